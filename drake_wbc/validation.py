@@ -1,0 +1,174 @@
+"""Argument checks that fail early and say exactly what was wrong.
+
+Every public function of the math layer checks its inputs with these helpers,
+so that a bad value is reported where it enters, with the argument's name,
+the value received and what is allowed, instead of surfacing later as a NaN
+in a command to the robot. Each helper returns the checked value as a
+float numpy array (or float), ready to use.
+"""
+
+import numpy as np
+
+
+def _shown(value):
+    """A short, readable rendering of a value for an error message."""
+    text = np.array2string(np.asarray(value), precision=6, threshold=20)
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
+def as_vector(name, value, size=None):
+    """Returns `value` as a finite float vector, optionally of a given size.
+
+    Raises:
+        ValueError: naming `name` when the value is not a 1-D array of
+            `size` finite numbers.
+    """
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"{name} = {value!r} is not allowed: must be a vector of numbers"
+        ) from None
+    if array.ndim != 1 or (size is not None and array.shape[0] != size):
+        wanted = f"shape ({size},)" if size is not None else "a 1-D shape"
+        raise ValueError(
+            f"{name} has shape {array.shape}, which is not allowed: "
+            f"must have {wanted}"
+        )
+    if not np.all(np.isfinite(array)):
+        raise ValueError(
+            f"{name} = {_shown(array)} is not allowed: "
+            "every entry must be finite (no NaN or infinity)"
+        )
+    return array
+
+
+def as_matrix(name, value, shape):
+    """Returns `value` as a finite float matrix of exactly `shape`.
+
+    Raises:
+        ValueError: naming `name` when the shape is wrong or an entry is not
+            finite.
+    """
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"{name} = {value!r} is not allowed: must be a matrix of numbers"
+        ) from None
+    if array.shape != tuple(shape):
+        raise ValueError(
+            f"{name} has shape {array.shape}, which is not allowed: "
+            f"must have shape {tuple(shape)}"
+        )
+    if not np.all(np.isfinite(array)):
+        raise ValueError(
+            f"{name} = {_shown(array)} is not allowed: "
+            "every entry must be finite (no NaN or infinity)"
+        )
+    return array
+
+
+def as_scalar(name, value):
+    """Returns `value` as a finite float.
+
+    Raises:
+        ValueError: naming `name` when the value is not one finite number.
+    """
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"{name} = {value!r} is not allowed: must be a single number"
+        ) from None
+    if not np.isfinite(number):
+        raise ValueError(
+            f"{name} = {number!r} is not allowed: must be finite"
+        )
+    return number
+
+
+def in_closed_range(name, value, lower, upper):
+    """Returns `value` as a float after checking lower <= value <= upper.
+
+    Raises:
+        ValueError: naming `name`, its value and the allowed range.
+    """
+    number = as_scalar(name, value)
+    if not lower <= number <= upper:
+        raise ValueError(
+            f"{name} = {number!r} is not allowed: "
+            f"must lie in [{lower}, {upper}]"
+        )
+    return number
+
+
+def positive(name, value):
+    """Returns `value` as a float after checking that it is > 0.
+
+    Raises:
+        ValueError: naming `name` and its value.
+    """
+    number = as_scalar(name, value)
+    if not number > 0.0:
+        raise ValueError(
+            f"{name} = {number!r} is not allowed: must be greater than 0"
+        )
+    return number
+
+
+def non_negative(name, value):
+    """Returns `value` as a float after checking that it is >= 0.
+
+    Raises:
+        ValueError: naming `name` and its value.
+    """
+    number = as_scalar(name, value)
+    if not number >= 0.0:
+        raise ValueError(
+            f"{name} = {number!r} is not allowed: must be 0 or greater"
+        )
+    return number
+
+
+def ordered_limits(lower_name, lower, upper_name, upper, size=None):
+    """Returns (lower, upper) as vectors after checking lower < upper.
+
+    Works for scalars too (pass size=None and numbers): the result is then
+    a pair of 1-element vectors.
+
+    Raises:
+        ValueError: naming both arguments and the first index where the
+            lower limit is not below the upper one.
+    """
+    lower = as_vector(lower_name, np.atleast_1d(lower), size)
+    upper = as_vector(upper_name, np.atleast_1d(upper), lower.shape[0])
+    bad = np.flatnonzero(lower >= upper)
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"{lower_name}[{i}] = {lower[i]!r} and {upper_name}[{i}] = "
+            f"{upper[i]!r} are not allowed: each lower limit must be "
+            "strictly below its upper limit"
+        )
+    return lower, upper
+
+
+def rotation_matrix(name, value, tolerance=1e-6):
+    """Returns `value` as a 3x3 rotation matrix after checking R^T R = I and
+    det R = +1 to `tolerance`.
+
+    Raises:
+        ValueError: naming `name` when the matrix is not a proper rotation.
+    """
+    R = as_matrix(name, value, (3, 3))
+    orthogonality = np.max(np.abs(R.T @ R - np.eye(3)))
+    determinant = np.linalg.det(R)
+    if orthogonality > tolerance or abs(determinant - 1.0) > tolerance:
+        raise ValueError(
+            f"{name} = {_shown(R)} is not allowed: must be a rotation matrix "
+            f"(R^T R = I and det R = 1 to {tolerance}; here the largest "
+            f"entry of R^T R - I is {orthogonality:.3g} and det R = "
+            f"{determinant:.6g})"
+        )
+    return R

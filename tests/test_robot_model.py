@@ -1,0 +1,344 @@
+"""The robot model: what it contains, its kinematics against the facts table,
+and its flexible mount against a simulation of the loaded plant."""
+
+import numpy as np
+import pytest
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.multibody.tree import PdControllerGains
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink
+
+from drake_wbc.robot_model import (
+    ARM_JOINTS,
+    BASE_JOINTS,
+    HOME_ARM_POSITIONS,
+    MOUNT_JOINTS,
+    ArmKinematics,
+    add_mcr,
+    joint_position_indices,
+    make_mcr_plant,
+    mount_rocking_modes,
+)
+
+# The Elfin5 table of the robot facts: joint origin relative to the previous
+# link frame (xyz, rpy), position limit, effort; all axes are local z.
+ELFIN5_TABLE = [
+    ((0, 0, 0.22), (0, 0, 0), 3.14, 200),
+    ((0, 0, 0), (1.5708, 0, 0), 2.35, 200),
+    ((0, 0.38, 0), (3.1416, 0, 1.5708), 2.61, 200),
+    ((0, 0, 0), (1.5708, 0, 1.5708), 3.14, 104),
+    ((0, 0, 0.42), (-1.5708, 0, 0), 2.56, 34),
+    ((0, 0, 0), (1.5708, 0, 0), 3.14, 34),
+]
+FLANGE_OFFSET = 0.1565
+LINK_MASSES = [2.13, 7.96, 3.73, 4.72, 1.47, 2.50, 0.455]
+
+
+def rotation_rpy(roll, pitch, yaw):
+    """R = Rz(yaw) Ry(pitch) Rx(roll), the URDF/SDFormat convention."""
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    Ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    Rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    return Rz @ Ry @ Rx
+
+
+def flange_pose_from_table(q):
+    """The flange pose in the arm's base frame, chained by hand from the
+    table (independent of the model files and of Drake)."""
+    X = np.eye(4)
+    for (xyz, rpy, _, _), angle in zip(ELFIN5_TABLE, q, strict=True):
+        joint = np.eye(4)
+        joint[:3, :3] = rotation_rpy(*rpy)
+        joint[:3, 3] = xyz
+        motion = np.eye(4)
+        motion[:3, :3] = rotation_rpy(0, 0, angle)
+        X = X @ joint @ motion
+    flange = np.eye(4)
+    flange[2, 3] = FLANGE_OFFSET
+    return X @ flange
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return make_mcr_plant()
+
+
+def _arm_context(plant, model, q_a):
+    context = plant.CreateDefaultContext()
+    q = plant.GetPositions(context)
+    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_a
+    plant.SetPositions(context, q)
+    return context
+
+
+def test_joints_names_and_limits(robot):
+    plant, model = robot
+    assert plant.num_positions() == plant.num_velocities() == 11
+    names = {
+        plant.get_joint(i).name()
+        for i in plant.GetJointIndices()
+        if plant.get_joint(i).num_velocities() == 1
+    }
+    assert names == set(BASE_JOINTS + MOUNT_JOINTS + ARM_JOINTS)
+    actuated = [
+        plant.get_joint_actuator(i).joint().name()
+        for i in plant.GetJointActuatorIndices()
+    ]
+    assert sorted(actuated) == sorted(BASE_JOINTS + ARM_JOINTS)
+    for name, (_, _, limit, effort) in zip(ARM_JOINTS, ELFIN5_TABLE,
+                                           strict=True):
+        joint = plant.GetJointByName(name, model.arm)
+        assert joint.position_lower_limits()[0] == -limit
+        assert joint.position_upper_limits()[0] == limit
+        assert joint.velocity_upper_limits()[0] == 1.57
+        assert joint.acceleration_upper_limits()[0] == 12.56
+        actuator = plant.GetJointActuatorByName(name, model.arm)
+        assert actuator.effort_limit() == effort
+    for name, limit in zip(BASE_JOINTS, (1.0, 1.0, 1.0), strict=True):
+        joint = plant.GetJointByName(name, model.base)
+        assert joint.velocity_upper_limits()[0] == limit
+    for name in MOUNT_JOINTS:
+        assert plant.GetJointByName(name, model.base).type_name() == (
+            "revolute"
+        )
+
+
+def test_masses(robot):
+    plant, model = robot
+    context = plant.CreateDefaultContext()
+
+    def mass(instance):
+        return sum(
+            plant.get_body(b).get_mass(context)
+            for b in plant.GetBodyIndices(instance)
+        )
+
+    assert mass(model.arm) == pytest.approx(sum(LINK_MASSES), abs=1e-9)
+    assert mass(model.tool) == pytest.approx(0.30 + 0.40, abs=1e-9)
+    # Chassis 120 kg and mount plate 1 kg (EST) within the facts' 100-150.
+    assert 100 <= mass(model.base) <= 150
+    total = mass(model.base) + mass(model.arm) + mass(model.tool)
+    assert total == pytest.approx(121.0 + 22.965 + 0.7, abs=1e-9)
+
+
+@pytest.mark.parametrize(
+    "q, position",
+    [
+        # Straight up: the offsets add along z.
+        ((0, 0, 0, 0, 0, 0), (0, 0, 0.22 + 0.38 + 0.42 + 0.1565)),
+        # Turning the base joint of a vertical arm moves nothing.
+        ((np.pi / 2, 0, 0, 0, 0, 0), (0, 0, 1.1765)),
+        # J2 (axis -y) at -90 degrees tips the whole arm forward.
+        ((0, -np.pi / 2, 0, 0, 0, 0), (0.38 + 0.42 + 0.1565, 0, 0.22)),
+        # J3 (axis +y) at +90 degrees: the forearm points forward.
+        ((0, 0, np.pi / 2, 0, 0, 0), (0.42 + 0.1565, 0, 0.60)),
+        # J5 (axis +y) at +90 degrees: the flange juts forward.
+        ((0, 0, 0, 0, np.pi / 2, 0), (0.1565, 0, 1.02)),
+        # Both elbow and wrist at 90 degrees: the flange points down.
+        ((0, 0, np.pi / 2, 0, np.pi / 2, 0), (0.42, 0, 0.60 - 0.1565)),
+    ],
+)
+def test_flange_matches_hand_computation(robot, q, position):
+    plant, model = robot
+    context = _arm_context(plant, model, q)
+    X = model.flange_frame.CalcPose(context, model.arm_base_frame)
+    # The table rounds pi/2 to 1.5708, which moves the flange by ~1e-5 m
+    # from these exact-angle hand results.
+    np.testing.assert_allclose(X.translation(), position, atol=1e-4)
+
+
+def test_forward_kinematics_matches_table(robot):
+    plant, model = robot
+    rng = np.random.default_rng(2)
+    limits = np.array([row[2] for row in ELFIN5_TABLE])
+    for _ in range(20):
+        q = rng.uniform(-limits, limits)
+        context = _arm_context(plant, model, q)
+        X = model.flange_frame.CalcPose(context, model.arm_base_frame)
+        expected = flange_pose_from_table(q)
+        np.testing.assert_allclose(X.translation(), expected[:3, 3],
+                                   atol=1e-12)
+        np.testing.assert_allclose(X.rotation().matrix(), expected[:3, :3],
+                                   atol=1e-12)
+
+
+def test_sensor_tool_and_lidar_frames(robot):
+    plant, model = robot
+    context = _arm_context(plant, model, HOME_ARM_POSITIONS)
+    X_FM = model.ft_measurement_frame.CalcPose(context, model.flange_frame)
+    np.testing.assert_allclose(X_FM.translation(), [0, 0, 0.01625],
+                               atol=1e-12)
+    X_FT = model.tcp_frame.CalcPose(context, model.flange_frame)
+    np.testing.assert_allclose(X_FT.translation(), [0, 0, 0.0415 + 0.10],
+                               atol=1e-12)
+    # The two LIDARs sit at diagonally opposite corners of the 0.8 x 0.6 m
+    # footprint and face outwards, yawed +45 and -135 degrees.
+    front, rear = (
+        frame.CalcPose(context, model.base_frame)
+        for frame in model.lidar_frames
+    )
+    for X in (front, rear):
+        p = X.translation()
+        assert 0.3 < abs(p[0]) <= 0.4 and 0.2 < abs(p[1]) <= 0.3
+        facing = X.rotation().matrix()[:, 0]
+        outward = np.array([np.sign(p[0]), np.sign(p[1]), 0]) / np.sqrt(2)
+        np.testing.assert_allclose(facing, outward, atol=1e-5)
+    np.testing.assert_allclose(front.translation()[:2],
+                               -rear.translation()[:2])
+
+
+def test_arm_kinematics_jacobian_against_finite_differences(robot):
+    plant, model = robot
+    kinematics = ArmKinematics(plant, model)
+    np.testing.assert_allclose(kinematics.R_ba, np.eye(3), atol=1e-12)
+    rng = np.random.default_rng(3)
+    step = 1e-6
+    for _ in range(5):
+        q = rng.uniform(0.8 * kinematics.lower, 0.8 * kinematics.upper)
+        values = kinematics.evaluate(q)
+        context = _arm_context(plant, model, q)
+        p_base = model.tcp_frame.CalcPose(context, model.base_frame)
+        np.testing.assert_allclose(values.p_ee_in_base,
+                                   p_base.translation(), atol=1e-12)
+        for i in range(6):
+            dq = np.zeros(6)
+            dq[i] = step
+            plus = kinematics.evaluate(q + dq).X_AE
+            minus = kinematics.evaluate(q - dq).X_AE
+            velocity = (plus.translation() - minus.translation()) / (2 * step)
+            R_dot = (plus.rotation().matrix() - minus.rotation().matrix()) / (
+                2 * step
+            )
+            W = R_dot @ values.X_AE.rotation().matrix().T
+            omega = np.array([W[2, 1], W[0, 2], W[1, 0]])
+            np.testing.assert_allclose(values.J_a[:3, i], velocity, atol=1e-8)
+            np.testing.assert_allclose(values.J_a[3:, i], omega, atol=1e-8)
+
+
+def test_home_pose_is_comfortable(robot):
+    plant, model = robot
+    kinematics = ArmKinematics(plant, model)
+    span = kinematics.upper - kinematics.lower
+    margin = np.minimum(HOME_ARM_POSITIONS - kinematics.lower,
+                        kinematics.upper - HOME_ARM_POSITIONS) / span
+    assert np.all(margin > 0.25)
+    # Its manipulability is among the best tenth of the joint space.
+    def manipulability(q):
+        J_a = kinematics.evaluate(q).J_a
+        return np.prod(np.linalg.svd(J_a, compute_uv=False))
+
+    rng = np.random.default_rng(4)
+    samples = [
+        manipulability(rng.uniform(kinematics.lower, kinematics.upper))
+        for _ in range(400)
+    ]
+    assert manipulability(HOME_ARM_POSITIONS) > np.percentile(samples, 90)
+
+
+def test_mount_rocking_mode(robot):
+    plant, model = robot
+    modes = mount_rocking_modes(plant, model)
+    assert len(modes) == 2
+    for mode in modes:
+        assert mode.frequency_hz == pytest.approx(5.0, abs=0.1)
+        assert mode.damping_ratio == pytest.approx(0.05, abs=0.005)
+
+
+def _simulate_locked(q_a, initial_mount, base_velocity=0.0, duration=1.5):
+    """Simulates the discrete robot with its arm locked at q_a and the base
+    held by a stiff velocity servo on base_x; returns (times, positions,
+    velocities, plant, model, context)."""
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
+    plant.set_discrete_contact_approximation(
+        plant.get_discrete_contact_approximation().kSap
+    )
+    model = add_mcr(plant)
+    for name in BASE_JOINTS:
+        actuator = plant.GetJointActuatorByName(name, model.base)
+        actuator.set_controller_gains(PdControllerGains(p=0.0, d=3e4))
+    plant.Finalize()
+    desired = np.zeros(6)
+    desired[3] = base_velocity
+    source = builder.AddSystem(ConstantVectorSource(desired))
+    builder.Connect(source.get_output_port(),
+                    plant.get_desired_state_input_port(model.base))
+    log = builder.AddSystem(VectorLogSink(plant.num_multibody_states()))
+    builder.Connect(plant.get_state_output_port(), log.get_input_port())
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    q = plant.GetPositions(plant_context)
+    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_a
+    q[joint_position_indices(plant, MOUNT_JOINTS, model.base)] = initial_mount
+    plant.SetPositions(plant_context, q)
+    for name in ARM_JOINTS:
+        plant.GetJointByName(name, model.arm).Lock(plant_context)
+    simulator.AdvanceTo(duration)
+    data = log.FindLog(context).data()
+    nq = plant.num_positions()
+    return (log.FindLog(context).sample_times(), data[:nq], data[nq:],
+            plant, model)
+
+
+def _dominant_frequency(times, signal):
+    signal = signal - signal.mean()
+    spectrum = np.abs(np.fft.rfft(signal * np.hanning(len(signal)), n=2**16))
+    frequencies = np.fft.rfftfreq(2**16, d=times[1] - times[0])
+    return frequencies[np.argmax(spectrum)]
+
+
+def test_mount_oscillates_at_modal_frequency_in_simulation(robot):
+    plant, model = robot
+    expected = mount_rocking_modes(plant, model)
+    times, q, _, sim_plant, sim_model = _simulate_locked(
+        HOME_ARM_POSITIONS, initial_mount=[0.0, 0.005]
+    )
+    pitch = q[joint_position_indices(sim_plant, ["mount_pitch"],
+                                     sim_model.base)[0]]
+    frequency = _dominant_frequency(times, pitch)
+    pitch_mode = max(expected, key=lambda mode: mode.shape[1])
+    assert frequency == pytest.approx(pitch_mode.frequency_hz, rel=0.03)
+    # Logarithmic decrement of the peak-to-trough swings: independent of
+    # the static sag about which the mount rings (the arm's centre of mass
+    # is ahead of the mount).
+    extrema = [i for i in range(1, len(pitch) - 1)
+               if (pitch[i] - pitch[i - 1]) * (pitch[i + 1] - pitch[i]) < 0]
+    swings = np.abs(np.diff(pitch[extrema]))
+    cycles = (len(swings) - 1) / 2
+    decrement = np.log(swings[0] / swings[-1]) / cycles
+    zeta = decrement / np.sqrt(4 * np.pi**2 + decrement**2)
+    assert zeta == pytest.approx(pitch_mode.damping_ratio, rel=0.15)
+
+
+def test_base_velocity_step_shakes_end_effector():
+    step = 0.1
+    times, q, v, plant, model = _simulate_locked(
+        HOME_ARM_POSITIONS, initial_mount=[0.0, 0.0], base_velocity=step,
+        duration=2.0,
+    )
+    context = plant.CreateDefaultContext()
+    tcp_velocity = []
+    for qi, vi in zip(q.T, v.T, strict=True):
+        plant.SetPositionsAndVelocities(context, np.concatenate([qi, vi]))
+        V = model.tcp_frame.CalcSpatialVelocityInWorld(context)
+        tcp_velocity.append(V.translational()[0])
+    tcp_velocity = np.array(tcp_velocity)
+    settled = times > 0.1
+    # The base reaches the commanded speed; the end effector overshoots it
+    # and rings at the mount's mode: a visible shake, as on the real robot.
+    base_velocity = v[joint_position_indices(plant, ["base_x"],
+                                             model.base)[0]]
+    assert base_velocity[-1] == pytest.approx(step, rel=1e-3)
+    swing = tcp_velocity[settled].max() - tcp_velocity[settled].min()
+    assert swing > 0.3 * step
+    frequency = _dominant_frequency(times[settled], tcp_velocity[settled])
+    assert frequency == pytest.approx(5.0, abs=0.3)
+    # and the ringing decays (damping ratio 0.05: to ~e^-3 in 2 s).
+    late = times > 1.6
+    assert np.ptp(tcp_velocity[late]) < 0.3 * swing
