@@ -1,0 +1,430 @@
+"""Capability of movement C_m of the arm and its gradients (Sec. III-A).
+
+The capability of movement C_m = m * P_jnt ("Movement Capability
+Optimization") multiplies Yoshikawa's manipulability index m (distance to
+singularity) by the joint-limit penalization P_jnt (distance to the joint
+limits). Its gradient w.r.t. the arm's Cartesian pose, grad_x C_m, drives
+the null-space term of eq. (wbccm) and is the direction that the
+compensation of eq. (wb_error) must not worsen, a projection faded in by
+the transition alpha of eq. (transition) as C_m drops from C_m^u to C_m^l.
+
+J_a is the 6 x n geometric Jacobian of the tool point in the arm's base frame
+T_a, rows [v; w] (linear velocity of the tool point in m/s, angular velocity
+in rad/s per joint rate in rad/s), columns the joint rates of an
+all-revolute serial chain (n = 6 for the Elfin5). All gradients here are
+analytic, computed from J_a and q alone: no AutoDiff, no finite differences.
+"""
+
+import numpy as np
+
+from drake_wbc.validation import (
+    as_scalar,
+    as_vector,
+    non_negative,
+    ordered_limits,
+    positive,
+)
+
+DEFAULT_JOINT_LIMIT_GAIN = 1.5e4
+"""Default scaling factor k_j of P_jnt (dimensionless).
+
+Scaling: each factor (q_i - l_i)(u_i - q_i) / (u_i - l_i)^2 of P_jnt is at
+most 1/4, reached at mid-range, so their product over n joints is at most
+4^-n (1/4096 for six joints). k_j must therefore be of order 4^n for P_jnt
+to approach 1 at mid-range. For n = 6 and this default:
+
+    every joint mid-range:  P_jnt = 1 - exp(-k_j 4^-6)
+                                  = 1 - exp(-3.66) = 0.974,
+    one joint 5% of its range from a limit, the others mid-range
+    (its factor is 0.05 * 0.95 = 0.19 / 4 instead of 1/4):
+                            P_jnt = 1 - exp(-0.19 k_j 4^-6)
+                                  = 1 - exp(-0.696) = 0.501.
+
+Why 1.5e4 on our arm: it makes the paper's limitation band
+0.035 < C_m < 0.04 mean "close to a constraint" on the Elfin5 with the
+wiping tool. At the home pose (drake_wbc.robot_model.HOME_ARM_POSITIONS)
+m = 0.071 and P_jnt = 0.91, so C_m = 0.065, well above the band. Moving
+one joint from home, C_m enters the band either when that joint comes
+within about 8 to 12% of its range from a limit (P_jnt falls to 0.5-0.6
+with m unchanged), or when the manipulability itself falls to about 0.04
+(the elbow opening towards the stretched singularity, or the wrist
+straightening), with P_jnt still above 0.9. A smaller k_j (5e3) would put
+home itself inside the band; a larger one (3e4) would let joints come
+within about 4% of a limit before the band is reached.
+"""
+
+DEFAULT_DAMPING_THRESHOLD = 0.02
+"""Default threshold eps on the smallest singular value s_min of J_a, below
+which `capability_gradient` damps its solve. For the Elfin5, s_min is about
+0.2 d within d rad of the wrist singularity (q_5 = 0) and about 0.16 d near
+the stretched elbow (q_3 = 0): 0.02 damps roughly the last 0.1 rad."""
+
+DEFAULT_MAX_DAMPING = 0.02
+"""Default damping lambda_max of `capability_gradient` (at s_min = 0). Equal
+to eps, so that below eps s_min^2 + lambda^2 = eps^2: the gain
+s_min / eps^2 of the weakest direction falls linearly from 1/eps to 0,
+meeting the undamped gain 1/s_min continuously at s_min = eps."""
+
+
+def _as_jacobian(J_a, rows=None, wide=True):
+    """Returns J_a as a finite float matrix with `rows` rows (any number if
+    None) and, if `wide`, at least as many columns as rows."""
+    try:
+        J = np.asarray(J_a, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"J_a = {J_a!r} is not allowed: must be a matrix of numbers"
+        ) from None
+    bad_rows = J.ndim == 2 and rows is not None and J.shape[0] != rows
+    if (J.ndim != 2 or J.size == 0 or bad_rows
+            or (wide and J.shape[0] > J.shape[1])):
+        wanted = "a non-empty 2-D shape"
+        if rows is not None:
+            wanted += f" with {rows} rows [v; w]"
+        if wide:
+            wanted += " and at least as many columns as rows"
+        raise ValueError(
+            f"J_a has shape {J.shape}, which is not allowed: must have "
+            f"{wanted}"
+        )
+    as_vector("J_a", J.ravel())  # finiteness, reported with the name J_a
+    return J
+
+
+def _as_limits(q, lower, upper, size=None):
+    """Returns q, lower, upper as checked float vectors of one size."""
+    q = as_vector("q", q, size)
+    lower, upper = ordered_limits("lower", lower, "upper", upper, q.size)
+    return q, lower, upper
+
+
+def _products_of_others(values):
+    """Returns p with p_k = prod_{l != k} values_l, computed without any
+    division, so that it stays exact when some values are 0."""
+    return np.array(
+        [np.prod(np.delete(values, k)) for k in range(values.size)]
+    )
+
+
+def _manipulability_gradient(J, U, s, Vt):
+    """dm/dq from J and its thin SVD J = U diag(s) Vt (see the public
+    function for the derivation)."""
+    weights = _products_of_others(s)  # m / s_k, with no division
+    dJ = jacobian_derivative(J)
+    return np.einsum("k,rk,irc,kc->i", weights, U, dJ, Vt)
+
+
+def _penalty_and_gradient(q, lower, upper, k_j):
+    """P_jnt and dP_jnt/dq for checked inputs (see the public functions)."""
+    q = np.clip(q, lower, upper)
+    span2 = (upper - lower) ** 2
+    factors = (q - lower) * (upper - q) / span2
+    factor_slopes = (upper + lower - 2.0 * q) / span2
+    product = np.prod(factors)
+    penalty = -np.expm1(-k_j * product)
+    gradient = (
+        k_j * np.exp(-k_j * product)
+        * factor_slopes * _products_of_others(factors)
+    )
+    return penalty, gradient
+
+
+def manipulability(J_a):
+    """Yoshikawa's manipulability index m (Sec. III-A, "manipulability
+    index"): m = sqrt(det(J_a J_a^T)) = prod_i s_i.
+
+    Computed as the product of the singular values s_i of J_a, which stays
+    accurate near a singularity where det(J_a J_a^T) loses all its digits.
+
+    Args:
+        J_a: (k, n) matrix with k <= n; for the arm the (6, n) geometric
+            Jacobian [v; w] of the tool point in T_a.
+
+    Returns:
+        m >= 0 as a float, in metres^3 for the arm's Jacobian (three rows
+        in m/rad); 0, to rounding, only at a singularity.
+    """
+    J = _as_jacobian(J_a)
+    return float(np.prod(np.linalg.svd(J, compute_uv=False)))
+
+
+def joint_limit_penalty(q, lower, upper, k_j=DEFAULT_JOINT_LIMIT_GAIN):
+    """Joint-limit penalization P_jnt (Sec. III-A, "penalization"):
+
+        P_jnt = 1 - exp(-k_j prod_i (q_i - l_i)(u_i - q_i) / (u_i - l_i)^2).
+
+    P_jnt is 0 when any joint is at a limit and largest, 1 - exp(-k_j 4^-n),
+    when every joint is mid-range (see `DEFAULT_JOINT_LIMIT_GAIN`). A joint
+    beyond a limit (a simulated joint can overshoot by a hair) is clamped to
+    that limit, so that P_jnt = 0 there rather than a meaningless value.
+
+    Args:
+        q: (n,) joint angles q_a, rad.
+        lower: (n,) lower joint limits q^l, rad.
+        upper: (n,) upper joint limits q^u, rad, each > its lower limit.
+        k_j: scaling factor k_j > 0, dimensionless.
+
+    Returns:
+        P_jnt in [0, 1), dimensionless, as a float.
+    """
+    q, lower, upper = _as_limits(q, lower, upper)
+    k_j = positive("k_j", k_j)
+    return float(_penalty_and_gradient(q, lower, upper, k_j)[0])
+
+
+def capability(J_a, q, lower, upper, k_j=DEFAULT_JOINT_LIMIT_GAIN):
+    """Capability of movement C_m = m * P_jnt (Sec. III-A, the equation
+    before eq. (wbccm)).
+
+    Args:
+        J_a: (6, n) geometric Jacobian [v; w] of the tool point in T_a at q.
+        q: (n,) joint angles q_a, rad.
+        lower, upper: (n,) joint limits, rad (see `joint_limit_penalty`).
+        k_j: scaling factor k_j > 0 of P_jnt.
+
+    Returns:
+        C_m >= 0 as a float, in the units of m (metres^3 for the arm).
+    """
+    J = _as_jacobian(J_a, rows=6)
+    q, lower, upper = _as_limits(q, lower, upper, J.shape[1])
+    k_j = positive("k_j", k_j)
+    penalty = _penalty_and_gradient(q, lower, upper, k_j)[0]
+    return float(np.prod(np.linalg.svd(J, compute_uv=False)) * penalty)
+
+
+def _as_values(value):
+    """Returns (value as float or float array, whether it was a scalar)."""
+    try:
+        shape = np.shape(value)
+    except ValueError:
+        raise ValueError(
+            f"value = {value!r} is not allowed: must be a number or an "
+            "array of numbers"
+        ) from None
+    if shape == ():
+        return as_scalar("value", value), True
+    return as_vector("value", np.ravel(value)).reshape(shape), False
+
+
+def _transition_band(value, upper, lower):
+    """Checked value, the position x of value in the band and its width."""
+    value, scalar = _as_values(value)
+    lower, upper = ordered_limits("lower", lower, "upper", upper, 1)
+    width = upper[0] - lower[0]
+    return (value - lower[0]) / width, width, scalar
+
+
+def transition(value, upper, lower):
+    """Transition function alpha(C_m, C_m^u, C_m^l) of eq. (transition):
+
+        alpha = 0                                   for value >= upper,
+        alpha = 0.5 (1 + cos(pi x)),
+                x = (value - lower) / (upper - lower)  in between,
+        alpha = 1                                   for value <= lower.
+
+    alpha is continuous with a continuous derivative (0 at both band edges)
+    and non-increasing in `value`.
+
+    Args:
+        value: C_m, a number or an array of numbers (elementwise).
+        upper: upper threshold C_m^u.
+        lower: lower threshold C_m^l, < upper.
+
+    Returns:
+        alpha in [0, 1], dimensionless: a float for a scalar `value`, else
+        an array of the shape of `value`.
+    """
+    x, _, scalar = _transition_band(value, upper, lower)
+    alpha = 0.5 * (1.0 + np.cos(np.pi * np.clip(x, 0.0, 1.0)))
+    return float(alpha) if scalar else alpha
+
+
+def transition_derivative(value, upper, lower):
+    """Derivative d alpha / d value of eq. (transition):
+
+        -0.5 pi / (upper - lower) * sin(pi x)  inside the band, else 0,
+
+    with x as in `transition`. It vanishes at both band edges, so alpha is
+    C^1 across them.
+
+    Args:
+        value, upper, lower: as for `transition`.
+
+    Returns:
+        d alpha / d value <= 0, in 1 / (units of value): a float for a
+        scalar `value`, else an array of the shape of `value`.
+    """
+    x, width, scalar = _transition_band(value, upper, lower)
+    inside = (x > 0.0) & (x < 1.0)
+    slope = np.where(inside, -0.5 * np.pi / width * np.sin(np.pi * x), 0.0)
+    return float(slope) if scalar else slope
+
+
+def jacobian_derivative(J_a):
+    """Partial derivatives dJ_a/dq_i of a revolute chain's geometric
+    Jacobian, from J_a alone.
+
+    Column j of J_a is [z_j x (p - p_j); z_j]: z_j the unit axis of joint
+    j, p_j a point on it, p the tool point, all in the fixed frame T_a.
+    Turning joint i moves the links after it rigidly about axis i: a vector r
+    on them changes as dr/dq_i = z_i x r, the tool point as dp/dq_i = Jv_i.
+    With J_j = [Jv_j; Jw_j]:
+
+    - i <= j: z_j and p - p_j ride on the moving links, and by the Jacobi
+      identity dJv_j/dq_i = z_i x Jv_j = Jw_i x Jv_j, dJw_j/dq_i =
+      Jw_i x Jw_j;
+    - i > j: z_j and p_j stay, only p moves: dJv_j/dq_i = Jw_j x Jv_i,
+      dJw_j/dq_i = 0.
+
+    Args:
+        J_a: (6, n) geometric Jacobian [v; w] of the tool point in the fixed
+            frame T_a, all joints revolute; m/rad and rad/rad.
+
+    Returns:
+        (n, 6, n) array D with D[i] = dJ_a/dq_i, per rad.
+    """
+    J = _as_jacobian(J_a, rows=6, wide=False)
+    Jv, Jw = J[:3].T, J[3:].T  # (n, 3): row j is column j of J_a
+    w_x_v = np.cross(Jw[:, None, :], Jv[None, :, :])  # [i, j] = Jw_i x Jv_j
+    w_x_w = np.cross(Jw[:, None, :], Jw[None, :, :])  # [i, j] = Jw_i x Jw_j
+    upper = np.triu(np.ones((J.shape[1],) * 2, dtype=bool))[:, :, None]
+    dJv = np.where(upper, w_x_v, np.swapaxes(w_x_v, 0, 1))
+    dJw = np.where(upper, w_x_w, 0.0)
+    return np.concatenate([dJv, dJw], axis=2).transpose(0, 2, 1)
+
+
+def manipulability_joint_gradient(J_a):
+    """Gradient dm/dq of the manipulability index, analytic from J_a.
+
+    Derivation: m^2 = det(J J^T), so 2 m dm = m^2 tr((J J^T)^-1 d(J J^T))
+    = 2 m^2 tr((J J^T)^-1 J dJ^T), hence dm = m tr(J^+ dJ) with
+    J^+ = J^T (J J^T)^-1. With the thin SVD J = U diag(s) V^T,
+    m J^+ = V diag(m / s_k) U^T and m / s_k = prod_{l != k} s_l, so
+
+        dm/dq_i = sum_k (prod_{l != k} s_l) u_k^T (dJ/dq_i) v_k,
+
+    with dJ/dq_i from `jacobian_derivative`. This form has no division and
+    stays finite as m -> 0. Where m > 0 it is the exact gradient. At an
+    exact singularity m has no gradient: with one zero singular value m
+    behaves like |linear| and the value returned is one of its two
+    one-sided gradients (which one depends on the signs the SVD picks for
+    u_k, v_k), either of them an ascent direction out of the singularity;
+    with two or more zero singular values m vanishes to second order and
+    the exact gradient, 0, is returned.
+
+    Args:
+        J_a: (6, n) geometric Jacobian [v; w] of the tool point in T_a,
+            n >= 6, all joints revolute.
+
+    Returns:
+        (n,) array dm/dq, in units of m (metres^3) per rad.
+    """
+    J = _as_jacobian(J_a, rows=6)
+    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    return _manipulability_gradient(J, U, s, Vt)
+
+
+def joint_limit_penalty_gradient(q, lower, upper,
+                                 k_j=DEFAULT_JOINT_LIMIT_GAIN):
+    """Gradient dP_jnt/dq of the penalization of `joint_limit_penalty`.
+
+    With f_i = (q_i - l_i)(u_i - q_i) / (u_i - l_i)^2 and F = prod_i f_i:
+
+        dP_jnt/dq_i = k_j exp(-k_j F) (u_i + l_i - 2 q_i) / (u_i - l_i)^2
+                      * prod_{j != i} f_j,
+
+    the product of the other factors computed directly (not F / f_i), so
+    that it stays right with a joint at a limit (f_i = 0): there the
+    component of that joint points back into the range and the others are
+    0. A joint beyond a limit is clamped to it as in `joint_limit_penalty`,
+    and the gradient is the one at the clamped configuration.
+
+    Args:
+        q, lower, upper, k_j: as for `joint_limit_penalty`.
+
+    Returns:
+        (n,) array dP_jnt/dq, per rad.
+    """
+    q, lower, upper = _as_limits(q, lower, upper)
+    k_j = positive("k_j", k_j)
+    return _penalty_and_gradient(q, lower, upper, k_j)[1]
+
+
+def _capability_and_gradient(J, q, lower, upper, k_j):
+    """C_m, dC_m/dq and the SVD of J for checked inputs."""
+    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    m = np.prod(s)
+    penalty, penalty_gradient = _penalty_and_gradient(q, lower, upper, k_j)
+    gradient = (penalty * _manipulability_gradient(J, U, s, Vt)
+                + m * penalty_gradient)
+    return m * penalty, gradient, (U, s, Vt)
+
+
+def capability_joint_gradient(J_a, q, lower, upper,
+                              k_j=DEFAULT_JOINT_LIMIT_GAIN):
+    """Gradient dC_m/dq = P_jnt dm/dq + m dP_jnt/dq of C_m = m * P_jnt.
+
+    See `manipulability_joint_gradient` for the value at an exact
+    singularity and `joint_limit_penalty_gradient` for joints at or beyond
+    a limit.
+
+    Args:
+        J_a: (6, n) geometric Jacobian [v; w] of the tool point in T_a at q,
+            n >= 6, all joints revolute.
+        q, lower, upper, k_j: as for `joint_limit_penalty`.
+
+    Returns:
+        (n,) array dC_m/dq, in units of C_m per rad.
+    """
+    J = _as_jacobian(J_a, rows=6)
+    q, lower, upper = _as_limits(q, lower, upper, J.shape[1])
+    k_j = positive("k_j", k_j)
+    return _capability_and_gradient(J, q, lower, upper, k_j)[1]
+
+
+def capability_gradient(J_a, q, lower, upper, k_j=DEFAULT_JOINT_LIMIT_GAIN,
+                        damping=DEFAULT_MAX_DAMPING,
+                        damping_threshold=DEFAULT_DAMPING_THRESHOLD):
+    """Gradient grad_x C_m of C_m w.r.t. the arm's Cartesian pose, as used
+    in eq. (wbccm) and eq. (wb_error).
+
+    Definition: the covector g such that dC_m/dt = g . V_a for every arm
+    twist V_a = [v_a; w_a] = J_a qdot (in T_a, at the tool point), i.e.
+    J_a^T g = dC_m/dq, so g = J_a^-T dC_m/dq for a square nonsingular J_a.
+    It is analytic, from J_a alone (see `capability_joint_gradient`); no
+    AutoDiff.
+
+    It is solved as g = (J_a J_a^T + lambda^2 I)^-1 J_a dC_m/dq, evaluated
+    through the SVD of J_a. lambda = 0 (the exact J_a^-T, or the
+    least-squares solution if n > 6) unless the smallest singular value
+    s_min is below the threshold eps, where
+    lambda^2 = lambda_max^2 (1 - (s_min / eps)^2) grows continuously from 0.
+    This damping is the only approximation. A zero singular value with
+    lambda = 0 gets gain 0 (pseudo-inverse).
+
+    Args:
+        J_a: (6, n) geometric Jacobian [v; w] of the tool point in T_a at q,
+            n >= 6, all joints revolute.
+        q, lower, upper, k_j: as for `joint_limit_penalty`.
+        damping: lambda_max >= 0, in the units of the singular values of
+            J_a; 0 turns damping off. Default `DEFAULT_MAX_DAMPING`.
+        damping_threshold: eps > 0. Default `DEFAULT_DAMPING_THRESHOLD`.
+
+    Returns:
+        (6,) array g = [g_v; g_w]: C_m per m along v_a, C_m per rad along
+        w_a.
+    """
+    J = _as_jacobian(J_a, rows=6)
+    q, lower, upper = _as_limits(q, lower, upper, J.shape[1])
+    k_j = positive("k_j", k_j)
+    lambda_max = non_negative("damping", damping)
+    eps = positive("damping_threshold", damping_threshold)
+    _, joint_gradient, (U, s, Vt) = _capability_and_gradient(
+        J, q, lower, upper, k_j)
+    s_min = s[-1]
+    lambda2 = (lambda_max**2 * (1.0 - (s_min / eps) ** 2)
+               if s_min < eps else 0.0)
+    denominators = s**2 + lambda2
+    safe = np.where(denominators > 0.0, denominators, 1.0)
+    gains = np.where(denominators > 0.0, s / safe, 0.0)
+    return U @ (gains * (Vt @ joint_gradient))

@@ -1,0 +1,592 @@
+"""Tests of drake_wbc.capability against closed forms and independent
+formulations.
+
+Real arm Jacobians come from a small forward kinematics of serial chains
+given as URDF-style joint origins (xyz, rpy relative to the previous link
+frame, revolute about the local z axis, then a fixed flange offset), written
+here independently of the code under test: the Elfin5 table and random
+chains, to show nothing is Elfin-specific. Derivatives are checked against
+finite differences of that kinematics.
+"""
+
+import numpy as np
+import pytest
+
+from drake_wbc import capability as cap
+
+# Joint origins (xyz in m, rpy in rad) of the Elfin5, as in its URDF.
+ELFIN5 = (
+    (
+        ((0.0, 0.0, 0.22), (0.0, 0.0, 0.0)),
+        ((0.0, 0.0, 0.0), (1.5708, 0.0, 0.0)),
+        ((0.0, 0.38, 0.0), (3.1416, 0.0, 1.5708)),
+        ((0.0, 0.0, 0.0), (1.5708, 0.0, 1.5708)),
+        ((0.0, 0.0, 0.42), (-1.5708, 0.0, 0.0)),
+        ((0.0, 0.0, 0.0), (1.5708, 0.0, 0.0)),
+    ),
+    ((0.0, 0.0, 0.1565), (0.0, 0.0, 0.0)),
+)
+ELFIN5_UPPER = np.array([3.14, 2.35, 2.61, 3.14, 2.56, 3.14])
+ELFIN5_LOWER = -ELFIN5_UPPER
+K_J = cap.DEFAULT_JOINT_LIMIT_GAIN
+
+
+# ----------------------------------------------------------------------------
+# Independent kinematics of a serial chain
+# ----------------------------------------------------------------------------
+
+def rpy_matrix(roll, pitch, yaw):
+    """R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+    Ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    Rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    return Rz @ Ry @ Rx
+
+
+def forward_kinematics(chain, q):
+    """Tool position, tool rotation, joint axes (n, 3), joint origins (n, 3),
+    all in the base frame."""
+    joints, (flange_xyz, flange_rpy) = chain
+    R, p = np.eye(3), np.zeros(3)
+    axes, origins = [], []
+    for (xyz, rpy), angle in zip(joints, q, strict=True):
+        p = p + R @ np.asarray(xyz)
+        R = R @ rpy_matrix(*rpy)
+        axes.append(R[:, 2])
+        origins.append(p)
+        R = R @ rpy_matrix(0.0, 0.0, angle)
+    p = p + R @ np.asarray(flange_xyz)
+    R = R @ rpy_matrix(*flange_rpy)
+    return p, R, np.array(axes), np.array(origins)
+
+
+def jacobian(chain, q):
+    """Geometric Jacobian [v; w] of the tool point by the cross products
+    z_i x (p - p_i), z_i."""
+    p, _, axes, origins = forward_kinematics(chain, q)
+    return np.vstack([np.cross(axes, p - origins).T, axes.T])
+
+
+def jacobian_by_differences(chain, q, h=1e-6):
+    """Geometric Jacobian from central differences of the forward
+    kinematics: v from the tool position, w from R_dot R^T."""
+    columns = []
+    for e in np.eye(len(q)):
+        p_plus, R_plus, _, _ = forward_kinematics(chain, q + h * e)
+        p_minus, R_minus, _, _ = forward_kinematics(chain, q - h * e)
+        _, R, _, _ = forward_kinematics(chain, q)
+        W = (R_plus - R_minus) / (2.0 * h) @ R.T
+        w = np.array([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0],
+                      W[1, 0] - W[0, 1]]) / 2.0
+        columns.append(np.concatenate([(p_plus - p_minus) / (2.0 * h), w]))
+    return np.array(columns).T
+
+
+def random_chain(rng, n):
+    joints = tuple(
+        (tuple(rng.uniform(-0.4, 0.4, 3)), tuple(rng.uniform(-np.pi, np.pi, 3)))
+        for _ in range(n)
+    )
+    flange = (tuple(rng.uniform(-0.2, 0.2, 3)), tuple(rng.uniform(-1, 1, 3)))
+    return joints, flange
+
+
+def random_nonsingular_q(rng, chain, lower, upper, s_min=0.05):
+    """A random configuration inside the limits, with smallest singular
+    value of the Jacobian above s_min."""
+    while True:
+        q = rng.uniform(lower, upper)
+        if np.linalg.svd(jacobian(chain, q), compute_uv=False)[-1] > s_min:
+            return q
+
+
+def central_differences(function, x, h=1e-6):
+    return np.array([
+        (function(x + h * e) - function(x - h * e)) / (2.0 * h)
+        for e in np.eye(len(x))
+    ])
+
+
+def one_sided_difference(function, x, direction, h=1e-6):
+    """Second-order one-sided difference of function along direction."""
+    return (-3.0 * function(x) + 4.0 * function(x + h * direction)
+            - function(x + 2.0 * h * direction)) / (2.0 * h)
+
+
+def penalty_by_loop(q, lower, upper, k_j):
+    """P_jnt written out term by term, from the paper's formula."""
+    product = 1.0
+    for qi, li, ui in zip(q, lower, upper, strict=True):
+        product *= (qi - li) * (ui - qi) / (ui - li) ** 2
+    return 1.0 - np.exp(-k_j * product)
+
+
+def chains_under_test():
+    rng = np.random.default_rng(7)
+    chains = [("elfin5", ELFIN5, ELFIN5_LOWER, ELFIN5_UPPER)]
+    for n in (6, 6, 7):
+        chains.append((f"random{n}", random_chain(rng, n),
+                       -np.full(n, 2.5), np.full(n, 2.5)))
+    return chains
+
+
+CHAINS = chains_under_test()
+CHAIN_IDS = [name for name, *_ in CHAINS]
+
+
+def test_kinematics_of_the_tests_agree_with_each_other():
+    rng = np.random.default_rng(0)
+    for _, chain, lower, upper in CHAINS:
+        q = rng.uniform(lower, upper)
+        np.testing.assert_allclose(jacobian(chain, q),
+                                   jacobian_by_differences(chain, q),
+                                   atol=1e-8)
+
+
+# ----------------------------------------------------------------------------
+# Manipulability
+# ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("shape", [(6, 6), (6, 7), (3, 5), (1, 4)])
+def test_manipulability_is_sqrt_det_and_product_of_singular_values(shape):
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        J = rng.normal(size=shape)
+        m = cap.manipulability(J)
+        assert isinstance(m, float)
+        np.testing.assert_allclose(m, np.sqrt(np.linalg.det(J @ J.T)),
+                                   rtol=1e-10)
+        np.testing.assert_allclose(
+            m, np.prod(np.linalg.svd(J, compute_uv=False)), rtol=1e-12)
+
+
+def test_manipulability_scales_with_rows_and_is_one_for_orthonormal_rows():
+    rng = np.random.default_rng(2)
+    Q, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+    assert cap.manipulability(Q) == pytest.approx(1.0, rel=1e-12)
+    scale = rng.uniform(0.5, 2.0, 6)
+    J = rng.normal(size=(6, 6))
+    np.testing.assert_allclose(cap.manipulability(scale[:, None] * J),
+                               np.prod(scale) * cap.manipulability(J),
+                               rtol=1e-10)
+
+
+def test_manipulability_is_zero_at_singular_configurations():
+    # The Elfin5 at q = 0 is stretched straight up.
+    assert cap.manipulability(jacobian(ELFIN5, np.zeros(6))) < 1e-12
+    J = np.random.default_rng(3).normal(size=(6, 6))
+    J[:, 4] = 2.0 * J[:, 1]
+    assert cap.manipulability(J) < 1e-12
+    q = random_nonsingular_q(np.random.default_rng(3), ELFIN5,
+                             ELFIN5_LOWER, ELFIN5_UPPER)
+    assert cap.manipulability(jacobian(ELFIN5, q)) > 1e-4
+
+
+# ----------------------------------------------------------------------------
+# Joint-limit penalty
+# ----------------------------------------------------------------------------
+
+def test_penalty_matches_the_formula_inside_the_limits():
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        q = rng.uniform(ELFIN5_LOWER, ELFIN5_UPPER)
+        k_j = rng.uniform(1.0, 1e5)
+        np.testing.assert_allclose(
+            cap.joint_limit_penalty(q, ELFIN5_LOWER, ELFIN5_UPPER, k_j),
+            penalty_by_loop(q, ELFIN5_LOWER, ELFIN5_UPPER, k_j),
+            rtol=1e-12, atol=1e-300)
+
+
+@pytest.mark.parametrize("joint", range(6))
+def test_penalty_is_zero_at_and_beyond_each_limit(joint):
+    rng = np.random.default_rng(5)
+    q = rng.uniform(ELFIN5_LOWER, ELFIN5_UPPER)
+    for limit, overshoot in ((ELFIN5_LOWER, -1e-3), (ELFIN5_UPPER, 1e-3)):
+        q[joint] = limit[joint]
+        assert cap.joint_limit_penalty(q, ELFIN5_LOWER, ELFIN5_UPPER,
+                                       K_J) == 0.0
+        q[joint] = limit[joint] + overshoot
+        assert cap.joint_limit_penalty(q, ELFIN5_LOWER, ELFIN5_UPPER,
+                                       K_J) == 0.0
+
+
+def test_penalty_is_largest_with_every_joint_mid_range():
+    rng = np.random.default_rng(6)
+    lower = rng.uniform(-3.0, 0.0, 6)
+    upper = lower + rng.uniform(0.5, 4.0, 6)
+    mid = 0.5 * (lower + upper)
+    best = cap.joint_limit_penalty(mid, lower, upper, K_J)
+    for _ in range(1000):
+        q = rng.uniform(lower, upper)
+        assert cap.joint_limit_penalty(q, lower, upper, K_J) < best
+
+
+@pytest.mark.parametrize("n", [1, 3, 6, 7])
+def test_penalty_at_mid_range_closed_form_and_monotone_in_gain(n):
+    lower, upper = -np.arange(1.0, n + 1), np.arange(2.0, n + 2)
+    mid = 0.5 * (lower + upper)
+    gains = 4.0**n * np.array([0.01, 0.1, 1.0, 3.0, 10.0, 30.0])
+    penalties = [cap.joint_limit_penalty(mid, lower, upper, k) for k in gains]
+    np.testing.assert_allclose(1.0 - np.array(penalties),
+                               np.exp(-gains * 4.0**-n), rtol=1e-9,
+                               atol=1e-15)
+    assert np.all(np.diff(penalties) > 0.0)
+    assert penalties[-1] > 1.0 - 1e-12
+
+
+def test_default_gain_values_stated_in_its_docstring():
+    mid = 0.5 * (ELFIN5_LOWER + ELFIN5_UPPER)
+    near = mid.copy()
+    near[2] = ELFIN5_LOWER[2] + 0.05 * (ELFIN5_UPPER[2] - ELFIN5_LOWER[2])
+    p_mid = cap.joint_limit_penalty(mid, ELFIN5_LOWER, ELFIN5_UPPER)
+    p_near = cap.joint_limit_penalty(near, ELFIN5_LOWER, ELFIN5_UPPER)
+    assert p_mid == pytest.approx(1.0 - np.exp(-K_J / 4096.0), rel=1e-12)
+    assert p_near == pytest.approx(1.0 - np.exp(-0.19 * K_J / 4096.0),
+                                   rel=1e-12)
+    assert p_mid == pytest.approx(0.974, abs=5e-4)
+    assert p_near == pytest.approx(0.501, abs=5e-4)
+
+
+def test_capability_is_manipulability_times_penalty():
+    rng = np.random.default_rng(8)
+    for _, chain, lower, upper in CHAINS:
+        q = rng.uniform(lower, upper)
+        J = jacobian(chain, q)
+        expected = (np.sqrt(np.linalg.det(J @ J.T))
+                    * penalty_by_loop(q, lower, upper, K_J))
+        np.testing.assert_allclose(cap.capability(J, q, lower, upper, K_J),
+                                   expected, rtol=1e-9)
+
+
+# ----------------------------------------------------------------------------
+# Transition
+# ----------------------------------------------------------------------------
+
+UPPER, LOWER = 0.05, 0.01
+
+
+def test_transition_values():
+    assert cap.transition(0.2, UPPER, LOWER) == 0.0
+    assert cap.transition(UPPER, UPPER, LOWER) == 0.0
+    assert cap.transition(LOWER, UPPER, LOWER) == 1.0
+    assert cap.transition(-3.0, UPPER, LOWER) == 1.0
+    mid = cap.transition(0.5 * (UPPER + LOWER), UPPER, LOWER)
+    assert isinstance(mid, float)
+    assert mid == pytest.approx(0.5, abs=1e-15)
+    values = np.array([[0.0, 0.02], [0.04, 0.06]])
+    alpha = cap.transition(values, UPPER, LOWER)
+    assert alpha.shape == values.shape
+    for index in np.ndindex(values.shape):
+        x = (values[index] - LOWER) / (UPPER - LOWER)
+        expected = 0.5 * (1.0 + np.cos(np.pi * min(max(x, 0.0), 1.0)))
+        assert alpha[index] == pytest.approx(expected, abs=1e-15)
+
+
+def test_transition_is_monotone_non_increasing():
+    values = np.linspace(-0.1, 0.2, 20001)
+    alpha = cap.transition(values, UPPER, LOWER)
+    assert np.all(np.diff(alpha) <= 0.0)
+    assert np.all((alpha >= 0.0) & (alpha <= 1.0))
+    assert np.all(cap.transition_derivative(values, UPPER, LOWER) <= 0.0)
+
+
+@pytest.mark.parametrize("edge", [LOWER, UPPER])
+def test_transition_is_continuously_differentiable_at_the_band_edges(edge):
+    def alpha(v):
+        return cap.transition(v, UPPER, LOWER)
+
+    # Inside the band alpha departs from its edge value as c h^2 with
+    # c = pi^2 / (4 (upper - lower)^2); outside it is flat. So the one-sided
+    # difference quotients on both sides, and the derivative, are O(h).
+    c = 1.01 * np.pi**2 / (4.0 * (UPPER - LOWER) ** 2)
+    at_edge = alpha(edge)
+    for h in (1e-4, 1e-6, 1e-8):
+        for side in (-1.0, 1.0):
+            step = alpha(edge + side * h) - at_edge
+            assert abs(step) <= c * h**2 + 1e-16
+            assert abs(step / h) <= c * h + 1e-16 / h
+            assert abs(cap.transition_derivative(edge + side * h, UPPER,
+                                                 LOWER)) <= 2.0 * c * h
+    assert cap.transition_derivative(edge, UPPER, LOWER) == 0.0
+
+
+def test_transition_derivative_matches_finite_differences():
+    values = np.random.default_rng(9).uniform(-0.02, 0.08, 200)
+    h = 1e-7
+    numeric = (cap.transition(values + h, UPPER, LOWER)
+               - cap.transition(values - h, UPPER, LOWER)) / (2.0 * h)
+    np.testing.assert_allclose(
+        cap.transition_derivative(values, UPPER, LOWER), numeric,
+        atol=1e-6 * np.pi / (UPPER - LOWER))
+
+
+# ----------------------------------------------------------------------------
+# Joint-space gradients
+# ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize(("name", "chain", "lower", "upper"), CHAINS,
+                         ids=CHAIN_IDS)
+def test_jacobian_derivative_matches_finite_differences(name, chain, lower,
+                                                        upper):
+    rng = np.random.default_rng(10)
+    for _ in range(5):
+        q = rng.uniform(lower, upper)
+        numeric = np.array([
+            (jacobian(chain, q + 1e-6 * e) - jacobian(chain, q - 1e-6 * e))
+            / 2e-6 for e in np.eye(len(q))
+        ])
+        np.testing.assert_allclose(cap.jacobian_derivative(jacobian(chain, q)),
+                                   numeric, atol=1e-8)
+
+
+@pytest.mark.parametrize(("name", "chain", "lower", "upper"), CHAINS,
+                         ids=CHAIN_IDS)
+def test_manipulability_gradient_matches_finite_differences(name, chain,
+                                                            lower, upper):
+    rng = np.random.default_rng(11)
+    for _ in range(10):
+        q = random_nonsingular_q(rng, chain, lower, upper)
+        numeric = central_differences(
+            lambda x, chain=chain: cap.manipulability(jacobian(chain, x)), q)
+        analytic = cap.manipulability_joint_gradient(jacobian(chain, q))
+        np.testing.assert_allclose(
+            analytic, numeric, rtol=1e-6,
+            atol=1e-6 * np.max(np.abs(numeric)))
+
+
+def test_manipulability_gradient_at_and_near_singularities():
+    # Stretched straight up: several zero singular values, m vanishes to
+    # higher order, its gradient is 0.
+    home = cap.manipulability_joint_gradient(jacobian(ELFIN5, np.zeros(6)))
+    assert np.all(np.abs(home) < 1e-12)
+    # Wrist singularity (q_5 = 0): one zero singular value, m ~ |g . d| along
+    # any direction d, and the gradient is the limit of the gradients on
+    # either side, up to sign.
+    q = np.array([0.3, -0.7, 1.1, 0.4, 0.0, -0.5])
+    g = cap.manipulability_joint_gradient(jacobian(ELFIN5, q))
+    assert np.all(np.isfinite(g)) and np.linalg.norm(g) > 1e-2
+    rng = np.random.default_rng(12)
+    h = 1e-5
+    for _ in range(5):
+        d = rng.normal(size=6)
+        m = [cap.manipulability(jacobian(ELFIN5, q + t * d))
+             for t in (-h, 0.0, h)]
+        np.testing.assert_allclose((m[0] + m[2] - 2.0 * m[1]) / (2.0 * h),
+                                   abs(g @ d), rtol=1e-6)
+    for side in (-1.0, 1.0):
+        near = q.copy()
+        near[4] = side * 1e-8
+        g_near = cap.manipulability_joint_gradient(jacobian(ELFIN5, near))
+        assert min(np.linalg.norm(g_near - g),
+                   np.linalg.norm(g_near + g)) < 1e-6 * np.linalg.norm(g)
+
+
+def test_penalty_gradient_matches_finite_differences_inside():
+    rng = np.random.default_rng(13)
+    for _ in range(20):
+        q = rng.uniform(ELFIN5_LOWER, ELFIN5_UPPER)
+        numeric = central_differences(
+            lambda x: penalty_by_loop(x, ELFIN5_LOWER, ELFIN5_UPPER, K_J), q)
+        np.testing.assert_allclose(
+            cap.joint_limit_penalty_gradient(q, ELFIN5_LOWER, ELFIN5_UPPER,
+                                             K_J),
+            numeric, rtol=1e-6, atol=1e-9 * np.max(np.abs(numeric)))
+
+
+@pytest.mark.parametrize("joint", range(6))
+def test_gradients_with_a_joint_exactly_at_a_limit(joint):
+    rng = np.random.default_rng(14 + joint)
+    q = 0.6 * rng.uniform(ELFIN5_LOWER, ELFIN5_UPPER)
+    q[4] = 1.0  # away from the wrist singularity
+    for limit, inward in ((ELFIN5_LOWER, 1.0), (ELFIN5_UPPER, -1.0)):
+        q[joint] = limit[joint]
+
+        def penalty(x):
+            return cap.joint_limit_penalty(x, ELFIN5_LOWER, ELFIN5_UPPER, K_J)
+
+        def capability(x):
+            return cap.capability(jacobian(ELFIN5, x), x, ELFIN5_LOWER,
+                                  ELFIN5_UPPER, K_J)
+
+        e = np.eye(6)[joint]
+        for function, gradient in (
+            (penalty, cap.joint_limit_penalty_gradient(
+                q, ELFIN5_LOWER, ELFIN5_UPPER, K_J)),
+            (capability, cap.capability_joint_gradient(
+                jacobian(ELFIN5, q), q, ELFIN5_LOWER, ELFIN5_UPPER, K_J)),
+        ):
+            # The joint at its limit: derivative from inside, pointing in.
+            slope = one_sided_difference(function, q, inward * e)
+            assert inward * gradient[joint] > 0.0
+            np.testing.assert_allclose(inward * gradient[joint], slope,
+                                       rtol=1e-5)
+            # The other joints: P stays 0 when they move.
+            others = np.delete(np.arange(6), joint)
+            np.testing.assert_allclose(gradient[others], 0.0, atol=1e-15)
+            np.testing.assert_allclose(
+                central_differences(function, q)[others], 0.0, atol=1e-15)
+
+
+def test_penalty_gradient_beyond_a_limit_is_the_one_at_the_limit():
+    q = 0.5 * (ELFIN5_LOWER + ELFIN5_UPPER)
+    q[1] = ELFIN5_UPPER[1]
+    at_limit = cap.joint_limit_penalty_gradient(q, ELFIN5_LOWER,
+                                                ELFIN5_UPPER, K_J)
+    q[1] += 1e-3
+    beyond = cap.joint_limit_penalty_gradient(q, ELFIN5_LOWER, ELFIN5_UPPER,
+                                              K_J)
+    np.testing.assert_array_equal(beyond, at_limit)
+
+
+@pytest.mark.parametrize(("name", "chain", "lower", "upper"), CHAINS,
+                         ids=CHAIN_IDS)
+def test_capability_joint_gradient_matches_finite_differences(name, chain,
+                                                              lower, upper):
+    rng = np.random.default_rng(15)
+
+    def capability(x):
+        return cap.capability(jacobian(chain, x), x, lower, upper, K_J)
+
+    for _ in range(10):
+        q = random_nonsingular_q(rng, chain, lower, upper)
+        numeric = central_differences(capability, q)
+        np.testing.assert_allclose(
+            cap.capability_joint_gradient(jacobian(chain, q), q, lower,
+                                          upper, K_J),
+            numeric, rtol=1e-6, atol=1e-6 * np.max(np.abs(numeric)))
+
+
+# ----------------------------------------------------------------------------
+# Cartesian gradient
+# ----------------------------------------------------------------------------
+
+def test_capability_gradient_gives_the_rate_of_change_along_any_twist():
+    rng = np.random.default_rng(16)
+    for _, chain, lower, upper in CHAINS[:3]:  # square Jacobians
+        for _ in range(10):
+            q = random_nonsingular_q(rng, chain, lower, upper)
+            J = jacobian(chain, q)
+            g = cap.capability_gradient(J, q, lower, upper, K_J)
+            V = rng.normal(size=6)
+            qdot = np.linalg.solve(J, V)
+            h = 1e-6
+            rate = (cap.capability(jacobian(chain, q + h * qdot), q + h * qdot,
+                                   lower, upper, K_J)
+                    - cap.capability(jacobian(chain, q - h * qdot),
+                                     q - h * qdot, lower, upper, K_J)
+                    ) / (2.0 * h)
+            scale = np.linalg.norm(g) * np.linalg.norm(V)
+            assert g @ V == pytest.approx(rate, rel=1e-6, abs=1e-8 * scale)
+            np.testing.assert_allclose(
+                g, np.linalg.solve(
+                    J.T, cap.capability_joint_gradient(J, q, lower, upper,
+                                                       K_J)),
+                rtol=1e-9, atol=1e-12 * np.linalg.norm(g))
+
+
+def test_capability_gradient_of_a_redundant_chain_is_least_squares():
+    _, chain, lower, upper = CHAINS[-1]
+    rng = np.random.default_rng(17)
+    q = random_nonsingular_q(rng, chain, lower, upper)
+    J = jacobian(chain, q)
+    assert J.shape == (6, 7)
+    dC = cap.capability_joint_gradient(J, q, lower, upper, K_J)
+    expected = np.linalg.lstsq(J.T, dC, rcond=None)[0]
+    np.testing.assert_allclose(
+        cap.capability_gradient(J, q, lower, upper, K_J), expected,
+        rtol=1e-9, atol=1e-12 * np.linalg.norm(expected))
+
+
+def test_capability_gradient_damping_near_a_singularity():
+    eps = cap.DEFAULT_DAMPING_THRESHOLD
+    lam = cap.DEFAULT_MAX_DAMPING
+    q = np.array([0.3, -0.7, 1.1, 0.4, 0.0, -0.5])
+    for q5 in (0.0, 1e-3, 0.03, 0.08):  # s_min: 0, 3e-4, 0.01, 0.027
+        q[4] = q5
+        J = jacobian(ELFIN5, q)
+        s_min = np.linalg.svd(J, compute_uv=False)[-1]
+        lambda2 = lam**2 * (1.0 - (s_min / eps) ** 2) if s_min < eps else 0.0
+        dC = cap.capability_joint_gradient(J, q, ELFIN5_LOWER, ELFIN5_UPPER,
+                                           K_J)
+        expected = np.linalg.solve(J @ J.T + lambda2 * np.eye(6), J @ dC)
+        g = cap.capability_gradient(J, q, ELFIN5_LOWER, ELFIN5_UPPER, K_J)
+        assert np.all(np.isfinite(g))
+        np.testing.assert_allclose(g, expected, rtol=1e-8,
+                                   atol=1e-10 * np.linalg.norm(expected))
+        if q5 == 0.0:
+            continue  # J_a^-T does not exist there
+        # Without damping: the pseudo-inverse solution.
+        undamped = cap.capability_gradient(J, q, ELFIN5_LOWER, ELFIN5_UPPER,
+                                           K_J, damping=0.0)
+        np.testing.assert_allclose(undamped, np.linalg.pinv(J.T) @ dC,
+                                   rtol=1e-6, atol=1e-9)
+
+
+def test_capability_gradient_is_continuous_across_the_damping_threshold():
+    rng = np.random.default_rng(18)
+    U, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+    V, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+    q = np.zeros(6)
+    lower, upper = -np.ones(6), np.ones(6)
+
+    def gradient(s_min):
+        J = U @ np.diag([2.0, 1.5, 1.0, 0.7, 0.4, s_min]) @ V.T
+        return cap.capability_gradient(J, q, lower, upper, K_J,
+                                       damping=0.05, damping_threshold=0.1)
+
+    below, above = gradient(0.1 - 1e-9), gradient(0.1 + 1e-9)
+    np.testing.assert_allclose(below, above, rtol=1e-6)
+
+
+# ----------------------------------------------------------------------------
+# Bad input
+# ----------------------------------------------------------------------------
+
+J_OK = np.random.default_rng(19).normal(size=(6, 6))
+Q_OK = np.zeros(6)
+
+
+@pytest.mark.parametrize(("call", "name"), [
+    (lambda: cap.manipulability(np.full((6, 6), np.nan)), "J_a"),
+    (lambda: cap.manipulability(np.ones((7, 6))), "J_a"),
+    (lambda: cap.manipulability(np.ones(6)), "J_a"),
+    (lambda: cap.manipulability_joint_gradient(np.ones((5, 6))), "J_a"),
+    (lambda: cap.jacobian_derivative(np.ones((6, 6, 1))), "J_a"),
+    (lambda: cap.joint_limit_penalty([0.0, np.nan], [-1, -1], [1, 1], 1.0),
+     "q"),
+    (lambda: cap.joint_limit_penalty([0.0, np.inf], [-1, -1], [1, 1], 1.0),
+     "q"),
+    (lambda: cap.joint_limit_penalty([0.0, 0.0], [-1, np.nan], [1, 1], 1.0),
+     "lower"),
+    (lambda: cap.joint_limit_penalty([0.0, 0.0], [-1, -1], [1, 1, 1], 1.0),
+     "upper"),
+    (lambda: cap.joint_limit_penalty([0.0, 0.0], [-1, 1], [1, 1], 1.0),
+     "lower"),
+    (lambda: cap.joint_limit_penalty([0.0, 0.0], [-1, 2], [1, 1], 1.0),
+     "upper"),
+    (lambda: cap.joint_limit_penalty([0.0, 0.0], [-1, -1], [1, 1], 0.0),
+     "k_j"),
+    (lambda: cap.joint_limit_penalty_gradient([0.0], [-1], [1], -2.0),
+     "k_j"),
+    (lambda: cap.capability(J_OK, np.zeros(5), -np.ones(6), np.ones(6)),
+     "q"),
+    (lambda: cap.capability_joint_gradient(J_OK, Q_OK, -np.ones(6),
+                                           np.ones(6), np.nan), "k_j"),
+    (lambda: cap.capability_gradient(J_OK, Q_OK, -np.ones(6), np.ones(6),
+                                     damping=-0.1), "damping"),
+    (lambda: cap.capability_gradient(J_OK, Q_OK, -np.ones(6), np.ones(6),
+                                     damping_threshold=0.0),
+     "damping_threshold"),
+    (lambda: cap.transition(0.5, 0.1, 0.2), "upper"),
+    (lambda: cap.transition(0.5, 0.2, 0.2), "lower"),
+    (lambda: cap.transition_derivative(0.5, 0.1, 0.2), "upper"),
+    (lambda: cap.transition(np.nan, 0.2, 0.1), "value"),
+    (lambda: cap.transition([0.1, np.inf], 0.2, 0.1), "value"),
+    (lambda: cap.transition(0.1, np.nan, 0.1), "upper"),
+])
+def test_bad_input_raises_value_error_naming_the_argument(call, name):
+    with pytest.raises(ValueError, match=rf"\b{name}\b"):
+        call()
