@@ -1,0 +1,314 @@
+"""Weighted whole-body motion distribution (paper Sec. III-B and IV-A).
+
+The end-effector twist V_ee (6,) is split into the whole-body input
+V_wb = [V_a; V_b] (9,) by the weighted least-norm solution of eq. (wln),
+
+    V_wb = J^+ V_ee + (I - J^+ J) V_n^0,   J^+ = Q J^T (J Q J^T)^-1,
+
+eq. (wbsln) with Q = W^-1 of eq. (weight-factors), and with the null-space
+velocity V_n^0 = k_n [grad_x C_m; 0_3] of eq. (wbccm).
+
+Singular Q. At sigma_xy or sigma_phi equal to 0 or 1 the matrix Q has
+zeros on its diagonal and W = Q^-1 does not exist, but the formula for J^+
+only needs J Q J^T to be invertible; Q^-1 is never formed. As Q is
+diagonal, J^+ V_ee = Q (...) gives exactly zero to every input whose
+weight in Q is zero.
+
+Claim: for the controller's J = J_wb = [R_ba, J_b] (arm input = Cartesian
+twist, eq. (1) bottom line), J Q J^T is positive definite for every
+(sigma_xy, sigma_phi) in [0, 1]^2 when ^bR_a = I (the usual mounting);
+for a general mounting ^bR_a it is so whenever a_z != 0, a = ^bR_a e_z
+being the arm base's z axis in T_b (a_z = 0 only for an arm mounted on
+its side, and then only at sigma_xy = 0 or sigma_phi = 0).
+
+Proof. Write s = sigma_xy, p = sigma_phi and R = ^bR_a. J Q J^T is a sum
+of positive semidefinite terms, R6 Q_a R6^T + J_b Q_b J_b^T, so it is
+singular iff some u = [l; w] != 0 (l linear, w angular, in T_b) makes
+both terms vanish, i.e. Q_a R6^T u = 0 and Q_b J_b^T u = 0. With
+l' = R^T l, w' = R^T w these read
+
+    s l'_x = s l'_y = l'_z = w'_x = w'_y = p w'_z = 0,
+    (1 - s) l_x = (1 - s) l_y = (1 - p)(w_z - y l_x + x l_y) = 0.
+
+So w = w'_z a and l is orthogonal to a. Linear part: if s > 0 then
+l' = 0, so l = 0; if s = 0 then l_x = l_y = 0, and l orthogonal to a
+gives l_z a_z = 0, so l = 0 when a_z != 0. Angular part, with l = 0: if
+p > 0 then w'_z = 0; if p = 0 then w_z = w'_z a_z = 0, so w'_z = 0 when
+a_z != 0. Hence u = 0: each of the planar translations and the yaw is
+always carried by the arm block or by J_b. For R = I, J Q J^T does not
+depend on s; it has the eigenvalue 1 three times (vz, wx, wy), and on
+(vx, vy, wz) it equals diag(1, 1, p) + (1 - p) c c^T, c = [-y, x, 1], with
+determinant 1 + p (1 - p) r^2 >= 1 and trace 3 + (1 - p) r^2 <= 3 + r^2
+(r = horizontal distance of the end effector from the base's z axis). So
+its smallest eigenvalue is at least 4 / (3 + r^2)^2 and its condition
+number at most (3 + r^2)^3 / 4, below the damping threshold 1e4 (see
+below) for every r < 5.5 m, far beyond an arm's reach. So no damping
+happens in the controller's case and J_wb V_wb = V_ee holds exactly (to
+rounding). For a general mounting the margin shrinks as a_z -> 0 at
+sigma = 0.
+
+Damping. For a general J, e.g. a singular geometric Jacobian in the arm
+block (eq. (1) top line), J Q J^T can be singular. weighted_pseudoinverse
+then uses the damped inverse (J Q J^T + lambda^2 I)^-1 with the usual
+smooth rule on its smallest eigenvalue s_min and largest s_max:
+
+    lambda^2 = lambda_max^2 (1 - (s_min / eps)^2)   if s_min < eps,
+    lambda^2 = 0                                     otherwise,
+
+with eps and lambda_max^2 relative to s_max (see SingularityDamping), so
+that the rule does not depend on units or on the overall size of J. The
+defaults take lambda_max^2 = eps = 1e-4 s_max: then s_min + lambda^2 =
+s_min + eps - s_min^2 / eps stays within [eps, 1.25 eps] as s_min goes
+from eps to 0, so the smallest eigenvalue of the damped matrix neither
+jumps nor drops below eps.
+With damping J V_wb = V_ee holds only approximately (the motion along the
+weak directions is reduced); this is the only deviation from the paper's
+formula.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from drake_wbc.validation import (
+    as_matrix,
+    as_vector,
+    in_closed_range,
+    non_negative,
+    positive,
+)
+
+
+@dataclass(frozen=True)
+class SingularityDamping:
+    """Parameters of the damped inverse of J Q J^T near singularity.
+
+    Both values are relative to s_max, the largest eigenvalue of J Q J^T
+    (whose entries mix units of linear and angular motion), so the rule
+    is the same whatever the units or the overall size of J. Damping
+    starts when the condition number of J Q J^T exceeds 1 / threshold,
+    i.e. that of J Q^(1/2) exceeds 1 / sqrt(threshold).
+
+    Attributes:
+        threshold: eps / s_max; default 1e-4, i.e. damping starts where
+            the smallest singular value of J Q^(1/2) falls below 1 % of
+            the largest. Whole-body Jacobians [R_ba, J_b] stay above it
+            (module docstring).
+        max_squared: lambda_max^2 / s_max, reached when J Q J^T is exactly
+            singular; default 1e-4 (lambda_max = 1 % of the largest
+            singular value of J Q^(1/2)). Equal to the threshold, it makes
+            the transition gentle: s_min + lambda^2 stays within
+            [eps, 1.25 eps]. The motion along a direction of singular
+            value sigma_i of J Q^(1/2) is reduced by the relative amount
+            lambda^2 / (sigma_i^2 + lambda^2) <= 1e-4 s_max / sigma_i^2,
+            negligible in well-conditioned directions, and the gain of J^+
+            stays below 1 / sqrt(eps) = 100 / sqrt(s_max) instead of
+            growing without bound.
+    """
+
+    threshold: float = 1e-4
+    max_squared: float = 1e-4
+
+    def __post_init__(self):
+        positive("threshold", self.threshold)
+        non_negative("max_squared", self.max_squared)
+
+
+DEFAULT_DAMPING = SingularityDamping()
+"""The default damping of weighted_pseudoinverse and distribute."""
+
+
+def weighting_matrix(sigma_xy, sigma_phi):
+    """Weighting matrix Q = W^-1 of eq. (weight-factors).
+
+    Q = block-diag(Q_a, Q_b) with
+
+        Q_a = diag(sigma_xy, sigma_xy, 1, 1, 1, sigma_phi),
+        Q_b = diag(1 - sigma_xy, 1 - sigma_xy, 1 - sigma_phi),
+
+    ordered like V_wb = [V_a; V_b] = [vx, vy, vz, wx, wy, wz (arm, T_a);
+    vx_b, vy_b, wz_b (base, T_b)]. sigma = 1 gives the motion in the plane
+    (sigma_xy) or about z (sigma_phi) to the arm only, sigma = 0 to the
+    base only, values in between to both.
+
+    Args:
+        sigma_xy: weighting factor of the x-y translation, in [0, 1].
+        sigma_phi: weighting factor of the rotation about z, in [0, 1].
+
+    Returns:
+        (9, 9) diagonal array Q (positive semidefinite; singular when a
+        sigma is 0 or 1).
+
+    Raises:
+        ValueError: if a sigma is not a finite number in [0, 1].
+    """
+    s_xy = in_closed_range("sigma_xy", sigma_xy, 0.0, 1.0)
+    s_phi = in_closed_range("sigma_phi", sigma_phi, 0.0, 1.0)
+    return np.diag(
+        [s_xy, s_xy, 1.0, 1.0, 1.0, s_phi, 1.0 - s_xy, 1.0 - s_xy, 1.0 - s_phi]
+    )
+
+
+def _checked_weights(Q):
+    """Q as a finite, symmetric, positive semidefinite 9x9 matrix."""
+    Q = as_matrix("Q", Q, (9, 9))
+    scale = max(np.max(np.abs(Q)), 1.0)
+    asymmetry = np.abs(Q - Q.T)
+    i, j = np.unravel_index(np.argmax(asymmetry), asymmetry.shape)
+    if asymmetry[i, j] > 1e-12 * scale:
+        raise ValueError(
+            f"Q with Q[{i}, {j}] = {Q[i, j]!r} and Q[{j}, {i}] = "
+            f"{Q[j, i]!r} is not allowed: must be symmetric"
+        )
+    smallest = np.linalg.eigvalsh(Q)[0]
+    if smallest < -1e-12 * scale:
+        raise ValueError(
+            f"Q with smallest eigenvalue {smallest:.6g} is not allowed: "
+            "must be positive semidefinite (no negative eigenvalue)"
+        )
+    return Q
+
+
+def weighted_pseudoinverse(J_wb, Q, damping=DEFAULT_DAMPING):
+    """Weighted pseudo-inverse J^+ = Q J^T (J Q J^T)^-1 of eq. (wbsln).
+
+    The paper's W^-1 is Q of eq. (weight-factors). Q may be singular
+    (sigma at 0 or 1): only J Q J^T is inverted. J^+ V_ee is then the
+    weighted least-norm solution of eq. (wln), min V^T W V subject to
+    J V = V_ee, and J J^+ = I.
+
+    Near a singularity of J Q J^T (smallest eigenvalue s_min below
+    eps = damping.threshold * s_max) the damped inverse
+    (J Q J^T + lambda^2 I)^-1 is used, with lambda^2 =
+    damping.max_squared * s_max * (1 - (s_min / eps)^2); see the module
+    docstring. J J^+ = I then holds only approximately. For the
+    controller's J_wb = [R_ba, J_b] this never happens in practice (proof
+    in the module docstring).
+
+    Args:
+        J_wb: (6, 9) whole-body Jacobian, e.g. from
+            kinematics.whole_body_jacobian.
+        Q: (9, 9) symmetric positive semidefinite weighting matrix W^-1.
+        damping: SingularityDamping parameters, or None for the paper's
+            exact formula (an error if J Q J^T is singular).
+
+    Returns:
+        (9, 6) array J^+.
+
+    Raises:
+        ValueError: if J_wb or Q has the wrong shape or a non-finite entry,
+            Q is not symmetric positive semidefinite, damping is not a
+            SingularityDamping or None, or (damping=None only) J Q J^T is
+            not positive definite.
+    """
+    J = as_matrix("J_wb", J_wb, (6, 9))
+    Q = _checked_weights(Q)
+    return _pseudoinverse(J, Q, _checked_damping(damping))
+
+
+def _checked_damping(damping):
+    """damping, after checking that it is a SingularityDamping or None."""
+    if damping is not None and not isinstance(damping, SingularityDamping):
+        raise ValueError(
+            f"damping = {damping!r} is not allowed: must be a "
+            "SingularityDamping or None"
+        )
+    return damping
+
+
+def _pseudoinverse(J, Q, damping):
+    """J^+ for arguments already checked (see weighted_pseudoinverse)."""
+    JQ = J @ Q
+    M = JQ @ J.T
+    M = 0.5 * (M + M.T)
+    if damping is None:
+        try:
+            factor = np.linalg.cholesky(M)
+        except np.linalg.LinAlgError:
+            raise ValueError(
+                "J_wb with J_wb Q J_wb^T of smallest eigenvalue "
+                f"{np.linalg.eigvalsh(M)[0]:.6g} is not allowed with "
+                "damping=None: J_wb Q J_wb^T must be positive definite "
+                "(J_wb Q^(1/2) of full row rank); pass a SingularityDamping"
+            ) from None
+        # (L L^T)^-1 J Q by two triangular solves; J^+ is its transpose.
+        return np.linalg.solve(factor.T, np.linalg.solve(factor, JQ)).T
+    eigenvalues = np.linalg.eigvalsh(M)
+    s_min, s_max = max(eigenvalues[0], 0.0), eigenvalues[-1]
+    if s_max <= 0.0:
+        # J Q^(1/2) = 0: no input with a weight moves the end effector.
+        return np.zeros((9, 6))
+    eps = damping.threshold * s_max
+    if s_min < eps:
+        lambda_sq = damping.max_squared * s_max * (1.0 - (s_min / eps) ** 2)
+        M[np.diag_indices(6)] += lambda_sq
+    return np.linalg.solve(M, JQ).T
+
+
+def capability_null_velocity(grad_x_C_m, k_n):
+    """Null-space velocity V_n^0 = k_n [grad_x C_m; 0_3] of eq. (wbccm).
+
+    Args:
+        grad_x_C_m: (6,) gradient of the movement capability C_m w.r.t.
+            the arm's Cartesian pose coordinates, ordered and expressed like
+            V_a ([linear; angular], T_a).
+        k_n: gain k_n >= 0 of the secondary task (0 switches it off, as
+            the paper does when C_m exceeds C_m^u).
+
+    Returns:
+        (9,) array V_n^0, ordered like V_wb; its base part is zero.
+
+    Raises:
+        ValueError: if grad_x_C_m is not 6 finite numbers or k_n is
+            negative or not finite.
+    """
+    grad = as_vector("grad_x_C_m", grad_x_C_m, 6)
+    gain = non_negative("k_n", k_n)
+    V_n = np.zeros(9)
+    V_n[:6] = gain * grad
+    return V_n
+
+
+def distribute(
+    J_wb,
+    V_ee,
+    sigma_xy,
+    sigma_phi,
+    null_velocity=None,
+    damping=DEFAULT_DAMPING,
+):
+    """Whole-body input V_wb for an end-effector twist, eq. (wbsln)/(wbccm).
+
+        V_wb = J^+ V_ee + (I - J^+ J_wb) V_n^0,
+
+    with J^+ the weighted pseudo-inverse for Q(sigma_xy, sigma_phi) of
+    eq. (weight-factors). The null-space term does not change the
+    end-effector twist: J_wb (I - J^+ J_wb) = 0 whenever no damping is
+    needed (always for J_wb = [R_ba, J_b], see the module docstring).
+
+    Args:
+        J_wb: (6, 9) whole-body Jacobian, normally [R_ba, J_b] (eq. (1),
+            bottom line) from kinematics.whole_body_jacobian(None, ...).
+        V_ee: (6,) end-effector twist [v; w] in T_b (m/s; rad/s).
+        sigma_xy: weighting factor of the x-y translation, in [0, 1].
+        sigma_phi: weighting factor of the rotation about z, in [0, 1].
+        null_velocity: (9,) V_n^0, ordered like V_wb, e.g. from
+            capability_null_velocity; None for no null-space motion.
+        damping: see weighted_pseudoinverse.
+
+    Returns:
+        (9,) array V_wb = [V_a (6, T_a); V_b (3, T_b)].
+
+    Raises:
+        ValueError: on a bad argument (wrong shape, non-finite entry, sigma
+            outside [0, 1]), naming it.
+    """
+    J = as_matrix("J_wb", J_wb, (6, 9))
+    V_ee = as_vector("V_ee", V_ee, 6)
+    Q = weighting_matrix(sigma_xy, sigma_phi)
+    J_pinv = _pseudoinverse(J, Q, _checked_damping(damping))
+    V_wb = J_pinv @ V_ee
+    if null_velocity is not None:
+        V_n = as_vector("null_velocity", null_velocity, 9)
+        V_wb += V_n - J_pinv @ (J @ V_n)
+    return V_wb
