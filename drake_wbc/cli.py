@@ -1,0 +1,92 @@
+"""The `drake-wbc` command.
+
+Each subcommand is one entry of `SUBCOMMANDS`: a name, a one-line help, a
+function that adds its arguments and a function that runs it and returns
+the exit code. Heavy imports happen inside the runners, so that
+`drake-wbc --help` answers at once.
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def _add_demo_arguments(parser):
+    parser.add_argument(
+        "--output",
+        type=Path,
+        default=Path("out") / "demo",
+        help="folder for the Meshcat page (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--q-arm",
+        type=float,
+        nargs=6,
+        metavar="Q",
+        help="arm configuration in rad (default: the home pose)",
+    )
+
+
+def _run_demo(args):
+    from drake_wbc.model_report import describe_robot, write_model_page
+    from drake_wbc.robot_model import HOME_ARM_POSITIONS
+
+    q_a = HOME_ARM_POSITIONS if args.q_arm is None else args.q_arm
+    print("drake_wbc robot model: omnidirectional base, flexible mount, "
+          "Elfin5 arm, FT-300, wiping tool\n")
+    print(describe_robot(q_a))
+    page = write_model_page(args.output / "mcr_model.html", q_a)
+    print(f"\nMeshcat page of the model (open it in a browser): {page}")
+    return 0
+
+
+SUBCOMMANDS = (
+    (
+        "demo",
+        "load the robot model, print its joints, limits and capability of "
+        "movement, and write a Meshcat page of it",
+        _add_demo_arguments,
+        _run_demo,
+    ),
+)
+
+
+def make_parser():
+    """Returns the argument parser of `drake-wbc`."""
+    parser = argparse.ArgumentParser(
+        prog="drake-wbc",
+        description=(
+            "Whole-body control of velocity-controlled mobile collaborative "
+            "robots with Coupling Dynamic Movement Primitives (CDMP-WBC), "
+            "built on Drake."
+        ),
+    )
+    from drake_wbc import __version__
+
+    parser.add_argument(
+        "--version", action="version", version=f"%(prog)s {__version__}"
+    )
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, summary, add_arguments, run in SUBCOMMANDS:
+        sub = commands.add_parser(name, help=summary, description=summary)
+        add_arguments(sub)
+        sub.set_defaults(run=run)
+    return parser
+
+
+def main(argv=None):
+    """Runs `drake-wbc` with `argv` (the process's arguments if None)."""
+    parser = make_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    try:
+        return args.run(args)
+    except ValueError as error:
+        print(f"drake-wbc {args.command}: {error}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

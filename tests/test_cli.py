@@ -1,0 +1,67 @@
+"""The drake-wbc command and its demo."""
+
+import base64
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from drake_wbc import capability
+from drake_wbc.cli import main
+from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
+
+
+def test_help_lists_subcommands():
+    result = subprocess.run(
+        [sys.executable, "-m", "drake_wbc.cli", "--help"],
+        capture_output=True, text=True, check=True,
+    )
+    assert "usage: drake-wbc" in result.stdout
+    assert "demo" in result.stdout
+
+
+def test_no_subcommand_prints_help_and_fails(capsys):
+    assert main([]) == 2
+    assert "usage: drake-wbc" in capsys.readouterr().out
+
+
+def test_demo_reports_the_model_and_writes_a_page(tmp_path, capsys):
+    assert main(["demo", "--output", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    for joint in ("base_x", "base_y", "base_yaw", "mount_roll",
+                  "mount_pitch", "joint1", "joint6"):
+        assert joint in out
+    # The printed C_m is the capability at home, computed independently.
+    kinematics = ArmKinematics()
+    J_a = kinematics.evaluate(HOME_ARM_POSITIONS).J_a
+    C_m = capability.capability(J_a, HOME_ARM_POSITIONS, kinematics.lower,
+                                kinematics.upper)
+    assert f"C_m = {C_m:.4f}" in out
+    page = tmp_path / "mcr_model.html"
+    html = page.read_text()
+    assert html.lstrip().lower().startswith("<!doctype html")
+    # Self-contained: the viewer's script and the scene are inline, the
+    # scene as base64-encoded commands that name every part of the robot.
+    assert "<script" in html and "http://" not in html.split("<body")[0]
+    blobs = re.findall(r"data:application/octet-binary;base64,([^\"']+)",
+                       html)
+    scene = b"".join(base64.b64decode(blob) for blob in blobs)
+    for name in (b"elfin5", b"mcr_base", b"ft300_wiping_tool",
+                 b"lidar_fields"):
+        assert name in scene
+
+
+def test_demo_rejects_a_bad_configuration(tmp_path, capsys):
+    code = main(["demo", "--output", str(tmp_path), "--q-arm",
+                 "0", "0", "nan", "0", "0", "0"])
+    assert code == 2
+    assert "q_a" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("q", [np.zeros(6), HOME_ARM_POSITIONS])
+def test_demo_at_other_configurations(tmp_path, capsys, q):
+    args = ["demo", "--output", str(tmp_path), "--q-arm"]
+    assert main(args + [str(x) for x in q]) == 0
+    assert "C_m" in capsys.readouterr().out
