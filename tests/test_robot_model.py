@@ -342,3 +342,46 @@ def test_base_velocity_step_shakes_end_effector():
     # and the ringing decays (damping ratio 0.05: to ~e^-3 in 2 s).
     late = times > 1.6
     assert np.ptp(tcp_velocity[late]) < 0.3 * swing
+
+
+def test_sensing_weld_reads_the_tool_weight():
+    """At rest the weld `ft300_sensing` carries the tool: its reaction
+    wrench (on the tool, at the measurement frame) is the tool's weight
+    and its moment about the measurement point, as an F/T sensor reads."""
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
+    model = add_mcr(plant)
+    plant.Finalize()
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    context = plant.GetMyMutableContextFromRoot(
+        simulator.get_mutable_context())
+    q = plant.GetPositions(context)
+    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = (
+        HOME_ARM_POSITIONS)
+    plant.SetPositions(context, q)
+    for i in plant.GetJointIndices():
+        if plant.get_joint(i).num_velocities() == 1:
+            plant.get_joint(i).Lock(context)
+    simulator.AdvanceTo(0.05)
+
+    weld = plant.GetJointByName("ft300_sensing", model.tool)
+    wrench = plant.get_reaction_forces_output_port().Eval(context)[
+        int(weld.index())]
+    tool = plant.GetBodyByName("wiping_tool", model.tool)
+    mass = tool.get_mass(context)
+    g = plant.gravity_field().gravity_vector()
+    X_WM = model.ft_measurement_frame.CalcPoseInWorld(context)
+    R_MW = X_WM.rotation().inverse()
+    # Equilibrium of the tool: weld force + weight = 0, and the weld's
+    # moment about the measurement point cancels that of the weight.
+    force_W = -mass * g
+    p_WCom = tool.EvalPoseInWorld(context).multiply(
+        tool.CalcCenterOfMassInBodyFrame(context))
+    moment_W = np.cross(p_WCom - X_WM.translation(), force_W)
+    np.testing.assert_allclose(wrench.translational(), R_MW @ force_W,
+                               atol=1e-6)
+    np.testing.assert_allclose(wrench.rotational(), R_MW @ moment_W,
+                               atol=1e-6)
+    assert np.linalg.norm(wrench.translational()) == pytest.approx(
+        0.40 * 9.81, rel=1e-3)
