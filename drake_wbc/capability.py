@@ -18,6 +18,7 @@ analytic, computed from J_a and q alone: no AutoDiff, no finite differences.
 import numpy as np
 
 from drake_wbc.validation import (
+    as_matrix,
     as_scalar,
     as_vector,
     non_negative,
@@ -69,25 +70,13 @@ meeting the undamped gain 1/s_min continuously at s_min = eps."""
 def _as_jacobian(J_a, rows=None, wide=True):
     """Returns J_a as a finite float matrix with `rows` rows (any number if
     None) and, if `wide`, at least as many columns as rows."""
-    try:
-        J = np.asarray(J_a, dtype=float)
-    except (TypeError, ValueError):
+    J = as_matrix("J_a", J_a, (rows, None))
+    if J.size == 0 or (wide and J.shape[0] > J.shape[1]):
         raise ValueError(
-            f"J_a = {J_a!r} is not allowed: must be a matrix of numbers"
-        ) from None
-    bad_rows = J.ndim == 2 and rows is not None and J.shape[0] != rows
-    if (J.ndim != 2 or J.size == 0 or bad_rows
-            or (wide and J.shape[0] > J.shape[1])):
-        wanted = "a non-empty 2-D shape"
-        if rows is not None:
-            wanted += f" with {rows} rows [v; w]"
-        if wide:
-            wanted += " and at least as many columns as rows"
-        raise ValueError(
-            f"J_a has shape {J.shape}, which is not allowed: must have "
-            f"{wanted}"
+            f"J_a has shape {J.shape}, which is not allowed: must be "
+            "non-empty" + (" with at least as many columns as rows"
+                           if wide else "")
         )
-    as_vector("J_a", J.ravel())  # finiteness, reported with the name J_a
     return J
 
 

@@ -23,43 +23,39 @@ def as_vector(name, value, size=None):
         ValueError: naming `name` when the value is not a 1-D array of
             `size` finite numbers.
     """
-    try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(
-            f"{name} = {value!r} is not allowed: must be a vector of numbers"
-        ) from None
-    if array.ndim != 1 or (size is not None and array.shape[0] != size):
-        wanted = f"shape ({size},)" if size is not None else "a 1-D shape"
-        raise ValueError(
-            f"{name} has shape {array.shape}, which is not allowed: "
-            f"must have {wanted}"
-        )
-    if not np.all(np.isfinite(array)):
-        raise ValueError(
-            f"{name} = {_shown(array)} is not allowed: "
-            "every entry must be finite (no NaN or infinity)"
-        )
-    return array
+    return _as_array(name, value, (size,), "vector")
 
 
 def as_matrix(name, value, shape):
-    """Returns `value` as a finite float matrix of exactly `shape`.
+    """Returns `value` as a finite float matrix of `shape`.
+
+    An entry None in `shape` accepts any size along that axis, e.g.
+    (6, None) for a Jacobian with six rows.
 
     Raises:
         ValueError: naming `name` when the shape is wrong or an entry is not
             finite.
     """
+    return _as_array(name, value, shape, "matrix")
+
+
+def _as_array(name, value, shape, kind):
     try:
         array = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise ValueError(
-            f"{name} = {value!r} is not allowed: must be a matrix of numbers"
+            f"{name} = {value!r} is not allowed: must be a {kind} of numbers"
         ) from None
-    if array.shape != tuple(shape):
+    fits = array.ndim == len(shape) and all(
+        wanted is None or size == wanted
+        for size, wanted in zip(array.shape, shape, strict=False)
+    )
+    if not fits:
+        wanted = ", ".join("any" if n is None else str(n) for n in shape)
+        wanted += "," if len(shape) == 1 else ""
         raise ValueError(
             f"{name} has shape {array.shape}, which is not allowed: "
-            f"must have shape {tuple(shape)}"
+            f"must have shape ({wanted})"
         )
     if not np.all(np.isfinite(array)):
         raise ValueError(
@@ -109,12 +105,7 @@ def positive(name, value):
     Raises:
         ValueError: naming `name` and its value.
     """
-    number = as_scalar(name, value)
-    if not number > 0.0:
-        raise ValueError(
-            f"{name} = {number!r} is not allowed: must be greater than 0"
-        )
-    return number
+    return _above(name, value, strict=True)
 
 
 def non_negative(name, value):
@@ -123,10 +114,15 @@ def non_negative(name, value):
     Raises:
         ValueError: naming `name` and its value.
     """
+    return _above(name, value, strict=False)
+
+
+def _above(name, value, strict):
     number = as_scalar(name, value)
-    if not number >= 0.0:
+    if not (number > 0.0 if strict else number >= 0.0):
+        wanted = "greater than 0" if strict else "0 or greater"
         raise ValueError(
-            f"{name} = {number!r} is not allowed: must be 0 or greater"
+            f"{name} = {number!r} is not allowed: must be {wanted}"
         )
     return number
 

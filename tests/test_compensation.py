@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from reference_kinematics import random_rotation
 
 from drake_wbc.compensation import (
     base_deviation,
@@ -12,17 +13,6 @@ from drake_wbc.distribution import distribute
 from drake_wbc.kinematics import base_jacobian, whole_body_jacobian
 
 N_CASES = 200
-
-
-def random_rotation(rng):
-    """A uniformly random rotation matrix from a random unit quaternion."""
-    q = rng.normal(size=4)
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
 
 
 def required_compensation(dV_b, p, R):

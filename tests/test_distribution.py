@@ -8,6 +8,7 @@ import itertools
 
 import numpy as np
 import pytest
+from reference_kinematics import random_rotation
 
 from drake_wbc.distribution import (
     SingularityDamping,
@@ -22,17 +23,6 @@ BOUNDARY_SIGMAS = [
     (0.0, 0.0), (1.0, 1.0), (0.0, 1.0), (1.0, 0.0),
     (0.0, 0.4), (0.7, 0.0), (1.0, 0.3), (0.6, 1.0),
 ]
-
-
-def random_rotation(rng):
-    """A uniformly random rotation matrix from a random unit quaternion."""
-    q = rng.normal(size=4)
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
 
 
 def random_orthogonal(rng, n):

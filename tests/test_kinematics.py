@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from reference_kinematics import random_rotation
 
 from drake_wbc.kinematics import (
     base_jacobian,
@@ -11,17 +12,6 @@ from drake_wbc.kinematics import (
 )
 
 N_CASES = 200
-
-
-def random_rotation(rng):
-    """A uniformly random rotation matrix from a random unit quaternion."""
-    q = rng.normal(size=4)
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
 
 
 def rot_z(angle):

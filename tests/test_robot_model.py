@@ -8,6 +8,12 @@ from pydrake.multibody.tree import PdControllerGains
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink
+from reference_kinematics import (
+    ELFIN5,
+    ELFIN5_LOWER,
+    ELFIN5_UPPER,
+    forward_kinematics,
+)
 
 from drake_wbc.robot_model import (
     ARM_JOINTS,
@@ -21,45 +27,10 @@ from drake_wbc.robot_model import (
     mount_rocking_modes,
 )
 
-# The Elfin5 table of the robot facts: joint origin relative to the previous
-# link frame (xyz, rpy), position limit, effort; all axes are local z.
-ELFIN5_TABLE = [
-    ((0, 0, 0.22), (0, 0, 0), 3.14, 200),
-    ((0, 0, 0), (1.5708, 0, 0), 2.35, 200),
-    ((0, 0.38, 0), (3.1416, 0, 1.5708), 2.61, 200),
-    ((0, 0, 0), (1.5708, 0, 1.5708), 3.14, 104),
-    ((0, 0, 0.42), (-1.5708, 0, 0), 2.56, 34),
-    ((0, 0, 0), (1.5708, 0, 0), 3.14, 34),
-]
-FLANGE_OFFSET = 0.1565
+# Efforts (N m) and link masses (kg, base to L6) of the Elfin5 facts table;
+# its joint origins and limits are in reference_kinematics.
+ELFIN5_EFFORTS = [200, 200, 200, 104, 34, 34]
 LINK_MASSES = [2.13, 7.96, 3.73, 4.72, 1.47, 2.50, 0.455]
-
-
-def rotation_rpy(roll, pitch, yaw):
-    """R = Rz(yaw) Ry(pitch) Rx(roll), the URDF/SDFormat convention."""
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    cy, sy = np.cos(yaw), np.sin(yaw)
-    Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    Ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-    Rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
-    return Rz @ Ry @ Rx
-
-
-def flange_pose_from_table(q):
-    """The flange pose in the arm's base frame, chained by hand from the
-    table (independent of the model files and of Drake)."""
-    X = np.eye(4)
-    for (xyz, rpy, _, _), angle in zip(ELFIN5_TABLE, q, strict=True):
-        joint = np.eye(4)
-        joint[:3, :3] = rotation_rpy(*rpy)
-        joint[:3, 3] = xyz
-        motion = np.eye(4)
-        motion[:3, :3] = rotation_rpy(0, 0, angle)
-        X = X @ joint @ motion
-    flange = np.eye(4)
-    flange[2, 3] = FLANGE_OFFSET
-    return X @ flange
 
 
 @pytest.fixture(scope="module")
@@ -89,8 +60,8 @@ def test_joints_names_and_limits(robot):
         for i in plant.GetJointActuatorIndices()
     ]
     assert sorted(actuated) == sorted(BASE_JOINTS + ARM_JOINTS)
-    for name, (_, _, limit, effort) in zip(ARM_JOINTS, ELFIN5_TABLE,
-                                           strict=True):
+    for name, limit, effort in zip(ARM_JOINTS, ELFIN5_UPPER, ELFIN5_EFFORTS,
+                                   strict=True):
         joint = plant.GetJointByName(name, model.arm)
         assert joint.position_lower_limits()[0] == -limit
         assert joint.position_upper_limits()[0] == limit
@@ -153,17 +124,16 @@ def test_flange_matches_hand_computation(robot, q, position):
 
 def test_forward_kinematics_matches_table(robot):
     plant, model = robot
+    """The flange pose equals the chain written by hand from the facts
+    table, independent of the model files and of Drake."""
     rng = np.random.default_rng(2)
-    limits = np.array([row[2] for row in ELFIN5_TABLE])
     for _ in range(20):
-        q = rng.uniform(-limits, limits)
+        q = rng.uniform(ELFIN5_LOWER, ELFIN5_UPPER)
         context = _arm_context(plant, model, q)
         X = model.flange_frame.CalcPose(context, model.arm_base_frame)
-        expected = flange_pose_from_table(q)
-        np.testing.assert_allclose(X.translation(), expected[:3, 3],
-                                   atol=1e-12)
-        np.testing.assert_allclose(X.rotation().matrix(), expected[:3, :3],
-                                   atol=1e-12)
+        p, R, _, _ = forward_kinematics(ELFIN5, q)
+        np.testing.assert_allclose(X.translation(), p, atol=1e-12)
+        np.testing.assert_allclose(X.rotation().matrix(), R, atol=1e-12)
 
 
 def test_sensor_tool_and_lidar_frames(robot):
