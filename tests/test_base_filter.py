@@ -1,0 +1,157 @@
+"""BaseVelocityFilter against eq. (filtering): Drake's linearisation of the
+very system the controller uses, compared with closed forms."""
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import (
+    ConstantVectorSource,
+    Linearize,
+    VectorLogSink,
+)
+
+from drake_wbc.filtering import (
+    BaseFilterParameters,
+    lowpass_response,
+    lowpass_state_space,
+    lowpass_zoh_response,
+    zero_order_hold,
+)
+from drake_wbc.systems import BaseVelocityFilter
+
+FREQUENCIES_HZ = np.logspace(-2, 2, 200)
+OMEGA = 2 * np.pi * FREQUENCIES_HZ
+
+
+def frequency_response(linear_system, omega):
+    """C (sI - A)^-1 B + D at s = j omega, or z = e^(j omega h) when the
+    system is discrete; (len(omega), outputs, inputs)."""
+    A, B = linear_system.A(), linear_system.B()
+    C, D = linear_system.C(), linear_system.D()
+    h = linear_system.time_period()
+    points = np.exp(1j * omega * h) if h > 0 else 1j * omega
+    eye = np.eye(A.shape[0])
+    return np.array(
+        [C @ np.linalg.solve(p * eye - A, B) + D for p in points]
+    )
+
+
+def linearize(params):
+    system = BaseVelocityFilter(params)
+    context = system.CreateDefaultContext()
+    system.get_input_port().FixValue(context, np.zeros(3))
+    return Linearize(system, context)
+
+
+def assert_diagonal_response(response, expected):
+    for axis in range(3):
+        relative = np.abs(response[:, axis, axis] - expected) / np.abs(
+            expected)
+        assert relative.max() < 1e-6
+        off = np.delete(response[:, axis, :], axis, axis=1)
+        assert np.abs(off).max() == 0.0
+
+
+@pytest.mark.parametrize("zeta", [0.5, 1.0, 2.0])
+def test_continuous_linearization_matches_eq_filtering(zeta):
+    params = BaseFilterParameters(omega_f=2 * np.pi, zeta=zeta, time_step=0.0)
+    linear = linearize(params)
+    assert linear.time_period() == 0.0
+    assert_diagonal_response(frequency_response(linear, OMEGA),
+                             lowpass_response(params.omega_f, zeta, OMEGA))
+
+
+@pytest.mark.parametrize("zeta", [0.5, 1.0, 2.0])
+@pytest.mark.parametrize("time_step", [0.01, 0.002])
+def test_discrete_linearization_matches_exact_zoh_equivalent(zeta,
+                                                             time_step):
+    params = BaseFilterParameters(omega_f=2 * np.pi, zeta=zeta,
+                                  time_step=time_step)
+    linear = linearize(params)
+    assert linear.time_period() == time_step
+    expected = lowpass_zoh_response(params.omega_f, zeta, time_step, OMEGA)
+    assert_diagonal_response(frequency_response(linear, OMEGA), expected)
+
+
+def test_zoh_equivalent_tends_to_the_continuous_filter():
+    """Below a tenth of the sampling rate the discrete filter is the
+    continuous one up to the hold's half-period delay."""
+    omega = OMEGA[FREQUENCIES_HZ < 5]
+    h = 0.001
+    delayed = lowpass_response(2 * np.pi, 1.0, omega) * np.exp(
+        -1j * omega * h / 2)
+    discrete = lowpass_zoh_response(2 * np.pi, 1.0, h, omega)
+    assert np.abs(discrete - delayed).max() < 1e-3
+
+
+def test_step_response_is_exact_at_the_samples():
+    """With zeta = 1 the step response is 1 - (1 + w t) e^(-w t); the
+    zero-order-hold discretisation reproduces it exactly at each sample."""
+    params = BaseFilterParameters()
+    builder = DiagramBuilder()
+    system = builder.AddSystem(BaseVelocityFilter(params))
+    step = np.array([0.1, -0.05, 0.2])
+    source = builder.AddSystem(ConstantVectorSource(step))
+    builder.Connect(source.get_output_port(), system.get_input_port())
+    log = builder.AddSystem(VectorLogSink(3, publish_period=params.time_step))
+    builder.Connect(system.get_output_port(), log.get_input_port())
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    simulator.AdvanceTo(2.0)
+    data = log.FindLog(simulator.get_context())
+    t = data.sample_times()
+    w = params.omega_f
+    expected = np.outer(step, 1 - (1 + w * t) * np.exp(-w * t))
+    np.testing.assert_allclose(data.data(), expected, atol=1e-12)
+
+
+def test_scalar_conversion_keeps_parameters():
+    params = BaseFilterParameters(omega_f=3.0, zeta=0.7, time_step=0.005)
+    system = BaseVelocityFilter(params)
+    for converted in (system.ToAutoDiffXd(), system.ToSymbolic()):
+        assert converted.params == params
+        assert converted.get_input_port().get_name() == "velocity"
+        assert converted.get_output_port().get_name() == "filtered_velocity"
+
+
+def test_set_velocity_starts_at_rest():
+    system = BaseVelocityFilter()
+    context = system.CreateDefaultContext()
+    system.get_input_port().FixValue(context, [0.3, 0.0, 0.1])
+    system.set_velocity(context, [0.3, 0.0, 0.1])
+    np.testing.assert_allclose(system.get_output_port().Eval(context),
+                               [0.3, 0.0, 0.1])
+    state = context.get_discrete_state_vector().CopyToVector()
+    update = system.EvalUniquePeriodicDiscreteUpdate(context)
+    np.testing.assert_allclose(update.get_vector().CopyToVector(), state,
+                               atol=1e-12)
+
+
+def test_zero_order_hold_of_a_scalar_lag():
+    """e^(-h/T) and 1 - e^(-h/T) for x_dot = (u - x) / T."""
+    A_d, B_d = zero_order_hold(np.array([[-2.0]]), np.array([[2.0]]), 0.1)
+    assert A_d[0, 0] == pytest.approx(np.exp(-0.2), rel=1e-14)
+    assert B_d[0, 0] == pytest.approx(1 - np.exp(-0.2), rel=1e-14)
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    (dict(omega_f=0.0), "omega_f"),
+    (dict(omega_f=-1.0), "omega_f"),
+    (dict(zeta=0.0), "zeta"),
+    (dict(zeta=float("nan")), "zeta"),
+    (dict(time_step=-0.01), "time_step"),
+    (dict(omega_f=400.0, time_step=0.01), "Nyquist"),
+])
+def test_bad_parameters_are_rejected(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        BaseFilterParameters(**kwargs)
+
+
+def test_bad_filter_math_arguments_are_rejected():
+    with pytest.raises(ValueError, match="omega_f"):
+        lowpass_state_space(0.0, 1.0)
+    with pytest.raises(ValueError, match="zeta"):
+        lowpass_state_space(1.0, -1.0)
+    with pytest.raises(ValueError, match="time_step"):
+        zero_order_hold(np.eye(2), np.ones((2, 1)), 0.0)
