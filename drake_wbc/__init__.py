@@ -12,7 +12,10 @@ BaseVelocityFilter`).
 
 __version__ = "0.1.0"
 
-_SYSTEMS = ("BaseVelocityFilter",)
+_SYSTEMS = (
+    "ArmCartesianVelocityController",
+    "BaseVelocityFilter",
+)
 
 
 def __getattr__(name):

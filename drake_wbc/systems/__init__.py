@@ -5,9 +5,18 @@ AutoDiffXd), so that Drake's `Linearize` runs on the very systems the
 controller uses.
 """
 
+from drake_wbc.systems.arm_control import (
+    ArmCartesianVelocityController,
+    ArmCartesianVelocityController_,
+)
 from drake_wbc.systems.base_filter import (
     BaseVelocityFilter,
     BaseVelocityFilter_,
 )
 
-__all__ = ["BaseVelocityFilter", "BaseVelocityFilter_"]
+__all__ = [
+    "ArmCartesianVelocityController",
+    "ArmCartesianVelocityController_",
+    "BaseVelocityFilter",
+    "BaseVelocityFilter_",
+]

@@ -1,0 +1,579 @@
+"""The arm's Cartesian velocity controller: the math against closed forms
+and brute force, the Drake system through its ports, its scalar conversion
+and its linearisation."""
+
+import numpy as np
+import pytest
+from pydrake.autodiffutils import ExtractValue, InitializeAutoDiff
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import (
+    ConstantVectorSource,
+    FirstOrderTaylorApproximation,
+    Linearize,
+    LogVectorOutput,
+)
+
+from drake_wbc import ArmCartesianVelocityController as PackageLevel
+from drake_wbc.arm_control import (
+    DEFAULT_DAMPING,
+    DEFAULT_DAMPING_THRESHOLD,
+    DEFAULT_JOINT_LIMIT_MARGIN,
+    ELFIN5_ACCELERATION_LIMIT,
+    ArmControllerParameters,
+    damped_least_squares,
+    joint_position_velocity_bounds,
+    joint_velocity_for_twist,
+    singularity_damping,
+)
+from drake_wbc.capability import jacobian_derivative
+from drake_wbc.robot_model import ARM_JOINTS, HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.systems import ArmCartesianVelocityController
+
+H = 0.01
+VELOCITY_LIMIT = 1.57
+ACCELERATION_LIMIT = 12.56
+
+
+@pytest.fixture(scope="module")
+def arm():
+    return ArmKinematics()
+
+
+def jacobian(arm, q):
+    return arm.evaluate(q).J_a
+
+
+def regular_configuration(arm, rng):
+    """A configuration near home with s_min of J_a well above the damping
+    threshold and every joint far from its limits."""
+    while True:
+        q = HOME_ARM_POSITIONS + rng.uniform(-0.3, 0.3, 6)
+        s = np.linalg.svd(jacobian(arm, q), compute_uv=False)
+        if s[-1] > 2 * DEFAULT_DAMPING_THRESHOLD:
+            return q
+
+
+def unlimited(J_a, V_a, q, **kwargs):
+    """joint_velocity_for_twist with limits too far away to act."""
+    kwargs.setdefault("margin", 0.0)
+    return joint_velocity_for_twist(J_a, V_a, q, q - 1e3, q + 1e3, 1e9, H,
+                                    **kwargs)
+
+
+def parallel(a, b):
+    return abs(a @ b) / (np.linalg.norm(a) * np.linalg.norm(b))
+
+
+# --- the math ---------------------------------------------------------
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_regular_point_without_damping_is_the_inverse(arm, seed):
+    rng = np.random.default_rng(seed)
+    q = regular_configuration(arm, rng)
+    J = jacobian(arm, q)
+    V = rng.normal(size=6) * 0.05
+    exact = np.linalg.solve(J, V)
+    for damping in (0.0, DEFAULT_DAMPING):  # the rule gives lambda = 0 here
+        result = joint_velocity_for_twist(J, V, q, arm.lower, arm.upper,
+                                          VELOCITY_LIMIT, H, damping=damping)
+        np.testing.assert_allclose(result.q_dot, exact, rtol=1e-10,
+                                   atol=1e-14)
+        assert not result.damped and not result.limited
+        assert result.scale == 1.0 and result.acceleration_scale == 1.0
+
+
+@pytest.mark.parametrize("columns", [6, 7])
+def test_damped_solution_is_the_dls_closed_form(columns):
+    rng = np.random.default_rng(10 + columns)
+    J = rng.normal(size=(6, columns))
+    V = rng.normal(size=6)
+    for lam in (0.0, 0.05, 0.3):
+        closed = J.T @ np.linalg.solve(J @ J.T + lam**2 * np.eye(6), V)
+        np.testing.assert_allclose(damped_least_squares(J, V, lam), closed,
+                                   rtol=1e-10)
+    # The rule: with eps above every singular value, damping always acts.
+    eps, lambda_max = 10.0, 0.4
+    s_min = np.linalg.svd(J, compute_uv=False).min()
+    lam = lambda_max * (1 - (s_min / eps) ** 2)
+    closed = J.T @ np.linalg.solve(J @ J.T + lam**2 * np.eye(6), V)
+    result = unlimited(J, V, np.zeros(columns), damping=lambda_max,
+                       damping_threshold=eps)
+    assert result.damped and result.damping == pytest.approx(lam)
+    np.testing.assert_allclose(result.q_dot, closed, rtol=1e-10)
+
+
+def test_singularity_damping_rule_is_smooth_and_bounded():
+    eps, lambda_max = DEFAULT_DAMPING_THRESHOLD, DEFAULT_DAMPING
+    assert singularity_damping(0.0) == lambda_max
+    assert singularity_damping(eps) == 0.0
+    assert singularity_damping(2 * eps) == 0.0
+    s = np.linspace(0.0, 2 * eps, 4001)
+    lam = np.array([singularity_damping(x) for x in s])
+    np.testing.assert_allclose(
+        lam**2, np.where(s < eps, lambda_max**2 * (1 - (s / eps) ** 2) ** 2,
+                         0.0), atol=1e-15)
+    # lambda^2, all the solve uses, is C1: its slope tends to 0 at eps
+    # from below as it is 0 above (lambda itself has a kink there).
+    for delta in (1e-3 * eps, 1e-6 * eps):
+        left = (0.0 - singularity_damping(eps - delta) ** 2) / delta
+        assert abs(left) < 10 * delta * lambda_max**2 / eps**2
+    assert (singularity_damping(0.5 * eps) ** 2 - lambda_max**2 * 0.75**2
+            ) == pytest.approx(0.0, abs=1e-18)
+    # The gain of a direction with singular value s never exceeds 1.07/eps.
+    gain = s / (s**2 + lam**2)
+    assert gain.max() < 1.07 / eps
+    assert gain.max() > 1.06 / eps
+
+
+@pytest.mark.parametrize("joint", [4, 2])  # q5 -> 0 (wrist), q3 -> 0 (elbow)
+def test_near_a_singularity_the_rates_stay_bounded(arm, joint):
+    rng = np.random.default_rng(20 + joint)
+    V = rng.normal(size=6)
+    V *= 0.05 / np.linalg.norm(V)
+    bound = 1.07 / DEFAULT_DAMPING_THRESHOLD * np.linalg.norm(V)
+    for distance in (1e-2, 1e-4, 1e-8, 0.0):
+        q = HOME_ARM_POSITIONS.copy()
+        q[joint] = distance
+        J = jacobian(arm, q)
+        result = unlimited(J, V, q)
+        assert np.all(np.isfinite(result.q_dot))
+        assert result.damped
+        assert np.linalg.norm(result.q_dot) <= bound
+        if distance > 0:  # without damping the same twist explodes
+            undamped = unlimited(J, V, q, damping=0.0).q_dot
+            assert np.linalg.norm(undamped) > 2 * bound
+    # With the real limits the result obeys them too.
+    limited = joint_velocity_for_twist(J, V * 20, q, arm.lower, arm.upper,
+                                       VELOCITY_LIMIT, H)
+    assert np.abs(limited.q_dot).max() <= VELOCITY_LIMIT * (1 + 1e-12)
+
+
+def test_uniform_scaling_keeps_the_direction(arm):
+    rng = np.random.default_rng(30)
+    q = regular_configuration(arm, rng)
+    J = jacobian(arm, q)
+    V = np.array([0.8, -0.5, 0.3, 1.0, -0.7, 0.4])
+    limits = np.array([1.57, 1.57, 1.57, 2.0, 2.5, 3.0])
+    free = unlimited(J, V, q).q_dot
+    assert np.sum(np.abs(free) > limits) >= 2  # several joints too fast
+    result = joint_velocity_for_twist(J, V, q, q - 1e3, q + 1e3, limits, H,
+                                      margin=0.0)
+    assert result.scale < 1.0 and result.limited
+    assert parallel(result.q_dot, free) == pytest.approx(1.0, abs=1e-14)
+    np.testing.assert_allclose(result.q_dot, result.scale * free, rtol=1e-14)
+    assert np.abs(result.q_dot / limits).max() == pytest.approx(1.0)
+    # The end effector keeps its direction of motion: J q_dot = scale V.
+    np.testing.assert_allclose(J @ result.q_dot, result.scale * V,
+                               atol=1e-12)
+    # Clipping each joint instead would turn the motion.
+    assert parallel(np.clip(free, -limits, limits), free) < 0.999
+
+
+@pytest.mark.parametrize("joint", range(6))
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_a_joint_at_its_limit_is_never_commanded_further(arm, joint, side):
+    q = HOME_ARM_POSITIONS.copy()
+    J = jacobian(arm, q)
+    V = side * J[:, joint] * 0.5  # the twist of that joint turning outwards
+    margin = DEFAULT_JOINT_LIMIT_MARGIN
+    for beyond in (-0.003, 0.0, margin, margin + 0.01):
+        # The limit placed `beyond` past the edge of the band from q.
+        limit = q[joint] + side * (margin - beyond)
+        lower, upper = q - 3.0, q + 3.0
+        if side > 0:
+            upper[joint] = limit
+        else:
+            lower[joint] = limit
+        result = joint_velocity_for_twist(J, V, q, lower, upper,
+                                          VELOCITY_LIMIT, H)
+        step = q[joint] + H * result.q_dot[joint]
+        if beyond > 0:  # beyond the band's edge: no further out
+            assert side * result.q_dot[joint] <= 0.0
+        elif beyond == 0:  # at the edge, to the rounding of the limits
+            assert side * result.q_dot[joint] <= 1e-12
+        else:  # approaching: stops exactly at the edge
+            edge = limit - side * margin
+            assert side * (step - edge) <= 1e-15
+            assert step == pytest.approx(edge, abs=1e-15)
+        assert result.limited_joints[joint] and result.limited
+
+
+def braking_rate_by_summation(distance, h, a):
+    """The largest v whose full-deceleration stop v, v - a h, ..., covers
+    at most `distance` (each rate held for h), by bisection."""
+
+    def stopping_distance(v):
+        total = 0.0
+        while v > 0:
+            total += v * h
+            v -= a * h
+        return total
+
+    lo, hi = 0.0, 100.0
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if stopping_distance(mid) <= distance else (lo, mid)
+    return lo
+
+
+@pytest.mark.parametrize("distance", [0.0, 4e-4, 1.256e-3, 3e-3, 0.0123,
+                                      0.1, 0.35])
+def test_braking_bound_by_brute_force(distance):
+    upper = 1.0
+    q = np.array([upper - distance])
+    low, high = joint_position_velocity_bounds(
+        q, [-1.0], [upper], H, margin=0.0,
+        acceleration_limit=ACCELERATION_LIMIT)
+    expected = braking_rate_by_summation(distance, H, ACCELERATION_LIMIT)
+    assert high[0] == pytest.approx(expected, abs=1e-9)
+    assert low[0] <= 0.0
+    # Without an acceleration limit only the next step counts.
+    assert joint_position_velocity_bounds(q, [-1.0], [upper], H, 0.0)[1][
+        0] == pytest.approx(distance / H)
+
+
+def test_acceleration_limit_scales_the_change(arm):
+    rng = np.random.default_rng(40)
+    q = regular_configuration(arm, rng)
+    J = jacobian(arm, q)
+    V = np.array([0.05, 0.02, -0.03, 0.1, 0.0, 0.05])
+    previous = rng.normal(size=6) * 0.1
+    free = unlimited(J, V, q).q_dot
+    result = joint_velocity_for_twist(
+        J, V, q, arm.lower, arm.upper, VELOCITY_LIMIT, H,
+        acceleration_limit=ACCELERATION_LIMIT, previous_q_dot=previous)
+    change = result.q_dot - previous
+    assert result.acceleration_scale < 1.0 and result.limited
+    assert np.abs(change).max() == pytest.approx(ACCELERATION_LIMIT * H)
+    assert parallel(change, free - previous) == pytest.approx(1.0, abs=1e-12)
+    # Starting from the desired rate nothing changes.
+    again = joint_velocity_for_twist(
+        J, V, q, arm.lower, arm.upper, VELOCITY_LIMIT, H,
+        acceleration_limit=ACCELERATION_LIMIT, previous_q_dot=free)
+    np.testing.assert_allclose(again.q_dot, free, rtol=1e-12)
+    assert again.acceleration_scale == 1.0 and not again.limited
+
+
+@pytest.mark.parametrize("seed", [None, 0, 1, 2])
+def test_stepping_into_limits_keeps_every_limit(arm, seed):
+    """Integrating the command against a strong twist (None: the tool
+    pushed straight down at 0.3 m/s, which ends with the shoulder at its
+    lower limit; else random): positions stay in the band and rates change
+    by at most a h every step, also while braking at a joint limit or
+    passing near a singularity."""
+    if seed is None:
+        V = np.array([0.0, 0.0, -0.3, 0.0, 0.0, 0.0])
+    else:
+        rng = np.random.default_rng(50 + seed)
+        V = np.concatenate([rng.normal(size=3) * 0.3, rng.normal(size=3)])
+    q, q_dot = HOME_ARM_POSITIONS.copy(), np.zeros(6)
+    margin = DEFAULT_JOINT_LIMIT_MARGIN
+    braked = 0
+    for _ in range(400):
+        result = joint_velocity_for_twist(
+            jacobian(arm, q), V, q, arm.lower, arm.upper, VELOCITY_LIMIT, H,
+            acceleration_limit=ACCELERATION_LIMIT, previous_q_dot=q_dot)
+        assert np.abs(result.q_dot - q_dot).max() <= (
+            ACCELERATION_LIMIT * H * (1 + 1e-9))
+        assert np.abs(result.q_dot).max() <= VELOCITY_LIMIT * (1 + 1e-12)
+        braked += bool(result.limited_joints.any())
+        q_dot = result.q_dot
+        q = q + H * q_dot
+        assert np.all(q <= arm.upper - margin + 1e-12)
+        assert np.all(q >= arm.lower + margin - 1e-12)
+    if seed is None:  # the shoulder really ran into its limit
+        assert braked > 0
+        assert q[1] == pytest.approx(arm.lower[1] + margin, abs=1e-12)
+
+
+# --- the system -------------------------------------------------------
+
+
+def simulate(params, twist, duration, q0=None):
+    builder = DiagramBuilder()
+    system = builder.AddSystem(ArmCartesianVelocityController(params))
+    source = builder.AddSystem(ConstantVectorSource(twist))
+    builder.Connect(source.get_output_port(),
+                    system.GetInputPort("arm_velocity"))
+    logs = {
+        name: LogVectorOutput(system.GetOutputPort(name), builder,
+                              publish_period=params.time_step)
+        for name in ("arm_position_command", "arm_velocity_command",
+                     "limited")
+    }
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    if q0 is not None:
+        system.set_arm_position(
+            system.GetMyMutableContextFromRoot(simulator.get_mutable_context()),
+            q0)
+    simulator.AdvanceTo(duration)
+    context = simulator.get_context()
+    data = {name: log.FindLog(context).data() for name, log in logs.items()}
+    q_cmd = system.GetOutputPort("arm_position_command").Eval(
+        system.GetMyContextFromRoot(context))
+    return q_cmd, data
+
+
+def end_effector_error(arm, params, speed):
+    """Error of the commanded end effector after 1 s of [speed, 0, 0]."""
+    q_cmd, _ = simulate(params, [speed, 0, 0, 0, 0, 0], 1.0)
+    start, end = arm.evaluate(HOME_ARM_POSITIONS).X_AE, arm.evaluate(q_cmd).X_AE
+    displacement = end.translation() - start.translation()
+    turn = (start.rotation().inverse() @ end.rotation()).ToAngleAxis().angle()
+    return displacement - [speed, 0.0, 0.0], turn
+
+
+@pytest.mark.parametrize("use_acceleration_limit", [False, True])
+def test_constant_twist_moves_the_end_effector(arm, use_acceleration_limit):
+    """0.05 m/s along x of T_a for 1 s (100 updates, at t = 0 to 0.99):
+    0.05 m along x. Tolerance 1e-3 m: the explicit (Euler) integration of
+    q_dot = J_a(q)^-1 V_a drifts by O(h), 5e-5 m here (the tool point moves
+    on arcs within each step), and with the acceleration limit the start
+    from rest costs at most one step's travel, 0.05 m/s * h = 5e-4 m."""
+    params = ArmControllerParameters(
+        use_acceleration_limit=use_acceleration_limit)
+    error, turn = end_effector_error(arm, params, 0.05)
+    assert np.abs(error).max() < 1e-3
+    assert turn < 1e-6
+    if not use_acceleration_limit:
+        assert np.abs(error).max() < 1e-4
+
+
+def test_integration_error_is_first_order_in_the_time_step(arm):
+    errors = [
+        np.linalg.norm(end_effector_error(
+            arm, ArmControllerParameters(time_step=h,
+                                         use_acceleration_limit=False),
+            0.05)[0])
+        for h in (0.01, 0.005)
+    ]
+    assert errors[0] / errors[1] == pytest.approx(2.0, rel=0.1)
+
+
+def test_spinning_the_wrist_stops_at_the_limit(arm):
+    """A twist that turns joint 6 alone, at 1 rad/s, for 5 s: the command
+    stops at upper - margin, braking within the acceleration limit, and
+    never passes it."""
+    params = ArmControllerParameters()
+    J = jacobian(arm, HOME_ARM_POSITIONS)
+    q_cmd, data = simulate(params, J[:, 5], 5.0)
+    edge = arm.upper[5] - params.margin
+    assert data["arm_position_command"][5].max() <= edge + 1e-12
+    assert q_cmd[5] == pytest.approx(edge, abs=1e-12)
+    np.testing.assert_allclose(q_cmd[:5], HOME_ARM_POSITIONS[:5], atol=1e-9)
+    rates = data["arm_velocity_command"]
+    assert np.abs(np.diff(rates, axis=1)).max() <= (
+        ELFIN5_ACCELERATION_LIMIT * params.time_step * (1 + 1e-9))
+    assert data["limited"][0, -1] == 1.0  # still pushed, still limited
+    assert data["limited"][0, 50] == 0.0  # cruising at 1 rad/s
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_pushing_through_limits_never_leaves_them(arm, seed):
+    rng = np.random.default_rng(60 + seed)
+    twist = np.concatenate([rng.normal(size=3) * 0.3, rng.normal(size=3)])
+    params = ArmControllerParameters()
+    _, data = simulate(params, twist, 4.0)
+    q = data["arm_position_command"]
+    assert np.all(q <= arm.upper[:, None] - params.margin + 1e-12)
+    assert np.all(q >= arm.lower[:, None] + params.margin - 1e-12)
+    assert np.abs(data["arm_velocity_command"]).max() <= 1.57 * (1 + 1e-12)
+    assert data["limited"].max() == 1.0
+
+
+def test_ports_state_and_no_direct_feedthrough():
+    system = ArmCartesianVelocityController()
+    assert PackageLevel is ArmCartesianVelocityController
+    assert system.get_input_port().get_name() == "arm_velocity"
+    names = [system.get_output_port(i).get_name()
+             for i in range(system.num_output_ports())]
+    assert names == ["arm_position_command", "arm_velocity_command",
+                     "limited"]
+    assert not system.HasDirectFeedthrough(0, 0)
+    assert not system.HasAnyDirectFeedthrough()
+    context = system.CreateDefaultContext()
+    np.testing.assert_array_equal(
+        system.get_output_port(0).Eval(context), HOME_ARM_POSITIONS)
+    q0 = HOME_ARM_POSITIONS + 0.1
+    system.set_arm_position(context, q0)
+    np.testing.assert_array_equal(system.get_output_port(0).Eval(context), q0)
+    np.testing.assert_array_equal(system.get_output_port(1).Eval(context),
+                                  np.zeros(6))
+    # At rest with a zero twist the command holds.
+    system.get_input_port().FixValue(context, np.zeros(6))
+    update = system.EvalUniquePeriodicDiscreteUpdate(context)
+    np.testing.assert_allclose(update.get_vector().CopyToVector()[:6], q0,
+                               atol=1e-15)
+
+
+def test_model_limits_are_the_defaults(arm):
+    system = ArmCartesianVelocityController()
+    np.testing.assert_array_equal(system.lower, arm.lower)
+    np.testing.assert_array_equal(system.upper, arm.upper)
+    np.testing.assert_array_equal(system.velocity_limits, np.full(6, 1.57))
+    plant = arm._plant
+    for name in ARM_JOINTS:
+        joint = plant.GetJointByName(name)
+        assert joint.acceleration_upper_limits()[0] == (
+            ELFIN5_ACCELERATION_LIMIT)
+
+
+def test_autodiff_update_has_the_double_value_and_derivatives(arm):
+    system = ArmCartesianVelocityController()
+    ad = system.ToAutoDiffXd()
+    assert ad.params == system.params
+    rng = np.random.default_rng(70)
+    q = regular_configuration(arm, rng)
+    V = rng.normal(size=6) * 0.01
+    context = system.CreateDefaultContext()
+    system.set_arm_position(context, q)
+    system.get_input_port().FixValue(context, V)
+    expected = system.EvalUniquePeriodicDiscreteUpdate(
+        context).get_vector().CopyToVector()
+    ad_context = ad.CreateDefaultContext()
+    ad.set_arm_position(ad_context, q)
+    ad.get_input_port().FixValue(ad_context,
+                                 InitializeAutoDiff(V).ravel())
+    update = ad.EvalUniquePeriodicDiscreteUpdate(
+        ad_context).get_vector().CopyToVector()
+    np.testing.assert_allclose(ExtractValue(update).ravel(), expected)
+    J_inv = np.linalg.inv(jacobian(arm, q))
+    derivative = np.array([u.derivatives() for u in update[:6]])
+    np.testing.assert_allclose(derivative, H * J_inv, rtol=1e-6, atol=1e-9)
+
+
+def update_by_central_differences(system, x, u, step=1e-6):
+    """d x_next / d (x, u) of the double system, by central differences."""
+    context = system.CreateDefaultContext()
+    port = system.get_input_port()
+
+    def update(z):
+        context.SetDiscreteState(z[:x.size])
+        port.FixValue(context, z[x.size:])
+        return system.EvalUniquePeriodicDiscreteUpdate(
+            context).get_vector().CopyToVector()
+
+    z = np.concatenate([x, u])
+    columns = []
+    for i in range(z.size):
+        dz = np.zeros_like(z)
+        dz[i] = step
+        columns.append((update(z + dz) - update(z - dz)) / (2 * step))
+    jac = np.stack(columns, axis=1)
+    return jac[:, :x.size], jac[:, x.size:]
+
+
+def expected_linearisation(arm, q, V):
+    """A and B in closed form where no limit acts and J_a is regular:
+    q_dot = J^-1 V, d q_dot / d q_i = -J^-1 (dJ/dq_i) J^-1 V, with dJ/dq_i
+    from the analytic jacobian_derivative; q_dot does not depend on the
+    previous rate."""
+    J = jacobian(arm, q)
+    J_inv = np.linalg.inv(J)
+    q_dot = J_inv @ V
+    dq_dot = np.stack([-J_inv @ dJ @ q_dot for dJ in jacobian_derivative(J)],
+                      axis=1)
+    A = np.zeros((13, 13))
+    A[:6, :6] = np.eye(6) + H * dq_dot
+    A[6:12, :6] = dq_dot
+    B = np.zeros((13, 6))
+    B[:6] = H * J_inv
+    B[6:12] = J_inv
+    return A, B, q_dot
+
+
+def test_linearize_at_rest_gives_the_inverse_jacobian(arm):
+    rng = np.random.default_rng(80)
+    q = regular_configuration(arm, rng)
+    system = ArmCartesianVelocityController()
+    context = system.CreateDefaultContext()
+    system.set_arm_position(context, q)
+    system.get_input_port().FixValue(context, np.zeros(6))
+    linear = Linearize(system, context)  # an equilibrium: V_a = 0
+    assert linear.time_period() == H
+    A, B, _ = expected_linearisation(arm, q, np.zeros(6))
+    np.testing.assert_allclose(linear.A(), A, atol=1e-8)
+    np.testing.assert_allclose(linear.B(), B, rtol=1e-6, atol=1e-8)
+    np.testing.assert_allclose(linear.C()[:6], np.eye(6, 13))
+    np.testing.assert_array_equal(linear.D(), np.zeros((6, 6)))
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_taylor_approximation_at_a_moving_regular_point(arm, seed):
+    """Away from singularities and limits, moving at the commanded rate:
+    Drake's first-order approximation of the AutoDiff system against
+    central differences of the double update and the closed form."""
+    rng = np.random.default_rng(90 + seed)
+    q = regular_configuration(arm, rng)
+    V = np.concatenate([rng.normal(size=3) * 0.03, rng.normal(size=3) * 0.1])
+    A, B, q_dot = expected_linearisation(arm, q, V)
+    x = np.concatenate([q, q_dot, [0.0]])  # already at the desired rate
+    system = ArmCartesianVelocityController()
+    context = system.CreateDefaultContext()
+    context.SetDiscreteState(x)
+    system.get_input_port().FixValue(context, V)
+    update = system.EvalUniquePeriodicDiscreteUpdate(context)
+    assert update.get_vector().GetAtIndex(12) == 0.0  # nothing limited
+    affine = FirstOrderTaylorApproximation(system, context)
+    A_fd, B_fd = update_by_central_differences(system, x, V)
+    for A_other, B_other in ((A_fd, B_fd), (A, B)):
+        np.testing.assert_allclose(affine.A(), A_other, rtol=1e-6, atol=1e-8)
+        np.testing.assert_allclose(affine.B(), B_other, rtol=1e-6, atol=1e-8)
+    assert np.abs(A[:6, :6] - np.eye(6)).max() > 1e-4  # A depends on V_a
+
+
+# --- arguments --------------------------------------------------------
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    (dict(time_step=0.0), "time_step"),
+    (dict(time_step=-0.01), "time_step"),
+    (dict(damping=-0.1), "damping"),
+    (dict(damping_threshold=0.0), "damping_threshold"),
+    (dict(margin=-0.01), "margin"),
+    (dict(margin=float("nan")), "margin"),
+    (dict(acceleration_limit=0.0), "acceleration_limit"),
+    (dict(use_acceleration_limit=1), "use_acceleration_limit"),
+    (dict(lower=[-1.0] * 6), "upper"),
+    (dict(lower=[1.0] * 6, upper=[-1.0] * 6), "lower"),
+    (dict(lower=[-1.0] * 6, upper=[1.0] * 6, margin=1.0), "margin"),
+    (dict(velocity_limits=[1.0] * 5 + [-1.0]), "velocity_limits"),
+])
+def test_bad_parameters_are_rejected(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        ArmControllerParameters(**kwargs)
+
+
+def test_bad_system_arguments_are_rejected():
+    with pytest.raises(ValueError, match="params"):
+        ArmCartesianVelocityController(params=0.01)
+    with pytest.raises(ValueError, match="margin"):
+        ArmCartesianVelocityController(ArmControllerParameters(margin=2.4))
+    system = ArmCartesianVelocityController()
+    with pytest.raises(ValueError, match="q"):
+        system.set_arm_position(system.CreateDefaultContext(), np.zeros(5))
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    (dict(time_step=0.0), "time_step"),
+    (dict(damping=-1.0), "damping"),
+    (dict(damping_threshold=-1.0), "damping_threshold"),
+    (dict(margin=-0.1), "margin"),
+    (dict(velocity_limit=0.0), "velocity_limit"),
+    (dict(acceleration_limit=-1.0), "acceleration_limit"),
+    (dict(previous_q_dot=np.zeros(5), acceleration_limit=1.0),
+     "previous_q_dot"),
+    (dict(J_a=np.eye(5)), "J_a"),
+    (dict(V_a=np.zeros(5)), "V_a"),
+    (dict(q=np.full(6, np.nan)), "q"),
+])
+def test_bad_math_arguments_are_rejected(kwargs, name):
+    arguments = dict(J_a=np.eye(6), V_a=np.zeros(6), q=np.zeros(6),
+                     lower=-np.ones(6), upper=np.ones(6), velocity_limit=1.0,
+                     time_step=0.01)
+    arguments.update(kwargs)
+    with pytest.raises(ValueError, match=name):
+        joint_velocity_for_twist(**arguments)
