@@ -15,6 +15,10 @@ __version__ = "0.1.0"
 _SYSTEMS = (
     "ArmCartesianVelocityController",
     "BaseVelocityFilter",
+    "ArmCapability",
+    "MotionDistributor",
+    "RobustCompensator",
+    "WorkspaceAdapter",
 )
 
 

@@ -13,10 +13,40 @@ from drake_wbc.systems.base_filter import (
     BaseVelocityFilter,
     BaseVelocityFilter_,
 )
+from drake_wbc.systems.capability_stage import (
+    ArmCapability,
+    ArmCapability_,
+    ArmCapabilityParameters,
+    CapabilityBand,
+    WorkspaceAdapter,
+    WorkspaceAdapter_,
+    WorkspaceAdapterParameters,
+)
+from drake_wbc.systems.coordination import (
+    MotionDistributor,
+    MotionDistributor_,
+    MotionDistributorParameters,
+    RobustCompensator,
+    RobustCompensator_,
+    RobustCompensatorParameters,
+)
 
 __all__ = [
     "ArmCartesianVelocityController",
     "ArmCartesianVelocityController_",
     "BaseVelocityFilter",
     "BaseVelocityFilter_",
+    "ArmCapability",
+    "ArmCapabilityParameters",
+    "ArmCapability_",
+    "CapabilityBand",
+    "MotionDistributor",
+    "MotionDistributorParameters",
+    "MotionDistributor_",
+    "RobustCompensator",
+    "RobustCompensatorParameters",
+    "RobustCompensator_",
+    "WorkspaceAdapter",
+    "WorkspaceAdapterParameters",
+    "WorkspaceAdapter_",
 ]

@@ -1,0 +1,376 @@
+"""ArmCapability and WorkspaceAdapter: what the arm's configuration tells
+the coordination stages (systems/coordination.py) once a tick, C_m, its
+gradient and alpha (Sec. III-A, IV-A), and the weighting factors of the
+motion modes (Sec. IV-C); and the helpers all these stages share."""
+
+import functools
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem_, ValueProducer
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from drake_wbc import capability, workspace
+from drake_wbc.robot_model import ArmKinematics
+from drake_wbc.scalar_support import through_float_function
+from drake_wbc.validation import (
+    as_scalar,
+    in_closed_range,
+    non_negative,
+    positive,
+)
+from drake_wbc.workspace import LocalWorkspace, MotionMode
+
+SCALARS = (float, AutoDiffXd)
+"""The scalar types of the coordination stages (double and AutoDiffXd; not
+symbolic: they branch on values, as the paper's piecewise functions do)."""
+
+
+@dataclass(frozen=True)
+class CapabilityBand:
+    """The limitation band C_m^l < C_m < C_m^u of eq. (transition).
+
+    One band serves every stage that looks at C_m: alpha of the robust
+    compensation (ArmCapability), the adaptive weighting factors of the
+    intuitive pHRI mode (WorkspaceAdapter) and the switch-off of the
+    null-space gain (MotionDistributor).
+
+    Attributes:
+        lower: C_m^l >= 0 (m^3, like C_m); alpha = 1 at and below it.
+        upper: C_m^u > C_m^l; alpha = 0 at and above it.
+
+    The defaults are the paper's 0.035 and 0.04 (fixed-point experiment);
+    see capability.DEFAULT_JOINT_LIMIT_GAIN for what they mean on our arm.
+    """
+
+    lower: float = 0.035
+    upper: float = 0.04
+
+    def __post_init__(self):
+        lower = non_negative("lower", self.lower)
+        upper = as_scalar("upper", self.upper)
+        if not lower < upper:
+            raise ValueError(
+                f"lower = {lower!r} and upper = {upper!r} are not allowed: "
+                "the band's lower threshold C_m^l must be strictly below "
+                "its upper threshold C_m^u"
+            )
+
+
+def checked_instance(name, value, kind, default):
+    """`value` if it is a `kind`, `default()` if it is None; else raises a
+    ValueError naming `name`."""
+    if value is None:
+        return default()
+    if not isinstance(value, kind):
+        raise ValueError(
+            f"{name} = {value!r} is not allowed: must be a {kind.__name__} "
+            "or None"
+        )
+    return value
+
+
+def set_band(params):
+    """Checks `params.band` (a frozen dataclass's field), putting the
+    default CapabilityBand in place of None."""
+    object.__setattr__(params, "band", checked_instance(
+        "band", params.band, CapabilityBand, CapabilityBand))
+
+
+@functools.cache
+def shared_arm_kinematics():
+    """One ArmKinematics of our robot, for stages that read only its
+    constants (R_ba, the arm base's position)."""
+    return ArmKinematics()
+
+
+def arm_mounting(arm):
+    """(R_ba, p_a): the rotation ^bR_a and the arm base's origin in T_b
+    (m), constants of the nominal kinematics of `arm` (ArmKinematics)."""
+    values = arm.evaluate(np.zeros(6))
+    R_ba = np.array(arm.R_ba, dtype=float)
+    return R_ba, values.p_ee_in_base - R_ba @ values.X_AE.translation()
+
+
+def declare_cached_vector(system, description, calc, prerequisites):
+    """Declares a cache entry holding the vector `calc(context)` (float or
+    AutoDiffXd), computed once per change of `prerequisites` and read by
+    every output of `system` that needs it."""
+
+    def produce(context, value):
+        value.set_value(calc(context))
+
+    return system.DeclareCacheEntry(
+        description,
+        ValueProducer(allocate=lambda: AbstractValue.Make(np.zeros(0)),
+                      calc=produce),
+        prerequisites,
+    )
+
+
+def declare_slices(system, entry, slices):
+    """Declares one vector output port per (name, slice) of the vector in
+    cache `entry`."""
+    for name, part in slices:
+        def calc(context, output, part=part):
+            output.SetFromVector(entry.Eval(context)[part])
+
+        size = part.stop - part.start
+        system.DeclareVectorOutputPort(
+            name, size, calc, prerequisites_of_calc={entry.ticket()})
+
+
+def declare_inputs(system, sizes):
+    """Declares the vector input ports (name, size) of `system`; returns
+    them by name."""
+    return {name: system.DeclareVectorInputPort(name, size)
+            for name, size in sizes}
+
+
+def tickets(ports):
+    """The dependency tickets of `ports`."""
+    return {port.ticket() for port in ports}
+
+
+def optional_scalar(port, context, default):
+    """The value of a one-element input `port`, or `default` if it is
+    neither connected nor fixed."""
+    if port.HasValue(context):
+        return port.Eval(context)[0]
+    return default
+
+
+@dataclass(frozen=True)
+class ArmCapabilityParameters:
+    """Parameters of ArmCapability.
+
+    Attributes:
+        band: the limitation band of alpha, eq. (transition).
+        joint_limit_gain: k_j > 0 of the joint-limit penalization P_jnt.
+        gradient_damping: lambda_max >= 0 of capability.capability_gradient.
+        gradient_damping_threshold: eps > 0 of the same.
+    """
+
+    band: CapabilityBand = field(default_factory=CapabilityBand)
+    joint_limit_gain: float = capability.DEFAULT_JOINT_LIMIT_GAIN
+    gradient_damping: float = capability.DEFAULT_MAX_DAMPING
+    gradient_damping_threshold: float = capability.DEFAULT_DAMPING_THRESHOLD
+
+    def __post_init__(self):
+        set_band(self)
+        positive("joint_limit_gain", self.joint_limit_gain)
+        non_negative("gradient_damping", self.gradient_damping)
+        positive("gradient_damping_threshold",
+                 self.gradient_damping_threshold)
+
+
+_CAPABILITY_OUTPUTS = (
+    ("end_effector_position", slice(0, 3)),
+    ("capability", slice(3, 4)),
+    ("capability_gradient", slice(4, 10)),
+    ("alpha", slice(10, 11)),
+)
+
+
+@TemplateSystem.define("ArmCapability_", T_list=SCALARS)
+def ArmCapability_(T):
+    class Impl(LeafSystem_[T]):
+        """What several stages need from the arm's configuration, once a
+        tick: the end effector's position, C_m (Sec. III-A and IV-A), its
+        Cartesian gradient and alpha of eq. (transition).
+
+        ::
+
+                           ┌───────────────┐
+                           │               ├──► end_effector_position
+            arm_position ─►│ ArmCapability ├──► capability
+                           │               ├──► capability_gradient
+                           │               ├──► alpha
+                           └───────────────┘
+
+        - arm_position: q_a (6), the measured joint angles (rad).
+        - end_effector_position: p_ee (3) in T_b (m), for J_b of eq. (2).
+        - capability: C_m = m P_jnt (1), the capability of movement.
+        - capability_gradient: grad_x C_m (6) w.r.t. the arm's Cartesian
+          pose, ordered and expressed like V_a ([linear; angular], T_a),
+          as eqs. (wbccm) and (wb_error) use it.
+        - alpha: alpha(C_m, C_m^u, C_m^l) (1) of eq. (transition).
+
+        The arm's kinematics (J_a, p_ee) and C_m are evaluated once per
+        context, in a cache entry that every output reads; all outputs
+        depend on arm_position only (direct feedthrough, stateless).
+
+        AutoDiffXd: the kinematics need a double MultibodyPlant and C_m an
+        SVD, so the float computation is wrapped in
+        scalar_support.through_float_function: the values are exact and
+        the derivatives w.r.t. q_a come from central differences (about
+        1e-9 relative).
+
+        Args:
+            params: ArmCapabilityParameters; the paper's band
+                0.035 < C_m < 0.04 if None.
+            arm: the ArmKinematics to use; a new ArmKinematics() of our
+                robot if None. A scalar-converted copy shares it.
+        """
+
+        def _construct(self, params=None, arm=None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.params = checked_instance("params", params,
+                                           ArmCapabilityParameters,
+                                           ArmCapabilityParameters)
+            self.arm = checked_instance("arm", arm, ArmKinematics,
+                                        ArmKinematics)
+            self._input = self.DeclareVectorInputPort("arm_position", 6)
+            entry = declare_cached_vector(
+                self, "arm kinematics and capability", self._calc,
+                {self._input.ticket()})
+            declare_slices(self, entry, _CAPABILITY_OUTPUTS)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.params, other.arm,
+                            converter=converter)
+
+        def evaluate(self, q_a):
+            """[p_ee (3), C_m, grad_x C_m (6), alpha] at float q_a (6,)."""
+            p = self.params
+            values = self.arm.evaluate(q_a)
+            args = (values.J_a, q_a, self.arm.lower, self.arm.upper,
+                    p.joint_limit_gain)
+            C_m = capability.capability(*args)
+            gradient = capability.capability_gradient(
+                *args, damping=p.gradient_damping,
+                damping_threshold=p.gradient_damping_threshold)
+            alpha = capability.transition(C_m, p.band.upper, p.band.lower)
+            return np.concatenate(
+                [values.p_ee_in_base, [C_m], gradient, [alpha]])
+
+        def _calc(self, context):
+            return through_float_function(self.evaluate,
+                                          self._input.Eval(context))
+
+    return Impl
+
+
+ArmCapability = ArmCapability_[None]
+"""ArmCapability_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""
+
+
+@dataclass(frozen=True)
+class WorkspaceAdapterParameters:
+    """Parameters of WorkspaceAdapter.
+
+    Attributes:
+        mode: a MotionMode or its name, 'locomotion', 'manipulation',
+            'loco-manipulation' or 'intuitive-phri' (Table T:motion-mode).
+        sigma_xy, sigma_phi: the fixed weighting factors of the
+            loco-manipulation mode, in (0, 1) there (checked in [0, 1] in
+            the other modes, which do not use them). The default 0.5 is the
+            paper's trajectory-tracking experiment.
+        workspace: the local workspace of the intuitive pHRI mode; the
+            paper's d^l = 0.75, d^u = 0.8 m, phi^l = 30, phi^u = 35 deg.
+        band: C_m^l, C_m^u of f_xy and f_phi (intuitive pHRI).
+    """
+
+    mode: MotionMode = MotionMode.LOCO_MANIPULATION
+    sigma_xy: float = 0.5
+    sigma_phi: float = 0.5
+    workspace: LocalWorkspace = field(default_factory=LocalWorkspace)
+    band: CapabilityBand = field(default_factory=CapabilityBand)
+
+    def __post_init__(self):
+        object.__setattr__(self, "mode", MotionMode.parse(self.mode))
+        in_closed_range("sigma_xy", self.sigma_xy, 0.0, 1.0)
+        in_closed_range("sigma_phi", self.sigma_phi, 0.0, 1.0)
+        object.__setattr__(self, "workspace", checked_instance(
+            "workspace", self.workspace, LocalWorkspace, LocalWorkspace))
+        set_band(self)
+        if self.mode is MotionMode.LOCO_MANIPULATION:
+            workspace.fixed_weighting_factors(self.mode, self.sigma_xy,
+                                              self.sigma_phi)
+
+
+@TemplateSystem.define("WorkspaceAdapter_", T_list=SCALARS)
+def WorkspaceAdapter_(T):
+    class Impl(LeafSystem_[T]):
+        """The weighting factors of eq. (weight-factors) for a motion mode,
+        Table (T:motion-mode), with the local workspace and the
+        deactivation strategy of Sec. IV-C in the intuitive pHRI mode.
+
+        ::
+
+                                   ┌──────────────────┐
+            end_effector_position ►│                  ├──► sigma_xy
+            end_effector_velocity ►│ WorkspaceAdapter │
+            capability ───────────►│                  ├──► sigma_phi
+            capability_gradient ──►│                  │
+                                   └──────────────────┘
+
+        - end_effector_position: p_ee (3) in T_b (m).
+        - end_effector_velocity: V_ee (6), the commanded twist in T_b.
+        - capability: C_m (1); capability_gradient: grad_x C_m (6, T_a).
+        - sigma_xy, sigma_phi (1 each), in [0, 1].
+
+        Locomotion gives (0, 0), manipulation (1, 1), loco-manipulation
+        the fixed parameters; these modes read no input (no direct
+        feedthrough). The intuitive pHRI mode computes
+        workspace.local_workspace_state: f_xy, f_phi from C_m penalized
+        by the extent d and deflection phi of the end effector w.r.t. the
+        arm's base (defined in drake_wbc.workspace), then sigma = 1 if
+        the commanded twist, carried by the arm alone, would raise
+        C_m^(d,phi) or lead back (d_dot, phi_dot < 0), else f (both
+        tests beyond a roundoff guard, workspace.DEACTIVATION_TOLERANCE).
+        sigma is then discontinuous where the deactivation switches, as
+        in the paper.
+
+        Args:
+            params: WorkspaceAdapterParameters; loco-manipulation with
+                sigma_xy = sigma_phi = 0.5 if None.
+            arm: ArmKinematics whose R_ba and arm-base position define
+                T_a; our robot's if None.
+        """
+
+        def _construct(self, params=None, arm=None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.params = checked_instance(
+                "params", params, WorkspaceAdapterParameters,
+                WorkspaceAdapterParameters)
+            self.arm = checked_instance("arm", arm, ArmKinematics,
+                                        shared_arm_kinematics)
+            self.R_ba, self.arm_base_position = arm_mounting(self.arm)
+            self._inputs = declare_inputs(self, (
+                ("end_effector_position", 3), ("end_effector_velocity", 6),
+                ("capability", 1), ("capability_gradient", 6)))
+            adaptive = self.params.mode is MotionMode.INTUITIVE_PHRI
+            entry = declare_cached_vector(
+                self, "weighting factors", self._calc,
+                tickets(self._inputs.values()) if adaptive
+                else {self.nothing_ticket()})
+            declare_slices(self, entry, (("sigma_xy", slice(0, 1)),
+                                         ("sigma_phi", slice(1, 2))))
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.params, other.arm,
+                            converter=converter)
+
+        def _calc(self, context):
+            p = self.params
+            if p.mode is not MotionMode.INTUITIVE_PHRI:
+                return np.array(workspace.fixed_weighting_factors(
+                    p.mode, p.sigma_xy, p.sigma_phi))
+            inputs = {name: port.Eval(context)
+                      for name, port in self._inputs.items()}
+            state = workspace.local_workspace_state(
+                inputs["end_effector_position"],
+                inputs["end_effector_velocity"],
+                inputs["capability"][0], inputs["capability_gradient"],
+                p.band.upper, p.band.lower, p.workspace, self.R_ba,
+                self.arm_base_position)
+            return np.array([state.sigma_xy, state.sigma_phi])
+
+    return Impl
+
+
+WorkspaceAdapter = WorkspaceAdapter_[None]
+"""WorkspaceAdapter_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""

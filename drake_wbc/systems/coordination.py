@@ -1,0 +1,400 @@
+"""The coordination stages of Sec. IV-A as Drake systems:
+MotionDistributor (eq. (wbccm)) and RobustCompensator (eqs.
+(wb_error)-(compensation)); their inputs C_m, grad_x C_m, alpha and the
+weighting factors come from ArmCapability and WorkspaceAdapter
+(systems/capability_stage.py).
+
+Both are stateless: their outputs follow directly from their inputs
+(direct feedthrough), neither sits on a feedback edge. The double systems
+call the math layer (distribution, compensation), which checks its
+arguments; the AutoDiffXd ones run the same formulas elementwise, with
+scalar_support.solve for the linear solve, so that their derivatives are
+exact.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from drake_wbc import compensation, distribution, kinematics, workspace
+from drake_wbc.robot_model import ArmKinematics
+from drake_wbc.scalar_support import solve, value_of
+from drake_wbc.systems.capability_stage import (
+    SCALARS,
+    CapabilityBand,
+    checked_instance,
+    declare_cached_vector,
+    declare_inputs,
+    declare_slices,
+    optional_scalar,
+    set_band,
+    shared_arm_kinematics,
+    tickets,
+)
+from drake_wbc.validation import in_closed_range, non_negative
+
+PROJECTOR_TOLERANCE = 1e-12
+"""Norm of grad_x C_m below which P_Cm = 0, as in
+compensation.gradient_projector (its default)."""
+
+
+def _autodiff(array):
+    """`array` with every entry an AutoDiffXd (floats get no derivatives)."""
+    array = np.asarray(array, dtype=object)
+    flat = [e if isinstance(e, AutoDiffXd) else AutoDiffXd(float(e))
+            for e in array.ravel()]
+    return np.array(flat, dtype=object).reshape(array.shape)
+
+
+def _unit_interval(name, value):
+    """Checks 0 <= value <= 1 for a float or AutoDiffXd scalar."""
+    if not 0.0 <= value <= 1.0:
+        raise ValueError(
+            f"{name} = {float(value_of(value))!r} is not allowed: must lie "
+            "in [0, 1]"
+        )
+    return value
+
+
+def base_jacobian_any(p_ee_in_base):
+    """J_b of eq. (2) (kinematics.base_jacobian) for any scalar type."""
+    p = np.asarray(p_ee_in_base)
+    zero = p[0] * 0.0
+    one = zero + 1.0
+    return np.array([[one, zero, -p[1]], [zero, one, p[0]], [zero] * 3,
+                     [zero] * 3, [zero] * 3, [zero, zero, one]])
+
+
+def distribute_any(J_wb, V_ee, sigma_xy, sigma_phi, null_velocity,
+                   damping=distribution.DEFAULT_DAMPING):
+    """distribution.distribute for AutoDiffXd arguments (floats also work).
+
+        V_wb = J^+ (V_ee - J V_n^0) + V_n^0,  J^+ = Q J^T (J Q J^T)^-1,
+
+    the same as J^+ V_ee + (I - J^+ J) V_n^0, with the same damping of
+    J Q J^T near singularity; there the eigenvalues s_min, s_max are taken
+    as v^T (J Q J^T) v with the eigenvectors v of its value, which gives
+    them (and lambda^2) their exact first derivatives for simple
+    eigenvalues.
+    """
+    _unit_interval("sigma_xy", sigma_xy)
+    _unit_interval("sigma_phi", sigma_phi)
+    J = _autodiff(J_wb)
+    weights = np.array([sigma_xy, sigma_xy, 1.0, 1.0, 1.0, sigma_phi,
+                        1.0 - sigma_xy, 1.0 - sigma_xy, 1.0 - sigma_phi],
+                       dtype=object)
+    JQ = J * weights[np.newaxis, :]
+    M = JQ @ J.T
+    M = _autodiff(0.5 * (M + M.T))
+    V_n = _autodiff(null_velocity)
+    eigenvalues, vectors = np.linalg.eigh(value_of(M))
+    if eigenvalues[-1] <= 0.0:
+        return V_n  # J^+ = 0: no weighted input moves the end effector
+    if damping is not None:
+        eps = damping.threshold * eigenvalues[-1]
+        if max(eigenvalues[0], 0.0) < eps:
+            s_max = vectors[:, -1] @ M @ vectors[:, -1]
+            s_min = (vectors[:, 0] @ M @ vectors[:, 0]
+                     if eigenvalues[0] > 0.0 else s_max * 0.0)
+            ratio = s_min / (damping.threshold * s_max)
+            lambda_sq = damping.max_squared * s_max * (1.0 - ratio * ratio)
+            M = M + lambda_sq * np.eye(6)
+    try:
+        x = solve(M, _autodiff(V_ee) - J @ V_n)
+    except np.linalg.LinAlgError:
+        raise ValueError(
+            "J_wb with singular J_wb Q J_wb^T is not allowed with "
+            "damping=None: pass a SingularityDamping"
+        ) from None
+    return JQ.T @ x + V_n
+
+
+def compensate_any(delta_V_b, p_ee_in_base, R_ba, grad_C_m, alpha):
+    """compensation.robust_compensation for AutoDiffXd arguments:
+    (delta_V_a^cmp, delta_V_ee), eqs. (wb_error) and (deviation), with
+    P_Cm = g g^T / (g^T g) written as g (g . x) / (g . g)."""
+    _unit_interval("alpha", alpha)
+    R6 = kinematics.twist_rotation(R_ba)
+    required = -(R6.T @ (base_jacobian_any(p_ee_in_base) @ delta_V_b))
+    g = np.asarray(grad_C_m)
+    g_squared = np.dot(g, g)
+    if g_squared > PROJECTOR_TOLERANCE**2:
+        deviation = -alpha * g * (np.dot(g, required) / g_squared)
+    else:
+        deviation = required * 0.0
+    return required + deviation, deviation
+
+
+@dataclass(frozen=True)
+class MotionDistributorParameters:
+    """Parameters of MotionDistributor.
+
+    Attributes:
+        null_space_gain: k_n >= 0 of eq. (wbccm), used when the
+            null_space_gain port is not connected; the paper starts with 0
+            and switches to 0.1.
+        band: C_m^l, C_m^u; k_n is off at and above C_m^u.
+        smooth_switch_off: True fades k_n out across the band,
+            k_n alpha(C_m, C_m^u, C_m^l); False switches it off in one step
+            above C_m^u, the paper's words read literally.
+        damping: distribution.SingularityDamping (never active for our
+            robot's J_wb, see distribution), or None.
+    """
+
+    null_space_gain: float = 0.0
+    band: CapabilityBand = field(default_factory=CapabilityBand)
+    smooth_switch_off: bool = True
+    damping: distribution.SingularityDamping | None = (
+        distribution.DEFAULT_DAMPING)
+
+    def __post_init__(self):
+        non_negative("null_space_gain", self.null_space_gain)
+        set_band(self)
+        if not isinstance(self.smooth_switch_off, bool):
+            raise ValueError(
+                f"smooth_switch_off = {self.smooth_switch_off!r} is not "
+                "allowed: must be True or False"
+            )
+        if not (self.damping is None or isinstance(
+                self.damping, distribution.SingularityDamping)):
+            raise ValueError(
+                f"damping = {self.damping!r} is not allowed: must be a "
+                "SingularityDamping or None"
+            )
+
+
+@TemplateSystem.define("MotionDistributor_", T_list=SCALARS)
+def MotionDistributor_(T):
+    class Impl(LeafSystem_[T]):
+        """Weighted whole-body motion distribution with null-space
+        optimisation of C_m, eq. (wbccm):
+
+            V_wb = J^+ V_ee + (I - J^+ J_wb) k_n [grad_x C_m; 0_3],
+
+        J_wb = [R_ba, J_b] (eq. (1) bottom line, J_b of eq. (2) at p_ee)
+        and J^+ weighted by Q(sigma_xy, sigma_phi) of eq.
+        (weight-factors).
+
+        ::
+
+                                   ┌───────────────────┐
+            end_effector_velocity ►│                   │
+            sigma_xy ─────────────►│                   ├──► arm_velocity
+            sigma_phi ────────────►│                   │
+            end_effector_position ►│ MotionDistributor │
+            capability ───────────►│                   ├──► base_velocity
+            capability_gradient ──►│                   │
+            null_space_gain ──────►│ (optional)        │
+                                   └───────────────────┘
+
+        - end_effector_velocity: V_ee (6), the commanded twist in T_b.
+        - sigma_xy, sigma_phi: weighting factors (1 each) in [0, 1].
+        - end_effector_position: p_ee (3) in T_b (m), for J_b.
+        - capability: C_m (1); capability_gradient: grad_x C_m (6, T_a).
+        - null_space_gain: k_n (1) >= 0, optional: the parameter's
+          value when not connected (nor fixed).
+        - arm_velocity: V_a (6) in T_a; base_velocity: V_b (3) in T_b.
+
+        Switch-off of k_n: the paper sets k_n = 0 when C_m > C_m^u. A step
+        there would put a velocity step k_n grad_x C_m on the arm (the
+        kind of step the base filter exists to avoid). By default the
+        gain used is k_n alpha(C_m, C_m^u, C_m^l): exactly 0 above C_m^u
+        as in the paper, k_n at and below C_m^l, and C^1 in between, so
+        V_wb stays continuous. The optimisation then drives C_m up to
+        C_m^u, approached from below, instead of across it. The
+        null-space term never changes the end-effector twist:
+        J_wb V_wb = V_ee.
+
+        Args:
+            params: MotionDistributorParameters; k_n = 0 if None.
+            arm: ArmKinematics whose R_ba is used; our robot's if None.
+        """
+
+        def _construct(self, params=None, arm=None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.params = checked_instance(
+                "params", params, MotionDistributorParameters,
+                MotionDistributorParameters)
+            self.arm = checked_instance("arm", arm, ArmKinematics,
+                                        shared_arm_kinematics)
+            self.R_ba = np.array(self.arm.R_ba, dtype=float)
+            self._inputs = declare_inputs(self, (
+                ("end_effector_velocity", 6), ("sigma_xy", 1),
+                ("sigma_phi", 1), ("end_effector_position", 3),
+                ("capability", 1), ("capability_gradient", 6),
+                ("null_space_gain", 1)))
+            entry = declare_cached_vector(
+                self, "whole-body input V_wb", self._calc,
+                tickets(self._inputs.values()))
+            declare_slices(self, entry, (("arm_velocity", slice(0, 6)),
+                                         ("base_velocity", slice(6, 9))))
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.params, other.arm,
+                            converter=converter)
+
+        def null_space_gain(self, context):
+            """The gain of eq. (wbccm) used in `context`: k_n (port, else
+            parameter) times the switch-off at C_m (see the class)."""
+            k_n = optional_scalar(self._inputs["null_space_gain"], context,
+                                  self.params.null_space_gain)
+            if k_n < 0.0:
+                raise ValueError(
+                    f"null_space_gain = {float(value_of(k_n))!r} is not "
+                    "allowed: must be 0 or greater"
+                )
+            C_m = self._inputs["capability"].Eval(context)[0]
+            band = self.params.band
+            if self.params.smooth_switch_off:
+                return k_n * workspace.smooth_transition(C_m, band.upper,
+                                                         band.lower)
+            return k_n * (1.0 if C_m <= band.upper else 0.0)
+
+        def _calc(self, context):
+            value = {name: port.Eval(context)
+                     for name, port in self._inputs.items()
+                     if name != "null_space_gain"}
+            V_ee = value["end_effector_velocity"]
+            sigma_xy = value["sigma_xy"][0]
+            sigma_phi = value["sigma_phi"][0]
+            p = value["end_effector_position"]
+            g = value["capability_gradient"]
+            k = self.null_space_gain(context)
+            if T is float:
+                J = kinematics.whole_body_jacobian(None, p, self.R_ba)
+                V_n = distribution.capability_null_velocity(g, k)
+                return distribution.distribute(J, V_ee, sigma_xy, sigma_phi,
+                                               V_n, self.params.damping)
+            J = np.hstack([kinematics.twist_rotation(self.R_ba),
+                           base_jacobian_any(p)])
+            V_n = np.concatenate([k * g, g[:3] * 0.0])
+            return distribute_any(J, V_ee, sigma_xy, sigma_phi, V_n,
+                                  self.params.damping)
+
+    return Impl
+
+
+MotionDistributor = MotionDistributor_[None]
+"""MotionDistributor_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""
+
+
+@dataclass(frozen=True)
+class RobustCompensatorParameters:
+    """Parameters of RobustCompensator.
+
+    Attributes:
+        compensation_switch: s_c in [0, 1], used when the
+            compensation_switch port is not connected. The paper's s_c is
+            1 (robust compensation, alpha as computed) or 0 (alpha = 0:
+            exact compensation whatever C_m); values in between scale
+            alpha.
+    """
+
+    compensation_switch: float = 1.0
+
+    def __post_init__(self):
+        in_closed_range("compensation_switch", self.compensation_switch,
+                        0.0, 1.0)
+
+
+@TemplateSystem.define("RobustCompensator_", T_list=SCALARS)
+def RobustCompensator_(T):
+    class Impl(LeafSystem_[T]):
+        """Arm compensation of the filtered base motion, eqs. (wb_error),
+        (compensation) and (deviation):
+
+            delta_V_b     = V_b^flt - V_b,
+            delta_V_a^req = -R_ba^T J_b delta_V_b,
+            delta_V_a^cmp = (I - s_c alpha P_Cm) delta_V_a^req,
+            V_a^ref       = V_a + delta_V_a^cmp,
+            delta_V_ee    = -s_c alpha P_Cm delta_V_a^req,
+
+        P_Cm the projector onto grad_x C_m.
+
+        ::
+
+                                    ┌───────────────────┐
+            arm_velocity ──────────►│                   │
+            base_velocity ─────────►│                   ├─► arm_reference_
+            filtered_base_velocity ►│                   │   velocity
+            end_effector_position ─►│ RobustCompensator │
+            capability_gradient ───►│                   ├─► end_effector_
+            alpha ─────────────────►│                   │   deviation
+            compensation_switch ───►│ (optional)        │
+                                    └───────────────────┘
+
+        - arm_velocity: V_a (6, T_a) and base_velocity: V_b (3, T_b), from
+          the MotionDistributor.
+        - filtered_base_velocity: V_b^flt (3, T_b), from the
+          BaseVelocityFilter (what the base is commanded).
+        - end_effector_position: p_ee (3) in T_b (m), for J_b.
+        - capability_gradient: grad_x C_m (6, T_a); alpha (1) of eq.
+          (transition), in [0, 1].
+        - compensation_switch: s_c (1) in [0, 1], optional: the
+          parameter's value when not connected (nor fixed). s_c = 0 means
+          alpha = 0, the exact compensation.
+        - arm_reference_velocity: V_a^ref (6, T_a).
+        - end_effector_deviation: delta_V_ee (6), in T_a like the paper
+          (the same in T_b for our robot, R_ba = I).
+
+        With s_c alpha = 0 the arm reference and the filtered base give the
+        commanded twist exactly: J_wb [V_a^ref; V_b^flt] = J_wb [V_a; V_b].
+
+        Args:
+            params: RobustCompensatorParameters; s_c = 1 if None.
+            arm: ArmKinematics whose R_ba is used; our robot's if None.
+        """
+
+        def _construct(self, params=None, arm=None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.params = checked_instance(
+                "params", params, RobustCompensatorParameters,
+                RobustCompensatorParameters)
+            self.arm = checked_instance("arm", arm, ArmKinematics,
+                                        shared_arm_kinematics)
+            self.R_ba = np.array(self.arm.R_ba, dtype=float)
+            self._inputs = declare_inputs(self, (
+                ("arm_velocity", 6), ("base_velocity", 3),
+                ("filtered_base_velocity", 3), ("end_effector_position", 3),
+                ("capability_gradient", 6), ("alpha", 1),
+                ("compensation_switch", 1)))
+            entry = declare_cached_vector(
+                self, "compensated arm twist and deviation", self._calc,
+                tickets(self._inputs.values()))
+            declare_slices(self, entry, (
+                ("arm_reference_velocity", slice(0, 6)),
+                ("end_effector_deviation", slice(6, 12))))
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.params, other.arm,
+                            converter=converter)
+
+        def _calc(self, context):
+            value = {name: port.Eval(context)
+                     for name, port in self._inputs.items()
+                     if name != "compensation_switch"}
+            s_c = _unit_interval("compensation_switch", optional_scalar(
+                self._inputs["compensation_switch"], context,
+                self.params.compensation_switch))
+            alpha = s_c * _unit_interval("alpha", value["alpha"][0])
+            V_b, V_b_flt = (value["base_velocity"],
+                            value["filtered_base_velocity"])
+            p = value["end_effector_position"]
+            g = value["capability_gradient"]
+            if T is float:
+                cmp, deviation = compensation.robust_compensation(
+                    compensation.base_deviation(V_b_flt, V_b),
+                    kinematics.base_jacobian(p), self.R_ba, g, alpha)
+            else:
+                cmp, deviation = compensate_any(V_b_flt - V_b, p, self.R_ba,
+                                                g, alpha)
+            return np.concatenate([value["arm_velocity"] + cmp, deviation])
+
+    return Impl
+
+
+RobustCompensator = RobustCompensator_[None]
+"""RobustCompensator_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""
