@@ -13,6 +13,9 @@ BaseVelocityFilter`).
 __version__ = "0.1.0"
 
 _SYSTEMS = (
+    "ArmCdmp",
+    "BaseCdmp",
+    "WholeBodyCdmp",
     "ArmCartesianVelocityController",
     "BaseVelocityFilter",
     "ArmCapability",

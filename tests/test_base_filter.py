@@ -11,6 +11,7 @@ from pydrake.systems.primitives import (
     VectorLogSink,
 )
 
+from drake_wbc.analysis.frequency import linear_system_response
 from drake_wbc.filtering import (
     BaseFilterParameters,
     lowpass_response,
@@ -22,19 +23,6 @@ from drake_wbc.systems import BaseVelocityFilter
 
 FREQUENCIES_HZ = np.logspace(-2, 2, 200)
 OMEGA = 2 * np.pi * FREQUENCIES_HZ
-
-
-def frequency_response(linear_system, omega):
-    """C (sI - A)^-1 B + D at s = j omega, or z = e^(j omega h) when the
-    system is discrete; (len(omega), outputs, inputs)."""
-    A, B = linear_system.A(), linear_system.B()
-    C, D = linear_system.C(), linear_system.D()
-    h = linear_system.time_period()
-    points = np.exp(1j * omega * h) if h > 0 else 1j * omega
-    eye = np.eye(A.shape[0])
-    return np.array(
-        [C @ np.linalg.solve(p * eye - A, B) + D for p in points]
-    )
 
 
 def linearize(params):
@@ -58,7 +46,7 @@ def test_continuous_linearization_matches_eq_filtering(zeta):
     params = BaseFilterParameters(omega_f=2 * np.pi, zeta=zeta, time_step=0.0)
     linear = linearize(params)
     assert linear.time_period() == 0.0
-    assert_diagonal_response(frequency_response(linear, OMEGA),
+    assert_diagonal_response(linear_system_response(linear, OMEGA),
                              lowpass_response(params.omega_f, zeta, OMEGA))
 
 
@@ -71,7 +59,7 @@ def test_discrete_linearization_matches_exact_zoh_equivalent(zeta,
     linear = linearize(params)
     assert linear.time_period() == time_step
     expected = lowpass_zoh_response(params.omega_f, zeta, time_step, OMEGA)
-    assert_diagonal_response(frequency_response(linear, OMEGA), expected)
+    assert_diagonal_response(linear_system_response(linear, OMEGA), expected)
 
 
 def test_zoh_equivalent_tends_to_the_continuous_filter():

@@ -22,6 +22,14 @@ from drake_wbc.systems.capability_stage import (
     WorkspaceAdapter_,
     WorkspaceAdapterParameters,
 )
+from drake_wbc.systems.cdmp_stages import (
+    ArmCdmp,
+    ArmCdmp_,
+    BaseCdmp,
+    BaseCdmp_,
+    WholeBodyCdmp,
+    WholeBodyCdmp_,
+)
 from drake_wbc.systems.coordination import (
     MotionDistributor,
     MotionDistributor_,
@@ -32,6 +40,12 @@ from drake_wbc.systems.coordination import (
 )
 
 __all__ = [
+    "ArmCdmp",
+    "ArmCdmp_",
+    "BaseCdmp",
+    "BaseCdmp_",
+    "WholeBodyCdmp",
+    "WholeBodyCdmp_",
     "ArmCartesianVelocityController",
     "ArmCartesianVelocityController_",
     "BaseVelocityFilter",

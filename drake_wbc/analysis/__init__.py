@@ -1,0 +1,1 @@
+"""Analysis of the controller: frequency responses of its linearisations."""

@@ -1,0 +1,408 @@
+"""The coupled DMPs of the whole body, the base and the arm as Drake systems.
+
+For a fixed pHRI switch S_hri, eqs. (cdmp-wb), (cdmp-wb-error),
+(cdmp-base) and (cdmp-arm) are affine in their state and inputs (the
+forcing term f(s) is zero, as in all of the paper's experiments, and the
+repulsive force of the base enters as an input computed from the obstacle
+points). Each stage therefore evaluates the math layer's derivative
+function (drake_wbc.cdmp) once at construction to obtain
+
+    x_dot = A x + B u + c,
+
+checks that the function is indeed affine, and then runs that model: in
+continuous time (time_step = 0) or exactly discretised with a zero-order
+hold at the control period (time_step > 0; inputs held over each period).
+The update is then a few small float matrix products per tick, and it is
+exact for double and AutoDiffXd alike, so `Linearize` gives the paper's
+transfer functions. The velocity output y_dot is the first block of
+x_dot; its direct feedthrough is declared explicitly, so that feedback
+edges such as delta_V_ee, which enters only the state, close no algebraic
+loop.
+"""
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from drake_wbc import cdmp
+from drake_wbc.filtering import zero_order_hold
+from drake_wbc.validation import non_negative
+
+
+class AffineDynamics:
+    """x_dot = A x + B u + c of an affine float function, and its exact
+    zero-order-hold discretisation x+ = A_d x + B_d u + c_d.
+
+    Args:
+        derivative: f(x, u) -> x_dot, affine in (x, u).
+        num_states, num_inputs: sizes of x and u.
+        time_step: 0 for continuous time, else the hold period h.
+
+    Raises:
+        ValueError: if `derivative` is not affine (checked at a random
+            point to 1e-9 relative).
+    """
+
+    def __init__(self, derivative, num_states, num_inputs, time_step):
+        zero_x, zero_u = np.zeros(num_states), np.zeros(num_inputs)
+        self.c = np.asarray(derivative(zero_x, zero_u), dtype=float)
+        self.A = np.column_stack(
+            [derivative(e, zero_u) - self.c for e in np.eye(num_states)]
+        )
+        self.B = np.column_stack(
+            [derivative(zero_x, e) - self.c for e in np.eye(num_inputs)]
+        )
+        rng = np.random.default_rng(0)
+        x, u = rng.normal(size=num_states), rng.normal(size=num_inputs)
+        exact = derivative(x, u)
+        model = self.A @ x + self.B @ u + self.c
+        if not np.allclose(model, exact, rtol=1e-9, atol=1e-12):
+            raise ValueError(
+                "derivative is not affine in its state and inputs, which is "
+                "not allowed for an AffineDynamics"
+            )
+        self.time_step = non_negative("time_step", time_step)
+        if self.time_step > 0.0:
+            augmented = np.column_stack([self.B, self.c])
+            self.A_d, B_aug = zero_order_hold(self.A, augmented, time_step)
+            self.B_d, self.c_d = B_aug[:, :-1], B_aug[:, -1]
+
+    def derivative(self, x, u):
+        """x_dot for state x and input u (any scalar type)."""
+        return self.A @ x + self.B @ u + self.c
+
+    def next_state(self, x, u):
+        """The state one hold period later, u held constant."""
+        return self.A_d @ x + self.B_d @ u + self.c_d
+
+
+def _rotation_z(angle):
+    """Rz(angle) for any scalar type."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0.0 * c], [s, c, 0.0 * c],
+                     [0.0 * c, 0.0 * c, 1.0 + 0.0 * c]])
+
+
+def _rotate_twist(R, twist):
+    return np.concatenate([R @ twist[:3], R @ twist[3:]])
+
+
+class _CdmpStage:
+    """Shared mechanics of the three stages (a mixin of LeafSystem_[T])."""
+
+    def _declare_state(self, num_states, time_step):
+        self._time_step = non_negative("time_step", time_step)
+        if self._time_step > 0.0:
+            index = self.DeclareDiscreteState(num_states)
+            self.DeclarePeriodicDiscreteUpdateEvent(
+                self._time_step, 0.0, self._update
+            )
+            return self.discrete_state_ticket(index)
+        self.DeclareContinuousState(num_states)
+        return self.xc_ticket()
+
+    def _state(self, context):
+        if self._time_step > 0.0:
+            return context.get_discrete_state_vector().CopyToVector()
+        return context.get_continuous_state_vector().CopyToVector()
+
+    def _optional(self, port, context, default):
+        if port.HasValue(context):
+            return port.Eval(context)
+        return default
+
+    def _switch(self, context):
+        """S_hri from its input port (a value >= 0.5 means 1) or the
+        parameter."""
+        value = self._optional(self._phri_port, context, None)
+        if value is None:
+            return int(self._default_switch)
+        return 1 if value[0] >= 0.5 else 0
+
+    def _update(self, context, discrete_state):
+        model = self._models[self._switch(context)]
+        discrete_state.set_value(
+            model.next_state(self._state(context), self._drive(context))
+        )
+
+    def DoCalcTimeDerivatives(self, context, derivatives):
+        model = self._models[self._switch(context)]
+        derivatives.get_mutable_vector().SetFromVector(
+            model.derivative(self._state(context), self._drive(context))
+        )
+
+    def _velocity(self, context):
+        """y_dot: the first block of x_dot."""
+        model = self._models[self._switch(context)]
+        x_dot = model.derivative(self._state(context), self._drive(context))
+        return x_dot[: self._dimension]
+
+
+@TemplateSystem.define("WholeBodyCdmp_")
+def WholeBodyCdmp_(T):
+    class Impl(_CdmpStage, LeafSystem_[T]):
+        """CDMP of the whole body, eqs. (cdmp-wb) and (cdmp-wb-error).
+
+        ::
+
+                                    ┌───────────────┐
+            reference_velocity ────►│               │
+            wrench ────────────────►│               │
+            end_effector_deviation ►│ WholeBodyCdmp ├──► end_effector_velocity
+            base_yaw ──────────────►│               │
+            phri_switch ───────────►│               │
+                                    └───────────────┘
+
+        - reference_velocity: V_ee^ref (6), world frame, [v; w].
+        - wrench: F_ext (6), the wrench on the end effector, T_b.
+        - end_effector_deviation: delta_V_ee (6) of eq. (deviation), T_b;
+          it is integrated (E = int delta_V_ee dt) and enters only the
+          state, so this edge closes no algebraic loop.
+        - base_yaw: phi_b (1), optional (0 when unconnected).
+        - phri_switch: S_hri (1), optional (the parameter when
+          unconnected; >= 0.5 counts as 1).
+        - end_effector_velocity: V_ee (6), y_dot rotated into T_b by
+          eq. (3), for the distributor.
+
+        State [y, z, C, E] (24), world frame, displacements from the start
+        (goal g = 0). Orientation is carried as integrated angular
+        velocity, which is exact for the velocity interface with f = 0.
+
+        Args:
+            params: cdmp.WholeBodyCdmpParameters (paper values if None).
+            time_step: control period h (0: continuous), default 0.01 s.
+        """
+
+        def _construct(self, params=None, time_step=0.01, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            params = cdmp.WholeBodyCdmpParameters() if params is None \
+                else params
+            self.params, self._dimension = params, 6
+            self._default_switch = params.S_hri
+
+            def derivative(switch):
+                def f(x, u):
+                    y, z, C, E = np.split(x, 4)
+                    return np.concatenate(cdmp.whole_body_cdmp_derivative(
+                        y, z, C, E, np.zeros(6), u[:6], u[6:12], u[12:],
+                        params, S_hri=switch))
+                return f
+
+            self._models = {
+                s: AffineDynamics(derivative(s), 24, 18, time_step)
+                for s in (0, 1)
+            }
+            self._reference = self.DeclareVectorInputPort(
+                "reference_velocity", 6)
+            self._wrench = self.DeclareVectorInputPort("wrench", 6)
+            self._deviation = self.DeclareVectorInputPort(
+                "end_effector_deviation", 6)
+            self._yaw = self.DeclareVectorInputPort("base_yaw", 1)
+            self._phri_port = self.DeclareVectorInputPort("phri_switch", 1)
+            state = self._declare_state(24, time_step)
+            self.DeclareVectorOutputPort(
+                "end_effector_velocity", 6, self._output,
+                prerequisites_of_calc={
+                    state,
+                    *(self.input_port_ticket(p.get_index())
+                      for p in (self._reference, self._wrench, self._yaw,
+                                self._phri_port)),
+                })
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.params, other._time_step,
+                            converter=converter)
+
+        def _yaw_rotation(self, context):
+            yaw = self._optional(self._yaw, context, np.zeros(1))[0]
+            return _rotation_z(yaw)
+
+        def _drive(self, context):
+            R_wb = self._yaw_rotation(context)
+            return np.concatenate([
+                self._reference.Eval(context),
+                _rotate_twist(R_wb, self._wrench.Eval(context)),
+                _rotate_twist(R_wb, self._deviation.Eval(context)),
+            ])
+
+        def _output(self, context, output):
+            R_bw = self._yaw_rotation(context).T
+            output.SetFromVector(_rotate_twist(R_bw, self._velocity(context)))
+
+    return Impl
+
+
+@TemplateSystem.define("BaseCdmp_")
+def BaseCdmp_(T):
+    class Impl(_CdmpStage, LeafSystem_[T]):
+        """CDMP of the base with obstacle avoidance, eq. (cdmp-base).
+
+        ::
+
+                             ┌──────────┐
+            base_velocity ──►│          │
+            obstacle_points ►│ BaseCdmp ├──► avoiding_base_velocity
+                             └──────────┘
+
+        - base_velocity: V_b (3) from the distributor, [vx, vy, wz], T_b.
+        - obstacle_points: an (M, 2) float array of obstacle points in T_b
+          (abstract-valued; optional, none when unconnected). The
+          repulsive force f_avoid, the gradient of U_rep around the
+          footprint (cdmp.repulsive_force), is computed from them each
+          tick and held over the period.
+        - avoiding_base_velocity: V_b' (3), y_dot, for the base filter.
+
+        State [y, z, C] (9) in T_b coordinates, goal g = 0: once the
+        obstacle is gone the base returns onto its commanded path.
+
+        Args:
+            params: cdmp.BaseCdmpParameters (paper values if None).
+            time_step: control period h (0: continuous), default 0.01 s.
+        """
+
+        def _construct(self, params=None, time_step=0.01, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            params = cdmp.BaseCdmpParameters() if params is None else params
+            self.params, self._dimension = params, 3
+            self._default_switch = 0
+            no_points = np.zeros((0, 2))
+
+            def derivative(x, u):
+                # f_avoid enters tau z_dot exactly as the forcing term does.
+                y, z, C = np.split(x, 3)
+                return np.concatenate(cdmp.base_cdmp_derivative(
+                    y, z, C, np.zeros(3), u[:3], no_points, params,
+                    forcing=u[3:]))
+
+            model = AffineDynamics(derivative, 9, 6, time_step)
+            self._models = {0: model, 1: model}
+            self._velocity_in = self.DeclareVectorInputPort(
+                "base_velocity", 3)
+            self._points = self.DeclareAbstractInputPort(
+                "obstacle_points", AbstractValue.Make(no_points))
+            self._phri_port = None
+            state = self._declare_state(9, time_step)
+            self.DeclareVectorOutputPort(
+                "avoiding_base_velocity", 3, self._output,
+                prerequisites_of_calc={
+                    state,
+                    self.input_port_ticket(self._velocity_in.get_index()),
+                    self.input_port_ticket(self._points.get_index()),
+                })
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.params, other._time_step,
+                            converter=converter)
+
+        def _switch(self, context):
+            return 0
+
+        def repulsive_force(self, context):
+            """f_avoid (3,) from the obstacle points (no yaw part)."""
+            points = (self._points.Eval(context)
+                      if self._points.HasValue(context)
+                      else np.zeros((0, 2)))
+            force = cdmp.repulsive_force(points, self.params.repulsion)
+            return np.array([force[0], force[1], 0.0])
+
+        def _drive(self, context):
+            return np.concatenate([self._velocity_in.Eval(context),
+                                   self.repulsive_force(context)])
+
+        def _output(self, context, output):
+            output.SetFromVector(self._velocity(context))
+
+    return Impl
+
+
+@TemplateSystem.define("ArmCdmp_")
+def ArmCdmp_(T):
+    class Impl(_CdmpStage, LeafSystem_[T]):
+        """CDMP of the arm: hybrid stiffness/force control, eq. (cdmp-arm).
+
+        ::
+
+                            ┌─────────┐
+            arm_velocity ──►│         │
+            wrench ────────►│         │
+            desired_wrench ►│ ArmCdmp ├──► arm_velocity_command
+            phri_switch ───►│         │
+                            └─────────┘
+
+        - arm_velocity: V_a^ref (6) from the compensator, T_a, [v; w].
+        - wrench: F_ext (6), the wrench on the tool, T_a.
+        - desired_wrench: F_d (6), optional (the parameter when
+          unconnected).
+        - phri_switch: S_hri (1), optional; 1 turns the force control off.
+        - arm_velocity_command: y_dot (6), the arm's Cartesian velocity.
+
+        Along axes with S_m = 1 the arm yields to F_ext like a spring
+        (stiffness-coupled, eq. (lp-admit)); along S_m = 0 it drives
+        F_ext to F_d (admittance-coupled, eq. (tf-admit)); see drake_wbc.cdmp
+        for the force convention and the sign of the force term. State
+        [y, z~, C_a] (18), T_a, goal g = 0.
+
+        Args:
+            params: cdmp.ArmCdmpParameters (the paper's wiping values if
+                None).
+            time_step: control period h (0: continuous), default 0.01 s.
+        """
+
+        def _construct(self, params=None, time_step=0.01, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            params = cdmp.ArmCdmpParameters() if params is None else params
+            self.params, self._dimension = params, 6
+            self._default_switch = params.S_hri
+            base = dict(k_p=params.k_p, k_d=params.k_d, k_f=params.k_f,
+                        S_m=params.S_m, dmp=params.dmp)
+
+            def derivative(switch):
+                def f(x, u):
+                    y, z, C_a = np.split(x, 3)
+                    with_goal_force = cdmp.ArmCdmpParameters(
+                        **base, F_d=u[12:], S_hri=switch)
+                    return np.concatenate(cdmp.arm_cdmp_derivative(
+                        y, z, C_a, np.zeros(6), u[:6], u[6:12],
+                        with_goal_force))
+                return f
+
+            self._models = {
+                s: AffineDynamics(derivative(s), 18, 18, time_step)
+                for s in (0, 1)
+            }
+            self._velocity_in = self.DeclareVectorInputPort(
+                "arm_velocity", 6)
+            self._wrench = self.DeclareVectorInputPort("wrench", 6)
+            self._desired = self.DeclareVectorInputPort("desired_wrench", 6)
+            self._phri_port = self.DeclareVectorInputPort("phri_switch", 1)
+            state = self._declare_state(18, time_step)
+            self.DeclareVectorOutputPort(
+                "arm_velocity_command", 6, self._output,
+                prerequisites_of_calc={
+                    state,
+                    *(self.input_port_ticket(p.get_index())
+                      for p in (self._velocity_in, self._wrench,
+                                self._desired, self._phri_port)),
+                })
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.params, other._time_step,
+                            converter=converter)
+
+        def _drive(self, context):
+            return np.concatenate([
+                self._velocity_in.Eval(context),
+                self._wrench.Eval(context),
+                self._optional(self._desired, context, self.params.F_d),
+            ])
+
+        def _output(self, context, output):
+            output.SetFromVector(self._velocity(context))
+
+    return Impl
+
+
+WholeBodyCdmp = WholeBodyCdmp_[None]
+BaseCdmp = BaseCdmp_[None]
+ArmCdmp = ArmCdmp_[None]

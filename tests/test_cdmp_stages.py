@@ -1,0 +1,272 @@
+"""The coupled-DMP stages against the paper's equations, through their ports,
+and Drake's linearisation of them against eqs. (lp-admit) and (tf-admit)."""
+
+import numpy as np
+import pytest
+from pydrake.common.value import AbstractValue
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import Linearize, VectorLogSink
+
+from drake_wbc import cdmp
+from drake_wbc.analysis.frequency import linear_system_response
+from drake_wbc.systems.cdmp_stages import (
+    AffineDynamics,
+    ArmCdmp,
+    BaseCdmp,
+    WholeBodyCdmp,
+)
+
+OMEGA = 2 * np.pi * np.logspace(-2, 2, 120)
+
+
+def fix_inputs(system, context, values):
+    for name, value in values.items():
+        port = system.GetInputPort(name)
+        if name == "obstacle_points":
+            port.FixValue(context, AbstractValue.Make(np.asarray(value)))
+        else:
+            port.FixValue(context, np.atleast_1d(value))
+
+
+def rk4_hold(derivative, x, h, steps=400):
+    """Integrates x_dot = derivative(x) over h with fine RK4 steps."""
+    dt = h / steps
+    for _ in range(steps):
+        k1 = derivative(x)
+        k2 = derivative(x + dt / 2 * k1)
+        k3 = derivative(x + dt / 2 * k2)
+        k4 = derivative(x + dt * k3)
+        x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return x
+
+
+def rotation_z(angle):
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def test_affine_dynamics_rejects_a_nonlinear_function():
+    with pytest.raises(ValueError, match="affine"):
+        AffineDynamics(lambda x, u: x * x + u, 2, 2, 0.0)
+
+
+@pytest.mark.parametrize("switch", [0, 1])
+def test_whole_body_cdmp_matches_its_equation(switch):
+    rng = np.random.default_rng(1)
+    params = cdmp.WholeBodyCdmpParameters()
+    system = WholeBodyCdmp(params, time_step=0.0)
+    context = system.CreateDefaultContext()
+    x = rng.normal(size=24)
+    context.SetContinuousState(x)
+    yaw = 0.7
+    V_ref, F_b, dV_b = rng.normal(size=(3, 6))
+    fix_inputs(system, context, dict(
+        reference_velocity=V_ref, wrench=F_b, end_effector_deviation=dV_b,
+        base_yaw=yaw, phri_switch=switch))
+    R_wb = rotation_z(yaw)
+
+    def to_world(twist):
+        return np.concatenate([R_wb @ twist[:3], R_wb @ twist[3:]])
+
+    y, z, C, E = np.split(x, 4)
+    expected = cdmp.whole_body_cdmp_derivative(
+        y, z, C, E, np.zeros(6), V_ref, to_world(F_b), to_world(dV_b),
+        params, S_hri=switch)
+    derivatives = system.EvalTimeDerivatives(context).CopyToVector()
+    np.testing.assert_allclose(derivatives, np.concatenate(expected),
+                               atol=1e-12)
+    y_dot = expected[0]
+    output = system.GetOutputPort("end_effector_velocity").Eval(context)
+    R_bw = R_wb.T
+    np.testing.assert_allclose(
+        output, np.concatenate([R_bw @ y_dot[:3], R_bw @ y_dot[3:]]),
+        atol=1e-12)
+
+
+def test_deviation_closes_no_algebraic_loop():
+    system = WholeBodyCdmp()
+    deviation = system.GetInputPort("end_effector_deviation").get_index()
+    assert not system.HasDirectFeedthrough(deviation, 0)
+    reference = system.GetInputPort("reference_velocity").get_index()
+    assert system.HasDirectFeedthrough(reference, 0)
+
+
+def test_discrete_update_is_the_exact_hold():
+    """One discrete update equals a fine integration of the paper's
+    equation with the inputs held over the period."""
+    rng = np.random.default_rng(2)
+    params = cdmp.ArmCdmpParameters()
+    system = ArmCdmp(params, time_step=0.01)
+    context = system.CreateDefaultContext()
+    x = 0.1 * rng.normal(size=18)
+    context.SetDiscreteState(x)
+    V_a, F = rng.normal(size=(2, 6))
+    fix_inputs(system, context, dict(arm_velocity=V_a, wrench=F))
+
+    def derivative(state):
+        y, z, C_a = np.split(state, 3)
+        return np.concatenate(cdmp.arm_cdmp_derivative(
+            y, z, C_a, np.zeros(6), V_a, F, params))
+
+    update = system.EvalUniquePeriodicDiscreteUpdate(context)
+    np.testing.assert_allclose(update.get_vector().CopyToVector(),
+                               rk4_hold(derivative, x, 0.01), atol=1e-11)
+
+
+def test_base_cdmp_avoids_and_returns():
+    """An obstacle 0.2 m ahead of the footprint pushes the base back; once
+    it is gone the base returns onto its commanded path."""
+    params = cdmp.BaseCdmpParameters(
+        repulsion=cdmp.RepulsiveFieldParameters(k_obs=1.0))
+    system = BaseCdmp(params)
+    context = system.CreateDefaultContext()
+    fix_inputs(system, context, dict(base_velocity=[0.1, 0.0, 0.0],
+                                     obstacle_points=[[0.6, 0.0]]))
+    force = system.repulsive_force(context)
+    expected = cdmp.repulsive_force(np.array([[0.6, 0.0]]),
+                                    params.repulsion)
+    np.testing.assert_allclose(force[:2], expected)
+    assert force[0] < 0 and force[2] == 0
+
+    simulator = Simulator(system, context)
+
+    def deviation():
+        """y - C: the base's displacement off its commanded path."""
+        y, _, C = np.split(context.get_discrete_state_vector().
+                           CopyToVector(), 3)
+        return y - C
+
+    simulator.AdvanceTo(1.0)
+    assert deviation()[0] < -1e-3  # pushed back from the commanded path
+    assert deviation()[1] == deviation()[2] == 0.0
+    fix_inputs(system, context, dict(obstacle_points=np.zeros((0, 2))))
+    simulator.AdvanceTo(5.0)
+    np.testing.assert_allclose(deviation(), 0.0, atol=1e-6)  # back on it
+    output = system.GetOutputPort("avoiding_base_velocity")
+    np.testing.assert_allclose(output.Eval(context), [0.1, 0, 0], atol=1e-6)
+
+
+def test_tracking_error_is_eliminated():
+    """eq. (cdmp-wb-error): a deviation of the end effector, integrated,
+    is commanded back: the output's excess over the reference integrates
+    to minus the deviation."""
+    builder = DiagramBuilder()
+    system = builder.AddSystem(WholeBodyCdmp())
+    log = builder.AddSystem(VectorLogSink(6, publish_period=0.01))
+    builder.Connect(system.get_output_port(), log.get_input_port())
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    context = system.GetMyMutableContextFromRoot(
+        simulator.get_mutable_context())
+    reference = np.array([0.1, 0, 0, 0, 0, 0])
+    deviation = np.array([0, 0.02, 0, 0, 0, 0])
+    fix_inputs(system, context, dict(reference_velocity=reference,
+                                     wrench=np.zeros(6),
+                                     end_effector_deviation=deviation))
+    simulator.AdvanceTo(0.5)  # 0.5 s at 0.02 m/s: 0.01 m off in y
+    fix_inputs(system, context, dict(end_effector_deviation=np.zeros(6)))
+    simulator.AdvanceTo(4.0)
+    data = log.FindLog(simulator.get_context()).data()
+    excess = (data - reference[:, None]).sum(axis=1) * 0.01
+    assert excess[1] == pytest.approx(-0.01, abs=2e-4)
+    np.testing.assert_allclose(data[:, -1], reference, atol=1e-6)
+
+
+def lp_admit(k_p, k_d, tau, alpha_z, beta_z, omega):
+    """eq. (lp-admit): Y/F of the stiffness-coupled DMP."""
+    s = 1j * omega
+    return (k_p * (tau**2 + k_d) * s + k_p * tau * alpha_z) / (
+        tau**2 * s**2 + tau * alpha_z * s + alpha_z * beta_z)
+
+
+def lp_admit_zoh(k_p, k_d, tau, alpha_z, h, omega):
+    """The exact zero-order-hold equivalent of eq. (lp-admit) with
+    beta_z = alpha_z / 4 (a double pole at -a, a = alpha_z / (2 tau)),
+    from partial fractions of H(s)/s = N(s) / (s (s + a)^2):
+    A/s + B/(s + a) + C/(s + a)^2 with A = N(0)/a^2, B = -A,
+    C = -N(-a)/a, so H_d = A + B (z-1)/(z-q) + C h q (z-1)/(z-q)^2."""
+    a = alpha_z / (2 * tau)
+
+    def N(s):
+        return k_p * ((tau**2 + k_d) * s + tau * alpha_z) / tau**2
+
+    A, C = N(0.0) / a**2, -N(-a) / a
+    q = np.exp(-a * h)
+    z = np.exp(1j * omega * h)
+    return A - A * (z - 1) / (z - q) + C * h * q * (z - 1) / (z - q) ** 2
+
+
+def linearize_arm(params, time_step, axis):
+    system = ArmCdmp(params, time_step=time_step)
+    context = system.CreateDefaultContext()
+    # An equilibrium: the force axes at F_d, no load on the stiffness axes.
+    fix_inputs(system, context, dict(arm_velocity=np.zeros(6),
+                                     wrench=params.F_d * (1 - params.S_m)))
+    wrench = system.GetInputPort("wrench").get_index()
+    linear = Linearize(system, context, input_port_index=wrench)
+    position = np.zeros((1, 18))
+    position[0, axis] = 1.0  # y of that axis
+    return linear_system_response(linear, OMEGA, outputs=position)[:, 0,
+                                                                   axis]
+
+
+@pytest.mark.parametrize("k_d", [0.0, 0.3])
+@pytest.mark.parametrize("time_step", [0.0, 0.01])
+def test_stiffness_coupled_arm_matches_eq_lp_admit(k_d, time_step):
+    params = cdmp.ArmCdmpParameters(S_m=np.ones(6), k_d=k_d)
+    dmp = params.dmp
+    response = linearize_arm(params, time_step, axis=2)
+    if time_step == 0.0:
+        expected = lp_admit(params.k_p, k_d, dmp.tau, dmp.alpha_z,
+                            dmp.resolved_beta_z, OMEGA)
+    else:
+        expected = lp_admit_zoh(params.k_p, k_d, dmp.tau, dmp.alpha_z,
+                                time_step, OMEGA)
+    relative = np.abs(response - expected) / np.abs(expected)
+    assert relative.max() < 1e-6
+
+
+@pytest.mark.parametrize("time_step", [0.0, 0.01])
+def test_admittance_coupled_arm_matches_eq_tf_admit(time_step):
+    """Along a force-controlled axis (S_m = 0) the arm is the
+    admittance-coupled DMP: Y/F = D_a / s with D_a = k_f, whose exact
+    zero-order-hold equivalent is k_f h / (z - 1)."""
+    params = cdmp.ArmCdmpParameters()
+    response = linearize_arm(params, time_step, axis=0)
+    if time_step == 0.0:
+        expected = params.k_f / (1j * OMEGA)
+    else:
+        expected = params.k_f * time_step / (np.exp(1j * OMEGA * time_step)
+                                             - 1)
+    relative = np.abs(response - expected) / np.abs(expected)
+    assert relative.max() < 1e-6
+
+
+def test_phri_switch_turns_the_force_control_off():
+    system = ArmCdmp()
+    context = system.CreateDefaultContext()
+    fix_inputs(system, context, dict(arm_velocity=np.zeros(6),
+                                     wrench=np.zeros(6)))
+    output = system.get_output_port()
+    # Out of contact the force loop drives towards the surface at k_f F_d.
+    assert output.Eval(context)[0] == pytest.approx(
+        -system.params.k_f * system.params.F_d[0])
+    fix_inputs(system, context, dict(phri_switch=1.0))
+    assert output.Eval(context)[0] == 0.0
+    fix_inputs(system, context, dict(phri_switch=0.0,
+                                     desired_wrench=np.zeros(6)))
+    assert output.Eval(context)[0] == 0.0
+
+
+@pytest.mark.parametrize("stage", [WholeBodyCdmp, BaseCdmp, ArmCdmp])
+def test_scalar_conversion(stage):
+    system = stage(time_step=0.005)
+    converted = system.ToAutoDiffXd()
+    assert converted.params is system.params
+    assert converted.num_output_ports() == system.num_output_ports()
+
+
+def test_bad_time_step_is_rejected():
+    with pytest.raises(ValueError, match="time_step"):
+        ArmCdmp(time_step=-0.01)
