@@ -217,6 +217,7 @@ class ArmKinematics:
                 "McrModel that add_mcr returned for that plant"
             )
         self._plant = plant
+        self.plant, self.model = plant, model
         self._context = plant.CreateDefaultContext()
         self._arm_base = model.arm_base_frame
         self._base = model.base_frame
@@ -235,12 +236,21 @@ class ArmKinematics:
             .matrix()
         )
 
-    def evaluate(self, q_a):
-        """Returns the ArmKinematicsValues at arm configuration `q_a` (6,)."""
+    def _set_arm_positions(self, q_a):
         q_a = as_vector("q_a", q_a, 6)
         q = self._plant.GetPositions(self._context)
         q[self._q_indices] = q_a
         self._plant.SetPositions(self._context, q)
+
+    def frame_pose(self, q_a, frame):
+        """Returns the pose X_AF of `frame` (of this plant) in T_a at arm
+        configuration `q_a` (6,)."""
+        self._set_arm_positions(q_a)
+        return frame.CalcPose(self._context, self._arm_base)
+
+    def evaluate(self, q_a):
+        """Returns the ArmKinematicsValues at arm configuration `q_a` (6,)."""
+        self._set_arm_positions(q_a)
         J = self._plant.CalcJacobianSpatialVelocity(
             self._context,
             JacobianWrtVariable.kV,

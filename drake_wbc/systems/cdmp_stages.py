@@ -21,6 +21,7 @@ loop.
 """
 
 import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
@@ -28,6 +29,10 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from drake_wbc import cdmp
 from drake_wbc.filtering import zero_order_hold
 from drake_wbc.validation import non_negative
+
+SCALARS = [float, AutoDiffXd]
+"""Double, and AutoDiffXd for Linearize; not symbolic (the stage branches
+on values)."""
 
 
 class AffineDynamics:
@@ -133,13 +138,23 @@ class _CdmpStage:
         )
 
     def _velocity(self, context):
-        """y_dot: the first block of x_dot."""
+        """y_dot: the first block of x_dot. Inputs that enter the state
+        alone (see `_check_state_only`) are not evaluated, so that a
+        feedback edge into them closes no loop."""
         model = self._models[self._switch(context)]
-        x_dot = model.derivative(self._state(context), self._drive(context))
+        x_dot = model.derivative(self._state(context),
+                                 self._drive(context, for_output=True))
         return x_dot[: self._dimension]
 
+    def _check_state_only(self, columns):
+        """Checks that the inputs u[columns] do not reach y_dot."""
+        for model in self._models.values():
+            if np.any(model.B[: self._dimension, columns] != 0.0):
+                raise RuntimeError(
+                    "an input declared state-only reaches the output")
 
-@TemplateSystem.define("WholeBodyCdmp_")
+
+@TemplateSystem.define("WholeBodyCdmp_", T_list=SCALARS)
 def WholeBodyCdmp_(T):
     class Impl(_CdmpStage, LeafSystem_[T]):
         """CDMP of the whole body, eqs. (cdmp-wb) and (cdmp-wb-error).
@@ -193,6 +208,7 @@ def WholeBodyCdmp_(T):
                 s: AffineDynamics(derivative(s), 24, 18, time_step)
                 for s in (0, 1)
             }
+            self._check_state_only(slice(12, 18))
             self._reference = self.DeclareVectorInputPort(
                 "reference_velocity", 6)
             self._wrench = self.DeclareVectorInputPort("wrench", 6)
@@ -218,13 +234,13 @@ def WholeBodyCdmp_(T):
             yaw = self._optional(self._yaw, context, np.zeros(1))[0]
             return _rotation_z(yaw)
 
-        def _drive(self, context):
+        def _drive(self, context, for_output=False):
             R_wb = self._yaw_rotation(context)
-            return np.concatenate([
-                self._reference.Eval(context),
-                _rotate_twist(R_wb, self._wrench.Eval(context)),
-                _rotate_twist(R_wb, self._deviation.Eval(context)),
-            ])
+            wrench = _rotate_twist(R_wb, self._wrench.Eval(context))
+            deviation = (0.0 * wrench if for_output else
+                         _rotate_twist(R_wb, self._deviation.Eval(context)))
+            return np.concatenate([self._reference.Eval(context), wrench,
+                                   deviation])
 
         def _output(self, context, output):
             R_bw = self._yaw_rotation(context).T
@@ -233,7 +249,7 @@ def WholeBodyCdmp_(T):
     return Impl
 
 
-@TemplateSystem.define("BaseCdmp_")
+@TemplateSystem.define("BaseCdmp_", T_list=SCALARS)
 def BaseCdmp_(T):
     class Impl(_CdmpStage, LeafSystem_[T]):
         """CDMP of the base with obstacle avoidance, eq. (cdmp-base).
@@ -306,7 +322,7 @@ def BaseCdmp_(T):
             force = cdmp.repulsive_force(points, self.params.repulsion)
             return np.array([force[0], force[1], 0.0])
 
-        def _drive(self, context):
+        def _drive(self, context, for_output=False):
             return np.concatenate([self._velocity_in.Eval(context),
                                    self.repulsive_force(context)])
 
@@ -316,7 +332,7 @@ def BaseCdmp_(T):
     return Impl
 
 
-@TemplateSystem.define("ArmCdmp_")
+@TemplateSystem.define("ArmCdmp_", T_list=SCALARS)
 def ArmCdmp_(T):
     class Impl(_CdmpStage, LeafSystem_[T]):
         """CDMP of the arm: hybrid stiffness/force control, eq. (cdmp-arm).
@@ -390,7 +406,7 @@ def ArmCdmp_(T):
             Impl._construct(self, other.params, other._time_step,
                             converter=converter)
 
-        def _drive(self, context):
+        def _drive(self, context, for_output=False):
             return np.concatenate([
                 self._velocity_in.Eval(context),
                 self._wrench.Eval(context),

@@ -1,0 +1,115 @@
+"""ExternalWrenchEstimator: the wrist sensor's reading as the external
+wrench F_ext that the coupled DMPs take."""
+
+import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from drake_wbc.robot_model import ArmKinematics
+from drake_wbc.scalar_support import through_float_function
+
+STANDARD_GRAVITY = 9.81
+"""m/s^2, along -z of T_a when the base stands level."""
+
+SCALARS = [float, AutoDiffXd]
+"""Double, and AutoDiffXd for Linearize; not symbolic (the stage branches
+on values)."""
+
+
+def external_wrench(reading, X_AM, X_AT, tool_mass, p_M_com):
+    """The wrench that the environment exerts on the tool, from a reading.
+
+    The sensor reads the wrench [f; tau] that the tool exerts on it, at and
+    in its measurement frame M: the tool's weight plus every external
+    wrench on the tool. Removing the weight (payload compensation) and
+    moving the result to the tool centre point T, expressed in T_a:
+
+        f_ext = f - m R_MA g,   tau_ext = tau - p_com x (m R_MA g)   (in M),
+        F_ext = [R_AM f_ext;  R_AM tau_ext + (p_M - p_T) x R_AM f_ext].
+
+    Args:
+        reading: (6,) [f; tau] in M, N and N m.
+        X_AM, X_AT: poses of M and of the tool centre point in T_a.
+        tool_mass: the mass beyond the measuring plane, kg.
+        p_M_com: (3,) its centre of mass in M, m.
+
+    Returns:
+        (6,) F_ext = [force; torque] on the tool, at T, in T_a: the force
+        convention of drake_wbc.cdmp.
+    """
+    R_AM = X_AM.rotation().matrix()
+    weight_M = R_AM.T @ np.array([0.0, 0.0, -tool_mass * STANDARD_GRAVITY])
+    f_M = reading[:3] - weight_M
+    tau_M = reading[3:] - np.cross(p_M_com, weight_M)
+    f_A = R_AM @ f_M
+    r_TM = X_AM.translation() - X_AT.translation()
+    return np.concatenate([f_A, R_AM @ tau_M + np.cross(r_TM, f_A)])
+
+
+@TemplateSystem.define("ExternalWrenchEstimator_", T_list=SCALARS)
+def ExternalWrenchEstimator_(T):
+    class Impl(LeafSystem_[T]):
+        """The external wrench on the tool from the wrist sensor's reading.
+
+        ::
+
+                           ┌─────────────────────────┐
+            wrist_wrench ─►│                         │
+            arm_position ─►│ ExternalWrenchEstimator ├──► external_wrench
+                           └─────────────────────────┘
+
+        - wrist_wrench: (6) the reading [f; tau], the wrench the tool
+          exerts on the sensor at its measurement frame, in that frame.
+        - arm_position: (6) the measured arm configuration q_a.
+        - external_wrench: F_ext (6), the wrench the environment exerts on
+          the tool, at the tool centre point, in T_a, with the tool's
+          weight removed (see `external_wrench`).
+
+        The tool's mass and centre of mass are read from the robot model.
+        In AutoDiffXd the derivative comes from central differences of the
+        double computation (scalar_support.through_float_function).
+
+        Args:
+            arm: an ArmKinematics of the robot (a new one if None).
+        """
+
+        def _construct(self, arm=None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._arm = ArmKinematics() if arm is None else arm
+            plant, model = self._arm.plant, self._arm.model
+            tool = plant.GetBodyByName("wiping_tool", model.tool)
+            context = plant.CreateDefaultContext()
+            self._tool_mass = tool.get_mass(context)
+            X_MB = tool.body_frame().CalcPose(
+                context, model.ft_measurement_frame)
+            self._p_M_com = X_MB.multiply(
+                tool.CalcCenterOfMassInBodyFrame(context))
+            self._reading = self.DeclareVectorInputPort("wrist_wrench", 6)
+            self._position = self.DeclareVectorInputPort("arm_position", 6)
+            self.DeclareVectorOutputPort("external_wrench", 6, self._output)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other._arm, converter=converter)
+
+        def _estimate(self, inputs):
+            q_a, reading = inputs[:6], inputs[6:]
+            model = self._arm.model
+            return external_wrench(
+                reading,
+                self._arm.frame_pose(q_a, model.ft_measurement_frame),
+                self._arm.frame_pose(q_a, model.tcp_frame),
+                self._tool_mass,
+                self._p_M_com,
+            )
+
+        def _output(self, context, output):
+            inputs = np.concatenate([self._position.Eval(context),
+                                     self._reading.Eval(context)])
+            output.SetFromVector(through_float_function(self._estimate,
+                                                        inputs))
+
+    return Impl
+
+
+ExternalWrenchEstimator = ExternalWrenchEstimator_[None]

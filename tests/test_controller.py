@@ -1,0 +1,176 @@
+"""The controller Diagram: it builds without algebraic loops, runs against
+fixed measurements without NaN, and reads the wrist sensor right."""
+
+import numpy as np
+import pytest
+from pydrake.common.value import AbstractValue
+from pydrake.multibody.math import SpatialForce
+from pydrake.multibody.plant import (
+    AddMultibodyPlantSceneGraph,
+    ExternallyAppliedSpatialForce,
+)
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantValueSource, VectorLogSink
+
+from drake_wbc.controller import (
+    STATION_INPUTS,
+    TASK_INPUTS,
+    ControllerParameters,
+    build_controller,
+)
+from drake_wbc.robot_model import (
+    ARM_JOINTS,
+    HOME_ARM_POSITIONS,
+    ArmKinematics,
+    add_mcr,
+    joint_position_indices,
+)
+from drake_wbc.systems.wrench import ExternalWrenchEstimator
+
+
+@pytest.fixture(scope="module")
+def arm():
+    return ArmKinematics()
+
+
+def tool_weight_reading(arm, q_a):
+    """What the sensor reads with nothing touching the tool: the weight of
+    the tool, [f; tau] at and in the measurement frame M, from the plant's
+    mass properties (base level, mount at rest)."""
+    plant, model = arm.plant, arm.model
+    tool = plant.GetBodyByName("wiping_tool", model.tool)
+    context = plant.CreateDefaultContext()
+    X_MB = tool.body_frame().CalcPose(context, model.ft_measurement_frame)
+    p_M_com = X_MB.multiply(tool.CalcCenterOfMassInBodyFrame(context))
+    R_AM = arm.frame_pose(q_a, model.ft_measurement_frame).rotation()
+    weight_M = R_AM.inverse().multiply(
+        np.array([0.0, 0.0, -9.81 * tool.get_mass(context)]))
+    return np.concatenate([weight_M, np.cross(p_M_com, weight_M)])
+
+
+def test_ports(arm):
+    controller = build_controller(arm=arm)
+    diagram = controller.diagram
+    inputs = {diagram.get_input_port(i).get_name()
+              for i in range(diagram.num_input_ports())}
+    assert inputs == set(STATION_INPUTS + TASK_INPUTS)
+    for name in ("base.velocity_command", "arm.position_command",
+                 "capability", "alpha", "sigma_xy", "sigma_phi",
+                 "end_effector_deviation", "base_velocity",
+                 "filtered_base_velocity"):
+        assert diagram.HasOutputPort(name)
+
+
+def test_runs_ten_seconds_against_fixed_measurements(arm):
+    controller = build_controller(arm=arm)
+    builder = DiagramBuilder()
+    diagram = builder.AddSystem(controller.diagram)
+    names = ("base.velocity_command", "arm.position_command", "capability",
+             "alpha", "end_effector_deviation", "filtered_base_velocity")
+    logs = {}
+    for name in names:
+        port = diagram.GetOutputPort(name)
+        logs[name] = builder.AddSystem(
+            VectorLogSink(port.size(), publish_period=0.01))
+        builder.Connect(port, logs[name].get_input_port())
+    points = builder.AddSystem(ConstantValueSource(AbstractValue.Make(
+        np.array([[0.7, 0.1], [-0.6, -0.45], [2.0, 0.0]]))))
+    builder.Connect(points.get_output_port(),
+                    diagram.GetInputPort("lidar.obstacle_points"))
+    root = builder.Build()
+    context = root.CreateDefaultContext()
+    inner = diagram.GetMyMutableContextFromRoot(context)
+    diagram.GetInputPort("base.state_estimated").FixValue(
+        inner, [0.0, 0.0, 0.3, 0.0, 0.0, 0.0])
+    diagram.GetInputPort("arm.position_measured").FixValue(
+        inner, HOME_ARM_POSITIONS)
+    diagram.GetInputPort("wrist.wrench_measured").FixValue(
+        inner, tool_weight_reading(arm, HOME_ARM_POSITIONS))
+    diagram.GetInputPort("reference_velocity").FixValue(
+        inner, [0.1, 0.05, 0.0, 0.0, 0.0, 0.05])
+    controller.initialize(context)
+    simulator = Simulator(root, context)
+    simulator.AdvanceTo(10.0)
+    for name, log in logs.items():
+        data = log.FindLog(context).data()
+        assert data.shape[1] >= 1000, name
+        assert np.all(np.isfinite(data)), name
+    q_cmd = logs["arm.position_command"].FindLog(context).data()
+    assert np.all(q_cmd <= arm.upper[:, None] + 1e-9)
+    assert np.all(q_cmd >= arm.lower[:, None] - 1e-9)
+    # sigma = 0.5: half of the planar motion is the base's.
+    base = logs["base.velocity_command"].FindLog(context).data()
+    assert np.max(np.abs(base[:2, -1])) > 0.01
+
+
+def test_weight_alone_reads_as_no_external_wrench(arm):
+    estimator = ExternalWrenchEstimator(arm)
+    context = estimator.CreateDefaultContext()
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        q = rng.uniform(0.7 * arm.lower, 0.7 * arm.upper)
+        estimator.GetInputPort("arm_position").FixValue(context, q)
+        estimator.GetInputPort("wrist_wrench").FixValue(
+            context, tool_weight_reading(arm, q))
+        np.testing.assert_allclose(
+            estimator.get_output_port().Eval(context), 0.0, atol=1e-12)
+
+
+def test_estimator_recovers_a_push_on_the_simulated_tool(arm):
+    """A known wrench applied at the tool centre point of the simulated
+    robot: the sensing weld's reaction, read as the sensor reads it, gives
+    that wrench back (in T_a, at the tool centre point)."""
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
+    model = add_mcr(plant)
+    plant.Finalize()
+    tool = plant.GetBodyByName("wiping_tool", model.tool)
+    push_W = SpatialForce(tau=[0.3, -0.2, 0.1], f=[4.0, -6.0, 9.0])
+    diagram_context = None
+
+    applied = ExternallyAppliedSpatialForce()
+    applied.body_index = tool.index()
+    X_BT = model.tcp_frame.GetFixedPoseInBodyFrame()
+    applied.p_BoBq_B = X_BT.translation()
+    applied.F_Bq_W = push_W
+    source = builder.AddSystem(ConstantValueSource(
+        AbstractValue.Make([applied])))
+    builder.Connect(source.get_output_port(),
+                    plant.get_applied_spatial_force_input_port())
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    diagram_context = simulator.get_mutable_context()
+    context = plant.GetMyMutableContextFromRoot(diagram_context)
+    q = plant.GetPositions(context)
+    q_a = HOME_ARM_POSITIONS + np.array([0.3, 0.2, -0.1, 0.4, 0.2, 0.5])
+    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_a
+    plant.SetPositions(context, q)
+    for i in plant.GetJointIndices():
+        if plant.get_joint(i).num_velocities() == 1:
+            plant.get_joint(i).Lock(context)
+    simulator.AdvanceTo(0.05)
+    weld = plant.GetJointByName("ft300_sensing", model.tool)
+    reaction = plant.get_reaction_forces_output_port().Eval(context)[
+        int(weld.index())]
+    # The sensor reads what the tool exerts on it: minus the reaction.
+    reading = -np.concatenate([reaction.translational(),
+                               reaction.rotational()])
+    estimator = ExternalWrenchEstimator(arm)
+    estimator_context = estimator.CreateDefaultContext()
+    estimator.GetInputPort("arm_position").FixValue(estimator_context, q_a)
+    estimator.GetInputPort("wrist_wrench").FixValue(estimator_context,
+                                                    reading)
+    estimate = estimator.get_output_port().Eval(estimator_context)
+    # Base at the origin and the mount locked at rest: T_a is parallel to
+    # the world frame, so the push in T_a is the push in W.
+    np.testing.assert_allclose(estimate[:3], push_W.translational(),
+                               atol=1e-6)
+    np.testing.assert_allclose(estimate[3:], push_W.rotational(), atol=1e-6)
+
+
+def test_parameters_are_validated():
+    with pytest.raises(ValueError, match="time_step"):
+        ControllerParameters(time_step=0.0)
+    with pytest.raises(ValueError, match="params"):
+        build_controller(params="fast")
