@@ -135,7 +135,7 @@ class JointVelocityCommand(NamedTuple):
                     or np.any(self.limited_joints))
 
 
-@dataclass(frozen=True)
+@dataclass
 class ArmControllerParameters:
     """Parameters of the arm's Cartesian velocity controller.
 
@@ -158,7 +158,8 @@ class ArmControllerParameters:
         velocity_limits: (6,) rad/s > 0, or None for the model's (1.57 on
             every Elfin5 joint).
 
-    Vectors are stored as tuples, so that parameters compare with ==.
+    Vectors are given as any sequence (a list in YAML) and stored as
+    tuples, so that parameters compare with ==.
     """
 
     time_step: float = 0.01
@@ -167,9 +168,9 @@ class ArmControllerParameters:
     margin: float = DEFAULT_JOINT_LIMIT_MARGIN
     use_acceleration_limit: bool = True
     acceleration_limit: float = ELFIN5_ACCELERATION_LIMIT
-    lower: tuple | None = None
-    upper: tuple | None = None
-    velocity_limits: tuple | None = None
+    lower: list[float] | None = None
+    upper: list[float] | None = None
+    velocity_limits: list[float] | None = None
 
     def __post_init__(self):
         positive("time_step", self.time_step)
@@ -191,13 +192,12 @@ class ArmControllerParameters:
             lower, upper = ordered_limits("lower", self.lower, "upper",
                                           self.upper, 6)
             check_margin(self.margin, lower, upper)
-            object.__setattr__(self, "lower", tuple(lower.tolist()))
-            object.__setattr__(self, "upper", tuple(upper.tolist()))
+            self.lower = tuple(lower.tolist())
+            self.upper = tuple(upper.tolist())
         if self.velocity_limits is not None:
             limits = _positive_vector("velocity_limits",
                                       self.velocity_limits, 6)
-            object.__setattr__(self, "velocity_limits",
-                               tuple(limits.tolist()))
+            self.velocity_limits = tuple(limits.tolist())
 
 
 def _positive_vector(name, value, size):

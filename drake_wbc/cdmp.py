@@ -64,14 +64,15 @@ def _switch(name, value):
 
 
 def _set(obj, name, value):
-    """Stores a checked value (read-only if an array) in a frozen object."""
+    """Stores a checked value in `obj`, an array as a read-only copy (so
+    that it changes only by assignment, which `validate` checks)."""
     if isinstance(value, np.ndarray):
         value = np.array(value, dtype=float)
         value.flags.writeable = False
-    object.__setattr__(obj, name, value)
+    setattr(obj, name, value)
 
 
-@dataclass(frozen=True)
+@dataclass
 class StiffnessCouplingParameters:
     """Eq. (stiff-dmp): C_f = k_p F and the gain k_d of k_d C_f_dot,
     both >= 0 (defaults: the paper's k_p of the arm, k_d = 0)."""
@@ -86,19 +87,20 @@ class StiffnessCouplingParameters:
         _dmp(self.dmp)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(eq=False)
 class AdmittanceCouplingParameters:
     """Eq. (admit-dmp): C_dot = V + D_a (F_e - F_d).
 
     Attributes:
         D_a: admittance D_a, a number > 0 (D_a I) or a symmetric positive
             definite (d, d) matrix; m/(N s). Default 0.01 (the paper's
-            k_f).
-        F_d: desired wrench F_d, a number or (d,); default 0.
+            k_f). Stored as a read-only array (0-d for a number).
+        F_d: desired wrench F_d, a number or (d,); default 0. Stored like
+            D_a.
     """
 
-    D_a: float | np.ndarray = 0.01
-    F_d: float | np.ndarray = 0.0
+    D_a: np.ndarray = 0.01
+    F_d: np.ndarray = 0.0
     dmp: DmpParameters = field(default_factory=DmpParameters)
 
     def __post_init__(self):
@@ -122,7 +124,7 @@ class AdmittanceCouplingParameters:
         _dmp(self.dmp)
 
 
-@dataclass(frozen=True)
+@dataclass
 class WholeBodyCdmpParameters:
     """Eq. (cdmp-wb): admittance gain k_hri >= 0 (m/(N s); paper 0.05)
     and the default pHRI switch S_hri, 0 or 1 (paper: 1 in pHRI)."""
@@ -137,7 +139,7 @@ class WholeBodyCdmpParameters:
         _dmp(self.dmp)
 
 
-@dataclass(frozen=True)
+@dataclass
 class RepulsiveFieldParameters:
     """U_rep after eq. (cdmp-base), around the base's footprint.
 
@@ -145,7 +147,8 @@ class RepulsiveFieldParameters:
         k_obs: scaling factor k_obs >= 0 (paper 0.01).
         d_th: distance threshold d_th > 0, m (paper 0.5).
         half_sizes: footprint half-sizes (a, b) >= 0 along x and y of T_b,
-            m; default (0.4, 0.3), the 0.8 x 0.6 m base.
+            m, any sequence of two numbers (a list in YAML), stored as a
+            tuple; default (0.4, 0.3), the 0.8 x 0.6 m base.
         d_min: 0 < d_min < d_th, m: distances are clamped to it, so the
             force stays finite for a point on or inside the footprint
             (default 0.05).
@@ -153,7 +156,7 @@ class RepulsiveFieldParameters:
 
     k_obs: float = 0.01
     d_th: float = 0.5
-    half_sizes: tuple = (0.4, 0.3)
+    half_sizes: list[float] = (0.4, 0.3)
     d_min: float = 0.05
 
     def __post_init__(self):
@@ -167,7 +170,7 @@ class RepulsiveFieldParameters:
                              f"lie in (0, d_th = {self.d_th!r})")
 
 
-@dataclass(frozen=True)
+@dataclass
 class BaseCdmpParameters:
     """Eq. (cdmp-base): the repulsive field and the DMP."""
 
@@ -182,7 +185,7 @@ class BaseCdmpParameters:
         _dmp(self.dmp)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(eq=False)
 class ArmCdmpParameters:
     """Eq. (cdmp-arm), with the paper's wiping values as defaults.
 
@@ -195,6 +198,8 @@ class ArmCdmpParameters:
             control) or 1 (stiffness); default (0, 1, 1, 1, 1, 1).
         F_d: (6,) desired wrench F_d on the tool; default -10 N along x.
         S_hri: default pHRI switch, 0 or 1.
+
+    S_m and F_d are stored as read-only float arrays.
     """
 
     k_p: float = 0.0005
@@ -208,12 +213,12 @@ class ArmCdmpParameters:
     def __post_init__(self):
         for name in ("k_p", "k_d", "k_f"):
             non_negative(name, getattr(self, name))
-        S_m = as_vector("S_m", self.S_m)
+        S_m = as_vector("S_m", self.S_m, 6)
         if np.any((S_m != 0.0) & (S_m != 1.0)):
             raise ValueError(f"S_m = {S_m!r} is not allowed: every "
                              "diagonal entry must be 0 or 1")
         _set(self, "S_m", S_m)
-        _set(self, "F_d", as_vector("F_d", self.F_d, S_m.size))
+        _set(self, "F_d", as_vector("F_d", self.F_d, 6))
         _set(self, "S_hri", _switch("S_hri", self.S_hri))
         _dmp(self.dmp)
 

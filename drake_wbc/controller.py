@@ -27,7 +27,7 @@ feedback edge inside, delta_V_ee, enters WholeBodyCdmp's state alone, and
 the commands leave from state (filter, arm controller): no algebraic loop.
 """
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder
@@ -57,7 +57,7 @@ from drake_wbc.systems.coordination import (
     RobustCompensatorParameters,
 )
 from drake_wbc.systems.wrench import ExternalWrenchEstimator
-from drake_wbc.validation import positive
+from drake_wbc.validation import positive, validated_copy
 
 STATION_INPUTS = (
     "base.state_estimated",
@@ -78,17 +78,25 @@ TASK_INPUTS = (
 parameter is used while the port is not connected)."""
 
 
-@dataclass(frozen=True)
+@dataclass
 class ControllerParameters:
     """Every stage's parameters, with the paper's values as defaults.
 
     Attributes:
         time_step: the control period h in s (the paper runs at 100 Hz);
-            it overrides the time steps inside the stage parameters.
+            it overrides the time steps inside the stage parameters, and
+            base_filter.omega_f must stay below its Nyquist rate
+            pi / time_step.
         arm_cdmp: stiffness on every axis by default (S_m = I): force
             control drives the tool towards a surface it has not yet
             touched, so it is the task's choice (the wiping scenario sets
             the paper's S_m = diag(0, 1, 1, 1, 1, 1)), not a default.
+
+    Read from YAML by drake_wbc.config.load_controller_parameters
+    (diagrams/controller.yaml lists every field). The parameters are
+    read when the controller is built: each stage keeps a validated copy,
+    so changing them afterwards has no effect on a built controller; after
+    assigning fields, drake_wbc.validation.validate checks the whole tree.
     """
 
     time_step: float = 0.01
@@ -112,7 +120,20 @@ class ControllerParameters:
         default_factory=ArmControllerParameters)
 
     def __post_init__(self):
-        positive("time_step", self.time_step)
+        h = positive("time_step", self.time_step)
+        for item in fields(self):
+            if item.name != "time_step" and not isinstance(
+                    getattr(self, item.name), item.type):
+                raise ValueError(
+                    f"{item.name} = {getattr(self, item.name)!r} is not "
+                    f"allowed: must be a {item.type.__name__}")
+        omega_f = self.base_filter.omega_f
+        if omega_f >= np.pi / h:
+            raise ValueError(
+                f"time_step = {h!r} s is not allowed with base_filter."
+                f"omega_f = {omega_f!r} rad/s: the filter's cut-off must be "
+                f"below the Nyquist rate pi / time_step = {np.pi / h:.6g} "
+                "rad/s")
 
 
 class Controller:
@@ -122,7 +143,8 @@ class Controller:
         diagram: the Diagram; add it to a builder and connect its ports.
         stages: dict of the stages (LeafSystems) by name, for logging
             and inspection.
-        params: the ControllerParameters it was built from.
+        params: the (validated copy of the) ControllerParameters it was
+            built from.
     """
 
     def __init__(self, diagram, stages, params):
@@ -146,7 +168,8 @@ def build_controller(params=None, arm=None):
     """Builds the CDMP-WBC controller Diagram.
 
     Args:
-        params: ControllerParameters (the paper's values if None).
+        params: ControllerParameters (the paper's values if None); the
+            controller keeps a validated copy.
         arm: a shared ArmKinematics (a new one if None).
 
     Returns:
@@ -160,6 +183,7 @@ def build_controller(params=None, arm=None):
     if not isinstance(params, ControllerParameters):
         raise ValueError(f"params = {params!r} is not allowed: must be a "
                          "ControllerParameters")
+    params = validated_copy(params)
     h = params.time_step
     arm = ArmKinematics() if arm is None else arm
     builder = DiagramBuilder()

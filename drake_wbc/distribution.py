@@ -79,7 +79,7 @@ from drake_wbc.validation import (
 )
 
 
-@dataclass(frozen=True)
+@dataclass
 class SingularityDamping:
     """Parameters of the damped inverse of J Q J^T near singularity.
 
@@ -115,7 +115,8 @@ class SingularityDamping:
 
 
 DEFAULT_DAMPING = SingularityDamping()
-"""The default damping of weighted_pseudoinverse and distribute."""
+"""The default damping of weighted_pseudoinverse and distribute (shared:
+pass a SingularityDamping of your own rather than changing this one)."""
 
 
 def weighting_matrix(sigma_xy, sigma_phi):

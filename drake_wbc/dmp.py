@@ -34,7 +34,7 @@ Learning is float only.
 """
 
 from dataclasses import dataclass, replace
-from functools import cached_property
+from functools import lru_cache
 from numbers import Integral
 
 import numpy as np
@@ -45,7 +45,7 @@ FINAL_PHASE = 0.01
 """Phase s reached at t = duration with the default alpha_s."""
 
 
-@dataclass(frozen=True)
+@dataclass
 class DmpParameters:
     """Gains, timing and basis of a DMP (eqs. (6), (7)).
 
@@ -98,24 +98,19 @@ class DmpParameters:
             return self.alpha_s
         return -np.log(FINAL_PHASE) * self.tau / self.duration
 
-    @cached_property
+    @property
     def centres(self):
         """(num_basis,) basis centres c_i in phase, from 1 down."""
-        t_i = np.linspace(0.0, self.duration, self.num_basis)
-        c = np.exp(-self.resolved_alpha_s * t_i / self.tau)
-        c.flags.writeable = False
-        return c
+        return self._basis()[0]
 
-    @cached_property
+    @property
     def widths(self):
         """(num_basis,) basis widths h_i = 1 / (c_{i+1} - c_i)^2."""
-        if self.num_basis == 1:
-            h = np.ones(1)
-        else:
-            h = 1.0 / np.diff(self.centres) ** 2
-            h = np.append(h, h[-1])
-        h.flags.writeable = False
-        return h
+        return self._basis()[1]
+
+    def _basis(self):
+        return _basis(self.resolved_alpha_s, self.tau, self.duration,
+                      self.num_basis)
 
     def with_tau(self, tau):
         """The same movement executed with temporal scaling `tau`.
@@ -128,6 +123,22 @@ class DmpParameters:
         tau = positive("tau", tau)
         return replace(self, tau=tau, alpha_s=self.resolved_alpha_s,
                        duration=self.duration * tau / self.tau)
+
+
+@lru_cache(maxsize=64)
+def _basis(alpha_s, tau, duration, num_basis):
+    """(centres, widths) of the basis (DmpParameters), read-only; computed
+    once per set of values, so they always follow the current fields."""
+    t_i = np.linspace(0.0, duration, num_basis)
+    c = np.exp(-alpha_s * t_i / tau)
+    if num_basis == 1:
+        h = np.ones(1)
+    else:
+        h = 1.0 / np.diff(c) ** 2
+        h = np.append(h, h[-1])
+    c.flags.writeable = False
+    h.flags.writeable = False
+    return c, h
 
 
 def _checked_parameters(params):

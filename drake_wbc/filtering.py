@@ -26,7 +26,7 @@ from scipy.linalg import expm
 from drake_wbc.validation import non_negative, positive
 
 
-@dataclass(frozen=True)
+@dataclass
 class BaseFilterParameters:
     """Parameters of the base velocity filter, eq. (filtering).
 

@@ -5,7 +5,19 @@ so that a bad value is reported where it enters, with the argument's name,
 the value received and what is allowed, instead of surfacing later as a NaN
 in a command to the robot. Each helper returns the checked value as a
 float numpy array (or float), ready to use.
+
+The parameter dataclasses check (and normalise) their fields in
+`__post_init__`. They are plain, mutable dataclasses, so that Drake's
+`yaml_load_typed` can fill them field by field (drake_wbc.config); after
+assigning fields, `validate` runs every check of a parameters tree again.
+A stage keeps a validated copy of the parameters it is constructed with
+(`validated_copy`), so changing a parameters object afterwards has no
+effect on the stages already built from it.
 """
+
+import copy
+import dataclasses
+import re
 
 import numpy as np
 
@@ -168,3 +180,61 @@ def rotation_matrix(name, value, tolerance=1e-6):
             f"{determinant:.6g})"
         )
     return R
+
+
+def validate(params, path=""):
+    """Runs the checks of the parameters dataclass `params` again, and those
+    of every dataclass nested in it, innermost first; returns `params`.
+
+    The checks are each class's `__post_init__`, which also normalises the
+    values (e.g. a list into a read-only array or a tuple), so they are
+    safe to run more than once. They are needed again after fields have
+    been assigned, as `yaml_load_typed` does.
+
+    Args:
+        params: a dataclass instance.
+        path: the dotted name of `params` in an enclosing tree, if any
+            (e.g. "arm_cdmp"), used in error messages.
+
+    Raises:
+        ValueError: naming the field by its dotted path from the root
+            (e.g. `arm_cdmp.S_m = [0.5 1. 1. 1. 1. 1.] is not allowed: ...`).
+    """
+    if not dataclasses.is_dataclass(params) or isinstance(params, type):
+        name = path or "params"
+        raise ValueError(f"{name} = {params!r} is not allowed: must be a "
+                         "parameters dataclass")
+    prefix = f"{path}." if path else ""
+    names = [f.name for f in dataclasses.fields(params)]
+    for name in names:
+        value = getattr(params, name)
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            validate(value, prefix + name)
+    check = getattr(params, "__post_init__", None)
+    if check is None:
+        return params
+    try:
+        check()
+    except ValueError as error:
+        raise ValueError(_qualified(str(error), prefix, names)) from None
+    return params
+
+
+def validated_copy(params):
+    """A deep copy of the parameters dataclass `params`, validated (see
+    `validate`): what a stage keeps, so that later changes to `params`
+    do not reach it."""
+    return validate(copy.deepcopy(params))
+
+
+def _qualified(message, prefix, names):
+    """`message` with the fields `names` it reports (`name = ...`,
+    `name[i] = ...`, `name has shape ...`) renamed `prefix + name`; the
+    message is prefixed with the path instead when it reports no field."""
+    if not prefix:
+        return message
+    pattern = re.compile(
+        r"(?<![\w.])(" + "|".join(map(re.escape, names))
+        + r")(?=(\[\d+\])? (=|has shape))")
+    renamed, count = pattern.subn(lambda m: prefix + m.group(1), message)
+    return renamed if count else f"{prefix[:-1]}: {message}"

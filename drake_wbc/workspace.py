@@ -96,8 +96,13 @@ AXIS_TOLERANCE = 1e-9
 effector counts as on the axis: phi = 0 and no gradient of d or phi."""
 
 
-class MotionMode(enum.Enum):
-    """The motion modes of Table (T:motion-mode)."""
+class MotionMode(enum.StrEnum):
+    """The motion modes of Table (T:motion-mode).
+
+    A str enum: each member is also its name as a string (e.g.
+    MotionMode.INTUITIVE_PHRI == "intuitive-phri"), which is how YAML
+    files and WorkspaceAdapterParameters.mode carry it.
+    """
 
     LOCOMOTION = "locomotion"
     MANIPULATION = "manipulation"
@@ -135,7 +140,7 @@ def _ordered(lower_name, lower, upper_name, upper):
     return lower, upper
 
 
-@dataclass(frozen=True)
+@dataclass
 class LocalWorkspace:
     """The boundaries of the local workspace (Sec. IV-C, "Local Workspace").
 

@@ -3,6 +3,11 @@
 Every stage is a scalar-convertible `TemplateSystem` (double and
 AutoDiffXd), so that Drake's `Linearize` runs on the very systems the
 controller uses.
+
+Parameters are read when a stage is constructed: it checks them and keeps
+a validated copy (drake_wbc.validation.validated_copy), shared with its
+scalar-converted copies, so changing a parameters object afterwards has
+no effect on the stages built from it.
 """
 
 from drake_wbc.systems.arm_control import (

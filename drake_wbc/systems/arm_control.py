@@ -13,7 +13,7 @@ from drake_wbc.arm_control import (
 )
 from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.scalar_support import through_float_function
-from drake_wbc.validation import as_vector
+from drake_wbc.validation import as_vector, validated_copy
 
 ARM_JOINT_COUNT = 6
 """The arm's joints (the Elfin5's six)."""
@@ -111,7 +111,7 @@ def ArmCartesianVelocityController_(T):
                     f"kinematics = {kinematics!r} is not allowed: must be an "
                     "ArmKinematics"
                 )
-            self.params = params
+            self.params = params = validated_copy(params)
             self.kinematics = kinematics
             self.lower = np.array(params.lower or kinematics.lower, float)
             self.upper = np.array(params.upper or kinematics.upper, float)
@@ -145,6 +145,7 @@ def ArmCartesianVelocityController_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, other.kinematics,
                             converter=converter)
+            self.params = other.params
 
         @staticmethod
         def _state(context):

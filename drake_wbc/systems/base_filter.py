@@ -9,6 +9,7 @@ from drake_wbc.filtering import (
     lowpass_state_space,
     zero_order_hold,
 )
+from drake_wbc.validation import validated_copy
 
 BASE_AXES = 3
 """The base's velocity components [vx, vy, wz] (T_b)."""
@@ -49,7 +50,7 @@ def BaseVelocityFilter_(T):
                     f"params = {params!r} is not allowed: must be a "
                     "BaseFilterParameters"
                 )
-            self.params = params
+            self.params = params = validated_copy(params)
             A, B, C, _ = lowpass_state_space(params.omega_f, params.zeta)
             eye = np.eye(BASE_AXES)
             self._A = np.kron(eye, A)
@@ -82,6 +83,7 @@ def BaseVelocityFilter_(T):
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, converter=converter)
+            self.params = other.params
 
         @staticmethod
         def _discrete_state(context):

@@ -20,6 +20,7 @@ from drake_wbc.validation import (
     in_closed_range,
     non_negative,
     positive,
+    validated_copy,
 )
 from drake_wbc.workspace import LocalWorkspace, MotionMode
 
@@ -28,7 +29,7 @@ SCALARS = (float, AutoDiffXd)
 symbolic: they branch on values, as the paper's piecewise functions do)."""
 
 
-@dataclass(frozen=True)
+@dataclass
 class CapabilityBand:
     """The limitation band C_m^l < C_m < C_m^u of eq. (transition).
 
@@ -73,10 +74,10 @@ def checked_instance(name, value, kind, default):
 
 
 def set_band(params):
-    """Checks `params.band` (a frozen dataclass's field), putting the
+    """Checks `params.band` (a parameters dataclass's field), putting the
     default CapabilityBand in place of None."""
-    object.__setattr__(params, "band", checked_instance(
-        "band", params.band, CapabilityBand, CapabilityBand))
+    params.band = checked_instance("band", params.band, CapabilityBand,
+                                   CapabilityBand)
 
 
 @functools.cache
@@ -142,7 +143,7 @@ def optional_scalar(port, context, default):
     return default
 
 
-@dataclass(frozen=True)
+@dataclass
 class ArmCapabilityParameters:
     """Parameters of ArmCapability.
 
@@ -217,9 +218,9 @@ def ArmCapability_(T):
 
         def _construct(self, params=None, arm=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self.params = checked_instance("params", params,
-                                           ArmCapabilityParameters,
-                                           ArmCapabilityParameters)
+            self.params = validated_copy(checked_instance(
+                "params", params, ArmCapabilityParameters,
+                ArmCapabilityParameters))
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         ArmKinematics)
             self._input = self.DeclareVectorInputPort("arm_position", 6)
@@ -231,6 +232,7 @@ def ArmCapability_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, other.arm,
                             converter=converter)
+            self.params = other.params
 
         def evaluate(self, q_a):
             """[p_ee (3), C_m, grad_x C_m (6), alpha] at float q_a (6,)."""
@@ -257,13 +259,15 @@ ArmCapability = ArmCapability_[None]
 """ArmCapability_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""
 
 
-@dataclass(frozen=True)
+@dataclass
 class WorkspaceAdapterParameters:
     """Parameters of WorkspaceAdapter.
 
     Attributes:
         mode: a MotionMode or its name, 'locomotion', 'manipulation',
-            'loco-manipulation' or 'intuitive-phri' (Table T:motion-mode).
+            'loco-manipulation' or 'intuitive-phri' (Table T:motion-mode);
+            stored as the MotionMode (a str enum, so that YAML gives the
+            name).
         sigma_xy, sigma_phi: the fixed weighting factors of the
             loco-manipulation mode, in (0, 1) there (checked in [0, 1] in
             the other modes, which do not use them). The default 0.5 is the
@@ -273,18 +277,18 @@ class WorkspaceAdapterParameters:
         band: C_m^l, C_m^u of f_xy and f_phi (intuitive pHRI).
     """
 
-    mode: MotionMode = MotionMode.LOCO_MANIPULATION
+    mode: str = MotionMode.LOCO_MANIPULATION
     sigma_xy: float = 0.5
     sigma_phi: float = 0.5
     workspace: LocalWorkspace = field(default_factory=LocalWorkspace)
     band: CapabilityBand = field(default_factory=CapabilityBand)
 
     def __post_init__(self):
-        object.__setattr__(self, "mode", MotionMode.parse(self.mode))
+        self.mode = MotionMode.parse(self.mode)
         in_closed_range("sigma_xy", self.sigma_xy, 0.0, 1.0)
         in_closed_range("sigma_phi", self.sigma_phi, 0.0, 1.0)
-        object.__setattr__(self, "workspace", checked_instance(
-            "workspace", self.workspace, LocalWorkspace, LocalWorkspace))
+        self.workspace = checked_instance(
+            "workspace", self.workspace, LocalWorkspace, LocalWorkspace)
         set_band(self)
         if self.mode is MotionMode.LOCO_MANIPULATION:
             workspace.fixed_weighting_factors(self.mode, self.sigma_xy,
@@ -333,9 +337,9 @@ def WorkspaceAdapter_(T):
 
         def _construct(self, params=None, arm=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self.params = checked_instance(
+            self.params = validated_copy(checked_instance(
                 "params", params, WorkspaceAdapterParameters,
-                WorkspaceAdapterParameters)
+                WorkspaceAdapterParameters))
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         shared_arm_kinematics)
             self.R_ba, self.arm_base_position = arm_mounting(self.arm)
@@ -353,6 +357,7 @@ def WorkspaceAdapter_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, other.arm,
                             converter=converter)
+            self.params = other.params
 
         def _calc(self, context):
             p = self.params

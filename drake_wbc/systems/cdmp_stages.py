@@ -28,7 +28,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc import cdmp
 from drake_wbc.filtering import zero_order_hold
-from drake_wbc.validation import non_negative
+from drake_wbc.validation import non_negative, validated_copy
 
 SCALARS = [float, AutoDiffXd]
 """Double, and AutoDiffXd for Linearize; not symbolic (the stage branches
@@ -191,8 +191,8 @@ def WholeBodyCdmp_(T):
 
         def _construct(self, params=None, time_step=0.01, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            params = cdmp.WholeBodyCdmpParameters() if params is None \
-                else params
+            params = validated_copy(cdmp.WholeBodyCdmpParameters()
+                                    if params is None else params)
             self.params, self._dimension = params, 6
             self._default_switch = params.S_hri
 
@@ -229,6 +229,7 @@ def WholeBodyCdmp_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, other._time_step,
                             converter=converter)
+            self.params = other.params
 
         def _yaw_rotation(self, context):
             yaw = self._optional(self._yaw, context, np.zeros(1))[0]
@@ -279,7 +280,8 @@ def BaseCdmp_(T):
 
         def _construct(self, params=None, time_step=0.01, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            params = cdmp.BaseCdmpParameters() if params is None else params
+            params = validated_copy(cdmp.BaseCdmpParameters()
+                                    if params is None else params)
             self.params, self._dimension = params, 3
             self._default_switch = 0
             no_points = np.zeros((0, 2))
@@ -310,6 +312,7 @@ def BaseCdmp_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, other._time_step,
                             converter=converter)
+            self.params = other.params
 
         def _switch(self, context):
             return 0
@@ -367,7 +370,8 @@ def ArmCdmp_(T):
 
         def _construct(self, params=None, time_step=0.01, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            params = cdmp.ArmCdmpParameters() if params is None else params
+            params = validated_copy(cdmp.ArmCdmpParameters()
+                                    if params is None else params)
             self.params, self._dimension = params, 6
             self._default_switch = params.S_hri
             base = dict(k_p=params.k_p, k_d=params.k_d, k_f=params.k_f,
@@ -405,6 +409,7 @@ def ArmCdmp_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, other._time_step,
                             converter=converter)
+            self.params = other.params
 
         def _drive(self, context, for_output=False):
             return np.concatenate([

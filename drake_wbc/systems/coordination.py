@@ -34,7 +34,11 @@ from drake_wbc.systems.capability_stage import (
     shared_arm_kinematics,
     tickets,
 )
-from drake_wbc.validation import in_closed_range, non_negative
+from drake_wbc.validation import (
+    in_closed_range,
+    non_negative,
+    validated_copy,
+)
 
 PROJECTOR_TOLERANCE = 1e-12
 """Norm of grad_x C_m below which P_Cm = 0, as in
@@ -128,7 +132,7 @@ def compensate_any(delta_V_b, p_ee_in_base, R_ba, grad_C_m, alpha):
     return required + deviation, deviation
 
 
-@dataclass(frozen=True)
+@dataclass
 class MotionDistributorParameters:
     """Parameters of MotionDistributor.
 
@@ -141,14 +145,15 @@ class MotionDistributorParameters:
             k_n alpha(C_m, C_m^u, C_m^l); False switches it off in one step
             above C_m^u, the paper's words read literally.
         damping: distribution.SingularityDamping (never active for our
-            robot's J_wb, see distribution), or None.
+            robot's J_wb, see distribution), or None for none; default
+            the values of distribution.DEFAULT_DAMPING.
     """
 
     null_space_gain: float = 0.0
     band: CapabilityBand = field(default_factory=CapabilityBand)
     smooth_switch_off: bool = True
-    damping: distribution.SingularityDamping | None = (
-        distribution.DEFAULT_DAMPING)
+    damping: distribution.SingularityDamping | None = field(
+        default_factory=distribution.SingularityDamping)
 
     def __post_init__(self):
         non_negative("null_space_gain", self.null_space_gain)
@@ -215,9 +220,9 @@ def MotionDistributor_(T):
 
         def _construct(self, params=None, arm=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self.params = checked_instance(
+            self.params = validated_copy(checked_instance(
                 "params", params, MotionDistributorParameters,
-                MotionDistributorParameters)
+                MotionDistributorParameters))
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         shared_arm_kinematics)
             self.R_ba = np.array(self.arm.R_ba, dtype=float)
@@ -235,6 +240,7 @@ def MotionDistributor_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, other.arm,
                             converter=converter)
+            self.params = other.params
 
         def null_space_gain(self, context):
             """The gain of eq. (wbccm) used in `context`: k_n (port, else
@@ -281,7 +287,7 @@ MotionDistributor = MotionDistributor_[None]
 """MotionDistributor_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""
 
 
-@dataclass(frozen=True)
+@dataclass
 class RobustCompensatorParameters:
     """Parameters of RobustCompensator.
 
@@ -350,9 +356,9 @@ def RobustCompensator_(T):
 
         def _construct(self, params=None, arm=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self.params = checked_instance(
+            self.params = validated_copy(checked_instance(
                 "params", params, RobustCompensatorParameters,
-                RobustCompensatorParameters)
+                RobustCompensatorParameters))
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         shared_arm_kinematics)
             self.R_ba = np.array(self.arm.R_ba, dtype=float)
@@ -371,6 +377,7 @@ def RobustCompensator_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, other.arm,
                             converter=converter)
+            self.params = other.params
 
         def _calc(self, context):
             value = {name: port.Eval(context)

@@ -1,0 +1,244 @@
+"""The controller's parameters from YAML: diagrams/controller.yaml holds the
+defaults in full, partial files override only what they name, and every
+bad value or key is reported with the file and the field's path."""
+
+import dataclasses
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_file
+
+from drake_wbc import cdmp
+from drake_wbc.config import load_controller_parameters
+from drake_wbc.controller import ControllerParameters, build_controller
+from drake_wbc.dmp import DmpParameters
+from drake_wbc.filtering import BaseFilterParameters
+from drake_wbc.systems import ArmCdmp, BaseVelocityFilter, WorkspaceAdapter
+from drake_wbc.systems.capability_stage import WorkspaceAdapterParameters
+from drake_wbc.validation import validate
+from drake_wbc.workspace import MotionMode
+
+CONTROLLER_FILE = Path(__file__).parents[1] / "diagrams" / "controller.yaml"
+
+
+def assert_same(actual, expected, path="params"):
+    """Field by field (recursively), numpy arrays with np.array_equal."""
+    if dataclasses.is_dataclass(expected):
+        assert type(actual) is type(expected), path
+        for item in dataclasses.fields(expected):
+            assert_same(getattr(actual, item.name),
+                        getattr(expected, item.name), f"{path}.{item.name}")
+    elif isinstance(expected, np.ndarray):
+        assert isinstance(actual, np.ndarray), path
+        assert np.array_equal(actual, expected), path
+        assert actual.dtype == expected.dtype, path
+    else:
+        assert actual == expected, path
+        assert type(actual) in (type(expected), float), path
+
+
+def assert_every_field_written(document, params, path="params"):
+    """The YAML mapping `document` has exactly the fields of `params`, at
+    every level."""
+    names = [item.name for item in dataclasses.fields(params)]
+    assert list(document) == names, path
+    for name in names:
+        value = getattr(params, name)
+        if dataclasses.is_dataclass(value):
+            assert_every_field_written(document[name], value,
+                                       f"{path}.{name}")
+
+
+def test_the_file_holds_the_defaults_in_full():
+    defaults = ControllerParameters()
+    assert_every_field_written(yaml_load_file(CONTROLLER_FILE), defaults)
+    loaded = load_controller_parameters(path=CONTROLLER_FILE)
+    assert_same(loaded, defaults)
+    assert loaded.workspace.mode is MotionMode.LOCO_MANIPULATION
+    assert not loaded.arm_cdmp.S_m.flags.writeable  # normalised again
+
+
+def test_the_file_loads_from_a_string_too():
+    assert_same(load_controller_parameters(text=CONTROLLER_FILE.read_text()),
+                ControllerParameters())
+
+
+def test_a_partial_file_overrides_only_its_fields(tmp_path):
+    file = tmp_path / "partial.yaml"
+    file.write_text("time_step: 0.005\ndistributor: {null_space_gain: 0.1}\n")
+    loaded = load_controller_parameters(path=file)
+    expected = ControllerParameters()
+    expected.time_step = 0.005
+    expected.distributor.null_space_gain = 0.1
+    assert_same(loaded, expected)
+
+
+def test_an_empty_document_gives_the_defaults():
+    for text in ("", "# nothing to change\n", "{}"):
+        assert_same(load_controller_parameters(text=text),
+                    ControllerParameters())
+
+
+def test_every_field_type_survives_a_round_trip():
+    params = ControllerParameters(time_step=0.005)
+    params.workspace.mode = "intuitive-phri"
+    params.workspace.workspace.extent_upper = 0.85
+    params.distributor.damping.threshold = 2.0e-4
+    params.base_cdmp.repulsion.half_sizes = (0.5, 0.35)
+    params.whole_body_cdmp.dmp.beta_z = 5.0
+    params.arm_cdmp.S_m = (0, 1, 1, 1, 1, 1)
+    params.arm_cdmp.F_d = (-5, 0, 0, 0, 0, 0.5)
+    params.arm_controller.lower = [-3.0] * 6
+    params.arm_controller.upper = [3.0] * 6
+    params.arm_controller.velocity_limits = [1.0] * 6
+    validate(params)
+    loaded = load_controller_parameters(text=yaml_dump_typed(params))
+    assert_same(loaded, params)
+    assert loaded.workspace.mode is MotionMode.INTUITIVE_PHRI
+    assert loaded.arm_controller.lower == (-3.0,) * 6
+
+
+def test_null_sets_an_optional_field_to_none():
+    loaded = load_controller_parameters(text=(
+        "distributor: {damping: null}\n"
+        "base_cdmp: {dmp: {beta_z: 5.0}}\n"))
+    assert loaded.distributor.damping is None
+    assert loaded.base_cdmp.dmp.beta_z == 5.0
+    assert loaded.arm_cdmp.dmp.beta_z is None
+
+
+def test_a_controller_builds_from_loaded_parameters():
+    params = load_controller_parameters(text=(
+        "time_step: 0.005\n"
+        "workspace: {mode: intuitive-phri}\n"
+        "arm_cdmp: {S_m: [0, 1, 1, 1, 1, 1]}\n"))
+    controller = build_controller(params)
+    stages = controller.stages
+    assert stages["workspace"].params.mode is MotionMode.INTUITIVE_PHRI
+    assert stages["base_filter"].params.time_step == 0.005
+    np.testing.assert_array_equal(stages["arm_cdmp"].params.S_m,
+                                  [0, 1, 1, 1, 1, 1])
+    context = controller.diagram.CreateDefaultContext()
+    assert context.num_discrete_state_groups() > 0
+    build_controller(load_controller_parameters(path=CONTROLLER_FILE))
+
+
+BAD_VALUES = [
+    ("base_filter: {zeta: -1}", "base_filter.zeta = -1.0",
+     "greater than 0"),
+    ("arm_cdmp: {S_m: [0.5, 1, 1, 1, 1, 1]}", "arm_cdmp.S_m = ",
+     "must be 0 or 1"),
+    ("arm_cdmp: {S_m: [1, 1]}", "arm_cdmp.S_m has shape (2,)",
+     "shape (6,)"),
+    ("workspace: {mode: flying}", "workspace.mode = 'flying'",
+     "'intuitive-phri'"),
+    ("capability: {band: {lower: 0.05}}", "capability.band.lower = 0.05",
+     "strictly below"),
+    ("base_cdmp: {dmp: {num_basis: 0}}", "base_cdmp.dmp.num_basis = 0",
+     "1 or greater"),
+    ("distributor: {damping: {threshold: 0}}",
+     "distributor.damping.threshold = 0.0", "greater than 0"),
+    ("arm_controller: {lower: [0, 0, 0, 0, 0, 0]}",
+     "arm_controller.lower = ", "both limits or neither"),
+    ("time_step: 0.6", "time_step = 0.6", "Nyquist"),
+    ("base_filter: {zeta: fast}", "base_filter.zeta = 'fast'", "float"),
+    ("workspace: {sigma_xy: [0.5]}", "workspace.sigma_xy = [0.5]",
+     "float"),
+    ("capability: {band: 0.04}", "capability.band = 0.04",
+     "mapping of the fields of CapabilityBand"),
+    ("arm_cdmp: {S_x: 1}", "unknown key 'arm_cdmp.S_x'", "k_p, k_d"),
+    ("flying: true", "unknown key 'flying'", "time_step, capability"),
+]
+
+
+@pytest.mark.parametrize("text, field, allowed", BAD_VALUES)
+def test_bad_values_name_the_file_and_field(tmp_path, text, field, allowed):
+    file = tmp_path / "bad.yaml"
+    file.write_text(text + "\n")
+    with pytest.raises(ValueError) as error:
+        load_controller_parameters(path=file)
+    message = str(error.value)
+    assert message.startswith(f"{file}: "), message
+    assert field in message and allowed in message, message
+    with pytest.raises(ValueError, match=re.escape(field)):
+        load_controller_parameters(text=text)
+
+
+def test_bad_yaml_and_bad_arguments_are_reported(tmp_path):
+    file = tmp_path / "broken.yaml"
+    file.write_text("arm_cdmp: [\n")
+    with pytest.raises(ValueError, match=f"{re.escape(str(file))}: not "
+                       "valid YAML"):
+        load_controller_parameters(path=file)
+    with pytest.raises(ValueError, match="exactly one"):
+        load_controller_parameters()
+    with pytest.raises(ValueError, match="exactly one"):
+        load_controller_parameters(path=file, text="{}")
+    with pytest.raises(FileNotFoundError):
+        load_controller_parameters(path=tmp_path / "missing.yaml")
+
+
+def test_validate_checks_and_normalises_assigned_fields():
+    params = ControllerParameters()
+    params.arm_cdmp.S_m = [0, 1, 1, 1, 1, 1]
+    params.workspace.mode = "manipulation"
+    params.arm_controller.velocity_limits = [1.0] * 6
+    assert validate(params) is params
+    assert isinstance(params.arm_cdmp.S_m, np.ndarray)
+    assert not params.arm_cdmp.S_m.flags.writeable
+    assert params.workspace.mode is MotionMode.MANIPULATION
+    assert params.arm_controller.velocity_limits == (1.0,) * 6
+    params.base_cdmp.repulsion.d_min = 0.6
+    with pytest.raises(ValueError, match=r"base_cdmp\.repulsion\.d_min = "
+                       r"0\.6 is not allowed: must lie in \(0, "
+                       r"base_cdmp\.repulsion\.d_th = 0\.5\)"):
+        validate(params)
+    with pytest.raises(ValueError, match="parameters dataclass"):
+        validate("fast")
+    params = ControllerParameters()
+    params.base_filter = None
+    with pytest.raises(ValueError, match="base_filter = None"):
+        validate(params)
+
+
+def test_the_mode_is_still_given_by_name():
+    params = WorkspaceAdapterParameters(mode="intuitive-phri")
+    assert params.mode is MotionMode.INTUITIVE_PHRI
+    assert MotionMode.INTUITIVE_PHRI == "intuitive-phri"
+    assert MotionMode("locomotion") is MotionMode.LOCOMOTION
+
+
+def test_stages_keep_a_validated_copy_of_their_parameters():
+    params = BaseFilterParameters(time_step=0.005)
+    stage = BaseVelocityFilter(params)
+    params.zeta = 2.0
+    assert stage.params.zeta == 1.0
+    assert stage.ToAutoDiffXd().params is stage.params
+    with pytest.raises(ValueError, match="zeta = -1.0"):
+        params.zeta = -1.0
+        BaseVelocityFilter(params)
+    arm = cdmp.ArmCdmpParameters()
+    arm.S_m = [0.5] * 6
+    with pytest.raises(ValueError, match="S_m"):
+        ArmCdmp(arm)
+    workspace = WorkspaceAdapterParameters()
+    stage = WorkspaceAdapter(workspace)
+    workspace.mode = "manipulation"
+    assert stage.params.mode is MotionMode.LOCO_MANIPULATION
+    controller_params = ControllerParameters()
+    controller = build_controller(controller_params)
+    controller_params.distributor.null_space_gain = 0.1
+    assert controller.stages["distributor"].params.null_space_gain == 0.0
+
+
+def test_the_dmp_basis_follows_its_fields():
+    params = DmpParameters()
+    assert params.centres.shape == (20,)
+    params.num_basis = 10
+    params.alpha_s = 3.0
+    expected = DmpParameters(num_basis=10, alpha_s=3.0)
+    np.testing.assert_array_equal(params.centres, expected.centres)
+    np.testing.assert_array_equal(params.widths, expected.widths)
+    assert params.centres[-1] == pytest.approx(np.exp(-3.0))
