@@ -238,3 +238,16 @@ def _qualified(message, prefix, names):
         + r")(?=(\[\d+\])? (=|has shape))")
     renamed, count = pattern.subn(lambda m: prefix + m.group(1), message)
     return renamed if count else f"{prefix[:-1]}: {message}"
+
+
+def checked_instance(name, value, kind, default):
+    """`value` if it is a `kind`, `default()` if it is None; else raises a
+    ValueError naming `name`."""
+    if value is None:
+        return default()
+    if not isinstance(value, kind):
+        raise ValueError(
+            f"{name} = {value!r} is not allowed: must be a {kind.__name__} "
+            "or None"
+        )
+    return value

@@ -81,6 +81,7 @@ import numpy as np
 from drake_wbc.validation import (
     as_scalar,
     as_vector,
+    checked_instance,
     in_closed_range,
     non_negative,
     rotation_matrix,
@@ -319,23 +320,13 @@ def workspace_penalties(p_in_arm_base, workspace=None):
         p_in_arm_base: (3,) end-effector position in T_a.
         workspace: LocalWorkspace; the paper's if None.
     """
-    ws = _workspace(workspace)
+    ws = checked_instance("workspace", workspace, LocalWorkspace,
+                          LocalWorkspace)
     P_d = smooth_transition(extent(p_in_arm_base), ws.extent_upper,
                             ws.extent_lower)
     P_phi = smooth_transition(deflection(p_in_arm_base),
                               ws.deflection_upper, ws.deflection_lower)
     return P_d, P_phi
-
-
-def _workspace(workspace):
-    if workspace is None:
-        return LocalWorkspace()
-    if not isinstance(workspace, LocalWorkspace):
-        raise ValueError(
-            f"workspace = {workspace!r} is not allowed: must be a "
-            "LocalWorkspace or None"
-        )
-    return workspace
 
 
 class PenalizedCapability(NamedTuple):
@@ -367,7 +358,8 @@ def penalized_capability(C_m, grad_C_m, p_in_arm_base, workspace=None):
     Returns:
         PenalizedCapability.
     """
-    ws = _workspace(workspace)
+    ws = checked_instance("workspace", workspace, LocalWorkspace,
+                          LocalWorkspace)
     C_m = _scalar("C_m", C_m)
     g = _vector("grad_C_m", grad_C_m, 6)
     d = extent(p_in_arm_base)
@@ -465,7 +457,8 @@ def local_workspace_state(p_ee_in_base, V_ee, C_m, grad_C_m,
         LocalWorkspaceState; sigma_xy and sigma_phi are the weighting
         factors, after the deactivation strategy.
     """
-    ws = _workspace(workspace)
+    ws = checked_instance("workspace", workspace, LocalWorkspace,
+                          LocalWorkspace)
     p = in_arm_base(p_ee_in_base, R_ba, arm_base_in_base)
     V = _vector("V_ee", V_ee, 6)
     R = np.eye(3) if R_ba is None else rotation_matrix("R_ba", R_ba)

@@ -17,6 +17,7 @@ from drake_wbc.robot_model import ArmKinematics
 from drake_wbc.scalar_support import through_float_function
 from drake_wbc.validation import (
     as_scalar,
+    checked_instance,
     in_closed_range,
     non_negative,
     positive,
@@ -58,19 +59,6 @@ class CapabilityBand:
                 "the band's lower threshold C_m^l must be strictly below "
                 "its upper threshold C_m^u"
             )
-
-
-def checked_instance(name, value, kind, default):
-    """`value` if it is a `kind`, `default()` if it is None; else raises a
-    ValueError naming `name`."""
-    if value is None:
-        return default()
-    if not isinstance(value, kind):
-        raise ValueError(
-            f"{name} = {value!r} is not allowed: must be a {kind.__name__} "
-            "or None"
-        )
-    return value
 
 
 def set_band(params):

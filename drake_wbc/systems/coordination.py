@@ -25,7 +25,6 @@ from drake_wbc.scalar_support import solve, value_of
 from drake_wbc.systems.capability_stage import (
     SCALARS,
     CapabilityBand,
-    checked_instance,
     declare_cached_vector,
     declare_inputs,
     declare_slices,
@@ -35,6 +34,7 @@ from drake_wbc.systems.capability_stage import (
     tickets,
 )
 from drake_wbc.validation import (
+    checked_instance,
     in_closed_range,
     non_negative,
     validated_copy,
