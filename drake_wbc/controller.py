@@ -57,7 +57,7 @@ from drake_wbc.systems.coordination import (
     RobustCompensatorParameters,
 )
 from drake_wbc.systems.wrench import ExternalWrenchEstimator
-from drake_wbc.validation import positive, validated_copy
+from drake_wbc.validation import checked_instance, positive, validated_copy
 
 STATION_INPUTS = (
     "base.state_estimated",
@@ -179,13 +179,10 @@ def build_controller(params=None, arm=None):
         end_effector_deviation, base_velocity, filtered_base_velocity,
         arm_velocity_command, arm_limited).
     """
-    params = ControllerParameters() if params is None else params
-    if not isinstance(params, ControllerParameters):
-        raise ValueError(f"params = {params!r} is not allowed: must be a "
-                         "ControllerParameters")
-    params = validated_copy(params)
+    params = validated_copy(checked_instance(
+        "params", params, ControllerParameters, ControllerParameters))
     h = params.time_step
-    arm = ArmKinematics() if arm is None else arm
+    arm = checked_instance("arm", arm, ArmKinematics, ArmKinematics)
     builder = DiagramBuilder()
     add = builder.AddNamedSystem
     stages = dict(

@@ -13,7 +13,7 @@ from drake_wbc.arm_control import (
 )
 from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.scalar_support import through_float_function
-from drake_wbc.validation import as_vector, validated_copy
+from drake_wbc.validation import as_vector, checked_instance, validated_copy
 
 ARM_JOINT_COUNT = 6
 """The arm's joints (the Elfin5's six)."""
@@ -99,18 +99,11 @@ def ArmCartesianVelocityController_(T):
 
         def _construct(self, params=None, kinematics=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            params = ArmControllerParameters() if params is None else params
-            if not isinstance(params, ArmControllerParameters):
-                raise ValueError(
-                    f"params = {params!r} is not allowed: must be an "
-                    "ArmControllerParameters"
-                )
-            kinematics = ArmKinematics() if kinematics is None else kinematics
-            if not isinstance(kinematics, ArmKinematics):
-                raise ValueError(
-                    f"kinematics = {kinematics!r} is not allowed: must be an "
-                    "ArmKinematics"
-                )
+            params = checked_instance("params", params,
+                                      ArmControllerParameters,
+                                      ArmControllerParameters)
+            kinematics = checked_instance("kinematics", kinematics,
+                                          ArmKinematics, ArmKinematics)
             self.params = params = validated_copy(params)
             self.kinematics = kinematics
             self.lower = np.array(params.lower or kinematics.lower, float)

@@ -9,7 +9,7 @@ from drake_wbc.filtering import (
     lowpass_state_space,
     zero_order_hold,
 )
-from drake_wbc.validation import validated_copy
+from drake_wbc.validation import checked_instance, validated_copy
 
 BASE_AXES = 3
 """The base's velocity components [vx, vy, wz] (T_b)."""
@@ -44,12 +44,9 @@ def BaseVelocityFilter_(T):
 
         def _construct(self, params=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            params = BaseFilterParameters() if params is None else params
-            if not isinstance(params, BaseFilterParameters):
-                raise ValueError(
-                    f"params = {params!r} is not allowed: must be a "
-                    "BaseFilterParameters"
-                )
+            params = checked_instance("params", params,
+                                      BaseFilterParameters,
+                                      BaseFilterParameters)
             self.params = params = validated_copy(params)
             A, B, C, _ = lowpass_state_space(params.omega_f, params.zeta)
             eye = np.eye(BASE_AXES)
