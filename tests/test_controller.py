@@ -3,12 +3,9 @@ fixed measurements without NaN, and reads the wrist sensor right."""
 
 import numpy as np
 import pytest
+from locked_robot import sensor_reading, settle_locked_robot
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.math import SpatialForce
-from pydrake.multibody.plant import (
-    AddMultibodyPlantSceneGraph,
-    ExternallyAppliedSpatialForce,
-)
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantValueSource, VectorLogSink
@@ -20,11 +17,8 @@ from drake_wbc.controller import (
     build_controller,
 )
 from drake_wbc.robot_model import (
-    ARM_JOINTS,
     HOME_ARM_POSITIONS,
     ArmKinematics,
-    add_mcr,
-    joint_position_indices,
 )
 from drake_wbc.systems.wrench import ExternalWrenchEstimator
 
@@ -121,41 +115,9 @@ def test_estimator_recovers_a_push_on_the_simulated_tool(arm):
     """A known wrench applied at the tool centre point of the simulated
     robot: the sensing weld's reaction, read as the sensor reads it, gives
     that wrench back (in T_a, at the tool centre point)."""
-    builder = DiagramBuilder()
-    plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
-    model = add_mcr(plant)
-    plant.Finalize()
-    tool = plant.GetBodyByName("wiping_tool", model.tool)
     push_W = SpatialForce(tau=[0.3, -0.2, 0.1], f=[4.0, -6.0, 9.0])
-    diagram_context = None
-
-    applied = ExternallyAppliedSpatialForce()
-    applied.body_index = tool.index()
-    X_BT = model.tcp_frame.GetFixedPoseInBodyFrame()
-    applied.p_BoBq_B = X_BT.translation()
-    applied.F_Bq_W = push_W
-    source = builder.AddSystem(ConstantValueSource(
-        AbstractValue.Make([applied])))
-    builder.Connect(source.get_output_port(),
-                    plant.get_applied_spatial_force_input_port())
-    diagram = builder.Build()
-    simulator = Simulator(diagram)
-    diagram_context = simulator.get_mutable_context()
-    context = plant.GetMyMutableContextFromRoot(diagram_context)
-    q = plant.GetPositions(context)
     q_a = HOME_ARM_POSITIONS + np.array([0.3, 0.2, -0.1, 0.4, 0.2, 0.5])
-    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_a
-    plant.SetPositions(context, q)
-    for i in plant.GetJointIndices():
-        if plant.get_joint(i).num_velocities() == 1:
-            plant.get_joint(i).Lock(context)
-    simulator.AdvanceTo(0.05)
-    weld = plant.GetJointByName("ft300_sensing", model.tool)
-    reaction = plant.get_reaction_forces_output_port().Eval(context)[
-        int(weld.index())]
-    # The sensor reads what the tool exerts on it: minus the reaction.
-    reading = -np.concatenate([reaction.translational(),
-                               reaction.rotational()])
+    reading = sensor_reading(*settle_locked_robot(q_a, push_W))
     estimator = ExternalWrenchEstimator(arm)
     estimator_context = estimator.CreateDefaultContext()
     estimator.GetInputPort("arm_position").FixValue(estimator_context, q_a)

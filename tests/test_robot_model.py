@@ -3,6 +3,7 @@ and its flexible mount against a simulation of the loaded plant."""
 
 import numpy as np
 import pytest
+from locked_robot import sensing_weld_reaction, settle_locked_robot
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.multibody.tree import PdControllerGains
 from pydrake.systems.analysis import Simulator
@@ -318,26 +319,8 @@ def test_sensing_weld_reads_the_tool_weight():
     """At rest the weld `ft300_sensing` carries the tool: its reaction
     wrench (on the tool, at the measurement frame) is the tool's weight
     and its moment about the measurement point, as an F/T sensor reads."""
-    builder = DiagramBuilder()
-    plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
-    model = add_mcr(plant)
-    plant.Finalize()
-    diagram = builder.Build()
-    simulator = Simulator(diagram)
-    context = plant.GetMyMutableContextFromRoot(
-        simulator.get_mutable_context())
-    q = plant.GetPositions(context)
-    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = (
-        HOME_ARM_POSITIONS)
-    plant.SetPositions(context, q)
-    for i in plant.GetJointIndices():
-        if plant.get_joint(i).num_velocities() == 1:
-            plant.get_joint(i).Lock(context)
-    simulator.AdvanceTo(0.05)
-
-    weld = plant.GetJointByName("ft300_sensing", model.tool)
-    wrench = plant.get_reaction_forces_output_port().Eval(context)[
-        int(weld.index())]
+    plant, model, context = settle_locked_robot(HOME_ARM_POSITIONS)
+    wrench = sensing_weld_reaction(plant, model, context)
     tool = plant.GetBodyByName("wiping_tool", model.tool)
     mass = tool.get_mass(context)
     g = plant.gravity_field().gravity_vector()
