@@ -184,7 +184,8 @@ def rotation_matrix(name, value, tolerance=1e-6):
 
 def validate(params, path=""):
     """Runs the checks of the parameters dataclass `params` again, and those
-    of every dataclass nested in it, innermost first; returns `params`.
+    of every dataclass nested in it (also as items of a list or tuple, e.g.
+    a scene's obstacles), innermost first; returns `params`.
 
     The checks are each class's `__post_init__`, which also normalises the
     values (e.g. a list into a read-only array or a tuple), so they are
@@ -200,7 +201,7 @@ def validate(params, path=""):
         ValueError: naming the field by its dotted path from the root
             (e.g. `arm_cdmp.S_m = [0.5 1. 1. 1. 1. 1.] is not allowed: ...`).
     """
-    if not dataclasses.is_dataclass(params) or isinstance(params, type):
+    if not _is_instance(params):
         name = path or "params"
         raise ValueError(f"{name} = {params!r} is not allowed: must be a "
                          "parameters dataclass")
@@ -208,8 +209,12 @@ def validate(params, path=""):
     names = [f.name for f in dataclasses.fields(params)]
     for name in names:
         value = getattr(params, name)
-        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        if _is_instance(value):
             validate(value, prefix + name)
+        elif isinstance(value, (list, tuple)):
+            for i, item in enumerate(value):
+                if _is_instance(item):
+                    validate(item, f"{prefix}{name}[{i}]")
     check = getattr(params, "__post_init__", None)
     if check is None:
         return params
@@ -218,6 +223,11 @@ def validate(params, path=""):
     except ValueError as error:
         raise ValueError(_qualified(str(error), prefix, names)) from None
     return params
+
+
+def _is_instance(value):
+    """True for a dataclass instance (not a dataclass type)."""
+    return dataclasses.is_dataclass(value) and not isinstance(value, type)
 
 
 def validated_copy(params):

@@ -242,3 +242,25 @@ def test_the_dmp_basis_follows_its_fields():
     np.testing.assert_array_equal(params.centres, expected.centres)
     np.testing.assert_array_equal(params.widths, expected.widths)
     assert params.centres[-1] == pytest.approx(np.exp(-3.0))
+
+
+def test_validate_reaches_dataclasses_inside_lists():
+    from dataclasses import dataclass, field
+
+    from drake_wbc.validation import positive, validate
+
+    @dataclass
+    class Item:
+        size: float = 1.0
+
+        def __post_init__(self):
+            positive("size", self.size)
+
+    @dataclass
+    class Holder:
+        items: list = field(default_factory=list)
+
+    holder = Holder(items=[Item(), Item()])
+    holder.items[1].size = -2.0
+    with pytest.raises(ValueError, match=r"items\[1\]\.size = -2"):
+        validate(holder)
