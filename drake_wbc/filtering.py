@@ -38,16 +38,30 @@ class BaseFilterParameters:
         time_step: control period h in s; 0 gives the continuous filter,
             > 0 its exact zero-order-hold discretisation. omega_f must stay
             below the Nyquist rate pi / h.
+        enabled: False bypasses the filter (the paper's comparison run
+            "without trajectory filtering"): the command is then V_b'
+            itself, sampled at each tick and held like every discrete
+            command, so the output still leaves from state. Needs
+            time_step > 0.
     """
 
     omega_f: float = 2.0 * np.pi
     zeta: float = 1.0
     time_step: float = 0.01
+    enabled: bool = True
 
     def __post_init__(self):
         positive("omega_f", self.omega_f)
         positive("zeta", self.zeta)
         h = non_negative("time_step", self.time_step)
+        if not isinstance(self.enabled, (bool, np.bool_)):
+            raise ValueError(f"enabled = {self.enabled!r} is not allowed: "
+                             "must be true or false")
+        if not self.enabled and h == 0.0:
+            raise ValueError(
+                "enabled = False is not allowed with time_step = 0: the "
+                "bypassed filter is a one-period hold, which needs a "
+                "control period > 0")
         if h > 0.0 and self.omega_f >= np.pi / h:
             raise ValueError(
                 f"omega_f = {self.omega_f!r} rad/s is not allowed with "

@@ -143,3 +143,25 @@ def test_bad_filter_math_arguments_are_rejected():
         lowpass_state_space(1.0, -1.0)
     with pytest.raises(ValueError, match="time_step"):
         zero_order_hold(np.eye(2), np.ones((2, 1)), 0.0)
+
+
+def test_bypassed_filter_holds_the_input_for_one_period():
+    params = BaseFilterParameters(enabled=False, time_step=0.01)
+    filt = BaseVelocityFilter(params)
+    context = filt.CreateDefaultContext()
+    first, second = np.array([0.1, -0.2, 0.3]), np.array([-0.4, 0.5, 0.6])
+    filt.get_input_port().FixValue(context, first)
+    simulator = Simulator(filt, context)
+    simulator.AdvanceTo(0.005)  # sampled at t = 0
+    np.testing.assert_array_equal(filt.get_output_port().Eval(context), first)
+    filt.get_input_port().FixValue(context, second)
+    simulator.AdvanceTo(0.0099)
+    np.testing.assert_array_equal(filt.get_output_port().Eval(context), first)
+    simulator.AdvanceTo(0.015)  # sampled at t = 0.01
+    np.testing.assert_array_equal(filt.get_output_port().Eval(context),
+                                  second)
+
+
+def test_bypass_needs_a_control_period():
+    with pytest.raises(ValueError, match="enabled = False"):
+        BaseFilterParameters(enabled=False, time_step=0.0)

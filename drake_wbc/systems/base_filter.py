@@ -31,6 +31,9 @@ def BaseVelocityFilter_(T):
         - filtered_velocity: V_b^flt (3), the base velocity command; it is
           the filter's state (no direct feedthrough).
 
+        With params.enabled False it is bypassed: the output is the input
+        sampled at the last tick and held (x+ = [u, 0] per axis).
+
         Continuous (time_step = 0) or exactly discretised with a zero-order
         hold at the control period (time_step > 0, one periodic discrete
         update), so that Drake's `Linearize` applies either way. The state
@@ -55,10 +58,15 @@ def BaseVelocityFilter_(T):
             self._C = np.kron(eye, C)
             self._input = self.DeclareVectorInputPort("velocity", BASE_AXES)
             n = 2 * BASE_AXES
-            if params.time_step > 0.0:
+            if not params.enabled:
+                # Bypassed: x+ = [u, 0] per axis, y = u sampled and held.
+                self._A = np.zeros_like(self._A)
+                self._B = np.kron(eye, [[1.0], [0.0]])
+            elif params.time_step > 0.0:
                 self._A, self._B = zero_order_hold(
                     self._A, self._B, params.time_step
                 )
+            if params.time_step > 0.0:
                 state = self.DeclareDiscreteState(n)
                 self.DeclarePeriodicDiscreteUpdateEvent(
                     params.time_step, 0.0, self._update
