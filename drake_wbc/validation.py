@@ -111,6 +111,19 @@ def in_closed_range(name, value, lower, upper):
     return number
 
 
+def whole_number(name, value, minimum=0):
+    """`value` as an int >= `minimum` (811.0 is accepted; a bool is not).
+
+    Raises:
+        ValueError: naming `name`, its value and what is allowed.
+    """
+    number = in_closed_range(name, value, minimum, np.inf)
+    if not number.is_integer() or isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} = {value!r} is not allowed: must be a "
+                         "whole number")
+    return int(number)
+
+
 def positive(name, value):
     """Returns `value` as a float after checking that it is > 0.
 

@@ -1,0 +1,244 @@
+"""The station's simulated wrist force/torque sensor (Robotiq FT-300).
+
+The true wrench comes from the plant: the tool hangs on the weld
+`ft300_sensing` at the sensor's measurement frame (drake_wbc.robot_model),
+and `WeldWrench` turns that weld's reaction into the wrench [f; tau] the
+tool exerts on the sensor. `measure` models what the sensor makes of it
+(noise, saturation, quantisation), and `WristForceTorqueSensor` samples it
+at the sensor's rate, like the real one. Sampling at t = 0 follows the
+same rules as the LIDAR's (see drake_wbc.station.lidar), with one more
+(checked on drake 1.51.1): a discrete plant's reaction forces are sampled
+outputs (the default `use_sampled_output_ports`), zero until its first
+step. The reading stored at `Simulator.Initialize()` is then zero; the
+plant steps in an unrestricted update, which Drake runs before the
+discrete updates due at the same time, so the reading taken at t = 0
+already holds the forces of the initial state.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.multibody.math import SpatialForce
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.systems.framework import LeafSystem
+
+from drake_wbc.validation import (
+    as_vector,
+    checked_instance,
+    non_negative,
+    positive,
+    validated_copy,
+    whole_number,
+)
+
+WRENCH_SIZE = 6
+"""[fx, fy, fz, tx, ty, tz]: force first, N, then torque, N m."""
+
+
+@dataclass
+class ForceTorqueSensorParameters:
+    """Parameters of the wrist F/T sensor; the defaults are the FT-300's.
+
+    Attributes:
+        rate: readings a second, Hz, > 0 (100).
+        force_noise_std: N, >= 0, of a Gaussian error on each force
+            component (0.1: the data sheet's RMS bound, taken as the RMS).
+        torque_noise_std: N m, >= 0, the same for torques (0.005).
+        force_resolution: N, >= 0; forces are rounded to the nearest
+            multiple (0.01); 0: no quantisation.
+        torque_resolution: N m, >= 0, the same for torques (0.001).
+        force_range: N, > 0; each force component saturates at +-range
+            (300).
+        torque_range: N m, > 0, the same for torques (30).
+        seed: a whole number >= 0. The noise of reading k is drawn from
+            np.random.default_rng([seed, k]): it never depends on what was
+            computed before.
+    """
+
+    rate: float = 100.0
+    force_noise_std: float = 0.1
+    torque_noise_std: float = 0.005
+    force_resolution: float = 0.01
+    torque_resolution: float = 0.001
+    force_range: float = 300.0
+    torque_range: float = 30.0
+    seed: int = 0
+
+    def __post_init__(self):
+        self.rate = positive("rate", self.rate)
+        for name in ("force_noise_std", "torque_noise_std",
+                     "force_resolution", "torque_resolution"):
+            setattr(self, name, non_negative(name, getattr(self, name)))
+        self.force_range = positive("force_range", self.force_range)
+        self.torque_range = positive("torque_range", self.torque_range)
+        self.seed = whole_number("seed", self.seed)
+
+    @classmethod
+    def ideal(cls, **overrides):
+        """An ideal sensor for tests: no noise, no quantisation (the rate
+        and the ranges stay the FT-300's unless overridden)."""
+        fields = dict(force_noise_std=0.0, torque_noise_std=0.0,
+                      force_resolution=0.0, torque_resolution=0.0)
+        fields.update(overrides)
+        return cls(**fields)
+
+
+def _per_axis(force_value, torque_value):
+    """(6,) the force value thrice, then the torque value thrice."""
+    return np.repeat([float(force_value), float(torque_value)], 3)
+
+
+def measure(wrench, params, tick):
+    """What the sensor reads for a true wrench.
+
+    Gaussian noise first, then saturation at +-range, then rounding to the
+    nearest multiple of the resolution (where it is > 0), per component.
+
+    Args:
+        wrench: (6,) the true [f; tau], N and N m.
+        params: ForceTorqueSensorParameters (FT-300 defaults if None).
+        tick: the reading's index, a whole number >= 0; with `params.seed`
+            it fixes the noise.
+
+    Returns:
+        (6,) the reading [f; tau].
+    """
+    params = checked_instance("params", params, ForceTorqueSensorParameters,
+                              ForceTorqueSensorParameters)
+    reading = as_vector("wrench", wrench, WRENCH_SIZE)
+    tick = whole_number("tick", tick)
+    std = _per_axis(params.force_noise_std, params.torque_noise_std)
+    if np.any(std > 0.0):
+        rng = np.random.default_rng([params.seed, tick])
+        reading = reading + std * rng.standard_normal(WRENCH_SIZE)
+    limit = _per_axis(params.force_range, params.torque_range)
+    reading = np.clip(reading, -limit, limit)
+    resolution = _per_axis(params.force_resolution,
+                                  params.torque_resolution)
+    step = np.where(resolution > 0.0, resolution, 1.0)
+    return np.where(resolution > 0.0, np.round(reading / step) * step,
+                    reading)
+
+
+class WristForceTorqueSensor(LeafSystem):
+    """The wrist F/T sensor, sampled.
+
+    ::
+
+                     ┌────────────────────────┐
+            wrench ─►│ WristForceTorqueSensor ├──► wrench_measured
+                     └────────────────────────┘
+
+    - wrench: (6) the true [f; tau] the tool exerts on the sensor, at and
+      in its measurement frame (e.g. from `WeldWrench`).
+    - wrench_measured: (6) the last reading (`measure`), the station's
+      `wrist.wrench_measured`.
+
+    A plain double `LeafSystem`. A periodic discrete update at 1 / rate,
+    offset 0, stores the reading and a reading counter (the noise's
+    tick); the output comes from that state alone, so it holds between
+    readings, with no direct feedthrough (the plant, the controller and
+    the sensor form a loop). The default reading is zero, counter 0. An
+    initialization event (see the module notes) and `initialize_reading`
+    store the reading of the current input without advancing the
+    counter: the update at t = 0 then stores it again (with the reading
+    of the plant's first step, for a discrete plant).
+
+    Args:
+        params: ForceTorqueSensorParameters (FT-300 defaults if None).
+    """
+
+    def __init__(self, params=None):
+        super().__init__()
+        params = checked_instance("params", params,
+                                  ForceTorqueSensorParameters,
+                                  ForceTorqueSensorParameters)
+        self.params = validated_copy(params)
+        self._wrench = self.DeclareVectorInputPort("wrench", WRENCH_SIZE)
+        self._reading = self.DeclareDiscreteState(WRENCH_SIZE)
+        self._tick = self.DeclareDiscreteState(1)
+        self.DeclarePeriodicDiscreteUpdateEvent(1.0 / self.params.rate, 0.0,
+                                                self._update)
+        self.DeclareInitializationDiscreteUpdateEvent(self._store_reading)
+        self.DeclareVectorOutputPort(
+            "wrench_measured", WRENCH_SIZE, self._output,
+            prerequisites_of_calc={
+                self.discrete_state_ticket(self._reading)})
+
+    def _measure(self, context):
+        tick = context.get_discrete_state(self._tick).GetAtIndex(0)
+        return measure(self._wrench.Eval(context), self.params, tick)
+
+    def initialize_reading(self, context):
+        """Stores in `context` the reading of its current input, at the
+        current reading counter (left as it is)."""
+        self._store_reading(context, context.get_mutable_discrete_state())
+
+    def _store_reading(self, context, discrete_state):
+        discrete_state.get_mutable_vector(self._reading).SetFromVector(
+            self._measure(context))
+
+    def _update(self, context, discrete_state):
+        self._store_reading(context, discrete_state)
+        tick = context.get_discrete_state(self._tick).GetAtIndex(0)
+        discrete_state.get_mutable_vector(self._tick).SetAtIndex(0, tick + 1)
+
+    def _output(self, context, output):
+        output.SetFromVector(
+            context.get_discrete_state(self._reading).CopyToVector())
+
+
+class WeldWrench(LeafSystem):
+    """The true sensor wrench from the reaction forces of a weld.
+
+    ::
+
+                              ┌────────────┐
+            reaction_forces ─►│ WeldWrench ├──► wrench
+                              └────────────┘
+
+    - reaction_forces: abstract, the list of SpatialForce that
+      `plant.get_reaction_forces_output_port()` gives, indexed by
+      int(joint.index()); each is the force on the joint's child body at
+      the joint's child frame, expressed in that frame.
+    - wrench: (6) -[f; tau] of the weld's reaction: the wrench the child
+      (the tool) exerts on the parent (the sensor), at and in the weld's
+      child frame (the measurement frame, for `ft300_sensing`).
+
+    Args:
+        plant: the MultibodyPlant holding the weld.
+        weld_joint: the weld, e.g. plant.GetJointByName("ft300_sensing",
+            model.tool).
+    """
+
+    def __init__(self, plant, weld_joint):
+        super().__init__()
+        if not isinstance(plant, MultibodyPlant):
+            raise ValueError(f"plant = {plant!r} is not allowed: must be a "
+                             "MultibodyPlant (double)")
+        index = getattr(weld_joint, "index", None)
+        if (index is None or int(index()) >= plant.num_joints()
+                or plant.get_joint(index()) is not weld_joint):
+            raise ValueError(f"weld_joint = {weld_joint!r} is not allowed: "
+                             "must be a joint of plant")
+        if weld_joint.num_velocities() != 0:
+            raise ValueError(
+                f"weld_joint = {weld_joint!r} is not allowed: must be a "
+                f"weld (it has {weld_joint.num_velocities()} velocities)")
+        self.joint_index = int(index())
+        self._reactions = self.DeclareAbstractInputPort(
+            "reaction_forces",
+            AbstractValue.Make([SpatialForce(np.zeros(3), np.zeros(3))]))
+        self.DeclareVectorOutputPort("wrench", WRENCH_SIZE, self._output)
+
+    def _output(self, context, output):
+        reactions = self._reactions.Eval(context)
+        if len(reactions) <= self.joint_index:
+            raise ValueError(
+                f"reaction_forces has {len(reactions)} entries, which is not "
+                f"allowed: must have one per joint of the plant (the weld's "
+                f"index is {self.joint_index})")
+        reaction = reactions[self.joint_index]
+        output.SetFromVector(-np.concatenate([reaction.translational(),
+                                              reaction.rotational()]))

@@ -1,0 +1,365 @@
+"""The station's simulated 2-D LIDARs (SICK TiM571).
+
+A LIDAR sees a planar cut through the world at its height, with shapes in
+the world frame: circles (people, columns), (K, 3) rows [cx, cy, r], and
+boxes (tables, walls), (L, 5) rows [cx, cy, half_x, half_y, yaw], i.e.
+rectangles with half sizes along their own axes, yawed by `yaw`. Each beam
+reports the distance to the nearest shape along it; `inf` is no return.
+Pure numpy math first, then the Drake systems, thin over it.
+
+Sampling at t = 0 (drake 1.51.1): `Simulator.Initialize()` runs no
+periodic update; the one due at t = 0 runs at the start of the first
+`AdvanceTo` (even `AdvanceTo(0)`), and one due when an `AdvanceTo` ends,
+at the start of the next. What reads the outputs at initialisation (a
+logger's first sample) would see the default state, so the sensors also
+store a reading in an initialization event.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem
+
+from drake_wbc.validation import (
+    as_matrix,
+    as_vector,
+    checked_instance,
+    in_closed_range,
+    non_negative,
+    positive,
+    validated_copy,
+    whole_number,
+)
+
+
+@dataclass
+class LidarParameters:
+    """Parameters of one 2-D LIDAR; the defaults are the SICK TiM571's.
+
+    Attributes:
+        field_of_view: rad, from the first beam to the last, in (0, 2 pi];
+            270 degrees.
+        num_beams: beams a scan, >= 1, evenly spread (811: 0.333 degree).
+        min_range: m, >= 0; closer objects give no return (0.05).
+        max_range: m, > min_range; farther objects give no return (25).
+        rate: scans a second, Hz, > 0 (15).
+        range_noise_std: m, >= 0, of a Gaussian error on each range (0).
+        seed: a whole number >= 0; the noise of scan k is drawn from
+            np.random.default_rng([seed, k]), whatever came before.
+    """
+
+    field_of_view: float = float(np.radians(270.0))
+    num_beams: int = 811
+    min_range: float = 0.05
+    max_range: float = 25.0
+    rate: float = 15.0
+    range_noise_std: float = 0.0
+    seed: int = 0
+
+    def __post_init__(self):
+        self.field_of_view = in_closed_range(
+            "field_of_view", self.field_of_view, 0.0, 2.0 * np.pi)
+        positive("field_of_view", self.field_of_view)
+        self.num_beams = whole_number("num_beams", self.num_beams, 1)
+        self.min_range = non_negative("min_range", self.min_range)
+        self.max_range = positive("max_range", self.max_range)
+        if self.max_range <= self.min_range:
+            raise ValueError(
+                f"max_range = {self.max_range!r} is not allowed: must be "
+                f"greater than min_range = {self.min_range!r}")
+        self.rate = positive("rate", self.rate)
+        self.range_noise_std = non_negative("range_noise_std",
+                                            self.range_noise_std)
+        self.seed = whole_number("seed", self.seed)
+
+    @property
+    def beam_angles(self):
+        """(num_beams,) beam directions in the scanner frame, rad, evenly
+        from -field_of_view / 2 to +field_of_view / 2 about its x axis (a
+        single beam points along x)."""
+        half = 0.5 * self.field_of_view if self.num_beams > 1 else 0.0
+        return np.linspace(-half, half, self.num_beams)
+
+    @property
+    def beam_spacing(self):
+        """Angle between neighbouring beams, rad (0 for a single beam)."""
+        return self.field_of_view / max(self.num_beams - 1, 1)
+
+
+def shapes_array(name, value, columns):
+    """`value` checked as circles (columns = 3) or boxes (columns = 5),
+    see the module notes; None or empty gives no shapes."""
+    if value is None or np.size(value) == 0:
+        return np.zeros((0, columns))
+    shapes = as_matrix(name, value, (None, columns))
+    sizes = [2] if columns == 3 else [2, 3]
+    bad = np.argwhere(shapes[:, sizes] <= 0.0)
+    if bad.size:
+        row, column = int(bad[0, 0]), sizes[int(bad[0, 1])]
+        raise ValueError(
+            f"{name}[{row}, {column}] = {float(shapes[row, column])!r} is "
+            "not allowed: radii and half sizes must be greater than 0")
+    return shapes
+
+
+def _rotation(yaw):
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s], [s, c]])
+
+
+def _circle_distances(origin, directions, circles):
+    """(N, K) distance along each ray to each circle (inf: missed): the
+    first root of |m + t d|^2 = r^2, m = origin - centre, with the
+    discriminant from the ray's perpendicular offset (no cancellation)."""
+    m = origin - circles[:, :2]
+    b = directions @ m.T
+    offset = m[None, :, :] - b[:, :, None] * directions[:, None, :]
+    r = circles[:, 2]
+    disc = r * r - np.sum(offset * offset, axis=2)
+    t = -b - np.sqrt(np.maximum(disc, 0.0))
+    distances = np.where((disc >= 0.0) & (t >= 0.0), t, np.inf)
+    inside = np.sum(m * m, axis=1) <= r * r
+    return np.where(inside[None, :], 0.0, distances)
+
+
+def _box_distances(origin, angles, boxes):
+    """(N, L) distance along each ray to each box (inf: missed), by the
+    slab method in each box's own frame."""
+    yaw, half = boxes[:, 4], boxes[:, 2:4]
+    local = np.einsum("lji,lj->li", np.moveaxis(_rotation(yaw), -1, 0),
+                      origin - boxes[:, :2])                    # (L, 2)
+    relative = angles[:, None] - yaw[None, :]
+    d = np.stack([np.cos(relative), np.sin(relative)], axis=2)  # (N, L, 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_low, t_high = (-half - local) / d, (half - local) / d
+    within = np.abs(local) <= half
+    parallel = d == 0.0
+    enter = np.where(parallel, np.where(within, -np.inf, np.inf),
+                     np.minimum(t_low, t_high)).max(axis=2)
+    leave = np.where(parallel, np.where(within, np.inf, -np.inf),
+                     np.maximum(t_low, t_high)).min(axis=2)
+    distances = np.where((enter <= leave) & (leave >= 0.0), enter, np.inf)
+    return np.where(np.all(within, axis=1)[None, :], 0.0, distances)
+
+
+def cast_rays(origin, angles, circles, boxes, max_range):
+    """Distances along rays in the plane to the nearest circle or box.
+
+    Args:
+        origin: (2,) the rays' common start, world frame, m.
+        angles: (N,) ray directions in the world plane, rad.
+        circles: (K, 3) [cx, cy, r] rows, or None.
+        boxes: (L, 5) [cx, cy, half_x, half_y, yaw] rows, or None.
+        max_range: m, > 0; farther hits are not reported.
+
+    Returns:
+        (N,) the distance to the nearest hit along each ray (a grazing ray
+        hits), `inf` where nothing is hit within max_range; 0 on every ray
+        when the origin is inside or on a shape (the scanner is blocked).
+    """
+    origin = as_vector("origin", origin, 2)
+    angles = as_vector("angles", np.atleast_1d(angles))
+    circles = shapes_array("circles", circles, 3)
+    boxes = shapes_array("boxes", boxes, 5)
+    max_range = positive("max_range", max_range)
+    directions = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    candidates = [np.full((angles.size, 1), np.inf),
+                  _circle_distances(origin, directions, circles),
+                  _box_distances(origin, angles, boxes)]
+    ranges = np.concatenate(candidates, axis=1).min(axis=1)
+    ranges[ranges > max_range] = np.inf
+    return ranges
+
+
+def scan(base_pose, mount, params, circles, boxes, tick):
+    """The ranges of one scan of a LIDAR on the base.
+
+    Args:
+        base_pose: (3,) [x, y, yaw] of T_b in the world.
+        mount: (3,) [x, y, yaw] of the scanner frame in T_b.
+        params: LidarParameters (TiM571 defaults if None).
+        circles, boxes: the shapes in the world (see `cast_rays`).
+        tick: the scan's index, a whole number >= 0; with `params.seed` it
+            fixes the range noise, if any.
+
+    Returns:
+        (num_beams,) ranges, m, in the order of `params.beam_angles`; `inf`
+        (no return) where the true distance is below min_range (so for a
+        blocked scanner) or the reading, noise included, leaves
+        [min_range, max_range].
+    """
+    params = checked_instance("params", params, LidarParameters,
+                              LidarParameters)
+    base_pose = as_vector("base_pose", base_pose, 3)
+    mount = as_vector("mount", mount, 3)
+    tick = whole_number("tick", tick)
+    origin = base_pose[:2] + _rotation(base_pose[2]) @ mount[:2]
+    ranges = cast_rays(origin, base_pose[2] + mount[2] + params.beam_angles,
+                       circles, boxes, params.max_range)
+    too_close = ranges < params.min_range
+    if params.range_noise_std > 0.0:
+        rng = np.random.default_rng([params.seed, tick])
+        ranges += params.range_noise_std * rng.standard_normal(ranges.size)
+    outside = (ranges < params.min_range) | (ranges > params.max_range)
+    ranges[too_close | outside] = np.inf
+    return ranges
+
+
+def scan_points(ranges, angles_in_scanner, mount):
+    """The returns of a scan as (M, 2) points [x, y] in T_b, one per
+    finite range (`inf`, no return, is skipped).
+
+    Args:
+        ranges: (N,) ranges, m, >= 0 or inf.
+        angles_in_scanner: (N,) the beams' angles in the scanner frame.
+        mount: (3,) [x, y, yaw] of the scanner frame in T_b.
+    """
+    angles = as_vector("angles_in_scanner", np.atleast_1d(angles_in_scanner))
+    ranges = np.atleast_1d(np.asarray(ranges, dtype=float))
+    if ranges.shape != angles.shape or not np.all(ranges >= 0.0):
+        raise ValueError(
+            f"ranges (shape {ranges.shape}) is not allowed: must be "
+            f"{angles.size} numbers >= 0 or inf, one per angle")
+    mount = as_vector("mount", mount, 3)
+    hit = np.isfinite(ranges)
+    r, a = ranges[hit], angles[hit]
+    in_scanner = np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
+    return mount[:2] + in_scanner @ _rotation(mount[2]).T
+
+
+def _no_points():
+    return AbstractValue.Make(np.zeros((0, 2)))
+
+
+class PlanarLidar(LeafSystem):
+    """A simulated 2-D LIDAR on the base, scanning a planar scene.
+
+    ::
+
+                              ┌─────────────┐
+            base_pose ───────►│             ├──► ranges
+            moving_positions ►│ PlanarLidar ├──► points
+                              └─────────────┘
+
+    - base_pose: (3) [x, y, yaw] of T_b in the world.
+    - moving_positions: (2 n) [x0, y0, x1, y1, ...], the world centres of
+      the n moving circular obstacles (walking people). Declared only
+      when `moving_radii` is not empty, and then it must be connected.
+    - ranges: (num_beams) the last scan, m, `inf` = no return.
+    - points: abstract, an (M, 2) float array, the last scan's returns as
+      points in T_b (what the controller's `lidar.obstacle_points` takes).
+
+    A plain double `LeafSystem` (a sensor with an abstract output is no
+    part of what the controller linearises). A periodic discrete update
+    at 1 / rate, offset 0, stores the ranges and a scan counter (the
+    noise's tick); the outputs come from that state alone, so they hold
+    between scans, with no direct feedthrough. The default state is no
+    return on every beam, counter 0. An initialization event (see the
+    module notes) and `initialize_scan` store the scan of the current
+    inputs without advancing the counter: the update at t = 0 then
+    stores that very scan again.
+
+    Args:
+        params: LidarParameters (TiM571 defaults if None).
+        mount: (3,) [x, y, yaw] of the scanner frame in T_b.
+        circles, boxes: the static shapes in the world, or None.
+        moving_radii: radii (m, > 0) of the moving circular obstacles.
+    """
+
+    def __init__(self, params=None, mount=(0.0, 0.0, 0.0), circles=None,
+                 boxes=None, moving_radii=()):
+        super().__init__()
+        params = checked_instance("params", params, LidarParameters,
+                                  LidarParameters)
+        self.params = validated_copy(params)
+        self.mount = as_vector("mount", mount, 3)
+        self.circles = shapes_array("circles", circles, 3)
+        self.boxes = shapes_array("boxes", boxes, 5)
+        self.moving_radii = as_vector("moving_radii", np.ravel(moving_radii))
+        for i, radius in enumerate(self.moving_radii):
+            positive(f"moving_radii[{i}]", radius)
+        n, count = self.params.num_beams, self.moving_radii.size
+        self._base_pose = self.DeclareVectorInputPort("base_pose", 3)
+        self._moving = (self.DeclareVectorInputPort("moving_positions",
+                                                    2 * count)
+                        if count else None)
+        self._ranges = self.DeclareDiscreteState(np.full(n, np.inf))
+        self._tick = self.DeclareDiscreteState(1)
+        self.DeclarePeriodicDiscreteUpdateEvent(1.0 / self.params.rate, 0.0,
+                                                self._update)
+        self.DeclareInitializationDiscreteUpdateEvent(self._store_scan)
+        state = {self.discrete_state_ticket(self._ranges)}
+        self.DeclareVectorOutputPort("ranges", n, self._output_ranges,
+                                     prerequisites_of_calc=state)
+        self.DeclareAbstractOutputPort("points", _no_points,
+                                       self._output_points,
+                                       prerequisites_of_calc=state)
+
+    def _scan(self, context):
+        circles = self.circles
+        if self._moving is not None:
+            centres = self._moving.Eval(context).reshape(-1, 2)
+            circles = np.vstack([circles, np.column_stack(
+                [centres, self.moving_radii])])
+        tick = context.get_discrete_state(self._tick).GetAtIndex(0)
+        return scan(self._base_pose.Eval(context), self.mount, self.params,
+                    circles, self.boxes, tick)
+
+    def initialize_scan(self, context):
+        """Stores in `context` the scan of its current inputs, at the
+        current scan counter (left as it is)."""
+        self._store_scan(context, context.get_mutable_discrete_state())
+
+    def _store_scan(self, context, discrete_state):
+        discrete_state.get_mutable_vector(self._ranges).SetFromVector(
+            self._scan(context))
+
+    def _update(self, context, discrete_state):
+        self._store_scan(context, discrete_state)
+        tick = context.get_discrete_state(self._tick).GetAtIndex(0)
+        discrete_state.get_mutable_vector(self._tick).SetAtIndex(0, tick + 1)
+
+    def _stored_ranges(self, context):
+        return context.get_discrete_state(self._ranges).CopyToVector()
+
+    def _output_ranges(self, context, output):
+        output.SetFromVector(self._stored_ranges(context))
+
+    def _output_points(self, context, output):
+        output.set_value(scan_points(self._stored_ranges(context),
+                                     self.params.beam_angles, self.mount))
+
+
+class ObstaclePointMerger(LeafSystem):
+    """Concatenates the points of several LIDARs into one array.
+
+    ::
+
+                        ┌─────────────────────┐
+            points_0 ──►│                     │
+            ...         │ ObstaclePointMerger ├──► points
+            points_n-1 ►│                     │
+                        └─────────────────────┘
+
+    - points_i: abstract, an (M_i, 2) float array of points in T_b; each
+      must be connected (a forgotten scanner is an error, not a blind
+      side).
+    - points: abstract, their (sum M_i, 2) concatenation, in input order.
+
+    Args:
+        num_inputs: n, a whole number >= 1.
+    """
+
+    def __init__(self, num_inputs=2):
+        super().__init__()
+        self.num_inputs = whole_number("num_inputs", num_inputs, 1)
+        self._inputs = [self.DeclareAbstractInputPort(f"points_{i}",
+                                                      _no_points())
+                        for i in range(self.num_inputs)]
+        self.DeclareAbstractOutputPort("points", _no_points, self._merge)
+
+    def _merge(self, context, output):
+        output.set_value(np.concatenate(
+            [as_matrix(port.get_name(), port.Eval(context), (None, 2))
+             for port in self._inputs], axis=0))
