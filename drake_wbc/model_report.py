@@ -5,17 +5,15 @@ This is what `drake-wbc demo` prints and writes: the first look a user gets
 at the robot the controller drives.
 """
 
-import logging
-from pathlib import Path
-
 import numpy as np
-from pydrake.geometry import Meshcat, MeshcatVisualizer, Rgba
+from pydrake.geometry import MeshcatVisualizer, Rgba
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.visualization import AddFrameTriadIllustration
 
 from drake_wbc import capability
+from drake_wbc.replay import quiet_meshcat, write_static_html
 from drake_wbc.robot_model import (
     ARM_JOINTS,
     BASE_JOINTS,
@@ -153,8 +151,6 @@ def write_model_page(path, q_a=HOME_ARM_POSITIONS, lidar_range=1.0):
         pathlib.Path: the written file.
     """
     q_a = as_vector("q_a", q_a, 6)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
     model = add_mcr(plant)
@@ -170,14 +166,7 @@ def write_model_page(path, q_a=HOME_ARM_POSITIONS, lidar_range=1.0):
         AddFrameTriadIllustration(
             scene_graph=scene_graph, frame=frame, length=0.12, radius=0.004
         )
-    # The page is static: Drake's note about its live server would mislead.
-    drake_logger = logging.getLogger("drake")
-    previous_level = drake_logger.level
-    drake_logger.setLevel(logging.WARNING)
-    try:
-        meshcat = Meshcat()
-    finally:
-        drake_logger.setLevel(previous_level)
+    meshcat = quiet_meshcat()
     MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
@@ -194,5 +183,4 @@ def write_model_page(path, q_a=HOME_ARM_POSITIONS, lidar_range=1.0):
         meshcat.SetTransform(name, frame.CalcPoseInWorld(plant_context))
     meshcat.SetTransform("/lidar_fields", RigidTransform())
     diagram.ForcedPublish(context)
-    path.write_text(meshcat.StaticHtml())
-    return path
+    return write_static_html(meshcat, path)
