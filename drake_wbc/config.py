@@ -51,6 +51,28 @@ def load_controller_parameters(path=None, text=None):
             key, the key's path and the keys allowed there.
         OSError: if the file cannot be read.
     """
+    return load_typed(ControllerParameters, path=path, text=text)
+
+
+def load_typed(schema, path=None, text=None):
+    """An instance of the dataclass `schema` from a YAML file or string,
+    with every check of its tree run (see load_controller_parameters).
+
+    Args:
+        schema: a parameters dataclass (ControllerParameters, a scenario,
+            ...).
+        path: a YAML file (str or path-like); or
+        text: YAML text. Give exactly one.
+
+    Returns:
+        The loaded, validated instance of `schema`.
+
+    Raises:
+        ValueError: naming the file (when loading one), the field's
+            dotted path, its value and what is allowed; for an unknown
+            key, the key's path and the keys allowed there.
+        OSError: if the file cannot be read.
+    """
     if (path is None) == (text is None):
         raise ValueError(f"path = {path!r} and text = {text!r} are not "
                          "allowed: give exactly one of them")
@@ -60,16 +82,16 @@ def load_controller_parameters(path=None, text=None):
     try:
         if yaml_load_data(text) is None:  # empty, or comments only
             text = "{}"
-        params = yaml_load_typed(schema=ControllerParameters, data=text)
+        params = yaml_load_typed(schema=schema, data=text)
     except _LOADER_ERRORS as error:
-        raise ValueError(source + _explained(text, error)) from None
+        raise ValueError(source + _explained(schema, text, error)) from None
     try:
         return validate(params)
     except ValueError as error:
         raise ValueError(f"{source}{error}") from None
 
 
-def _explained(text, error):
+def _explained(schema, text, error):
     """A message for `error` from yaml_load_typed on `text`, naming the key
     where it arose when one can be found."""
     if isinstance(error, yaml.YAMLError):
@@ -77,7 +99,7 @@ def _explained(text, error):
     document = yaml_load_data(text)
     found = None
     if isinstance(document, dict):
-        found = _failing_key(document, ControllerParameters, "")
+        found = _failing_key(document, schema, "")
     return found or str(error)
 
 
@@ -99,6 +121,13 @@ def _failing_key(document, schema, prefix):
             inner = _failing_key(value, nested, f"{name}.")
             if inner is not None:
                 return inner
+        item_schema = _list_item_dataclass(hints[key])
+        if item_schema is not None and isinstance(value, list):
+            for i, item in enumerate(value):
+                if isinstance(item, dict):
+                    inner = _failing_key(item, item_schema, f"{name}[{i}].")
+                    if inner is not None:
+                        return inner
         message = _load_error(schema, {key: value})
         if message is None:
             continue
@@ -126,4 +155,11 @@ def _dataclass_in(hint):
     for kind in (hint, *typing.get_args(hint)):
         if isinstance(kind, type) and dataclasses.is_dataclass(kind):
             return kind
+    return None
+
+
+def _list_item_dataclass(hint):
+    """The dataclass of the items of a `list[X]` type hint, or None."""
+    if typing.get_origin(hint) is list:
+        return _dataclass_in(typing.get_args(hint)[0])
     return None
