@@ -1,0 +1,380 @@
+"""The robot's own low-level loops, as the simulated station runs them.
+
+The controller commands a base velocity and arm joint positions; on the
+real robot the base's and the arm's drivers turn those into motion, each
+with its own bandwidth. Their gap is the paper's reason for the base
+filter (Sec. IV-A), so the station models both honestly:
+
+- `BaseVelocityDriver`: the base's velocity loop, a first-order lag of
+  0.1 to 0.3 s (facts sheet, EST) with saturation at the base's velocity
+  and acceleration limits, ahead of a stiff wheel servo (the plant's own
+  PD controller with p = 0, a velocity servo).
+- `ArmPositionDriver`: the arm's position servo. It samples the position
+  command at the control period and interpolates linearly towards it over
+  the next period, as industrial arm drivers do, feeding the plant's PD
+  controller with a consistent position and velocity.
+
+`servo_gains` sizes the plant's PD gains from the robot's mass matrix.
+Both drivers are TemplateSystems (double and AutoDiffXd), so that the base
+loop can be linearised together with the plant.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.multibody.tree import PdControllerGains
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from drake_wbc.robot_model import (
+    ARM_JOINTS,
+    BASE_JOINTS,
+    HOME_ARM_POSITIONS,
+    joint_velocity_indices,
+    make_mcr_plant,
+)
+from drake_wbc.validation import (
+    as_vector,
+    checked_instance,
+    in_closed_range,
+    non_negative,
+    positive,
+    validated_copy,
+)
+
+SCALARS = [float, AutoDiffXd]
+"""The drivers branch on values (saturation), so no symbolic scalar."""
+
+
+@dataclass
+class BaseDriverParameters:
+    """The base's velocity loop (facts sheet: EST from comparable bases).
+
+    Attributes:
+        lag: time constant of the velocity loop in s (0.1 to 0.3 s on
+            such bases); 0.2 s by default.
+        velocity_limits: [vx, vy, wz] limits, m/s and rad/s (1.0 each).
+        acceleration_limits: [ax, ay, alpha_z] limits, m/s^2 and rad/s^2
+            (1.0 each).
+        damping_ratio: None (the default) for the first-order lag; a
+            number in (0, 1] makes the loop second order, with natural
+            frequency 1 / lag and this damping ratio: a base whose
+            velocity overshoots and rings after a rapid command, the
+            shaking the paper reports ("the base can shake or even
+            slip", Sec. IV-A).
+        servo_time_constant: time constant of the wheel servo that tracks
+            the loop's output, s; it sizes the plant's velocity gain and
+            must be well below `lag`.
+        time_step: the driver's update period in s (the plant's step; the
+            station sets it).
+    """
+
+    lag: float = 0.2
+    damping_ratio: float | None = None
+    velocity_limits: list[float] = field(
+        default_factory=lambda: [1.0, 1.0, 1.0])
+    acceleration_limits: list[float] = field(
+        default_factory=lambda: [1.0, 1.0, 1.0])
+    servo_time_constant: float = 0.01
+    time_step: float = 0.001
+
+    def __post_init__(self):
+        positive("lag", self.lag)
+        if self.damping_ratio is not None:
+            in_closed_range("damping_ratio", self.damping_ratio, 1e-3, 1.0)
+        for name in ("velocity_limits", "acceleration_limits"):
+            limits = as_vector(name, getattr(self, name), 3)
+            if np.any(limits <= 0.0):
+                raise ValueError(f"{name} = {list(limits)} is not allowed: "
+                                 "every limit must be > 0")
+        servo = positive("servo_time_constant", self.servo_time_constant)
+        if servo >= 0.5 * self.lag:
+            raise ValueError(
+                f"servo_time_constant = {servo!r} s is not allowed with "
+                f"lag = {self.lag!r} s: must be below lag / 2, or the "
+                "servo, not the loop, sets the base's bandwidth")
+        positive("time_step", self.time_step)
+
+
+@dataclass
+class ArmDriverParameters:
+    """The arm's position servo.
+
+    Attributes:
+        command_period: how often the driver samples the position
+            command, s (the control period, 0.01 s).
+        servo_frequency: bandwidth of each joint's PD loop in Hz; with
+            the joint's inertia from the mass matrix it sets the gains
+            (25 Hz: a stiff servo, 0.02 to 0.05 s as on the real arm).
+        damping_ratio: of each joint's PD loop (1: critically damped).
+        min_inertia: the least joint inertia used to size the gains,
+            kg m^2. It stands for the geared drives' reflected inertia,
+            which the model leaves out (EST, 0.2 kg m^2): without it the
+            wrist joints, whose links weigh little, would get almost no
+            stiffness.
+        time_step: the driver's update period in s (the plant's step).
+    """
+
+    command_period: float = 0.01
+    servo_frequency: float = 25.0
+    damping_ratio: float = 1.0
+    min_inertia: float = 0.2
+    time_step: float = 0.001
+
+    def __post_init__(self):
+        positive("command_period", self.command_period)
+        positive("servo_frequency", self.servo_frequency)
+        positive("damping_ratio", self.damping_ratio)
+        non_negative("min_inertia", self.min_inertia)
+        positive("time_step", self.time_step)
+
+
+def base_loop_step(x, command, params):
+    """One period of the base's velocity loop, per axis.
+
+    First order (params.damping_ratio None): x = v, and
+    v+ = v + clip((1 - e^(-h / lag)) (sat(command) - v), +-a_max h), the
+    exact step of the lag towards the saturated command, limited to the
+    acceleration limits.
+
+    Second order: x = [v, a] (6,), w = 1 / lag, zeta = damping_ratio;
+    a+ = clip(a + h (w^2 (sat(command) - v) - 2 zeta w a), +-a_max),
+    v+ = v + h a+ (semi-implicit Euler, exact enough for w h << 1).
+
+    Works for double and AutoDiffXd.
+
+    Args:
+        x: the loop's state: its velocity [vx, vy, wz] in T_b, followed
+            by its acceleration in the second-order loop.
+        command: (3,) the commanded velocity, T_b.
+        params: BaseDriverParameters.
+    """
+    h, zeta = params.time_step, params.damping_ratio
+    w = 1.0 / params.lag
+    gain = 1.0 - np.exp(-h / params.lag)
+    velocity, acceleration = [], []
+    for i in range(3):
+        limit = params.velocity_limits[i]
+        target = min(max(command[i], -limit), limit)
+        a_max = params.acceleration_limits[i]
+        if zeta is None:
+            step = a_max * h
+            velocity.append(x[i] + min(max(gain * (target - x[i]), -step),
+                                       step))
+            continue
+        a = x[3 + i] + h * (w * w * (target - x[i]) - 2.0 * zeta * w
+                            * x[3 + i])
+        a = min(max(a, -a_max), a_max)
+        acceleration.append(a)
+        velocity.append(x[i] + h * a)
+    return np.array(velocity + acceleration)
+
+
+def base_loop_size(params):
+    """The size of the base loop's state (see base_loop_step)."""
+    return 3 if params.damping_ratio is None else 6
+
+
+def body_to_world_rates(yaw, v):
+    """The base joints' rates [x_dot, y_dot, yaw_dot] for a velocity v =
+    [vx, vy, wz] in T_b at heading `yaw` (eq. (3))."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]])
+
+
+@TemplateSystem.define("BaseVelocityDriver_", T_list=SCALARS)
+def BaseVelocityDriver_(T):
+    class Impl(LeafSystem_[T]):
+        """The base's velocity loop: lag and saturation.
+
+        ::
+
+                               ┌────────────────────┐
+            velocity_command ─►│                    ├──► desired_state
+            base_pose ────────►│ BaseVelocityDriver ├──► velocity
+                               └────────────────────┘
+
+        - velocity_command: [vx, vy, wz] (3) in T_b, as the controller
+          sends it.
+        - base_pose: [x, y, yaw] (3) of T_b in the world (odometry).
+        - desired_state: (6) [q_d; v_d] for the plant's desired-state
+          port of the base: v_d is the loop's velocity as joint rates
+          (world x, y and yaw); q_d is zero, unused by the velocity servo
+          (p = 0).
+        - velocity: the loop's velocity (3) in T_b, from its state
+          (base_loop_step).
+
+        Args:
+            params: BaseDriverParameters (the defaults if None).
+        """
+
+        def _construct(self, params=None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            params = checked_instance("params", params, BaseDriverParameters,
+                                      BaseDriverParameters)
+            self.params = validated_copy(params)
+            self._command = self.DeclareVectorInputPort(
+                "velocity_command", 3)
+            self._pose = self.DeclareVectorInputPort("base_pose", 3)
+            state = self.DeclareDiscreteState(base_loop_size(self.params))
+            self.DeclarePeriodicDiscreteUpdateEvent(
+                self.params.time_step, 0.0, self._update)
+            ticket = {self.discrete_state_ticket(state)}
+            self.DeclareVectorOutputPort(
+                "desired_state", 6, self._desired_state,
+                prerequisites_of_calc=ticket | {
+                    self.input_port_ticket(self._pose.get_index())})
+            self.DeclareVectorOutputPort(
+                "velocity", 3, self._velocity, prerequisites_of_calc=ticket)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.params, converter=converter)
+
+        def _update(self, context, discrete_state):
+            v = context.get_discrete_state_vector().CopyToVector()
+            discrete_state.set_value(base_loop_step(
+                v, self._command.Eval(context), self.params))
+
+        def _desired_state(self, context, output):
+            v = context.get_discrete_state_vector().CopyToVector()[:3]
+            yaw = self._pose.Eval(context)[2]
+            output.SetFromVector(np.concatenate(
+                [np.zeros(3), body_to_world_rates(yaw, v)]))
+
+        def _velocity(self, context, output):
+            output.SetFromVector(
+                context.get_discrete_state_vector().CopyToVector()[:3])
+
+        def set_velocity(self, context, velocity):
+            """Starts the loop at rest at `velocity` (3,) in T_b."""
+            state = np.zeros(base_loop_size(self.params))
+            state[:3] = as_vector("velocity", velocity, 3)
+            context.SetDiscreteState(state)
+
+    return Impl
+
+
+@TemplateSystem.define("ArmPositionDriver_", T_list=SCALARS)
+def ArmPositionDriver_(T):
+    class Impl(LeafSystem_[T]):
+        """The arm's position servo: sample, then interpolate.
+
+        ::
+
+                               ┌───────────────────┐
+            position_command ─►│ ArmPositionDriver ├──► desired_state
+                               └───────────────────┘
+
+        - position_command: q_cmd (6), rad.
+        - desired_state: (12) [q_d; v_d] for the plant's desired-state
+          port of the arm. At each sample t_k (every command_period) the
+          driver takes the command; until the next sample q_d moves
+          linearly from the previous command to it, with v_d the constant
+          rate between them. The command is reached one period after it
+          was sampled.
+
+        State [q_from (6), q_to (6), t_k (1)].
+
+        Args:
+            params: ArmDriverParameters (the defaults if None).
+            initial_positions: the arm's configuration at the start.
+        """
+
+        def _construct(self, params=None,
+                       initial_positions=HOME_ARM_POSITIONS, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            params = checked_instance("params", params, ArmDriverParameters,
+                                      ArmDriverParameters)
+            self.params = validated_copy(params)
+            self._initial = as_vector("initial_positions", initial_positions,
+                                      6)
+            self._command = self.DeclareVectorInputPort(
+                "position_command", 6)
+            self.DeclareDiscreteState(
+                np.concatenate([self._initial, self._initial, [0.0]]))
+            self.DeclarePeriodicDiscreteUpdateEvent(
+                self.params.command_period, 0.0, self._update)
+            self.DeclareVectorOutputPort("desired_state", 12,
+                                         self._desired_state)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.params, other._initial,
+                            converter=converter)
+
+        def _update(self, context, discrete_state):
+            state = context.get_discrete_state_vector().CopyToVector()
+            reached = self._interpolated(state, context.get_time())[0]
+            discrete_state.set_value(np.concatenate([
+                reached, self._command.Eval(context), [context.get_time()]]))
+
+        def _interpolated(self, state, time):
+            q_from, q_to, t_k = state[:6], state[6:12], state[12]
+            h = self.params.command_period
+            rate = (q_to - q_from) / h
+            fraction = min(max((time - t_k) / h, 0.0), 1.0)
+            return q_from + fraction * (q_to - q_from), rate
+
+        def _desired_state(self, context, output):
+            state = context.get_discrete_state_vector().CopyToVector()
+            q_d, v_d = self._interpolated(state, context.get_time())
+            output.SetFromVector(np.concatenate([q_d, v_d]))
+
+        def set_positions(self, context, positions):
+            """Holds the arm at `positions` (6,) from the context's time."""
+            q = as_vector("positions", positions, 6)
+            context.SetDiscreteState(
+                np.concatenate([q, q, [context.get_time()]]))
+
+    return Impl
+
+
+BaseVelocityDriver = BaseVelocityDriver_[None]
+ArmPositionDriver = ArmPositionDriver_[None]
+
+
+def servo_gains(arm_positions, base, arm):
+    """The PD gains of the base's and the arm's actuators.
+
+    The base's joints get a pure velocity servo, p = 0 and d = M_ii /
+    servo_time_constant; each arm joint a PD loop of `servo_frequency`
+    and `damping_ratio` on its diagonal inertia I = max(M_ii,
+    min_inertia): p = I w^2, d = 2 zeta I w. M is the robot's mass
+    matrix with the arm at `arm_positions` (the mount at rest; the base's
+    position does not enter M).
+
+    Args:
+        arm_positions: (6,) the arm configuration to size for.
+        base: BaseDriverParameters.
+        arm: ArmDriverParameters.
+
+    Returns:
+        dict: joint name -> PdControllerGains, for `set_servo_gains`.
+    """
+    q_a = as_vector("arm_positions", arm_positions, 6)
+    plant, model = make_mcr_plant()
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, model.arm, q_a)
+    M = plant.CalcMassMatrix(context)
+    w = 2.0 * np.pi * arm.servo_frequency
+    gains = {}
+    for name, i in zip(BASE_JOINTS, joint_velocity_indices(
+            plant, BASE_JOINTS, model.base), strict=True):
+        gains[name] = PdControllerGains(
+            p=0.0, d=M[i, i] / base.servo_time_constant)
+    for name, i in zip(ARM_JOINTS, joint_velocity_indices(
+            plant, ARM_JOINTS, model.arm), strict=True):
+        inertia = max(M[i, i], arm.min_inertia)
+        gains[name] = PdControllerGains(
+            p=inertia * w * w, d=2.0 * arm.damping_ratio * inertia * w)
+    return gains
+
+
+def set_servo_gains(plant, model, gains):
+    """Gives the robot's actuators in `plant` (not yet finalized) the PD
+    gains of `servo_gains`."""
+    for names, instance in ((BASE_JOINTS, model.base),
+                            (ARM_JOINTS, model.arm)):
+        for name in names:
+            plant.GetJointActuatorByName(name, instance).set_controller_gains(
+                gains[name])

@@ -1,0 +1,294 @@
+"""The simulated station: the robot in its scene, as one Drake Diagram.
+
+::
+
+                              ┌───────────────────┐
+    base.velocity_command ───►│                   ├──► base.state_estimated
+    arm.position_command ────►│                   ├──► arm.position_measured
+                              │                   ├──► arm.velocity_estimated
+                              │ SimulatedStation  ├──► wrist.wrench_measured
+                              │                   ├──► lidar.obstacle_points
+                              │                   ├──► lidar.<scanner>.ranges
+                              │                   ├──► truth.* (metrics)
+                              │                   ├──► query_object
+                              └───────────────────┘
+
+Inside: a discrete MultibodyPlant (SAP, 1 ms) of the robot of models/ and
+the scene's static obstacles; the base's velocity loop and the arm's
+position servo (drake_wbc.station.drivers); the FT-300 on the weld
+`ft300_sensing`; two TiM571 LIDARs that see the static obstacles and the
+walking people; the person's hand on the tool. The ports named like the
+LCM hardware interface's are all the controller may read; `truth.*` are
+for metrics and plots, `query_object` for visualisation.
+
+    station = SimulatedStation(StationOptions(), scene)
+    builder.AddSystem(station.diagram)
+    ...
+    station.set_initial_state(root_context)
+"""
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.tree import (
+    ForceElementIndex,
+    MultibodyForces,
+    RevoluteSpring,
+)
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import Demultiplexer
+
+from drake_wbc.robot_model import (
+    ARM_JOINTS,
+    BASE_JOINTS,
+    HOME_ARM_POSITIONS,
+    LIDAR_FRAMES,
+    MOUNT_JOINTS,
+    add_mcr,
+    joint_position_indices,
+    joint_velocity_indices,
+)
+from drake_wbc.station.drivers import (
+    ArmDriverParameters,
+    ArmPositionDriver,
+    BaseDriverParameters,
+    BaseVelocityDriver,
+    servo_gains,
+    set_servo_gains,
+)
+from drake_wbc.station.force_torque import (
+    ForceTorqueSensorParameters,
+    WeldWrench,
+    WristForceTorqueSensor,
+)
+from drake_wbc.station.lidar import (
+    LidarParameters,
+    ObstaclePointMerger,
+    PlanarLidar,
+)
+from drake_wbc.station.scene import (
+    Scene,
+    add_hand,
+    add_people,
+    add_static_obstacles,
+    planar_shapes,
+)
+from drake_wbc.station.state_sensors import BaseOdometry, GroundTruth
+from drake_wbc.validation import as_vector, checked_instance, positive
+
+LIDAR_NAMES = ("front_left", "rear_right")
+"""The scanners' names in port names, in the order of LIDAR_FRAMES."""
+
+
+@dataclass
+class StationOptions:
+    """How the simulated station is built (a scenario's `station:`).
+
+    Attributes:
+        time_step: the plant's discrete step in s (1 ms or finer); the
+            drivers run at it too.
+        base: the base's velocity loop.
+        arm: the arm's position servo.
+        wrist: the FT-300 model (noise and quantisation of the real
+            sensor by default; ForceTorqueSensorParameters.ideal() for
+            none).
+        lidar: the TiM571 model of both scanners.
+        initial_base_pose: [x, y, yaw] of T_b in the world at the start.
+        initial_arm_positions: the arm's configuration at the start (rad).
+    """
+
+    time_step: float = 0.001
+    base: BaseDriverParameters = field(default_factory=BaseDriverParameters)
+    arm: ArmDriverParameters = field(default_factory=ArmDriverParameters)
+    wrist: ForceTorqueSensorParameters = field(
+        default_factory=ForceTorqueSensorParameters)
+    lidar: LidarParameters = field(default_factory=LidarParameters)
+    initial_base_pose: list[float] = field(
+        default_factory=lambda: [0.0, 0.0, 0.0])
+    initial_arm_positions: list[float] = field(
+        default_factory=lambda: list(HOME_ARM_POSITIONS))
+
+    def __post_init__(self):
+        h = positive("time_step", self.time_step)
+        if h > 0.001:
+            raise ValueError(f"time_step = {h!r} s is not allowed: must be "
+                             "at most 0.001 s (1 ms)")
+        as_vector("initial_base_pose", self.initial_base_pose, 3)
+        as_vector("initial_arm_positions", self.initial_arm_positions, 6)
+
+
+class SimulatedStation:
+    """The built station: its Diagram and the parts inside it.
+
+    Attributes:
+        diagram: the station Diagram (ports in the module's docstring).
+        plant, scene_graph, model: the plant, its SceneGraph and the
+            robot's McrModel.
+        systems: dict of the station's other systems by name.
+        options, scene: what it was built from.
+    """
+
+    def __init__(self, options=None, scene=None):
+        self.options = options = checked_instance(
+            "options", options, StationOptions, StationOptions)
+        self.scene = scene = checked_instance("scene", scene, Scene, Scene)
+        h = options.time_step
+        builder = DiagramBuilder()
+        plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(
+            time_step=h, discrete_contact_approximation="sap",
+            contact_model="hydroelastic_with_fallback"), builder)
+        model = add_mcr(plant)
+        add_static_obstacles(plant, scene)
+        self._gains = servo_gains(options.initial_arm_positions,
+                                  options.base, options.arm)
+        set_servo_gains(plant, model, self._gains)
+        plant.Finalize()
+        self.plant, self.scene_graph, self.model = plant, scene_graph, model
+        add = builder.AddNamedSystem
+        s = self.systems = {}
+        s["odometry"] = add("odometry", BaseOdometry(plant, model))
+        s["truth"] = add("truth", GroundTruth(plant, model))
+        s["base_driver"] = add("base_driver", BaseVelocityDriver(
+            replace(options.base, time_step=h)))
+        s["arm_driver"] = add("arm_driver", ArmPositionDriver(
+            replace(options.arm, time_step=h),
+            options.initial_arm_positions))
+        s["arm_state"] = add("arm_state", Demultiplexer([6, 6]))
+        weld = plant.GetJointByName("ft300_sensing", model.tool)
+        s["weld_wrench"] = add("weld_wrench", WeldWrench(plant, weld))
+        s["wrist"] = add("wrist", WristForceTorqueSensor(options.wrist))
+        s["people"] = add_people(builder, scene_graph, scene.people)
+        s["hand"] = add_hand(builder, plant, model, scene.hand)
+        connect = builder.Connect
+        state = plant.get_state_output_port()
+        connect(state, s["odometry"].GetInputPort("plant_state"))
+        connect(state, s["truth"].GetInputPort("plant_state"))
+        connect(plant.get_body_poses_output_port(),
+                s["truth"].GetInputPort("body_poses"))
+        connect(plant.get_body_spatial_velocities_output_port(),
+                s["truth"].GetInputPort("body_spatial_velocities"))
+        connect(s["odometry"].GetOutputPort("pose"),
+                s["base_driver"].GetInputPort("base_pose"))
+        connect(s["base_driver"].GetOutputPort("desired_state"),
+                plant.get_desired_state_input_port(model.base))
+        connect(s["arm_driver"].GetOutputPort("desired_state"),
+                plant.get_desired_state_input_port(model.arm))
+        connect(plant.get_state_output_port(model.arm),
+                s["arm_state"].get_input_port())
+        connect(plant.get_reaction_forces_output_port(),
+                s["weld_wrench"].GetInputPort("reaction_forces"))
+        connect(s["weld_wrench"].GetOutputPort("wrench"),
+                s["wrist"].GetInputPort("wrench"))
+        self._add_lidars(builder, scene)
+
+        export_in, export_out = builder.ExportInput, builder.ExportOutput
+        export_in(s["base_driver"].GetInputPort("velocity_command"),
+                  "base.velocity_command")
+        export_in(s["arm_driver"].GetInputPort("position_command"),
+                  "arm.position_command")
+        outputs = (
+            (s["odometry"].GetOutputPort("state_estimated"),
+             "base.state_estimated"),
+            (s["arm_state"].get_output_port(0), "arm.position_measured"),
+            (s["arm_state"].get_output_port(1), "arm.velocity_estimated"),
+            (s["wrist"].GetOutputPort("wrench_measured"),
+             "wrist.wrench_measured"),
+            (s["lidar_points"].GetOutputPort("points"),
+             "lidar.obstacle_points"),
+            *((s[f"lidar_{n}"].GetOutputPort("ranges"),
+               f"lidar.{n}.ranges") for n in LIDAR_NAMES),
+            *((s["truth"].GetOutputPort(n), f"truth.{n}") for n in (
+                "end_effector_pose", "end_effector_velocity", "base_pose",
+                "mount_angles")),
+            (s["base_driver"].GetOutputPort("velocity"),
+             "truth.base_loop_velocity"),
+            (s["weld_wrench"].GetOutputPort("wrench"), "truth.wrist_wrench"),
+            (s["hand"].GetOutputPort("force"), "truth.hand_force"),
+            (s["people"].GetOutputPort("positions"), "truth.people_positions"),
+            (scene_graph.get_query_output_port(), "query_object"),
+        )
+        for port, name in outputs:
+            export_out(port, name)
+        self.diagram = builder.Build()
+        self.diagram.set_name("simulated_station")
+
+    def _add_lidars(self, builder, scene):
+        """The two scanners, each seeing the static obstacles at its height
+        and the people, and the merger of their points."""
+        plant, model, s = self.plant, self.model, self.systems
+        context = plant.CreateDefaultContext()
+        radii = [person.radius for person in scene.people]
+        s["lidar_points"] = builder.AddNamedSystem(
+            "lidar_points", ObstaclePointMerger(len(LIDAR_NAMES)))
+        for i, (name, frame_name) in enumerate(zip(LIDAR_NAMES, LIDAR_FRAMES,
+                                                   strict=True)):
+            X_BL = plant.GetFrameByName(frame_name, model.base).CalcPose(
+                context, model.base_frame)
+            yaw = np.arctan2(X_BL.rotation().matrix()[1, 0],
+                             X_BL.rotation().matrix()[0, 0])
+            circles, boxes = planar_shapes(scene, X_BL.translation()[2])
+            lidar = s[f"lidar_{name}"] = builder.AddNamedSystem(
+                f"lidar_{name}", PlanarLidar(
+                    self.options.lidar,
+                    mount=(*X_BL.translation()[:2], yaw),
+                    circles=circles, boxes=boxes, moving_radii=radii))
+            builder.Connect(s["truth"].GetOutputPort("base_pose"),
+                            lidar.GetInputPort("base_pose"))
+            if radii:
+                builder.Connect(s["people"].GetOutputPort("positions"),
+                                lidar.GetInputPort("moving_positions"))
+            builder.Connect(lidar.GetOutputPort("points"),
+                            s["lidar_points"].GetInputPort(f"points_{i}"))
+
+    def set_initial_state(self, root_context):
+        """Puts the robot at the options' initial pose, at rest and in
+        static equilibrium (the mount's sag and the arm servo's droop
+        under gravity), with the drivers holding it there. (The sensors
+        take their first reading when the Simulator initializes.)"""
+        options, plant, model = self.options, self.plant, self.model
+        context = plant.GetMyMutableContextFromRoot(root_context)
+        q = plant.GetPositions(context)
+        q[joint_position_indices(plant, BASE_JOINTS, model.base)] = (
+            options.initial_base_pose)
+        q_cmd = np.asarray(options.initial_arm_positions, dtype=float)
+        q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_cmd
+        q[joint_position_indices(plant, MOUNT_JOINTS, model.base)] = 0.0
+        plant.SetPositions(context, q)
+        plant.SetVelocities(context, np.zeros(plant.num_velocities()))
+        self._settle_under_gravity(context, q_cmd)
+        for name in ("base_driver", "arm_driver"):
+            system = self.systems[name]
+            own = system.GetMyMutableContextFromRoot(root_context)
+            if name == "base_driver":
+                system.set_velocity(own, np.zeros(3))
+            else:
+                system.set_positions(own, q_cmd)
+
+    def _settle_under_gravity(self, context, q_cmd, iterations=30):
+        """Moves the mount's and the arm's joints to where the springs and
+        the arm's servo balance gravity (fixed-point iteration with each
+        joint's own stiffness; gravity's stiffness is far smaller)."""
+        plant, model = self.plant, self.model
+        springs = {e.joint().name(): e.default_stiffness()
+                   for e in (plant.get_force_element(ForceElementIndex(i))
+                             for i in range(plant.num_force_elements()))
+                   if isinstance(e, RevoluteSpring)}
+        iq = np.concatenate([
+            joint_position_indices(plant, MOUNT_JOINTS, model.base),
+            joint_position_indices(plant, ARM_JOINTS, model.arm)])
+        iv = np.concatenate([
+            joint_velocity_indices(plant, MOUNT_JOINTS, model.base),
+            joint_velocity_indices(plant, ARM_JOINTS, model.arm)])
+        stiffness = np.array([springs[n] for n in MOUNT_JOINTS]
+                             + [self._gains[n].p for n in ARM_JOINTS])
+        target = np.concatenate([np.zeros(2), q_cmd])
+        forces = MultibodyForces(plant)
+        for _ in range(iterations):
+            plant.CalcForceElementsContribution(context, forces)
+            tau = plant.CalcGeneralizedForces(context, forces)[iv]
+            q = plant.GetPositions(context)
+            servo = np.concatenate([np.zeros(2), -stiffness[2:] * (
+                q[iq[2:]] - target[2:])])
+            q[iq] += (tau + servo) / stiffness
+            plant.SetPositions(context, q)

@@ -1,0 +1,156 @@
+"""What the simulated station reports of the robot's own state.
+
+- `BaseOdometry`: the base's pose and twist, as the base's wheel odometry
+  reports them (here without drift: the plant's planar joints).
+- `GroundTruth`: what no sensor of the real robot measures, for metrics
+  only (the motion-capture system of the paper's tracking experiment):
+  the end effector's pose and velocity in the world, the base's pose and
+  the flexible mount's angles. The controller never reads it.
+"""
+
+import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.math import RollPitchYaw
+from pydrake.systems.framework import LeafSystem, LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from drake_wbc.robot_model import (
+    BASE_JOINTS,
+    MOUNT_JOINTS,
+    joint_position_indices,
+    joint_velocity_indices,
+)
+
+
+def _selection(indices, size):
+    """The matrix that picks `indices` out of a vector of `size`."""
+    S = np.zeros((len(indices), size))
+    S[np.arange(len(indices)), indices] = 1.0
+    return S
+
+
+@TemplateSystem.define("BaseOdometry_", T_list=[float, AutoDiffXd])
+def BaseOdometry_(T):
+    class Impl(LeafSystem_[T]):
+        """The base's odometry from the plant's state.
+
+        ::
+
+                            ┌──────────────┐
+            plant_state ───►│              ├──► pose
+                            │ BaseOdometry ├──► state_estimated
+                            └──────────────┘
+
+        - plant_state: the whole plant's state [q; v].
+        - pose: [x, y, yaw] (3) of T_b in the world.
+        - state_estimated: [x, y, yaw, vx, vy, wz] (6): the pose, then
+          the twist in T_b, as a base's odometry reports it.
+
+        Args:
+            plant: the finalized plant holding the robot.
+            model: its McrModel.
+        """
+
+        def _construct(self, plant, model, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._plant, self._model = plant, model
+            nq, nv = plant.num_positions(), plant.num_velocities()
+            self._select_q = _selection(
+                joint_position_indices(plant, BASE_JOINTS, model.base),
+                nq + nv)
+            self._select_v = _selection(
+                nq + joint_velocity_indices(plant, BASE_JOINTS, model.base),
+                nq + nv)
+            self._state = self.DeclareVectorInputPort("plant_state", nq + nv)
+            self.DeclareVectorOutputPort("pose", 3, self._pose)
+            self.DeclareVectorOutputPort("state_estimated", 6,
+                                         self._state_estimated)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other._plant, other._model,
+                            converter=converter)
+
+        def _pose(self, context, output):
+            output.SetFromVector(self._select_q @ self._state.Eval(context))
+
+        def _state_estimated(self, context, output):
+            x = self._state.Eval(context)
+            pose, rates = self._select_q @ x, self._select_v @ x
+            c, s = np.cos(pose[2]), np.sin(pose[2])
+            twist = np.array([c * rates[0] + s * rates[1],
+                              -s * rates[0] + c * rates[1], rates[2]])
+            output.SetFromVector(np.concatenate([pose, twist]))
+
+    return Impl
+
+
+BaseOdometry = BaseOdometry_[None]
+
+
+class GroundTruth(LeafSystem):
+    """The robot's true motion, for metrics (double only).
+
+    ::
+
+                                    ┌─────────────┐
+        body_poses ────────────────►│             ├──► end_effector_pose
+        body_spatial_velocities ───►│ GroundTruth ├──► end_effector_velocity
+        plant_state ───────────────►│             ├──► base_pose
+                                    │             ├──► mount_angles
+                                    └─────────────┘
+
+    - end_effector_pose: (6) the tool centre point's position [x, y, z]
+      and its orientation as roll, pitch, yaw, in the world.
+    - end_effector_velocity: (6) its twist [v; w] in the world, the
+      linear part at the tool centre point.
+    - base_pose: [x, y, yaw] (3) of T_b in the world.
+    - mount_angles: [roll, pitch] (2) of the flexible mount, rad.
+
+    Args:
+        plant: the finalized plant holding the robot.
+        model: its McrModel.
+    """
+
+    def __init__(self, plant, model):
+        super().__init__()
+        tool = model.tcp_frame.body()
+        self._tool_index = int(tool.index())
+        self._X_tool_tcp = model.tcp_frame.GetFixedPoseInBodyFrame()
+        nq, nv = plant.num_positions(), plant.num_velocities()
+        self._base_q = joint_position_indices(plant, BASE_JOINTS, model.base)
+        self._mount_q = joint_position_indices(plant, MOUNT_JOINTS,
+                                               model.base)
+        self._poses = self.DeclareAbstractInputPort(
+            "body_poses", plant.get_body_poses_output_port().Allocate())
+        self._velocities = self.DeclareAbstractInputPort(
+            "body_spatial_velocities",
+            plant.get_body_spatial_velocities_output_port().Allocate())
+        self._state = self.DeclareVectorInputPort("plant_state", nq + nv)
+        self.DeclareVectorOutputPort("end_effector_pose", 6, self._ee_pose)
+        self.DeclareVectorOutputPort("end_effector_velocity", 6,
+                                     self._ee_velocity)
+        self.DeclareVectorOutputPort(
+            "base_pose", 3,
+            lambda context, output: output.SetFromVector(
+                self._state.Eval(context)[self._base_q]))
+        self.DeclareVectorOutputPort(
+            "mount_angles", 2,
+            lambda context, output: output.SetFromVector(
+                self._state.Eval(context)[self._mount_q]))
+
+    def _X_W_tcp(self, context):
+        X_W_tool = self._poses.Eval(context)[self._tool_index]
+        return X_W_tool @ self._X_tool_tcp
+
+    def _ee_pose(self, context, output):
+        X = self._X_W_tcp(context)
+        output.SetFromVector(np.concatenate(
+            [X.translation(), RollPitchYaw(X.rotation()).vector()]))
+
+    def _ee_velocity(self, context, output):
+        V_W_tool = self._velocities.Eval(context)[self._tool_index]
+        X_W_tool = self._poses.Eval(context)[self._tool_index]
+        p_tool_tcp_W = X_W_tool.rotation() @ self._X_tool_tcp.translation()
+        V_W_tcp = V_W_tool.Shift(p_tool_tcp_W)
+        output.SetFromVector(np.concatenate(
+            [V_W_tcp.translational(), V_W_tcp.rotational()]))
