@@ -40,7 +40,56 @@ def _run_demo(args):
     return 0
 
 
+def _add_run_arguments(parser):
+    parser.add_argument(
+        "scenario", nargs="?", default=None,
+        help="a scenario's name (see --list) or YAML file (default: the "
+             "default scenario)")
+    parser.add_argument("--list", action="store_true",
+                        help="list the scenarios, one line each, and exit")
+    parser.add_argument(
+        "--output", type=Path, default=None,
+        help="output folder (default: out/<scenario>)")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="simulated time in s (default: the scenario's)")
+    parser.add_argument("--no-replay", action="store_true",
+                        help="do not write the Meshcat replay pages")
+
+
+def _run_run(args):
+    from drake_wbc.reports import run_scenario
+    from drake_wbc.scenario import (
+        DEFAULT_SCENARIO,
+        find_scenario,
+        load_scenario,
+        scenario_files,
+    )
+
+    if args.list:
+        for path in scenario_files():
+            scenario = load_scenario(path)
+            marker = " (default)" if path.stem == DEFAULT_SCENARIO else ""
+            print(f"{path.stem:22s} {scenario.description}{marker}")
+        return 0
+    path = find_scenario(args.scenario or DEFAULT_SCENARIO)
+    if args.duration is not None and not args.duration > 0:
+        raise ValueError(f"--duration = {args.duration!r} is not allowed: "
+                         "must be > 0 s")
+    output = args.output or Path("out") / path.stem
+    print(f"drake-wbc run {path.stem}: writing to {output}/")
+    run_scenario(path, output, duration=args.duration,
+                 replay=False if args.no_replay else None)
+    return 0
+
+
 SUBCOMMANDS = (
+    (
+        "run",
+        "run a scenario (one of the paper's experiments) in simulation and "
+        "write its logs, figures, metrics and Meshcat replay",
+        _add_run_arguments,
+        _run_run,
+    ),
     (
         "demo",
         "load the robot model, print its joints, limits and capability of "

@@ -127,7 +127,8 @@ class ReplayRecorder:
             builder: the `DiagramBuilder` that holds `scene_graph`; not yet
                 built.
             scene_graph: the `SceneGraph` whose illustration geometry is
-                drawn.
+                drawn, or its query output port (e.g. the `query_object`
+                port a station diagram exports).
             publish_period: the frame period of the replay, s (> 0); the
                 visualizer publishes once per period of simulated time.
             meshcat: the `Meshcat` to draw in; a new one (see
