@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """One entry point for a fresh clone: makes `.venv`, installs, runs.
 
-    python3 dev.py run     # the main job (the demo of the robot model)
+    python3 dev.py run     # the main job: drake-wbc run (the default scenario)
     python3 dev.py test    # the whole test suite (extra args go to pytest)
     python3 dev.py lint    # ruff check
     python3 dev.py shell   # print how to activate the environment
@@ -83,7 +83,7 @@ def main(args):
         )
     ensure_installed()
     if command == "run":
-        return _run([str(_venv_bin("drake-wbc")), "demo", *rest])
+        return _run([str(_venv_bin("drake-wbc")), "run", *rest])
     if command == "test":
         return _run([str(_venv_bin("python")), "-m", "pytest", *rest])
     if command == "lint":

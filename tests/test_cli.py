@@ -65,3 +65,43 @@ def test_demo_at_other_configurations(tmp_path, capsys, q):
     args = ["demo", "--output", str(tmp_path), "--q-arm"]
     assert main(args + [str(x) for x in q]) == 0
     assert "C_m" in capsys.readouterr().out
+
+
+def test_run_lists_every_scenario(capsys):
+    from drake_wbc.scenario import DEFAULT_SCENARIO, scenario_files
+
+    assert main(["run", "--list"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    names = [path.stem for path in scenario_files()]
+    assert [line.split()[0] for line in out] == names
+    assert "controller" not in names
+    assert sum("(default)" in line for line in out) == (
+        DEFAULT_SCENARIO in names)
+
+
+def test_run_names_an_unknown_scenario(capsys):
+    assert main(["run", "no_such_scenario"]) == 2
+    err = capsys.readouterr().err
+    assert "no_such_scenario" in err and "trajectory_tracking" in err
+
+
+def test_run_reports_a_bad_scenario_file(tmp_path, capsys):
+    path = tmp_path / "bad.yaml"
+    path.write_text("duration: 5.0\nscene:\n  people:\n"
+                    "  - {name: p, radius: -0.2}\n")
+    assert main(["run", str(path), "--output", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and "scene.people[0].radius = -0.2" in err
+
+
+def test_run_writes_logs_figures_replay_and_summary(tmp_path, capsys):
+    assert main(["run", "trajectory_tracking", "--duration", "1.2",
+                 "--output", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "ratio_unfiltered_to_filtered" in out
+    for name in ("summary.json", "trajectory_tracking.png",
+                 "log_filtered.npz", "log_unfiltered.csv",
+                 "replay_filtered.html"):
+        assert (tmp_path / name).is_file(), name
+    header = (tmp_path / "log_filtered.csv").read_text().splitlines()[0]
+    assert header.startswith("time,") and "capability.C_m" in header
