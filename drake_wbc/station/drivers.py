@@ -58,7 +58,7 @@ class BaseDriverParameters:
         acceleration_limits: [ax, ay, alpha_z] limits, m/s^2 and rad/s^2
             (1.0 each).
         damping_ratio: None (the default) for the first-order lag; a
-            number in (0, 1] makes the loop second order, with natural
+            number in [0.001, 1] makes the loop second order, with natural
             frequency 1 / lag and this damping ratio: a base whose
             velocity overshoots and rings after a rapid command, the
             shaking the paper reports ("the base can shake or even
@@ -140,7 +140,8 @@ def base_loop_step(x, command, params):
 
     Second order: x = [v, a] (6,), w = 1 / lag, zeta = damping_ratio;
     a+ = clip(a + h (w^2 (sat(command) - v) - 2 zeta w a), +-a_max),
-    v+ = v + h a+ (semi-implicit Euler, exact enough for w h << 1).
+    v+ = v + h a+ (semi-implicit Euler, exact enough for w h << 1); an
+    overshoot is stopped at the velocity limits.
 
     Works for double and AutoDiffXd.
 
@@ -166,8 +167,11 @@ def base_loop_step(x, command, params):
         a = x[3 + i] + h * (w * w * (target - x[i]) - 2.0 * zeta * w
                             * x[3 + i])
         a = min(max(a, -a_max), a_max)
+        v = x[i] + h * a
+        if v > limit or v < -limit:  # at the velocity limit: stop there
+            v, a = min(max(v, -limit), limit), 0.0 * a
         acceleration.append(a)
-        velocity.append(x[i] + h * a)
+        velocity.append(v)
     return np.array(velocity + acceleration)
 
 
@@ -295,8 +299,10 @@ def ArmPositionDriver_(T):
                 np.concatenate([self._initial, self._initial, [0.0]]))
             self.DeclarePeriodicDiscreteUpdateEvent(
                 self.params.command_period, 0.0, self._update)
-            self.DeclareVectorOutputPort("desired_state", 12,
-                                         self._desired_state)
+            self.DeclareVectorOutputPort(
+                "desired_state", 12, self._desired_state,
+                prerequisites_of_calc={self.time_ticket(),
+                                       self.xd_ticket()})
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, other._initial,

@@ -1,0 +1,395 @@
+"""The simulated station as the controller sees it: its ports, a start
+in static equilibrium, the base's and the arm's responses to commands,
+and what the ground truth, the LIDARs and the wrist sensor report."""
+
+import numpy as np
+import pytest
+from locked_robot import sensor_reading, settle_locked_robot
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
+from pydrake.multibody.tree import ForceElementIndex, RevoluteSpring
+from pydrake.systems.analysis import Simulator
+
+from drake_wbc.robot_model import (
+    ARM_JOINTS,
+    BASE_JOINTS,
+    MOUNT_JOINTS,
+    ArmKinematics,
+)
+from drake_wbc.station.force_torque import ForceTorqueSensorParameters
+from drake_wbc.station.scene import (
+    BoxObstacle,
+    CylinderObstacle,
+    Scene,
+    WalkingPerson,
+    person_positions,
+)
+from drake_wbc.station.simulation import SimulatedStation, StationOptions
+
+PILLAR = CylinderObstacle(name="pillar", position=[1.5, -1.2], radius=0.2,
+                          height=2.0)
+WALL = BoxObstacle(name="wall", center=[0.0, -3.0, 1.0],
+                   size=[6.0, 0.1, 2.0])
+PERSON = WalkingPerson(name="alice", radius=0.25, times=[0.0, 20.0],
+                       waypoints=[[-1.5, 1.0], [-1.5, 3.0]])
+SCENE = Scene(cylinders=[PILLAR], boxes=[WALL], people=[PERSON])
+"""Away from every path the base takes below; all seen by the LIDARs."""
+
+FOOTPRINT_HALF = np.array([0.4, 0.3])  # the base's 0.8 x 0.6 m, in T_b
+
+VECTOR_INPUTS = {"base.velocity_command": 3, "arm.position_command": 6}
+VECTOR_OUTPUTS = {
+    "base.state_estimated": 6,
+    "arm.position_measured": 6,
+    "arm.velocity_estimated": 6,
+    "wrist.wrench_measured": 6,
+    "lidar.front_left.ranges": 811,
+    "lidar.rear_right.ranges": 811,
+    "truth.end_effector_pose": 6,
+    "truth.end_effector_velocity": 6,
+    "truth.base_pose": 3,
+    "truth.base_loop_velocity": 3,
+    "truth.mount_angles": 2,
+    "truth.wrist_wrench": 6,
+    "truth.hand_force": 6,
+    "truth.people_positions": 2,
+}
+ABSTRACT_OUTPUTS = {"lidar.obstacle_points", "query_object"}
+
+REVOLUTE_JOINTS = ("base_yaw", *MOUNT_JOINTS, *ARM_JOINTS)
+
+
+@pytest.fixture(scope="module")
+def station():
+    return SimulatedStation(
+        StationOptions(wrist=ForceTorqueSensorParameters.ideal()), SCENE)
+
+
+class Run:
+    """A simulation of the station from its initial state, the base at
+    `base_pose`, holding the arm at its initial command and the base at
+    rest until told otherwise."""
+
+    def __init__(self, station, base_pose=(0.0, 0.0, 0.0)):
+        self.station = station
+        self.diagram = station.diagram
+        self.simulator = Simulator(self.diagram)
+        self.context = self.simulator.get_mutable_context()
+        station.set_initial_state(self.context)
+        plant = station.plant
+        self.plant_context = plant.GetMyMutableContextFromRoot(self.context)
+        x, y, yaw = base_pose
+        base = [plant.GetJointByName(n, station.model.base)
+                for n in BASE_JOINTS]
+        base[0].set_translation(self.plant_context, x)
+        base[1].set_translation(self.plant_context, y)
+        base[2].set_angle(self.plant_context, yaw)
+        self.q_cmd = np.array(station.options.initial_arm_positions)
+        self.command(arm=self.q_cmd, base=np.zeros(3))
+        self.simulator.Initialize()
+
+    def command(self, arm=None, base=None):
+        if arm is not None:
+            self.diagram.GetInputPort("arm.position_command").FixValue(
+                self.context, np.asarray(arm, dtype=float))
+        if base is not None:
+            self.diagram.GetInputPort("base.velocity_command").FixValue(
+                self.context, np.asarray(base, dtype=float))
+
+    def __getitem__(self, name):
+        value = self.diagram.GetOutputPort(name).Eval(self.context)
+        return value.copy() if isinstance(value, np.ndarray) else value
+
+    def advance(self, t):
+        self.simulator.AdvanceTo(t)
+
+    def velocities(self, names):
+        v = self.station.plant.GetVelocities(self.plant_context)
+        return np.array([v[self.station.plant.GetJointByName(n)
+                           .velocity_start()] for n in names])
+
+    def distances_to_joints(self, point_W, names):
+        """|point - o_j| for the child frame origins o_j (on the axes) of
+        the joints `names`."""
+        plant = self.station.plant
+        return np.array([np.linalg.norm(point_W - plant.GetJointByName(n)
+                                        .frame_on_child().CalcPoseInWorld(
+                                            self.plant_context).translation())
+                         for n in names])
+
+
+REST_POSE = (0.3, -0.2, 0.4)
+REST_DURATION = 0.5
+
+
+@pytest.fixture(scope="module")
+def rest(station):
+    """0.5 s with the commands equal to the initial state, the base at
+    REST_POSE; the extremes of the mount's and the arm's motion."""
+    run = Run(station, REST_POSE)
+    run.start = {name: run[name] for name in (
+        "truth.mount_angles", "arm.position_measured",
+        "truth.end_effector_pose", "truth.base_pose")}
+    run.start["plant_positions"] = station.plant.GetPositions(
+        run.plant_context).copy()
+    run.mount_motion = run.arm_motion = 0.0
+    for t in np.arange(1, 51) * REST_DURATION / 50:
+        run.advance(t)
+        run.mount_motion = max(run.mount_motion, np.max(np.abs(
+            run["truth.mount_angles"] - run.start["truth.mount_angles"])))
+        run.arm_motion = max(run.arm_motion, np.max(np.abs(
+            run["arm.position_measured"]
+            - run.start["arm.position_measured"])))
+    return run
+
+
+def test_ports_are_the_documented_ones(station):
+    diagram = station.diagram
+    inputs = {diagram.get_input_port(i).get_name(): diagram.get_input_port(i)
+              for i in range(diagram.num_input_ports())}
+    outputs = {diagram.get_output_port(i).get_name():
+               diagram.get_output_port(i)
+               for i in range(diagram.num_output_ports())}
+    assert set(inputs) == set(VECTOR_INPUTS)
+    assert set(outputs) == set(VECTOR_OUTPUTS) | ABSTRACT_OUTPUTS
+    for ports, sizes in ((inputs, VECTOR_INPUTS), (outputs, VECTOR_OUTPUTS)):
+        for name, size in sizes.items():
+            assert ports[name].size() == size, name
+    for name in ABSTRACT_OUTPUTS:
+        assert outputs[name].get_data_type().name == "kAbstractValued"
+    # The controller closes the loop through the station: no input may
+    # reach an output in the same instant.
+    assert not diagram.HasAnyDirectFeedthrough()
+
+
+def test_initial_state_is_a_static_equilibrium(station, rest):
+    plant = station.plant
+    # The start is not the nominal pose: the mount sags and the arm
+    # droops under gravity, by far more than the bound below, so a start
+    # out of equilibrium would swing by about that much.
+    sag = rest.start["truth.mount_angles"]
+    droop = rest.start["arm.position_measured"] - rest.q_cmd
+    assert np.max(np.abs(sag)) > 1e-3
+    assert np.max(np.abs(droop)) > 1e-4
+    # 1e-6 rad: a thousandth of the sag, two orders above the SAP
+    # solver's resolution at rest (a 1e-8 rad offset is left alone).
+    assert rest.mount_motion < 1e-6
+    assert rest.arm_motion < 1e-6
+    # And the balance itself: gravity, the mount's springs and the arm's
+    # servo (p (q_cmd - q), at rest) sum to zero on every joint.
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, rest.start["plant_positions"])
+    tau_g = plant.CalcGravityGeneralizedForces(context)
+    springs = {}
+    for i in range(plant.num_force_elements()):
+        element = plant.get_force_element(ForceElementIndex(i))
+        if isinstance(element, RevoluteSpring):
+            springs[element.joint().name()] = element.default_stiffness()
+    gains = station._gains
+    for name in (*MOUNT_JOINTS, *ARM_JOINTS):
+        joint = plant.GetJointByName(name)
+        q = joint.get_angle(context)
+        if name in MOUNT_JOINTS:
+            restoring = -springs[name] * q
+        else:
+            q_cmd = rest.q_cmd[ARM_JOINTS.index(name)]
+            restoring = gains[name].p * (q_cmd - q)
+        residual = tau_g[joint.velocity_start()] + restoring
+        assert abs(residual) < 1e-6, name
+
+
+def test_base_moves_along_its_heading_with_the_first_order_lag(station):
+    yaw, u, h = 0.5, 0.2, station.options.time_step
+    lag = station.options.base.lag
+    run = Run(station, (0.0, 0.0, yaw))
+    run.command(base=[u, 0.0, 0.0])
+    start = run["truth.base_pose"]
+    loop, state = [], []
+    steps = 1500
+    for n in range(1, steps + 1):
+        run.advance(n * h)
+        loop.append(run["truth.base_loop_velocity"])
+        state.append(run["base.state_estimated"])
+    loop, state = np.array(loop), np.array(state)
+    # The loop's velocity is the sampled lag (u below the acceleration
+    # limit: the first step (1 - e^(-h/lag)) u < a_max h).
+    assert (1.0 - np.exp(-h / lag)) * u < 1.0 * h
+    n = np.arange(1, steps + 1)
+    np.testing.assert_allclose(loop[:, 0], u * (1.0 - np.exp(-n * h / lag)),
+                               atol=1e-14)
+    np.testing.assert_array_equal(loop[:, 1:], 0.0)
+    # The base goes where T_b's x axis points, and does not turn.
+    end = run["truth.base_pose"]
+    np.testing.assert_allclose(state[-1, :3], end, atol=1e-15)
+    displacement = end[:2] - start[:2]
+    assert np.arctan2(displacement[1], displacement[0]) == pytest.approx(
+        yaw, abs=1e-6)
+    assert end[2] == pytest.approx(yaw, abs=1e-6)
+    # Distance: the lag's integral, less the wheel servo's delay of
+    # tau_s u; 1 mm allows for the sampling (h u / 2) and the servo's
+    # transient.
+    T, tau_s = steps * h, station.options.base.servo_time_constant
+    travelled = u * (T - lag * (1.0 - np.exp(-T / lag))) - u * tau_s
+    assert np.linalg.norm(displacement) == pytest.approx(travelled,
+                                                         abs=1e-3)
+    # After 7.5 lags the measured body-frame twist is the command, less
+    # the lag's remainder u e^(-T/lag) (5e-5 for the servo's delay and
+    # the mount's rocking).
+    np.testing.assert_allclose(state[-1, 3:], [u, 0.0, 0.0],
+                               atol=u * np.exp(-T / lag) + 5e-5)
+    # Early on the wheels follow the loop within the servo's delay,
+    # tau_s times the loop's largest acceleration u / lag.
+    early = n <= 300
+    np.testing.assert_allclose(state[early, 3], loop[early, 0],
+                               atol=1.1 * tau_s * u / lag)
+
+
+def test_a_large_command_saturates_at_the_velocity_limit(station):
+    run = Run(station)
+    run.command(base=[3.0, 0.0, 0.0])
+    h, lag = station.options.time_step, station.options.base.lag
+    limit = station.options.base.velocity_limits[0]
+    a_max = station.options.base.acceleration_limits[0]
+    gain, ramp = 1.0 - np.exp(-h / lag), a_max * h
+    n_switch = int(np.ceil((limit - ramp / gain) / ramp))
+    measured = []
+    for k in range(1, 201):
+        n = 10 * k
+        run.advance(n * h)
+        measured.append(run["base.state_estimated"][3])
+        # Closed form of the saturated loop: a ramp at a_max, then the
+        # lag towards the limit (not towards the 3 m/s command).
+        expected = (n * ramp if n <= n_switch else limit - (
+            limit - n_switch * ramp) * (1.0 - gain) ** (n - n_switch))
+        assert run["truth.base_loop_velocity"][0] == pytest.approx(
+            expected, abs=1e-12)
+    measured = np.array(measured)
+    assert np.all(measured <= limit)
+    assert measured[-1] == pytest.approx(limit, abs=1e-3)
+
+
+def test_an_arm_step_is_tracked_within_a_milliradian(station):
+    run = Run(station)
+    start = run["arm.position_measured"]
+    step = np.array([0.05, 0.0, 0.0, 0.0, 0.0, 0.0])
+    run.command(arm=run.q_cmd + step)
+    run.advance(0.2)
+    measured = run["arm.position_measured"]
+    assert abs(measured[0] - (run.q_cmd[0] + step[0])) < 1e-3
+    # The other joints stay where gravity left them.
+    np.testing.assert_allclose(measured[1:], start[1:], atol=1e-3)
+
+
+def test_end_effector_starts_at_the_nominal_tcp_within_the_sag(rest):
+    q_cmd = rest.q_cmd
+    values = ArmKinematics().evaluate(q_cmd)
+    x, y, yaw = REST_POSE
+    X_WB = RigidTransform(RotationMatrix.MakeZRotation(yaw), [x, y, 0.0])
+    p_nominal = X_WB @ values.p_ee_in_base
+    R_nominal = X_WB.rotation() @ RotationMatrix(
+        ArmKinematics().R_ba) @ values.X_AE.rotation()
+    pose = rest.start["truth.end_effector_pose"]
+    R_truth = RotationMatrix(RollPitchYaw(pose[3:]))
+    # Small rotations theta_j about the mount's and the arm's axes move
+    # the tool centre point by at most sum |theta_j| r_j, r_j its distance
+    # from axis j (below r_max, the farthest joint origin, plus 1 cm for
+    # the moved configuration), and turn it by at most sum |theta_j|.
+    angles = np.concatenate([
+        rest.start["truth.mount_angles"],
+        rest.start["arm.position_measured"] - q_cmd])
+    r_max = np.max(rest.distances_to_joints(
+        pose[:3], (*MOUNT_JOINTS, *ARM_JOINTS))) + 0.01
+    offset = np.linalg.norm(pose[:3] - p_nominal)
+    assert offset < np.sum(np.abs(angles)) * r_max
+    assert offset > 1e-4  # the sag shows
+    turn = (R_nominal.inverse() @ R_truth).ToAngleAxis().angle()
+    assert turn < np.sum(np.abs(angles)) + 1e-12
+
+
+def test_end_effector_velocity_is_the_derivative_of_its_position(station):
+    h = station.options.time_step
+    run = Run(station, (0.0, 0.0, -0.7))
+    run.command(base=[0.2, -0.1, 0.3])
+    r_max = np.max(run.distances_to_joints(
+        run["truth.end_effector_pose"][:3], REVOLUTE_JOINTS)) + 0.1
+    positions, velocities, bounds = [], [], []
+    for n in range(1, 401):
+        run.advance(n * h)
+        positions.append(run["truth.end_effector_pose"][:3])
+        velocities.append(run["truth.end_effector_velocity"][:3])
+        rate = np.sum(np.abs(run.velocities(REVOLUTE_JOINTS)))
+        bounds.append(0.5 * h * rate**2 * r_max)
+    positions, velocities = np.array(positions), np.array(velocities)
+    # The plant steps q+ = q + h v+, so the backward difference of the
+    # position over a step is the velocity at its end, V = J(q+) v+, less
+    # (h / 2) Jdot v+, the point's acceleration at constant joint rates:
+    # at most (sum of the revolute joints' rates)^2 r_max (the base's
+    # prismatic joints have fixed axes and add nothing).
+    difference = np.diff(positions, axis=0) / h
+    errors = np.linalg.norm(difference - velocities[1:], axis=1)
+    assert np.all(errors <= np.array(bounds[1:]) + 1e-9)
+    assert np.max(np.linalg.norm(velocities, axis=1)) > 0.1
+
+
+def on_box_boundary(points_W, box, tolerance):
+    c, s = np.cos(box.yaw), np.sin(box.yaw)
+    local = (points_W - box.center[:2]) @ np.array([[c, -s], [s, c]])
+    half = np.array(box.size[:2]) / 2
+    return np.abs(np.max(np.abs(local) / half, axis=1) - 1.0) * np.min(
+        half) < tolerance
+
+
+def test_lidar_points_lie_on_the_obstacles_and_the_walking_person(rest):
+    points = rest["lidar.obstacle_points"]
+    x, y, yaw = rest["truth.base_pose"]
+    np.testing.assert_allclose([x, y, yaw], REST_POSE, atol=1e-9)
+    c, s = np.cos(yaw), np.sin(yaw)
+    points_W = np.array([x, y]) + points @ np.array([[c, -s], [s, c]]).T
+    # The last scan before the end, at a multiple of 1/15 s, saw the
+    # person where the schedule had them then.
+    rate = 15.0
+    t_scan = np.floor(REST_DURATION * rate) / rate
+    person = person_positions(SCENE.people, t_scan)[0]
+    now = rest["truth.people_positions"]
+    np.testing.assert_allclose(now, person_positions(SCENE.people,
+                                                     REST_DURATION)[0])
+    on_pillar = np.abs(np.linalg.norm(points_W - PILLAR.position, axis=1)
+                       - PILLAR.radius) < 1e-9
+    on_person = np.abs(np.linalg.norm(points_W - person, axis=1)
+                       - PERSON.radius) < 1e-9
+    on_wall = on_box_boundary(points_W, WALL, 1e-9)
+    assert on_pillar.sum() >= 10 and on_person.sum() >= 10
+    assert on_wall.sum() >= 10
+    assert np.all(on_pillar | on_person | on_wall)
+    # The person had moved on since that scan; the points are not where
+    # the person is now.
+    assert not np.any(np.abs(np.linalg.norm(points_W - now, axis=1)
+                             - PERSON.radius) < 1e-9)
+    inside = np.all(np.abs(points) <= FOOTPRINT_HALF, axis=1)
+    assert not np.any(inside)
+
+
+def test_wrist_at_rest_reads_the_tools_weight(station, rest):
+    plant, model = station.plant, station.model
+    reading = rest["wrist.wrench_measured"]
+    tool = plant.GetBodyByName("wiping_tool", model.tool)
+    mass = tool.default_mass()
+    weight_W = mass * plant.gravity_field().gravity_vector()
+    X_WS = model.ft_measurement_frame.CalcPoseInWorld(rest.plant_context)
+    f_S = X_WS.rotation().inverse() @ weight_W
+    p_WCm = tool.EvalPoseInWorld(rest.plant_context) @ tool.default_com()
+    p_S = X_WS.inverse() @ p_WCm
+    np.testing.assert_allclose(reading, np.concatenate(
+        [f_S, np.cross(p_S, f_S)]), atol=1e-9)
+    assert np.linalg.norm(reading[:3]) == pytest.approx(
+        mass * 9.81, rel=1e-3)
+    # The robot locked at the same arm configuration, mount at rest, base
+    # at the origin: the same force, turned by the sag's tilt.
+    locked_plant, locked_model, context = settle_locked_robot(rest.q_cmd)
+    locked = sensor_reading(locked_plant, locked_model, context)
+    R_W_locked = locked_model.ft_measurement_frame.CalcPoseInWorld(
+        context).rotation()
+    np.testing.assert_allclose(
+        reading[:3], (X_WS.rotation().inverse() @ R_W_locked) @ locked[:3],
+        atol=1e-9)
+    tilt = (X_WS.rotation().inverse() @ R_W_locked).ToAngleAxis().angle()
+    assert tilt > 1e-3
