@@ -43,7 +43,7 @@ CONTROLLER_FILE = "controller.yaml"
 """The file in diagrams/ that holds the controller's defaults, not a
 scenario."""
 
-DEFAULT_SCENARIO = "fixed_point"
+DEFAULT_SCENARIO = "trajectory_tracking"
 """The scenario `drake-wbc run` runs when given none."""
 
 INTERPOLATIONS = ("hold", "linear")
