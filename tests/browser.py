@@ -162,8 +162,10 @@ def seek_copy(page, copy, time):
 
 
 def screenshot(browser, page, png, size=(800, 600), budget_ms=2000,
-               timeout=60.0):
-    """Opens `page` in `browser`, lets it run, saves a screenshot.
+               timeout=90.0, attempts=2):
+    """Opens `page` in `browser`, lets it run, saves a screenshot; a run
+    that times out (a loaded machine can stall headless chromium's virtual
+    clock) is tried again once with a fresh profile.
 
     Args:
         browser: the browser's program (see `find_browser`).
@@ -171,7 +173,8 @@ def screenshot(browser, page, png, size=(800, 600), budget_ms=2000,
         png: the PNG file to write.
         size: (width, height) of the window in pixels.
         budget_ms: the page time the page runs for before the picture.
-        timeout: the wall-clock limit of the browser's run, s.
+        timeout: the wall-clock limit of each of the browser's runs, s.
+        attempts: how many runs before a timeout is an error.
 
     Returns:
         str or None: the report of a `seek_copy` script, None if the page
@@ -181,6 +184,20 @@ def screenshot(browser, page, png, size=(800, 600), budget_ms=2000,
         BrowserError: when the browser fails, times out (it is then
             killed, with every process it started) or writes no picture.
     """
+    for attempt in range(attempts):
+        try:
+            return _screenshot_once(browser, page, png, size, budget_ms,
+                                    timeout)
+        except BrowserTimeoutError:
+            if attempt == attempts - 1:
+                raise
+
+
+class BrowserTimeoutError(BrowserError):
+    """The browser did not finish within its time limit."""
+
+
+def _screenshot_once(browser, page, png, size, budget_ms, timeout):
     png = Path(png)
     png.unlink(missing_ok=True)
     with tempfile.TemporaryDirectory(prefix="replay-browser-") as profile:
@@ -201,7 +218,7 @@ def screenshot(browser, page, png, size=(800, 600), budget_ms=2000,
             dom, errors = process.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:
             _kill_group(process)
-            raise BrowserError(
+            raise BrowserTimeoutError(
                 f"{browser} did not finish {page} within {timeout} s and "
                 "was killed"
             ) from None
