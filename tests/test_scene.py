@@ -373,11 +373,11 @@ def test_the_wall_holds_the_pad_against_the_hand():
     face_x, _, z = X_WT.translation()
     wall = BoxObstacle(name="wall", center=[face_x + 0.05, 0.0, z],
                        size=[0.1, 1.0, 1.0])
-    push = 20.0
+    push = 10.0  # the paper's wiping force
     hand = HandForce(times=[0.0, 0.1, 10.0],
                      forces=[[0, 0, 0], [push, 0, 0], [push, 0, 0]])
     plant, model, context, ids = _simulate(
-        q_a, hand, 1.0, Scene(boxes=[wall]), free_base_x_damping=1500.0)
+        q_a, hand, 6.0, Scene(boxes=[wall]), free_base_x_damping=1500.0)
     # The contact force on the pad balances the push.
     contacts = plant.get_contact_results_output_port().Eval(context)
     assert contacts.num_hydroelastic_contacts() == 1
@@ -387,12 +387,15 @@ def test_the_wall_holds_the_pad_against_the_hand():
     assert ids["wall"] in (surface.id_M(), surface.id_N())
     on_pad = sign * info.F_Ac_W().translational()
     np.testing.assert_allclose(on_pad, [-push, 0.0, 0.0], atol=1e-3 * push)
-    # The robot moved in by the pad's compression alone (stiff foam).
+    # The robot moved in by the pad's compression alone (a soft sponge,
+    # about 3 mm at 10 N; less than its half thickness, 10 mm).
     base_x = plant.GetJointByName("base_x", model.base)
-    assert 0.0 < base_x.get_translation(context) < 1e-3
+    assert 1e-3 < base_x.get_translation(context) < 1e-2
     # The reading is that of the tool's weight alone.
     weight_only = _simulate(q_a, HandForce(), 0.05)[:3]
     difference = sensor_reading(plant, model, context) - sensor_reading(
         *weight_only)
     np.testing.assert_allclose(difference[:3], 0.0, atol=1e-3 * push)
-    np.testing.assert_allclose(difference[3:], 0.0, atol=1e-4 * push)
+    # The soft pad, slightly tilted, shifts its centre of pressure off the
+    # tool centre point by about a millimetre.
+    np.testing.assert_allclose(difference[3:], 0.0, atol=2e-3 * push)
