@@ -23,6 +23,7 @@ from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import LeafSystem
 
+from drake_wbc.station.sampling import SampledReading
 from drake_wbc.validation import (
     as_vector,
     checked_instance,
@@ -121,7 +122,7 @@ def measure(wrench, params, tick):
                     reading)
 
 
-class WristForceTorqueSensor(LeafSystem):
+class WristForceTorqueSensor(SampledReading, LeafSystem):
     """The wrist F/T sensor, sampled.
 
     ::
@@ -156,37 +157,16 @@ class WristForceTorqueSensor(LeafSystem):
                                   ForceTorqueSensorParameters)
         self.params = validated_copy(params)
         self._wrench = self.DeclareVectorInputPort("wrench", WRENCH_SIZE)
-        self._reading = self.DeclareDiscreteState(WRENCH_SIZE)
-        self._tick = self.DeclareDiscreteState(1)
-        self.DeclarePeriodicDiscreteUpdateEvent(1.0 / self.params.rate, 0.0,
-                                                self._update)
-        self.DeclareInitializationDiscreteUpdateEvent(self._store_reading)
+        reading = self._declare_sampling(np.zeros(WRENCH_SIZE),
+                                         self.params.rate)
         self.DeclareVectorOutputPort(
-            "wrench_measured", WRENCH_SIZE, self._output,
-            prerequisites_of_calc={
-                self.discrete_state_ticket(self._reading)})
+            "wrench_measured", WRENCH_SIZE,
+            lambda context, output: output.SetFromVector(
+                self._stored_reading(context)),
+            prerequisites_of_calc=reading)
 
-    def _measure(self, context):
-        tick = context.get_discrete_state(self._tick).GetAtIndex(0)
+    def _read(self, context, tick):
         return measure(self._wrench.Eval(context), self.params, tick)
-
-    def initialize_reading(self, context):
-        """Stores in `context` the reading of its current input, at the
-        current reading counter (left as it is)."""
-        self._store_reading(context, context.get_mutable_discrete_state())
-
-    def _store_reading(self, context, discrete_state):
-        discrete_state.get_mutable_vector(self._reading).SetFromVector(
-            self._measure(context))
-
-    def _update(self, context, discrete_state):
-        self._store_reading(context, discrete_state)
-        tick = context.get_discrete_state(self._tick).GetAtIndex(0)
-        discrete_state.get_mutable_vector(self._tick).SetAtIndex(0, tick + 1)
-
-    def _output(self, context, output):
-        output.SetFromVector(
-            context.get_discrete_state(self._reading).CopyToVector())
 
 
 class WeldWrench(LeafSystem):

@@ -21,6 +21,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
+from drake_wbc.station.sampling import SampledReading
 from drake_wbc.validation import (
     as_matrix,
     as_vector,
@@ -232,7 +233,7 @@ def _no_points():
     return AbstractValue.Make(np.zeros((0, 2)))
 
 
-class PlanarLidar(LeafSystem):
+class PlanarLidar(SampledReading, LeafSystem):
     """A simulated 2-D LIDAR on the base, scanning a planar scene.
 
     ::
@@ -284,50 +285,32 @@ class PlanarLidar(LeafSystem):
         self._moving = (self.DeclareVectorInputPort("moving_positions",
                                                     2 * count)
                         if count else None)
-        self._ranges = self.DeclareDiscreteState(np.full(n, np.inf))
-        self._tick = self.DeclareDiscreteState(1)
-        self.DeclarePeriodicDiscreteUpdateEvent(1.0 / self.params.rate, 0.0,
-                                                self._update)
-        self.DeclareInitializationDiscreteUpdateEvent(self._store_scan)
-        state = {self.discrete_state_ticket(self._ranges)}
+        state = self._declare_sampling(np.full(n, np.inf), self.params.rate)
         self.DeclareVectorOutputPort("ranges", n, self._output_ranges,
                                      prerequisites_of_calc=state)
         self.DeclareAbstractOutputPort("points", _no_points,
                                        self._output_points,
                                        prerequisites_of_calc=state)
 
-    def _scan(self, context):
+    def _read(self, context, tick):
         circles = self.circles
         if self._moving is not None:
             centres = self._moving.Eval(context).reshape(-1, 2)
             circles = np.vstack([circles, np.column_stack(
                 [centres, self.moving_radii])])
-        tick = context.get_discrete_state(self._tick).GetAtIndex(0)
         return scan(self._base_pose.Eval(context), self.mount, self.params,
                     circles, self.boxes, tick)
 
     def initialize_scan(self, context):
         """Stores in `context` the scan of its current inputs, at the
         current scan counter (left as it is)."""
-        self._store_scan(context, context.get_mutable_discrete_state())
-
-    def _store_scan(self, context, discrete_state):
-        discrete_state.get_mutable_vector(self._ranges).SetFromVector(
-            self._scan(context))
-
-    def _update(self, context, discrete_state):
-        self._store_scan(context, discrete_state)
-        tick = context.get_discrete_state(self._tick).GetAtIndex(0)
-        discrete_state.get_mutable_vector(self._tick).SetAtIndex(0, tick + 1)
-
-    def _stored_ranges(self, context):
-        return context.get_discrete_state(self._ranges).CopyToVector()
+        self.initialize_reading(context)
 
     def _output_ranges(self, context, output):
-        output.SetFromVector(self._stored_ranges(context))
+        output.SetFromVector(self._stored_reading(context))
 
     def _output_points(self, context, output):
-        output.set_value(scan_points(self._stored_ranges(context),
+        output.set_value(scan_points(self._stored_reading(context),
                                      self.params.beam_angles, self.mount))
 
 
