@@ -127,6 +127,15 @@ def run_metrics(scenario, log):
     }
 
 
+def metrics_of_each_run(scenario, logs, metrics_of_run):
+    """`metrics_of_run(scenario, log)` of the single run, or of every run
+    with its keys prefixed `<run>.`."""
+    if len(logs) == 1:
+        return metrics_of_run(scenario, next(iter(logs.values())))
+    return {f"{name}.{key}": value for name, log in logs.items()
+            for key, value in metrics_of_run(scenario, log).items()}
+
+
 def compute_metrics(scenario, logs):
     """The `generic` experiment: no metrics beyond run_metrics."""
     return {}

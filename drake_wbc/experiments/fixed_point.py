@@ -42,6 +42,7 @@ from dataclasses import replace
 import numpy as np
 
 from drake_wbc.experiments.common import (
+    metrics_of_each_run,
     new_figure,
     obstacle_distances,
     save_figure,
@@ -166,10 +167,7 @@ def run_metrics(scenario, log):
 
 def compute_metrics(scenario, logs):
     """The metrics of every run (see the module's docstring)."""
-    if len(logs) == 1:
-        return run_metrics(scenario, next(iter(logs.values())))
-    return {f"{name}.{key}": value for name, log in logs.items()
-            for key, value in run_metrics(scenario, log).items()}
+    return metrics_of_each_run(scenario, logs, run_metrics)
 
 
 def draw_figures(scenario, logs, folder):

@@ -31,7 +31,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from drake_wbc.experiments.common import obstacle_distances, save_figure
+from drake_wbc.experiments.common import (
+    metrics_of_each_run,
+    obstacle_distances,
+    save_figure,
+)
 
 ARROW_PERIOD = 1.0
 """Seconds between the position-velocity arrows of the x-y plot."""
@@ -121,10 +125,7 @@ def run_metrics(scenario, log):
 
 def compute_metrics(scenario, logs):
     """The metrics of every run (see the module's docstring)."""
-    if len(logs) == 1:
-        return run_metrics(scenario, next(iter(logs.values())))
-    return {f"{name}.{key}": value for name, log in logs.items()
-            for key, value in run_metrics(scenario, log).items()}
+    return metrics_of_each_run(scenario, logs, run_metrics)
 
 
 def _draw_scene(axis, scenario, log):
