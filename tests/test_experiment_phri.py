@@ -103,6 +103,9 @@ def test_stages_group_the_pushes():
         forces=[[0, 0, 0], [1, 0, 0], [0, 0, 0], [0, 1, 0], [0, 0, 0],
                 [0, 0, 0], [2, 0, 0], [0, 0, 0]])
     assert phri.hand_pushes(hand) == [(1.0, 2.0), (2.0, 3.0), (5.0, 7.0)]
+    twist = HandForce(times=hand.times, forces=hand.forces,
+                      torques=[[0, 0, 0]] * 4 + [[0, 0, 1]] + [[0, 0, 0]] * 3)
+    assert phri.hand_pushes(twist) == [(1.0, 2.0), (2.0, 5.0), (5.0, 7.0)]
     scenario = load_scenario(text="experiment: phri\nduration: 10.0\n")
     scenario.scene.hand = hand
     assert phri.stages(scenario) == [("A", 0.0, 5.0), ("B", 5.0, 10.0)]

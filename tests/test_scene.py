@@ -36,7 +36,7 @@ from drake_wbc.station.scene import (
     add_hand,
     add_people,
     add_static_obstacles,
-    hand_force,
+    hand_wrench,
     person_positions,
     planar_shapes,
 )
@@ -85,17 +85,28 @@ def test_a_repeating_walk_starts_again_every_period():
                                    atol=1e-12)
 
 
-def test_the_hand_force_is_piecewise_linear_and_zero_outside():
+def test_the_hand_wrench_is_piecewise_linear_and_zero_outside():
     hand = HandForce(times=[1.0, 2.0, 4.0],
                      forces=[[0, 0, 0], [10, -4, 2], [10, -4, 2]])
     expected = {0.5: [0, 0, 0], 1.0: [0, 0, 0], 1.5: [5, -2, 1],
                 3.0: [10, -4, 2], 4.0: [10, -4, 2], 4.001: [0, 0, 0]}
     for t, force in expected.items():
-        np.testing.assert_allclose(hand_force(hand, t), force, atol=1e-12)
+        np.testing.assert_allclose(hand_wrench(hand, t), force + [0] * 3,
+                                   atol=1e-12)
     step = HandForce(times=[1.0, 2.0], forces=[[3, 0, 0], [3, 0, 0]])
-    np.testing.assert_array_equal(hand_force(step, 0.999), [0, 0, 0])
-    np.testing.assert_array_equal(hand_force(step, 1.0), [3, 0, 0])
-    np.testing.assert_array_equal(hand_force(HandForce(), 1.0), [0, 0, 0])
+    np.testing.assert_array_equal(hand_wrench(step, 0.999), [0] * 6)
+    np.testing.assert_array_equal(hand_wrench(step, 1.0), [3, 0, 0, 0, 0, 0])
+    np.testing.assert_array_equal(hand_wrench(HandForce(), 1.0), [0] * 6)
+    twist = HandForce(times=[0.0, 2.0], forces=[[0, 0, 0], [2, 0, 0]],
+                      torques=[[0, 0, 0], [0, 1, -4]])
+    np.testing.assert_allclose(hand_wrench(twist, 0.5),
+                               [0.5, 0, 0, 0, 0.25, -1], atol=1e-12)
+
+
+def test_hand_torques_must_match_the_times():
+    with pytest.raises(ValueError, match="torques"):
+        HandForce(times=[0.0, 1.0], forces=[[0, 0, 0], [1, 0, 0]],
+                  torques=[[0, 0, 1]])
 
 
 def test_a_full_scene_loads_and_round_trips_through_yaml():
@@ -272,7 +283,8 @@ def test_meshcat_draws_the_people_in_a_recording():
 
 def test_hand_force_source_outputs():
     plant, model = make_mcr_plant()
-    hand = HandForce(times=[0.0, 1.0], forces=[[0, 0, 0], [4, -2, 6]])
+    hand = HandForce(times=[0.0, 1.0], forces=[[0, 0, 0], [4, -2, 6]],
+                     torques=[[0, 0, 0], [1, 0, -3]])
     source = HandForceSource(plant, model, hand)
     context = source.CreateDefaultContext()
     context.SetTime(0.5)
@@ -281,9 +293,9 @@ def test_hand_force_source_outputs():
     assert applied.body_index == tool.index()
     np.testing.assert_allclose(applied.p_BoBq_B, [0.0, 0.0, 0.1])
     np.testing.assert_allclose(applied.F_Bq_W.translational(), [2, -1, 3])
-    np.testing.assert_array_equal(applied.F_Bq_W.rotational(), [0, 0, 0])
+    np.testing.assert_allclose(applied.F_Bq_W.rotational(), [0.5, 0, -1.5])
     np.testing.assert_allclose(source.GetOutputPort("force").Eval(context),
-                               [2, -1, 3, 0, 0, 0])
+                               [2, -1, 3, 0.5, 0, -1.5])
     with pytest.raises(ValueError, match="plant is not finalized"):
         add_hand(DiagramBuilder(), MultibodyPlant(time_step=1e-3), model,
                  hand)
@@ -344,7 +356,9 @@ def test_the_hand_force_shows_up_in_the_sensing_weld():
     negative, by plus."""
     q_a = HOME_ARM_POSITIONS + np.array([0.3, 0.2, -0.1, 0.4, 0.2, 0.5])
     force_W = np.array([4.0, -6.0, 9.0])
-    hand = HandForce(times=[0.0, 1.0], forces=[force_W, force_W])
+    torque_W = np.array([0.5, 1.0, -2.0])  # about the tool centre point
+    hand = HandForce(times=[0.0, 1.0], forces=[force_W, force_W],
+                     torques=[torque_W, torque_W])
     pushed = _simulate(q_a, hand, 0.05)[:3]
     alone = _simulate(q_a, HandForce(), 0.05)[:3]
     plant, model, context = pushed
@@ -353,7 +367,7 @@ def test_the_hand_force_shows_up_in_the_sensing_weld():
     R_MW = X_WM.rotation().inverse().matrix()
     wrench_M = np.concatenate([
         R_MW @ force_W,
-        R_MW @ np.cross(p_WT - X_WM.translation(), force_W)])
+        R_MW @ (np.cross(p_WT - X_WM.translation(), force_W) + torque_W)])
     change = (sensing_weld_reaction(*pushed).get_coeffs()
               - sensing_weld_reaction(*alone).get_coeffs())
     scale = 1e-6 * np.linalg.norm(force_W)

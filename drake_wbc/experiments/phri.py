@@ -8,10 +8,10 @@ end effector stays within d^l and phi^l of the arm's base, the base as it
 leaves them (sigma_xy, sigma_phi of Table (T:motion-mode)).
 
 Stages. The hand's schedule is read as pushes (the intervals where its
-force is not zero); pushes less than STAGE_GAP apart form one stage, and
-the stages are lettered A, B, ... in order, as in the paper's figure. A
-stage runs from its first push to the next stage's first push (the first
-from 0, the last to the end of the run).
+force or torque is not zero); pushes less than STAGE_GAP apart form one
+stage, and the stages are lettered A, B, ... in order, as in the paper's
+figure. A stage runs from its first push to the next stage's first push
+(the first from 0, the last to the end of the run).
 
 Per stage S, each metric named `<run>.<S>.<metric>`:
 
@@ -71,10 +71,12 @@ STAGE_METRICS = (
 
 
 def hand_pushes(hand):
-    """The intervals (start, end) in s where the HandForce `hand` is not
-    zero, in order."""
+    """The intervals (start, end) in s where the HandForce `hand` (its
+    force or its torque) is not zero, in order."""
     forces = np.linalg.norm(np.asarray(hand.forces, dtype=float).reshape(
         -1, 3), axis=1)
+    if hand.torques:
+        forces = forces + np.linalg.norm(hand.torques, axis=1)
     pushes = []
     for i in range(len(hand.times) - 1):
         if forces[i] > 0.0 or forces[i + 1] > 0.0:

@@ -159,24 +159,30 @@ class WalkingPerson:
 
 @dataclass
 class HandForce:
-    """A person's hand on the tool: a force at the tool centre point.
+    """A person's hand on the tool: a force at the tool centre point, and
+    optionally a twist of the tool (a torque about that point).
 
     Piecewise-linear in time, zero before the first and after the last
-    time (so a smooth schedule starts and ends with a zero force).
+    time (so a smooth schedule starts and ends with a zero wrench).
 
     Attributes:
         times: [t0, t1, ...] s, strictly increasing; empty for no hand.
         forces: [[fx, fy, fz], ...] N in the world frame, one per time.
+        torques: [[tx, ty, tz], ...] N m in the world frame about the tool
+            centre point, one per time; empty (the default) for none.
     """
 
     times: list[float] = field(default_factory=list)
     forces: list[list[float]] = field(default_factory=list)
+    torques: list[list[float]] = field(default_factory=list)
 
     def __post_init__(self):
         self.times = _times("times", self.times, allow_empty=True)
         rows = (len(self.times), 3)
         self.forces = ([] if not self.times and _empty(self.forces) else
                        as_matrix("forces", self.forces, rows).tolist())
+        self.torques = ([] if _empty(self.torques) else
+                        as_matrix("torques", self.torques, rows).tolist())
 
 
 @dataclass
@@ -234,15 +240,21 @@ def person_positions(people, t):
     return positions
 
 
-def hand_force(hand, t):
-    """Returns the force (3,) of the validated HandForce `hand` on the tool
-    in the world at time `t` (s), N: zero outside its times."""
+def hand_wrench(hand, t):
+    """Returns the wrench (6,) [f; tau] of the validated HandForce `hand`
+    on the tool at time `t` (s): N and N m about the tool centre point, in
+    the world; zero outside its times."""
     t = as_scalar("t", t)
     if not hand.times:
-        return np.zeros(3)
-    forces = np.asarray(hand.forces)
-    return np.array([np.interp(t, hand.times, forces[:, k], left=0.0,
-                               right=0.0) for k in range(3)])
+        return np.zeros(6)
+    columns = np.asarray(hand.forces)
+    if hand.torques:
+        columns = np.hstack([columns, hand.torques])
+    wrench = np.zeros(6)
+    for k in range(columns.shape[1]):
+        wrench[k] = np.interp(t, hand.times, columns[:, k], left=0.0,
+                              right=0.0)
+    return wrench
 
 
 def planar_shapes(scene, height):
@@ -399,7 +411,7 @@ def add_people(builder, scene_graph, people):
 
 
 class HandForceSource(LeafSystem):
-    """A person's hand pushing the tool at its centre point.
+    """A person's hand pushing (and twisting) the tool at its centre point.
 
     ::
 
@@ -411,7 +423,7 @@ class HandForceSource(LeafSystem):
     - spatial_forces: list[ExternallyAppliedSpatialForce], one force on
       the tool body at the tool centre point, for the plant's
       applied_spatial_force input.
-    - force: (6) [f; tau] in the world, N and N m: that force, with zero
+    - force: (6) [f; tau] in the world, N and N m: that wrench, the
       torque about the tool centre point, for logs.
 
     The tool centre point is fixed in the tool body and the force is in
@@ -441,16 +453,15 @@ class HandForceSource(LeafSystem):
             prerequisites_of_calc={self.time_ticket()})
 
     def _calc_spatial_forces(self, context, output):
+        wrench = hand_wrench(self.hand, context.get_time())
         applied = ExternallyAppliedSpatialForce()
         applied.body_index = self._body_index
         applied.p_BoBq_B = self._p_BoBq_B
-        applied.F_Bq_W = SpatialForce(
-            tau=np.zeros(3), f=hand_force(self.hand, context.get_time()))
+        applied.F_Bq_W = SpatialForce(tau=wrench[3:], f=wrench[:3])
         output.set_value([applied])
 
     def _calc_force(self, context, output):
-        output.SetFromVector(np.concatenate(
-            [hand_force(self.hand, context.get_time()), np.zeros(3)]))
+        output.SetFromVector(hand_wrench(self.hand, context.get_time()))
 
 
 def add_hand(builder, plant, model, hand):
