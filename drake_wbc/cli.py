@@ -10,6 +10,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from drake_wbc.analysis import commands as analysis
+
 
 def _add_demo_arguments(parser):
     parser.add_argument(
@@ -90,6 +92,10 @@ SUBCOMMANDS = (
         _add_run_arguments,
         _run_run,
     ),
+    ("bode", analysis.BODE_HELP, analysis.add_bode_arguments,
+     analysis.run_bode),
+    ("diagram", analysis.DIAGRAM_HELP, analysis.add_diagram_arguments,
+     analysis.run_diagram),
     (
         "demo",
         "load the robot model, print its joints, limits and capability of "

@@ -1,1 +1,13 @@
-"""Analysis of the controller: frequency responses of its linearisations."""
+"""Analysis of the controller: frequency responses of its linearisations.
+
+- frequency: H(j omega) or H(e^(j omega h)) from A, B, C, D; bandwidth,
+  peak gain, gain and phase margins.
+- closed_forms: eqs. (lp-admit) and (tf-admit) and their exact
+  zero-order-hold equivalents (eq. (filtering)'s are in
+  drake_wbc.filtering).
+- chains: the filter chain and the coupled DMPs built from the project's
+  systems and linearised with Drake; period_map: the AutoDiff
+  linearisation of a multi-rate diagram over one control period.
+- bode, report, commands: Bode plots, CSV files and the table, and the
+  `drake-wbc bode` and `drake-wbc diagram` subcommands.
+"""

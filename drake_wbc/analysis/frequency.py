@@ -1,14 +1,23 @@
-"""Frequency responses of linear(ised) systems.
+"""Frequency responses of linear(ised) systems, and what to read off them.
 
 Drake has no Bode helper; these evaluate C (sI - A)^-1 B + D on the
 imaginary axis, or on the unit circle z = e^(j omega h) for a system
 discretised with period h, straight from the matrices that Drake's
-`Linearize` returns.
+`Linearize` returns, and read off a response its -3 dB bandwidth, its
+peak gain and, for a loop transfer function, its gain and phase margins.
+
+Plain numpy and scipy; the Drake side is in drake_wbc.analysis.chains.
 """
 
-import numpy as np
+from dataclasses import dataclass
 
-from drake_wbc.validation import as_vector, non_negative
+import numpy as np
+from scipy.optimize import brentq
+
+from drake_wbc.validation import as_vector, non_negative, positive
+
+DEFAULT_BAND_HZ = (0.01, 100.0)
+"""The frequency band of the analysis in Hz: 0.01 to 100 Hz."""
 
 
 def frequency_response(A, B, C, D, omega, time_step=0.0):
@@ -24,6 +33,8 @@ def frequency_response(A, B, C, D, omega, time_step=0.0):
     omega = as_vector("omega", np.atleast_1d(omega))
     h = non_negative("time_step", time_step)
     points = np.exp(1j * omega * h) if h > 0 else 1j * omega
+    if A.size == 0:
+        return np.repeat(D[np.newaxis].astype(complex), len(omega), axis=0)
     eye = np.eye(A.shape[0])
     return np.array(
         [C @ np.linalg.solve(p * eye - A, B) + D for p in points]
@@ -40,3 +51,162 @@ def linear_system_response(linear_system, omega, outputs=None):
         D = np.zeros((C.shape[0], linear_system.B().shape[1]))
     return frequency_response(linear_system.A(), linear_system.B(), C, D,
                               omega, linear_system.time_period())
+
+
+def frequency_grid(low_hz=DEFAULT_BAND_HZ[0], high_hz=DEFAULT_BAND_HZ[1],
+                   points_per_decade=100):
+    """A logarithmic grid of frequencies: (f in Hz, omega in rad/s).
+
+    Args:
+        low_hz, high_hz: the band's ends in Hz, 0 < low_hz < high_hz.
+        points_per_decade: points per decade, >= 1 (the ends included).
+    """
+    low = positive("low_hz", low_hz)
+    high = positive("high_hz", high_hz)
+    if high <= low:
+        raise ValueError(f"high_hz = {high!r} is not allowed with low_hz = "
+                         f"{low!r}: must be greater")
+    density = positive("points_per_decade", points_per_decade)
+    count = max(2, int(np.ceil(density * np.log10(high / low))) + 1)
+    hertz = np.logspace(np.log10(low), np.log10(high), count)
+    return hertz, 2.0 * np.pi * hertz
+
+
+def decibels(response):
+    """20 log10 |response| (-inf where the response is 0)."""
+    with np.errstate(divide="ignore"):
+        return 20.0 * np.log10(np.abs(response))
+
+
+def phase_degrees(response, unwrap=True):
+    """The phase of `response` (along its first axis) in degrees,
+    unwrapped by default."""
+    angle = np.angle(response)
+    return np.degrees(np.unwrap(angle, axis=0) if unwrap else angle)
+
+
+def bandwidth(omega, response, reference=None, drop_db=3.0):
+    """The -3 dB bandwidth: the lowest frequency at which the gain has
+    fallen `drop_db` below `reference`, interpolated linearly in dB over
+    log frequency between grid points.
+
+    Args:
+        omega: (N,) increasing angular frequencies (rad/s).
+        response: (N,) complex response at `omega`.
+        reference: the gain it is measured from; by default the gain at
+            the lowest frequency (the DC gain of a low-pass).
+        drop_db: how far the gain must fall, dB > 0.
+
+    Returns:
+        The bandwidth in rad/s, or nan if the gain never falls that far
+        on the grid (nor is already below at its start).
+    """
+    omega = as_vector("omega", omega)
+    gain = decibels(np.asarray(response))
+    drop = positive("drop_db", drop_db)
+    level = (gain[0] if reference is None
+             else 20.0 * np.log10(positive("reference", reference))) - drop
+    below = np.nonzero(gain < level)[0]
+    if len(below) == 0 or below[0] == 0:
+        return float("nan")
+    i = below[0]
+    x0, x1 = np.log(omega[i - 1]), np.log(omega[i])
+    fraction = (gain[i - 1] - level) / (gain[i - 1] - gain[i])
+    return float(np.exp(x0 + fraction * (x1 - x0)))
+
+
+def peak_gain(omega, response):
+    """(the largest |response| on the grid, the frequency in rad/s where
+    it is reached)."""
+    magnitude = np.abs(np.asarray(response))
+    i = int(np.argmax(magnitude))
+    return float(magnitude[i]), float(np.asarray(omega)[i])
+
+
+@dataclass
+class StabilityMargins:
+    """Margins of a loop transfer function L (the loop closed as
+    y = L e, e = r - y).
+
+    Attributes:
+        gain_margin: 1 / |L| at the phase crossover (L real and negative)
+            where |L| is largest; inf if the phase never crosses -180
+            degrees on the band.
+        phase_crossover: that frequency in rad/s (nan if none).
+        phase_margin: 180 + arg L in degrees, in (-180, 180], at the gain
+            crossover (|L| = 1) where it is smallest; inf if |L| never
+            crosses 1 on the band.
+        gain_crossover: that frequency in rad/s (nan if none).
+    """
+
+    gain_margin: float
+    phase_crossover: float
+    phase_margin: float
+    gain_crossover: float
+
+    @property
+    def gain_margin_db(self):
+        """The gain margin in dB, 20 log10 gain_margin."""
+        return float(20.0 * np.log10(self.gain_margin))
+
+
+def _crossings(function, omega, scale=None):
+    """The roots of the real `function` of omega between the grid points
+    where it changes sign, each refined with Brent's method; grid points
+    where |function| <= 1e-12 scale(omega) count as roots (e.g. the
+    Nyquist frequency of a discrete loop, where Im L vanishes to
+    rounding)."""
+    values = np.array([function(w) for w in omega])
+    roots = [float(w) for w, v in zip(omega, values, strict=True)
+             if scale is not None and abs(v) <= 1e-12 * scale(w)]
+    for i in np.nonzero(np.sign(values[:-1]) * np.sign(values[1:]) <= 0)[0]:
+        if values[i] == 0.0:
+            roots.append(float(omega[i]))
+        elif values[i + 1] != 0.0:
+            roots.append(brentq(function, omega[i], omega[i + 1],
+                                xtol=1e-14, rtol=1e-14))
+    return sorted(set(roots))
+
+
+def stability_margins(loop, omega):
+    """Gain and phase margins of the loop transfer function `loop`.
+
+    The crossovers are bracketed on the grid `omega` and refined to
+    machine precision with Brent's method on `loop` itself, so the
+    margins do not depend on the grid's density (only on its
+    bracketing every crossover). The phase crossover is where Im L = 0
+    with Re L < 0, which needs no unwrapping of the phase.
+
+    Args:
+        loop: a callable, omega (rad/s, a float) -> L (complex), e.g.
+            lambda w: frequency_response(A, B, C, D, w, h)[0, 0, 0].
+        omega: (N,) increasing angular frequencies bracketing the band.
+
+    Returns:
+        StabilityMargins.
+    """
+    if not callable(loop):
+        raise ValueError(f"loop = {loop!r} is not allowed: must be a "
+                         "callable of omega returning a complex number")
+    omega = as_vector("omega", omega)
+
+    def value(w):
+        return complex(np.asarray(loop(w)).ravel()[0])
+
+    phase_crossings = [
+        w for w in _crossings(lambda w: value(w).imag, omega,
+                              scale=lambda w: abs(value(w)))
+        if value(w).real < 0.0]
+    gain_crossings = _crossings(lambda w: abs(value(w)) - 1.0, omega)
+    gain_margin, phase_crossover = float("inf"), float("nan")
+    if phase_crossings:
+        phase_crossover = max(phase_crossings, key=lambda w: abs(value(w)))
+        gain_margin = 1.0 / abs(value(phase_crossover))
+    phase_margin, gain_crossover = float("inf"), float("nan")
+    for w in gain_crossings:
+        margin = 180.0 + np.degrees(np.angle(value(w)))
+        margin = margin - 360.0 if margin > 180.0 else margin
+        if margin < phase_margin:
+            phase_margin, gain_crossover = float(margin), float(w)
+    return StabilityMargins(gain_margin, phase_crossover, phase_margin,
+                            gain_crossover)

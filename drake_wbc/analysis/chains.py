@@ -1,0 +1,344 @@
+"""The controller's filter chain and coupled DMPs, linearised with Drake.
+
+Each chain is built from the project's own scalar-convertible systems and
+linearised around the operating point of a scenario (the arm at its
+initial configuration, the robot at rest):
+
+- the base filter alone, eq. (filtering): BaseVelocityFilter, V_b' to
+  V_b^flt, with Drake's `Linearize`;
+- the split of the end-effector command (`build_split_diagram`):
+  MotionDistributor (eq. (wbccm)) -> BaseVelocityFilter -> RobustCompensator
+  (eqs. (wb_error), (compensation)) at a fixed arm configuration, from V_ee
+  to the base's share J_b V_b^flt, the arm's share R_ba V_a^ref and their
+  sum, the end effector's velocity J_wb [V_a^ref; V_b^flt] with ideal
+  actuators (one periodic discrete group: `Linearize`);
+- the same split with the base's real velocity loop, the station's
+  BaseVelocityDriver (eq. (filtering)'s output as its command, the base's
+  share J_b v_base): two rates, the control period and the plant's step,
+  so the period map over one control period is linearised with AutoDiff
+  (`linearize_period_map`);
+- the force responses of the coupled DMPs (`linearize_dmp_force`): the
+  arm's CDMP, eq. (cdmp-arm), on a stiffness axis (eq. (lp-admit)) and on
+  a force axis (eq. (tf-admit), D_a = k_f), and the whole body's CDMP,
+  eq. (cdmp-wb), with S_hri = 1 (eq. (tf-admit), D_a = k_hri).
+"""
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import (
+    ConstantVectorSource,
+    Linearize,
+    LinearSystem,
+    MatrixGain,
+    Multiplexer,
+)
+
+from drake_wbc import cdmp, kinematics
+from drake_wbc.analysis.period_map import linearize_period_map
+from drake_wbc.controller import ControllerParameters, build_controller
+from drake_wbc.filtering import BaseFilterParameters
+from drake_wbc.robot_model import HOME_ARM_POSITIONS
+from drake_wbc.station.drivers import BaseDriverParameters, BaseVelocityDriver
+from drake_wbc.systems import (
+    ArmCdmp,
+    BaseVelocityFilter,
+    MotionDistributor,
+    RobustCompensator,
+    WholeBodyCdmp,
+)
+from drake_wbc.validation import as_vector, checked_instance, whole_number
+
+SPLIT_OUTPUTS = ("base_share", "arm_share", "end_effector_velocity")
+"""The split diagram's outputs, each a twist (6) of the end effector in
+T_b, stacked in this order on its `shares` port."""
+
+
+@dataclass
+class OperatingPoint:
+    """Where the chains are linearised: the arm's configuration and what
+    the controller's ArmCapability and WorkspaceAdapter make of it.
+
+    Attributes:
+        arm_positions: q_a (6), rad.
+        end_effector_position: p_ee (3) in T_b, m.
+        capability: C_m; capability_gradient: grad_x C_m (6, T_a).
+        alpha: alpha of eq. (transition).
+        sigma_xy, sigma_phi: the weighting factors of eq.
+            (weight-factors) at rest (V_ee = 0).
+    """
+
+    arm_positions: np.ndarray
+    end_effector_position: np.ndarray
+    capability: float
+    capability_gradient: np.ndarray
+    alpha: float
+    sigma_xy: float
+    sigma_phi: float
+
+
+def operating_point(params=None, arm_positions=None):
+    """The OperatingPoint of a controller with `params` (the paper's if
+    None) with the arm at `arm_positions` (the home pose if None), from
+    the controller's own stages."""
+    controller = build_controller(checked_instance(
+        "params", params, ControllerParameters, ControllerParameters))
+    context = controller.diagram.CreateDefaultContext()
+    q_a = as_vector("arm_positions", HOME_ARM_POSITIONS
+                    if arm_positions is None else arm_positions, 6)
+    diagram = controller.diagram
+    diagram.GetInputPort("arm.position_measured").FixValue(context, q_a)
+    for name in ("reference_velocity", "wrist.wrench_measured"):
+        diagram.GetInputPort(name).FixValue(context, np.zeros(6))
+    diagram.GetInputPort("base.state_estimated").FixValue(context,
+                                                          np.zeros(6))
+
+    def value(stage, port):
+        system = controller.stages[stage]
+        return system.GetOutputPort(port).Eval(
+            system.GetMyContextFromRoot(context))
+
+    return OperatingPoint(
+        arm_positions=q_a,
+        end_effector_position=value("capability", "end_effector_position"),
+        capability=float(value("capability", "capability")[0]),
+        capability_gradient=value("capability", "capability_gradient"),
+        alpha=float(value("capability", "alpha")[0]),
+        sigma_xy=float(value("workspace", "sigma_xy")[0]),
+        sigma_phi=float(value("workspace", "sigma_phi")[0]))
+
+
+def linearize_base_filter(params=None):
+    """Drake's linearisation of BaseVelocityFilter, eq. (filtering): a
+    LinearSystem from V_b' (3) to V_b^flt (3), continuous or discrete
+    with params.time_step."""
+    system = BaseVelocityFilter(checked_instance(
+        "params", params, BaseFilterParameters, BaseFilterParameters))
+    context = system.CreateDefaultContext()
+    system.get_input_port().FixValue(context, np.zeros(3))
+    return Linearize(system, context)
+
+
+def linearize_base_driver(params=None):
+    """Drake's linearisation of the station's BaseVelocityDriver at rest
+    (the base's velocity loop, inside its saturations): a LinearSystem
+    from the velocity command (3) to the loop's velocity (3), discrete at
+    params.time_step (the plant's step)."""
+    system = BaseVelocityDriver(checked_instance(
+        "params", params, BaseDriverParameters, BaseDriverParameters))
+    context = system.CreateDefaultContext()
+    system.GetInputPort("base_pose").FixValue(context, np.zeros(3))
+    command = system.GetInputPort("velocity_command")
+    command.FixValue(context, np.zeros(3))
+    return Linearize(system, context, command.get_index(),
+                     system.GetOutputPort("velocity").get_index())
+
+
+def build_split_diagram(params=None, point=None, base_driver=None,
+                        alpha=None):
+    """The split of the end-effector command as a Diagram.
+
+    ::
+
+                              ┌──────────────────────┐
+                              │ MotionDistributor    ├─► shares
+        end_effector_velocity►│ → BaseVelocityFilter │   [base_share;
+                              │ (→ BaseVelocityDriver)   arm_share;
+                              │ → RobustCompensator  │   end_effector_
+                              └──────────────────────┘   velocity]
+
+    - end_effector_velocity: V_ee (6), the commanded twist in T_b.
+    - shares (18): the base's share J_b V_b^flt (J_b v_base with the
+      driver), the arm's share R6_ba V_a^ref, and their sum, the end
+      effector's twist J_wb [V_a^ref; V_b] with an ideal arm; each 6, T_b.
+      Also exported alone under their names, with filtered_base_velocity
+      (3) and arm_reference_velocity (6).
+
+    The distributor's other inputs (p_ee, C_m, grad_x C_m, sigma_xy,
+    sigma_phi, k_n) and the compensator's (p_ee, grad_x C_m, alpha, s_c)
+    are constants at the operating point, J_b is taken at its p_ee. The
+    BaseCdmp between distributor and filter is left out: without obstacles
+    it only passes V_b on (V_b' = V_b, a DMP with C_dot = V_b and g + C =
+    y).
+
+    Args:
+        params: ControllerParameters (the paper's if None); the filter
+            runs at params.time_step.
+        point: OperatingPoint (`operating_point(params)` if None).
+        base_driver: BaseDriverParameters of the base's velocity loop
+            between the filter and the base, or None for an ideal base.
+        alpha: alpha in [0, 1] in place of the operating point's (the
+            split sums to one while alpha = 0).
+    """
+    params = checked_instance("params", params, ControllerParameters,
+                              ControllerParameters)
+    point = point if point is not None else operating_point(params)
+    if not isinstance(point, OperatingPoint):
+        raise ValueError(f"point = {point!r} is not allowed: must be an "
+                         "OperatingPoint or None")
+    builder = DiagramBuilder()
+    add = builder.AddNamedSystem
+    distributor = add("distributor", MotionDistributor(params.distributor))
+    base_filter = add("base_filter", BaseVelocityFilter(
+        replace(params.base_filter, time_step=params.time_step)))
+    compensator = add("compensator", RobustCompensator(params.compensator))
+    alpha = point.alpha if alpha is None else alpha
+
+    def constant(name, value, destination, port):
+        source = add(f"{name}_{destination.get_name()}", ConstantVectorSource(
+            np.atleast_1d(np.asarray(value, dtype=float))))
+        builder.Connect(source.get_output_port(),
+                        destination.GetInputPort(port))
+
+    p_ee = point.end_effector_position
+    for name, value in (
+            ("end_effector_position", p_ee), ("capability", point.capability),
+            ("capability_gradient", point.capability_gradient),
+            ("sigma_xy", point.sigma_xy), ("sigma_phi", point.sigma_phi),
+            ("null_space_gain", params.distributor.null_space_gain)):
+        constant(name, value, distributor, name)
+    for name, value in (
+            ("end_effector_position", p_ee),
+            ("capability_gradient", point.capability_gradient),
+            ("alpha", alpha),
+            ("compensation_switch",
+             params.compensator.compensation_switch)):
+        constant(name, value, compensator, name)
+    connect = builder.Connect
+    base_velocity = distributor.GetOutputPort("base_velocity")
+    connect(base_velocity, base_filter.get_input_port())
+    connect(base_velocity, compensator.GetInputPort("base_velocity"))
+    connect(distributor.GetOutputPort("arm_velocity"),
+            compensator.GetInputPort("arm_velocity"))
+    filtered = base_filter.get_output_port()
+    connect(filtered, compensator.GetInputPort("filtered_base_velocity"))
+    base_motion = filtered
+    if base_driver is not None:
+        driver = add("base_driver", BaseVelocityDriver(checked_instance(
+            "base_driver", base_driver, BaseDriverParameters, None)))
+        connect(filtered, driver.GetInputPort("velocity_command"))
+        constant("base_pose", np.zeros(3), driver, "base_pose")
+        base_motion = driver.GetOutputPort("velocity")
+    J_b = kinematics.base_jacobian(p_ee)
+    R6 = kinematics.twist_rotation(distributor.R_ba)
+    base_share = add("base_share", MatrixGain(J_b))
+    arm_share = add("arm_share", MatrixGain(R6))
+    total = add("end_effector", MatrixGain(np.hstack([R6, J_b])))
+    stack = add("shares", Multiplexer([6, 6, 6]))
+    both = add("arm_and_base", Multiplexer([6, 3]))
+    arm_reference = compensator.GetOutputPort("arm_reference_velocity")
+    connect(base_motion, base_share.get_input_port())
+    connect(arm_reference, arm_share.get_input_port())
+    connect(arm_reference, both.get_input_port(0))
+    connect(base_motion, both.get_input_port(1))
+    connect(both.get_output_port(), total.get_input_port())
+    for i, system in enumerate((base_share, arm_share, total)):
+        connect(system.get_output_port(), stack.get_input_port(i))
+    builder.ExportInput(distributor.GetInputPort("end_effector_velocity"),
+                        "end_effector_velocity")
+    builder.ExportOutput(stack.get_output_port(), "shares")
+    for name, system in zip(SPLIT_OUTPUTS, (base_share, arm_share, total),
+                            strict=True):
+        builder.ExportOutput(system.get_output_port(), name)
+    builder.ExportOutput(filtered, "filtered_base_velocity")
+    builder.ExportOutput(arm_reference, "arm_reference_velocity")
+    diagram = builder.Build()
+    diagram.set_name("split" if base_driver is None else "split_with_base")
+    return diagram
+
+
+def linearize_split(params=None, point=None, base_driver=None, alpha=None):
+    """The split's LinearSystem from V_ee (6) to the stacked shares (18,
+    SPLIT_OUTPUTS), discrete at params.time_step: Drake's `Linearize`
+    for ideal actuators, `linearize_period_map` with the base driver
+    (two rates). Arguments as for `build_split_diagram`."""
+    params = checked_instance("params", params, ControllerParameters,
+                              ControllerParameters)
+    diagram = build_split_diagram(params, point, base_driver, alpha)
+    context = diagram.CreateDefaultContext()
+    source = diagram.GetInputPort("end_effector_velocity")
+    source.FixValue(context, np.zeros(6))
+    output = diagram.GetOutputPort("shares")
+    if base_driver is None:
+        return Linearize(diagram, context, source.get_index(),
+                         output.get_index())
+    return linearize_period_map(diagram, context, params.time_step, source,
+                                output)
+
+
+@dataclass
+class DmpForceResponse:
+    """A coupled DMP linearised from the force to its position.
+
+    Attributes:
+        system: the LinearSystem from the wrench (6) to y_dot (6).
+        position: the (6, n) selection of the position y from the state.
+        axis: the axis (0 to 5) whose force-to-position response is meant.
+    """
+
+    system: LinearSystem
+    position: np.ndarray
+    axis: int
+
+    def response(self, omega):
+        """The axis' force-to-position response at `omega` (rad/s)."""
+        from drake_wbc.analysis.frequency import linear_system_response
+
+        H = linear_system_response(self.system, omega, self.position)
+        return H[:, self.axis, self.axis]
+
+
+def linearize_dmp_force(kind, params=None, time_step=None, axis=None):
+    """Linearises a coupled DMP of the controller from the wrench on the
+    tool to its position y.
+
+    Args:
+        kind: 'stiffness' (ArmCdmp on an axis with S_m = 1, eq.
+            (lp-admit) with its C_s entering without the factor tau),
+            'admittance' (ArmCdmp on an axis with S_m = 0, S_hri = 0: eq.
+            (tf-admit) with D_a = k_f) or 'phri' (WholeBodyCdmp with
+            S_hri = 1: eq. (tf-admit) with D_a = k_hri).
+        params: ControllerParameters (the paper's if None): its arm_cdmp's
+            k_p, k_d, k_f and DMP, or its whole_body_cdmp. S_m is set on
+            `axis` as `kind` needs.
+        time_step: 0 for continuous time; params.time_step if None.
+        axis: the axis, 0 to 5; 0 (x) if None.
+
+    Returns:
+        DmpForceResponse.
+    """
+    params = checked_instance("params", params, ControllerParameters,
+                              ControllerParameters)
+    h = params.time_step if time_step is None else time_step
+    axis = 0 if axis is None else whole_number("axis", axis)
+    if axis > 5:
+        raise ValueError(f"axis = {axis!r} is not allowed: must be 0 to 5")
+    if kind == "phri":
+        system = WholeBodyCdmp(params.whole_body_cdmp, time_step=h)
+        switch, others = 1.0, ("reference_velocity", "end_effector_deviation")
+    elif kind in ("stiffness", "admittance"):
+        arm = params.arm_cdmp
+        S_m = np.array(arm.S_m)
+        S_m[axis] = 1.0 if kind == "stiffness" else 0.0
+        system = ArmCdmp(cdmp.ArmCdmpParameters(
+            k_p=arm.k_p, k_d=arm.k_d, k_f=arm.k_f, S_m=S_m, F_d=np.zeros(6),
+            S_hri=0.0, dmp=arm.dmp), time_step=h)
+        switch, others = 0.0, ("arm_velocity", "desired_wrench")
+    else:
+        raise ValueError(f"kind = {kind!r} is not allowed: must be "
+                         "'stiffness', 'admittance' or 'phri'")
+    context = system.CreateDefaultContext()
+    for name in others:
+        system.GetInputPort(name).FixValue(context, np.zeros(6))
+    system.GetInputPort("phri_switch").FixValue(context, [switch])
+    if kind == "phri":
+        system.GetInputPort("base_yaw").FixValue(context, [0.0])
+    wrench = system.GetInputPort("wrench")
+    wrench.FixValue(context, np.zeros(6))
+    linear = Linearize(system, context, wrench.get_index(),
+                       system.get_output_port(0).get_index())
+    n = linear.A().shape[0]
+    position = np.zeros((6, n))
+    position[:, :6] = np.eye(6)
+    return DmpForceResponse(linear, position, axis)

@@ -1,0 +1,107 @@
+"""Linearisation of a multi-rate discrete diagram over one period.
+
+Drake's `Linearize` takes a system with one periodic discrete group. The
+controller runs at the control period h and the station's drivers at the
+plant's step, so a chain that crosses them (e.g. eq. (filtering)'s
+BaseVelocityFilter feeding the base's velocity loop) has two groups. Its
+state sampled every h still evolves time-invariantly; the map over one
+period is simulated here in AutoDiffXd and its Jacobians are the
+discrete-time A, B, C, D at period h (the design notes' "Jacobian of the
+discrete update with AutoDiff").
+"""
+
+import numpy as np
+from pydrake.autodiffutils import (
+    AutoDiffXd,
+    ExtractGradient,
+    ExtractValue,
+    InitializeAutoDiff,
+)
+from pydrake.systems.analysis import Simulator_
+from pydrake.systems.primitives import LinearSystem
+
+from drake_wbc.validation import positive
+
+
+def _discrete_groups(context):
+    state = context.get_discrete_state()
+    return [state.get_vector(i).CopyToVector()
+            for i in range(state.num_groups())]
+
+
+def linearize_period_map(system, context, period, input_port, output_port):
+    """Linearises a discrete multi-rate `system` over one `period`, by
+    AutoDiff through Drake's Simulator.
+
+    Drake's `Linearize` takes one periodic discrete group; a diagram
+    whose groups run at rates that divide 1 / `period` (e.g. the control
+    period and the plant's step) is time invariant when sampled every
+    `period`. Its period map x_k -> x_(k+1), with the input held at u_k
+    over the period, is simulated here in AutoDiffXd from `context`
+    (time 0, all updates aligned), seeded with derivatives w.r.t. x_k
+    and u_k, so that
+
+        x_(k+1) = A x_k + B u_k,   y_k = C x_k + D u_k
+
+    are the exact Jacobians (x: the discrete groups stacked; y sampled
+    just before the updates at t_k, like the state).
+
+    Args:
+        system: a scalar-convertible System with discrete state only.
+        context: its Context at the operating point, time 0; its other
+            vector inputs fixed.
+        period: the map's period in s, a whole multiple of every
+            group's period.
+        input_port, output_port: the vector ports of u and y.
+
+    Returns:
+        LinearSystem(A, B, C, D, period).
+    """
+    h = positive("period", period)
+    if context.num_continuous_states() or context.num_abstract_states():
+        raise ValueError(
+            f"system = {system.get_name()!r} is not allowed: must have "
+            "discrete state only (no continuous or abstract state)")
+    groups = _discrete_groups(context)
+    sizes = [len(g) for g in groups]
+    x0 = np.concatenate(groups) if groups else np.zeros(0)
+    u0 = input_port.Eval(context)
+    n, m = len(x0), len(u0)
+    seeded = InitializeAutoDiff(np.concatenate([x0, u0]), n + m)[:, 0]
+    ad_system = system.ToAutoDiffXd()
+
+    def ad_context():
+        new = ad_system.CreateDefaultContext()
+        new.SetTime(0.0)
+        offset = 0
+        state = new.get_mutable_discrete_state()
+        for i, size in enumerate(sizes):
+            state.get_mutable_vector(i).SetFromVector(
+                seeded[offset:offset + size])
+            offset += size
+        for i in range(system.num_input_ports()):
+            port = system.get_input_port(i)
+            ad_port = ad_system.get_input_port(i)
+            if i == input_port.get_index():
+                ad_port.FixValue(new, seeded[n:])
+            elif port.HasValue(context):
+                ad_port.FixValue(new, np.array(
+                    [AutoDiffXd(v) for v in port.Eval(context)]))
+        return new
+
+    start = ad_context()
+    y = ad_system.get_output_port(output_port.get_index()).Eval(start)
+    simulator = Simulator_[AutoDiffXd](ad_system, ad_context())
+    simulator.AdvanceTo(h)
+    after = simulator.get_context().get_discrete_state()
+    x1 = np.concatenate([after.get_vector(i).CopyToVector()
+                         for i in range(len(sizes))])
+    dx, dy = ExtractGradient(x1), ExtractGradient(y)
+    value = ExtractValue(x1).ravel()
+    if not np.allclose(value, x0, rtol=0.0, atol=1e-9 * (1 + abs(x0).max(
+            initial=0.0))):
+        raise ValueError(
+            "the operating point is not an equilibrium over one period "
+            f"(state moves by {np.abs(value - x0).max():.3g}), which "
+            "linearize_period_map does not allow")
+    return LinearSystem(dx[:, :n], dx[:, n:], dy[:, :n], dy[:, n:], h)

@@ -1,0 +1,267 @@
+"""`drake-wbc bode`: every frequency response of a scenario, written out.
+
+For a scenario's controller and station, at its initial arm
+configuration (drake_wbc.analysis.chains), this computes and writes (PNG
+and CSV per figure, summary.csv, and the table it returns):
+
+- base_filter: BaseVelocityFilter linearised, discrete at the control
+  period and continuous, over eq. (filtering)'s closed forms;
+- split_ideal: V_ee (x of T_b) to the base's share, the arm's share and
+  their sum with ideal actuators (flat at 0 dB and 0 degrees while
+  alpha = 0), the base's share over k_b times eq. (filtering);
+- split_base_loop: the same with the station's BaseVelocityDriver, and
+  the driver alone; where the end effector's command stops being
+  reproduced (|sum - 1| > REPRODUCTION_TOLERANCE);
+- dmp_force: the coupled DMPs' force-to-position responses over eqs.
+  (lp-admit) and (tf-admit);
+- contact_loops: the arm's CDMP against a contact spring K (the wiping
+  pad's), with the loops' gain and phase margins;
+- filter_sweep, split_sweep: families of curves over omega_f and zeta.
+"""
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from drake_wbc import distribution, kinematics
+from drake_wbc.analysis import chains, closed_forms
+from drake_wbc.analysis.bode import (
+    BodePlot,
+    draw,
+    format_table,
+    summarize,
+    write_csv,
+    write_summary_csv,
+)
+from drake_wbc.analysis.frequency import (
+    frequency_grid,
+    linear_system_response,
+    stability_margins,
+)
+from drake_wbc.filtering import (
+    lowpass_response,
+    lowpass_zoh_response,
+)
+from drake_wbc.validation import positive
+
+CONTACT_STIFFNESS = 3.0e3
+"""K of the contact loops, N/m: the wiping pad's sponge (about 3e3 N/m,
+models/ft300_wiping_tool.sdf)."""
+
+REPRODUCTION_TOLERANCE = 0.1
+"""|V_ee,actual / V_ee - 1| above which the end effector's command counts
+as no longer reproduced (10 %)."""
+
+SWEEP_OMEGA_F_HZ = (0.5, 1.0, 2.0, 4.0)
+SWEEP_ZETA = (0.5, 0.707, 1.0)
+"""The family of filter settings drawn in filter_sweep and split_sweep."""
+
+AXIS = 0
+"""The end-effector axis of the split figures: x of T_b."""
+
+
+@dataclass
+class BodeReport:
+    """What `write_bode_report` wrote.
+
+    Attributes:
+        plots: the BodePlots, by name.
+        rows: the table's ResponseSummary rows.
+        table: the table as text.
+        notes: lines printed under the table.
+        paths: the files written.
+    """
+
+    plots: dict = field(default_factory=dict)
+    rows: list = field(default_factory=list)
+    table: str = ""
+    notes: list = field(default_factory=list)
+    paths: list = field(default_factory=list)
+
+
+def base_share_gain(point, axis=AXIS):
+    """k_b: the base's share of V_ee along `axis` at DC, (J_b V_b)_axis
+    for a unit V_ee on that axis, from the math layer's eq. (wbccm)
+    (drake_wbc.distribution, k_n = 0)."""
+    J_b = kinematics.base_jacobian(point.end_effector_position)
+    J_wb = kinematics.whole_body_jacobian(None, point.end_effector_position,
+                                          np.eye(3))
+    V_wb = distribution.distribute(J_wb, np.eye(6)[axis], point.sigma_xy,
+                                   point.sigma_phi)
+    return float((J_b @ V_wb[6:])[axis])
+
+
+def first_departure(hertz, response, tolerance=REPRODUCTION_TOLERANCE):
+    """The lowest frequency (Hz) at which |response - 1| exceeds
+    `tolerance`, or nan."""
+    tolerance = positive("tolerance", tolerance)
+    off = np.nonzero(np.abs(np.asarray(response) - 1.0) > tolerance)[0]
+    return float(hertz[off[0]]) if len(off) else float("nan")
+
+
+def _split_plots(report, params, point, driver, hertz, omega, h):
+    rows = report.rows
+    ideal = linear_system_response(chains.linearize_split(params, point),
+                                   omega)
+    k_b = base_share_gain(point)
+    f = params.base_filter
+    plot = BodePlot("split_ideal", "V_ee (x) split, ideal actuators "
+                    f"(sigma_xy = {point.sigma_xy:g}, alpha = "
+                    f"{point.alpha:g})", hertz, nyquist_hz=0.5 / h)
+    labels = ("base share J_b V_b^flt", "arm share R_ba V_a^ref",
+              "sum: end effector")
+    for i, label in enumerate(labels):
+        response = ideal[:, 6 * i + AXIS, AXIS]
+        plot.add(label, response)
+        rows.append(summarize(f"split: {label}", hertz, response))
+    plot.add(f"k_b = {k_b:.3f} x eq. (filtering), ZOH", k_b
+             * lowpass_zoh_response(f.omega_f, f.zeta, h, omega), True)
+    report.plots[plot.name] = plot
+
+    real = linear_system_response(
+        chains.linearize_split(params, point, base_driver=driver), omega)
+    loop = chains.linearize_base_driver(driver)
+    plot = BodePlot("split_base_loop", "V_ee (x) split with the base's "
+                    f"velocity loop (lag {driver.lag:g} s)", hertz,
+                    nyquist_hz=0.5 / h)
+    for i, label in enumerate(("base share J_b v_base",
+                               "arm share R_ba V_a^ref",
+                               "sum: end effector")):
+        response = real[:, 6 * i + AXIS, AXIS]
+        plot.add(label, response)
+        rows.append(summarize(f"with base loop: {label}", hertz, response))
+    plot.add("base velocity loop alone",
+             linear_system_response(loop, omega)[:, AXIS, AXIS])
+    rows.append(summarize("base velocity loop alone", hertz,
+                          plot.curves[-1].response))
+    plot.add("sum with an ideal base", ideal[:, 12 + AXIS, AXIS], True)
+    report.plots[plot.name] = plot
+    departure = first_departure(hertz, real[:, 12 + AXIS, AXIS])
+    where = ("nowhere on the band" if np.isnan(departure)
+             else f"from {departure:.3f} Hz")
+    report.notes.append(
+        "end effector with the base's velocity loop: |V_ee,actual / V_ee - "
+        f"1| exceeds {REPRODUCTION_TOLERANCE:g} {where} (largest "
+        f"{np.abs(real[:, 12 + AXIS, AXIS] - 1).max():.3f})")
+    report.notes.append(
+        "end effector with ideal actuators: largest |sum - 1| = "
+        f"{np.abs(ideal[:, 12:18, :] - np.eye(6)).max():.2e}")
+
+
+def _dmp_plots(report, params, hertz, omega, h, stiffness):
+    arm, dmp = params.arm_cdmp, params.arm_cdmp.dmp
+    plot = BodePlot("dmp_force", "coupled DMPs: force to position (m/N), "
+                    f"discrete at {h:g} s", hertz, nyquist_hz=0.5 / h)
+    responses = {}
+    for kind, label in (("stiffness", "arm CDMP, stiffness axis"),
+                        ("admittance", "arm CDMP, force axis"),
+                        ("phri", "whole-body CDMP, S_hri = 1")):
+        responses[kind] = chains.linearize_dmp_force(kind, params).response(
+            omega)
+        plot.add(label, responses[kind])
+        report.rows.append(summarize(label, hertz, responses[kind]))
+    plot.add("eq. (lp-admit)", closed_forms.lp_admit_response(
+        arm.k_p, arm.k_d, dmp.tau, dmp.alpha_z, dmp.resolved_beta_z, omega,
+        velocity_scale=1.0), True)
+    for name, gain in (("k_f", arm.k_f),
+                       ("k_hri", params.whole_body_cdmp.k_hri)):
+        if gain > 0.0:
+            plot.add(f"eq. (tf-admit), D_a = {name}",
+                     closed_forms.tf_admit_response(gain, omega), True)
+    report.plots[plot.name] = plot
+
+    plot = BodePlot("contact_loops", f"arm CDMP against a contact of "
+                    f"{stiffness:g} N/m: loop K H(z)", hertz,
+                    nyquist_hz=0.5 / h)
+    for kind in ("admittance", "stiffness"):
+        linear = chains.linearize_dmp_force(kind, params)
+
+        def loop(w, linear=linear):
+            return stiffness * linear.response(np.atleast_1d(w))[0]
+
+        margins = stability_margins(loop, omega)
+        plot.add(f"{kind} axis", stiffness * responses[kind])
+        report.rows.append(summarize(f"contact loop, {kind} axis", hertz,
+                                     stiffness * responses[kind], margins))
+    report.plots[plot.name] = plot
+
+
+def _sweep_plots(report, params, point, driver, hertz, omega, h):
+    filters = BodePlot("filter_sweep", "base filter, eq. (filtering), "
+                       f"discrete at {h:g} s: omega_f and zeta", hertz,
+                       nyquist_hz=0.5 / h)
+    split = BodePlot("split_sweep", "end effector with the base's velocity "
+                     "loop: omega_f and zeta", hertz, nyquist_hz=0.5 / h)
+    styles = ("-", "--", ":", "-.")
+    for i, f_hz in enumerate(SWEEP_OMEGA_F_HZ):
+        for j, zeta in enumerate(SWEEP_ZETA):
+            family = (i, styles[j % len(styles)])
+            setting = replace(params.base_filter, omega_f=2 * np.pi * f_hz,
+                              zeta=zeta, time_step=h, enabled=True)
+            label = f"f = {f_hz:g} Hz, zeta = {zeta:g}"
+            filters.add(label, linear_system_response(
+                chains.linearize_base_filter(setting), omega)[:, 0, 0],
+                family=family)
+            swept = replace(params, base_filter=setting)
+            split.add(label, linear_system_response(chains.linearize_split(
+                swept, point, base_driver=driver), omega)[:, 12 + AXIS,
+                                                          AXIS],
+                family=family)
+    report.plots[filters.name] = filters
+    report.plots[split.name] = split
+
+
+def compute_bode_report(scenario, points_per_decade=60,
+                        contact_stiffness=CONTACT_STIFFNESS):
+    """Every response of `scenario` (a drake_wbc.scenario.Scenario), on a
+    grid from 0.01 Hz to the lower of 100 Hz and the control rate's
+    Nyquist frequency. Returns a BodeReport (nothing written)."""
+    params = scenario.controller
+    h = params.time_step
+    hertz, omega = frequency_grid(0.01, min(100.0, 0.5 / h),
+                                  points_per_decade)
+    point = chains.operating_point(params,
+                                   scenario.station.initial_arm_positions)
+    driver = replace(scenario.station.base,
+                     time_step=scenario.station.time_step)
+    report = BodeReport()
+    f = replace(params.base_filter, time_step=h, enabled=True)
+    plot = BodePlot("base_filter", "base filter, eq. (filtering): "
+                    f"omega_f = {f.omega_f:.4g} rad/s, zeta = {f.zeta:g}",
+                    hertz, nyquist_hz=0.5 / h)
+    discrete = linear_system_response(chains.linearize_base_filter(f),
+                                      omega)[:, 0, 0]
+    continuous = linear_system_response(chains.linearize_base_filter(
+        replace(f, time_step=0.0)), omega)[:, 0, 0]
+    plot.add(f"BaseVelocityFilter, h = {h:g} s", discrete)
+    plot.add("BaseVelocityFilter, continuous", continuous)
+    plot.add("eq. (filtering), ZOH", lowpass_zoh_response(
+        f.omega_f, f.zeta, h, omega), True)
+    plot.add("eq. (filtering)", lowpass_response(f.omega_f, f.zeta, omega),
+             True)
+    report.plots[plot.name] = plot
+    report.rows += [summarize(f"base filter, h = {h:g} s", hertz, discrete),
+                    summarize("base filter, continuous", hertz, continuous)]
+    _split_plots(report, params, point, driver, hertz, omega, h)
+    _dmp_plots(report, params, hertz, omega, h, contact_stiffness)
+    _sweep_plots(report, params, point, driver, hertz, omega, h)
+    report.table = format_table(report.rows)
+    report.notes.insert(0, (
+        f"operating point: q_a = {np.round(point.arm_positions, 3).tolist()}"
+        f", C_m = {point.capability:.4f}, alpha = {point.alpha:g}, "
+        f"sigma_xy = {point.sigma_xy:g}, sigma_phi = {point.sigma_phi:g}"))
+    return report
+
+
+def write_bode_report(scenario, output, **options):
+    """Computes `compute_bode_report(scenario, **options)` and writes each
+    plot's PNG and CSV and summary.csv to the folder `output`. Returns
+    the BodeReport, its `paths` filled."""
+    report = compute_bode_report(scenario, **options)
+    output = Path(output)
+    for plot in report.plots.values():
+        report.paths += [draw(plot, output), write_csv(plot, output)]
+    report.paths.append(write_summary_csv(report.rows,
+                                          output / "summary.csv"))
+    return report

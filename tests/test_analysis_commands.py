@@ -1,0 +1,114 @@
+"""`drake-wbc bode` and `drake-wbc diagram` (drake_wbc.analysis.commands):
+they run on the default scenario and write well-formed files."""
+
+import argparse
+import contextlib
+import csv
+import io
+
+import numpy as np
+import pytest
+
+from drake_wbc.analysis import commands
+from drake_wbc.analysis.bode import read_csv
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+PLOTS = ("base_filter", "split_ideal", "split_base_loop", "dmp_force",
+         "contact_loops", "filter_sweep", "split_sweep")
+TABLE_ROWS = (
+    "base filter, h = 0.01 s", "base filter, continuous",
+    "split: sum: end effector", "with base loop: sum: end effector",
+    "base velocity loop alone", "arm CDMP, stiffness axis",
+    "arm CDMP, force axis", "whole-body CDMP, S_hri = 1",
+    "contact loop, admittance axis", "contact loop, stiffness axis")
+
+
+def _parse(add_arguments, argv):
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    return parser.parse_args(argv)
+
+
+def _run(run, args):
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = run(args)
+    return code, out.getvalue()
+
+
+@pytest.fixture(scope="module")
+def bode(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("bode")
+    args = _parse(commands.add_bode_arguments, ["--output", str(folder)])
+    assert args.scenario is None  # the default scenario
+    code, text = _run(commands.run_bode, args)
+    return code, text, folder
+
+
+def test_bode_writes_every_plot_and_table(bode):
+    code, text, folder = bode
+    assert code == 0
+    assert "drake-wbc bode trajectory_tracking" in text
+    for name in PLOTS:
+        assert (folder / f"{name}.png").read_bytes()[:8] == PNG_SIGNATURE
+        header, data = read_csv(folder / f"{name}.csv")
+        assert header[:2] == ["frequency_hz", "omega_rad_s"]
+        assert len(header) == data.shape[1] >= 4
+        assert (len(header) - 2) % 2 == 0
+        assert data.shape[0] > 100 and np.all(np.isfinite(data))
+        assert np.all(np.diff(data[:, 0]) > 0)
+        assert np.allclose(data[:, 1], 2 * np.pi * data[:, 0])
+    for row in TABLE_ROWS:
+        assert any(line.startswith(row) for line in text.splitlines()), row
+    with (folder / "summary.csv").open(newline="") as stream:
+        summary = list(csv.reader(stream))
+    assert summary[0][0] == "name" and "phase_margin_deg" in summary[0]
+    assert {row[0] for row in summary[1:]} >= set(TABLE_ROWS)
+    assert all(len(row) == len(summary[0]) for row in summary)
+
+
+def test_bode_ideal_split_is_flat(bode):
+    _, _, folder = bode
+    header, data = read_csv(folder / "split_ideal.csv")
+    total = header.index("sum: end effector magnitude_db")
+    assert np.abs(data[:, total]).max() < 1e-9
+    assert np.abs(data[:, total + 1]).max() < 1e-9
+    base = header.index("base share J_b V_b^flt magnitude_db")
+    assert data[0, base] == pytest.approx(20 * np.log10(0.5), abs=0.01)
+
+
+def test_bode_table_reports_the_contact_loop_margins(bode):
+    _, text, _ = bode
+    line = next(x for x in text.splitlines()
+                if x.startswith("contact loop, admittance axis"))
+    # The discrete integrator K k_f h / (z - 1) with K k_f h = 0.3: gain
+    # margin 2 / 0.3 at the Nyquist frequency.
+    assert f"{20 * np.log10(2 / 0.3):.2f}" in line.split()
+
+
+def test_bode_rejects_an_unknown_scenario(tmp_path):
+    args = _parse(commands.add_bode_arguments,
+                  ["no_such_scenario", "--output", str(tmp_path)])
+    with pytest.raises(ValueError, match="no_such_scenario"):
+        commands.run_bode(args)
+
+
+def test_diagram_writes_dot_and_says_when_graphviz_is_missing(
+        tmp_path, monkeypatch):
+    empty = tmp_path / "empty_path"
+    empty.mkdir()
+    monkeypatch.setenv("PATH", str(empty))
+    folder = tmp_path / "diagram"
+    args = _parse(commands.add_diagram_arguments,
+                  ["trajectory_tracking", "--output", str(folder)])
+    code, text = _run(commands.run_diagram, args)
+    assert code == 0
+    for stem, name in (("controller", "cdmp_wbc_controller"),
+                       ("station", "simulated_station")):
+        dot = (folder / f"{stem}.dot").read_text()
+        assert dot.lstrip().startswith("digraph")
+        assert dot.count("{") == dot.count("}")
+        assert name in dot
+        assert not (folder / f"{stem}.svg").exists()
+    assert "Graphviz's `dot` program is not on PATH" in text
+    assert commands.render_svg(folder / "controller.dot") is None

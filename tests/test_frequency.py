@@ -1,0 +1,372 @@
+"""Frequency responses of the filter chain and the coupled DMPs
+(drake_wbc.analysis): Drake's linearisations against the paper's closed
+forms, against independent formulations, and against simulation."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import LogVectorOutput, MatrixGain, Sine
+
+from drake_wbc import cdmp
+from drake_wbc.analysis import chains, closed_forms
+from drake_wbc.analysis.frequency import (
+    bandwidth,
+    frequency_grid,
+    frequency_response,
+    linear_system_response,
+    peak_gain,
+    stability_margins,
+)
+from drake_wbc.dmp import DmpParameters
+from drake_wbc.filtering import (
+    BaseFilterParameters,
+    lowpass_response,
+    lowpass_zoh_response,
+)
+from drake_wbc.scenario import find_scenario, load_scenario
+from drake_wbc.systems.cdmp_stages import AffineDynamics
+from drake_wbc.systems.coordination import RobustCompensatorParameters
+
+HERTZ, OMEGA = frequency_grid(0.01, 100.0, 40)
+"""The log grid of the checks, 0.01 to 100 Hz."""
+
+H = 0.01
+
+
+def off_sampling_rate(time_step):
+    """The grid without the frequencies that alias onto DC at `time_step`
+    (100 Hz at 100 Hz), where a discrete integrator's pole z = 1 lies."""
+    if time_step == 0.0:
+        return OMEGA
+    cycles = OMEGA * time_step / (2 * np.pi)
+    return OMEGA[np.abs(cycles - np.round(cycles)) > 1e-6]
+
+
+def relative_error(actual, expected):
+    return np.max(np.abs(actual - expected) / np.abs(expected))
+
+
+@pytest.fixture(scope="module")
+def scenario():
+    return load_scenario(find_scenario("trajectory_tracking"))
+
+
+@pytest.fixture(scope="module")
+def point(scenario):
+    return chains.operating_point(scenario.controller,
+                                  scenario.station.initial_arm_positions)
+
+
+@pytest.fixture(scope="module")
+def driver(scenario):
+    return replace(scenario.station.base,
+                   time_step=scenario.station.time_step)
+
+
+# The base filter, eq. (filtering).
+
+@pytest.mark.parametrize("zeta", [1.0, 0.7, 1.6])
+@pytest.mark.parametrize("time_step", [0.0, H])
+def test_base_filter_matches_eq_filtering(zeta, time_step):
+    params = BaseFilterParameters(omega_f=2 * np.pi, zeta=zeta,
+                                  time_step=time_step)
+    response = linear_system_response(chains.linearize_base_filter(params),
+                                      OMEGA)
+    expected = (lowpass_response(params.omega_f, zeta, OMEGA)
+                if time_step == 0.0 else
+                lowpass_zoh_response(params.omega_f, zeta, time_step, OMEGA))
+    for axis in range(3):
+        assert relative_error(response[:, axis, axis], expected) < 1e-6
+    off_axis = response[:, 0, 1:]
+    assert np.abs(off_axis).max() < 1e-12
+
+
+@pytest.mark.parametrize("zeta", [1.0, 0.7, 1.6])
+def test_second_order_zoh_form_agrees_with_the_filters(zeta):
+    w = 3.0
+    general = closed_forms.second_order_zoh_response(0.0, w * w, 1.0,
+                                                     2 * zeta * w, w * w, H,
+                                                     OMEGA)
+    assert relative_error(general, lowpass_zoh_response(w, zeta, H,
+                                                        OMEGA)) < 1e-9
+
+
+# The coupled DMPs, eqs. (lp-admit) and (tf-admit).
+
+@pytest.mark.parametrize("time_step", [0.0, H])
+@pytest.mark.parametrize("dmp", [DmpParameters(),
+                                 DmpParameters(alpha_z=20.0, beta_z=8.0)])
+@pytest.mark.parametrize("k_d", [0.0, 0.4])
+def test_arm_stiffness_axis_matches_eq_lp_admit(scenario, time_step, dmp,
+                                                k_d):
+    arm = replace(scenario.controller.arm_cdmp, k_d=k_d, dmp=dmp)
+    params = replace(scenario.controller, arm_cdmp=arm)
+    response = chains.linearize_dmp_force("stiffness", params, time_step,
+                                          axis=1).response(OMEGA)
+    args = (arm.k_p, k_d, dmp.tau, dmp.alpha_z, dmp.resolved_beta_z)
+    # tau = 1: the arm's C_s (no factor tau) is the paper's tau C_f.
+    expected = (closed_forms.lp_admit_response(*args, OMEGA)
+                if time_step == 0.0 else
+                closed_forms.lp_admit_zoh_response(*args, time_step, OMEGA))
+    assert relative_error(response, expected) < 1e-6
+
+
+@pytest.mark.parametrize("time_step", [0.0, H])
+@pytest.mark.parametrize("kind", ["admittance", "phri"])
+def test_admittance_couplings_match_eq_tf_admit(scenario, time_step, kind):
+    params = scenario.controller
+    gain = (params.arm_cdmp.k_f if kind == "admittance"
+            else params.whole_body_cdmp.k_hri)
+    omega = off_sampling_rate(time_step)
+    response = chains.linearize_dmp_force(kind, params, time_step,
+                                          axis=2).response(omega)
+    expected = (closed_forms.tf_admit_response(gain, omega)
+                if time_step == 0.0 else
+                closed_forms.tf_admit_zoh_response(gain, time_step, omega))
+    assert relative_error(response, expected) < 1e-6
+
+
+def _math_layer_model(derivative, num_states, time_step):
+    """(A, B) of a one-axis DMP of drake_wbc.cdmp from its derivative
+    function (no Drake system)."""
+    model = AffineDynamics(derivative, num_states, 1, time_step)
+    if time_step > 0.0:
+        return model.A_d, model.B_d
+    return model.A, model.B
+
+
+@pytest.mark.parametrize("time_step", [0.0, H])
+def test_math_layer_dmps_match_the_paper_for_any_tau(time_step):
+    dmp = DmpParameters(tau=0.6, alpha_z=30.0, beta_z=5.0)
+    stiff = cdmp.StiffnessCouplingParameters(k_p=0.002, k_d=0.3, dmp=dmp)
+
+    def stiffness(x, u):
+        return np.concatenate(cdmp.stiffness_coupled_derivative(
+            x[:1], x[1:], np.zeros(1), u, stiff))
+
+    A, B = _math_layer_model(stiffness, 2, time_step)
+    response = frequency_response(A, B, [[1.0, 0.0]], [[0.0]], OMEGA,
+                                  time_step)[:, 0, 0]
+    args = (stiff.k_p, stiff.k_d, dmp.tau, dmp.alpha_z, dmp.beta_z)
+    expected = (closed_forms.lp_admit_response(*args, OMEGA)
+                if time_step == 0.0 else
+                closed_forms.lp_admit_zoh_response(*args, time_step, OMEGA))
+    assert relative_error(response, expected) < 1e-6
+
+    admit = cdmp.AdmittanceCouplingParameters(D_a=0.02, dmp=dmp)
+
+    def admittance(x, u):
+        return np.concatenate(cdmp.admittance_coupled_derivative(
+            x[:1], x[1:2], x[2:], np.zeros(1), u, admit))
+
+    A, B = _math_layer_model(admittance, 3, time_step)
+    omega = off_sampling_rate(time_step)
+    response = frequency_response(A, B, [[1.0, 0.0, 0.0]], [[0.0]], omega,
+                                  time_step)[:, 0, 0]
+    expected = (closed_forms.tf_admit_response(0.02, omega)
+                if time_step == 0.0 else
+                closed_forms.tf_admit_zoh_response(0.02, time_step, omega))
+    assert relative_error(response, expected) < 1e-6
+
+
+# The split of the end-effector command.
+
+def test_ideal_split_sums_to_unity(scenario, point):
+    assert point.alpha == 0.0
+    response = linear_system_response(
+        chains.linearize_split(scenario.controller, point), OMEGA)
+    total = response[:, 12:18, :]
+    for axis in range(6):
+        sum_axis = total[:, axis, axis]
+        assert np.abs(np.abs(sum_axis) - 1.0).max() < 1e-9
+        assert np.abs(np.angle(sum_axis)).max() < 1e-9
+    assert np.abs(total - np.eye(6)).max() < 1e-9
+    # The base's share is k_b times the discrete filter, the arm's the
+    # rest.
+    f = scenario.controller.base_filter
+    from drake_wbc.analysis.report import base_share_gain
+
+    k_b = base_share_gain(point)
+    assert k_b == pytest.approx(0.5, abs=1e-3)  # sigma_xy = 0.5
+    base = k_b * lowpass_zoh_response(f.omega_f, f.zeta, H, OMEGA)
+    assert relative_error(response[:, 0, 0], base) < 1e-6
+    assert relative_error(response[:, 6, 0], 1.0 - base) < 1e-6
+
+
+def test_split_with_alpha_gives_way(scenario, point):
+    # With robust compensation active (alpha = 1, s_c = 1) the arm leaves
+    # out the compensation along grad_x C_m: the sum is no longer one.
+    params = replace(scenario.controller,
+                     compensator=RobustCompensatorParameters(1.0))
+    response = linear_system_response(
+        chains.linearize_split(params, point, alpha=1.0), OMEGA)
+    assert np.abs(response[:, 12, 0] - 1.0).max() > 0.05
+
+
+def test_period_map_equals_linearize_at_one_rate(scenario, point):
+    diagram = chains.build_split_diagram(scenario.controller, point)
+    context = diagram.CreateDefaultContext()
+    source = diagram.GetInputPort("end_effector_velocity")
+    source.FixValue(context, np.zeros(6))
+    lifted = chains.linearize_period_map(
+        diagram, context, H, source, diagram.GetOutputPort("shares"))
+    direct = chains.linearize_split(scenario.controller, point)
+    for name in ("A", "B", "C", "D"):
+        assert np.allclose(getattr(lifted, name)(), getattr(direct, name)(),
+                           rtol=0.0, atol=1e-12)
+
+
+def test_base_loop_sum_departs_from_unity(scenario, point, driver):
+    response = linear_system_response(chains.linearize_split(
+        scenario.controller, point, base_driver=driver), OMEGA)
+    total = response[:, 12, 0]
+    assert abs(total[0] - 1.0) < 0.01  # DC: reproduced
+    assert np.abs(total - 1.0).max() > 0.1  # the base's lag shows
+    # The driver alone: the first-order lag, exactly discretised.
+    loop = linear_system_response(chains.linearize_base_driver(driver),
+                                  OMEGA)[:, 0, 0]
+    q = np.exp(-driver.time_step / driver.lag)
+    z = np.exp(1j * OMEGA * driver.time_step)
+    assert relative_error(loop, (1.0 - q) / (z - q)) < 1e-6
+
+
+# Linearisation against the simulated nonlinear diagram.
+
+SIM_HZ = (0.5, 1.5, 4.0)
+SETTLE, WINDOW, AMPLITUDE = 3.0, 4.0, 0.01
+
+
+def _measured_response(system, input_size, output_port, axis):
+    """Drives input `axis` of `system` with three small sinusoids, logs
+    `output_port` every control period and fits the steady-state
+    sinusoids by least squares: the complex gain at each of SIM_HZ."""
+    builder = DiagramBuilder()
+    plant = builder.AddSystem(system)
+    omegas = 2 * np.pi * np.array(SIM_HZ)
+    sines = builder.AddSystem(Sine(np.full(3, AMPLITUDE), omegas,
+                                   np.zeros(3), 3))
+    spread = np.zeros((input_size, 3))
+    spread[axis] = 1.0
+    gain = builder.AddSystem(MatrixGain(spread))
+    builder.Connect(sines.get_output_port(0), gain.get_input_port())
+    builder.Connect(gain.get_output_port(), plant.get_input_port(0))
+    logger = LogVectorOutput(plant.GetOutputPort(output_port), builder, H)
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    simulator.AdvanceTo(SETTLE + WINDOW + 1e-9)
+    log = logger.FindLog(simulator.get_context())
+    t, y = log.sample_times(), log.data()[axis]
+    keep = t >= SETTLE - 1e-9
+    t, y = t[keep], y[keep]
+    design = np.column_stack([f(w * t) for w in omegas
+                              for f in (np.sin, np.cos)] + [np.ones_like(t)])
+    c = np.linalg.lstsq(design, y, rcond=None)[0]
+    # y = a sin + b cos = Im((a + j b) e^(j w t)) for input Im(A e^(jwt)).
+    return (c[0:6:2] + 1j * c[1:6:2]) / AMPLITUDE, omegas
+
+
+def _check(measured, predicted):
+    ratio = np.abs(measured) / np.abs(predicted)
+    assert np.abs(ratio - 1.0).max() < 0.02
+    phase = np.degrees(np.angle(measured / predicted))
+    assert np.abs(phase).max() < 2.0
+
+
+def test_base_filter_linearisation_matches_simulation():
+    from drake_wbc.systems import BaseVelocityFilter
+
+    params = BaseFilterParameters(time_step=H)
+    measured, omegas = _measured_response(BaseVelocityFilter(params), 3,
+                                          "filtered_velocity", 0)
+    predicted = linear_system_response(chains.linearize_base_filter(params),
+                                       omegas)[:, 0, 0]
+    _check(measured, predicted)
+
+
+def test_base_loop_chain_linearisation_matches_simulation(scenario, point,
+                                                          driver):
+    diagram = chains.build_split_diagram(scenario.controller, point, driver)
+    measured, omegas = _measured_response(diagram, 6, "end_effector_velocity",
+                                          0)
+    predicted = linear_system_response(chains.linearize_split(
+        scenario.controller, point, driver), omegas)[:, 12, 0]
+    _check(measured, predicted)
+    base, _ = _measured_response(
+        chains.build_split_diagram(scenario.controller, point, driver), 6,
+        "base_share", 0)
+    _check(base, linear_system_response(chains.linearize_split(
+        scenario.controller, point, driver), omegas)[:, 0, 0])
+
+
+# Margins, bandwidth and peak against textbook loops.
+
+def test_gain_margin_of_a_third_order_loop():
+    # L = K / (s (s + 1) (s + 2)): phase crossover at sqrt(2) rad/s, where
+    # |L| = K / 6, so the gain margin is 6 / K.
+    K = 1.5
+
+    def loop(w):
+        s = 1j * w
+        return K / (s * (s + 1) * (s + 2))
+
+    margins = stability_margins(loop, np.logspace(-2, 2, 50))
+    assert margins.gain_margin == pytest.approx(6.0 / K, rel=1e-9)
+    assert margins.phase_crossover == pytest.approx(np.sqrt(2.0), rel=1e-9)
+    # Its phase margin from the crossover root of w^2 (w^2 + 1)(w^2 + 4) =
+    # K^2, a cubic in w^2.
+    roots = np.roots([1.0, 5.0, 4.0, -K * K])
+    w_c = np.sqrt(roots[np.isreal(roots) & (roots.real > 0)].real[0])
+    expected = 90.0 - np.degrees(np.arctan(w_c) + np.arctan(w_c / 2.0))
+    assert margins.gain_crossover == pytest.approx(w_c, rel=1e-9)
+    assert margins.phase_margin == pytest.approx(expected, abs=1e-7)
+
+
+def test_phase_margin_of_a_second_order_loop():
+    # L = K / (s (s + a)): |L| = 1 at w_c^2 = (-a^2 + sqrt(a^4 + 4 K^2)) / 2
+    # and the phase margin is 90 - atan(w_c / a); no phase crossover.
+    K, a = 25.0, 2.0
+    margins = stability_margins(lambda w: K / (1j * w * (1j * w + a)),
+                                np.logspace(-2, 3, 40))
+    w_c = np.sqrt((-a**2 + np.sqrt(a**4 + 4 * K * K)) / 2)
+    assert margins.phase_margin == pytest.approx(
+        90.0 - np.degrees(np.arctan(w_c / a)), abs=1e-7)
+    assert np.isinf(margins.gain_margin)
+
+
+def test_gain_margin_of_a_discrete_integrator_loop():
+    # L = g / (z - 1) crosses -180 degrees at the Nyquist frequency with
+    # |L| = g / 2: the arm's force axis against a spring, g = K k_f h.
+    g = 0.3
+    _, omega = frequency_grid(0.01, 0.5 / H, 30)
+    margins = stability_margins(
+        lambda w: g / (np.exp(1j * w * H) - 1.0), omega)
+    assert margins.gain_margin == pytest.approx(2.0 / g, rel=1e-9)
+
+
+def test_bandwidth_and_peak_of_textbook_responses():
+    hertz, omega = frequency_grid(0.01, 100.0, 400)
+    w_c = 5.0
+    first = 1.0 / (1j * omega / w_c + 1.0)
+    assert bandwidth(omega, first) == pytest.approx(
+        w_c * np.sqrt(10**0.3 - 1.0), rel=1e-3)
+    zeta, w_n = 0.2, 10.0
+    second = lowpass_response(w_n, zeta, omega)
+    peak, at = peak_gain(omega, second)
+    assert peak == pytest.approx(1 / (2 * zeta * np.sqrt(1 - zeta**2)),
+                                 rel=1e-3)
+    assert at == pytest.approx(w_n * np.sqrt(1 - 2 * zeta**2), rel=1e-2)
+    assert np.isnan(bandwidth(omega, np.ones_like(omega)))
+
+
+def test_bad_inputs_are_named():
+    with pytest.raises(ValueError, match="high_hz"):
+        frequency_grid(10.0, 1.0)
+    with pytest.raises(ValueError, match="kind = 'spring'"):
+        chains.linearize_dmp_force("spring")
+    with pytest.raises(ValueError, match="loop"):
+        stability_margins(3.0, OMEGA)
+    with pytest.raises(ValueError, match="axis = 7"):
+        chains.linearize_dmp_force("stiffness", axis=7)
