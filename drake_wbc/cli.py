@@ -84,6 +84,18 @@ def _run_run(args):
     return 0
 
 
+def _add_bench_arguments(parser):
+    from drake_wbc.bench import add_bench_arguments
+
+    add_bench_arguments(parser)
+
+
+def _run_bench(args):
+    from drake_wbc.bench import run_bench
+
+    return run_bench(args)
+
+
 SUBCOMMANDS = (
     (
         "run",
@@ -92,6 +104,10 @@ SUBCOMMANDS = (
         _add_run_arguments,
         _run_run,
     ),
+    ("bench", "benchmark the closed-form controller against QP-based "
+     "peers (Drake's DiffIK, qpsolvers), a control tick per stage, and each "
+     "scenario's real-time factor and memory", _add_bench_arguments,
+     _run_bench),
     ("bode", analysis.BODE_HELP, analysis.add_bode_arguments,
      analysis.run_bode),
     ("diagram", analysis.DIAGRAM_HELP, analysis.add_diagram_arguments,

@@ -1,0 +1,231 @@
+"""`drake-wbc bench`: the arguments and the run.
+
+    drake-wbc bench [--quick] [--output DIR] [--repeats N]
+
+measures, in one process and interleaved (drake_wbc.bench.timing):
+the closed-form motion distribution against Drake's DiffIK and QPs
+through qpsolvers (bench.distribution_race), one control tick whole and
+per stage (bench.control_tick), the cost against the number of obstacle
+points and the control rate, and, each in a child process, every
+scenario's real-time factor and peak memory (bench.scenarios). It prints
+the tables and writes bench.json and bench.md to the output folder.
+"""
+
+import warnings
+from pathlib import Path
+
+from drake_wbc.bench import report, timing
+from drake_wbc.validation import positive, whole_number
+
+FULL = dict(repeats=30, problems=200, ticks=100, scaling_ticks=50,
+            points=(100, 250, 500, 1000, 2000),
+            rates=(100.0, 200.0, 500.0, 1000.0),
+            scenarios=None, scenario_duration=None)
+"""The settings of a full run (scenarios None: all of them, for their
+whole duration)."""
+
+QUICK = dict(repeats=5, problems=20, ticks=20, scaling_ticks=10,
+             points=(100, 2000), rates=(100.0, 1000.0),
+             scenarios=("trajectory_tracking",), scenario_duration=1.0)
+"""The settings of --quick: a few seconds of each part."""
+
+FAIRNESS_TOLERANCE = 1e-6
+"""Largest allowed difference of V_wb between same-problem contenders."""
+
+OSQP_NOTICE = "The default value of raise_error will change"
+"""The start of a notice osqp prints on every solve, silenced."""
+
+TICK_POINTS = 300
+"""Obstacle points of the control-tick part (a person and some walls)."""
+
+
+def add_bench_arguments(parser):
+    """Adds the arguments of `drake-wbc bench` to `parser`."""
+    parser.add_argument("--quick", action="store_true",
+                        help="a short run: few repetitions, one scenario "
+                             "for one simulated second")
+    parser.add_argument("--output", type=Path, default=Path("out/bench"),
+                        help="output folder (default: %(default)s)")
+    parser.add_argument("--repeats", type=int, default=None,
+                        help="timed repetitions of each micro-benchmark "
+                             f"(default: {FULL['repeats']}, quick "
+                             f"{QUICK['repeats']})")
+    parser.add_argument("--scenario-repeats", type=int, default=1,
+                        help="runs of each scenario (default: %(default)s)")
+    parser.add_argument("--scenario-duration", type=float, default=None,
+                        help="simulated seconds of each scenario (default: "
+                             "the scenario's, 1 with --quick)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="seed of the random problems (default: "
+                             "%(default)s)")
+    parser.add_argument("--profile", action="store_true",
+                        help="also write cProfile reports of the control "
+                             "tick and of a scenario")
+
+
+def settings_from(args):
+    """The run's settings (a dict like FULL) from parsed arguments."""
+    settings = dict(QUICK if args.quick else FULL)
+    if args.repeats is not None:
+        settings["repeats"] = whole_number("--repeats", args.repeats, 1)
+    if args.scenario_duration is not None:
+        settings["scenario_duration"] = positive("--scenario-duration",
+                                                 args.scenario_duration)
+    settings["scenario_repeats"] = whole_number(
+        "--scenario-repeats", args.scenario_repeats, 1)
+    settings["seed"] = args.seed
+    settings["quick"] = bool(args.quick)
+    return settings
+
+
+def bench_distribution(arm, settings):
+    """Part 1: the fairness check, then the interleaved race."""
+    from drake_wbc.bench import distribution_race as race
+
+    problems = race.make_problems(settings["problems"], settings["seed"],
+                                  arm)
+    same, informative = race.make_contenders(arm)
+    fairness = race.fairness(problems, same, informative)
+    contenders = {name: race.batch(solve, problems)
+                  for name, solve in {**same, **informative}.items()}
+    times = timing.interleave(contenders, settings["repeats"])
+    reference = times[race.REFERENCE]
+    entries = {}
+    for name, samples in times.items():
+        entries[name] = dict(
+            time_us=timing.scaled(timing.summarize(samples), 1e6),
+            ratio_to_closed_form=timing.summarize(samples / reference),
+            **fairness[name])
+    fair = all(entry["max_abs_difference"] <= FAIRNESS_TOLERANCE
+               for entry in fairness.values() if entry["same_problem"])
+    return dict(problems=len(problems), tolerance=FAIRNESS_TOLERANCE,
+                fair=fair, contenders=entries)
+
+
+def bench_tick(arm, settings):
+    """Part 2: the full tick and each stage."""
+    from drake_wbc.bench.control_tick import ControllerTicker, stage_tickers
+
+    ticker = ControllerTicker(arm, num_points=TICK_POINTS)
+    stages = stage_tickers(ticker)
+    n = settings["ticks"]
+    contenders = {"tick": ticker.ticks(n),
+                  "tick_cached": ticker.ticks(n, refresh=False)}
+    for name, stage in stages.items():
+        contenders[f"stage:{name}"] = stage.contender(n)
+        contenders[f"inputs:{name}"] = stage.contender(n, inputs_only=True)
+    times = timing.interleave(contenders, settings["repeats"])
+
+    def us(key):
+        return timing.scaled(timing.summarize(times[key]), 1e6)
+
+    return dict(
+        rate_hz=1.0 / ticker.time_step, obstacle_points=TICK_POINTS,
+        tick_us=us("tick"), tick_cached_us=us("tick_cached"),
+        stages={name: dict(tick_us=us(f"stage:{name}"),
+                           inputs_us=us(f"inputs:{name}"))
+                for name in stages})
+
+
+def bench_scaling(arm, settings):
+    """Part 4: ticks per second against obstacle points and control
+    rate (one ticker each, all interleaved)."""
+    from drake_wbc.bench.control_tick import ControllerTicker
+
+    configs = [("obstacle_points", points, 100.0)
+               for points in settings["points"]]
+    configs += [("control_rate", TICK_POINTS, rate)
+                for rate in settings["rates"]]
+    tickers = {(kind, points, rate): ControllerTicker(
+        arm, time_step=1.0 / rate, num_points=points)
+        for kind, points, rate in configs}
+    n = settings["scaling_ticks"]
+    times = timing.interleave({key: t.ticks(n) for key, t in tickers.items()},
+                              settings["repeats"])
+    result = {"obstacle_points": [], "control_rate": []}
+    for (kind, points, rate), samples in times.items():
+        stats = timing.scaled(timing.summarize(samples), 1e6)
+        result[kind].append(dict(
+            points=points, rate_hz=rate, tick_us=stats,
+            ticks_per_second=1e6 / stats["median"],
+            load=stats["median"] * 1e-6 * rate))
+    return result
+
+
+def bench_scenarios(settings, echo=print):
+    """Part 3: each scenario in a child process."""
+    from drake_wbc.bench.scenarios import measure_scenarios
+    from drake_wbc.scenario import find_scenario, scenario_files
+
+    names = settings["scenarios"]
+    paths = (scenario_files() if names is None
+             else [find_scenario(name) for name in names])
+    results = measure_scenarios(paths, settings["scenario_duration"],
+                                settings["scenario_repeats"], echo=echo)
+    for entry in results.values():
+        entry["chunk_real_time_factor_stats"] = timing.summarize(
+            entry.pop("chunk_real_time_factor"))
+    return results
+
+
+def run_benchmarks(settings, echo=print):
+    """Every part with `settings` (see FULL); returns the results dict
+    (environment, settings, distribution, control_tick, scaling,
+    scenarios, goals)."""
+    from drake_wbc.robot_model import ArmKinematics
+
+    arm = ArmKinematics()
+    results = {"environment": timing.environment(),
+               "settings": {k: (list(v) if isinstance(v, tuple) else v)
+                            for k, v in settings.items()}}
+    parts = (("distribution", "motion distribution race",
+              lambda: bench_distribution(arm, settings)),
+             ("control_tick", "control tick, whole and per stage",
+              lambda: bench_tick(arm, settings)),
+             ("scaling", "obstacle points and control rate",
+              lambda: bench_scaling(arm, settings)),
+             ("scenarios", "scenarios, each in a child process",
+              lambda: bench_scenarios(settings, echo)))
+    for key, label, part in parts:
+        echo(f"bench: {label} ...")
+        results[key] = part()
+    results["goals"] = report.evaluate_goals(results)
+    return results
+
+
+def run_bench(args, echo=print):
+    """Runs `drake-wbc bench` with parsed `args`; returns the exit code
+    (0; the goals are reported, not enforced)."""
+    settings = settings_from(args)
+    output = Path(args.output)
+    output.mkdir(parents=True, exist_ok=True)
+    with warnings.catch_warnings():
+        # osqp 1.x announces a change of a default on every solve.
+        warnings.filterwarnings("ignore", OSQP_NOTICE)
+        results = run_benchmarks(settings, echo)
+    text = report.markdown(results)
+    (output / "bench.md").write_text(text)
+    report.write_json(results, output / "bench.json")
+    echo("")
+    echo(text)
+    if args.profile:
+        _write_profiles(output, settings, echo)
+    echo(f"Written to {output}/: bench.json, bench.md"
+         + (", profile_tick.txt, profile_scenario.txt"
+            if args.profile else ""))
+    return 0
+
+
+def _write_profiles(output, settings, echo):
+    from drake_wbc.bench import profiling
+    from drake_wbc.bench.control_tick import make_ticker
+    from drake_wbc.scenario import find_scenario
+
+    echo("bench: profiling ...")
+    ticker = make_ticker(num_points=TICK_POINTS)
+    (output / "profile_tick.txt").write_text(
+        profiling.profile_ticks(ticker, 50 if settings["quick"] else 500))
+    (output / "profile_scenario.txt").write_text(profiling.profile_scenario(
+        find_scenario("trajectory_tracking"),
+        0.5 if settings["quick"] else 2.0))
+

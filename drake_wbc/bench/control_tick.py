@@ -1,0 +1,186 @@
+"""One control tick of the controller Diagram, whole and stage by stage.
+
+The controller runs alone in a Simulator (no plant) against fixed
+measurements: the robot at rest at the home pose, the tool's weight on
+the wrist sensor (no external wrench), obstacle points scattered around
+the base, and a constant reference twist. A tick is one AdvanceTo by the
+control period h. Before every tick the station inputs are fixed again
+(to the same values), as new measurements arrive each period on the
+robot: this invalidates the caches that depend on them, so that the
+stateless stages (ArmCapability, the wrench estimator, ...) compute each
+tick as they do in the closed loop instead of once.
+
+Per stage, each stage gets a context of its own with the state and the
+input values it has in the running diagram; a tick of it is: fix its
+inputs again, evaluate every output, and the periodic discrete update
+when it has state. The cost of fixing the inputs alone is reported next
+to it (the `inputs` column), so that the net cost of the stage is plain.
+"""
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import PortDataType
+
+from drake_wbc.controller import (
+    STATION_INPUTS,
+    ControllerParameters,
+    build_controller,
+)
+from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.validation import positive, whole_number
+
+REFERENCE_VELOCITY = np.array([0.1, 0.05, 0.0, 0.0, 0.0, 0.05])
+"""The reference twist V_ee^ref (T_w) of the ticks."""
+
+BASE_STATE = np.array([0.0, 0.0, 0.3, 0.0, 0.0, 0.0])
+"""The measured base state: at the origin, yawed 0.3 rad, at rest."""
+
+
+def tool_weight_reading(arm, q_a=HOME_ARM_POSITIONS):
+    """What the wrist sensor reads with nothing touching the tool: the
+    tool's weight as [f; tau] at and in the measurement frame, from the
+    plant's mass properties."""
+    plant, model = arm.plant, arm.model
+    tool = plant.GetBodyByName("wiping_tool", model.tool)
+    context = plant.CreateDefaultContext()
+    X_MB = tool.body_frame().CalcPose(context, model.ft_measurement_frame)
+    p_M_com = X_MB.multiply(tool.CalcCenterOfMassInBodyFrame(context))
+    R_AM = arm.frame_pose(q_a, model.ft_measurement_frame).rotation()
+    weight_M = R_AM.inverse().multiply(
+        np.array([0.0, 0.0, -9.81 * tool.get_mass(context)]))
+    return np.concatenate([weight_M, np.cross(p_M_com, weight_M)])
+
+
+def obstacle_points(count, seed=0):
+    """`count` obstacle points (count, 2) in T_b, seeded: a quarter of
+    them within 0.5 m of the footprint (inside the repulsive field's
+    d_th), the rest between 1 and 5 m away, like LIDAR returns on walls."""
+    count = whole_number("count", count, minimum=0)
+    rng = np.random.default_rng(seed)
+    near = count // 4
+    radius = np.concatenate([rng.uniform(0.55, 0.9, near),
+                             rng.uniform(1.0, 5.0, count - near)])
+    angle = rng.uniform(-np.pi, np.pi, count)
+    return np.column_stack([radius * np.cos(angle),
+                            radius * np.sin(angle)])
+
+
+class ControllerTicker:
+    """The controller Diagram in a Simulator of its own, with fixed inputs.
+
+    Args:
+        arm: a shared ArmKinematics.
+        time_step: control period h in s (0.01 s: 100 Hz, the paper's).
+        num_points: number of obstacle points on lidar.obstacle_points.
+    """
+
+    def __init__(self, arm, time_step=0.01, num_points=300):
+        self.time_step = positive("time_step", time_step)
+        params = ControllerParameters(time_step=self.time_step)
+        self.controller = build_controller(params, arm)
+        diagram = self.controller.diagram
+        self.simulator = Simulator(diagram)
+        self.context = self.simulator.get_mutable_context()
+        self.values = {
+            "base.state_estimated": BASE_STATE,
+            "arm.position_measured": HOME_ARM_POSITIONS,
+            "wrist.wrench_measured": tool_weight_reading(arm),
+            "lidar.obstacle_points": AbstractValue.Make(
+                obstacle_points(num_points)),
+        }
+        self.ports = {name: diagram.GetInputPort(name)
+                      for name in STATION_INPUTS}
+        self.refresh()
+        diagram.GetInputPort("reference_velocity").FixValue(
+            self.context, REFERENCE_VELOCITY)
+        self.controller.initialize(self.context)
+        self.simulator.Initialize()
+
+    def refresh(self):
+        """Fixes the station inputs again (new measurements)."""
+        for name, port in self.ports.items():
+            port.FixValue(self.context, self.values[name])
+
+    def ticks(self, count, refresh=True):
+        """A timing.interleave contender: `count` ticks of the controller
+        (measurements fixed again before each if `refresh`)."""
+        count = whole_number("count", count, minimum=1)
+        h = self.time_step
+
+        def run():
+            for _ in range(count):
+                if refresh:
+                    self.refresh()
+                self.simulator.AdvanceTo(self.context.get_time() + h)
+            return count
+
+        return run
+
+
+class StageTicker:
+    """One stage of a running ControllerTicker, in a context of its own.
+
+    Args:
+        ticker: a ControllerTicker that has run at least one tick.
+        name: the stage's name (a key of Controller.stages).
+    """
+
+    def __init__(self, ticker, name):
+        stage = ticker.controller.stages[name]
+        inner = stage.GetMyContextFromRoot(ticker.context)
+        self.stage, self.name = stage, name
+        self.context = stage.CreateDefaultContext()
+        self.context.SetTimeStateAndParametersFrom(inner)
+        self.inputs = []
+        for i in range(stage.num_input_ports()):
+            port = stage.get_input_port(i)
+            if not port.HasValue(inner):
+                continue  # an optional input left unconnected
+            if port.get_data_type() == PortDataType.kVectorValued:
+                value = np.array(port.Eval(inner))
+            else:
+                value = port.EvalAbstract(inner).Clone()
+            self.inputs.append((port, value))
+        self.outputs = [stage.get_output_port(i)
+                        for i in range(stage.num_output_ports())]
+        self.has_state = self.context.num_discrete_state_groups() > 0
+
+    def refresh(self):
+        for port, value in self.inputs:
+            port.FixValue(self.context, value)
+
+    def tick(self):
+        """Inputs fixed again, every output evaluated, the discrete
+        update computed."""
+        self.refresh()
+        for port in self.outputs:
+            port.Eval(self.context)
+        if self.has_state:
+            self.stage.EvalUniquePeriodicDiscreteUpdate(self.context)
+
+    def contender(self, count, inputs_only=False):
+        """A timing.interleave contender: `count` stage ticks (or only
+        the fixing of the inputs, if `inputs_only`)."""
+        count = whole_number("count", count, minimum=1)
+        work = self.refresh if inputs_only else self.tick
+
+        def run():
+            for _ in range(count):
+                work()
+            return count
+
+        return run
+
+
+def stage_tickers(ticker):
+    """A StageTicker for every stage of `ticker`'s controller, after one
+    tick so that every input has its running value."""
+    ticker.ticks(1)()
+    return {name: StageTicker(ticker, name)
+            for name in ticker.controller.stages}
+
+
+def make_ticker(arm=None, **kwargs):
+    """A ControllerTicker on `arm` (a new ArmKinematics if None)."""
+    return ControllerTicker(arm or ArmKinematics(), **kwargs)

@@ -1,0 +1,346 @@
+"""The closed-form motion distribution against QP-based peers.
+
+Every contender solves the same seeded 9-DoF problems: at an arm
+configuration q_a, split an end-effector twist V_ee (T_b) into the
+whole-body input V_wb = [V_a; V_b] by the weighted least-norm problem of
+eq. (wln) with Q(sigma_xy, sigma_phi) of eq. (weight-factors) and the
+null-space velocity V_n^0 = k_n [grad_x C_m; 0_3] of eq. (wbccm):
+
+    min (V_wb - V_n^0)^T Q^-1 (V_wb - V_n^0)   s.t.   J_wb V_wb = V_ee,
+
+whose solution is eq. (wbsln) with the null-space term,
+V_wb = J^+ V_ee + (I - J^+ J_wb) V_n^0. J_wb = [R_ba, J_b] (eq. (1),
+bottom line) needs p_ee from the MultibodyPlant, so every contender
+starts from the same kinematics (ArmKinematics.evaluate, as the
+controller's ArmCapability does each tick) and its time includes it.
+
+Contenders:
+- closed_form: the controller's own path (kinematics.whole_body_jacobian
+  and distribution.distribute, as MotionDistributor calls them).
+- drake_diffik: Drake's DoDifferentialInverseKinematics (a QP solved
+  with OSQP inside Drake) in the scaled input u = Q^-1/2 V_wb, where
+  the weighted problem is its unweighted one: J = J_wb Q^1/2, joint
+  centering gain I and nominal position Q^-1/2 V_n^0 at q = 0.
+- qpsolvers_<solver>: the QP above through qpsolvers (OSQP, Clarabel,
+  ProxQP when installed), P = Q^-1 and q = -Q^-1 V_n^0, equality
+  constraints only, tolerances tightened to 1e-9 so they agree.
+- drake_diffik_plant (informative, not the same problem): Drake's
+  overload that evaluates its own kinematics on the robot's
+  MultibodyPlant, in joint velocities, unweighted; the plant has two
+  more velocities (the flexible mount), held at zero by velocity
+  bounds. Drake builds the null-space cost from a non-orthonormal
+  basis, so with those bounds its answer is not the 9-DoF least-norm
+  one; its difference is reported, not checked.
+
+sigma is drawn inside (0.05, 0.95) so that Q is invertible (the QPs need
+Q^-1); no inequality constraint is present, so all the same-problem
+contenders must agree (fairness).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.multibody.inverse_kinematics import (
+    DifferentialInverseKinematicsParameters,
+    DifferentialInverseKinematicsStatus,
+    DoDifferentialInverseKinematics,
+)
+
+from drake_wbc import distribution, kinematics
+from drake_wbc.robot_model import (
+    ARM_JOINTS,
+    BASE_JOINTS,
+    MOUNT_JOINTS,
+    ArmKinematics,
+    joint_position_indices,
+    joint_velocity_indices,
+)
+from drake_wbc.validation import whole_number
+
+REFERENCE = "closed_form"
+"""The contender whose time the ratios divide by."""
+
+QP_SOLVERS = ("osqp", "clarabel", "proxqp")
+"""The qpsolvers back-ends raced, those installed."""
+
+QP_SETTINGS = {
+    "osqp": dict(eps_abs=1e-10, eps_rel=1e-10, polishing=True,
+                 verbose=False),
+    "clarabel": dict(tol_gap_abs=1e-10, tol_gap_rel=1e-10, tol_feas=1e-10,
+                     verbose=False),
+    "proxqp": dict(eps_abs=1e-10, eps_rel=0.0, verbose=False),
+}
+"""Tolerances tight enough for the solvers to agree with the closed form
+to about 1e-8 (their defaults stop near 1e-5)."""
+
+SPARSE_SOLVERS = ("osqp", "clarabel")
+"""Back-ends that take sparse matrices (given as CSC directly, so that
+qpsolvers converts nothing)."""
+
+
+@dataclass(frozen=True)
+class DistributionProblem:
+    """One problem of the race (see the module docstring).
+
+    Attributes:
+        arm_position: q_a (6), rad.
+        base_yaw: phi_b, rad (for drake_diffik_plant's world frame).
+        end_effector_velocity: V_ee (6) in T_b, [v; w].
+        sigma_xy, sigma_phi: weighting factors in (0, 1).
+        capability_gradient: grad_x C_m (6), T_a.
+        null_space_gain: k_n >= 0.
+    """
+
+    arm_position: np.ndarray
+    base_yaw: float
+    end_effector_velocity: np.ndarray
+    sigma_xy: float
+    sigma_phi: float
+    capability_gradient: np.ndarray
+    null_space_gain: float
+
+
+def make_problems(count, seed, arm):
+    """`count` problems drawn with numpy's generator seeded by `seed`:
+    q_a uniform in 80 % of the joint ranges of `arm` (ArmKinematics),
+    V_ee normal with 0.1 m/s, rad/s per component, sigma uniform in
+    (0.05, 0.95), k_n uniform in [0, 0.2]."""
+    count = whole_number("count", count, minimum=1)
+    rng = np.random.default_rng(seed)
+    middle = 0.5 * (arm.lower + arm.upper)
+    half = 0.4 * (arm.upper - arm.lower)
+    return [
+        DistributionProblem(
+            arm_position=rng.uniform(middle - half, middle + half),
+            base_yaw=float(rng.uniform(-np.pi, np.pi)),
+            end_effector_velocity=rng.normal(0.0, 0.1, 6),
+            sigma_xy=float(rng.uniform(0.05, 0.95)),
+            sigma_phi=float(rng.uniform(0.05, 0.95)),
+            capability_gradient=rng.normal(0.0, 0.3, 6),
+            null_space_gain=float(rng.uniform(0.0, 0.2)),
+        )
+        for _ in range(count)
+    ]
+
+
+def _problem_data(arm, R_ba, problem):
+    """(J_wb, diagonal of Q, V_n^0): the controller's kinematics and
+    weighting at `problem`."""
+    p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
+    J = kinematics.whole_body_jacobian(None, p_ee, R_ba)
+    weights = np.diag(distribution.weighting_matrix(problem.sigma_xy,
+                                                    problem.sigma_phi))
+    V_n = distribution.capability_null_velocity(
+        problem.capability_gradient, problem.null_space_gain)
+    return J, weights, V_n
+
+
+def closed_form(arm):
+    """The controller's distribution: ArmKinematics, whole_body_jacobian,
+    distribute (eqs. (1), (2), (wbsln), (wbccm))."""
+    R_ba = np.array(arm.R_ba, dtype=float)
+    damping = distribution.DEFAULT_DAMPING
+
+    def solve(problem):
+        p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
+        J = kinematics.whole_body_jacobian(None, p_ee, R_ba)
+        V_n = distribution.capability_null_velocity(
+            problem.capability_gradient, problem.null_space_gain)
+        return distribution.distribute(
+            J, problem.end_effector_velocity, problem.sigma_xy,
+            problem.sigma_phi, V_n, damping)
+
+    return solve
+
+
+def drake_diffik(arm, time_step=0.01):
+    """Drake's DoDifferentialInverseKinematics on the scaled problem."""
+    R_ba = np.array(arm.R_ba, dtype=float)
+    params = DifferentialInverseKinematicsParameters(9, 9)
+    params.set_time_step(time_step)
+    params.set_joint_centering_gain(np.eye(9))
+    zero = np.zeros(9)
+
+    def solve(problem):
+        J, weights, V_n = _problem_data(arm, R_ba, problem)
+        root = np.sqrt(weights)
+        params.set_nominal_joint_position(V_n / root)
+        result = DoDifferentialInverseKinematics(
+            zero, zero, problem.end_effector_velocity, J * root, params)
+        _check_status(result)
+        return root * result.joint_velocities
+
+    return solve
+
+
+def _check_status(result):
+    if result.status != DifferentialInverseKinematicsStatus.kSolutionFound:
+        raise RuntimeError(
+            f"DoDifferentialInverseKinematics returned {result.status} on "
+            "a problem without active constraints")
+
+
+def qpsolvers_contender(arm, solver):
+    """The weighted QP through qpsolvers with back-end `solver`."""
+    import qpsolvers
+    import scipy.sparse
+
+    if solver not in qpsolvers.available_solvers:
+        raise ValueError(
+            f"solver = {solver!r} is not allowed: must be one of the "
+            f"installed qpsolvers back-ends {qpsolvers.available_solvers}")
+    R_ba = np.array(arm.R_ba, dtype=float)
+    sparse = solver in SPARSE_SOLVERS
+    settings = QP_SETTINGS.get(solver, {})
+
+    def solve(problem):
+        J, weights, V_n = _problem_data(arm, R_ba, problem)
+        inverse = 1.0 / weights
+        if sparse:
+            P = scipy.sparse.diags(inverse, format="csc")
+            A = scipy.sparse.csc_matrix(J)
+        else:
+            P, A = np.diag(inverse), J
+        x = qpsolvers.solve_qp(P, -inverse * V_n, A=A,
+                               b=problem.end_effector_velocity,
+                               solver=solver, **settings)
+        if x is None:
+            raise RuntimeError(f"qpsolvers back-end {solver!r} found no "
+                               "solution")
+        return x
+
+    return solve
+
+
+class PlantDiffIk:
+    """Drake's DiffIK overload on the robot's MultibodyPlant (its own
+    kinematics), joint space, mount held by velocity bounds.
+
+    Args:
+        arm: ArmKinematics whose plant (the robot alone) is used.
+        time_step: DiffIK's time step, s.
+    """
+
+    def __init__(self, arm, time_step=0.01):
+        plant, model = arm.plant, arm.model
+        self.plant, self.frame = plant, model.tcp_frame
+        self.context = plant.CreateDefaultContext()
+        nv = plant.num_velocities()
+        self.iq_arm = joint_position_indices(plant, ARM_JOINTS, model.arm)
+        self.iq_base = joint_position_indices(plant, BASE_JOINTS,
+                                              model.base)
+        self.iv_arm = joint_velocity_indices(plant, ARM_JOINTS, model.arm)
+        self.iv_base = joint_velocity_indices(plant, BASE_JOINTS,
+                                              model.base)
+        mount = joint_velocity_indices(plant, MOUNT_JOINTS, model.base)
+        limit = np.full(nv, np.inf)
+        limit[mount] = 0.0
+        self.params = DifferentialInverseKinematicsParameters(
+            plant.num_positions(), nv)
+        self.params.set_time_step(time_step)
+        self.params.set_joint_velocity_limits((-limit, limit))
+        self.params.set_joint_centering_gain(np.eye(nv))
+
+    def _world_twist(self, problem):
+        """V_ee in the world, Drake's order [w; v]."""
+        c, s = np.cos(problem.base_yaw), np.sin(problem.base_yaw)
+        R_wb = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        V = problem.end_effector_velocity
+        return np.concatenate([R_wb @ V[3:], R_wb @ V[:3]])
+
+    def __call__(self, problem):
+        """The solution as [dq_a (6); V_b (3, T_b)]."""
+        q = np.zeros(self.plant.num_positions())
+        q[self.iq_arm] = problem.arm_position
+        q[self.iq_base[2]] = problem.base_yaw
+        self.plant.SetPositions(self.context, q)
+        nominal = q.copy()
+        nominal[self.iq_arm] += (problem.null_space_gain
+                                 * problem.capability_gradient)
+        self.params.set_nominal_joint_position(nominal)
+        result = DoDifferentialInverseKinematics(
+            self.plant, self.context, self._world_twist(problem),
+            self.frame, self.params)
+        _check_status(result)
+        v = result.joint_velocities
+        c, s = np.cos(problem.base_yaw), np.sin(problem.base_yaw)
+        vx, vy, wz = v[self.iv_base]
+        return np.concatenate([v[self.iv_arm],
+                               [c * vx + s * vy, -s * vx + c * vy, wz]])
+
+    def least_norm(self, problem):
+        """The 9-DoF least-norm answer of the same joint-space problem
+        (distribution.weighted_pseudoinverse with Q = I), to compare."""
+        self(problem)  # sets the configuration
+        from pydrake.multibody.tree import JacobianWrtVariable
+
+        world = self.plant.world_frame()
+        J = self.plant.CalcJacobianSpatialVelocity(
+            self.context, JacobianWrtVariable.kV, self.frame, np.zeros(3),
+            world, world)
+        columns = np.concatenate([self.iv_arm, self.iv_base])
+        J = np.vstack([J[3:], J[:3]])[:, columns]
+        twist = self._world_twist(problem)
+        V = np.concatenate([twist[3:], twist[:3]])
+        z = np.zeros(9)
+        z[:6] = problem.null_space_gain * problem.capability_gradient
+        J_pinv = distribution.weighted_pseudoinverse(J, np.eye(9))
+        v = J_pinv @ V + z - J_pinv @ (J @ z)
+        c, s = np.cos(problem.base_yaw), np.sin(problem.base_yaw)
+        vx, vy, wz = v[6:]
+        return np.concatenate([v[:6], [c * vx + s * vy, -s * vx + c * vy,
+                                       wz]])
+
+
+def make_contenders(arm=None, time_step=0.01, solvers=QP_SOLVERS):
+    """The contenders by name: callables problem -> V_wb (9,).
+
+    Returns:
+        (same_problem, informative): two dicts; the first holds
+        closed_form first, then the contenders that must agree with it.
+    """
+    import qpsolvers
+
+    arm = arm or ArmKinematics()
+    same = {REFERENCE: closed_form(arm),
+            "drake_diffik": drake_diffik(arm, time_step)}
+    for solver in solvers:
+        if solver in qpsolvers.available_solvers:
+            same[f"qpsolvers_{solver}"] = qpsolvers_contender(arm, solver)
+    return same, {"drake_diffik_plant": PlantDiffIk(arm, time_step)}
+
+
+def fairness(problems, same_problem, informative=None):
+    """Largest difference of each contender's V_wb from closed_form's.
+
+    Returns:
+        dict name -> {"max_abs_difference": float, "same_problem": bool};
+        the informative contenders are compared with the least-norm
+        answer of their own joint-space problem.
+    """
+    reference = same_problem[REFERENCE]
+    expected = [reference(p) for p in problems]
+    report = {}
+    for name, solve in same_problem.items():
+        difference = max(float(np.max(np.abs(solve(p) - e)))
+                         for p, e in zip(problems, expected, strict=True))
+        report[name] = {"max_abs_difference": difference,
+                        "same_problem": True}
+    for name, solver in (informative or {}).items():
+        difference = max(
+            float(np.max(np.abs(solver(p) - solver.least_norm(p))))
+            for p in problems)
+        report[name] = {"max_abs_difference": difference,
+                        "same_problem": False}
+    return report
+
+
+def batch(solve, problems):
+    """A contender for timing.interleave: solves every problem once."""
+
+    def run():
+        for problem in problems:
+            solve(problem)
+        return len(problems)
+
+    return run

@@ -1,0 +1,116 @@
+"""Real-time factor and peak memory of each scenario's closed loop.
+
+Each run happens in a child process of its own (multiprocessing, spawn),
+so that its peak resident memory (resource.getrusage, ru_maxrss) is that
+of one run alone, from a fresh interpreter: Python, Drake, the station
+(plant, LIDARs, scene) and the controller, the loggers of
+drake_wbc.runner included. The run is the scenario's first variant,
+built by runner.build_closed_loop and started as runner.simulate starts
+it; it advances in chunks of `chunk` simulated seconds, and the real-time
+factor of every chunk is kept, so that a run gives its spread as well as
+its overall figure (simulated time over wall time, the build excluded).
+"""
+
+import multiprocessing
+import resource
+import time
+
+import numpy as np
+
+from drake_wbc.validation import positive, whole_number
+
+
+def _run_in_child(path, duration, chunk):
+    """The body of the child process; returns a plain dict."""
+    started = time.perf_counter()
+    from pydrake.systems.analysis import Simulator
+
+    from drake_wbc.runner import build_closed_loop
+    from drake_wbc.scenario import load_scenario
+
+    imported = time.perf_counter()
+    scenario = load_scenario(path)
+    duration = scenario.duration if duration is None else min(
+        duration, scenario.duration)
+    loop = build_closed_loop(scenario, scenario.variants[0])
+    simulator = Simulator(loop.diagram)
+    root = simulator.get_mutable_context()
+    loop.station.set_initial_state(root)
+    loop.controller.initialize(
+        root, arm_position=scenario.station.initial_arm_positions)
+    simulator.Initialize()
+    built = time.perf_counter()
+    factors, t = [], 0.0
+    while t < duration - 1e-12:
+        step_end = min(t + chunk, duration)
+        wall = time.perf_counter()
+        simulator.AdvanceTo(step_end)
+        factors.append((step_end - t) / (time.perf_counter() - wall))
+        t = step_end
+    finished = time.perf_counter()
+    return {
+        "variant": scenario.variants[0].name,
+        "simulated_s": duration,
+        "wall_s": finished - built,
+        "real_time_factor": duration / (finished - built),
+        "chunk_real_time_factors": factors,
+        "import_s": imported - started,
+        "build_s": built - imported,
+        # Linux reports ru_maxrss in KiB.
+        "peak_memory_mib": resource.getrusage(
+            resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+    }
+
+
+def run_scenario_in_child(path, duration=None, chunk=0.5):
+    """Runs one scenario in a fresh spawned process.
+
+    Args:
+        path: the scenario file.
+        duration: simulated seconds (the scenario's own if None; never
+            more than it).
+        chunk: simulated seconds between two wall-clock readings.
+
+    Returns:
+        dict: variant, simulated_s, wall_s, real_time_factor,
+        chunk_real_time_factors, import_s, build_s, peak_memory_mib.
+    """
+    if duration is not None:
+        positive("duration", duration)
+    positive("chunk", chunk)
+    context = multiprocessing.get_context("spawn")
+    with context.Pool(1, maxtasksperchild=1) as pool:
+        return pool.apply(_run_in_child, (str(path), duration, chunk))
+
+
+def measure_scenarios(paths, duration=None, repeats=1, chunk=0.5,
+                      echo=None):
+    """Runs every scenario `repeats` times, round-robin, one at a time.
+
+    Returns:
+        dict scenario name -> {"runs": [child results], "real_time_factor":
+        median over runs, "chunk_real_time_factor": all chunks' factors
+        (for the spread), "peak_memory_mib": largest over runs}.
+    """
+    repeats = whole_number("repeats", repeats, minimum=1)
+    results = {path.stem: [] for path in paths}
+    for r in range(repeats):
+        for path in paths:
+            run = run_scenario_in_child(path, duration, chunk)
+            results[path.stem].append(run)
+            if echo is not None:
+                echo(f"  {path.stem} (run {r + 1}/{repeats}): "
+                     f"{run['simulated_s']:.1f} s simulated, real-time "
+                     f"factor {run['real_time_factor']:.2f}, peak memory "
+                     f"{run['peak_memory_mib']:.0f} MiB")
+    summary = {}
+    for name, runs in results.items():
+        summary[name] = {
+            "runs": runs,
+            "real_time_factor": float(np.median(
+                [run["real_time_factor"] for run in runs])),
+            "chunk_real_time_factor": np.concatenate(
+                [run["chunk_real_time_factors"] for run in runs]),
+            "peak_memory_mib": max(run["peak_memory_mib"] for run in runs),
+        }
+    return summary

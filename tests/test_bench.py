@@ -1,0 +1,111 @@
+"""drake-wbc bench: the quick run writes well-formed tables, and the race
+is fair (every same-problem contender returns the same V_wb)."""
+
+import argparse
+import json
+
+import numpy as np
+import pytest
+
+from drake_wbc import distribution, kinematics
+from drake_wbc.bench import add_bench_arguments, run_bench
+from drake_wbc.bench import distribution_race as race
+from drake_wbc.bench.report import GOALS
+from drake_wbc.robot_model import ArmKinematics
+
+
+@pytest.fixture(scope="module")
+def arm():
+    return ArmKinematics()
+
+
+def test_quick_bench_writes_well_formed_tables(tmp_path):
+    parser = argparse.ArgumentParser()
+    add_bench_arguments(parser)
+    args = parser.parse_args(["--quick", "--output", str(tmp_path),
+                              "--repeats", "2"])
+    printed = []
+    assert run_bench(args, echo=printed.append) == 0
+    results = json.loads((tmp_path / "bench.json").read_text())
+    assert set(results) == {"environment", "settings", "distribution",
+                            "control_tick", "scaling", "scenarios", "goals"}
+    env = results["environment"]
+    assert env["packages"]["drake"] and env["packages"]["numpy"]
+    assert env["cpu_count"] >= 1 and env["cpu_model"] and env["python"]
+    contenders = results["distribution"]["contenders"]
+    assert {"closed_form", "drake_diffik", "qpsolvers_osqp",
+            "qpsolvers_clarabel"} <= set(contenders)
+    for entry in contenders.values():
+        stats = entry["time_us"]
+        assert stats["n"] == 2
+        assert 0 < stats["p10"] <= stats["median"] <= stats["p90"]
+    tick = results["control_tick"]
+    assert tick["tick_us"]["median"] > 0
+    assert set(tick["stages"]) >= {"capability", "distributor",
+                                   "base_cdmp", "arm_controller"}
+    assert [e["points"] for e in results["scaling"]["obstacle_points"]] \
+        == [100, 2000]
+    assert [e["rate_hz"] for e in results["scaling"]["control_rate"]] \
+        == [100.0, 1000.0]
+    run = results["scenarios"]["trajectory_tracking"]
+    assert run["real_time_factor"] > 0 and run["peak_memory_mib"] > 50
+    assert [g["goal"] for g in results["goals"]] == [g[0] for g in GOALS]
+    assert all(isinstance(g["met"], bool) for g in results["goals"])
+
+    text = (tmp_path / "bench.md").read_text()
+    assert text in printed
+    tables = [line for line in text.splitlines() if line.startswith("|")]
+    for name in contenders:
+        assert any(line.startswith(f"| {name} |") for line in tables), name
+    assert any(line.startswith("| stage capability |") for line in tables)
+    assert any(line.startswith("| trajectory_tracking |")
+               for line in tables)
+    # Every table's rows have as many cells as its header.
+    blocks, block = [], []
+    for line in text.splitlines() + [""]:
+        if line.startswith("|"):
+            block.append(line)
+        elif block:
+            blocks.append(block)
+            block = []
+    assert len(blocks) == 5
+    for rows in blocks:
+        assert len({row.count("|") for row in rows}) == 1, rows[0]
+
+
+@pytest.mark.filterwarnings("ignore:The default value of raise_error")
+def test_contenders_agree_without_active_constraints(arm):
+    problems = race.make_problems(12, seed=7, arm=arm)
+    same, informative = race.make_contenders(arm)
+    report = race.fairness(problems, same, informative)
+    assert set(report) == set(same) | set(informative)
+    for name in same:
+        assert report[name]["max_abs_difference"] < 1e-6, name
+    # The closed form itself satisfies the task: J_wb V_wb = V_ee.
+    solve = same[race.REFERENCE]
+    for problem in problems:
+        p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
+        J = kinematics.whole_body_jacobian(None, p_ee, arm.R_ba)
+        np.testing.assert_allclose(J @ solve(problem),
+                                   problem.end_effector_velocity,
+                                   atol=1e-12)
+
+
+@pytest.mark.filterwarnings("ignore:The default value of raise_error")
+def test_scaled_diffik_is_the_weighted_least_norm_problem(arm):
+    """Independent of the controller's code: the weighted problem's KKT
+    system, solved directly, gives what every contender gives."""
+    problem = race.make_problems(1, seed=3, arm=arm)[0]
+    p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
+    J = kinematics.whole_body_jacobian(None, p_ee, arm.R_ba)
+    W = np.diag(1.0 / np.diag(distribution.weighting_matrix(
+        problem.sigma_xy, problem.sigma_phi)))
+    V_n = np.concatenate([problem.null_space_gain
+                          * problem.capability_gradient, np.zeros(3)])
+    kkt = np.block([[W, J.T], [J, np.zeros((6, 6))]])
+    rhs = np.concatenate([W @ V_n, problem.end_effector_velocity])
+    expected = np.linalg.solve(kkt, rhs)[:9]
+    same, _ = race.make_contenders(arm)
+    for name, solve in same.items():
+        np.testing.assert_allclose(solve(problem), expected, atol=1e-7,
+                                   err_msg=name)
