@@ -48,6 +48,7 @@ from drake_wbc.validation import (
     as_vector,
     non_negative,
     positive,
+    selection,
 )
 
 
@@ -213,11 +214,7 @@ class ArmCdmpParameters:
     def __post_init__(self):
         for name in ("k_p", "k_d", "k_f"):
             non_negative(name, getattr(self, name))
-        S_m = as_vector("S_m", self.S_m, 6)
-        if np.any((S_m != 0.0) & (S_m != 1.0)):
-            raise ValueError(f"S_m = {S_m!r} is not allowed: every "
-                             "diagonal entry must be 0 or 1")
-        _set(self, "S_m", S_m)
+        _set(self, "S_m", selection("S_m", self.S_m, 6))
         _set(self, "F_d", as_vector("F_d", self.F_d, 6))
         _set(self, "S_hri", _switch("S_hri", self.S_hri))
         _dmp(self.dmp)
@@ -331,7 +328,11 @@ def footprint_distance(obstacle_points, params):
     zero = 0.0 * qx
     ox, oy = np.where(qx > 0, qx, zero), np.where(qy > 0, qy, zero)
     outside = (qx > 0) | (qy > 0)
-    r = np.sqrt(np.where(outside, ox**2 + oy**2, zero + 1.0))
+    # r = |(ox, oy)|, scaled by the larger part first so that it cannot
+    # underflow to 0 outside (which would make n = 0 / 0).
+    m = np.where(outside, np.where(ox >= oy, ox, oy), zero + 1.0)
+    r = m * np.sqrt(np.where(outside, (ox / m)**2 + (oy / m)**2,
+                             zero + 1.0))
     nearer_x = qx >= qy
     n = np.stack([
         np.where(outside, sx * ox / r, np.where(nearer_x, sx, 0.0) + zero),

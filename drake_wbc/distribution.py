@@ -90,10 +90,10 @@ class SingularityDamping:
     i.e. that of J Q^(1/2) exceeds 1 / sqrt(threshold).
 
     Attributes:
-        threshold: eps / s_max; default 1e-4, i.e. damping starts where
-            the smallest singular value of J Q^(1/2) falls below 1 % of
-            the largest. Whole-body Jacobians [R_ba, J_b] stay above it
-            (module docstring).
+        threshold: eps / s_max, in (0, 1); default 1e-4, i.e. damping
+            starts where the smallest singular value of J Q^(1/2) falls
+            below 1 % of the largest. Whole-body Jacobians [R_ba, J_b]
+            stay above it (module docstring).
         max_squared: lambda_max^2 / s_max, reached when J Q J^T is exactly
             singular; default 1e-4 (lambda_max = 1 % of the largest
             singular value of J Q^(1/2)). Equal to the threshold, it makes
@@ -110,7 +110,12 @@ class SingularityDamping:
     max_squared: float = 1e-4
 
     def __post_init__(self):
-        positive("threshold", self.threshold)
+        threshold = positive("threshold", self.threshold)
+        if threshold >= 1.0:
+            raise ValueError(
+                f"threshold = {threshold!r} is not allowed: must lie in "
+                "(0, 1) (s_min / s_max <= 1 always, so 1 or more would damp "
+                "every J Q J^T)")
         non_negative("max_squared", self.max_squared)
 
 

@@ -124,6 +124,66 @@ def whole_number(name, value, minimum=0):
     return int(number)
 
 
+def boolean(name, value):
+    """Returns `value` as a bool after checking that it is True or False
+    (numpy's bools too; not 0, 1 or a string).
+
+    Raises:
+        ValueError: naming `name` and its value.
+    """
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} = {value!r} is not allowed: must be true "
+                         "or false")
+    return bool(value)
+
+
+def text(name, value):
+    """Returns `value` after checking that it is a string.
+
+    Raises:
+        ValueError: naming `name` and its value.
+    """
+    if not isinstance(value, str):
+        raise ValueError(f"{name} = {value!r} is not allowed: must be a "
+                         "string")
+    return value
+
+
+def selection(name, value, size):
+    """Returns `value` as a vector of `size` entries, each exactly 0 or 1
+    (the diagonal of a selection matrix such as S_m, or a switch such as
+    S_hri with size 1).
+
+    Raises:
+        ValueError: naming `name`, its value and the first bad entry.
+    """
+    vector = as_vector(name, np.atleast_1d(value), size)
+    bad = np.flatnonzero((vector != 0.0) & (vector != 1.0))
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"{name} = {_shown(vector)} is not allowed: every entry must "
+            f"be 0 or 1 (here {name}[{i}] = {float(vector[i])!r})")
+    return vector
+
+
+def whole_multiple(name, value, period_name, period, tolerance=1e-9):
+    """Returns `value` as a float after checking that it is a whole
+    multiple (1, 2, ...) of `period` > 0, to a relative `tolerance`.
+
+    Raises:
+        ValueError: naming both, their values and what is allowed.
+    """
+    number = positive(name, value)
+    base = positive(period_name, period)
+    ratio = number / base
+    if ratio < 1.0 - tolerance or abs(ratio - round(ratio)) > tolerance:
+        raise ValueError(
+            f"{name} = {number!r} s is not allowed with {period_name} = "
+            f"{base!r} s: must be a whole multiple (1, 2, ...) of it")
+    return number
+
+
 def positive(name, value):
     """Returns `value` as a float after checking that it is > 0.
 
@@ -168,8 +228,8 @@ def ordered_limits(lower_name, lower, upper_name, upper, size=None):
     if bad.size:
         i = int(bad[0])
         raise ValueError(
-            f"{lower_name}[{i}] = {lower[i]!r} and {upper_name}[{i}] = "
-            f"{upper[i]!r} are not allowed: each lower limit must be "
+            f"{lower_name}[{i}] = {float(lower[i])!r} and {upper_name}[{i}] "
+            f"= {float(upper[i])!r} are not allowed: each lower limit must be "
             "strictly below its upper limit"
         )
     return lower, upper
@@ -252,13 +312,14 @@ def validated_copy(params):
 
 def _qualified(message, prefix, names):
     """`message` with the fields `names` it reports (`name = ...`,
-    `name[i] = ...`, `name has shape ...`) renamed `prefix + name`; the
-    message is prefixed with the path instead when it reports no field."""
+    `name[i] = ...`, `name.sub[j].x = ...`, `name has shape ...`) renamed
+    `prefix + name`; the message is prefixed with the path instead when it
+    reports no field."""
     if not prefix:
         return message
     pattern = re.compile(
         r"(?<![\w.])(" + "|".join(map(re.escape, names))
-        + r")(?=(\[\d+\])? (=|has shape))")
+        + r")(?=(?:\[\d+\]|\.\w+)* (?:=|has shape))")
     renamed, count = pattern.subn(lambda m: prefix + m.group(1), message)
     return renamed if count else f"{prefix[:-1]}: {message}"
 

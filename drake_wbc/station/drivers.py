@@ -41,6 +41,7 @@ from drake_wbc.validation import (
     non_negative,
     positive,
     validated_copy,
+    whole_multiple,
 )
 
 SCALARS = [float, AutoDiffXd]
@@ -67,7 +68,7 @@ class BaseDriverParameters:
             the loop's output, s; it sizes the plant's velocity gain and
             must be well below `lag`.
         time_step: the driver's update period in s (the plant's step; the
-            station sets it).
+            station sets it), at most lag / 10.
     """
 
     lag: float = 0.2
@@ -86,7 +87,7 @@ class BaseDriverParameters:
         for name in ("velocity_limits", "acceleration_limits"):
             limits = as_vector(name, getattr(self, name), 3)
             if np.any(limits <= 0.0):
-                raise ValueError(f"{name} = {list(limits)} is not allowed: "
+                raise ValueError(f"{name} = {limits.tolist()} is not allowed: "
                                  "every limit must be > 0")
         servo = positive("servo_time_constant", self.servo_time_constant)
         if servo >= 0.5 * self.lag:
@@ -94,7 +95,7 @@ class BaseDriverParameters:
                 f"servo_time_constant = {servo!r} s is not allowed with "
                 f"lag = {self.lag!r} s: must be below lag / 2, or the "
                 "servo, not the loop, sets the base's bandwidth")
-        positive("time_step", self.time_step)
+        check_base_time_step(self, "time_step", self.time_step)
 
 
 @dataclass
@@ -113,7 +114,9 @@ class ArmDriverParameters:
             which the model leaves out (EST, 0.2 kg m^2): without it the
             wrist joints, whose links weigh little, would get almost no
             stiffness.
-        time_step: the driver's update period in s (the plant's step).
+        time_step: the driver's update period in s (the plant's step);
+            command_period must be a whole multiple of it and
+            servo_frequency below its Nyquist frequency 1 / (2 time_step).
     """
 
     command_period: float = 0.01
@@ -127,7 +130,38 @@ class ArmDriverParameters:
         positive("servo_frequency", self.servo_frequency)
         positive("damping_ratio", self.damping_ratio)
         non_negative("min_inertia", self.min_inertia)
-        positive("time_step", self.time_step)
+        check_arm_time_step(self, "time_step", self.time_step)
+
+
+def check_base_time_step(params, name, time_step, prefix=""):
+    """Checks the step `time_step` (called `name`) of the base's loop
+    against BaseDriverParameters `params` (called `prefix` in messages):
+    > 0 and at most `lag` / 10 (the second-order loop's semi-implicit
+    Euler step needs h / lag << 1)."""
+    h = positive(name, time_step)
+    if h > 0.1 * params.lag:
+        raise ValueError(
+            f"{name} = {h!r} s is not allowed with {prefix}lag = "
+            f"{params.lag!r} s: "
+            "must be at most lag / 10, or the loop's discrete step, not its "
+            "time constant, sets its response")
+    return h
+
+
+def check_arm_time_step(params, name, time_step, prefix=""):
+    """Checks the step `time_step` (called `name`) of the arm's servo
+    against ArmDriverParameters `params` (called `prefix` in messages):
+    > 0, the command period a whole multiple of it, and the servo's
+    bandwidth below its Nyquist frequency 1 / (2 time_step)."""
+    h = positive(name, time_step)
+    whole_multiple(f"{prefix}command_period", params.command_period, name,
+                   h)
+    if params.servo_frequency >= 0.5 / h:
+        raise ValueError(
+            f"{prefix}servo_frequency = {params.servo_frequency!r} Hz is not "
+            f"allowed with {name} = {h!r} s: must be below the Nyquist "
+            f"frequency 1 / (2 {name}) = {0.5 / h:.6g} Hz")
+    return h
 
 
 def base_loop_step(x, command, params):

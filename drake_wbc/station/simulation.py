@@ -27,6 +27,7 @@ for metrics and plots, `query_object` for visualisation.
     station.set_initial_state(root_context)
 """
 
+import functools
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -54,6 +55,8 @@ from drake_wbc.station.drivers import (
     ArmPositionDriver,
     BaseDriverParameters,
     BaseVelocityDriver,
+    check_arm_time_step,
+    check_base_time_step,
     servo_gains,
     set_servo_gains,
 )
@@ -95,7 +98,12 @@ class StationOptions:
             none).
         lidar: the TiM571 model of both scanners.
         initial_base_pose: [x, y, yaw] of T_b in the world at the start.
-        initial_arm_positions: the arm's configuration at the start (rad).
+        initial_arm_positions: the arm's configuration at the start (rad),
+            within the joints' limits.
+
+    The drivers run at `time_step`: base.lag must be at least 10
+    time_step, arm.command_period a whole multiple of it and
+    arm.servo_frequency below 1 / (2 time_step).
     """
 
     time_step: float = 0.001
@@ -114,8 +122,34 @@ class StationOptions:
         if h > 0.001:
             raise ValueError(f"time_step = {h!r} s is not allowed: must be "
                              "at most 0.001 s (1 ms)")
+        for name, kind in (("base", BaseDriverParameters),
+                           ("arm", ArmDriverParameters),
+                           ("wrist", ForceTorqueSensorParameters),
+                           ("lidar", LidarParameters)):
+            setattr(self, name, checked_instance(name, getattr(self, name),
+                                                 kind, kind))
+        # The drivers run at the plant's step, whatever their own.
+        check_base_time_step(self.base, "time_step", h, prefix="base.")
+        check_arm_time_step(self.arm, "time_step", h, prefix="arm.")
         as_vector("initial_base_pose", self.initial_base_pose, 3)
-        as_vector("initial_arm_positions", self.initial_arm_positions, 6)
+        q = as_vector("initial_arm_positions", self.initial_arm_positions, 6)
+        lower, upper = arm_joint_limits()
+        bad = np.flatnonzero((q < lower) | (q > upper))
+        if bad.size:
+            i = int(bad[0])
+            raise ValueError(
+                f"initial_arm_positions[{i}] = {float(q[i])!r} rad is not "
+                f"allowed: must lie within the joint's limits "
+                f"[{float(lower[i])!r}, {float(upper[i])!r}] rad")
+
+
+@functools.cache
+def arm_joint_limits():
+    """(lower, upper): the arm's joint limits in rad, from the model."""
+    from drake_wbc.robot_model import ArmKinematics
+
+    arm = ArmKinematics()
+    return arm.lower.copy(), arm.upper.copy()
 
 
 class SimulatedStation:
