@@ -96,6 +96,18 @@ def _run_bench(args):
     return run_bench(args)
 
 
+def _add_stress_arguments(parser):
+    from drake_wbc.stress import add_stress_arguments
+
+    add_stress_arguments(parser)
+
+
+def _run_stress(args):
+    from drake_wbc.stress import run_stress
+
+    return run_stress(args)
+
+
 SUBCOMMANDS = (
     (
         "run",
@@ -108,6 +120,9 @@ SUBCOMMANDS = (
      "peers (Drake's DiffIK, qpsolvers), a control tick per stage, and each "
      "scenario's real-time factor and memory", _add_bench_arguments,
      _run_bench),
+    ("stress", "run N seeded random closed-loop cases (obstacles, people, "
+     "hand forces, references) in parallel or on a Dask cluster and check "
+     "the safety invariants", _add_stress_arguments, _run_stress),
     ("bode", analysis.BODE_HELP, analysis.add_bode_arguments,
      analysis.run_bode),
     ("diagram", analysis.DIAGRAM_HELP, analysis.add_diagram_arguments,

@@ -1,0 +1,149 @@
+"""The randomised stress run (drake_wbc.stress): its cases are valid,
+differ between seeds, and give the same records whoever runs them (this
+process, spawned worker processes, a Dask cluster); a broken invariant
+makes the exit code non-zero."""
+
+import argparse
+import json
+import math
+
+import pytest
+
+from drake_wbc import stress
+from drake_wbc.scenario import Scenario
+from drake_wbc.stress_cases import random_scenario, violations
+from drake_wbc.validation import validate
+
+SEED = 11
+CASES = 2
+DURATION = 1.0
+
+
+@pytest.fixture(scope="module")
+def serial():
+    """The records of the cases, run one after the other here."""
+    return stress.run_cases(SEED, CASES, DURATION, workers=1)
+
+
+def comparable(records):
+    return [stress.comparable(record) for record in records]
+
+
+def test_the_cases_are_valid_scenarios_that_differ_between_seeds():
+    for seed in (0, 1):
+        for index in range(4):
+            scenario = random_scenario(seed, index, DURATION)
+            assert isinstance(scenario, Scenario)
+            validate(scenario)
+            assert scenario.duration == DURATION
+    # repr, as some parameters (holding arrays) do not compare with ==.
+    first = [repr(random_scenario(0, i, DURATION)) for i in range(3)]
+    again = [repr(random_scenario(0, i, DURATION)) for i in range(3)]
+    other = [repr(random_scenario(1, i, DURATION)) for i in range(3)]
+    assert first == again
+    assert first != other
+    assert first[0] != first[1]
+
+
+def test_the_generated_obstacles_leave_the_way_free():
+    """Static obstacles keep CLEARANCE from the footprint's disc at the
+    start (the way itself is checked by construction)."""
+    from drake_wbc.stress_cases import CLEARANCE, FOOTPRINT_RADIUS
+
+    for index in range(20):
+        scene = random_scenario(5, index, 4.0).scene
+        for cylinder in scene.cylinders:
+            assert math.hypot(*cylinder.position) >= (
+                FOOTPRINT_RADIUS + CLEARANCE + cylinder.radius - 1e-12)
+        for box in scene.boxes:
+            half_diagonal = 0.5 * math.hypot(*box.size[:2])
+            assert math.hypot(*box.center[:2]) >= (
+                FOOTPRINT_RADIUS + CLEARANCE + half_diagonal - 1e-12)
+
+
+def test_serial_records_are_complete(serial):
+    assert [r["case"] for r in serial] == list(range(CASES))
+    for record in serial:
+        assert record["error"] == ""
+        assert record["duration_s"] == pytest.approx(DURATION)
+        assert record["seed"] == SEED
+
+
+def test_worker_processes_give_the_same_records(serial):
+    done = []
+    records = stress.run_cases(SEED, CASES, DURATION, workers=2,
+                               on_done=done.append)
+    assert len(done) == CASES
+    assert comparable(records) == comparable(serial)
+
+
+def test_a_dask_cluster_gives_the_same_records(serial):
+    distributed = pytest.importorskip("dask.distributed")
+    cluster = distributed.LocalCluster(
+        processes=True, n_workers=2, threads_per_worker=1,
+        dashboard_address=None)
+    try:
+        records = stress.run_cases(SEED, CASES, DURATION,
+                                   scheduler=cluster.scheduler_address)
+    finally:
+        cluster.close()
+    assert comparable(records) == comparable(serial)
+
+
+@pytest.mark.parametrize("key, value, fragment", [
+    ("all_finite", False, "NaN"),
+    ("min_capability", math.nan, "min_capability"),
+    ("max_base_command_ratio", 1.5, "base's velocity limit"),
+    ("max_joint_speed_command_ratio", 1.01, "velocity limit"),
+    ("min_command_joint_limit_margin_rad", -0.01, "beyond a joint limit"),
+    ("min_static_obstacle_distance_m", 0.0, "touched a static obstacle"),
+    ("error", "RuntimeError: boom", "simulation failed"),
+])
+def test_an_injected_violation_makes_the_exit_code_non_zero(
+        serial, key, value, fragment):
+    sound = [dict(record) for record in serial]
+    sound[0].update(max_base_command_ratio=0.5,
+                    max_joint_speed_command_ratio=0.5,
+                    min_command_joint_limit_margin_rad=0.1,
+                    min_static_obstacle_distance_m=None)
+    for record in sound[1:]:
+        record.update(sound[0], case=record["case"])
+    assert stress.exit_code(sound) == 0
+    broken = [dict(record) for record in sound]
+    broken[1][key] = value
+    found = violations(broken[1])
+    assert any(fragment in line for line in found), found
+    assert stress.exit_code(broken) == 1
+
+
+def test_run_stress_writes_the_results_and_returns_the_exit_code(
+        tmp_path, capsys):
+    parser = argparse.ArgumentParser()
+    stress.add_stress_arguments(parser)
+    args = parser.parse_args(["--cases", "1", "--seed", str(SEED),
+                              "--workers", "1", "--duration", "0.3",
+                              "--output", str(tmp_path)])
+    code = stress.run_stress(args)
+    output = capsys.readouterr()
+    document = json.loads((tmp_path / "stress.json").read_text())
+    assert document["seed"] == SEED
+    assert len(document["cases"]) == 1
+    assert code == (1 if document["cases"][0]["violations"] else 0)
+    assert code == document["failed"]
+    assert "1 / 1 cases done" in output.err
+    assert "invariants" in output.out
+    header = (tmp_path / "stress.csv").read_text().splitlines()[0]
+    assert "min_static_obstacle_distance_m" in header
+
+
+@pytest.mark.parametrize("overrides, fragment", [
+    (dict(cases=0), "cases = 0"),
+    (dict(seed=-1), "seed = -1"),
+    (dict(duration=0.0), "duration = 0.0"),
+    (dict(workers=0), "workers = 0"),
+])
+def test_bad_arguments_are_named(overrides, fragment):
+    arguments = dict(seed=0, cases=1, duration=1.0, workers=1)
+    arguments.update(overrides)
+    with pytest.raises(ValueError, match=fragment):
+        stress.run_cases(**arguments)
