@@ -2,6 +2,7 @@
 
 One control tick, as wired here (design notes, "data flow of one tick")::
 
+    every input ─► InputGuard ─► (the stages below; stop, safety_status)
     reference_velocity ─► WholeBodyCdmp ◄─ F_ext, S_hri, delta_V_ee
                               │ V_ee (T_b)
     ArmCapability ─► WorkspaceAdapter ─► sigma_xy, sigma_phi
@@ -12,19 +13,50 @@ One control tick, as wired here (design notes, "data flow of one tick")::
                           │      BaseCdmp ◄─ obstacle points
                           │          │ V_b'
                           │          ▼
-                          │   BaseVelocityFilter ──► base.velocity_command
-                          ▼          │ V_b^flt
+                          │   StopGate ◄─ stop
+                          │          ▼
+                          │   BaseVelocityFilter ──► filtered_base_velocity
+                          │          ▼ V_b^flt
+                          │   BaseCommandLimiter ◄─ stopped
+                          │          │ ──► base.velocity_command
+                          ▼          ▼ (the command, limited)
                    RobustCompensator ◄─ s_c ──► delta_V_ee (to WholeBodyCdmp)
                           │ V_a^ref
                           ▼
                        ArmCdmp ◄─ F_ext, F_d, S_hri
                           ▼
-             ArmCartesianVelocityController ──► arm.position_command
+             ArmCartesianVelocityController ◄─ stop (hold)
+                          ▼
+                 arm.position_command
 
 The station-facing ports carry the names of the simulated station and of
 the LCM hardware interface, so the same diagram drives either. The only
 feedback edge inside, delta_V_ee, enters WholeBodyCdmp's state alone, and
-the commands leave from state (filter, arm controller): no algebraic loop.
+the commands leave from state (filter, limiter's inputs, arm controller):
+no algebraic loop, and no direct feedthrough from any input to a command.
+
+Run-time safety (drake_wbc.safety, drake_wbc.systems.safety):
+- Every input enters through the InputGuard: a NaN, an infinite value or
+  a value out of range (k_n < 0, s_c outside [0, 1]) never reaches a stage
+  (the guard passes the last valid sample on) and triggers a safe stop:
+  from that tick on the base command is zero, the arm command is held at
+  its last position command (the arm controller's hold), the reference
+  velocity is replaced by zero and the base filter's input is gated to
+  zero, so that the DMPs and the filter settle at rest. The stop clears
+  once every input has been valid for safety.hold_time; the base command
+  then restarts from zero within the acceleration limits and the arm from
+  rest at the held position, so no command jumps. The `safety_status`
+  output (systems.safety.STATUS_FIELDS) and `safety_reason` (a sentence;
+  also Controller.safety_reason) say why; the stop is logged when it trips
+  and when it clears. Obstacle points with a NaN or infinite coordinate
+  are dropped (counted in the status), not a fault.
+- The base command is limited by BaseCommandLimiter to the robot's
+  velocity and acceleration limits by uniform scaling (its direction
+  kept), reported on `base_saturation`; the compensator sees the command
+  actually sent, so the arm makes up for what the limits take from the
+  base (eq. (compensation)). The arm's joint rates are scaled uniformly to
+  their limits by the arm controller (reported on `arm_limited`), and its
+  position command never leaves the joint limits.
 """
 
 from dataclasses import dataclass, field, fields, replace
@@ -37,6 +69,7 @@ from drake_wbc import cdmp
 from drake_wbc.arm_control import ArmControllerParameters
 from drake_wbc.filtering import BaseFilterParameters
 from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.safety import SafetyParameters
 from drake_wbc.systems import (
     ArmCapability,
     ArmCartesianVelocityController,
@@ -48,6 +81,7 @@ from drake_wbc.systems import (
     WholeBodyCdmp,
     WorkspaceAdapter,
 )
+from drake_wbc.systems.base_command import BaseCommandLimiter, StopGate
 from drake_wbc.systems.capability_stage import (
     ArmCapabilityParameters,
     WorkspaceAdapterParameters,
@@ -56,6 +90,7 @@ from drake_wbc.systems.coordination import (
     MotionDistributorParameters,
     RobustCompensatorParameters,
 )
+from drake_wbc.systems.safety import GuardedInput, InputGuard
 from drake_wbc.systems.wrench import ExternalWrenchEstimator
 from drake_wbc.validation import checked_instance, positive, validated_copy
 
@@ -91,6 +126,9 @@ class ControllerParameters:
             control drives the tool towards a surface it has not yet
             touched, so it is the task's choice (the wiping scenario sets
             the paper's S_m = diag(0, 1, 1, 1, 1, 1)), not a default.
+        safety: the run-time safety (hold time of the safe stop, the
+            base's velocity and acceleration limits); the arm's limits are
+            in arm_controller.
 
     Read from YAML by drake_wbc.config.load_controller_parameters
     (diagrams/controller.yaml lists every field). The parameters are
@@ -118,6 +156,7 @@ class ControllerParameters:
         default_factory=lambda: cdmp.ArmCdmpParameters(S_m=np.ones(6)))
     arm_controller: ArmControllerParameters = field(
         default_factory=ArmControllerParameters)
+    safety: SafetyParameters = field(default_factory=SafetyParameters)
 
     def __post_init__(self):
         h = positive("time_step", self.time_step)
@@ -154,14 +193,28 @@ class Controller:
                    base_velocity=(0.0, 0.0, 0.0)):
         """Starts the controller's state from the robot's measured state:
         the arm command at `arm_position`, the base filter at rest at
-        `base_velocity` (T_b). The DMPs start at rest."""
-        arm = self.stages["arm_controller"]
-        arm.set_arm_position(
-            arm.GetMyMutableContextFromRoot(root_context), arm_position)
-        base_filter = self.stages["base_filter"]
-        base_filter.set_velocity(
-            base_filter.GetMyMutableContextFromRoot(root_context),
-            np.asarray(base_velocity, dtype=float))
+        `base_velocity` (T_b) and the base command's limiter from it. The
+        DMPs start at rest; the input guard takes `arm_position` as the
+        last valid arm measurement."""
+        def context_of(name):
+            return self.stages[name].GetMyMutableContextFromRoot(
+                root_context)
+
+        base_velocity = np.asarray(base_velocity, dtype=float)
+        self.stages["arm_controller"].set_arm_position(
+            context_of("arm_controller"), arm_position)
+        self.stages["base_filter"].set_velocity(context_of("base_filter"),
+                                                base_velocity)
+        self.stages["base_limiter"].set_previous(context_of("base_limiter"),
+                                                 base_velocity)
+        self.stages["guard"].set_last_valid(
+            context_of("guard"), "arm.position_measured", arm_position)
+
+    def safety_reason(self, root_context):
+        """Why the controller is in a safe stop, as a sentence ("" when it
+        is not)."""
+        guard = self.stages["guard"]
+        return guard.reason(guard.GetMyContextFromRoot(root_context))
 
 
 def build_controller(params=None, arm=None):
@@ -177,7 +230,8 @@ def build_controller(params=None, arm=None):
         TASK_INPUTS; outputs base.velocity_command, arm.position_command
         and the diagnostics capability, alpha, sigma_xy, sigma_phi,
         end_effector_deviation, base_velocity, filtered_base_velocity,
-        arm_velocity_command, arm_limited).
+        arm_velocity_command, arm_limited, base_saturation,
+        safety_status, safety_reason).
     """
     params = validated_copy(checked_instance(
         "params", params, ControllerParameters, ControllerParameters))
@@ -186,6 +240,7 @@ def build_controller(params=None, arm=None):
     builder = DiagramBuilder()
     add = builder.AddNamedSystem
     stages = dict(
+        guard=add("guard", _input_guard(params)),
         capability=add("capability", ArmCapability(params.capability, arm)),
         wrench=add("wrench", ExternalWrenchEstimator(arm)),
         base_yaw=add("base_yaw", MatrixGain(
@@ -196,8 +251,11 @@ def build_controller(params=None, arm=None):
         distributor=add("distributor", MotionDistributor(
             params.distributor, arm)),
         base_cdmp=add("base_cdmp", BaseCdmp(params.base_cdmp, time_step=h)),
+        base_gate=add("base_gate", StopGate(3)),
         base_filter=add("base_filter", BaseVelocityFilter(
             replace(params.base_filter, time_step=h))),
+        base_limiter=add("base_limiter", BaseCommandLimiter(
+            params.safety, time_step=h)),
         compensator=add("compensator", RobustCompensator(
             params.compensator, arm)),
         arm_cdmp=add("arm_cdmp", ArmCdmp(params.arm_cdmp, time_step=h)),
@@ -210,25 +268,30 @@ def build_controller(params=None, arm=None):
         builder.Connect(s[source].GetOutputPort(output),
                         s[destination].GetInputPort(input_name))
 
-    def export(name, *targets):
-        index = builder.ExportInput(
-            s[targets[0][0]].GetInputPort(targets[0][1]), name)
-        for stage, port in targets[1:]:
-            builder.ConnectInput(index, s[stage].GetInputPort(port))
-
+    # Every input enters through the guard, and only its outputs (the
+    # inputs' last valid samples) reach the stages.
+    for name in STATION_INPUTS + TASK_INPUTS:
+        builder.ExportInput(s["guard"].GetInputPort(name), name)
     # Station measurements.
-    export("base.state_estimated", ("base_yaw", "u0"))
-    export("arm.position_measured", ("capability", "arm_position"),
-           ("wrench", "arm_position"))
-    export("wrist.wrench_measured", ("wrench", "wrist_wrench"))
-    export("lidar.obstacle_points", ("base_cdmp", "obstacle_points"))
+    connect("guard", "base.state_estimated", "base_yaw", "u0")
+    for stage in ("capability", "wrench"):
+        connect("guard", "arm.position_measured", stage, "arm_position")
+    connect("guard", "wrist.wrench_measured", "wrench", "wrist_wrench")
+    connect("guard", "lidar.obstacle_points", "base_cdmp", "obstacle_points")
     # Task inputs.
-    export("reference_velocity", ("whole_body_cdmp", "reference_velocity"))
-    export("desired_wrench", ("arm_cdmp", "desired_wrench"))
-    export("phri_switch", ("whole_body_cdmp", "phri_switch"),
-           ("arm_cdmp", "phri_switch"))
-    export("null_space_gain", ("distributor", "null_space_gain"))
-    export("compensation_switch", ("compensator", "compensation_switch"))
+    connect("guard", "reference_velocity", "whole_body_cdmp",
+            "reference_velocity")
+    connect("guard", "desired_wrench", "arm_cdmp", "desired_wrench")
+    connect("guard", "phri_switch.whole_body", "whole_body_cdmp",
+            "phri_switch")
+    connect("guard", "phri_switch.arm", "arm_cdmp", "phri_switch")
+    connect("guard", "null_space_gain", "distributor", "null_space_gain")
+    connect("guard", "compensation_switch", "compensator",
+            "compensation_switch")
+    # The safe stop.
+    connect("guard", "stop", "base_gate", "stop")
+    connect("guard", "stopped", "base_limiter", "stopped")
+    connect("guard", "stop", "arm_controller", "hold")
 
     connect("base_yaw", "y0", "whole_body_cdmp", "base_yaw")
     connect("wrench", "external_wrench", "whole_body_cdmp", "wrench")
@@ -242,10 +305,12 @@ def build_controller(params=None, arm=None):
     for name in ("sigma_xy", "sigma_phi"):
         connect("workspace", name, "distributor", name)
     connect("distributor", "base_velocity", "base_cdmp", "base_velocity")
-    connect("base_cdmp", "avoiding_base_velocity", "base_filter", "velocity")
+    connect("base_cdmp", "avoiding_base_velocity", "base_gate", "value")
+    connect("base_gate", "gated", "base_filter", "velocity")
+    connect("base_filter", "filtered_velocity", "base_limiter", "velocity")
     connect("distributor", "arm_velocity", "compensator", "arm_velocity")
     connect("distributor", "base_velocity", "compensator", "base_velocity")
-    connect("base_filter", "filtered_velocity", "compensator",
+    connect("base_limiter", "velocity_command", "compensator",
             "filtered_base_velocity")
     for name in ("end_effector_position", "capability_gradient", "alpha"):
         connect("capability", name, "compensator", name)
@@ -257,7 +322,7 @@ def build_controller(params=None, arm=None):
             "arm_velocity")
 
     outputs = (
-        ("base_filter", "filtered_velocity", "base.velocity_command"),
+        ("base_limiter", "velocity_command", "base.velocity_command"),
         ("arm_controller", "arm_position_command", "arm.position_command"),
         ("capability", "capability", "capability"),
         ("capability", "alpha", "alpha"),
@@ -268,9 +333,40 @@ def build_controller(params=None, arm=None):
         ("base_filter", "filtered_velocity", "filtered_base_velocity"),
         ("arm_cdmp", "arm_velocity_command", "arm_velocity_command"),
         ("arm_controller", "limited", "arm_limited"),
+        ("base_limiter", "saturation", "base_saturation"),
+        ("guard", "safety_status", "safety_status"),
+        ("guard", "safety_reason", "safety_reason"),
     )
     for stage, port, name in outputs:
         builder.ExportOutput(s[stage].GetOutputPort(port), name)
     diagram = builder.Build()
     diagram.set_name("cdmp_wbc_controller")
     return Controller(diagram, stages, params)
+
+
+def _input_guard(params):
+    """The InputGuard of every controller input: the task inputs' defaults
+    are the stages' parameters (what the stages used while their port was
+    not connected), and their ranges those the stages accept."""
+    inf = np.inf
+    vector = GuardedInput
+    inputs = (
+        vector("base.state_estimated", 6),
+        vector("arm.position_measured", 6, initial=HOME_ARM_POSITIONS),
+        vector("wrist.wrench_measured", 6),
+        vector("reference_velocity", 6, zero_when_stopped=True),
+        vector("desired_wrench", 6,
+               (("desired_wrench", params.arm_cdmp.F_d),)),
+        vector("phri_switch", 1, (
+            ("phri_switch.whole_body", [params.whole_body_cdmp.S_hri]),
+            ("phri_switch.arm", [params.arm_cdmp.S_hri]))),
+        vector("null_space_gain", 1, (
+            ("null_space_gain", [params.distributor.null_space_gain]),),
+            lower=0.0, upper=inf),
+        vector("compensation_switch", 1, (
+            ("compensation_switch",
+             [params.compensator.compensation_switch]),),
+            lower=0.0, upper=1.0),
+    )
+    return InputGuard(inputs, points_name="lidar.obstacle_points",
+                      time_step=params.time_step, params=params.safety)

@@ -29,6 +29,7 @@ from pydrake.trajectories import PiecewisePolynomial
 from drake_wbc.controller import STATION_INPUTS, build_controller
 from drake_wbc.scenario import TASK_SIZES, Scenario, Variant
 from drake_wbc.station.simulation import SimulatedStation
+from drake_wbc.systems.safety import STATUS_FIELDS
 from drake_wbc.validation import checked_instance
 
 SIGNALS = {
@@ -57,6 +58,8 @@ SIGNALS = {
     "filtered_base_velocity": ("vx", "vy", "wz"),
     "arm_velocity_command": ("vx", "vy", "vz", "wx", "wy", "wz"),
     "arm_limited": ("limited",),
+    "base_saturation": ("limited", "velocity_scale", "acceleration_scale"),
+    "safety_status": STATUS_FIELDS,
     # task
     "reference_velocity": ("vx", "vy", "vz", "wx", "wy", "wz"),
 }

@@ -387,7 +387,9 @@ def test_pushing_through_limits_never_leaves_them(arm, seed):
 def test_ports_state_and_no_direct_feedthrough():
     system = ArmCartesianVelocityController()
     assert PackageLevel is ArmCartesianVelocityController
-    assert system.get_input_port().get_name() == "arm_velocity"
+    inputs = [system.get_input_port(i).get_name()
+              for i in range(system.num_input_ports())]
+    assert inputs == ["arm_velocity", "hold"]
     names = [system.get_output_port(i).get_name()
              for i in range(system.num_output_ports())]
     assert names == ["arm_position_command", "arm_velocity_command",
@@ -403,7 +405,7 @@ def test_ports_state_and_no_direct_feedthrough():
     np.testing.assert_array_equal(system.get_output_port(1).Eval(context),
                                   np.zeros(6))
     # At rest with a zero twist the command holds.
-    system.get_input_port().FixValue(context, np.zeros(6))
+    system.get_input_port(0).FixValue(context, np.zeros(6))
     update = system.EvalUniquePeriodicDiscreteUpdate(context)
     np.testing.assert_allclose(update.get_vector().CopyToVector()[:6], q0,
                                atol=1e-15)
@@ -430,12 +432,12 @@ def test_autodiff_update_has_the_double_value_and_derivatives(arm):
     V = rng.normal(size=6) * 0.01
     context = system.CreateDefaultContext()
     system.set_arm_position(context, q)
-    system.get_input_port().FixValue(context, V)
+    system.get_input_port(0).FixValue(context, V)
     expected = system.EvalUniquePeriodicDiscreteUpdate(
         context).get_vector().CopyToVector()
     ad_context = ad.CreateDefaultContext()
     ad.set_arm_position(ad_context, q)
-    ad.get_input_port().FixValue(ad_context,
+    ad.get_input_port(0).FixValue(ad_context,
                                  InitializeAutoDiff(V).ravel())
     update = ad.EvalUniquePeriodicDiscreteUpdate(
         ad_context).get_vector().CopyToVector()
@@ -448,7 +450,7 @@ def test_autodiff_update_has_the_double_value_and_derivatives(arm):
 def update_by_central_differences(system, x, u, step=1e-6):
     """d x_next / d (x, u) of the double system, by central differences."""
     context = system.CreateDefaultContext()
-    port = system.get_input_port()
+    port = system.get_input_port(0)
 
     def update(z):
         context.SetDiscreteState(z[:x.size])
@@ -491,7 +493,7 @@ def test_linearize_at_rest_gives_the_inverse_jacobian(arm):
     system = ArmCartesianVelocityController()
     context = system.CreateDefaultContext()
     system.set_arm_position(context, q)
-    system.get_input_port().FixValue(context, np.zeros(6))
+    system.get_input_port(0).FixValue(context, np.zeros(6))
     linear = Linearize(system, context)  # an equilibrium: V_a = 0
     assert linear.time_period() == H
     A, B, _ = expected_linearisation(arm, q, np.zeros(6))
@@ -514,7 +516,7 @@ def test_taylor_approximation_at_a_moving_regular_point(arm, seed):
     system = ArmCartesianVelocityController()
     context = system.CreateDefaultContext()
     context.SetDiscreteState(x)
-    system.get_input_port().FixValue(context, V)
+    system.get_input_port(0).FixValue(context, V)
     update = system.EvalUniquePeriodicDiscreteUpdate(context)
     assert update.get_vector().GetAtIndex(12) == 0.0  # nothing limited
     affine = FirstOrderTaylorApproximation(system, context)

@@ -14,6 +14,7 @@ from scipy.signal import butter, sosfiltfilt
 from drake_wbc import cdmp
 from drake_wbc.robot_model import ArmKinematics
 from drake_wbc.station.scene import planar_shapes
+from drake_wbc.systems.safety import STATUS_FIELDS
 
 FOOTPRINT_HALF_SIZES = (0.4, 0.3)
 """The base's footprint, half length and half width in m (the model's
@@ -124,7 +125,23 @@ def run_metrics(scenario, log):
             log["base.velocity_command"][:, 2]))),
         "max_arm_joint_speed_command_rad_s": float(np.max(arm_speed)),
         "min_joint_limit_margin_rad": float(np.min(margin)),
+        **_safety_counts(log),
     }
+
+
+def _safety_counts(log):
+    """Safe stops (trips) and the time the controller's limits acted on the
+    commands, from the controller's diagnostics (none in an older log)."""
+    counts = {}
+    if "safety_status" in log:
+        trips = log["safety_status"][:, STATUS_FIELDS.index("trips")]
+        counts["safety_trips"] = int(np.max(trips))
+    dt = float(np.median(np.diff(log.time)))
+    for name, key in (("base_saturation", "base_saturated_s"),
+                      ("arm_limited", "arm_limited_s")):
+        if name in log:
+            counts[key] = dt * int(np.count_nonzero(log[name][:, 0] > 0.5))
+    return counts
 
 
 def metrics_of_each_run(scenario, logs, metrics_of_run):

@@ -14,6 +14,12 @@ from drake_wbc.systems.arm_control import (
     ArmCartesianVelocityController,
     ArmCartesianVelocityController_,
 )
+from drake_wbc.systems.base_command import (
+    BaseCommandLimiter,
+    BaseCommandLimiter_,
+    StopGate,
+    StopGate_,
+)
 from drake_wbc.systems.base_filter import (
     BaseVelocityFilter,
     BaseVelocityFilter_,
@@ -43,6 +49,11 @@ from drake_wbc.systems.coordination import (
     RobustCompensator_,
     RobustCompensatorParameters,
 )
+from drake_wbc.systems.safety import (
+    GuardedInput,
+    InputGuard,
+    InputGuard_,
+)
 
 __all__ = [
     "ArmCdmp",
@@ -51,6 +62,13 @@ __all__ = [
     "BaseCdmp_",
     "WholeBodyCdmp",
     "WholeBodyCdmp_",
+    "BaseCommandLimiter",
+    "BaseCommandLimiter_",
+    "GuardedInput",
+    "InputGuard",
+    "InputGuard_",
+    "StopGate",
+    "StopGate_",
     "ArmCartesianVelocityController",
     "ArmCartesianVelocityController_",
     "BaseVelocityFilter",

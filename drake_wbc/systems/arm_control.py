@@ -12,7 +12,7 @@ from drake_wbc.arm_control import (
     joint_velocity_for_twist,
 )
 from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
-from drake_wbc.scalar_support import through_float_function
+from drake_wbc.scalar_support import through_float_function, value_of
 from drake_wbc.validation import as_vector, checked_instance, validated_copy
 
 ARM_JOINT_COUNT = 6
@@ -41,12 +41,20 @@ def ArmCartesianVelocityController_(T):
 
                            ┌──────────────────────┐
             arm_velocity ─►│ ArmCartesianVelocity ├─► arm_position_command
-                           │ Controller           ├─► arm_velocity_command
+            hold ─────────►│ Controller           ├─► arm_velocity_command
                            │                      ├─► limited
                            └──────────────────────┘
 
         - arm_velocity: V_a (6), the arm's Cartesian twist command
           [v_a; w_a] in T_a (m/s, rad/s), at the end effector.
+        - hold (1): optional (no hold while unconnected); >= 0.5 holds the
+          command where it is, at rest (a safe stop, see
+          drake_wbc.systems.safety.InputGuard's `stop`): the update
+          leaves q_cmd unchanged and sets q_dot to 0, so that when the
+          hold ends the arm restarts from the held command, from rest,
+          within the acceleration limit (no jump). A twist that is not
+          finite is held the same way (with `limited` 1.0), never
+          integrated.
         - arm_position_command: q_cmd (6, rad), the joint positions for the
           arm's position servo. It is the state: no direct feedthrough.
         - arm_velocity_command: q_dot (6, rad/s) of the last update, the
@@ -55,6 +63,11 @@ def ArmCartesianVelocityController_(T):
         - limited: 1.0 when the last update was cut by a joint's position
           limit, scaled by the velocity limits or by the acceleration limit,
           else 0.0 (damping near a singularity alone does not count).
+
+        q_cmd never leaves the joint limits [lower, upper]: the update keeps
+        it in the band [lower + margin, upper - margin] (a joint outside the
+        band only moves back in), and `set_arm_position` clamps a start
+        outside the limits onto them.
 
         One periodic discrete update at the control period h:
 
@@ -119,6 +132,7 @@ def ArmCartesianVelocityController_(T):
             )
             self._input = self.DeclareVectorInputPort("arm_velocity",
                                                       TWIST_SIZE)
+            self._hold = self.DeclareVectorInputPort("hold", 1)
             initial = np.zeros(_STATE_SIZE)
             initial[_Q] = HOME_ARM_POSITIONS
             state = self.DeclareDiscreteState(BasicVector_[T](initial))
@@ -144,13 +158,18 @@ def ArmCartesianVelocityController_(T):
         def _state(context):
             return context.get_discrete_state_vector().CopyToVector()
 
-        def float_update(self, state_and_input):
+        def float_update(self, state_and_input, hold=False):
             """The update map in double: [q_cmd, q_dot, limited, V_a] (19)
-            -> the next state [q_cmd, q_dot, limited] (13)."""
+            -> the next state [q_cmd, q_dot, limited] (13); with `hold`
+            (or a V_a that is not finite) q_cmd stays, at rest."""
             z = np.asarray(state_and_input, dtype=float)
             q = z[_Q]
             previous = z[_Q_DOT]
             V_a = z[_STATE_SIZE:]
+            if hold or not np.all(np.isfinite(V_a)):
+                limited = 0.0 if hold else 1.0
+                return np.concatenate([q, np.zeros(ARM_JOINT_COUNT),
+                                       [limited]])
             params = self.params
             command = joint_velocity_for_twist(
                 self.kinematics.evaluate(q).J_a,
@@ -166,8 +185,11 @@ def ArmCartesianVelocityController_(T):
                 acceleration_limit=self._acceleration_limit,
                 previous_q_dot=previous,
             )
+            # The bounds keep q in the band up to rounding; the clip makes
+            # the joint limits exact.
             return np.concatenate([
-                q + params.time_step * command.q_dot,
+                np.clip(q + params.time_step * command.q_dot, self.lower,
+                        self.upper),
                 command.q_dot,
                 [1.0 if command.limited else 0.0],
             ])
@@ -175,9 +197,10 @@ def ArmCartesianVelocityController_(T):
         def _update(self, context, discrete_state):
             z = np.concatenate([self._state(context),
                                 self._input.Eval(context)])
-            discrete_state.set_value(
-                through_float_function(self.float_update, z)
-            )
+            hold = (self._hold.HasValue(context)
+                    and value_of(self._hold.Eval(context))[0] >= 0.5)
+            discrete_state.set_value(through_float_function(
+                lambda x: self.float_update(x, hold=hold), z))
 
         def _position(self, context, output):
             output.SetFromVector(self._state(context)[_Q])
@@ -193,8 +216,11 @@ def ArmCartesianVelocityController_(T):
             measured arm position when the controller takes over, so that
             the servo sees no jump. A joint outside the band
             [lower + margin, upper - margin] is kept where it is and is
-            only prevented from moving further out."""
-            q = as_vector("q", q, ARM_JOINT_COUNT)
+            only prevented from moving further out; one outside the joint
+            limits [lower, upper] starts on the limit, so that the command
+            never leaves them."""
+            q = np.clip(as_vector("q", q, ARM_JOINT_COUNT), self.lower,
+                        self.upper)
             state = np.zeros(_STATE_SIZE)
             state[_Q] = q
             context.SetDiscreteState(state)

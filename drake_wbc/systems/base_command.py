@@ -1,0 +1,202 @@
+"""The base's command at a safe stop and at the robot's limits, as Drake
+systems thin over drake_wbc.safety: StopGate (a signal zeroed while
+stopped) and BaseCommandLimiter (the base command within the robot's
+velocity and acceleration limits, its direction kept). InputGuard, which
+decides the stop, is in drake_wbc.systems.safety."""
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem_, ValueProducer
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from drake_wbc import safety
+from drake_wbc.safety import SafetyParameters, limit_base_velocity
+from drake_wbc.scalar_support import through_float_function, value_of
+from drake_wbc.systems.safety import SCALARS, as_scalar_type
+from drake_wbc.validation import (
+    as_vector,
+    checked_instance,
+    positive,
+    validated_copy,
+)
+
+
+@TemplateSystem.define("StopGate_", T_list=SCALARS)
+def StopGate_(T):
+    class Impl(LeafSystem_[T]):
+        """Passes a vector on, or zeros during a safe stop.
+
+        ::
+
+                     ┌──────────┐
+            value ──►│          │
+            stop ───►│ StopGate ├──► gated
+                     └──────────┘
+
+        - value: (size) the signal.
+        - stop (1): >= 0.5 during a stop (InputGuard's `stop`).
+        - gated: (size) value, or zeros while stop; the very same values
+          otherwise. Direct feedthrough of both inputs.
+
+        Before the base filter of eq. (filtering) it lets the filter's
+        state settle towards rest during a stop (to (1 + omega_f t)
+        exp(-omega_f t) of its value, 18% after the shortest stop of 0.5 s
+        with the paper's omega_f = 2 pi rad/s and zeta = 1), so that the
+        filter restarts from near zero velocity when the stop clears; the
+        BaseCommandLimiter ramps the command from zero from there.
+
+        Args:
+            size: the signal's size.
+        """
+
+        def _construct(self, size=3, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.size = int(size)
+            self._value = self.DeclareVectorInputPort("value", self.size)
+            self._stop = self.DeclareVectorInputPort("stop", 1)
+            self.DeclareVectorOutputPort("gated", self.size, self._output)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.size, converter=converter)
+
+        def _output(self, context, output):
+            value = self._value.Eval(context)
+            if value_of(self._stop.Eval(context))[0] >= 0.5:
+                value = as_scalar_type(T, np.zeros(self.size))
+            output.SetFromVector(value)
+
+    return Impl
+
+
+StopGate = StopGate_[None]
+"""StopGate_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""
+
+
+@TemplateSystem.define("BaseCommandLimiter_", T_list=SCALARS)
+def BaseCommandLimiter_(T):
+    class Impl(LeafSystem_[T]):
+        """The base velocity command within the robot's limits, or zero in
+        a safe stop.
+
+        ::
+
+                        ┌────────────────────┐
+            velocity ──►│                    ├──► velocity_command
+            stopped ───►│ BaseCommandLimiter ├──► saturation
+                        └────────────────────┘
+
+        - velocity: (3) the desired command [vx, vy, wz] in T_b (the base
+          filter's V_b^flt of eq. (filtering)).
+        - stopped (1): >= 0.5 in a safe stop (InputGuard's `stopped`).
+        - velocity_command: (3) drake_wbc.safety.limit_base_velocity of the
+          desired command from the previous tick's command: scaled as a
+          whole to the velocity limits, its change scaled as a whole to
+          the acceleration limits, so that its direction is kept. Zero in
+          a safe stop, at once: zero is the safe stop of a velocity
+          controlled base, whose own drive decelerates within its limits
+          (the robot's 1.0 m/s^2), and a ramp would keep trusting the
+          controller while its inputs are not valid. After the stop the
+          command restarts from zero within the acceleration limits.
+          Exactly the desired command when no limit acts.
+        - saturation: (3) [limited, velocity scale, acceleration scale]:
+          limited is 1.0 when a limit changed the command; the scales are
+          those of drake_wbc.safety.LimitedCommand (1.0 when not
+          limited). A desired command that is not finite (which the input
+          guard leaves no way to reach) gives a zero command, limited
+          1.0 and both scales 0.0.
+
+        Both outputs are direct feedthrough of `velocity` and `stopped`
+        (the base filter's and the guard's state), so they add no delay.
+        State: the previous command (3), updated once a tick h.
+
+        Scalar types: double and AutoDiffXd; the AutoDiff output is the
+        double one with derivatives by central differences
+        (scalar_support.through_float_function): exact where no limit
+        acts (the identity).
+
+        Args:
+            params: SafetyParameters (the limits); the robot's if None.
+            time_step: the control period h > 0, s.
+        """
+
+        def _construct(self, params=None, time_step=0.01, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.params = validated_copy(checked_instance(
+                "params", params, SafetyParameters, SafetyParameters))
+            self.time_step = positive("time_step", time_step)
+            self._velocity = self.DeclareVectorInputPort(
+                "velocity", safety.BASE_AXES)
+            self._stopped = self.DeclareVectorInputPort("stopped", 1)
+            state = self.DeclareDiscreteState(safety.BASE_AXES)
+            self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0,
+                                                    self._update)
+            # Not time: the result changes only with the inputs and state.
+            self._result = self.DeclareCacheEntry(
+                "the limited command",
+                ValueProducer(allocate=lambda: AbstractValue.Make(object()),
+                              calc=self._calc_result),
+                {self.discrete_state_ticket(state),
+                 self._velocity.ticket(), self._stopped.ticket()})
+            depends = {self._result.ticket()}
+            self.DeclareVectorOutputPort(
+                "velocity_command", safety.BASE_AXES, self._command_output,
+                prerequisites_of_calc=depends)
+            self.DeclareVectorOutputPort(
+                "saturation", 3, self._saturation_output,
+                prerequisites_of_calc=depends)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.params, other.time_step,
+                            converter=converter)
+            self.params = other.params
+
+        def float_map(self, z):
+            """[desired (3), previous (3), stopped] -> [command (3),
+            limited, velocity scale, acceleration scale], in double."""
+            desired, previous, stopped = z[:3], z[3:6], z[6]
+            if stopped >= 0.5:
+                return np.array([0.0, 0.0, 0.0, 0.0, 1.0, 1.0])
+            if not np.all(np.isfinite(desired)):
+                return np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
+            result = limit_base_velocity(
+                desired, previous, self.params.base_velocity_limits,
+                self.params.base_acceleration_limits, self.time_step)
+            return np.concatenate([
+                result.command, [1.0 if result.limited else 0.0,
+                                 result.velocity_scale,
+                                 result.acceleration_scale]])
+
+        def _calc_result(self, context, value):
+            value.set_value(self._evaluate_now(context))
+
+        def _evaluate(self, context):
+            return self._result.Eval(context)
+
+        def _evaluate_now(self, context):
+            z = np.concatenate([
+                self._velocity.Eval(context),
+                context.get_discrete_state_vector().CopyToVector(),
+                self._stopped.Eval(context)])
+            return through_float_function(self.float_map, z)
+
+        def _command_output(self, context, output):
+            output.SetFromVector(self._evaluate(context)[:3])
+
+        def _saturation_output(self, context, output):
+            output.SetFromVector(self._evaluate(context)[3:])
+
+        def _update(self, context, discrete_state):
+            discrete_state.set_value(self._evaluate(context)[:3])
+
+        def set_previous(self, context, velocity):
+            """Sets the previous command (3,), e.g. the base's measured
+            velocity when the controller takes over."""
+            context.SetDiscreteState(as_scalar_type(T, as_vector(
+                "velocity", velocity, safety.BASE_AXES)))
+
+    return Impl
+
+
+BaseCommandLimiter = BaseCommandLimiter_[None]
+"""BaseCommandLimiter_ for double; `ToAutoDiffXd()` gives the AutoDiff
+one."""
