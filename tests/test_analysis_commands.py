@@ -13,12 +13,15 @@ from drake_wbc.analysis import commands
 from drake_wbc.analysis.bode import read_csv
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-PLOTS = ("base_filter", "split_ideal", "split_base_loop", "dmp_force",
-         "contact_loops", "filter_sweep", "split_sweep")
+PLOTS = ("base_filter", "split_ideal", "split_base_loop", "base_plant",
+         "dmp_force", "contact_loops", "filter_sweep", "split_sweep")
 TABLE_ROWS = (
     "base filter, h = 0.01 s", "base filter, continuous",
     "split: sum: end effector", "with base loop: sum: end effector",
-    "base velocity loop alone", "arm CDMP, stiffness axis",
+    "base velocity loop alone", "base loop and plant: base velocity",
+    "end effector with the base loop and the plant",
+    "base velocity, driver and plant", "end effector, driver and plant",
+    "arm CDMP, stiffness axis",
     "arm CDMP, force axis", "whole-body CDMP, S_hri = 1",
     "contact loop, admittance axis", "contact loop, stiffness axis")
 
@@ -75,6 +78,25 @@ def test_bode_ideal_split_is_flat(bode):
     assert np.abs(data[:, total + 1]).max() < 1e-9
     base = header.index("base share J_b V_b^flt magnitude_db")
     assert data[0, base] == pytest.approx(20 * np.log10(0.5), abs=0.01)
+
+
+def test_bode_shows_the_plant(bode):
+    _, text, folder = bode
+    header, data = read_csv(folder / "split_base_loop.csv")
+    plant = header.index(
+        "end effector with the base loop and the plant magnitude_db")
+    driver = header.index("sum: end effector magnitude_db")
+    # At low frequency the plant follows the driver's loop.
+    assert data[0, plant] == pytest.approx(data[0, driver], abs=0.05)
+    assert ("end effector with the base loop and the plant: |V_ee,actual"
+            in text)
+    # The mount's rocking mode lifts the end effector's response to the
+    # base's command above the base's own around 5 Hz.
+    header, data = read_csv(folder / "base_plant.csv")
+    base = header.index("base velocity, driver and plant magnitude_db")
+    tool = header.index("end effector, driver and plant magnitude_db")
+    lift = data[:, tool] - data[:, base]
+    assert 4.0 < data[np.argmax(lift), 0] < 6.0 and lift.max() > 6.0
 
 
 def test_bode_table_reports_the_contact_loop_margins(bode):

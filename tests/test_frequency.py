@@ -8,10 +8,15 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import LogVectorOutput, MatrixGain, Sine
+from pydrake.systems.primitives import (
+    ConstantVectorSource,
+    LogVectorOutput,
+    MatrixGain,
+    Sine,
+)
 
 from drake_wbc import cdmp
-from drake_wbc.analysis import chains, closed_forms
+from drake_wbc.analysis import chains, closed_forms, plant_chain
 from drake_wbc.analysis.frequency import (
     bandwidth,
     frequency_grid,
@@ -301,6 +306,109 @@ def test_base_loop_chain_linearisation_matches_simulation(scenario, point,
         scenario.controller, point, driver), omegas)[:, 0, 0])
 
 
+# The base's loop through the station's plant.
+
+@pytest.fixture(scope="module")
+def station(scenario):
+    from drake_wbc.station.simulation import SimulatedStation
+
+    return SimulatedStation(scenario.station, scenario.scene)
+
+
+@pytest.fixture(scope="module")
+def base_plant(station):
+    """The driver and plant linearised at the plant's step."""
+    return plant_chain.linearize_base_plant(station)
+
+
+def test_base_plant_agrees_with_the_driver_at_low_frequency(
+        station, base_plant, driver):
+    low = OMEGA[HERTZ <= 0.1]
+    plant = linear_system_response(base_plant, low)
+    alone = linear_system_response(chains.linearize_base_driver(driver), low)
+    for axis in range(3):  # the base's actual velocity: the loop's
+        assert relative_error(plant[:, axis, axis],
+                              alone[:, axis, axis]) < 0.01
+    # A slow base translation carries the end effector along (no yaw:
+    # its twist is the base's).
+    assert relative_error(plant[:, 3, 0], alone[:, 0, 0]) < 0.01
+    # The mount's rocking mode (5 Hz) shows in the end effector's
+    # response, not in the base's.
+    hertz, omega = frequency_grid(3.0, 8.0, 200)
+    response = linear_system_response(base_plant, omega)
+    peak, at = peak_gain(omega, response[:, 3, 0] / response[:, 0, 0])
+    assert peak > 2.0 and 4.0 < at / (2 * np.pi) < 6.0
+
+
+def test_split_through_the_plant(scenario, point, station, driver):
+    with_plant = linear_system_response(chains.linearize_split(
+        scenario.controller, point, station=station), OMEGA)
+    with_driver = linear_system_response(chains.linearize_split(
+        scenario.controller, point, base_driver=driver), OMEGA)
+    assert with_plant.shape[1] == 18 + 9
+    # The shares are those of the driver's loop, exactly.
+    assert np.abs(with_plant[:, :18] - with_driver).max() < 1e-9
+    low = HERTZ <= 0.1
+    # The base's actual velocity is its share's at low frequency, and
+    # the end effector reproduces the command there.
+    for plant_row, driver_row in ((18, 0), (21, 12)):
+        assert relative_error(with_plant[low, plant_row, 0],
+                              with_driver[low, driver_row, 0]) < 0.01
+    assert abs(with_plant[0, 21, 0] - 1.0) < 0.01
+    with pytest.raises(ValueError, match="base_driver"):
+        chains.build_split_diagram(scenario.controller, point, driver,
+                                   station=station)
+
+
+def _station_response(station, axis, outputs):
+    """Drives the nonlinear station's base.velocity_command `axis` with
+    three small sinusoids from its static equilibrium (the arm's command
+    held), logs the (port, index) `outputs` every plant step and fits
+    the steady-state sinusoids: the complex gains at SIM_HZ."""
+    builder = DiagramBuilder()
+    system = builder.AddSystem(station.diagram)
+    omegas = 2 * np.pi * np.array(SIM_HZ)
+    sines = builder.AddSystem(Sine(np.full(3, AMPLITUDE), omegas,
+                                   np.zeros(3), 3))
+    spread = np.zeros((3, 3))
+    spread[axis] = 1.0
+    gain = builder.AddSystem(MatrixGain(spread))
+    builder.Connect(sines.get_output_port(0), gain.get_input_port())
+    builder.Connect(gain.get_output_port(),
+                    system.GetInputPort("base.velocity_command"))
+    hold = builder.AddSystem(ConstantVectorSource(
+        station.options.initial_arm_positions))
+    builder.Connect(hold.get_output_port(),
+                    system.GetInputPort("arm.position_command"))
+    h = station.options.time_step
+    loggers = [LogVectorOutput(system.GetOutputPort(port), builder, h)
+               for port, _ in outputs]
+    simulator = Simulator(builder.Build())
+    station.set_initial_state(simulator.get_mutable_context())
+    simulator.AdvanceTo(SETTLE + WINDOW + 1e-9)
+    gains = []
+    for logger, (_, index) in zip(loggers, outputs, strict=True):
+        log = logger.FindLog(simulator.get_context())
+        t, y = log.sample_times(), log.data()[index]
+        keep = t >= SETTLE - 1e-9
+        t, y = t[keep], y[keep]
+        design = np.column_stack([f(w * t) for w in omegas
+                                  for f in (np.sin, np.cos)]
+                                 + [np.ones_like(t)])
+        c = np.linalg.lstsq(design, y, rcond=None)[0]
+        gains.append((c[0:6:2] + 1j * c[1:6:2]) / AMPLITUDE)
+    return gains, omegas
+
+
+def test_base_plant_linearisation_matches_the_station(station, base_plant):
+    (base, end_effector), omegas = _station_response(
+        station, 0, [("base.state_estimated", 3),
+                     ("truth.end_effector_velocity", 0)])
+    predicted = linear_system_response(base_plant, omegas)
+    _check(base, predicted[:, 0, 0])
+    _check(end_effector, predicted[:, 3, 0])
+
+
 # Margins, bandwidth and peak against textbook loops.
 
 def test_gain_margin_of_a_third_order_loop():
@@ -370,3 +478,5 @@ def test_bad_inputs_are_named():
         stability_margins(3.0, OMEGA)
     with pytest.raises(ValueError, match="axis = 7"):
         chains.linearize_dmp_force("stiffness", axis=7)
+    with pytest.raises(ValueError, match="station = None"):
+        plant_chain.linearize_base_plant(None)

@@ -6,8 +6,9 @@
   zero-order-hold equivalents (eq. (filtering)'s are in
   drake_wbc.filtering).
 - chains: the filter chain and the coupled DMPs built from the project's
-  systems and linearised with Drake; period_map: the AutoDiff
-  linearisation of a multi-rate diagram over one control period.
+  systems and linearised with Drake; plant_chain: the station's base
+  driver and plant around their static equilibrium; period_map: the
+  AutoDiff linearisation of a multi-rate diagram over one control period.
 - bode, report, commands: Bode plots, CSV files and the table, and the
   `drake-wbc bode` and `drake-wbc diagram` subcommands.
 """

@@ -17,6 +17,13 @@ initial configuration, the robot at rest):
   share J_b v_base): two rates, the control period and the plant's step,
   so the period map over one control period is linearised with AutoDiff
   (`linearize_period_map`);
+- the same split through the station's plant (`station=`): the driver
+  commands the base of a copy of the SimulatedStation's MultibodyPlant
+  (SAP, the in-plant velocity servo, the flexible mount, the arm held by
+  its servo) at the station's static equilibrium; the base's actual
+  velocity and the end effector's through the plant are read off its
+  state (`plant_outputs`), and `linearize_base_plant` gives the driver
+  and plant alone;
 - the force responses of the coupled DMPs (`linearize_dmp_force`): the
   arm's CDMP, eq. (cdmp-arm), on a stiffness axis (eq. (lp-admit)) and on
   a force axis (eq. (tf-admit), D_a = k_f), and the whole body's CDMP,
@@ -37,10 +44,18 @@ from pydrake.systems.primitives import (
 
 from drake_wbc import cdmp, kinematics
 from drake_wbc.analysis.period_map import linearize_period_map
+from drake_wbc.analysis.plant_chain import (
+    add_station_plant,
+    plant_outputs,
+    station_equilibrium,
+)
 from drake_wbc.controller import ControllerParameters, build_controller
 from drake_wbc.filtering import BaseFilterParameters
 from drake_wbc.robot_model import HOME_ARM_POSITIONS
-from drake_wbc.station.drivers import BaseDriverParameters, BaseVelocityDriver
+from drake_wbc.station.drivers import (
+    BaseDriverParameters,
+    BaseVelocityDriver,
+)
 from drake_wbc.systems import (
     ArmCdmp,
     BaseVelocityFilter,
@@ -53,7 +68,6 @@ from drake_wbc.validation import as_vector, checked_instance, whole_number
 SPLIT_OUTPUTS = ("base_share", "arm_share", "end_effector_velocity")
 """The split diagram's outputs, each a twist (6) of the end effector in
 T_b, stacked in this order on its `shares` port."""
-
 
 @dataclass
 class OperatingPoint:
@@ -136,7 +150,7 @@ def linearize_base_driver(params=None):
 
 
 def build_split_diagram(params=None, point=None, base_driver=None,
-                        alpha=None):
+                        alpha=None, station=None):
     """The split of the end-effector command as a Diagram.
 
     ::
@@ -170,7 +184,17 @@ def build_split_diagram(params=None, point=None, base_driver=None,
             between the filter and the base, or None for an ideal base.
         alpha: alpha in [0, 1] in place of the operating point's (the
             split sums to one while alpha = 0).
+        station: a SimulatedStation, or None. If given (base_driver must
+            be None), its base driver drives a copy of its plant
+            (`add_station_plant`), whose state [q; v] is exported as
+            plant_state and after the shares on shares_and_plant_state.
     """
+    return _build_split(params, point, base_driver, alpha, station)[0]
+
+
+def _build_split(params, point, base_driver, alpha, station):
+    """build_split_diagram's diagram, and the McrModel of its plant (or
+    None)."""
     params = checked_instance("params", params, ControllerParameters,
                               ControllerParameters)
     point = point if point is not None else operating_point(params)
@@ -213,8 +237,16 @@ def build_split_diagram(params=None, point=None, base_driver=None,
             compensator.GetInputPort("arm_velocity"))
     filtered = base_filter.get_output_port()
     connect(filtered, compensator.GetInputPort("filtered_base_velocity"))
-    base_motion = filtered
-    if base_driver is not None:
+    base_motion, model = filtered, None
+    if station is not None:
+        if base_driver is not None:
+            raise ValueError(f"base_driver = {base_driver!r} is not allowed "
+                             "with a station: must be None (the station's "
+                             "own driver is used)")
+        driver, plant, model = add_station_plant(builder, station)
+        connect(filtered, driver.GetInputPort("velocity_command"))
+        base_motion = driver.GetOutputPort("velocity")
+    elif base_driver is not None:
         driver = add("base_driver", BaseVelocityDriver(checked_instance(
             "base_driver", base_driver, BaseDriverParameters, None)))
         connect(filtered, driver.GetInputPort("velocity_command"))
@@ -243,22 +275,52 @@ def build_split_diagram(params=None, point=None, base_driver=None,
         builder.ExportOutput(system.get_output_port(), name)
     builder.ExportOutput(filtered, "filtered_base_velocity")
     builder.ExportOutput(arm_reference, "arm_reference_velocity")
+    if model is not None:
+        state = plant.get_state_output_port()
+        both = add("shares_and_plant_state", Multiplexer([18, state.size()]))
+        connect(stack.get_output_port(), both.get_input_port(0))
+        connect(state, both.get_input_port(1))
+        builder.ExportOutput(state, "plant_state")
+        builder.ExportOutput(both.get_output_port(), "shares_and_plant_state")
     diagram = builder.Build()
-    diagram.set_name("split" if base_driver is None else "split_with_base")
-    return diagram
+    diagram.set_name("split_with_plant" if model is not None else "split"
+                     if base_driver is None else "split_with_base")
+    return diagram, model
 
 
-def linearize_split(params=None, point=None, base_driver=None, alpha=None):
+def linearize_split(params=None, point=None, base_driver=None, alpha=None,
+                    station=None):
     """The split's LinearSystem from V_ee (6) to the stacked shares (18,
     SPLIT_OUTPUTS), discrete at params.time_step: Drake's `Linearize`
     for ideal actuators, `linearize_period_map` with the base driver
-    (two rates). Arguments as for `build_split_diagram`."""
+    (two rates). Arguments as for `build_split_diagram`.
+
+    With a `station`, around its static equilibrium, 27 outputs: the
+    shares (the base's J_b v of the driver's loop), then PLANT_OUTPUTS
+    of the plant: the base's actual velocity (3) and the end effector's
+    twist (6), the arm's share R6_ba V_a^ref (an ideal arm) plus the
+    tool centre point's twist in the plant with the arm held (the base's
+    motion and the mount's rocking).
+    """
     params = checked_instance("params", params, ControllerParameters,
                               ControllerParameters)
-    diagram = build_split_diagram(params, point, base_driver, alpha)
+    diagram, model = _build_split(params, point, base_driver, alpha, station)
     context = diagram.CreateDefaultContext()
     source = diagram.GetInputPort("end_effector_velocity")
     source.FixValue(context, np.zeros(6))
+    if model is not None:
+        plant = diagram.GetSubsystemByName("plant")
+        S = plant_outputs(plant, model, station_equilibrium(
+            station, plant, model, context))
+        linear = linearize_period_map(
+            diagram, context, params.time_step, source,
+            diagram.GetOutputPort("shares_and_plant_state"))
+        select = np.zeros((27, 18 + S.shape[1]))
+        select[:18, :18] = np.eye(18)
+        select[18:, 18:] = S
+        select[21:, 6:12] = np.eye(6)  # the arm's share
+        return LinearSystem(linear.A(), linear.B(), select @ linear.C(),
+                            select @ linear.D(), linear.time_period())
     output = diagram.GetOutputPort("shares")
     if base_driver is None:
         return Linearize(diagram, context, source.get_index(),

@@ -8,6 +8,10 @@ state sampled every h still evolves time-invariantly; the map over one
 period is simulated here in AutoDiffXd and its Jacobians are the
 discrete-time A, B, C, D at period h (the design notes' "Jacobian of the
 discrete update with AutoDiff").
+
+A MultibodyPlant inside the diagram is stepped in AutoDiffXd too. Drake's
+scalar conversion of a plant leaves out its joint actuators' PD gains (the
+in-plant servos); `to_autodiff` puts them back.
 """
 
 import numpy as np
@@ -17,7 +21,10 @@ from pydrake.autodiffutils import (
     ExtractValue,
     InitializeAutoDiff,
 )
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import JointActuatorIndex
 from pydrake.systems.analysis import Simulator_
+from pydrake.systems.framework import Diagram
 from pydrake.systems.primitives import LinearSystem
 
 from drake_wbc.validation import positive
@@ -27,6 +34,32 @@ def _discrete_groups(context):
     state = context.get_discrete_state()
     return [state.get_vector(i).CopyToVector()
             for i in range(state.num_groups())]
+
+
+def _restore_servo_gains(system, converted):
+    """Copies the PD gains of every joint actuator of each MultibodyPlant
+    in `system` (a Diagram's, recursively, by name) to its counterpart in
+    the scalar-converted `converted`."""
+    if isinstance(system, MultibodyPlant):
+        for i in range(system.num_actuators()):
+            actuator = system.get_joint_actuator(JointActuatorIndex(i))
+            if actuator.has_controller():
+                converted.get_mutable_joint_actuator(
+                    JointActuatorIndex(i)).set_controller_gains(
+                        actuator.get_controller_gains())
+    elif isinstance(system, Diagram):
+        for child in system.GetSystems():
+            _restore_servo_gains(
+                child, converted.GetSubsystemByName(child.get_name()))
+
+
+def to_autodiff(system):
+    """`system`.ToAutoDiffXd(), with the PD gains of the in-plant servos of
+    every MultibodyPlant inside it kept (Drake's conversion of a plant
+    drops them, so that its PD-controlled joints would go limp)."""
+    converted = system.ToAutoDiffXd()
+    _restore_servo_gains(system, converted)
+    return converted
 
 
 def linearize_period_map(system, context, period, input_port, output_port):
@@ -47,7 +80,9 @@ def linearize_period_map(system, context, period, input_port, output_port):
     just before the updates at t_k, like the state).
 
     Args:
-        system: a scalar-convertible System with discrete state only.
+        system: a scalar-convertible System with discrete state only (a
+            MultibodyPlant inside without sampled output ports, whose
+            samples are abstract state).
         context: its Context at the operating point, time 0; its other
             vector inputs fixed.
         period: the map's period in s, a whole multiple of every
@@ -68,7 +103,7 @@ def linearize_period_map(system, context, period, input_port, output_port):
     u0 = input_port.Eval(context)
     n, m = len(x0), len(u0)
     seeded = InitializeAutoDiff(np.concatenate([x0, u0]), n + m)[:, 0]
-    ad_system = system.ToAutoDiffXd()
+    ad_system = to_autodiff(system)
 
     def ad_context():
         new = ad_system.CreateDefaultContext()

@@ -11,7 +11,12 @@ and CSV per figure, summary.csv, and the table it returns):
   alpha = 0), the base's share over k_b times eq. (filtering);
 - split_base_loop: the same with the station's BaseVelocityDriver, and
   the driver alone; where the end effector's command stops being
-  reproduced (|sum - 1| > REPRODUCTION_TOLERANCE);
+  reproduced (|sum - 1| > REPRODUCTION_TOLERANCE); and with the
+  station's plant after the driver (its base servo, the flexible
+  mount): the base's actual velocity and the end effector's;
+- base_plant: the base's velocity command to its actual velocity and to
+  the end effector's, through the driver and the plant (the servo and
+  the mount's rocking mode), over the driver alone;
 - dmp_force: the coupled DMPs' force-to-position responses over eqs.
   (lp-admit) and (tf-admit);
 - contact_loops: the arm's CDMP against a contact spring K (the wiping
@@ -25,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_wbc import distribution, kinematics
-from drake_wbc.analysis import chains, closed_forms
+from drake_wbc.analysis import chains, closed_forms, plant_chain
 from drake_wbc.analysis.bode import (
     BodePlot,
     draw,
@@ -43,6 +48,7 @@ from drake_wbc.filtering import (
     lowpass_response,
     lowpass_zoh_response,
 )
+from drake_wbc.station.simulation import SimulatedStation
 from drake_wbc.validation import positive
 
 CONTACT_STIFFNESS = 3.0e3
@@ -59,6 +65,10 @@ SWEEP_ZETA = (0.5, 0.707, 1.0)
 
 AXIS = 0
 """The end-effector axis of the split figures: x of T_b."""
+
+PLANT_CURVE = "end effector with the base loop and the plant"
+"""The curve (and row) of the end effector's actual velocity per V_ee
+through the base's loop and the station's plant (an ideal arm)."""
 
 
 @dataclass
@@ -100,7 +110,7 @@ def first_departure(hertz, response, tolerance=REPRODUCTION_TOLERANCE):
     return float(hertz[off[0]]) if len(off) else float("nan")
 
 
-def _split_plots(report, params, point, driver, hertz, omega, h):
+def _split_plots(report, params, point, station, hertz, omega, h):
     rows = report.rows
     ideal = linear_system_response(chains.linearize_split(params, point),
                                    omega)
@@ -119,6 +129,8 @@ def _split_plots(report, params, point, driver, hertz, omega, h):
              * lowpass_zoh_response(f.omega_f, f.zeta, h, omega), True)
     report.plots[plot.name] = plot
 
+    driver = replace(station.options.base,
+                     time_step=station.options.time_step)
     real = linear_system_response(
         chains.linearize_split(params, point, base_driver=driver), omega)
     loop = chains.linearize_base_driver(driver)
@@ -136,7 +148,14 @@ def _split_plots(report, params, point, driver, hertz, omega, h):
     rows.append(summarize("base velocity loop alone", hertz,
                           plot.curves[-1].response))
     plot.add("sum with an ideal base", ideal[:, 12 + AXIS, AXIS], True)
+    plant = linear_system_response(
+        chains.linearize_split(params, point, station=station), omega)
+    for row, label in ((18, "base loop and plant: base velocity"),
+                       (21, PLANT_CURVE)):
+        plot.add(label, plant[:, row + AXIS, AXIS])
+        rows.append(summarize(label, hertz, plot.curves[-1].response))
     report.plots[plot.name] = plot
+    _base_plant_plot(report, station, loop, hertz, omega, h)
     departure = first_departure(hertz, real[:, 12 + AXIS, AXIS])
     where = ("nowhere on the band" if np.isnan(departure)
              else f"from {departure:.3f} Hz")
@@ -144,9 +163,34 @@ def _split_plots(report, params, point, driver, hertz, omega, h):
         "end effector with the base's velocity loop: |V_ee,actual / V_ee - "
         f"1| exceeds {REPRODUCTION_TOLERANCE:g} {where} (largest "
         f"{np.abs(real[:, 12 + AXIS, AXIS] - 1).max():.3f})")
+    departure = first_departure(hertz, plant[:, 21 + AXIS, AXIS])
+    where = ("nowhere on the band" if np.isnan(departure)
+             else f"from {departure:.3f} Hz")
+    report.notes.append(
+        f"{PLANT_CURVE}: |V_ee,actual / V_ee - 1| exceeds "
+        f"{REPRODUCTION_TOLERANCE:g} {where} (largest "
+        f"{np.abs(plant[:, 21 + AXIS, AXIS] - 1).max():.3f})")
     report.notes.append(
         "end effector with ideal actuators: largest |sum - 1| = "
         f"{np.abs(ideal[:, 12:18, :] - np.eye(6)).max():.2e}")
+
+
+def _base_plant_plot(report, station, loop, hertz, omega, h):
+    """base_plant: the base's command (x of T_b, held over the control
+    period h) to its actual velocity and the end effector's through the
+    driver and the plant, over the driver alone."""
+    plant = linear_system_response(plant_chain.linearize_base_plant(station, h),
+                                   omega)
+    plot = BodePlot("base_plant", "base velocity command (x) through the "
+                    "base's loop and the plant (servo, mount)", hertz,
+                    nyquist_hz=0.5 / h)
+    for row, label in ((AXIS, "base velocity, driver and plant"),
+                       (3 + AXIS, "end effector, driver and plant")):
+        plot.add(label, plant[:, row, AXIS])
+        report.rows.append(summarize(label, hertz, plant[:, row, AXIS]))
+    plot.add("base velocity loop alone (plant step)",
+             linear_system_response(loop, omega)[:, AXIS, AXIS], True)
+    report.plots[plot.name] = plot
 
 
 def _dmp_plots(report, params, hertz, omega, h, stiffness):
@@ -225,6 +269,7 @@ def compute_bode_report(scenario, points_per_decade=60,
                                    scenario.station.initial_arm_positions)
     driver = replace(scenario.station.base,
                      time_step=scenario.station.time_step)
+    station = SimulatedStation(scenario.station, scenario.scene)
     report = BodeReport()
     f = replace(params.base_filter, time_step=h, enabled=True)
     plot = BodePlot("base_filter", "base filter, eq. (filtering): "
@@ -243,7 +288,7 @@ def compute_bode_report(scenario, points_per_decade=60,
     report.plots[plot.name] = plot
     report.rows += [summarize(f"base filter, h = {h:g} s", hertz, discrete),
                     summarize("base filter, continuous", hertz, continuous)]
-    _split_plots(report, params, point, driver, hertz, omega, h)
+    _split_plots(report, params, point, station, hertz, omega, h)
     _dmp_plots(report, params, hertz, omega, h, contact_stiffness)
     _sweep_plots(report, params, point, driver, hertz, omega, h)
     report.table = format_table(report.rows)
