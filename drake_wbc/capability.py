@@ -15,7 +15,10 @@ all-revolute serial chain (n = 6 for the Elfin5). All gradients here are
 analytic, computed from J_a and q alone: no AutoDiff, no finite differences.
 """
 
+import math
+
 import numpy as np
+from scipy.linalg.lapack import dgesdd
 
 from drake_wbc.validation import (
     as_matrix,
@@ -89,30 +92,70 @@ def _as_limits(q, lower, upper, size=None):
 
 def _products_of_others(values):
     """Returns p with p_k = prod_{l != k} values_l, computed without any
-    division, so that it stays exact when some values are 0."""
-    return np.array(
-        [np.prod(np.delete(values, k)) for k in range(values.size)]
-    )
+    division (the product of the values before k times that of the values
+    after k), so that it stays exact when some values are 0."""
+    v = values.tolist()  # a few numbers: plain floats are the fastest
+    before, after = [1.0] * len(v), [1.0] * len(v)
+    for k in range(1, len(v)):
+        before[k] = before[k - 1] * v[k - 1]
+    for k in range(len(v) - 2, -1, -1):
+        after[k] = after[k + 1] * v[k + 1]
+    return np.array([b * a for b, a in zip(before, after, strict=True)])
+
+
+def _cross(a, b):
+    """a x b along the first axis of (3, ...) arrays (np.cross is slow for
+    small arrays)."""
+    return np.array([a[1] * b[2] - a[2] * b[1],
+                     a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
+
+
+def _svd(J):
+    """The thin SVD (U, s, Vt) of a checked J (rows <= columns), by LAPACK's
+    dgesdd directly (as np.linalg.svd, without its overhead)."""
+    U, s, Vt, info = dgesdd(J, compute_uv=1, full_matrices=0)
+    if info != 0:
+        return np.linalg.svd(J, full_matrices=False)
+    return U, s, Vt
 
 
 def _manipulability_gradient(J, U, s, Vt):
     """dm/dq from J and its thin SVD J = U diag(s) Vt (see the public
-    function for the derivation)."""
-    weights = _products_of_others(s)  # m / s_k, with no division
-    dJ = jacobian_derivative(J)
-    return np.einsum("k,rk,irc,kc->i", weights, U, dJ, Vt)
+    function for the derivation).
+
+    With W = U diag(m / s_k) Vt (6, n), dm/dq_i = sum_j W_j . dJ_j/dq_i
+    over the columns j, and by the rules of `jacobian_derivative` and the
+    triple product a . (b x c) = b . (c x a) = c . (a x b):
+
+        dm/dq_i = Jw_i . sum_{j >= i} (Jv_j x Wv_j + Jw_j x Ww_j)
+                  + Jv_i . sum_{j < i} (Wv_j x Jw_j),
+
+    O(n) with running sums, without forming the (n, 6, n) derivative.
+    """
+    W = (U * _products_of_others(s)) @ Vt  # m / s_k, with no division
+    n = J.shape[1]
+    Jv, Jw, Wv, Ww = J[:3], J[3:], W[:3], W[3:]
+    # Jv x Wv, Jw x Ww and Wv x Jw in one product of (3, 3n) arrays.
+    crosses = _cross(np.concatenate([Jv, Jw, Wv], axis=1),
+                     np.concatenate([Wv, Ww, Jw], axis=1))
+    after = crosses[:, :n] + crosses[:, n:2 * n]
+    after = np.cumsum(after[:, ::-1], axis=1)[:, ::-1]
+    before = np.zeros_like(Jv)
+    np.cumsum(crosses[:, 2 * n:-1], axis=1, out=before[:, 1:])
+    return np.sum(Jw * after + Jv * before, axis=0)
 
 
 def _penalty_and_gradient(q, lower, upper, k_j):
     """P_jnt and dP_jnt/dq for checked inputs (see the public functions)."""
-    q = np.clip(q, lower, upper)
+    q = np.minimum(np.maximum(q, lower), upper)  # np.clip, faster
     span2 = (upper - lower) ** 2
     factors = (q - lower) * (upper - q) / span2
     factor_slopes = (upper + lower - 2.0 * q) / span2
-    product = np.prod(factors)
-    penalty = -np.expm1(-k_j * product)
+    product = math.prod(factors.tolist())
+    penalty = -math.expm1(-k_j * product)
     gradient = (
-        k_j * np.exp(-k_j * product)
+        k_j * math.exp(-k_j * product)
         * factor_slopes * _products_of_others(factors)
     )
     return penalty, gradient
@@ -274,12 +317,13 @@ def jacobian_derivative(J_a):
     """
     J = _as_jacobian(J_a, rows=6, wide=False)
     Jv, Jw = J[:3].T, J[3:].T  # (n, 3): row j is column j of J_a
-    w_x_v = np.cross(Jw[:, None, :], Jv[None, :, :])  # [i, j] = Jw_i x Jv_j
-    w_x_w = np.cross(Jw[:, None, :], Jw[None, :, :])  # [i, j] = Jw_i x Jw_j
-    upper = np.triu(np.ones((J.shape[1],) * 2, dtype=bool))[:, :, None]
-    dJv = np.where(upper, w_x_v, np.swapaxes(w_x_v, 0, 1))
+    # [:, i, j] = Jw_i x Jv_j and Jw_i x Jw_j (vector first).
+    w_x_v = _cross(Jw.T[:, :, None], Jv.T[:, None, :])
+    w_x_w = _cross(Jw.T[:, :, None], Jw.T[:, None, :])
+    upper = np.triu(np.ones((J.shape[1],) * 2, dtype=bool))
+    dJv = np.where(upper, w_x_v, np.swapaxes(w_x_v, 1, 2))
     dJw = np.where(upper, w_x_w, 0.0)
-    return np.concatenate([dJv, dJw], axis=2).transpose(0, 2, 1)
+    return np.concatenate([dJv, dJw], axis=0).transpose(1, 0, 2)
 
 
 def manipulability_joint_gradient(J_a):
@@ -309,8 +353,7 @@ def manipulability_joint_gradient(J_a):
         (n,) array dm/dq, in units of m (metres^3) per rad.
     """
     J = _as_jacobian(J_a, rows=6)
-    U, s, Vt = np.linalg.svd(J, full_matrices=False)
-    return _manipulability_gradient(J, U, s, Vt)
+    return _manipulability_gradient(J, *_svd(J))
 
 
 def joint_limit_penalty_gradient(q, lower, upper,
@@ -341,8 +384,8 @@ def joint_limit_penalty_gradient(q, lower, upper,
 
 def _capability_and_gradient(J, q, lower, upper, k_j):
     """C_m, dC_m/dq and the SVD of J for checked inputs."""
-    U, s, Vt = np.linalg.svd(J, full_matrices=False)
-    m = np.prod(s)
+    U, s, Vt = _svd(J)
+    m = math.prod(s.tolist())
     penalty, penalty_gradient = _penalty_and_gradient(q, lower, upper, k_j)
     gradient = (penalty * _manipulability_gradient(J, U, s, Vt)
                 + m * penalty_gradient)
@@ -408,12 +451,48 @@ def capability_gradient(J_a, q, lower, upper, k_j=DEFAULT_JOINT_LIMIT_GAIN,
     k_j = positive("k_j", k_j)
     lambda_max = non_negative("damping", damping)
     eps = positive("damping_threshold", damping_threshold)
-    _, joint_gradient, (U, s, Vt) = _capability_and_gradient(
-        J, q, lower, upper, k_j)
+    _, joint_gradient, svd = _capability_and_gradient(J, q, lower, upper, k_j)
+    return _cartesian_gradient(joint_gradient, svd, lambda_max, eps)
+
+
+def _cartesian_gradient(joint_gradient, svd, lambda_max, eps):
+    """g = (J J^T + lambda^2 I)^-1 J dC_m/dq through the thin SVD
+    svd = (U, s, Vt) of J (see capability_gradient)."""
+    U, s, Vt = svd
     s_min = s[-1]
     lambda2 = (lambda_max**2 * (1.0 - (s_min / eps) ** 2)
                if s_min < eps else 0.0)
     denominators = s**2 + lambda2
-    safe = np.where(denominators > 0.0, denominators, 1.0)
-    gains = np.where(denominators > 0.0, s / safe, 0.0)
+    if denominators.min() > 0.0:
+        gains = s / denominators
+    else:
+        safe = np.where(denominators > 0.0, denominators, 1.0)
+        gains = np.where(denominators > 0.0, s / safe, 0.0)
     return U @ (gains * (Vt @ joint_gradient))
+
+
+def capability_terms_unchecked(J_a, q, lower, upper, k_j, damping,
+                               damping_threshold):
+    """C_m and grad_x C_m together, from one SVD of J_a, for arguments
+    already checked: the per-tick path of the controller's ArmCapability,
+    whose parameters are checked once at construction.
+
+    The same values as `capability` and `capability_gradient` (to
+    rounding); nothing is checked here: J_a (6, n) with n >= 6, q, lower
+    and upper (n,) finite float arrays with lower < upper, k_j > 0,
+    damping >= 0 and damping_threshold > 0.
+
+    Returns:
+        (C_m, g): C_m as a float and g = grad_x C_m (6,).
+    """
+    C_m, joint_gradient, svd = _capability_and_gradient(J_a, q, lower,
+                                                        upper, k_j)
+    return float(C_m), _cartesian_gradient(joint_gradient, svd, damping,
+                                           damping_threshold)
+
+
+def transition_unchecked(value, upper, lower):
+    """alpha of eq. (transition) (see `transition`) for a float value and
+    thresholds already checked (lower < upper); a float."""
+    x = min(max((value - lower) / (upper - lower), 0.0), 1.0)
+    return 0.5 * (1.0 + math.cos(math.pi * x))

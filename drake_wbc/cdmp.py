@@ -372,7 +372,17 @@ def repulsive_force(obstacle_points, params):
     params: RepulsiveFieldParameters. Returns the (2,) force [f_x, f_y] in
     T_b (entering tau z_dot).
     """
-    d, n = _clamped_distance(obstacle_points, params)
+    points = np.reshape(obstacle_points, (-1, 2))
+    if points.dtype == np.float64:
+        # A finite point farther than d_th from the footprint along x or
+        # y gives an exact zero: drop those (non-finite ones stay, and
+        # make the force NaN as before).
+        a, b = params.half_sizes
+        x, y = points[:, 0], points[:, 1]
+        far = (((np.abs(x) - a > params.d_th) | (np.abs(y) - b > params.d_th))
+               & np.isfinite(x) & np.isfinite(y))
+        points = points[~far]
+    d, n = _clamped_distance(points, params)
     slope = params.k_obs * (1.0 / d - 1.0 / params.d_th) / d**2
     slope = np.where(d <= params.d_th, slope, 0.0 * slope)
     return np.sum(-slope[:, None] * n, axis=0) + np.zeros(2)

@@ -66,13 +66,15 @@ weak directions is reduced); this is the only deviation from the paper's
 formula.
 """
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg.lapack import dpotrf, dpotrs
 
+from drake_wbc.kinematics import as_float_array
 from drake_wbc.validation import (
     as_matrix,
-    as_vector,
     in_closed_range,
     non_negative,
     positive,
@@ -225,6 +227,45 @@ def _checked_damping(damping):
 def _pseudoinverse(J, Q, damping):
     """J^+ for arguments already checked (see weighted_pseudoinverse)."""
     JQ = J @ Q
+    if damping is not None:
+        solution = _certified_solve(J, JQ, JQ, damping.threshold)
+        if solution is not None:
+            return solution.T
+    return _pseudoinverse_by_rule(J, JQ, damping)
+
+
+def _certified_solve(J, JQ, rhs, threshold):
+    """(J Q J^T)^-1 rhs when the damping rule provably leaves
+    J Q J^T undamped, else None (then apply the rule as written). J (6, 9)
+    and JQ = J Q checked, rhs (6,) or (6, k).
+
+    This skips the eigen-decomposition that the rule needs. With the
+    Cholesky factor L of M = J Q J^T (so M is positive definite) and
+    t = tr M: s_max <= t, and the other five eigenvalues multiply to at
+    most (t / 5)^5 (arithmetic and geometric means), so
+    s_min >= det M (5 / t)^5 with det M = prod L_ii^2. Hence
+    prod_i (5 L_ii^2 / t) >= 5 threshold (six factors, free of units and
+    scale) proves s_min >= threshold t >= eps, i.e. lambda = 0. For the
+    controller's J_wb = [R_ba, J_b] with R_ba = I it holds for every reach
+    r up to about 3.4 m (det M >= 1, t <= 6 + r^2; module docstring), so
+    one Cholesky factorisation and its solve are the whole cost.
+    """
+    M = JQ @ J.T
+    factor, info = dpotrf(M, lower=1, clean=0)  # reads M's lower half
+    if info != 0:
+        return None
+    diagonal = factor.diagonal()
+    certificate = math.prod((diagonal * diagonal * (5.0 / M.trace()))
+                            .tolist())
+    if not certificate >= 5.0 * threshold:
+        return None
+    return dpotrs(factor, rhs, lower=1)[0]
+
+
+def _pseudoinverse_by_rule(J, JQ, damping):
+    """J^+ = Q J^T (J Q J^T + lambda^2 I)^-1 with the damping rule of the
+    module docstring applied as written (eigenvalues of J Q J^T), or the
+    exact inverse for damping None, for checked J and JQ = J Q."""
     M = JQ @ J.T
     M = 0.5 * (M + M.T)
     if damping is None:
@@ -251,6 +292,52 @@ def _pseudoinverse(J, Q, damping):
     return np.linalg.solve(M, JQ).T
 
 
+def _unit_interval(name, value):
+    """validation.in_closed_range(name, value, 0, 1), with a fast path for
+    a float in [0, 1] (finite, and not NaN, since it compares)."""
+    if type(value) is float and 0.0 <= value <= 1.0:
+        return value
+    return in_closed_range(name, value, 0.0, 1.0)
+
+
+def weights_of(sigma_xy, sigma_phi):
+    """The diagonal of Q(sigma_xy, sigma_phi) of eq. (weight-factors), (9,),
+    for sigmas already checked to lie in [0, 1] (see weighting_matrix)."""
+    return np.array([sigma_xy, sigma_xy, 1.0, 1.0, 1.0, sigma_phi,
+                     1.0 - sigma_xy, 1.0 - sigma_xy, 1.0 - sigma_phi])
+
+
+def distribute_unchecked(J_wb, V_ee, weights, null_velocity=None,
+                         damping=DEFAULT_DAMPING):
+    """`distribute` for float arguments already checked, Q given by its
+    diagonal `weights` (9,) (see weights_of): the per-tick path of the
+    controller, which checks its parameters once at construction.
+
+        V_wb = Q J^T (J Q J^T)^-1 (V_ee - J V_n^0) + V_n^0,
+
+    the same as J^+ V_ee + (I - J^+ J) V_n^0 of eq. (wbccm), with the
+    damping of weighted_pseudoinverse. Nothing is checked here: J_wb
+    (6, 9), V_ee (6,) and null_velocity (9,) or None must be finite float
+    arrays, weights non-negative and damping a SingularityDamping or None.
+
+    Returns:
+        (9,) array V_wb = [V_a (6, T_a); V_b (3, T_b)].
+    """
+    JQ = J_wb * weights
+    if damping is not None:
+        rhs = (V_ee if null_velocity is None
+               else V_ee - J_wb @ null_velocity)
+        x = _certified_solve(J_wb, JQ, rhs, damping.threshold)
+        if x is not None:
+            return JQ.T @ x if null_velocity is None else (
+                JQ.T @ x + null_velocity)
+    J_pinv = _pseudoinverse_by_rule(J_wb, JQ, damping)
+    V_wb = J_pinv @ V_ee
+    if null_velocity is not None:
+        V_wb += null_velocity - J_pinv @ (J_wb @ null_velocity)
+    return V_wb
+
+
 def capability_null_velocity(grad_x_C_m, k_n):
     """Null-space velocity V_n^0 = k_n [grad_x C_m; 0_3] of eq. (wbccm).
 
@@ -268,8 +355,9 @@ def capability_null_velocity(grad_x_C_m, k_n):
         ValueError: if grad_x_C_m is not 6 finite numbers or k_n is
             negative or not finite.
     """
-    grad = as_vector("grad_x_C_m", grad_x_C_m, 6)
-    gain = non_negative("k_n", k_n)
+    grad = as_float_array("grad_x_C_m", grad_x_C_m, (6,))
+    gain = (k_n if type(k_n) is float and 0.0 <= k_n < math.inf
+            else non_negative("k_n", k_n))
     V_n = np.zeros(9)
     V_n[:6] = gain * grad
     return V_n
@@ -309,12 +397,11 @@ def distribute(
         ValueError: on a bad argument (wrong shape, non-finite entry, sigma
             outside [0, 1]), naming it.
     """
-    J = as_matrix("J_wb", J_wb, (6, 9))
-    V_ee = as_vector("V_ee", V_ee, 6)
-    Q = weighting_matrix(sigma_xy, sigma_phi)
-    J_pinv = _pseudoinverse(J, Q, _checked_damping(damping))
-    V_wb = J_pinv @ V_ee
-    if null_velocity is not None:
-        V_n = as_vector("null_velocity", null_velocity, 9)
-        V_wb += V_n - J_pinv @ (J @ V_n)
-    return V_wb
+    J = as_float_array("J_wb", J_wb, (6, 9))
+    V_ee = as_float_array("V_ee", V_ee, (6,))
+    weights = weights_of(_unit_interval("sigma_xy", sigma_xy),
+                         _unit_interval("sigma_phi", sigma_phi))
+    V_n = (None if null_velocity is None
+           else as_float_array("null_velocity", null_velocity, (9,)))
+    return distribute_unchecked(J, V_ee, weights, V_n,
+                                _checked_damping(damping))

@@ -21,6 +21,53 @@ from drake_wbc.validation import as_matrix, as_scalar, as_vector
 from drake_wbc.validation import rotation_matrix as checked_rotation
 
 
+def as_float_array(name, value, shape):
+    """validation.as_vector / as_matrix with a fast path.
+
+    A float64 ndarray of exactly `shape` with finite entries is returned
+    as it is, as np.asarray would; anything else goes through the full
+    check, which names `name` on a bad value.
+
+    Args:
+        name: the argument's name, for the error message.
+        value: the argument.
+        shape: the wanted shape, e.g. (6,) or (6, 9).
+
+    Returns:
+        `value` as a finite float array of `shape`.
+
+    Raises:
+        ValueError: as validation.as_vector / as_matrix.
+    """
+    if (type(value) is np.ndarray and value.dtype == np.float64
+            and value.shape == shape and np.isfinite(value).all()):
+        return value
+    if len(shape) == 1:
+        return as_vector(name, value, shape[0])
+    return as_matrix(name, value, shape)
+
+
+class _RotationCheck:
+    """validation.rotation_matrix, remembering the last value it passed:
+    the same matrix (bytes equal) is not checked again, so that a constant
+    R_ba costs one comparison per call."""
+
+    def __init__(self):
+        self._last = None
+
+    def __call__(self, name, value):
+        if (type(value) is np.ndarray and value.dtype == np.float64
+                and value.shape == (3, 3)
+                and value.tobytes() == self._last):
+            return value
+        R = checked_rotation(name, value)
+        self._last = R.tobytes()
+        return R
+
+
+_checked_rotation_cached = _RotationCheck()
+
+
 def base_jacobian(p_ee_in_base):
     """Jacobian J_b of the base input, eq. (2).
 
@@ -46,7 +93,7 @@ def base_jacobian(p_ee_in_base):
     Raises:
         ValueError: if p_ee_in_base is not 3 finite numbers.
     """
-    p = as_vector("p_ee_in_base", p_ee_in_base, 3)
+    p = as_float_array("p_ee_in_base", p_ee_in_base, (3,))
     J_b = np.zeros((6, 3))
     J_b[0, 0] = 1.0
     J_b[1, 1] = 1.0
@@ -116,21 +163,31 @@ def whole_body_jacobian(J_a, p_ee_in_base, R_ba=None):
         ValueError: if J_a is not a finite 6x6 matrix, p_ee_in_base not 3
             finite numbers, or R_ba not a rotation matrix.
     """
-    J_wb = np.empty((6, 9))
-    if R_ba is None:
-        R = np.eye(3)
-    else:
-        R = checked_rotation("R_ba", R_ba)
+    R = (np.eye(3) if R_ba is None
+         else _checked_rotation_cached("R_ba", R_ba))
+    if J_a is not None:
+        J_a = as_float_array("J_a", J_a, (6, 6))
+    p = as_float_array("p_ee_in_base", p_ee_in_base, (3,))
+    return whole_body_jacobian_unchecked(J_a, p, R)
+
+
+def whole_body_jacobian_unchecked(J_a, p_ee_in_base, R_ba):
+    """whole_body_jacobian for float arguments already checked: J_a (6, 6)
+    or None, p_ee_in_base (3,) and the rotation matrix R_ba (3, 3), which
+    is not optional here. The per-tick path of the controller."""
+    J_wb = np.zeros((6, 9))
     if J_a is None:
-        J_wb[:3, :6] = 0.0
-        J_wb[3:, :6] = 0.0
-        J_wb[:3, :3] = R
-        J_wb[3:, 3:6] = R
+        J_wb[:3, :3] = R_ba
+        J_wb[3:, 3:6] = R_ba
     else:
-        J_a = as_matrix("J_a", J_a, (6, 6))
-        J_wb[:3, :6] = R @ J_a[:3]
-        J_wb[3:, :6] = R @ J_a[3:]
-    J_wb[:, 6:] = base_jacobian(p_ee_in_base)
+        J_wb[:3, :6] = R_ba @ J_a[:3]
+        J_wb[3:, :6] = R_ba @ J_a[3:]
+    # J_b of eq. (2) (base_jacobian).
+    J_wb[0, 6] = 1.0
+    J_wb[1, 7] = 1.0
+    J_wb[0, 8] = -p_ee_in_base[1]
+    J_wb[1, 8] = p_ee_in_base[0]
+    J_wb[5, 8] = 1.0
     return J_wb
 
 

@@ -35,6 +35,7 @@ from pydrake.multibody.tree import (
     RevoluteSpring,
 )
 
+from drake_wbc.kinematics import as_float_array
 from drake_wbc.validation import as_vector
 
 PACKAGE_NAME = "drake_wbc"
@@ -230,17 +231,34 @@ class ArmKinematics:
         self.velocity_limits = np.array(
             [j.velocity_upper_limits()[0] for j in joints]
         )
-        self.R_ba = (
-            self._arm_base.CalcPose(self._context, self._base)
-            .rotation()
-            .matrix()
-        )
+        X_BA = self._arm_base.CalcPose(self._context, self._base)
+        self.R_ba = X_BA.rotation().matrix()
+        # T_a is fixed in T_b (nominal kinematics): p_ee in T_b follows
+        # from X_AE, with no third query of the plant.
+        self._R_BA, self._p_BA = self.R_ba.copy(), X_BA.translation().copy()
+        self._q = self._plant.GetPositions(self._context)
+        # Flat indices of J_a's entries in Drake's (6, nv) Jacobian [w; v].
+        self._J_a_entries = (
+            np.array([3, 4, 5, 0, 1, 2])[:, None] * plant.num_velocities()
+            + np.asarray(self._v_indices)[None, :]).ravel()
+        self._q_a_key = None
+        self._memo = {}
 
-    def _set_arm_positions(self, q_a):
-        q_a = as_vector("q_a", q_a, 6)
-        q = self._plant.GetPositions(self._context)
-        q[self._q_indices] = q_a
-        self._plant.SetPositions(self._context, q)
+    MEMO_SIZE = 4
+    """Configurations whose values `evaluate` remembers (the stages of a
+    control tick ask for the same few: measured and commanded)."""
+
+    def _set_arm_positions(self, q_a, key=None):
+        """Puts q_a (6,) into the private context; a no-op when it is
+        already there, which keeps the plant's kinematics cache valid.
+        `key`: q_a.tobytes() of a checked q_a, if known."""
+        if key is None:
+            q_a = as_float_array("q_a", q_a, (6,))
+            key = q_a.tobytes()
+        if key != self._q_a_key:
+            self._q[self._q_indices] = q_a
+            self._plant.SetPositions(self._context, self._q)
+            self._q_a_key = key
 
     def frame_pose(self, q_a, frame):
         """Returns the pose X_AF of `frame` (of this plant) in T_a at arm
@@ -249,8 +267,25 @@ class ArmKinematics:
         return frame.CalcPose(self._context, self._arm_base)
 
     def evaluate(self, q_a):
-        """Returns the ArmKinematicsValues at arm configuration `q_a` (6,)."""
-        self._set_arm_positions(q_a)
+        """Returns the ArmKinematicsValues at arm configuration `q_a` (6,).
+
+        The last few configurations' values are remembered (the same q_a
+        gives the same values, as fresh copies)."""
+        q_a = as_float_array("q_a", q_a, (6,))
+        key = q_a.tobytes()
+        values = self._memo.get(key)
+        if values is None:
+            self._set_arm_positions(q_a, key)
+            values = self._evaluate_here()
+            if len(self._memo) >= self.MEMO_SIZE:
+                del self._memo[next(iter(self._memo))]
+            self._memo[key] = values
+        J_a, p_ee_in_base, X_AE = values
+        return ArmKinematicsValues(J_a.copy(), p_ee_in_base.copy(),
+                                   RigidTransform(X_AE))
+
+    def _evaluate_here(self):
+        """J_a, p_ee (T_b) and X_AE at the configuration of the context."""
         J = self._plant.CalcJacobianSpatialVelocity(
             self._context,
             JacobianWrtVariable.kV,
@@ -258,13 +293,11 @@ class ArmKinematics:
             np.zeros(3),
             self._arm_base,
             self._arm_base,
-        )[:, self._v_indices]
+        )
         # Drake orders spatial velocities [w; v]; the paper orders [v; w].
-        J_a = np.vstack([J[3:], J[:3]])
-        p_ee_in_base = self._plant.CalcPointsPositions(
-            self._context, self._end_effector, np.zeros(3), self._base
-        ).ravel()
+        J_a = J.take(self._J_a_entries).reshape(6, 6)
         X_AE = self._end_effector.CalcPose(self._context, self._arm_base)
+        p_ee_in_base = self._R_BA @ X_AE.translation() + self._p_BA
         return ArmKinematicsValues(J_a, p_ee_in_base, X_AE)
 
 

@@ -223,18 +223,25 @@ def ArmCapability_(T):
             self.params = other.params
 
         def evaluate(self, q_a):
-            """[p_ee (3), C_m, grad_x C_m (6), alpha] at float q_a (6,)."""
+            """[p_ee (3), C_m, grad_x C_m (6), alpha] at float q_a (6,).
+
+            One evaluation of the kinematics and one SVD of J_a
+            (capability.capability_terms_unchecked): the parameters were
+            checked at construction and q_a comes from a port of size 6.
+            """
             p = self.params
             values = self.arm.evaluate(q_a)
-            args = (values.J_a, q_a, self.arm.lower, self.arm.upper,
-                    p.joint_limit_gain)
-            C_m = capability.capability(*args)
-            gradient = capability.capability_gradient(
-                *args, damping=p.gradient_damping,
-                damping_threshold=p.gradient_damping_threshold)
-            alpha = capability.transition(C_m, p.band.upper, p.band.lower)
-            return np.concatenate(
-                [values.p_ee_in_base, [C_m], gradient, [alpha]])
+            C_m, gradient = capability.capability_terms_unchecked(
+                values.J_a, q_a, self.arm.lower, self.arm.upper,
+                p.joint_limit_gain, p.gradient_damping,
+                p.gradient_damping_threshold)
+            result = np.empty(11)
+            result[:3] = values.p_ee_in_base
+            result[3] = C_m
+            result[4:10] = gradient
+            result[10] = capability.transition_unchecked(
+                C_m, p.band.upper, p.band.lower)
+            return result
 
         def _calc(self, context):
             return through_float_function(self.evaluate,

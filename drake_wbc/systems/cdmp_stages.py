@@ -23,7 +23,7 @@ loop.
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.framework import LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc import cdmp
@@ -266,8 +266,9 @@ def BaseCdmp_(T):
         - obstacle_points: an (M, 2) float array of obstacle points in T_b
           (abstract-valued; optional, none when unconnected). The
           repulsive force f_avoid, the gradient of U_rep around the
-          footprint (cdmp.repulsive_force), is computed from them each
-          tick and held over the period.
+          footprint (cdmp.repulsive_force), is computed once per new set
+          of points (a cache entry that the output and the update share)
+          and held over the period.
         - avoiding_base_velocity: V_b' (3), y_dot, for the base filter.
 
         State [y, z, C] (9) in T_b coordinates, goal g = 0: once the
@@ -300,6 +301,13 @@ def BaseCdmp_(T):
             self._points = self.DeclareAbstractInputPort(
                 "obstacle_points", AbstractValue.Make(no_points))
             self._phri_port = None
+            self._force = self.DeclareCacheEntry(
+                "repulsive force f_avoid",
+                ValueProducer(
+                    allocate=lambda: AbstractValue.Make(np.zeros(3)),
+                    calc=lambda context, value: value.set_value(
+                        self._calc_repulsive_force(context))),
+                {self.input_port_ticket(self._points.get_index())})
             state = self._declare_state(9, time_step)
             self.DeclareVectorOutputPort(
                 "avoiding_base_velocity", 3, self._output,
@@ -318,7 +326,12 @@ def BaseCdmp_(T):
             return 0
 
         def repulsive_force(self, context):
-            """f_avoid (3,) from the obstacle points (no yaw part)."""
+            """f_avoid (3,) from the obstacle points (no yaw part), from a
+            cache entry that depends on the points alone: computed once
+            per new set of points, shared by the output and the update."""
+            return np.array(self._force.Eval(context))
+
+        def _calc_repulsive_force(self, context):
             points = (self._points.Eval(context)
                       if self._points.HasValue(context)
                       else np.zeros((0, 2)))

@@ -6,8 +6,11 @@ weighting factors come from ArmCapability and WorkspaceAdapter
 
 Both are stateless: their outputs follow directly from their inputs
 (direct feedthrough), neither sits on a feedback edge. The double systems
-call the math layer (distribution, compensation), which checks its
-arguments; the AutoDiffXd ones run the same formulas elementwise, with
+run the math layer's unchecked paths (distribution.distribute_unchecked,
+compensate_unchecked below): their parameters and R_ba are checked once
+at construction, their inputs have the ports' sizes, and only the values
+that the ports cannot constrain (sigma, alpha, s_c, k_n) are checked each
+tick. The AutoDiffXd ones run the same formulas elementwise, with
 scalar_support.solve for the linear solve, so that their derivatives are
 exact.
 """
@@ -19,7 +22,7 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_wbc import compensation, distribution, kinematics, workspace
+from drake_wbc import capability, distribution, kinematics, workspace
 from drake_wbc.robot_model import ArmKinematics
 from drake_wbc.scalar_support import solve, value_of
 from drake_wbc.systems.capability_stage import (
@@ -129,6 +132,24 @@ def compensate_any(delta_V_b, p_ee_in_base, R_ba, grad_C_m, alpha):
         deviation = -alpha * g * (np.dot(g, required) / g_squared)
     else:
         deviation = required * 0.0
+    return required + deviation, deviation
+
+
+def compensate_unchecked(delta_V_b, p_ee_in_base, R6, grad_C_m, alpha):
+    """compensation.robust_compensation for float arguments already
+    checked, R6 = kinematics.twist_rotation(R_ba) given: (delta_V_a^cmp,
+    delta_V_ee) of eqs. (wb_error) and (deviation), the same operations
+    in the same order, without the argument checks."""
+    J_b = np.zeros((6, 3))
+    J_b[0, 0] = J_b[1, 1] = J_b[5, 2] = 1.0
+    J_b[0, 2] = -p_ee_in_base[1]
+    J_b[1, 2] = p_ee_in_base[0]
+    required = -(R6.T @ (J_b @ delta_V_b))
+    norm = np.linalg.norm(grad_C_m)
+    if norm <= PROJECTOR_TOLERANCE:
+        return required + 0.0 * required, 0.0 * required
+    u = grad_C_m / norm
+    deviation = -alpha * (np.outer(u, u) @ required)
     return required + deviation, deviation
 
 
@@ -255,6 +276,9 @@ def MotionDistributor_(T):
             C_m = self._inputs["capability"].Eval(context)[0]
             band = self.params.band
             if self.params.smooth_switch_off:
+                if T is float:  # the band was checked at construction
+                    return k_n * capability.transition_unchecked(
+                        C_m, band.upper, band.lower)
                 return k_n * workspace.smooth_transition(C_m, band.upper,
                                                          band.lower)
             return k_n * (1.0 if C_m <= band.upper else 0.0)
@@ -270,10 +294,18 @@ def MotionDistributor_(T):
             g = value["capability_gradient"]
             k = self.null_space_gain(context)
             if T is float:
-                J = kinematics.whole_body_jacobian(None, p, self.R_ba)
-                V_n = distribution.capability_null_velocity(g, k)
-                return distribution.distribute(J, V_ee, sigma_xy, sigma_phi,
-                                               V_n, self.params.damping)
+                # The checked path of distribution.distribute, unchecked:
+                # R_ba and the damping were checked at construction, the
+                # ports have their sizes, sigma and k_n are checked here.
+                J = kinematics.whole_body_jacobian_unchecked(None, p,
+                                                             self.R_ba)
+                weights = distribution.weights_of(
+                    _unit_interval("sigma_xy", sigma_xy),
+                    _unit_interval("sigma_phi", sigma_phi))
+                V_n = np.zeros(9)
+                V_n[:6] = k * g
+                return distribution.distribute_unchecked(
+                    J, V_ee, weights, V_n, self.params.damping)
             J = np.hstack([kinematics.twist_rotation(self.R_ba),
                            base_jacobian_any(p)])
             V_n = np.concatenate([k * g, g[:3] * 0.0])
@@ -362,6 +394,7 @@ def RobustCompensator_(T):
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         shared_arm_kinematics)
             self.R_ba = np.array(self.arm.R_ba, dtype=float)
+            self._R6 = kinematics.twist_rotation(self.R_ba)
             self._inputs = declare_inputs(self, (
                 ("arm_velocity", 6), ("base_velocity", 3),
                 ("filtered_base_velocity", 3), ("end_effector_position", 3),
@@ -392,9 +425,8 @@ def RobustCompensator_(T):
             p = value["end_effector_position"]
             g = value["capability_gradient"]
             if T is float:
-                cmp, deviation = compensation.robust_compensation(
-                    compensation.base_deviation(V_b_flt, V_b),
-                    kinematics.base_jacobian(p), self.R_ba, g, alpha)
+                cmp, deviation = compensate_unchecked(
+                    V_b_flt - V_b, p, self._R6, g, alpha)
             else:
                 cmp, deviation = compensate_any(V_b_flt - V_b, p, self.R_ba,
                                                 g, alpha)

@@ -41,10 +41,17 @@ def external_wrench(reading, X_AM, X_AT, tool_mass, p_M_com):
     R_AM = X_AM.rotation().matrix()
     weight_M = R_AM.T @ np.array([0.0, 0.0, -tool_mass * STANDARD_GRAVITY])
     f_M = reading[:3] - weight_M
-    tau_M = reading[3:] - np.cross(p_M_com, weight_M)
+    tau_M = reading[3:] - _cross(p_M_com, weight_M)
     f_A = R_AM @ f_M
     r_TM = X_AM.translation() - X_AT.translation()
-    return np.concatenate([f_A, R_AM @ tau_M + np.cross(r_TM, f_A)])
+    return np.concatenate([f_A, R_AM @ tau_M + _cross(r_TM, f_A)])
+
+
+def _cross(a, b):
+    """a x b of 3-vectors (np.cross is slow for one pair)."""
+    return np.array([a[1] * b[2] - a[2] * b[1],
+                     a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
 
 
 @TemplateSystem.define("ExternalWrenchEstimator_", T_list=SCALARS)
