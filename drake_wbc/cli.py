@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from drake_wbc.analysis import commands as analysis
+from drake_wbc.hardware.programs import PROGRAMS
 
 
 def _add_demo_arguments(parser):
@@ -127,6 +128,7 @@ SUBCOMMANDS = (
      analysis.run_bode),
     ("diagram", analysis.DIAGRAM_HELP, analysis.add_diagram_arguments,
      analysis.run_diagram),
+    *PROGRAMS,
     (
         "demo",
         "load the robot model, print its joints, limits and capability of "

@@ -23,16 +23,26 @@ The files are in diagrams/ (`scenarios_dir()`); `find_scenario` takes a
 file's path or its name without `.yaml`.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
 
 from drake_wbc.config import load_typed
 from drake_wbc.controller import ControllerParameters
+from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.station.scene import Scene
 from drake_wbc.station.simulation import StationOptions
-from drake_wbc.validation import as_vector, positive
+from drake_wbc.validation import (
+    as_vector,
+    boolean,
+    checked_instance,
+    in_closed_range,
+    non_negative,
+    positive,
+    selection,
+    text,
+)
 
 EXPERIMENTS = ("generic", "trajectory_tracking", "fixed_point",
                "line_tracking", "wiping", "phri")
@@ -120,11 +130,26 @@ class TaskInputs:
 
     def __post_init__(self):
         for name, size in TASK_SIZES.items():
-            schedule = getattr(self, name)
+            schedule = checked_instance(name, getattr(self, name), Schedule,
+                                        Schedule)
+            setattr(self, name, schedule)
             if schedule.times and schedule.size() != size:
                 raise ValueError(
                     f"{name}.values = {schedule.values} is not allowed: "
                     f"each value must have {size} entries")
+            for i, value in enumerate(schedule.values):
+                _check_task_value(f"{name}.values[{i}]", name, value)
+
+
+def _check_task_value(where, name, value):
+    """Checks one value of the schedule of task input `name`: S_hri is 0
+    or 1 (eq. (cdmp-wb)), s_c lies in [0, 1] and k_n >= 0 (eq. (wbccm))."""
+    if name == "phri_switch":
+        selection(where, value, 1)
+    elif name == "compensation_switch":
+        in_closed_range(where, value[0], 0.0, 1.0)
+    elif name == "null_space_gain":
+        non_negative(where, value[0])
 
 
 @dataclass
@@ -143,11 +168,13 @@ class Variant:
     base_filter: bool = True
 
     def __post_init__(self):
-        if not self.name or not all(c.isalnum() or c in "_-"
-                                    for c in self.name):
+        if not isinstance(self.name, str) or not self.name or not all(
+                c.isalnum() or c in "_-" for c in self.name):
             raise ValueError(
                 f"name = {self.name!r} is not allowed: must be letters, "
                 "digits, _ and - only, and not empty")
+        text("label", self.label)
+        boolean("base_filter", self.base_filter)
 
 
 @dataclass
@@ -170,6 +197,8 @@ class OutputOptions:
     def __post_init__(self):
         positive("log_period", self.log_period)
         positive("replay_frame_rate", self.replay_frame_rate)
+        boolean("replay", self.replay)
+        boolean("plots", self.plots)
 
 
 @dataclass
@@ -187,6 +216,14 @@ class Scenario:
         task: the task inputs over time.
         variants: the runs to compare (one run if a single entry).
         outputs: what to write.
+        hardware: the LCM hardware interface (URL, channels, watchdog) for
+            `drake-wbc deploy` and `drake-wbc robot-sim`; None (the
+            default) runs the simulated station only.
+
+    Besides each part's own checks: controller.time_step is a whole
+    multiple of station.time_step and equals station.arm.command_period,
+    and no static obstacle overlaps the base's footprint at
+    station.initial_base_pose.
     """
 
     description: str = ""
@@ -199,8 +236,15 @@ class Scenario:
     task: TaskInputs = field(default_factory=TaskInputs)
     variants: list[Variant] = field(default_factory=lambda: [Variant()])
     outputs: OutputOptions = field(default_factory=OutputOptions)
+    hardware: HardwareOptions | None = None
 
     def __post_init__(self):
+        text("description", self.description)
+        for item in fields(self):
+            kind = _PARTS.get(item.name)
+            if kind is not None:
+                setattr(self, item.name, checked_instance(
+                    item.name, getattr(self, item.name), kind, kind))
         if self.experiment not in EXPERIMENTS:
             raise ValueError(
                 f"experiment = {self.experiment!r} is not allowed: must be "
@@ -220,6 +264,82 @@ class Scenario:
                 f"not allowed with station.time_step = "
                 f"{self.station.time_step!r} s: must be a whole multiple "
                 "of it")
+        command_period = self.station.arm.command_period
+        if abs(command_period - self.controller.time_step) > 1e-9:
+            raise ValueError(
+                f"station.arm.command_period = {command_period!r} s is not "
+                f"allowed with controller.time_step = "
+                f"{self.controller.time_step!r} s: the arm's driver must "
+                "sample the position command at the control period (it "
+                "moves to each command over one period)")
+        _check_start_is_free(self.scene, self.station.initial_base_pose)
+
+
+_PARTS = dict(controller=ControllerParameters, station=StationOptions,
+              scene=Scene, task=TaskInputs, outputs=OutputOptions)
+"""The nested parameters of a Scenario and their types."""
+
+FOOTPRINT_HALF_SIZES = (0.4, 0.3)
+"""The base's footprint, half length and half width in m (the model's
+0.8 x 0.6 m chassis)."""
+
+BASE_HEIGHT = 0.3
+"""The height of the base's deck in m: a box whose bottom is higher may
+overhang the base."""
+
+
+def _check_start_is_free(scene, base_pose):
+    """Checks that no static obstacle overlaps the base's footprint at
+    its initial pose [x, y, yaw]: no cylinder, and no box reaching below
+    BASE_HEIGHT (the footprint and each box as rectangles in the plane,
+    by separating axes)."""
+    x, y, yaw = base_pose
+    footprint = _rectangle(x, y, *FOOTPRINT_HALF_SIZES, yaw)
+    for i, cylinder in enumerate(scene.cylinders):
+        c, s = np.cos(yaw), np.sin(yaw)
+        offset = np.asarray(cylinder.position) - [x, y]
+        local = np.array([c * offset[0] + s * offset[1],
+                          -s * offset[0] + c * offset[1]])
+        nearest = np.clip(local, -np.array(FOOTPRINT_HALF_SIZES),
+                          FOOTPRINT_HALF_SIZES)
+        if np.linalg.norm(local - nearest) < cylinder.radius:
+            _overlap(f"scene.cylinders[{i}]", cylinder.name, base_pose)
+    for i, box in enumerate(scene.boxes):
+        if box.center[2] - box.size[2] / 2 >= BASE_HEIGHT:
+            continue
+        corners = _rectangle(box.center[0], box.center[1], box.size[0] / 2,
+                             box.size[1] / 2, box.yaw)
+        if not _separated(footprint, corners):
+            _overlap(f"scene.boxes[{i}]", box.name, base_pose)
+
+
+def _overlap(where, name, base_pose):
+    raise ValueError(
+        f"{where} ({name!r}) is not allowed with station.initial_base_pose "
+        f"= {list(base_pose)}: it overlaps the base's "
+        f"{2 * FOOTPRINT_HALF_SIZES[0]} x {2 * FOOTPRINT_HALF_SIZES[1]} m "
+        "footprint at the start")
+
+
+def _rectangle(cx, cy, hx, hy, yaw):
+    """The corners (4, 2) of a rectangle of half sizes hx, hy turned by
+    `yaw` about its centre (cx, cy)."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    local = np.array([[hx, hy], [-hx, hy], [-hx, -hy], [hx, -hy]])
+    return local @ np.array([[c, s], [-s, c]]) + [cx, cy]
+
+
+def _separated(a, b):
+    """True when the convex polygons with corners `a` and `b` do not
+    overlap (an edge normal of one separates them)."""
+    for corners in (a, b):
+        for k in range(len(corners)):
+            edge = corners[(k + 1) % len(corners)] - corners[k]
+            normal = np.array([-edge[1], edge[0]])
+            pa, pb = a @ normal, b @ normal
+            if pa.max() <= pb.min() or pb.max() <= pa.min():
+                return True
+    return False
 
 
 def scenarios_dir():
