@@ -108,6 +108,37 @@ def schedule_source(schedule, size):
     return TrajectorySource(trajectory)
 
 
+def add_controller(builder, scenario, variant, station):
+    """Adds the controller of `scenario` (its `variant`) and the task's
+    sources to `builder`, and connects the controller to `station` (a
+    Diagram already in `builder` with the station's ports: the simulated
+    station or the LCM hardware interface, the same wiring for both).
+
+    Returns:
+        (controller, sources): the drake_wbc.controller.Controller and a
+        dict of the task's sources (TrajectorySources) by input name.
+    """
+    params = copy.deepcopy(scenario.controller)
+    params.base_filter.enabled = variant.base_filter
+    controller = build_controller(params)
+    builder.AddNamedSystem("controller", controller.diagram)
+    for name in STATION_INPUTS:
+        builder.Connect(station.GetOutputPort(name),
+                        controller.diagram.GetInputPort(name))
+    for name in ("base.velocity_command", "arm.position_command"):
+        builder.Connect(controller.diagram.GetOutputPort(name),
+                        station.GetInputPort(name))
+    sources = {}
+    for name, size in TASK_SIZES.items():
+        schedule = getattr(scenario.task, name)
+        if name == "reference_velocity" or schedule.times:
+            sources[name] = builder.AddNamedSystem(
+                f"task.{name}", schedule_source(schedule, size))
+            builder.Connect(sources[name].get_output_port(),
+                            controller.diagram.GetInputPort(name))
+    return controller, sources
+
+
 def build_closed_loop(scenario, variant=None, replay=False):
     """Wires one run of `scenario` (its first variant if None).
 
@@ -124,24 +155,8 @@ def build_closed_loop(scenario, variant=None, replay=False):
     builder = DiagramBuilder()
     station = SimulatedStation(scenario.station, scenario.scene)
     builder.AddNamedSystem("station", station.diagram)
-    params = copy.deepcopy(scenario.controller)
-    params.base_filter.enabled = variant.base_filter
-    controller = build_controller(params)
-    builder.AddNamedSystem("controller", controller.diagram)
-    for name in STATION_INPUTS:
-        builder.Connect(station.diagram.GetOutputPort(name),
-                        controller.diagram.GetInputPort(name))
-    for name in ("base.velocity_command", "arm.position_command"):
-        builder.Connect(controller.diagram.GetOutputPort(name),
-                        station.diagram.GetInputPort(name))
-    sources = {}
-    for name, size in TASK_SIZES.items():
-        schedule = getattr(scenario.task, name)
-        if name == "reference_velocity" or schedule.times:
-            sources[name] = builder.AddNamedSystem(
-                f"task.{name}", schedule_source(schedule, size))
-            builder.Connect(sources[name].get_output_port(),
-                            controller.diagram.GetInputPort(name))
+    controller, sources = add_controller(builder, scenario, variant,
+                                         station.diagram)
     loggers = {}
     period = scenario.outputs.log_period
     for name in SIGNALS:

@@ -13,7 +13,6 @@ held, sent before returning) at the end, on a stop request (Ctrl-C in
 `drake-wbc deploy`) or on an error.
 """
 
-import copy
 import time
 from dataclasses import dataclass
 
@@ -22,7 +21,6 @@ from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_wbc.controller import STATION_INPUTS, build_controller
 from drake_wbc.hardware import messages
 from drake_wbc.hardware.codecs import SignalBundleEncoder
 from drake_wbc.hardware.interface import (
@@ -31,8 +29,8 @@ from drake_wbc.hardware.interface import (
     add_publisher,
 )
 from drake_wbc.hardware.options import HardwareOptions
-from drake_wbc.runner import SIGNALS, schedule_source
-from drake_wbc.scenario import TASK_SIZES, Scenario
+from drake_wbc.runner import SIGNALS, add_controller
+from drake_wbc.scenario import Scenario
 from drake_wbc.validation import checked_instance, positive
 
 COMMANDS = ("base.velocity_command", "arm.position_command")
@@ -105,24 +103,8 @@ def add_controller_side(builder, scenario, variant=None, options=None,
     hardware = HardwareInterface(options, lcm,
                                  scenario.station.initial_arm_positions)
     builder.AddNamedSystem("hardware", hardware.diagram)
-    params = copy.deepcopy(scenario.controller)
-    params.base_filter.enabled = variant.base_filter
-    controller = build_controller(params)
-    builder.AddNamedSystem("controller", controller.diagram)
-    for name in STATION_INPUTS:
-        builder.Connect(hardware.diagram.GetOutputPort(name),
-                        controller.diagram.GetInputPort(name))
-    for name in COMMANDS:
-        builder.Connect(controller.diagram.GetOutputPort(name),
-                        hardware.diagram.GetInputPort(name))
-    sources = {}
-    for name, size in TASK_SIZES.items():
-        schedule = getattr(scenario.task, name)
-        if name == "reference_velocity" or schedule.times:
-            sources[name] = builder.AddNamedSystem(
-                f"task.{name}", schedule_source(schedule, size))
-            builder.Connect(sources[name].get_output_port(),
-                            controller.diagram.GetInputPort(name))
+    controller, sources = add_controller(builder, scenario, variant,
+                                         hardware.diagram)
     ports = {name: controller.diagram.GetOutputPort(name)
              for name in SIGNALS
              if name not in COMMANDS

@@ -16,7 +16,6 @@ The LCM URL and channels are the scenario's `hardware:` (its defaults
 when the scenario has none); --lcm-url overrides the URL.
 """
 
-import argparse
 import json
 import logging
 import signal
@@ -260,21 +259,11 @@ PROGRAMS = (
 
 
 def main(argv=None):
-    """The three commands on their own: `python -m
-    drake_wbc.hardware.programs robot-sim|deploy|plot ...`."""
-    parser = argparse.ArgumentParser(prog="drake-wbc")
-    commands = parser.add_subparsers(dest="command", metavar="COMMAND",
-                                     required=True)
-    for name, summary, add_arguments, run in PROGRAMS:
-        sub = commands.add_parser(name, help=summary, description=summary)
-        add_arguments(sub)
-        sub.set_defaults(run=run)
-    args = parser.parse_args(argv)
-    try:
-        return args.run(args)
-    except ValueError as error:
-        print(f"drake-wbc {args.command}: {error}", file=sys.stderr)
-        return 2
+    """`python -m drake_wbc.hardware.programs robot-sim|deploy|plot ...`:
+    the same as `drake-wbc` (drake_wbc.cli), which offers the three."""
+    from drake_wbc.cli import main as drake_wbc_main
+
+    return drake_wbc_main(argv)
 
 
 if __name__ == "__main__":
