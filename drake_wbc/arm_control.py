@@ -49,6 +49,7 @@ from drake_wbc.validation import (
     non_negative,
     ordered_limits,
     positive,
+    positive_vector,
 )
 
 DEFAULT_DAMPING_THRESHOLD = 0.05
@@ -205,15 +206,7 @@ def _positive_vector(name, value, size):
     number is repeated."""
     if np.ndim(value) == 0:
         return np.full(size, positive(name, value))
-    vector = as_vector(name, value, size)
-    bad = np.flatnonzero(vector <= 0.0)
-    if bad.size:
-        i = int(bad[0])
-        raise ValueError(
-            f"{name}[{i}] = {vector[i]!r} is not allowed: every entry must "
-            "be greater than 0"
-        )
-    return vector
+    return positive_vector(name, value, size)
 
 
 def check_margin(margin, lower, upper):

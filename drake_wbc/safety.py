@@ -33,7 +33,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from drake_wbc.validation import as_vector, positive
+from drake_wbc.validation import positive, positive_vector
 
 BASE_AXES = 3
 """The base's velocity components [vx, vy, wz] (T_b)."""
@@ -119,22 +119,6 @@ class SafetyParameters:
             setattr(self, name, tuple(
                 positive_vector(name, getattr(self, name), BASE_AXES)
                 .tolist()))
-
-
-def positive_vector(name, value, size):
-    """`value` as a vector of `size` finite entries, each > 0.
-
-    Raises:
-        ValueError: naming `name`, the first bad entry and what is allowed.
-    """
-    vector = as_vector(name, value, size)
-    bad = np.flatnonzero(vector <= 0.0)
-    if bad.size:
-        i = int(bad[0])
-        raise ValueError(
-            f"{name}[{i}] = {vector[i]!r} is not allowed: every entry must "
-            "be greater than 0")
-    return vector
 
 
 def check_vector(value, lower=-math.inf, upper=math.inf):

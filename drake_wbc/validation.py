@@ -335,3 +335,19 @@ def checked_instance(name, value, kind, default):
             "or None"
         )
     return value
+
+
+def positive_vector(name, value, size):
+    """`value` as a vector of `size` finite entries, each > 0.
+
+    Raises:
+        ValueError: naming `name`, the first bad entry and what is allowed.
+    """
+    vector = as_vector(name, value, size)
+    bad = np.flatnonzero(vector <= 0.0)
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"{name}[{i}] = {vector[i]!r} is not allowed: every entry must "
+            "be greater than 0")
+    return vector
