@@ -226,6 +226,9 @@ def case_record(seed, index, scenario, log):
     joint_speed = np.abs(np.diff(command, axis=0)) / dt
     base = np.abs(log["base.velocity_command"])
     base_limits = np.asarray(scenario.station.base.velocity_limits)
+    filtered = np.abs(log["filtered_base_velocity"])
+    filter_limits = np.asarray(
+        scenario.controller.safety.base_velocity_limits)
     with np.errstate(invalid="ignore"):
         command_margin = np.min(np.minimum(command - lower, upper - command))
     return {
@@ -246,6 +249,7 @@ def case_record(seed, index, scenario, log):
         "max_base_speed_command_m_s":
             metrics["max_base_speed_command_m_s"],
         "max_base_command_ratio": float(np.max(base / base_limits)),
+        "max_filter_state_ratio": float(np.max(filtered / filter_limits)),
         "max_joint_speed_command_rad_s":
             metrics["max_arm_joint_speed_command_rad_s"],
         "max_joint_speed_command_ratio": float(
@@ -303,6 +307,8 @@ def violations(record):
     checks = (
         ("max_base_command_ratio", "a base velocity command exceeds the "
          "base's velocity limit", lambda x: x <= 1.0 + TOLERANCE),
+        ("max_filter_state_ratio", "the base filter's output exceeds the "
+         "base's velocity limit (wind-up)", lambda x: x <= 1.0 + TOLERANCE),
         ("max_joint_speed_command_ratio", "a joint position command moves "
          "faster than the joint's velocity limit",
          lambda x: x <= 1.0 + TOLERANCE),

@@ -94,6 +94,7 @@ def test_a_dask_cluster_gives_the_same_records(serial):
     ("all_finite", False, "NaN"),
     ("min_capability", math.nan, "min_capability"),
     ("max_base_command_ratio", 1.5, "base's velocity limit"),
+    ("max_filter_state_ratio", 37.0, "wind-up"),
     ("max_joint_speed_command_ratio", 1.01, "velocity limit"),
     ("min_command_joint_limit_margin_rad", -0.01, "beyond a joint limit"),
     ("min_static_obstacle_distance_m", 0.0, "touched a static obstacle"),
@@ -102,7 +103,7 @@ def test_a_dask_cluster_gives_the_same_records(serial):
 def test_an_injected_violation_makes_the_exit_code_non_zero(
         serial, key, value, fragment):
     sound = [dict(record) for record in serial]
-    sound[0].update(max_base_command_ratio=0.5,
+    sound[0].update(max_base_command_ratio=0.5, max_filter_state_ratio=0.5,
                     max_joint_speed_command_ratio=0.5,
                     min_command_joint_limit_margin_rad=0.1,
                     min_static_obstacle_distance_m=None)
@@ -147,3 +148,56 @@ def test_bad_arguments_are_named(overrides, fragment):
     arguments.update(overrides)
     with pytest.raises(ValueError, match=fragment):
         stress.run_cases(**arguments)
+
+
+def _stress_arguments(tmp_path, *extra):
+    parser = argparse.ArgumentParser()
+    stress.add_stress_arguments(parser)
+    return parser.parse_args(["--seed", str(SEED), "--workers", "1",
+                              "--duration", "0.3", "--output",
+                              str(tmp_path), *extra])
+
+
+def test_the_journal_keeps_each_case_and_resume_runs_only_the_rest(
+        tmp_path, capsys):
+    stress.run_stress(_stress_arguments(tmp_path, "--cases", "1"))
+    lines = (tmp_path / "stress.jsonl").read_text().splitlines()
+    assert json.loads(lines[0])["settings"]["seed"] == SEED
+    first = json.loads(lines[1])
+    assert first["case"] == 0
+    capsys.readouterr()
+    # A line cut short by a stopped run is ignored on resume.
+    with (tmp_path / "stress.jsonl").open("a") as stream:
+        stream.write('{"case": 1, "seed"')
+    stress.run_stress(_stress_arguments(tmp_path, "--cases", "2",
+                                        "--resume"))
+    output = capsys.readouterr()
+    assert "1 case(s) kept" in output.out
+    assert "1 / 1 cases done" in output.err
+    document = json.loads((tmp_path / "stress.json").read_text())
+    assert [case["case"] for case in document["cases"]] == [0, 1]
+    assert stress.comparable(document["cases"][0]) == stress.comparable(
+        dict(first, violations=document["cases"][0]["violations"]))
+    fresh = stress.run_cases(SEED, 2, 0.3, workers=1)
+    assert stress.comparable(document["cases"][1]) == stress.comparable(
+        dict(fresh[1], violations=violations(fresh[1])))
+
+
+def test_resume_refuses_a_journal_of_another_seed(tmp_path):
+    stress.Journal(tmp_path, dict(seed=SEED + 1, duration_s=0.3))
+    with pytest.raises(ValueError, match="--resume is not allowed"):
+        stress.run_stress(_stress_arguments(tmp_path, "--cases", "1",
+                                            "--resume"))
+
+
+def test_a_long_run_summarises_the_spread_and_lists_the_failures(serial):
+    records = [dict(serial[i % CASES], case=i)
+               for i in range(stress.SUMMARY_ROWS + 5)]
+    records[7]["max_base_command_ratio"] = 2.0
+    text = stress.summary_table(records)
+    assert "least" in text and "median" in text
+    assert "1 failing case(s):" in text
+    failing_rows = [line for line in text.splitlines()
+                    if "base's velocity limit" in line]
+    assert len(failing_rows) == 1 and failing_rows[0].split()[0] == "7"
+    assert len(text.splitlines()) < len(records)
