@@ -153,12 +153,22 @@ class RepulsiveFieldParameters:
         d_min: 0 < d_min < d_th, m: distances are clamped to it, so the
             force stays finite for a point on or inside the footprint
             (default 0.05).
+        max_force: the bound > 0 on |f_avoid|, the norm of the summed
+            force (in the units of tau z_dot, m/s^2 at tau = 1), which
+            `repulsive_force` scales down to it, its direction kept.
+            The paper's field is unbounded: with its k_obs = 0.01 one point
+            at d_min pushes with 72, and a person's leg seen by a dozen
+            LIDAR beams with many times that, which would drive V_b' to
+            tens of m/s. The default 80 is about alpha_z beta_z d_th with
+            the default DMP (156 s^-2 x 0.5 m): enough to hold the base
+            d_th off its path against its attractor in steady state.
     """
 
     k_obs: float = 0.01
     d_th: float = 0.5
     half_sizes: list[float] = (0.4, 0.3)
     d_min: float = 0.05
+    max_force: float = 80.0
 
     def __post_init__(self):
         non_negative("k_obs", self.k_obs)
@@ -169,6 +179,7 @@ class RepulsiveFieldParameters:
         if not 0.0 < positive("d_min", self.d_min) < self.d_th:
             raise ValueError(f"d_min = {self.d_min!r} is not allowed: must "
                              f"lie in (0, d_th = {self.d_th!r})")
+        positive("max_force", self.max_force)
 
 
 @dataclass
@@ -366,7 +377,8 @@ def repulsive_force(obstacle_points, params):
 
     for d <= d_th (0 beyond; continuous at d_th), n from
     `footprint_distance`. Below d_min the magnitude is the one at d_min
-    (along n), a bounded push out of the footprint.
+    (along n), a bounded push out of the footprint. A sum longer than
+    params.max_force is scaled down to it, its direction kept.
 
     obstacle_points: (M, 2) points [x, y] in T_b, m (M may be 0);
     params: RepulsiveFieldParameters. Returns the (2,) force [f_x, f_y] in
@@ -385,7 +397,11 @@ def repulsive_force(obstacle_points, params):
     d, n = _clamped_distance(points, params)
     slope = params.k_obs * (1.0 / d - 1.0 / params.d_th) / d**2
     slope = np.where(d <= params.d_th, slope, 0.0 * slope)
-    return np.sum(-slope[:, None] * n, axis=0) + np.zeros(2)
+    force = np.sum(-slope[:, None] * n, axis=0) + np.zeros(2)
+    squared = force[0] * force[0] + force[1] * force[1]
+    if squared > params.max_force**2:
+        force = force * (params.max_force / np.sqrt(squared))
+    return force
 
 
 def base_cdmp_derivative(y, z, C, g, V_b, obstacle_points, params,

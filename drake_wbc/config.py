@@ -1,4 +1,5 @@
-"""The controller's parameters from YAML (diagrams/controller.yaml).
+"""The controller's parameters: `ControllerParameters`, the checks that
+its parts agree, and loading from YAML (diagrams/controller.yaml).
 
 `load_controller_parameters` reads a YAML file or string into
 `ControllerParameters` with Drake's `yaml_load_typed`: the document's keys
@@ -20,13 +21,142 @@ a ValueError naming the file (if any), the field's dotted path (e.g.
 
 import dataclasses
 import typing
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+import numpy as np
 import yaml
 from pydrake.common.yaml import yaml_dump, yaml_load_data, yaml_load_typed
 
-from drake_wbc.controller import ControllerParameters
-from drake_wbc.validation import validate
+from drake_wbc import cdmp
+from drake_wbc.arm_control import ArmControllerParameters
+from drake_wbc.filtering import BaseFilterParameters
+from drake_wbc.safety import SafetyParameters
+from drake_wbc.systems.capability_stage import (
+    ArmCapabilityParameters,
+    WorkspaceAdapterParameters,
+)
+from drake_wbc.systems.coordination import (
+    MotionDistributorParameters,
+    RobustCompensatorParameters,
+)
+from drake_wbc.validation import positive, validate
+
+
+@dataclass
+class ControllerParameters:
+    """Every stage's parameters, with the paper's values as defaults.
+
+    Attributes:
+        time_step: the control period h in s (the paper runs at 100 Hz);
+            it overrides the time steps inside the stage parameters, and
+            base_filter.omega_f must stay below its Nyquist rate
+            pi / time_step.
+        arm_cdmp: stiffness on every axis by default (S_m = I): force
+            control drives the tool towards a surface it has not yet
+            touched, so it is the task's choice (the wiping scenario sets
+            the paper's S_m = diag(0, 1, 1, 1, 1, 1)), not a default.
+        safety: the run-time safety (hold time of the safe stop, the
+            base's velocity and acceleration limits); the arm's limits are
+            in arm_controller.
+
+    Besides each part's own checks, the parts must agree: one limitation
+    band C_m^l, C_m^u for every stage that looks at C_m (capability,
+    workspace and distributor .band, eq. (transition)); one default pHRI
+    switch S_hri for both DMPs that take it (whole_body_cdmp and arm_cdmp,
+    eqs. (cdmp-wb), (cdmp-arm)), which the phri_switch input drives
+    together; and, when the controller is built, arm_controller's limits
+    within the arm's own (`build_controller`).
+
+    Read from YAML by drake_wbc.config.load_controller_parameters
+    (diagrams/controller.yaml lists every field). The parameters are
+    read when the controller is built: each stage keeps a validated copy,
+    so changing them afterwards has no effect on a built controller; after
+    assigning fields, drake_wbc.validation.validate checks the whole tree.
+    """
+
+    time_step: float = 0.01
+    capability: ArmCapabilityParameters = field(
+        default_factory=ArmCapabilityParameters)
+    workspace: WorkspaceAdapterParameters = field(
+        default_factory=WorkspaceAdapterParameters)
+    distributor: MotionDistributorParameters = field(
+        default_factory=MotionDistributorParameters)
+    base_cdmp: cdmp.BaseCdmpParameters = field(
+        default_factory=cdmp.BaseCdmpParameters)
+    base_filter: BaseFilterParameters = field(
+        default_factory=BaseFilterParameters)
+    compensator: RobustCompensatorParameters = field(
+        default_factory=RobustCompensatorParameters)
+    whole_body_cdmp: cdmp.WholeBodyCdmpParameters = field(
+        default_factory=cdmp.WholeBodyCdmpParameters)
+    arm_cdmp: cdmp.ArmCdmpParameters = field(
+        default_factory=lambda: cdmp.ArmCdmpParameters(S_m=np.ones(6)))
+    arm_controller: ArmControllerParameters = field(
+        default_factory=ArmControllerParameters)
+    safety: SafetyParameters = field(default_factory=SafetyParameters)
+
+    def __post_init__(self):
+        h = positive("time_step", self.time_step)
+        for item in fields(self):
+            if item.name != "time_step" and not isinstance(
+                    getattr(self, item.name), item.type):
+                raise ValueError(
+                    f"{item.name} = {getattr(self, item.name)!r} is not "
+                    f"allowed: must be a {item.type.__name__}")
+        omega_f = self.base_filter.omega_f
+        if omega_f >= np.pi / h:
+            raise ValueError(
+                f"time_step = {h!r} s is not allowed with base_filter."
+                f"omega_f = {omega_f!r} rad/s: the filter's cut-off must be "
+                f"below the Nyquist rate pi / time_step = {np.pi / h:.6g} "
+                "rad/s")
+        bands = {name: getattr(self, name).band
+                 for name in ("capability", "workspace", "distributor")}
+        if len({(b.lower, b.upper) for b in bands.values()}) > 1:
+            given = ", ".join(f"{name}.band = ({b.lower!r}, {b.upper!r})"
+                              for name, b in bands.items())
+            raise ValueError(
+                f"{given} are not allowed: one limitation band C_m^l, "
+                "C_m^u of eq. (transition) serves every stage, so the three "
+                "must be equal")
+        switches = (self.whole_body_cdmp.S_hri, self.arm_cdmp.S_hri)
+        if switches[0] != switches[1]:
+            raise ValueError(
+                f"whole_body_cdmp.S_hri = {switches[0]!r} and arm_cdmp.S_hri "
+                f"= {switches[1]!r} are not allowed: the pHRI switch acts on "
+                "both DMPs together (eqs. (cdmp-wb), (cdmp-arm)), so the two "
+                "defaults must be equal")
+
+
+def check_arm_limits(params, arm):
+    """Checks that arm_controller's joint and velocity limits lie within
+    the arm's own (the model's), which they may tighten but not widen.
+
+    Args:
+        params: ArmControllerParameters.
+        arm: ArmKinematics.
+
+    Raises:
+        ValueError: naming the first limit beyond the arm's.
+    """
+    given = (("velocity_limits", params.velocity_limits,
+              arm.velocity_limits, "at most"),
+             ("lower", params.lower, arm.lower, "at least"),
+             ("upper", params.upper, arm.upper, "at most"))
+    for name, value, own, allowed in given:
+        if value is None:
+            continue
+        value, own = np.asarray(value, dtype=float), np.asarray(own)
+        beyond = value > own if allowed == "at most" else value < own
+        if np.any(beyond):
+            i = int(np.flatnonzero(beyond)[0])
+            raise ValueError(
+                f"arm_controller.{name}[{i}] = {float(value[i])!r} is not "
+                f"allowed: must be {allowed} the arm's own "
+                f"{float(own[i])!r}")
+
+
 
 _LOADER_ERRORS = (yaml.YAMLError, RuntimeError, TypeError, ValueError,
                   AssertionError, AttributeError, NotImplementedError)

@@ -13,7 +13,7 @@ One control tick, as wired here (design notes, "data flow of one tick")::
                           │      BaseCdmp ◄─ obstacle points
                           │          │ V_b'
                           │          ▼
-                          │   StopGate ◄─ stop
+                          │   StopGate ◄─ stop (and the velocity limits)
                           │          ▼
                           │   BaseVelocityFilter ──► filtered_base_velocity
                           │          ▼ V_b^flt
@@ -50,26 +50,26 @@ Run-time safety (drake_wbc.safety, drake_wbc.systems.safety):
   also Controller.safety_reason) say why; the stop is logged when it trips
   and when it clears. Obstacle points with a NaN or infinite coordinate
   are dropped (counted in the status), not a fault.
-- The base command is limited by BaseCommandLimiter to the robot's
-  velocity and acceleration limits by uniform scaling (its direction
-  kept), reported on `base_saturation`; the compensator sees the command
-  actually sent, so the arm makes up for what the limits take from the
-  base (eq. (compensation)). The arm's joint rates are scaled uniformly to
-  their limits by the arm controller (reported on `arm_limited`), and its
-  position command never leaves the joint limits.
+- The base command is limited to the robot's velocity limits by uniform
+  scaling (its direction kept) before the base filter, by the StopGate,
+  so that the filter cannot wind up (its state never asks for more than
+  the base can do), and again, with the acceleration limits, after it by
+  BaseCommandLimiter, reported on `base_saturation`; the compensator sees
+  the command actually sent, so the arm makes up for what the limits take
+  from the base (eq. (compensation)). The arm's joint rates are scaled
+  uniformly to their limits by the arm controller (reported on
+  `arm_limited`), and its position command never leaves the joint
+  limits.
 """
 
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import replace
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import MatrixGain
 
-from drake_wbc import cdmp
-from drake_wbc.arm_control import ArmControllerParameters
-from drake_wbc.filtering import BaseFilterParameters
+from drake_wbc.config import ControllerParameters, check_arm_limits
 from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
-from drake_wbc.safety import SafetyParameters
 from drake_wbc.systems import (
     ArmCapability,
     ArmCartesianVelocityController,
@@ -82,17 +82,9 @@ from drake_wbc.systems import (
     WorkspaceAdapter,
 )
 from drake_wbc.systems.base_command import BaseCommandLimiter, StopGate
-from drake_wbc.systems.capability_stage import (
-    ArmCapabilityParameters,
-    WorkspaceAdapterParameters,
-)
-from drake_wbc.systems.coordination import (
-    MotionDistributorParameters,
-    RobustCompensatorParameters,
-)
 from drake_wbc.systems.safety import GuardedInput, InputGuard
 from drake_wbc.systems.wrench import ExternalWrenchEstimator
-from drake_wbc.validation import checked_instance, positive, validated_copy
+from drake_wbc.validation import checked_instance, validated_copy
 
 STATION_INPUTS = (
     "base.state_estimated",
@@ -111,68 +103,6 @@ TASK_INPUTS = (
 )
 """The task's inputs; all but reference_velocity are optional (the stage's
 parameter is used while the port is not connected)."""
-
-
-@dataclass
-class ControllerParameters:
-    """Every stage's parameters, with the paper's values as defaults.
-
-    Attributes:
-        time_step: the control period h in s (the paper runs at 100 Hz);
-            it overrides the time steps inside the stage parameters, and
-            base_filter.omega_f must stay below its Nyquist rate
-            pi / time_step.
-        arm_cdmp: stiffness on every axis by default (S_m = I): force
-            control drives the tool towards a surface it has not yet
-            touched, so it is the task's choice (the wiping scenario sets
-            the paper's S_m = diag(0, 1, 1, 1, 1, 1)), not a default.
-        safety: the run-time safety (hold time of the safe stop, the
-            base's velocity and acceleration limits); the arm's limits are
-            in arm_controller.
-
-    Read from YAML by drake_wbc.config.load_controller_parameters
-    (diagrams/controller.yaml lists every field). The parameters are
-    read when the controller is built: each stage keeps a validated copy,
-    so changing them afterwards has no effect on a built controller; after
-    assigning fields, drake_wbc.validation.validate checks the whole tree.
-    """
-
-    time_step: float = 0.01
-    capability: ArmCapabilityParameters = field(
-        default_factory=ArmCapabilityParameters)
-    workspace: WorkspaceAdapterParameters = field(
-        default_factory=WorkspaceAdapterParameters)
-    distributor: MotionDistributorParameters = field(
-        default_factory=MotionDistributorParameters)
-    base_cdmp: cdmp.BaseCdmpParameters = field(
-        default_factory=cdmp.BaseCdmpParameters)
-    base_filter: BaseFilterParameters = field(
-        default_factory=BaseFilterParameters)
-    compensator: RobustCompensatorParameters = field(
-        default_factory=RobustCompensatorParameters)
-    whole_body_cdmp: cdmp.WholeBodyCdmpParameters = field(
-        default_factory=cdmp.WholeBodyCdmpParameters)
-    arm_cdmp: cdmp.ArmCdmpParameters = field(
-        default_factory=lambda: cdmp.ArmCdmpParameters(S_m=np.ones(6)))
-    arm_controller: ArmControllerParameters = field(
-        default_factory=ArmControllerParameters)
-    safety: SafetyParameters = field(default_factory=SafetyParameters)
-
-    def __post_init__(self):
-        h = positive("time_step", self.time_step)
-        for item in fields(self):
-            if item.name != "time_step" and not isinstance(
-                    getattr(self, item.name), item.type):
-                raise ValueError(
-                    f"{item.name} = {getattr(self, item.name)!r} is not "
-                    f"allowed: must be a {item.type.__name__}")
-        omega_f = self.base_filter.omega_f
-        if omega_f >= np.pi / h:
-            raise ValueError(
-                f"time_step = {h!r} s is not allowed with base_filter."
-                f"omega_f = {omega_f!r} rad/s: the filter's cut-off must be "
-                f"below the Nyquist rate pi / time_step = {np.pi / h:.6g} "
-                "rad/s")
 
 
 class Controller:
@@ -237,6 +167,7 @@ def build_controller(params=None, arm=None):
         "params", params, ControllerParameters, ControllerParameters))
     h = params.time_step
     arm = checked_instance("arm", arm, ArmKinematics, ArmKinematics)
+    check_arm_limits(params.arm_controller, arm)
     builder = DiagramBuilder()
     add = builder.AddNamedSystem
     stages = dict(
@@ -251,7 +182,8 @@ def build_controller(params=None, arm=None):
         distributor=add("distributor", MotionDistributor(
             params.distributor, arm)),
         base_cdmp=add("base_cdmp", BaseCdmp(params.base_cdmp, time_step=h)),
-        base_gate=add("base_gate", StopGate(3)),
+        base_gate=add("base_gate", StopGate(
+            3, limits=params.safety.base_velocity_limits)),
         base_filter=add("base_filter", BaseVelocityFilter(
             replace(params.base_filter, time_step=h))),
         base_limiter=add("base_limiter", BaseCommandLimiter(
@@ -308,6 +240,7 @@ def build_controller(params=None, arm=None):
     connect("base_cdmp", "avoiding_base_velocity", "base_gate", "value")
     connect("base_gate", "gated", "base_filter", "velocity")
     connect("base_filter", "filtered_velocity", "base_limiter", "velocity")
+    connect("base_gate", "scale", "base_limiter", "envelope_scale")
     connect("distributor", "arm_velocity", "compensator", "arm_velocity")
     connect("distributor", "base_velocity", "compensator", "base_velocity")
     connect("base_limiter", "velocity_command", "compensator",

@@ -348,6 +348,6 @@ def positive_vector(name, value, size):
     if bad.size:
         i = int(bad[0])
         raise ValueError(
-            f"{name}[{i}] = {vector[i]!r} is not allowed: every entry must "
-            "be greater than 0")
+            f"{name}[{i}] = {float(vector[i])!r} is not allowed: every entry "
+            "must be greater than 0")
     return vector

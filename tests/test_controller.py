@@ -20,27 +20,15 @@ from drake_wbc.robot_model import (
     HOME_ARM_POSITIONS,
     ArmKinematics,
 )
-from drake_wbc.systems.wrench import ExternalWrenchEstimator
+from drake_wbc.systems.wrench import (
+    ExternalWrenchEstimator,
+    tool_weight_reading,
+)
 
 
 @pytest.fixture(scope="module")
 def arm():
     return ArmKinematics()
-
-
-def tool_weight_reading(arm, q_a):
-    """What the sensor reads with nothing touching the tool: the weight of
-    the tool, [f; tau] at and in the measurement frame M, from the plant's
-    mass properties (base level, mount at rest)."""
-    plant, model = arm.plant, arm.model
-    tool = plant.GetBodyByName("wiping_tool", model.tool)
-    context = plant.CreateDefaultContext()
-    X_MB = tool.body_frame().CalcPose(context, model.ft_measurement_frame)
-    p_M_com = X_MB.multiply(tool.CalcCenterOfMassInBodyFrame(context))
-    R_AM = arm.frame_pose(q_a, model.ft_measurement_frame).rotation()
-    weight_M = R_AM.inverse().multiply(
-        np.array([0.0, 0.0, -9.81 * tool.get_mass(context)]))
-    return np.concatenate([weight_M, np.cross(p_M_com, weight_M)])
 
 
 def test_ports(arm):

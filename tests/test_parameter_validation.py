@@ -257,6 +257,14 @@ CASES = [
                                     omega_f=200.0, time_step=0.001)),
      ["time_step = 0.02", "base_filter.omega_f = 200.0", "Nyquist"]),
     (ControllerParameters, dict(capability="x"), ["capability = 'x'"]),
+    (ControllerParameters, dict(distributor=MotionDistributorParameters(
+        band=CapabilityBand(0.03, 0.04))),
+     ["distributor.band = (0.03, 0.04)", "capability.band = (0.035, 0.04)",
+      "must be equal"]),
+    (ControllerParameters, dict(
+        whole_body_cdmp=WholeBodyCdmpParameters(S_hri=1.0)),
+     ["whole_body_cdmp.S_hri = 1.0", "arm_cdmp.S_hri = 0.0"]),
+    (RepulsiveFieldParameters, dict(max_force=-1.0), ["max_force = -1.0"]),
     (ArmControllerParameters, dict(damping=-0.05), ["damping = -0.05"]),
     (ArmControllerParameters, dict(lower=[-1.0] * 6),
      ["lower = [-1.0", "upper = None", "both limits or neither"]),
@@ -372,3 +380,21 @@ def test_the_defaults_and_the_shipped_scenarios_are_valid():
         validate(kind())
     for path in scenario_files():
         load_scenario(path)
+
+
+@pytest.mark.parametrize("overrides, fragment", [
+    (dict(velocity_limits=[1.57] * 5 + [2.0]),
+     "arm_controller.velocity_limits[5] = 2.0 is not allowed: must be at "
+     "most the arm's own 1.57"),
+    (dict(lower=[-3.2] + [-1.0] * 5, upper=[1.0] * 6),
+     "arm_controller.lower[0] = -3.2 is not allowed: must be at least"),
+])
+def test_the_arm_controller_may_not_widen_the_arms_limits(overrides,
+                                                          fragment):
+    from drake_wbc.controller import build_controller
+
+    params = ControllerParameters(
+        arm_controller=ArmControllerParameters(**overrides))
+    with pytest.raises(ValueError) as error:
+        build_controller(params)
+    assert fragment in str(error.value)

@@ -8,15 +8,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
-from pydrake.common.value import AbstractValue
-from pydrake.systems.analysis import Simulator
+from controller_rig import H, Rig
 from pydrake.systems.framework import (
-    DiagramBuilder,
     InputPortIndex,
     OutputPortIndex,
     PortDataType,
 )
-from pydrake.systems.primitives import Linearize, VectorLogSink
+from pydrake.systems.primitives import Linearize
 
 from drake_wbc import safety
 from drake_wbc.config import load_controller_parameters
@@ -32,7 +30,6 @@ from drake_wbc.systems import BaseCommandLimiter, InputGuard, StopGate
 from drake_wbc.systems.safety import LOGGER, STATUS_FIELDS, GuardedInput
 from drake_wbc.workspace import MotionMode
 
-H = 0.01
 HOLD = safety.DEFAULT_HOLD_TIME
 V_MAX = np.array(safety.BASE_VELOCITY_LIMITS)
 A_MAX = np.array(safety.BASE_ACCELERATION_LIMITS)
@@ -45,80 +42,6 @@ STATUS = {name: i for i, name in enumerate(STATUS_FIELDS)}
 @pytest.fixture(scope="module")
 def arm():
     return ArmKinematics()
-
-
-def tool_weight_reading(arm, q_a):
-    """The wrist's reading with nothing touching the tool (its weight),
-    so that the external wrench is zero (as in test_controller)."""
-    plant, model = arm.plant, arm.model
-    tool = plant.GetBodyByName("wiping_tool", model.tool)
-    context = plant.CreateDefaultContext()
-    X_MB = tool.body_frame().CalcPose(context, model.ft_measurement_frame)
-    p_M_com = X_MB.multiply(tool.CalcCenterOfMassInBodyFrame(context))
-    R_AM = arm.frame_pose(q_a, model.ft_measurement_frame).rotation()
-    weight_M = R_AM.inverse().multiply(
-        np.array([0.0, 0.0, -9.81 * tool.get_mass(context)]))
-    return np.concatenate([weight_M, np.cross(p_M_com, weight_M)])
-
-
-class Rig:
-    """The controller Diagram with every vector output logged at each
-    tick, its inputs fixed on its context and changeable between
-    advances."""
-
-    def __init__(self, arm, params=None, q=HOME_ARM_POSITIONS):
-        self.controller = build_controller(params, arm)
-        builder = DiagramBuilder()
-        diagram = self.diagram = builder.AddSystem(self.controller.diagram)
-        self.logs = {}
-        for i in range(diagram.num_output_ports()):
-            port = diagram.get_output_port(i)
-            if port.get_data_type() == PortDataType.kVectorValued:
-                sink = builder.AddSystem(VectorLogSink(port.size(), H))
-                builder.Connect(port, sink.get_input_port())
-                self.logs[port.get_name()] = sink
-        self.root = builder.Build()
-        self.root_context = self.root.CreateDefaultContext()
-        self.context = diagram.GetMyMutableContextFromRoot(self.root_context)
-        self.q = np.asarray(q, dtype=float)
-        self.valid = {
-            "base.state_estimated": [0.0, 0.0, 0.3, 0.0, 0.0, 0.0],
-            "arm.position_measured": self.q,
-            "wrist.wrench_measured": tool_weight_reading(arm, self.q),
-            "reference_velocity": [0.1, 0.05, 0.0, 0.0, 0.0, 0.05],
-            "desired_wrench": [-10.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-            "phri_switch": [0.0],
-            "null_space_gain": [0.05],
-            "compensation_switch": [1.0],
-            "lidar.obstacle_points": np.array([[0.7, 0.1], [2.0, 0.0]]),
-        }
-        for name, value in self.valid.items():
-            self.set(name, value)
-        self.controller.initialize(self.root_context, arm_position=self.q)
-        self.simulator = Simulator(self.root, self.root_context)
-        self.ticks = 0
-
-    def set(self, name, value):
-        port = self.diagram.GetInputPort(name)
-        if name == "lidar.obstacle_points":
-            port.FixValue(self.context, AbstractValue.Make(
-                np.asarray(value, dtype=float)))
-        else:
-            port.FixValue(self.context, np.asarray(value, dtype=float))
-
-    def advance(self, duration):
-        """Advances by `duration` to a tick k h exactly (the tick's update
-        runs at the start of the next advance, after any input change)."""
-        self.ticks += round(duration / H)
-        self.simulator.AdvanceTo(self.ticks * H)
-
-    def time(self):
-        return self.ticks * H
-
-    def log(self, name):
-        """(time (N,), data (N, k)) of an output."""
-        log = self.logs[name].FindLog(self.root_context)
-        return log.sample_times(), log.data().T
 
 
 # --- invalid inputs: one run injecting into each input in turn --------
@@ -336,20 +259,23 @@ def test_saturated_base_command_is_parallel_and_flagged(arm):
     rig.set("lidar.obstacle_points", np.zeros((0, 2)))
     rig.advance(2.0)
     times, command = rig.log("base.velocity_command")
-    _, desired = rig.log("filtered_base_velocity")
+    _, desired = rig.log("base_velocity")
+    _, filtered = rig.log("filtered_base_velocity")
     _, saturation = rig.log("base_saturation")
-    assert np.all(np.abs(command) <= V_MAX + TOL)
+    for signal in (command, filtered):
+        assert np.all(np.abs(signal) <= V_MAX + TOL)
     assert np.all(np.abs(np.diff(command, axis=0)) <= A_MAX * H + TOL)
-    late = times > 1.5
+    late = times > 1.8
     assert np.all(saturation[late, 0] == 1.0)
-    # Parallel to the desired command, scaled by 1 / max |desired_i|: the
-    # filter's command is about 3 m/s in x (the base's half is the whole
-    # planar motion, rotated into T_b by the yaw of 0.3 rad).
+    # Parallel to the desired command V_b, scaled by 1 / max |V_b_i| (the
+    # envelope before the filter; V_b is about 3 m/s in x: the base's half
+    # is the whole planar motion, rotated into T_b by the yaw of 0.3 rad),
+    # once the DMP and the filter have settled.
     for c, d, s in zip(command[late], desired[late], saturation[late],
                        strict=True):
         scale = 1.0 / np.max(np.abs(d))
-        np.testing.assert_allclose(c, scale * d, rtol=1e-12, atol=1e-12)
-        assert s[1] == pytest.approx(scale, rel=1e-12)
+        np.testing.assert_allclose(c, scale * d, rtol=2e-3, atol=1e-6)
+        assert s[1] == pytest.approx(scale, rel=2e-3)
     assert np.max(np.abs(desired[late])) > 1.5
 
 

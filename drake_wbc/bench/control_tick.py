@@ -28,6 +28,7 @@ from drake_wbc.controller import (
     build_controller,
 )
 from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.systems.wrench import tool_weight_reading
 from drake_wbc.validation import positive, whole_number
 
 REFERENCE_VELOCITY = np.array([0.1, 0.05, 0.0, 0.0, 0.0, 0.05])
@@ -35,21 +36,6 @@ REFERENCE_VELOCITY = np.array([0.1, 0.05, 0.0, 0.0, 0.0, 0.05])
 
 BASE_STATE = np.array([0.0, 0.0, 0.3, 0.0, 0.0, 0.0])
 """The measured base state: at the origin, yawed 0.3 rad, at rest."""
-
-
-def tool_weight_reading(arm, q_a=HOME_ARM_POSITIONS):
-    """What the wrist sensor reads with nothing touching the tool: the
-    tool's weight as [f; tau] at and in the measurement frame, from the
-    plant's mass properties."""
-    plant, model = arm.plant, arm.model
-    tool = plant.GetBodyByName("wiping_tool", model.tool)
-    context = plant.CreateDefaultContext()
-    X_MB = tool.body_frame().CalcPose(context, model.ft_measurement_frame)
-    p_M_com = X_MB.multiply(tool.CalcCenterOfMassInBodyFrame(context))
-    R_AM = arm.frame_pose(q_a, model.ft_measurement_frame).rotation()
-    weight_M = R_AM.inverse().multiply(
-        np.array([0.0, 0.0, -9.81 * tool.get_mass(context)]))
-    return np.concatenate([weight_M, np.cross(p_M_com, weight_M)])
 
 
 def obstacle_points(count, seed=0):
@@ -85,7 +71,8 @@ class ControllerTicker:
         self.values = {
             "base.state_estimated": BASE_STATE,
             "arm.position_measured": HOME_ARM_POSITIONS,
-            "wrist.wrench_measured": tool_weight_reading(arm),
+            "wrist.wrench_measured": tool_weight_reading(
+                arm, HOME_ARM_POSITIONS),
             "lidar.obstacle_points": AbstractValue.Make(
                 obstacle_points(num_points)),
         }

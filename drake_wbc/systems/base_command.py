@@ -17,6 +17,7 @@ from drake_wbc.validation import (
     as_vector,
     checked_instance,
     positive,
+    positive_vector,
     validated_copy,
 )
 
@@ -24,46 +25,83 @@ from drake_wbc.validation import (
 @TemplateSystem.define("StopGate_", T_list=SCALARS)
 def StopGate_(T):
     class Impl(LeafSystem_[T]):
-        """Passes a vector on, or zeros during a safe stop.
+        """Passes a vector on, within an envelope, or zeros during a safe
+        stop.
 
         ::
 
                      ┌──────────┐
-            value ──►│          │
-            stop ───►│ StopGate ├──► gated
+            value ──►│          ├──► gated
+            stop ───►│ StopGate ├──► scale
                      └──────────┘
 
         - value: (size) the signal.
         - stop (1): >= 0.5 during a stop (InputGuard's `stop`).
-        - gated: (size) value, or zeros while stop; the very same values
-          otherwise. Direct feedthrough of both inputs.
+        - gated: (size) zeros while stop; otherwise value, scaled as a
+          whole into `limits` when given and exceeded (|gated_i| <=
+          limits_i, direction kept, drake_wbc.safety.uniform_scale); the
+          very same values when within them.
+        - scale (1): that factor in [0, 1] (1 when within the limits or
+          stopped), for the BaseCommandLimiter's report.
+        Both outputs are direct feedthrough of both inputs.
 
         Before the base filter of eq. (filtering) it lets the filter's
         state settle towards rest during a stop (to (1 + omega_f t)
         exp(-omega_f t) of its value, 18% after the shortest stop of 0.5 s
         with the paper's omega_f = 2 pi rad/s and zeta = 1), so that the
         filter restarts from near zero velocity when the stop clears; the
-        BaseCommandLimiter ramps the command from zero from there.
+        BaseCommandLimiter ramps the command from zero from there. With
+        the base's velocity limits as the envelope it is the filter's
+        anti-windup: a critically or over-damped filter (zeta >= 1) has a
+        non-negative impulse response of unit area, continuous or sampled
+        (its step response is monotone), so its state never asks for more
+        than the base can do, however large V_b' grows (e.g. a person
+        walking into the footprint, whose repulsion eq. (cdmp-base) bounds
+        only by RepulsiveFieldParameters.max_force); the arm compensates
+        the part taken away (eq. (compensation)).
+
+        The scale is computed on the values, so in AutoDiffXd the gate is
+        exact where no limit acts (the identity) and treats the scale as
+        a constant where one does.
 
         Args:
             size: the signal's size.
+            limits: None (no envelope), or (size,) limits > 0.
         """
 
-        def _construct(self, size=3, converter=None):
+        def _construct(self, size=3, limits=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.size = int(size)
+            self.limits = None if limits is None else tuple(
+                positive_vector("limits", limits, self.size).tolist())
             self._value = self.DeclareVectorInputPort("value", self.size)
             self._stop = self.DeclareVectorInputPort("stop", 1)
             self.DeclareVectorOutputPort("gated", self.size, self._output)
+            self.DeclareVectorOutputPort("scale", 1, self._scale_output)
 
         def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.size, converter=converter)
+            Impl._construct(self, other.size, other.limits,
+                            converter=converter)
+
+        def _scale(self, context, value):
+            if (self.limits is None
+                    or value_of(self._stop.Eval(context))[0] >= 0.5):
+                return 1.0
+            return safety.uniform_scale(value_of(value), self.limits)
 
         def _output(self, context, output):
             value = self._value.Eval(context)
             if value_of(self._stop.Eval(context))[0] >= 0.5:
                 value = as_scalar_type(T, np.zeros(self.size))
+            else:
+                scale = self._scale(context, value)
+                if scale < 1.0:
+                    value = scale * value
             output.SetFromVector(value)
+
+        def _scale_output(self, context, output):
+            output.SetFromVector(as_scalar_type(T, np.array([self._scale(
+                context, self._value.Eval(context))])))
 
     return Impl
 
@@ -80,14 +118,18 @@ def BaseCommandLimiter_(T):
 
         ::
 
-                        ┌────────────────────┐
-            velocity ──►│                    ├──► velocity_command
-            stopped ───►│ BaseCommandLimiter ├──► saturation
-                        └────────────────────┘
+                              ┌────────────────────┐
+            velocity ────────►│                    ├──► velocity_command
+            stopped ─────────►│ BaseCommandLimiter ├──► saturation
+            envelope_scale ──►│                    │
+                              └────────────────────┘
 
         - velocity: (3) the desired command [vx, vy, wz] in T_b (the base
           filter's V_b^flt of eq. (filtering)).
         - stopped (1): >= 0.5 in a safe stop (InputGuard's `stopped`).
+        - envelope_scale (1): optional (1 when unconnected), the factor
+          by which the StopGate before the filter scaled V_b' into the
+          velocity limits; it enters the report only.
         - velocity_command: (3) drake_wbc.safety.limit_base_velocity of the
           desired command from the previous tick's command: scaled as a
           whole to the velocity limits, its change scaled as a whole to
@@ -99,11 +141,13 @@ def BaseCommandLimiter_(T):
           command restarts from zero within the acceleration limits.
           Exactly the desired command when no limit acts.
         - saturation: (3) [limited, velocity scale, acceleration scale]:
-          limited is 1.0 when a limit changed the command; the scales are
-          those of drake_wbc.safety.LimitedCommand (1.0 when not
-          limited). A desired command that is not finite (which the input
-          guard leaves no way to reach) gives a zero command, limited
-          1.0 and both scales 0.0.
+          limited is 1.0 when a limit changed the command or the envelope
+          before the filter scaled V_b'; the velocity scale is the
+          product of envelope_scale and drake_wbc.safety.LimitedCommand's,
+          the acceleration scale LimitedCommand's (1.0 when not limited).
+          A desired command that is not finite (which the input guard
+          leaves no way to reach) gives a zero command, limited 1.0 and
+          both scales 0.0.
 
         Both outputs are direct feedthrough of `velocity` and `stopped`
         (the base filter's and the guard's state), so they add no delay.
@@ -127,6 +171,7 @@ def BaseCommandLimiter_(T):
             self._velocity = self.DeclareVectorInputPort(
                 "velocity", safety.BASE_AXES)
             self._stopped = self.DeclareVectorInputPort("stopped", 1)
+            self._envelope = self.DeclareVectorInputPort("envelope_scale", 1)
             state = self.DeclareDiscreteState(safety.BASE_AXES)
             self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0,
                                                     self._update)
@@ -143,7 +188,7 @@ def BaseCommandLimiter_(T):
                 prerequisites_of_calc=depends)
             self.DeclareVectorOutputPort(
                 "saturation", 3, self._saturation_output,
-                prerequisites_of_calc=depends)
+                prerequisites_of_calc={*depends, self._envelope.ticket()})
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, other.time_step,
@@ -152,7 +197,8 @@ def BaseCommandLimiter_(T):
 
         def float_map(self, z):
             """[desired (3), previous (3), stopped] -> [command (3),
-            limited, velocity scale, acceleration scale], in double."""
+            limited, velocity scale, acceleration scale], in double
+            (without the envelope's scale)."""
             desired, previous, stopped = z[:3], z[3:6], z[6]
             if stopped >= 0.5:
                 return np.array([0.0, 0.0, 0.0, 0.0, 1.0, 1.0])
@@ -183,7 +229,15 @@ def BaseCommandLimiter_(T):
             output.SetFromVector(self._evaluate(context)[:3])
 
         def _saturation_output(self, context, output):
-            output.SetFromVector(self._evaluate(context)[3:])
+            limited, velocity_scale, acceleration_scale = (
+                self._evaluate(context)[3:])
+            if self._envelope.HasValue(context):
+                envelope = self._envelope.Eval(context)[0]
+                if value_of([envelope])[0] < 1.0:
+                    limited = as_scalar_type(T, np.ones(1))[0]
+                velocity_scale = envelope * velocity_scale
+            output.SetFromVector(np.array(
+                [limited, velocity_scale, acceleration_scale]))
 
         def _update(self, context, discrete_state):
             discrete_state.set_value(self._evaluate(context)[:3])

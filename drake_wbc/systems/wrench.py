@@ -47,6 +47,28 @@ def external_wrench(reading, X_AM, X_AT, tool_mass, p_M_com):
     return np.concatenate([f_A, R_AM @ tau_M + _cross(r_TM, f_A)])
 
 
+def tool_weight_reading(arm, q_a):
+    """What the wrist sensor reads with nothing touching the tool: the
+    tool's weight as [f; tau] at and in the measurement frame M, from the
+    plant's mass properties (base level, mount at rest). The reading for
+    which `external_wrench` is zero; for tests, benchmarks and tools that
+    feed the controller fixed measurements.
+
+    Args:
+        arm: ArmKinematics.
+        q_a: (6,) the arm's joint positions, rad.
+    """
+    plant, model = arm.plant, arm.model
+    tool = plant.GetBodyByName("wiping_tool", model.tool)
+    context = plant.CreateDefaultContext()
+    X_MB = tool.body_frame().CalcPose(context, model.ft_measurement_frame)
+    p_M_com = X_MB.multiply(tool.CalcCenterOfMassInBodyFrame(context))
+    R_AM = arm.frame_pose(q_a, model.ft_measurement_frame).rotation()
+    weight_M = R_AM.inverse().multiply(np.array(
+        [0.0, 0.0, -STANDARD_GRAVITY * tool.get_mass(context)]))
+    return np.concatenate([weight_M, _cross(p_M_com, weight_M)])
+
+
 def _cross(a, b):
     """a x b of 3-vectors (np.cross is slow for one pair)."""
     return np.array([a[1] * b[2] - a[2] * b[1],
