@@ -339,13 +339,21 @@ def joint_position_velocity_bounds(q, lower, upper, time_step,
     lower, upper = ordered_limits("lower", lower, "upper", upper, q.size)
     h = positive("time_step", time_step)
     margin = check_margin(margin, lower, upper)
+    if acceleration_limit is not None:
+        acceleration_limit = _positive_vector(
+            "acceleration_limit", acceleration_limit, q.size)
+    return _position_bounds(q, lower, upper, h, margin, acceleration_limit)
+
+
+def _position_bounds(q, lower, upper, h, margin, acceleration_limit):
+    """`joint_position_velocity_bounds` on checked arguments
+    (acceleration_limit None or (n,))."""
     distances = np.stack([upper - margin - q, q - lower - margin])
     distances = np.maximum(distances, 0.0)
     rates = distances / h
     if acceleration_limit is not None:
-        a = _positive_vector("acceleration_limit", acceleration_limit,
-                             q.size)
-        rates = np.minimum(rates, _braking_rate(distances, h, a))
+        rates = np.minimum(rates, _braking_rate(distances, h,
+                                                acceleration_limit))
     return -rates[1], rates[0]
 
 
@@ -409,19 +417,33 @@ def joint_velocity_for_twist(J_a, V_a, q, lower, upper, velocity_limit,
     lambda_max = non_negative("damping", damping)
     eps = positive("damping_threshold", damping_threshold)
     margin = check_margin(margin, lower, upper)
+    previous = None
     if acceleration_limit is not None:
         acceleration_limit = _positive_vector("acceleration_limit",
                                               acceleration_limit, n)
         previous = (np.zeros(n) if previous_q_dot is None
                     else as_vector("previous_q_dot", previous_q_dot, n))
+    return joint_velocity_for_twist_unchecked(
+        J, V, q, lower, upper, velocity_limit, h, lambda_max, eps, margin,
+        acceleration_limit, previous)
 
+
+def joint_velocity_for_twist_unchecked(J, V, q, lower, upper,
+                                       velocity_limit, h, lambda_max, eps,
+                                       margin, acceleration_limit, previous):
+    """`joint_velocity_for_twist` without its argument checks, for the
+    controller's tick (its parameters are checked once, when it is built):
+    float arrays of the sizes given there, velocity_limit (n,),
+    acceleration_limit None or (n,), previous (n,) when it is not None."""
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
     s_min = float(s[-1])
-    lambda_ = singularity_damping(s_min, lambda_max, eps)
+    # singularity_damping, inline.
+    lambda_ = (0.0 if s_min >= eps
+               else float(lambda_max * (1.0 - (s_min / eps) ** 2)))
     q_dot = _damped_solve(U, s, Vt, V, lambda_)
 
-    low, high = joint_position_velocity_bounds(q, lower, upper, h, margin,
-                                               acceleration_limit)
+    low, high = _position_bounds(q, lower, upper, h, margin,
+                                 acceleration_limit)
     bounded = np.clip(q_dot, low, high)
     limited_joints = bounded != q_dot
     q_dot = bounded

@@ -9,7 +9,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from drake_wbc.arm_control import (
     ArmControllerParameters,
     check_margin,
-    joint_velocity_for_twist,
+    joint_velocity_for_twist_unchecked,
 )
 from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.scalar_support import through_float_function, value_of
@@ -125,11 +125,10 @@ def ArmCartesianVelocityController_(T):
                 params.velocity_limits or kinematics.velocity_limits, float
             )
             check_margin(params.margin, self.lower, self.upper)
-            self._acceleration_limit = (
-                params.acceleration_limit
-                if params.use_acceleration_limit
-                else None
-            )
+            # Checked once here, for the unchecked path of each tick.
+            self._acceleration_limits = (
+                np.full(ARM_JOINT_COUNT, float(params.acceleration_limit))
+                if params.use_acceleration_limit else None)
             self._input = self.DeclareVectorInputPort("arm_velocity",
                                                       TWIST_SIZE)
             self._hold = self.DeclareVectorInputPort("hold", 1)
@@ -171,20 +170,11 @@ def ArmCartesianVelocityController_(T):
                 return np.concatenate([q, np.zeros(ARM_JOINT_COUNT),
                                        [limited]])
             params = self.params
-            command = joint_velocity_for_twist(
-                self.kinematics.evaluate(q).J_a,
-                V_a,
-                q,
-                self.lower,
-                self.upper,
-                self.velocity_limits,
-                params.time_step,
-                damping=params.damping,
-                damping_threshold=params.damping_threshold,
-                margin=params.margin,
-                acceleration_limit=self._acceleration_limit,
-                previous_q_dot=previous,
-            )
+            command = joint_velocity_for_twist_unchecked(
+                self.kinematics.evaluate(q).J_a, V_a, q, self.lower,
+                self.upper, self.velocity_limits, params.time_step,
+                params.damping, params.damping_threshold, params.margin,
+                self._acceleration_limits, previous)
             # The bounds keep q in the band up to rounding; the clip makes
             # the joint limits exact.
             return np.concatenate([
