@@ -126,18 +126,79 @@ class AdmittanceCouplingParameters:
 
 
 @dataclass
+class MovementReplay:
+    """A learned movement played by the whole-body CDMP (eq. (cdmp-wb)
+    with the forcing term f(s) of eq. (6); drake_wbc.movement).
+
+    Attributes:
+        file: the learned movement (a YAML file written by
+            `drake-wbc teach`); a relative path is looked up in the
+            working folder, then in the repository's diagrams/.
+        goal: the TCP's goal [x, y, z, yaw] in the world (m, rad), or
+            None for the demonstrated goal.
+        tau: the temporal scaling tau > 0 (the movement runs tau / tau_0
+            times slower, tau_0 the learned one), or None for the learned
+            one.
+        start_time: when the movement starts, s >= 0 of the controller's
+            clock; before it the DMP runs with g = 0 and f = 0.
+        start: the TCP's pose [x, y, z, yaw] in the world where the
+            controller starts (its DMP's origin), or None for the
+            demonstration's start.
+        tracking_gain: K >= 0, 1/s: from start_time, the task adds
+            V_ee^ref = K (p*(t) - p(t)) on x, y, z and yaw, p* the pose
+            the DMP plays (its own rollout) and p the TCP's pose from the
+            measured joints and odometry (drake_wbc.runner wires it,
+            systems.whole_body_cdmp.MovementTracking); 0 plays the
+            movement open loop. Default 3: the paper's controller is a
+            velocity interface, and without it the TCP lags the DMP by
+            the whole body's tracking delay (the base's velocity loop)
+            and drifts with the base's yaw lag.
+
+    Checked here for form; the file is read (and its existence checked:
+    an empty name is not allowed then) when the controller is built.
+    """
+
+    file: str = ""
+    goal: list[float] | None = None
+    tau: float | None = None
+    start_time: float = 0.0
+    start: list[float] | None = None
+    tracking_gain: float = 3.0
+
+    def __post_init__(self):
+        if not isinstance(self.file, str):
+            raise ValueError(f"file = {self.file!r} is not allowed: must "
+                             "be the path of the learned movement's file")
+        for name in ("goal", "start"):
+            if getattr(self, name) is not None:
+                _set(self, name, tuple(float(v) for v in as_vector(
+                    name, getattr(self, name), 4)))
+        if self.tau is not None:
+            positive("tau", self.tau)
+        non_negative("start_time", self.start_time)
+        non_negative("tracking_gain", self.tracking_gain)
+
+
+@dataclass
 class WholeBodyCdmpParameters:
-    """Eq. (cdmp-wb): admittance gain k_hri >= 0 (m/(N s); paper 0.05)
-    and the default pHRI switch S_hri, 0 or 1 (paper: 1 in pHRI)."""
+    """Eq. (cdmp-wb): admittance gain k_hri >= 0 (m/(N s); paper 0.05),
+    the default pHRI switch S_hri, 0 or 1 (paper: 1 in pHRI), and an
+    optional learned movement to play (MovementReplay; None, the default,
+    keeps the paper's g = 0 and f = 0)."""
 
     k_hri: float = 0.05
     S_hri: float = 0.0
     dmp: DmpParameters = field(default_factory=DmpParameters)
+    movement: MovementReplay | None = None
 
     def __post_init__(self):
         non_negative("k_hri", self.k_hri)
         _set(self, "S_hri", _switch("S_hri", self.S_hri))
         _dmp(self.dmp)
+        if self.movement is not None and not isinstance(
+                self.movement, MovementReplay):
+            raise ValueError(f"movement = {self.movement!r} is not "
+                             "allowed: must be a MovementReplay or None")
 
 
 @dataclass
@@ -293,7 +354,7 @@ def admittance_coupled_derivative(y, z, C, g, F_e, params, V=0.0,
 
 
 def whole_body_cdmp_derivative(y, z, C, E, g, V_ee, F_ext, delta_V_ee,
-                               params, S_hri=None, forcing=0.0):
+                               params, S_hri=None, forcing=0.0, dmp=None):
     """CDMP of the whole body, eq. (cdmp-wb) with the tracking-error term
     of eq. (cdmp-wb-error):
 
@@ -310,14 +371,17 @@ def whole_body_cdmp_derivative(y, z, C, E, g, V_ee, F_ext, delta_V_ee,
     State (y, z, C, E), each (d,) (d = 6, twists [v; w]); inputs the
     goal g, the velocity V_ee, the wrench F_ext on the end effector and
     delta_V_ee, (d,); WholeBodyCdmpParameters; S_hri 0 or 1 (None:
-    params.S_hri); forcing f(s) (default 0). Returns (y_dot, z_dot, C_dot,
-    E_dot); y_dot is the velocity V_ee^ref sent to the distributor.
+    params.S_hri); forcing f(s) (default 0); dmp: the DmpParameters of
+    the transformation system (None: params.dmp; a learned movement's
+    gains and tau while it plays). Returns (y_dot, z_dot, C_dot, E_dot);
+    y_dot is the velocity V_ee^ref sent to the distributor.
     """
     S = params.S_hri if S_hri is None else S_hri
+    dmp = params.dmp if dmp is None else dmp
     C_dot = V_ee + (params.k_hri * S) * F_ext
     y_dot, z_dot = transformation_derivative(
-        y + E, z, g + C, None, params.dmp, forcing,
-        coupling_velocity=params.dmp.tau * C_dot)
+        y + E, z, g + C, None, dmp, forcing,
+        coupling_velocity=dmp.tau * C_dot)
     return y_dot, z_dot, C_dot, delta_V_ee
 
 

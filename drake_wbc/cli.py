@@ -97,6 +97,30 @@ def _run_bench(args):
     return run_bench(args)
 
 
+def _add_teach_arguments(parser):
+    from drake_wbc.teach_commands import add_teach_arguments
+
+    add_teach_arguments(parser)
+
+
+def _run_teach(args):
+    from drake_wbc.teach_commands import run_teach
+
+    return run_teach(args)
+
+
+def _add_replay_arguments(parser):
+    from drake_wbc.teach_commands import add_replay_arguments
+
+    add_replay_arguments(parser)
+
+
+def _run_replay(args):
+    from drake_wbc.teach_commands import run_replay
+
+    return run_replay(args)
+
+
 def _add_stress_arguments(parser):
     from drake_wbc.stress import add_stress_arguments
 
@@ -124,6 +148,13 @@ SUBCOMMANDS = (
     ("stress", "run N seeded random closed-loop cases (obstacles, people, "
      "hand forces, references) in parallel or on a Dask cluster and check "
      "the safety invariants", _add_stress_arguments, _run_stress),
+    ("teach", "run a pHRI scenario (or read an lcm-logger log), record the "
+     "demonstration the hand gave and learn it as a whole-body DMP "
+     "movement file", _add_teach_arguments, _run_teach),
+    ("replay", "play a learned movement through the whole controller in "
+     "simulation, to its goal or a moved one, at another tau or past new "
+     "obstacles, and plot it against the demonstration",
+     _add_replay_arguments, _run_replay),
     ("bode", analysis.BODE_HELP, analysis.add_bode_arguments,
      analysis.run_bode),
     ("diagram", analysis.DIAGRAM_HELP, analysis.add_diagram_arguments,

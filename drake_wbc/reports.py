@@ -68,7 +68,7 @@ def run_scenario(scenario, output, name=None, duration=None, replay=None,
         "description": scenario.description,
         "experiment": scenario.experiment,
         "runs": {k: run_metrics(scenario, log) for k, log in logs.items()},
-        "metrics": _plain(module.compute_metrics(scenario, logs)),
+        "metrics": plain_values(module.compute_metrics(scenario, logs)),
     }
     if scenario.outputs.plots:
         files += module.draw_figures(scenario, logs, output)
@@ -80,12 +80,12 @@ def run_scenario(scenario, output, name=None, duration=None, replay=None,
     return summary
 
 
-def _plain(value):
+def plain_values(value):
     """`value` with numpy scalars and arrays as plain Python, for JSON."""
     if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
+        return {k: plain_values(v) for k, v in value.items()}
     if isinstance(value, (list, tuple, np.ndarray)):
-        return [_plain(v) for v in value]
+        return [plain_values(v) for v in value]
     if isinstance(value, (np.floating, np.integer, np.bool_)):
         return value.item()
     return value

@@ -120,6 +120,8 @@ def add_controller(builder, scenario, variant, station):
     """
     params = copy.deepcopy(scenario.controller)
     params.base_filter.enabled = variant.base_filter
+    if variant.movement is not None:
+        params.whole_body_cdmp.movement = variant.movement
     controller = build_controller(params)
     builder.AddNamedSystem("controller", controller.diagram)
     for name in STATION_INPUTS:
@@ -136,7 +138,34 @@ def add_controller(builder, scenario, variant, station):
                 f"task.{name}", schedule_source(schedule, size))
             builder.Connect(sources[name].get_output_port(),
                             controller.diagram.GetInputPort(name))
+    player = controller.stages["whole_body_cdmp"].player
+    if player is not None and player.tracking_gain > 0.0:
+        _add_movement_tracking(builder, controller, sources, station, player)
     return controller, sources
+
+
+def _add_movement_tracking(builder, controller, sources, station, player):
+    """Adds the learned movement's tracking (MovementTracking) to the
+    task's reference velocity (cdmp.MovementReplay.tracking_gain)."""
+    from pydrake.systems.primitives import Adder
+
+    from drake_wbc.systems.whole_body_cdmp import MovementTracking
+
+    tracking = builder.AddNamedSystem("task.movement_tracking",
+                                      MovementTracking(player))
+    for name in ("base.state_estimated", "arm.position_measured"):
+        builder.Connect(station.GetOutputPort(name),
+                        tracking.GetInputPort(name))
+    adder = builder.AddNamedSystem("task.reference_velocity_sum",
+                                   Adder(2, 6))
+    reference = controller.diagram.GetInputPort("reference_velocity")
+    builder.Disconnect(sources["reference_velocity"].get_output_port(),
+                       reference)
+    builder.Connect(sources["reference_velocity"].get_output_port(),
+                    adder.get_input_port(0))
+    builder.Connect(tracking.get_output_port(), adder.get_input_port(1))
+    builder.Connect(adder.get_output_port(), reference)
+    sources["reference_velocity"] = adder
 
 
 def build_closed_loop(scenario, variant=None, replay=False):

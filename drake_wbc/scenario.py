@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_wbc.cdmp import MovementReplay
 from drake_wbc.config import load_typed
 from drake_wbc.controller import ControllerParameters
 from drake_wbc.hardware.options import HardwareOptions
@@ -45,7 +46,7 @@ from drake_wbc.validation import (
 )
 
 EXPERIMENTS = ("generic", "trajectory_tracking", "fixed_point",
-               "line_tracking", "wiping", "phri")
+               "line_tracking", "wiping", "phri", "teach", "repeat")
 """The experiments whose metrics and plots a run computes (paper Sec. V);
 `generic` gives the common ones only."""
 
@@ -161,11 +162,15 @@ class Variant:
         label: the legend's text (the name if empty).
         base_filter: False runs without the base filter (the paper's
             comparison in the trajectory-tracking experiment).
+        movement: the learned movement this run plays, replacing the
+            controller's whole_body_cdmp.movement (None: the
+            controller's).
     """
 
     name: str = "run"
     label: str = ""
     base_filter: bool = True
+    movement: MovementReplay | None = None
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name or not all(
@@ -175,6 +180,10 @@ class Variant:
                 "digits, _ and - only, and not empty")
         text("label", self.label)
         boolean("base_filter", self.base_filter)
+        if self.movement is not None and not isinstance(
+                self.movement, MovementReplay):
+            raise ValueError(f"movement = {self.movement!r} is not "
+                             "allowed: must be a MovementReplay or None")
 
 
 @dataclass
@@ -221,9 +230,9 @@ class Scenario:
             default) runs the simulated station only.
 
     Besides each part's own checks: controller.time_step is a whole
-    multiple of station.time_step and equals station.arm.command_period,
-    and no static obstacle overlaps the base's footprint at
-    station.initial_base_pose.
+    multiple of station.time_step and equals station.arm.command_period
+    (and hardware.publish_period, with hardware), and no static obstacle
+    overlaps the base's footprint at station.initial_base_pose.
     """
 
     description: str = ""
@@ -272,6 +281,15 @@ class Scenario:
                 f"{self.controller.time_step!r} s: the arm's driver must "
                 "sample the position command at the control period (it "
                 "moves to each command over one period)")
+        period = (None if self.hardware is None
+                  else self.hardware.publish_period)
+        if period is not None and abs(
+                period - self.controller.time_step) > 1e-9:
+            raise ValueError(
+                f"hardware.publish_period = {self.hardware.publish_period!r}"
+                f" s is not allowed with controller.time_step = "
+                f"{self.controller.time_step!r} s: the controller sends its "
+                "commands once a tick, so the two must be equal")
         _check_start_is_free(self.scene, self.station.initial_base_pose)
 
 

@@ -42,6 +42,7 @@ from drake_wbc.controller import ControllerParameters
 from drake_wbc.distribution import SingularityDamping
 from drake_wbc.dmp import DmpParameters
 from drake_wbc.filtering import BaseFilterParameters
+from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.scenario import (
     OutputOptions,
     Scenario,
@@ -250,6 +251,8 @@ CASES = [
         name="crate", center=[0.0, 0.5, 0.2], size=[0.3, 0.5, 0.4],
         yaw=0.3)])),
      ["scene.boxes[0] ('crate')", "overlaps"]),
+    (Scenario, dict(hardware=HardwareOptions(publish_period=0.02)),
+     ["hardware.publish_period = 0.02", "controller.time_step = 0.01"]),
     # ControllerParameters and ArmControllerParameters: their own checks.
     (ControllerParameters, dict(time_step=0.0), ["time_step = 0.0"]),
     (ControllerParameters, dict(time_step=0.02,

@@ -22,6 +22,8 @@ MODULES = {
     "line_tracking": "drake_wbc.experiments.line_tracking",
     "wiping": "drake_wbc.experiments.wiping",
     "phri": "drake_wbc.experiments.phri",
+    "teach": "drake_wbc.experiments.teach",
+    "repeat": "drake_wbc.experiments.repeat",
 }
 
 

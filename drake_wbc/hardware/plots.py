@@ -23,7 +23,7 @@ from drake_wbc.experiments.common import new_figure, run_metrics, save_figure
 from drake_wbc.hardware.interface import DIAGNOSTICS
 from drake_wbc.hardware.lcm_logs import read_lcm_log
 from drake_wbc.hardware.options import HardwareOptions
-from drake_wbc.reports import _plain
+from drake_wbc.reports import plain_values
 from drake_wbc.scenario import Scenario, find_scenario, load_scenario
 
 
@@ -79,7 +79,7 @@ def plot_lcm_log(logfile, output, scenario=None, variant=None,
         if key == "figures":
             files += value
         else:
-            summary[key] = _plain(value)
+            summary[key] = plain_values(value)
     files.append(draw_hardware_figure(log, output, title=name))
     summary["files"] = [Path(f).name for f in files]
     (output / "summary.json").write_text(json.dumps(summary, indent=2))

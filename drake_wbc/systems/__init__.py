@@ -38,8 +38,6 @@ from drake_wbc.systems.cdmp_stages import (
     ArmCdmp_,
     BaseCdmp,
     BaseCdmp_,
-    WholeBodyCdmp,
-    WholeBodyCdmp_,
 )
 from drake_wbc.systems.coordination import (
     MotionDistributor,
@@ -53,6 +51,10 @@ from drake_wbc.systems.safety import (
     GuardedInput,
     InputGuard,
     InputGuard_,
+)
+from drake_wbc.systems.whole_body_cdmp import (
+    WholeBodyCdmp,
+    WholeBodyCdmp_,
 )
 
 __all__ = [

@@ -1,9 +1,12 @@
-"""The coupled DMPs of the whole body, the base and the arm as Drake systems.
+"""The coupled DMPs of the base and the arm as Drake systems, and the
+mechanics they share with the whole body's (WholeBodyCdmp, in
+drake_wbc.systems.whole_body_cdmp, also importable from here).
 
 For a fixed pHRI switch S_hri, eqs. (cdmp-wb), (cdmp-wb-error),
 (cdmp-base) and (cdmp-arm) are affine in their state and inputs (the
-forcing term f(s) is zero, as in all of the paper's experiments, and the
-repulsive force of the base enters as an input computed from the obstacle
+forcing term f(s) is zero, as in all of the paper's experiments, or a
+learned one entering as an input computed from time, and the repulsive
+force of the base enters as an input computed from the obstacle
 points). Each stage therefore evaluates the math layer's derivative
 function (drake_wbc.cdmp) once at construction to obtain
 
@@ -125,14 +128,21 @@ class _CdmpStage:
             return int(self._default_switch)
         return 1 if value[0] >= 0.5 else 0
 
+    def _model(self, context, for_update=False):
+        """The affine model in force (by S_hri); `for_update`: for the
+        discrete update over the period that starts at the context's
+        time."""
+        return self._models[self._switch(context)]
+
     def _update(self, context, discrete_state):
-        model = self._models[self._switch(context)]
+        model = self._model(context, for_update=True)
         discrete_state.set_value(
-            model.next_state(self._state(context), self._drive(context))
+            model.next_state(self._state(context),
+                             self._drive(context, for_update=True))
         )
 
     def DoCalcTimeDerivatives(self, context, derivatives):
-        model = self._models[self._switch(context)]
+        model = self._model(context)
         derivatives.get_mutable_vector().SetFromVector(
             model.derivative(self._state(context), self._drive(context))
         )
@@ -141,7 +151,7 @@ class _CdmpStage:
         """y_dot: the first block of x_dot. Inputs that enter the state
         alone (see `_check_state_only`) are not evaluated, so that a
         feedback edge into them closes no loop."""
-        model = self._models[self._switch(context)]
+        model = self._model(context)
         x_dot = model.derivative(self._state(context),
                                  self._drive(context, for_output=True))
         return x_dot[: self._dimension]
@@ -152,102 +162,6 @@ class _CdmpStage:
             if np.any(model.B[: self._dimension, columns] != 0.0):
                 raise RuntimeError(
                     "an input declared state-only reaches the output")
-
-
-@TemplateSystem.define("WholeBodyCdmp_", T_list=SCALARS)
-def WholeBodyCdmp_(T):
-    class Impl(_CdmpStage, LeafSystem_[T]):
-        """CDMP of the whole body, eqs. (cdmp-wb) and (cdmp-wb-error).
-
-        ::
-
-                                    ┌───────────────┐
-            reference_velocity ────►│               │
-            wrench ────────────────►│               │
-            end_effector_deviation ►│ WholeBodyCdmp ├──► end_effector_velocity
-            base_yaw ──────────────►│               │
-            phri_switch ───────────►│               │
-                                    └───────────────┘
-
-        - reference_velocity: V_ee^ref (6), world frame, [v; w].
-        - wrench: F_ext (6), the wrench on the end effector, T_b.
-        - end_effector_deviation: delta_V_ee (6) of eq. (deviation), T_b;
-          it is integrated (E = int delta_V_ee dt) and enters only the
-          state, so this edge closes no algebraic loop.
-        - base_yaw: phi_b (1), optional (0 when unconnected).
-        - phri_switch: S_hri (1), optional (the parameter when
-          unconnected; >= 0.5 counts as 1).
-        - end_effector_velocity: V_ee (6), y_dot rotated into T_b by
-          eq. (3), for the distributor.
-
-        State [y, z, C, E] (24), world frame, displacements from the start
-        (goal g = 0). Orientation is carried as integrated angular
-        velocity, which is exact for the velocity interface with f = 0.
-
-        Args:
-            params: cdmp.WholeBodyCdmpParameters (paper values if None).
-            time_step: control period h (0: continuous), default 0.01 s.
-        """
-
-        def _construct(self, params=None, time_step=0.01, converter=None):
-            LeafSystem_[T].__init__(self, converter)
-            params = validated_copy(cdmp.WholeBodyCdmpParameters()
-                                    if params is None else params)
-            self.params, self._dimension = params, 6
-            self._default_switch = params.S_hri
-
-            def derivative(switch):
-                def f(x, u):
-                    y, z, C, E = np.split(x, 4)
-                    return np.concatenate(cdmp.whole_body_cdmp_derivative(
-                        y, z, C, E, np.zeros(6), u[:6], u[6:12], u[12:],
-                        params, S_hri=switch))
-                return f
-
-            self._models = {
-                s: AffineDynamics(derivative(s), 24, 18, time_step)
-                for s in (0, 1)
-            }
-            self._check_state_only(slice(12, 18))
-            self._reference = self.DeclareVectorInputPort(
-                "reference_velocity", 6)
-            self._wrench = self.DeclareVectorInputPort("wrench", 6)
-            self._deviation = self.DeclareVectorInputPort(
-                "end_effector_deviation", 6)
-            self._yaw = self.DeclareVectorInputPort("base_yaw", 1)
-            self._phri_port = self.DeclareVectorInputPort("phri_switch", 1)
-            state = self._declare_state(24, time_step)
-            self.DeclareVectorOutputPort(
-                "end_effector_velocity", 6, self._output,
-                prerequisites_of_calc={
-                    state,
-                    *(self.input_port_ticket(p.get_index())
-                      for p in (self._reference, self._wrench, self._yaw,
-                                self._phri_port)),
-                })
-
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.params, other._time_step,
-                            converter=converter)
-            self.params = other.params
-
-        def _yaw_rotation(self, context):
-            yaw = self._optional(self._yaw, context, np.zeros(1))[0]
-            return _rotation_z(yaw)
-
-        def _drive(self, context, for_output=False):
-            R_wb = self._yaw_rotation(context)
-            wrench = _rotate_twist(R_wb, self._wrench.Eval(context))
-            deviation = (0.0 * wrench if for_output else
-                         _rotate_twist(R_wb, self._deviation.Eval(context)))
-            return np.concatenate([self._reference.Eval(context), wrench,
-                                   deviation])
-
-        def _output(self, context, output):
-            R_bw = self._yaw_rotation(context).T
-            output.SetFromVector(_rotate_twist(R_bw, self._velocity(context)))
-
-    return Impl
 
 
 @TemplateSystem.define("BaseCdmp_", T_list=SCALARS)
@@ -338,7 +252,7 @@ def BaseCdmp_(T):
             force = cdmp.repulsive_force(points, self.params.repulsion)
             return np.array([force[0], force[1], 0.0])
 
-        def _drive(self, context, for_output=False):
+        def _drive(self, context, for_output=False, for_update=False):
             return np.concatenate([self._velocity_in.Eval(context),
                                    self.repulsive_force(context)])
 
@@ -424,7 +338,7 @@ def ArmCdmp_(T):
                             converter=converter)
             self.params = other.params
 
-        def _drive(self, context, for_output=False):
+        def _drive(self, context, for_output=False, for_update=False):
             return np.concatenate([
                 self._velocity_in.Eval(context),
                 self._wrench.Eval(context),
@@ -437,6 +351,15 @@ def ArmCdmp_(T):
     return Impl
 
 
-WholeBodyCdmp = WholeBodyCdmp_[None]
 BaseCdmp = BaseCdmp_[None]
 ArmCdmp = ArmCdmp_[None]
+
+
+def __getattr__(name):
+    """WholeBodyCdmp and WholeBodyCdmp_ live in
+    drake_wbc.systems.whole_body_cdmp; they are found here too."""
+    if name in ("WholeBodyCdmp", "WholeBodyCdmp_"):
+        from drake_wbc.systems import whole_body_cdmp
+
+        return getattr(whole_body_cdmp, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,174 @@
+"""Repeating a taught movement: the learned DMP played by the normal
+controller (drake_wbc.movement, cdmp.MovementReplay), against the
+demonstration it was learned from.
+
+Each run plays its variant's movement (or the controller's). Replay and
+demonstration are compared on the TCP's pose from the measured joints and
+the base's odometry (demonstration.tcp_poses, as the demonstration was
+recorded), time aligned through the phase: replay time since start_time
+over the movement's duration at the replay's tau, against the
+demonstration's normalised time. Metrics per run, `<run>.<metric>` when
+there are several runs:
+
+- path_rms_m: RMS over the demonstration's samples of the TCP's position
+  error, replay against demonstration (meaningful for the demonstrated
+  goal); path_yaw_rms_rad the same for yaw.
+- goal_error_m, goal_yaw_error_rad: the TCP at the end of the run
+  against the run's goal.
+- velocity_correlation: the correlation coefficient of the TCP's speed
+  profiles (|v| of x, y, z), replay against demonstration, time aligned:
+  1 for the same shape.
+- min_obstacle_distance_m: the least distance from the base's footprint
+  to any obstacle (inf without one); d_th_m the repulsion's threshold.
+- tau, duration_s: the replay's temporal scaling and length.
+
+Figures (`repeat_<run>.png`): the TCP's and the base's paths in the
+plane (demonstration, replay, goals, obstacles) and x, y, z and yaw
+against normalised time.
+"""
+
+import numpy as np
+
+from drake_wbc import demonstration as demos
+from drake_wbc import movement as mv
+from drake_wbc.experiments.common import (
+    new_figure,
+    obstacle_distances,
+    save_figure,
+)
+
+SPEED_FILTER_HZ = 2.0
+"""Hz: the speed profiles are low-passed (zero phase) at this before
+they are correlated, so that sensor noise does not count as shape."""
+
+
+def replay_of(scenario, variant_name):
+    """The cdmp.MovementReplay that the run `variant_name` plays."""
+    for variant in scenario.variants:
+        if variant.name == variant_name and variant.movement is not None:
+            return variant.movement
+    replay = scenario.controller.whole_body_cdmp.movement
+    if replay is None:
+        raise ValueError(
+            f"run {variant_name!r} plays no movement: give the run's or the "
+            "controller's whole_body_cdmp.movement")
+    return replay
+
+
+def replay_comparison(scenario, name, log):
+    """(movement, player, u, demo, replayed, target): the demonstration
+    and the replay (the run's TCP poses, sampled at the demonstration's
+    normalised times u) and the run's absolute goal target (4,)."""
+    replay = replay_of(scenario, name)
+    movement = mv.LearnedMovement.load(mv.resolve_movement_file(replay.file))
+    player = mv.MovementPlayer(movement, replay)
+    demo = movement.demonstrations[0]
+    u = (demo.time - demo.time[0]) / demo.duration
+    tcp = demos.tcp_poses(log["base.state_estimated"][:, :3],
+                       log["arm.position_measured"])
+    # The same turn of the yaw as the demonstration's.
+    tcp[:, 3] += 2 * np.pi * np.round((demo.tcp[0, 3] - tcp[0, 3])
+                                      / (2 * np.pi))
+    t = player.start_time + u * player.params.duration
+    replayed = np.column_stack([np.interp(t, log.time, tcp[:, i])
+                                for i in range(4)])
+    start = movement.start if replay.start is None else np.asarray(
+        replay.start)
+    target = start + player.goal[list(mv.LEARNED_TWIST_INDICES)]
+    return movement, player, u, demo, replayed, target, tcp
+
+
+def _speed(time, positions):
+    from scipy.signal import butter, sosfiltfilt
+
+    v = np.gradient(positions, time, axis=0)
+    fs = 1.0 / np.median(np.diff(time))
+    if fs > 2.5 * SPEED_FILTER_HZ:
+        sos = butter(2, SPEED_FILTER_HZ, fs=fs, output="sos")
+        v = sosfiltfilt(sos, v, axis=0)
+    return np.linalg.norm(v, axis=1)
+
+
+def run_metrics(scenario, name, log):
+    """The metrics of the module's docstring for one run."""
+    movement, player, u, demo, replayed, target, tcp = replay_comparison(
+        scenario, name, log)
+    error = replayed - demo.tcp
+    replay_speed = _speed(u, replayed[:, :3])
+    demo_speed = _speed(u, demo.tcp[:, :3])
+    people = log.signals.get("truth.people_positions")
+    distance = obstacle_distances(scenario.scene, log["truth.base_pose"],
+                                  people)
+    return {
+        "path_rms_m": float(np.sqrt(np.mean(np.sum(error[:, :3]**2,
+                                                   axis=1)))),
+        "path_yaw_rms_rad": float(np.sqrt(np.mean(error[:, 3]**2))),
+        "goal_error_m": float(np.linalg.norm(tcp[-1, :3] - target[:3])),
+        "goal_yaw_error_rad": float(abs(tcp[-1, 3] - target[3])),
+        "velocity_correlation": float(np.corrcoef(replay_speed,
+                                                  demo_speed)[0, 1]),
+        "min_obstacle_distance_m": float(np.min(distance)),
+        "d_th_m": float(scenario.controller.base_cdmp.repulsion.d_th),
+        "tau": float(player.params.tau),
+        "duration_s": float(player.params.duration),
+    }
+
+
+def compute_metrics(scenario, logs):
+    """The metrics of the module's docstring, of each run."""
+    metrics = {}
+    for name, log in logs.items():
+        prefix = "" if len(logs) == 1 else f"{name}."
+        metrics.update({prefix + k: v for k, v in run_metrics(
+            scenario, name, log).items()})
+    return metrics
+
+
+def draw_figures(scenario, logs, folder):
+    """`repeat_<run>.png` of each run (module docstring)."""
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Circle
+
+    paths = []
+    for name, log in logs.items():
+        movement, player, u, demo, replayed, target, tcp = \
+            replay_comparison(scenario, name, log)
+        fig, axes = new_figure(4, title=f"repeat: demonstration against "
+                               f"replay ({name})")
+        fig.set_size_inches(11.0, 8.0)
+        for axis in axes:
+            axis.remove()
+        grid = fig.add_gridspec(4, 2)
+        plane = fig.add_subplot(grid[:, 0])
+        plane.plot(demo.tcp[:, 0], demo.tcp[:, 1], "C0", label="TCP, "
+                   "demonstration")
+        plane.plot(tcp[:, 0], tcp[:, 1], "C1--", label="TCP, replay")
+        if demo.base is not None:
+            plane.plot(demo.base[:, 0], demo.base[:, 1], "C2",
+                       label="base, demonstration")
+        base = log["base.state_estimated"]
+        plane.plot(base[:, 0], base[:, 1], "C3--", label="base, replay")
+        plane.plot(*movement.goal[:2], "k*", markersize=10,
+                   label="demonstrated goal")
+        plane.plot(*target[:2], "r+", markersize=12, label="goal")
+        for c in scenario.scene.cylinders:
+            plane.add_patch(Circle(c.position, c.radius, color="0.5"))
+        plane.set_aspect("equal")
+        plane.grid(True, alpha=0.3)
+        plane.set_xlabel("x (m)")
+        plane.set_ylabel("y (m)")
+        plane.legend(fontsize=7, loc="best")
+        times = (log.time - player.start_time) / player.params.duration
+        for i, label in enumerate(("x (m)", "y (m)", "z (m)", "yaw (rad)")):
+            axis = fig.add_subplot(grid[i, 1])
+            axis.plot(u, demo.tcp[:, i], "C0", label="demonstration")
+            axis.plot(times, tcp[:, i], "C1--", label="replay")
+            axis.axhline(target[i], color="r", lw=0.6)
+            axis.set_ylabel(label)
+            axis.grid(True, alpha=0.3)
+        axis.set_xlabel("normalised time (replay: from start_time, over "
+                        "the duration at its tau)")
+        axis.legend(fontsize=7, loc="lower right")
+        paths.append(save_figure(fig, folder, f"repeat_{name}"))
+        plt.close(fig)
+    return paths

@@ -1,0 +1,149 @@
+"""Teaching by hand: a demonstration recorded in pHRI mode and the DMP
+learned from it (drake_wbc.movement; the paper's future work, Sec. VI,
+on its Sec. II-C and IV).
+
+The demonstration of each run is the interval in which S_hri is 1
+(demonstration.teaching_interval of the task's phri_switch), from the measured
+joints and the base's odometry. Metrics per run, `<run>.<metric>` when
+there are several runs:
+
+- start_s, stop_s, duration_s: the demonstration's markers.
+- tcp_dx_m, tcp_dy_m, tcp_dz_m, tcp_dyaw_rad: the TCP's net motion;
+  tcp_path_m its path length; base_path_m the base's.
+- fit_rms_m, fit_yaw_rms_rad: the learned DMP's rollout (dmp.rollout,
+  the same duration) against the demonstration, RMS over time of the
+  position error and of the yaw error; fit_goal_error_m where it ends.
+
+Figures (`teach_<run>.png`): the TCP's and the base's paths in the plane,
+and x, y, z and yaw against normalised time, demonstration against the
+learned rollout.
+"""
+
+import numpy as np
+
+from drake_wbc import demonstration as demos
+from drake_wbc import movement as mv
+from drake_wbc.experiments.common import new_figure, save_figure
+
+
+def interval(scenario, start=None, stop=None):
+    """(start, stop) of the demonstration: the S_hri markers of the
+    scenario's task, each replaced by `start`/`stop` when given."""
+    if start is None or stop is None:
+        marked = demos.teaching_interval(
+            scenario.task.phri_switch, scenario.duration,
+            scenario.controller.whole_body_cdmp.S_hri)
+        start = marked[0] if start is None else start
+        stop = marked[1] if stop is None else stop
+    return float(start), float(stop)
+
+
+def learn_from_log(scenario, log, start=None, stop=None, num_basis=None,
+                   source=""):
+    """The LearnedMovement of the demonstration in `log` (a RunLog),
+    learned with the gains of the scenario's whole-body DMP (so that it
+    replays with the same attractor)."""
+    start, stop = interval(scenario, start, stop)
+    demo = demos.demonstration_from_log(log, start, stop)
+    dmp = scenario.controller.whole_body_cdmp.dmp
+    params = mv.dmp.DmpParameters(
+        alpha_z=dmp.alpha_z, beta_z=dmp.beta_z, tau=1.0,
+        num_basis=num_basis or mv.DEFAULT_NUM_BASIS)
+    return mv.learn_movement(demo, params, source=source)
+
+
+def fit_metrics(movement):
+    """The learned rollout against the (first) demonstration."""
+    demo = movement.demonstrations[0]
+    t, y, _ = movement.rollout(dt=0.005, extra_time=0.0)
+    u = demo.time - demo.time[0]
+    rolled = np.column_stack([np.interp(u, t, y[:, i]) for i in range(4)])
+    error = rolled - demo.tcp
+    return {
+        "fit_rms_m": float(np.sqrt(np.mean(np.sum(error[:, :3]**2,
+                                                  axis=1)))),
+        "fit_yaw_rms_rad": float(np.sqrt(np.mean(error[:, 3]**2))),
+        "fit_goal_error_m": float(np.linalg.norm(y[-1, :3]
+                                                 - movement.goal[:3])),
+    }
+
+
+def movement_metrics(movement, start, stop):
+    """The metrics of the module's docstring for one learned movement."""
+    demo = movement.demonstrations[0]
+    delta = demo.tcp[-1] - demo.tcp[0]
+    metrics = {
+        "start_s": start, "stop_s": stop, "duration_s": demo.duration,
+        "tcp_dx_m": float(delta[0]), "tcp_dy_m": float(delta[1]),
+        "tcp_dz_m": float(delta[2]), "tcp_dyaw_rad": float(delta[3]),
+        "tcp_path_m": _path(demo.tcp[:, :3]),
+        "base_path_m": (_path(demo.base[:, :2]) if demo.base is not None
+                        else float("nan")),
+    }
+    metrics.update(fit_metrics(movement))
+    return metrics
+
+
+def _path(points):
+    return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
+
+
+def compute_metrics(scenario, logs):
+    """The metrics of the module's docstring, of each run."""
+    start, stop = interval(scenario)
+    metrics = {}
+    for name, log in logs.items():
+        values = movement_metrics(learn_from_log(scenario, log), start,
+                                  stop)
+        prefix = "" if len(logs) == 1 else f"{name}."
+        metrics.update({prefix + k: v for k, v in values.items()})
+    return metrics
+
+
+def draw_movement(movement, folder, name, title=None):
+    """`<name>.png`: the demonstrations against the learned rollout."""
+    import matplotlib.pyplot as plt
+
+    t, y, _ = movement.rollout(dt=0.01, extra_time=0.0)
+    u = t / movement.params.duration
+    fig, axes = new_figure(4, title=title or f"teach: {name}", width=11.0)
+    fig.set_size_inches(11.0, 8.0)
+    for axis in axes:
+        axis.remove()
+    grid = fig.add_gridspec(4, 2)
+    plane = fig.add_subplot(grid[:, 0])
+    for k, demo in enumerate(movement.demonstrations):
+        label = "demonstration" if k == 0 else None
+        plane.plot(demo.tcp[:, 0], demo.tcp[:, 1], "C0", label=label)
+        if demo.base is not None:
+            plane.plot(demo.base[:, 0], demo.base[:, 1], "C2",
+                       label="base (demonstration)" if k == 0 else None)
+    plane.plot(y[:, 0], y[:, 1], "C1--", label="learned rollout")
+    plane.plot(*movement.start[:2], "ko", label="start")
+    plane.plot(*movement.goal[:2], "k*", markersize=10, label="goal")
+    plane.set_aspect("equal")
+    plane.grid(True, alpha=0.3)
+    plane.set_xlabel("x (m)")
+    plane.set_ylabel("y (m)")
+    plane.legend(fontsize=7, loc="best")
+    units = ("x (m)", "y (m)", "z (m)", "yaw (rad)")
+    for i, label in enumerate(units):
+        axis = fig.add_subplot(grid[i, 1])
+        for demo in movement.demonstrations:
+            axis.plot((demo.time - demo.time[0]) / demo.duration,
+                      demo.tcp[:, i], "C0")
+        axis.plot(u, y[:, i], "C1--")
+        axis.set_ylabel(label)
+        axis.grid(True, alpha=0.3)
+    axis.set_xlabel("normalised time")
+    path = save_figure(fig, folder, name)
+    plt.close(fig)
+    return path
+
+
+def draw_figures(scenario, logs, folder):
+    """`teach_<run>.png` of each run (module docstring)."""
+    return [draw_movement(learn_from_log(scenario, log), folder,
+                          f"teach_{name}", f"teach: demonstration against "
+                          f"the learned DMP ({name})")
+            for name, log in logs.items()]

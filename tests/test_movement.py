@@ -1,0 +1,205 @@
+"""Learning, saving and playing a whole-body movement (drake_wbc.movement),
+and WholeBodyCdmp playing it against the DMP core's own integration."""
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.primitives import Linearize
+
+from drake_wbc import cdmp, dmp
+from drake_wbc import demonstration as demos
+from drake_wbc import movement as mv
+from drake_wbc.scenario import Schedule
+from drake_wbc.systems import WholeBodyCdmp
+
+START = np.array([0.9, 0.0, 0.65, -3.0])
+GOAL = np.array([1.7, 0.35, 0.7, -2.7])
+
+
+def synthetic(seed=0, num_basis=15, duration=4.0):
+    """(params, weights, t, y): a rollout of dmp.rollout with random
+    weights, from rest to rest (run on 2 s past the basis)."""
+    rng = np.random.default_rng(seed)
+    params = dmp.DmpParameters(duration=duration, num_basis=num_basis)
+    weights = 20.0 * rng.normal(size=(num_basis, 4))
+    t, y, _ = dmp.rollout(params, START, GOAL, duration + 2.0, 0.01,
+                          weights)
+    return params, weights, t, y
+
+
+def rollout_error(movement, t, y):
+    t_l, y_l, _ = movement.rollout(dt=0.01, extra_time=0.0)
+    rolled = np.column_stack([np.interp(t, t_l, y_l[:, i])
+                              for i in range(4)])
+    return np.sqrt(np.mean((rolled - y) ** 2))
+
+
+def test_a_rollout_is_recovered():
+    params, weights, t, y = synthetic()
+    learned = mv.learn_movement(demos.Demonstration(t, y), params,
+                                num_basis=40)
+    assert learned.params.duration == pytest.approx(t[-1])
+    np.testing.assert_allclose(learned.start, START)
+    np.testing.assert_allclose(learned.goal, y[-1])
+    # 0.1 % of the movement's 0.9 m (the learned basis spans the whole
+    # rollout, not the generating one's).
+    assert rollout_error(learned, t, y) < 1e-3
+
+
+def test_several_noisy_demonstrations_average():
+    params, _, t, y = synthetic(seed=1)
+    rng = np.random.default_rng(2)
+    demos = [demos.Demonstration(t * (1.0 + 0.02 * k),
+                              y + 1e-3 * rng.normal(size=y.shape))
+             for k in range(6)]
+    one = mv.learn_movement(demos[0], params, num_basis=40)
+    several = mv.learn_movement(demos, params, num_basis=40)
+    assert several.params.duration == pytest.approx(
+        np.mean([d.duration for d in demos]))
+    # Compare the shapes on the mean duration.
+    scaled_t = t * several.params.duration / t[-1]
+    error_one = rollout_error(one, t * one.params.duration / t[-1], y)
+    error_several = rollout_error(several, scaled_t, y)
+    assert error_several < error_one
+    assert error_several < 5e-3
+
+
+def test_save_and_load_round_trip(tmp_path):
+    params, _, t, y = synthetic()
+    base = np.column_stack([y[:, 0] - 0.9, y[:, 1], y[:, 3]])
+    learned = mv.learn_movement(demos.Demonstration(t, y, base), params,
+                                source="a test")
+    path = learned.save(tmp_path / "m.yaml")
+    text = path.read_text()
+    assert text.startswith("# A whole-body movement") and "a test" in text
+    loaded = mv.LearnedMovement.load(path)
+    np.testing.assert_allclose(loaded.weights, learned.weights, rtol=1e-5)
+    np.testing.assert_allclose(loaded.start, learned.start, atol=1e-7)
+    np.testing.assert_allclose(loaded.goal, learned.goal, atol=1e-7)
+    assert loaded.params.resolved_alpha_s == pytest.approx(
+        learned.params.resolved_alpha_s)
+    assert loaded.params.num_basis == learned.params.num_basis
+    demo = loaded.demonstrations[0]
+    assert np.median(np.diff(demo.time)) == pytest.approx(mv.PLOT_PERIOD)
+    assert demo.base.shape == (demo.time.size, 3)
+    np.testing.assert_allclose(demo.tcp[-1], y[-1], atol=1e-5)
+
+
+def test_teaching_interval_is_where_s_hri_is_one():
+    schedule = Schedule(times=[0.0, 0.5, 6.5], values=[[0], [1], [0]])
+    assert demos.teaching_interval(schedule, 7.0) == (0.5, 6.5)
+    assert demos.teaching_interval(Schedule(), 7.0, 1.0) == (0.0, 7.0)
+    with pytest.raises(ValueError, match="never 1"):
+        demos.teaching_interval(Schedule(), 7.0, 0.0)
+
+
+def movement_file(tmp_path):
+    params, _, t, y = synthetic(duration=3.0)
+    return mv.learn_movement(demos.Demonstration(t, y), params).save(
+        tmp_path / "m.yaml")
+
+
+def test_player_is_silent_before_start_and_moves_the_goal_with_progress(
+        tmp_path):
+    learned = mv.LearnedMovement.load(movement_file(tmp_path))
+    moved = learned.goal + [0.1, -0.1, 0.05, 2 * np.pi + 0.1]
+    player = mv.MovementPlayer(learned, cdmp.MovementReplay(
+        file="m", goal=list(moved), start_time=1.0))
+    g, f = player.goal_and_forcing(0.99)
+    assert not g.any() and not f.any()
+    np.testing.assert_allclose(player.reference(0.5), learned.start)
+    g, f = player.goal_and_forcing(1.0)
+    # At the start, the learned goal; the move follows the progress.
+    np.testing.assert_allclose(g[[0, 1, 2, 5]], learned.goal - learned.start)
+    np.testing.assert_allclose(
+        f[[0, 1, 2, 5]], dmp.forcing_term(1.0, learned.weights,
+                                          learned.params))
+    assert g[3] == g[4] == f[3] == f[4] == 0.0
+    g, _ = player.goal_and_forcing(100.0)  # the yaw within a turn
+    target = moved - learned.start - [0, 0, 0, 2 * np.pi]
+    np.testing.assert_allclose(g[[0, 1, 2, 5]], target)
+    np.testing.assert_allclose(player.reference(100.0),
+                               learned.start + target, atol=1e-5)
+    halfway = player.goal_at(0.5 * player.params.duration)[[0, 1, 2, 5]]
+    assert np.all((halfway - g[[0, 1, 2, 5]]) * (
+        halfway - (learned.goal - learned.start)) < 0)
+
+
+def test_whole_body_cdmp_plays_the_dmp_core_rollout(tmp_path):
+    """Through its ports, WholeBodyCdmp with a movement (no coupling
+    input) moves as dmp.rollout integrates the same DMP, from its
+    start_time on, to a moved goal and with temporal scaling."""
+    path = movement_file(tmp_path)
+    learned = mv.LearnedMovement.load(path)
+    goal = learned.goal + [0.1, -0.05, 0.02, 0.1]
+    start_time, tau = 0.5, 1.3
+    params = cdmp.WholeBodyCdmpParameters(movement=cdmp.MovementReplay(
+        file=str(path), goal=list(goal), start_time=start_time, tau=tau))
+    system = WholeBodyCdmp(params, time_step=0.01)
+    context = system.CreateDefaultContext()
+    for name in ("reference_velocity", "wrench", "end_effector_deviation"):
+        system.GetInputPort(name).FixValue(context, np.zeros(6))
+    simulator = Simulator(system, context)
+    output = system.GetOutputPort("end_effector_velocity")
+    player = system.player
+    times = start_time + np.arange(0.0, 5.0, 0.25)
+    velocities, positions = [], []
+    for t in times:
+        simulator.AdvanceTo(t)
+        velocities.append(output.Eval(context)[[0, 1, 2, 5]])
+        positions.append(context.get_discrete_state_vector().
+                         CopyToVector()[[0, 1, 2, 5]])
+    displacement = goal - learned.start
+
+    def moving_goal(t):
+        return player.goal_at(t)[[0, 1, 2, 5]]
+
+    t_r, y_r, yd_r = dmp.rollout(learned.params, np.zeros(4), None, 5.0,
+                                 0.001, learned.weights, moving_goal, tau)
+    k = np.searchsorted(t_r, times - start_time - 1e-9)
+    np.testing.assert_allclose(positions, y_r[k], atol=5e-4)
+    np.testing.assert_allclose(velocities, yd_r[k], atol=2e-3)
+    # On its way to the moved goal (the phase is at 0.02 at the end).
+    assert np.all(np.abs(positions[-1] - displacement)
+                  < 0.1 * np.abs(displacement))
+    # Still scalar-convertible, and silent before start_time.
+    assert system.ToAutoDiffXd().player is player
+    assert not np.any(player.goal_and_forcing(0.49)[0])
+    # Linearize runs on it, playing (the movement's tau in A) or not.
+    for t, playing in ((start_time + 1.0, True), (0.2, False)):
+        context.SetTime(t)
+        linear = Linearize(
+            system, context,
+            input_port_index=system.GetInputPort(
+                "reference_velocity").get_index(),
+            output_port_index=output.get_index(),
+            equilibrium_check_tolerance=1e9)
+        np.testing.assert_allclose(linear.A(),
+                                   system._models[(0, playing)].A_d)
+
+
+def test_bad_movement_parameters_are_explained(tmp_path):
+    with pytest.raises(ValueError, match=r"tau = -1.*greater than 0|tau"):
+        cdmp.MovementReplay(file="m.yaml", tau=-1.0)
+    with pytest.raises(ValueError, match="goal"):
+        cdmp.MovementReplay(file="m.yaml", goal=[1.0, 2.0])
+    with pytest.raises(ValueError, match="start_time"):
+        cdmp.MovementReplay(file="m.yaml", start_time=-0.5)
+    with pytest.raises(ValueError, match="movement = 3"):
+        cdmp.WholeBodyCdmpParameters(movement=3)
+    missing = cdmp.WholeBodyCdmpParameters(
+        movement=cdmp.MovementReplay(file="no/such/movement.yaml"))
+    with pytest.raises(ValueError, match=r"movement\.file = 'no/such/"
+                       r"movement\.yaml'.*no movement file"):
+        WholeBodyCdmp(missing)
+    with pytest.raises(ValueError, match="must name"):
+        WholeBodyCdmp(cdmp.WholeBodyCdmpParameters(
+            movement=cdmp.MovementReplay()))
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("weights: [1, 2]\n")
+    with pytest.raises(ValueError, match="not a learned movement"):
+        mv.LearnedMovement.load(bad)
+    with pytest.raises(ValueError, match="demonstrations"):
+        mv.learn_movement([])
+    with pytest.raises(ValueError, match="time"):
+        demos.Demonstration([0.0, 0.0, 1.0], np.zeros((3, 4)))
