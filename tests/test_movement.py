@@ -7,8 +7,8 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import Linearize
 
 from drake_wbc import cdmp, dmp
-from drake_wbc import demonstration as demos
 from drake_wbc import movement as mv
+from drake_wbc.demonstration import Demonstration, teaching_interval
 from drake_wbc.scenario import Schedule
 from drake_wbc.systems import WholeBodyCdmp
 
@@ -36,7 +36,7 @@ def rollout_error(movement, t, y):
 
 def test_a_rollout_is_recovered():
     params, weights, t, y = synthetic()
-    learned = mv.learn_movement(demos.Demonstration(t, y), params,
+    learned = mv.learn_movement(Demonstration(t, y), params,
                                 num_basis=40)
     assert learned.params.duration == pytest.approx(t[-1])
     np.testing.assert_allclose(learned.start, START)
@@ -49,7 +49,7 @@ def test_a_rollout_is_recovered():
 def test_several_noisy_demonstrations_average():
     params, _, t, y = synthetic(seed=1)
     rng = np.random.default_rng(2)
-    demos = [demos.Demonstration(t * (1.0 + 0.02 * k),
+    demos = [Demonstration(t * (1.0 + 0.02 * k),
                               y + 1e-3 * rng.normal(size=y.shape))
              for k in range(6)]
     one = mv.learn_movement(demos[0], params, num_basis=40)
@@ -67,7 +67,7 @@ def test_several_noisy_demonstrations_average():
 def test_save_and_load_round_trip(tmp_path):
     params, _, t, y = synthetic()
     base = np.column_stack([y[:, 0] - 0.9, y[:, 1], y[:, 3]])
-    learned = mv.learn_movement(demos.Demonstration(t, y, base), params,
+    learned = mv.learn_movement(Demonstration(t, y, base), params,
                                 source="a test")
     path = learned.save(tmp_path / "m.yaml")
     text = path.read_text()
@@ -87,15 +87,15 @@ def test_save_and_load_round_trip(tmp_path):
 
 def test_teaching_interval_is_where_s_hri_is_one():
     schedule = Schedule(times=[0.0, 0.5, 6.5], values=[[0], [1], [0]])
-    assert demos.teaching_interval(schedule, 7.0) == (0.5, 6.5)
-    assert demos.teaching_interval(Schedule(), 7.0, 1.0) == (0.0, 7.0)
+    assert teaching_interval(schedule, 7.0) == (0.5, 6.5)
+    assert teaching_interval(Schedule(), 7.0, 1.0) == (0.0, 7.0)
     with pytest.raises(ValueError, match="never 1"):
-        demos.teaching_interval(Schedule(), 7.0, 0.0)
+        teaching_interval(Schedule(), 7.0, 0.0)
 
 
 def movement_file(tmp_path):
     params, _, t, y = synthetic(duration=3.0)
-    return mv.learn_movement(demos.Demonstration(t, y), params).save(
+    return mv.learn_movement(Demonstration(t, y), params).save(
         tmp_path / "m.yaml")
 
 
@@ -202,4 +202,4 @@ def test_bad_movement_parameters_are_explained(tmp_path):
     with pytest.raises(ValueError, match="demonstrations"):
         mv.learn_movement([])
     with pytest.raises(ValueError, match="time"):
-        demos.Demonstration([0.0, 0.0, 1.0], np.zeros((3, 4)))
+        Demonstration([0.0, 0.0, 1.0], np.zeros((3, 4)))

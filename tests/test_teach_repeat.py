@@ -7,9 +7,9 @@ import argparse
 import numpy as np
 import pytest
 
-from drake_wbc import demonstration as demos
 from drake_wbc import movement as mv
 from drake_wbc import teach_commands
+from drake_wbc.demonstration import demonstration_from_log
 from drake_wbc.experiments import repeat, teach
 from drake_wbc.runner import build_closed_loop, simulate
 from drake_wbc.scenario import find_scenario, load_scenario
@@ -71,7 +71,7 @@ def test_the_demonstration_is_the_measured_whole_body_movement(teach_run):
     scenario, log = teach_run
     start, stop = teach.interval(scenario)
     assert (start, stop) == (0.5, 6.5)
-    demo = demos.demonstration_from_log(log, start, stop)
+    demo = demonstration_from_log(log, start, stop)
     mask = (log.time >= start - 1e-9) & (log.time <= stop + 1e-9)
     truth = log["truth.end_effector_pose"][mask]
     # Nominal kinematics (mount at rest) against the simulated truth.

@@ -29,8 +29,8 @@ against normalised time.
 
 import numpy as np
 
-from drake_wbc import demonstration as demos
 from drake_wbc import movement as mv
+from drake_wbc.demonstration import tcp_poses
 from drake_wbc.experiments.common import (
     new_figure,
     obstacle_distances,
@@ -64,7 +64,7 @@ def replay_comparison(scenario, name, log):
     player = mv.MovementPlayer(movement, replay)
     demo = movement.demonstrations[0]
     u = (demo.time - demo.time[0]) / demo.duration
-    tcp = demos.tcp_poses(log["base.state_estimated"][:, :3],
+    tcp = tcp_poses(log["base.state_estimated"][:, :3],
                        log["arm.position_measured"])
     # The same turn of the yaw as the demonstration's.
     tcp[:, 3] += 2 * np.pi * np.round((demo.tcp[0, 3] - tcp[0, 3])

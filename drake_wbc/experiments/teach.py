@@ -21,8 +21,8 @@ learned rollout.
 
 import numpy as np
 
-from drake_wbc import demonstration as demos
 from drake_wbc import movement as mv
+from drake_wbc.demonstration import demonstration_from_log, teaching_interval
 from drake_wbc.experiments.common import new_figure, save_figure
 
 
@@ -30,7 +30,7 @@ def interval(scenario, start=None, stop=None):
     """(start, stop) of the demonstration: the S_hri markers of the
     scenario's task, each replaced by `start`/`stop` when given."""
     if start is None or stop is None:
-        marked = demos.teaching_interval(
+        marked = teaching_interval(
             scenario.task.phri_switch, scenario.duration,
             scenario.controller.whole_body_cdmp.S_hri)
         start = marked[0] if start is None else start
@@ -44,7 +44,7 @@ def learn_from_log(scenario, log, start=None, stop=None, num_basis=None,
     learned with the gains of the scenario's whole-body DMP (so that it
     replays with the same attractor)."""
     start, stop = interval(scenario, start, stop)
-    demo = demos.demonstration_from_log(log, start, stop)
+    demo = demonstration_from_log(log, start, stop)
     dmp = scenario.controller.whole_body_cdmp.dmp
     params = mv.dmp.DmpParameters(
         alpha_z=dmp.alpha_z, beta_z=dmp.beta_z, tau=1.0,
