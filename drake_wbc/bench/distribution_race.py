@@ -55,7 +55,7 @@ from drake_wbc.robot_model import (
     joint_position_indices,
     joint_velocity_indices,
 )
-from drake_wbc.validation import whole_number
+from drake_wbc.validation import in_closed_range, non_negative, whole_number
 
 REFERENCE = "closed_form"
 """The contender whose time the ratios divide by."""
@@ -136,19 +136,26 @@ def _problem_data(arm, R_ba, problem):
 
 
 def closed_form(arm):
-    """The controller's distribution: ArmKinematics, whole_body_jacobian,
-    distribute (eqs. (1), (2), (wbsln), (wbccm))."""
+    """The controller's distribution, as its tick runs it
+    (systems.MotionDistributor): the end effector from the plant
+    (ArmKinematics), whole_body_jacobian and distribute on their unchecked
+    paths (eqs. (1), (2), (wbsln), (wbccm)); the controller checks its
+    parameters once, when it is built, and the sigmas and k_n on each
+    tick, as here."""
     R_ba = np.array(arm.R_ba, dtype=float)
     damping = distribution.DEFAULT_DAMPING
 
     def solve(problem):
         p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
-        J = kinematics.whole_body_jacobian(None, p_ee, R_ba)
-        V_n = distribution.capability_null_velocity(
-            problem.capability_gradient, problem.null_space_gain)
-        return distribution.distribute(
-            J, problem.end_effector_velocity, problem.sigma_xy,
-            problem.sigma_phi, V_n, damping)
+        J = kinematics.whole_body_jacobian_unchecked(None, p_ee, R_ba)
+        weights = distribution.weights_of(
+            in_closed_range("sigma_xy", problem.sigma_xy, 0.0, 1.0),
+            in_closed_range("sigma_phi", problem.sigma_phi, 0.0, 1.0))
+        V_n = np.zeros(9)
+        V_n[:6] = non_negative("k_n", problem.null_space_gain) * (
+            problem.capability_gradient)
+        return distribution.distribute_unchecked(
+            J, problem.end_effector_velocity, weights, V_n, damping)
 
     return solve
 
