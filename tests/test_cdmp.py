@@ -11,21 +11,23 @@ from drake_wbc.cdmp import (
     AdmittanceCouplingParameters,
     ArmCdmpParameters,
     BaseCdmpParameters,
-    RepulsiveFieldParameters,
     StiffnessCouplingParameters,
     WholeBodyCdmpParameters,
     admittance_coupled_derivative,
     arm_cdmp_derivative,
     base_cdmp_derivative,
-    footprint_distance,
     paper_velocity,
-    repulsive_force,
-    repulsive_potential,
     shifted_velocity,
     stiffness_coupled_derivative,
     whole_body_cdmp_derivative,
 )
 from drake_wbc.dmp import DmpParameters
+from drake_wbc.repulsion import (
+    RepulsiveFieldParameters,
+    footprint_distance,
+    repulsive_force,
+    repulsive_potential,
+)
 
 FREQUENCIES = 1j * np.logspace(-3, 3, 61)
 W_N = np.sqrt(25.0 * 6.25)  # natural frequency of the default attractor

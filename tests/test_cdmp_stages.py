@@ -8,7 +8,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Linearize, VectorLogSink
 
-from drake_wbc import cdmp
+from drake_wbc import cdmp, repulsion
 from drake_wbc.analysis.frequency import linear_system_response
 from drake_wbc.systems.cdmp_stages import (
     AffineDynamics,
@@ -118,13 +118,13 @@ def test_base_cdmp_avoids_and_returns():
     """An obstacle 0.2 m ahead of the footprint pushes the base back; once
     it is gone the base returns onto its commanded path."""
     params = cdmp.BaseCdmpParameters(
-        repulsion=cdmp.RepulsiveFieldParameters(k_obs=1.0))
+        repulsion=repulsion.RepulsiveFieldParameters(k_obs=1.0))
     system = BaseCdmp(params)
     context = system.CreateDefaultContext()
     fix_inputs(system, context, dict(base_velocity=[0.1, 0.0, 0.0],
                                      obstacle_points=[[0.6, 0.0]]))
     force = system.repulsive_force(context)
-    expected = cdmp.repulsive_force(np.array([[0.6, 0.0]]),
+    expected = repulsion.repulsive_force(np.array([[0.6, 0.0]]),
                                     params.repulsion)
     np.testing.assert_allclose(force[:2], expected)
     assert force[0] < 0 and force[2] == 0

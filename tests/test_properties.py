@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from reference_kinematics import ELFIN5, ELFIN5_LOWER, ELFIN5_UPPER, jacobian
 
 from drake_wbc import capability as cap
-from drake_wbc import cdmp, dmp, filtering
+from drake_wbc import dmp, filtering, repulsion
 from drake_wbc.arm_control import joint_velocity_for_twist
 from drake_wbc.compensation import robust_compensation
 from drake_wbc.distribution import (
@@ -349,15 +349,15 @@ def test_the_repulsive_force_is_finite_and_points_away(case, k_obs, d_min):
     half_sizes, point = case
     # Distances whose square underflows are the known failure below.
     assume(not 0.0 < independent_gap(point, half_sizes) < 1e-150)
-    params = cdmp.RepulsiveFieldParameters(k_obs=k_obs, d_th=0.5,
+    params = repulsion.RepulsiveFieldParameters(k_obs=k_obs, d_th=0.5,
                                            half_sizes=half_sizes,
                                            d_min=d_min)
-    force = cdmp.repulsive_force(point[None, :], params)
+    force = repulsion.repulsive_force(point[None, :], params)
     assert np.all(np.isfinite(force))
     bound = k_obs * (1.0 / d_min - 1.0 / params.d_th) / d_min**2
     assert np.linalg.norm(force) <= bound * (1 + 1e-12)
     assert force @ point <= 1e-12 * bound * np.linalg.norm(point)
-    distance, _ = cdmp.footprint_distance(point[None, :], params)
+    distance, _ = repulsion.footprint_distance(point[None, :], params)
     if distance[0] > params.d_th:
         assert np.all(force == 0.0)
 
@@ -370,9 +370,9 @@ def independent_gap(point, half_sizes):
 def test_the_repulsive_force_is_finite_at_an_underflowing_distance():
     """A point 3.5e-164 m outside the footprint: |(ox, oy)| computed as
     sqrt(ox^2 + oy^2) would underflow to 0 and the direction to 0 / 0."""
-    params = cdmp.RepulsiveFieldParameters(half_sizes=(0.0, 0.0))
+    params = repulsion.RepulsiveFieldParameters(half_sizes=(0.0, 0.0))
     point = np.array([[0.0, 3.5e-164]])
-    assert np.all(np.isfinite(cdmp.repulsive_force(point, params)))
+    assert np.all(np.isfinite(repulsion.repulsive_force(point, params)))
 
 
 # ------------------------------------------------------- base filter

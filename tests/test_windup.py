@@ -10,8 +10,8 @@ from pydrake.systems.framework import InputPortIndex, OutputPortIndex
 from pydrake.systems.primitives import Linearize
 
 from drake_wbc import safety
-from drake_wbc.cdmp import RepulsiveFieldParameters, repulsive_force
 from drake_wbc.controller import ControllerParameters
+from drake_wbc.repulsion import RepulsiveFieldParameters, repulsive_force
 from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.systems import StopGate
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from drake_wbc import cdmp
+from drake_wbc import repulsion
 from drake_wbc.robot_model import ArmKinematics
 from drake_wbc.station.scene import planar_shapes
 from drake_wbc.systems.safety import STATUS_FIELDS
@@ -71,7 +71,7 @@ def obstacle_distances(scene, base_pose, people_positions=None,
     Returns:
         (N,) distances in m (inf where there is nothing).
     """
-    params = cdmp.RepulsiveFieldParameters(half_sizes=FOOTPRINT_HALF_SIZES)
+    params = repulsion.RepulsiveFieldParameters(half_sizes=FOOTPRINT_HALF_SIZES)
     circles, boxes = planar_shapes(scene, height)
     radii = [person.radius for person in scene.people]
     outline = (np.concatenate([_box_outline(b) for b in boxes])
@@ -91,10 +91,10 @@ def obstacle_distances(scene, base_pose, people_positions=None,
         centres, r = np.concatenate(centres), np.concatenate(r)
         candidates = []
         if len(centres):
-            d, _ = cdmp.footprint_distance(in_base(centres), params)
+            d, _ = repulsion.footprint_distance(in_base(centres), params)
             candidates.append(np.min(d - r))
         if len(outline):
-            d, _ = cdmp.footprint_distance(in_base(outline), params)
+            d, _ = repulsion.footprint_distance(in_base(outline), params)
             candidates.append(np.min(d))
         if candidates:
             result[i] = max(min(candidates), 0.0)

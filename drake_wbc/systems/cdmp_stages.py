@@ -29,7 +29,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_wbc import cdmp
+from drake_wbc import cdmp, repulsion
 from drake_wbc.filtering import zero_order_hold
 from drake_wbc.validation import non_negative, validated_copy
 
@@ -180,7 +180,7 @@ def BaseCdmp_(T):
         - obstacle_points: an (M, 2) float array of obstacle points in T_b
           (abstract-valued; optional, none when unconnected). The
           repulsive force f_avoid, the gradient of U_rep around the
-          footprint (cdmp.repulsive_force), is computed once per new set
+          footprint (repulsion.repulsive_force), is computed once per new set
           of points (a cache entry that the output and the update share)
           and held over the period.
         - avoiding_base_velocity: V_b' (3), y_dot, for the base filter.
@@ -249,7 +249,7 @@ def BaseCdmp_(T):
             points = (self._points.Eval(context)
                       if self._points.HasValue(context)
                       else np.zeros((0, 2)))
-            force = cdmp.repulsive_force(points, self.params.repulsion)
+            force = repulsion.repulsive_force(points, self.params.repulsion)
             return np.array([force[0], force[1], 0.0])
 
         def _drive(self, context, for_output=False, for_update=False):
