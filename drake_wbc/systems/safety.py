@@ -170,11 +170,9 @@ def InputGuard_(T):
                                else as_vector(spec.name, spec.initial,
                                               spec.size))
             self._status_start = start
-            # The ranges of every entry, for one vectorised check a tick.
-            self._lower = np.concatenate(
-                [np.full(spec.size, float(spec.lower)) for spec in self.inputs])
-            self._upper = np.concatenate(
-                [np.full(spec.size, float(spec.upper)) for spec in self.inputs])
+            # The ranges of the entries of the inputs present, by which
+            # are present, for one vectorised check a tick.
+            self._ranges = {}
             self._points = None
             if points_name:
                 self._points = self.DeclareAbstractInputPort(
@@ -252,13 +250,23 @@ def InputGuard_(T):
 
         def _checks(self, values):
             """The InputCheck of each value (VALID for None): one
-            vectorised test of every entry, the per-input detail only when
-            an entry fails it."""
-            if all(value is not None for value in values):
-                flat = value_of(np.concatenate(values))
-                if np.all(np.isfinite(flat)) and np.all(
-                        (flat >= self._lower) & (flat <= self._upper)):
-                    return [VALID] * len(values)
+            vectorised test of every entry present, the per-input detail
+            only when an entry fails it."""
+            present = tuple(value is not None for value in values)
+            ranges = self._ranges.get(present)
+            if ranges is None:
+                specs = [spec for spec, here in zip(
+                    self.inputs, present, strict=True) if here]
+                ranges = self._ranges[present] = tuple(
+                    np.concatenate([np.full(spec.size, float(getattr(
+                        spec, bound))) for spec in specs] or [np.zeros(0)])
+                    for bound in ("lower", "upper"))
+            flat = value_of(np.concatenate(
+                [value for value in values if value is not None]
+                or [np.zeros(0)]))
+            if np.all(np.isfinite(flat)) and np.all(
+                    (flat >= ranges[0]) & (flat <= ranges[1])):
+                return [VALID] * len(values)
             return [VALID if value is None else check_vector(
                 value_of(value), spec.lower, spec.upper)
                 for spec, value in zip(self.inputs, values, strict=True)]
