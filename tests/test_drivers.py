@@ -24,8 +24,16 @@ from drake_wbc.station.drivers import (
     ArmPositionDriver,
     BaseDriverParameters,
     BaseVelocityDriver,
+    base_loop_size,
     base_loop_step,
-    servo_gains,
+)
+from drake_wbc.station.servo_gains import servo_gains
+from drake_wbc.station.symbolic_drivers import (
+    arm_interpolator_state,
+    arm_interpolator_system,
+    base_loop_state,
+    base_loop_system,
+    joint_rates_system,
 )
 
 
@@ -395,3 +403,101 @@ def test_second_order_overshoot_stops_at_the_velocity_limit():
         peak = max(peak, x[0])
     assert peak <= params.velocity_limits[0]
     assert peak == pytest.approx(params.velocity_limits[0])
+
+
+# The drivers as the station runs them: SymbolicVectorSystems built from
+# the same functions, checked against the reference LeafSystems above.
+
+@pytest.mark.parametrize("params", [
+    BaseDriverParameters(time_step=0.005),
+    BaseDriverParameters(damping_ratio=0.3, lag=0.1, time_step=0.002,
+                         acceleration_limits=[2.0, 0.5, 1.0])])
+def test_symbolic_base_loop_steps_like_base_loop_step(params):
+    system = base_loop_system(params)
+    assert system.GetUniquePeriodicDiscreteUpdateAttribute().period_sec() \
+        == params.time_step
+    context = system.CreateDefaultContext()
+    rng = np.random.default_rng(7)
+    for _ in range(200):  # within and beyond every limit
+        x = rng.uniform(-1.3, 1.3, base_loop_size(params))
+        u = rng.uniform(-2.0, 2.0, 3)
+        context.SetDiscreteState(x)
+        system.get_input_port().FixValue(context, u)
+        np.testing.assert_allclose(
+            system.EvalUniquePeriodicDiscreteUpdate(context).get_vector()
+            .CopyToVector(), base_loop_step(x, u, params), atol=1e-15)
+        np.testing.assert_array_equal(
+            system.get_output_port().Eval(context), x[:3])
+    context.SetDiscreteState(base_loop_state(params, [0.2, 0.0, -0.1]))
+    np.testing.assert_array_equal(system.get_output_port().Eval(context),
+                                  [0.2, 0.0, -0.1])
+
+
+def test_symbolic_base_loop_in_autodiff_has_the_lags_derivatives():
+    params = BaseDriverParameters()
+    system = base_loop_system(params).ToAutoDiffXd()
+    context = system.CreateDefaultContext()
+    context.SetDiscreteState(InitializeAutoDiff(
+        np.array([0.1, -0.05, 0.02]), 6, 0).ravel())
+    system.get_input_port().FixValue(context, InitializeAutoDiff(
+        np.array([0.1005, -0.05, 0.021]), 6, 3).ravel())
+    result = system.EvalUniquePeriodicDiscreteUpdate(context).get_vector(
+    ).CopyToVector()
+    g = 1.0 - np.exp(-params.time_step / params.lag)
+    np.testing.assert_allclose(ExtractGradient(result), np.hstack(
+        [(1.0 - g) * np.eye(3), g * np.eye(3)]), atol=1e-15)
+
+
+@pytest.mark.parametrize("yaw", [0.0, 0.5, -2.0])
+def test_symbolic_joint_rates_are_body_to_world_rates(yaw):
+    system = joint_rates_system()
+    context = system.CreateDefaultContext()
+    v = np.array([0.3, -0.2, 0.1])
+    system.get_input_port().FixValue(context, [*v, 1.0, 2.0, yaw])
+    np.testing.assert_allclose(
+        system.get_output_port().Eval(context),
+        [0.0, 0.0, 0.0, *(rotation_z(yaw) @ v)], atol=1e-15)
+
+
+def test_symbolic_arm_interpolator_follows_the_arm_driver():
+    """Both fed the same commands, changing between samples: the same
+    desired state at every plant step and in between."""
+    params = ArmDriverParameters(time_step=0.005)
+    q0 = np.array(HOME_ARM_POSITIONS)
+    reference, symbolic = ArmPositionDriver(params, q0), \
+        arm_interpolator_system(params, q0)
+    simulators = [Simulator(s) for s in (reference, symbolic)]
+    contexts = [s.get_mutable_context() for s in simulators]
+    # The default state holds the initial positions, as the reference's.
+    np.testing.assert_array_equal(
+        symbolic.get_output_port().Eval(contexts[1]),
+        np.concatenate([q0, np.zeros(6)]))
+    rng = np.random.default_rng(3)
+    for t in np.arange(1, 80) * 0.0025:
+        if rng.uniform() < 0.3:
+            q = q0 + rng.uniform(-0.2, 0.2, 6)
+            for system, context in zip((reference, symbolic), contexts,
+                                       strict=True):
+                system.get_input_port().FixValue(context, q)
+        for simulator in simulators:
+            simulator.AdvanceTo(t)
+        np.testing.assert_allclose(
+            symbolic.get_output_port().Eval(contexts[1]),
+            reference.GetOutputPort("desired_state").Eval(contexts[0]),
+            atol=1e-12)
+
+
+def test_symbolic_arm_interpolator_set_positions_holds_the_arm_there():
+    q0 = np.array(HOME_ARM_POSITIONS) + 0.1
+    system = arm_interpolator_system(ArmDriverParameters(), q0)
+    simulator = Simulator(system)
+    context = simulator.get_mutable_context()
+    q = np.array([0.2, -0.6, 1.2, 0.1, 0.9, -0.3])
+    system.get_input_port().FixValue(context, q)
+    simulator.AdvanceTo(0.033)
+    context.SetDiscreteState(arm_interpolator_state(q, 0.033, q0))
+    for t in (0.033, 0.035, 0.04, 0.077):
+        simulator.AdvanceTo(t)
+        np.testing.assert_allclose(system.get_output_port().Eval(context),
+                                   np.concatenate([q, np.zeros(6)]),
+                                   atol=1e-15)

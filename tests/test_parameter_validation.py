@@ -190,7 +190,7 @@ CASES = [
     (LidarParameters, dict(max_range=0.01),
      ["max_range = 0.01", "min_range = 0.05"]),
     (LidarParameters, dict(seed=True), ["seed = True"]),
-    (StationOptions, dict(time_step=0.002), ["time_step = 0.002", "1 ms"]),
+    (StationOptions, dict(time_step=0.006), ["time_step = 0.006", "5 ms"]),
     (StationOptions, dict(initial_arm_positions=[0, 0, 3.0, 0, 0, 0]),
      ["initial_arm_positions[2] = 3.0", "[-2.61, 2.61]"]),
     (StationOptions, dict(initial_base_pose=[0.0, 0.0]),

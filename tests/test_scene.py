@@ -29,16 +29,18 @@ from drake_wbc.station.scene import (
     BoxObstacle,
     CylinderObstacle,
     HandForce,
-    HandForceSource,
-    PeopleSource,
     Scene,
     WalkingPerson,
-    add_hand,
-    add_people,
     add_static_obstacles,
     hand_wrench,
     person_positions,
     planar_shapes,
+)
+from drake_wbc.station.scene_sources import (
+    HandForceSource,
+    PeopleSource,
+    add_hand,
+    add_people,
 )
 from drake_wbc.validation import validate
 
@@ -244,9 +246,19 @@ def test_people_source_positions_and_geometry_poses():
         assert inspector.GetPerceptionProperties(body) is None
     for t, alice, bob in [(0.0, [3, -2], [0, 4]), (2.5, [3, -1], [0.5, 4]),
                           (5.0, [3, 0], [1, 4]), (8.0, [3, 1.2], [1, 4])]:
+        # The drawn poses are those of the last sample (here at t).
+        context.SetTime(t)
+        source_context.SetDiscreteState(
+            source.EvalUniquePeriodicDiscreteUpdate(source_context)
+            .get_vector().CopyToVector())
+        context.SetTime(t + 0.5 * source.period)
+        positions = source.GetOutputPort("positions").Eval(source_context)
+        if t < 8.0:  # walking: the positions move on, the drawing holds
+            assert np.max(np.abs(positions - [*alice, *bob])) > 1e-4
         context.SetTime(t)
         positions = source.GetOutputPort("positions").Eval(source_context)
         np.testing.assert_allclose(positions, [*alice, *bob], atol=1e-12)
+        context.SetTime(t + 0.5 * source.period)
         poses = source.GetOutputPort("geometry_pose").Eval(source_context)
         query = query_port.Eval(scene_graph.GetMyContextFromRoot(context))
         for name, xy in (("alice", alice), ("bob", bob)):
@@ -287,7 +299,11 @@ def test_hand_force_source_outputs():
                      torques=[[0, 0, 0], [1, 0, -3]])
     source = HandForceSource(plant, model, hand)
     context = source.CreateDefaultContext()
+    # The wrench is sampled (here at 0.5 s) and held until the next sample.
     context.SetTime(0.5)
+    context.SetDiscreteState(source.EvalUniquePeriodicDiscreteUpdate(
+        context).get_vector().CopyToVector())
+    context.SetTime(0.5 + 0.9 * source.period)
     (applied,) = source.GetOutputPort("spatial_forces").Eval(context)
     tool = plant.GetBodyByName("wiping_tool", model.tool)
     assert applied.body_index == tool.index()
@@ -296,6 +312,19 @@ def test_hand_force_source_outputs():
     np.testing.assert_allclose(applied.F_Bq_W.rotational(), [0.5, 0, -1.5])
     np.testing.assert_allclose(source.GetOutputPort("force").Eval(context),
                                [2, -1, 3, 0.5, 0, -1.5])
+    # A simulation samples it every period from t = 0.
+    simulator = Simulator(source)
+    simulator.AdvanceTo(0.25 + 1e-9)
+    np.testing.assert_allclose(
+        source.GetOutputPort("force").Eval(simulator.get_context()),
+        [1, -0.5, 1.5, 0.25, 0, -0.75], atol=1e-12)
+    # No hand: no force, at any time.
+    idle = HandForceSource(plant, model, HandForce())
+    context = idle.CreateDefaultContext()
+    context.SetTime(0.5)
+    assert idle.GetOutputPort("spatial_forces").Eval(context) == []
+    np.testing.assert_array_equal(
+        idle.GetOutputPort("force").Eval(context), np.zeros(6))
     with pytest.raises(ValueError, match="plant is not finalized"):
         add_hand(DiagramBuilder(), MultibodyPlant(time_step=1e-3), model,
                  hand)

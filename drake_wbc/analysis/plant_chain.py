@@ -18,9 +18,11 @@ from pydrake.systems.primitives import ConstantVectorSource, LinearSystem
 
 from drake_wbc.analysis.period_map import linearize_period_map
 from drake_wbc.robot_model import add_mcr
-from drake_wbc.station.drivers import (
-    BaseVelocityDriver,
+from drake_wbc.station.drivers import BaseVelocityDriver
+from drake_wbc.station.servo_gains import (
+    drive_inertias,
     servo_gains,
+    set_drive_inertias,
     set_servo_gains,
 )
 from drake_wbc.station.simulation import SimulatedStation
@@ -52,6 +54,8 @@ def add_station_plant(builder, station):
     model = add_mcr(plant)
     set_servo_gains(plant, model, servo_gains(
         options.initial_arm_positions, options.base, options.arm))
+    set_drive_inertias(plant, model, drive_inertias(
+        options.initial_arm_positions, options.arm))
     plant.Finalize()
     driver = add("base_driver", BaseVelocityDriver(
         replace(options.base, time_step=h)))

@@ -14,26 +14,22 @@ filter (Sec. IV-A), so the station models both honestly:
   the next period, as industrial arm drivers do, feeding the plant's PD
   controller with a consistent position and velocity.
 
-`servo_gains` sizes the plant's PD gains from the robot's mass matrix.
-Both drivers are TemplateSystems (double and AutoDiffXd), so that the base
-loop can be linearised together with the plant.
+Both are TemplateSystems (double and AutoDiffXd, for linearisation);
+the station runs the same math as C++ SymbolicVectorSystems
+(drake_wbc.station.symbolic_drivers). The plant's PD gains:
+drake_wbc.station.servo_gains.
 """
 
 from dataclasses import dataclass, field
 
 import numpy as np
+import pydrake.symbolic as sym
 from pydrake.autodiffutils import AutoDiffXd
-from pydrake.multibody.tree import PdControllerGains
+from pydrake.symbolic import Expression, Variable
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_wbc.robot_model import (
-    ARM_JOINTS,
-    BASE_JOINTS,
-    HOME_ARM_POSITIONS,
-    joint_velocity_indices,
-    make_mcr_plant,
-)
+from drake_wbc.robot_model import HOME_ARM_POSITIONS
 from drake_wbc.validation import (
     as_vector,
     checked_instance,
@@ -113,7 +109,9 @@ class ArmDriverParameters:
             kg m^2. It stands for the geared drives' reflected inertia,
             which the model leaves out (EST, 0.2 kg m^2): without it the
             wrist joints, whose links weigh little, would get almost no
-            stiffness.
+            stiffness. The station puts it into its plant, as the
+            joints' rotor inertia (servo_gains.drive_inertias), so that
+            each servo really has servo_frequency.
         time_step: the driver's update period in s (the plant's step);
             command_period must be a whole multiple of it and
             servo_frequency below its Nyquist frequency 1 / (2 time_step).
@@ -164,6 +162,39 @@ def check_arm_time_step(params, name, time_step, prefix=""):
     return h
 
 
+def _is_symbolic(*values):
+    return any(isinstance(v, (Expression, Variable)) for v in values)
+
+
+def clip(value, low, high):
+    """min(max(value, low), high) for double, AutoDiffXd or a symbolic
+    Expression (then Drake's symbolic min and max, so that the same math
+    builds a SymbolicVectorSystem)."""
+    if _is_symbolic(value, low, high):
+        return sym.min(sym.max(value, low), high)
+    return min(max(value, low), high)
+
+
+def beyond(value, limit, outside, inside):
+    """`outside` where |value| > limit, else `inside`, for double,
+    AutoDiffXd or a symbolic Expression (if_then_else)."""
+    if _is_symbolic(value, outside, inside):
+        return sym.if_then_else(abs(value) > limit, outside, inside)
+    return outside if value > limit or value < -limit else inside
+
+
+def interpolated_command(state, time, period):
+    """The arm driver's interpolation (ArmPositionDriver): from the state
+    [q_from (6), q_to (6), t_k] at `time`, (q_d, v_d): q_d moves linearly
+    from q_from at t_k to q_to at t_k + period, then holds; v_d is the
+    constant rate (q_to - q_from) / period. For double, AutoDiffXd or
+    symbolic Expressions."""
+    q_from, q_to, t_k = state[:6], state[6:12], state[12]
+    rate = (q_to - q_from) / period
+    fraction = clip((time - t_k) / period, 0.0, 1.0)
+    return q_from + fraction * (q_to - q_from), rate
+
+
 def base_loop_step(x, command, params):
     """One period of the base's velocity loop, per axis.
 
@@ -177,7 +208,7 @@ def base_loop_step(x, command, params):
     v+ = v + h a+ (semi-implicit Euler, exact enough for w h << 1); an
     overshoot is stopped at the velocity limits.
 
-    Works for double and AutoDiffXd.
+    Works for double, AutoDiffXd and symbolic Expressions (see `clip`).
 
     Args:
         x: the loop's state: its velocity [vx, vy, wz] in T_b, followed
@@ -191,19 +222,19 @@ def base_loop_step(x, command, params):
     velocity, acceleration = [], []
     for i in range(3):
         limit = params.velocity_limits[i]
-        target = min(max(command[i], -limit), limit)
+        target = clip(command[i], -limit, limit)
         a_max = params.acceleration_limits[i]
         if zeta is None:
             step = a_max * h
-            velocity.append(x[i] + min(max(gain * (target - x[i]), -step),
-                                       step))
+            velocity.append(x[i] + clip(gain * (target - x[i]), -step, step))
             continue
         a = x[3 + i] + h * (w * w * (target - x[i]) - 2.0 * zeta * w
                             * x[3 + i])
-        a = min(max(a, -a_max), a_max)
+        a = clip(a, -a_max, a_max)
         v = x[i] + h * a
-        if v > limit or v < -limit:  # at the velocity limit: stop there
-            v, a = min(max(v, -limit), limit), 0.0 * a
+        # At the velocity limit: stop there.
+        v, a = beyond(v, limit, clip(v, -limit, limit), v), beyond(
+            v, limit, 0.0 * a, a)
         acceleration.append(a)
         velocity.append(v)
     return np.array(velocity + acceleration)
@@ -349,11 +380,8 @@ def ArmPositionDriver_(T):
                 reached, self._command.Eval(context), [context.get_time()]]))
 
         def _interpolated(self, state, time):
-            q_from, q_to, t_k = state[:6], state[6:12], state[12]
-            h = self.params.command_period
-            rate = (q_to - q_from) / h
-            fraction = min(max((time - t_k) / h, 0.0), 1.0)
-            return q_from + fraction * (q_to - q_from), rate
+            return interpolated_command(state, time,
+                                        self.params.command_period)
 
         def _desired_state(self, context, output):
             state = context.get_discrete_state_vector().CopyToVector()
@@ -371,50 +399,3 @@ def ArmPositionDriver_(T):
 
 BaseVelocityDriver = BaseVelocityDriver_[None]
 ArmPositionDriver = ArmPositionDriver_[None]
-
-
-def servo_gains(arm_positions, base, arm):
-    """The PD gains of the base's and the arm's actuators.
-
-    The base's joints get a pure velocity servo, p = 0 and d = M_ii /
-    servo_time_constant; each arm joint a PD loop of `servo_frequency`
-    and `damping_ratio` on its diagonal inertia I = max(M_ii,
-    min_inertia): p = I w^2, d = 2 zeta I w. M is the robot's mass
-    matrix with the arm at `arm_positions` (the mount at rest; the base's
-    position does not enter M).
-
-    Args:
-        arm_positions: (6,) the arm configuration to size for.
-        base: BaseDriverParameters.
-        arm: ArmDriverParameters.
-
-    Returns:
-        dict: joint name -> PdControllerGains, for `set_servo_gains`.
-    """
-    q_a = as_vector("arm_positions", arm_positions, 6)
-    plant, model = make_mcr_plant()
-    context = plant.CreateDefaultContext()
-    plant.SetPositions(context, model.arm, q_a)
-    M = plant.CalcMassMatrix(context)
-    w = 2.0 * np.pi * arm.servo_frequency
-    gains = {}
-    for name, i in zip(BASE_JOINTS, joint_velocity_indices(
-            plant, BASE_JOINTS, model.base), strict=True):
-        gains[name] = PdControllerGains(
-            p=0.0, d=M[i, i] / base.servo_time_constant)
-    for name, i in zip(ARM_JOINTS, joint_velocity_indices(
-            plant, ARM_JOINTS, model.arm), strict=True):
-        inertia = max(M[i, i], arm.min_inertia)
-        gains[name] = PdControllerGains(
-            p=inertia * w * w, d=2.0 * arm.damping_ratio * inertia * w)
-    return gains
-
-
-def set_servo_gains(plant, model, gains):
-    """Gives the robot's actuators in `plant` (not yet finalized) the PD
-    gains of `servo_gains`."""
-    for names, instance in ((BASE_JOINTS, model.base),
-                            (ARM_JOINTS, model.arm)):
-        for name in names:
-            plant.GetJointActuatorByName(name, instance).set_controller_gains(
-                gains[name])

@@ -109,17 +109,31 @@ def measure(wrench, params, tick):
                               ForceTorqueSensorParameters)
     reading = as_vector("wrench", wrench, WRENCH_SIZE)
     tick = whole_number("tick", tick)
-    std = _per_axis(params.force_noise_std, params.torque_noise_std)
-    if np.any(std > 0.0):
-        rng = np.random.default_rng([params.seed, tick])
-        reading = reading + std * rng.standard_normal(WRENCH_SIZE)
-    limit = _per_axis(params.force_range, params.torque_range)
-    reading = np.clip(reading, -limit, limit)
-    resolution = _per_axis(params.force_resolution,
-                                  params.torque_resolution)
-    step = np.where(resolution > 0.0, resolution, 1.0)
-    return np.where(resolution > 0.0, np.round(reading / step) * step,
-                    reading)
+    return _Measurement(params)(reading, tick)
+
+
+class _Measurement:
+    """`measure` for fixed parameters, checked once: the per-axis arrays
+    are built here, and a call takes a (6,) float wrench and a whole
+    number tick as they are."""
+
+    def __init__(self, params):
+        self.seed = params.seed
+        self.std = _per_axis(params.force_noise_std, params.torque_noise_std)
+        self.noisy = bool(np.any(self.std > 0.0))
+        self.limit = _per_axis(params.force_range, params.torque_range)
+        resolution = _per_axis(params.force_resolution,
+                               params.torque_resolution)
+        self.quantised = resolution > 0.0
+        self.step = np.where(self.quantised, resolution, 1.0)
+
+    def __call__(self, reading, tick):
+        if self.noisy:
+            rng = np.random.default_rng([self.seed, int(tick)])
+            reading = reading + self.std * rng.standard_normal(WRENCH_SIZE)
+        reading = np.minimum(np.maximum(reading, -self.limit), self.limit)
+        rounded = np.round(reading / self.step) * self.step
+        return np.where(self.quantised, rounded, reading)
 
 
 class WristForceTorqueSensor(SampledReading, LeafSystem):
@@ -156,6 +170,7 @@ class WristForceTorqueSensor(SampledReading, LeafSystem):
                                   ForceTorqueSensorParameters,
                                   ForceTorqueSensorParameters)
         self.params = validated_copy(params)
+        self._measure = _Measurement(self.params)
         self._wrench = self.DeclareVectorInputPort("wrench", WRENCH_SIZE)
         reading = self._declare_sampling(np.zeros(WRENCH_SIZE),
                                          self.params.rate)
@@ -166,7 +181,7 @@ class WristForceTorqueSensor(SampledReading, LeafSystem):
             prerequisites_of_calc=reading)
 
     def _read(self, context, tick):
-        return measure(self._wrench.Eval(context), self.params, tick)
+        return self._measure(self._wrench.Eval(context), tick)
 
 
 class WeldWrench(LeafSystem):

@@ -112,36 +112,48 @@ def _rotation(yaw):
 def _circle_distances(origin, directions, circles):
     """(N, K) distance along each ray to each circle (inf: missed): the
     first root of |m + t d|^2 = r^2, m = origin - centre, with the
-    discriminant from the ray's perpendicular offset (no cancellation)."""
-    m = origin - circles[:, :2]
-    b = directions @ m.T
-    offset = m[None, :, :] - b[:, :, None] * directions[:, None, :]
+    discriminant from the ray's perpendicular offset d x m (no
+    cancellation)."""
+    m = origin - circles[:, :2]                                 # (K, 2)
+    b = directions @ m.T                                        # (N, K)
+    offset = np.outer(directions[:, 0], m[:, 1]) - np.outer(
+        directions[:, 1], m[:, 0])
     r = circles[:, 2]
-    disc = r * r - np.sum(offset * offset, axis=2)
+    disc = r * r - offset * offset
     t = -b - np.sqrt(np.maximum(disc, 0.0))
     distances = np.where((disc >= 0.0) & (t >= 0.0), t, np.inf)
     inside = np.sum(m * m, axis=1) <= r * r
-    return np.where(inside[None, :], 0.0, distances)
+    distances[:, inside] = 0.0
+    return distances
 
 
-def _box_distances(origin, angles, boxes):
+def _box_distances(origin, directions, boxes):
     """(N, L) distance along each ray to each box (inf: missed), by the
-    slab method in each box's own frame."""
-    yaw, half = boxes[:, 4], boxes[:, 2:4]
-    local = np.einsum("lji,lj->li", np.moveaxis(_rotation(yaw), -1, 0),
-                      origin - boxes[:, :2])                    # (L, 2)
-    relative = angles[:, None] - yaw[None, :]
-    d = np.stack([np.cos(relative), np.sin(relative)], axis=2)  # (N, L, 2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_low, t_high = (-half - local) / d, (half - local) / d
-    within = np.abs(local) <= half
-    parallel = d == 0.0
-    enter = np.where(parallel, np.where(within, -np.inf, np.inf),
-                     np.minimum(t_low, t_high)).max(axis=2)
-    leave = np.where(parallel, np.where(within, np.inf, -np.inf),
-                     np.maximum(t_low, t_high)).min(axis=2)
+    slab method in each box's own frame, one axis at a time."""
+    yaw = boxes[:, 4]
+    c, s = np.cos(yaw), np.sin(yaw)
+    p = origin - boxes[:, :2]
+    local = (c * p[:, 0] + s * p[:, 1], -s * p[:, 0] + c * p[:, 1])
+    u, v = directions[:, :1], directions[:, 1:]  # the rays in each box's
+    along = (u * c + v * s, -u * s + v * c)     # frame, (N, L) each
+    enter, leave = None, None
+    for d, x, half in ((along[0], local[0], boxes[:, 2]),
+                       (along[1], local[1], boxes[:, 3])):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_low, t_high = (-half - x) / d, (half - x) / d
+        low, high = np.minimum(t_low, t_high), np.maximum(t_low, t_high)
+        parallel = d == 0.0
+        if parallel.any():  # within the slab: no bound; outside: missed
+            within = np.broadcast_to(np.abs(x) <= half, d.shape)
+            low[parallel] = np.where(within[parallel], -np.inf, np.inf)
+            high[parallel] = np.where(within[parallel], np.inf, -np.inf)
+        enter = low if enter is None else np.maximum(enter, low)
+        leave = high if leave is None else np.minimum(leave, high)
     distances = np.where((enter <= leave) & (leave >= 0.0), enter, np.inf)
-    return np.where(np.all(within, axis=1)[None, :], 0.0, distances)
+    inside = (np.abs(local[0]) <= boxes[:, 2]) & (
+        np.abs(local[1]) <= boxes[:, 3])
+    distances[:, inside] = 0.0
+    return distances
 
 
 def cast_rays(origin, angles, circles, boxes, max_range):
@@ -159,15 +171,19 @@ def cast_rays(origin, angles, circles, boxes, max_range):
         hits), `inf` where nothing is hit within max_range; 0 on every ray
         when the origin is inside or on a shape (the scanner is blocked).
     """
-    origin = as_vector("origin", origin, 2)
-    angles = as_vector("angles", np.atleast_1d(angles))
-    circles = shapes_array("circles", circles, 3)
-    boxes = shapes_array("boxes", boxes, 5)
-    max_range = positive("max_range", max_range)
+    return _cast_rays(as_vector("origin", origin, 2),
+                      as_vector("angles", np.atleast_1d(angles)),
+                      shapes_array("circles", circles, 3),
+                      shapes_array("boxes", boxes, 5),
+                      positive("max_range", max_range))
+
+
+def _cast_rays(origin, angles, circles, boxes, max_range):
+    """`cast_rays` of checked arguments."""
     directions = np.stack([np.cos(angles), np.sin(angles)], axis=1)
     candidates = [np.full((angles.size, 1), np.inf),
                   _circle_distances(origin, directions, circles),
-                  _box_distances(origin, angles, boxes)]
+                  _box_distances(origin, directions, boxes)]
     ranges = np.concatenate(candidates, axis=1).min(axis=1)
     ranges[ranges > max_range] = np.inf
     return ranges
@@ -192,12 +208,17 @@ def scan(base_pose, mount, params, circles, boxes, tick):
     """
     params = checked_instance("params", params, LidarParameters,
                               LidarParameters)
-    base_pose = as_vector("base_pose", base_pose, 3)
-    mount = as_vector("mount", mount, 3)
-    tick = whole_number("tick", tick)
+    return _scan(as_vector("base_pose", base_pose, 3),
+                 as_vector("mount", mount, 3), params, params.beam_angles,
+                 shapes_array("circles", circles, 3),
+                 shapes_array("boxes", boxes, 5), whole_number("tick", tick))
+
+
+def _scan(base_pose, mount, params, beam_angles, circles, boxes, tick):
+    """`scan` of checked arguments, with params.beam_angles given."""
     origin = base_pose[:2] + _rotation(base_pose[2]) @ mount[:2]
-    ranges = cast_rays(origin, base_pose[2] + mount[2] + params.beam_angles,
-                       circles, boxes, params.max_range)
+    ranges = _cast_rays(origin, base_pose[2] + mount[2] + beam_angles,
+                        circles, boxes, params.max_range)
     too_close = ranges < params.min_range
     if params.range_noise_std > 0.0:
         rng = np.random.default_rng([params.seed, tick])
@@ -280,6 +301,7 @@ class PlanarLidar(SampledReading, LeafSystem):
         self.moving_radii = as_vector("moving_radii", np.ravel(moving_radii))
         for i, radius in enumerate(self.moving_radii):
             positive(f"moving_radii[{i}]", radius)
+        self._beam_angles = self.params.beam_angles
         n, count = self.params.num_beams, self.moving_radii.size
         self._base_pose = self.DeclareVectorInputPort("base_pose", 3)
         self._moving = (self.DeclareVectorInputPort("moving_positions",
@@ -298,8 +320,9 @@ class PlanarLidar(SampledReading, LeafSystem):
             centres = self._moving.Eval(context).reshape(-1, 2)
             circles = np.vstack([circles, np.column_stack(
                 [centres, self.moving_radii])])
-        return scan(self._base_pose.Eval(context), self.mount, self.params,
-                    circles, self.boxes, tick)
+        # Checked at construction: the inputs have their ports' sizes.
+        return _scan(self._base_pose.Eval(context), self.mount, self.params,
+                     self._beam_angles, circles, self.boxes, int(tick))
 
     def initialize_scan(self, context):
         """Stores in `context` the scan of its current inputs, at the
@@ -311,7 +334,7 @@ class PlanarLidar(SampledReading, LeafSystem):
 
     def _output_points(self, context, output):
         output.set_value(scan_points(self._stored_reading(context),
-                                     self.params.beam_angles, self.mount))
+                                     self._beam_angles, self.mount))
 
 
 class ObstaclePointMerger(LeafSystem):

@@ -10,32 +10,26 @@ walking scheduled paths, a person's hand on the tool. In a scenario file
            forces: [[0, 0, 0], [0, 15, 0], [0, 15, 0], [0, 0, 0]]}
 
 In a diagram, `add_static_obstacles` puts the obstacles into the plant
-(drawn, touched), `add_people` the people (drawn, never touched; the LIDARs
-take their positions) and `add_hand` the hand.
+(drawn, touched); drake_wbc.station.scene_sources adds the people (drawn,
+never touched; the LIDARs take their positions) and the hand.
 """
 
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydrake.common.value import AbstractValue
 from pydrake.geometry import (
     AddContactMaterial,
     AddRigidHydroelasticProperties,
     Box,
     Cylinder,
-    FramePoseVector,
-    GeometryFrame,
     GeometryInstance,
     MakePhongIllustrationProperties,
     ProximityProperties,
 )
 from pydrake.math import RigidTransform, RollPitchYaw
-from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import (
     CoulombFriction,
-    ExternallyAppliedSpatialForce,
 )
-from pydrake.systems.framework import LeafSystem
 
 from drake_wbc.validation import (
     as_matrix,
@@ -228,33 +222,54 @@ class Scene:
 def person_positions(people, t):
     """Returns the [x, y] (N, 2) of the validated WalkingPerson list
     `people` in the world at time `t` (s)."""
-    t = as_scalar("t", t)
-    positions = np.zeros((len(people), 2))
-    for i, person in enumerate(people):
-        s, t0 = t, person.times[0]
-        if person.repeat > 0.0 and t > t0:
-            s = t0 + (t - t0) % person.repeat
-        path = np.asarray(person.waypoints)
-        positions[i] = [np.interp(s, person.times, path[:, k])
-                        for k in range(2)]
-    return positions
+    return Walks(people)(as_scalar("t", t))
+
+
+class Walks:
+    """`person_positions` of a fixed validated list of people, with their
+    schedules as arrays once: a call takes a float time as it is."""
+
+    def __init__(self, people):
+        self._walks = [(np.asarray(p.times, dtype=float),
+                        np.asarray(p.waypoints, dtype=float).T.copy(),
+                        p.times[0], p.repeat) for p in people]
+
+    def __call__(self, t):
+        positions = np.zeros((len(self._walks), 2))
+        for i, (times, path, t0, repeat) in enumerate(self._walks):
+            s = t0 + (t - t0) % repeat if repeat > 0.0 and t > t0 else t
+            positions[i, 0] = np.interp(s, times, path[0])
+            positions[i, 1] = np.interp(s, times, path[1])
+        return positions
 
 
 def hand_wrench(hand, t):
     """Returns the wrench (6,) [f; tau] of the validated HandForce `hand`
     on the tool at time `t` (s): N and N m about the tool centre point, in
     the world; zero outside its times."""
-    t = as_scalar("t", t)
-    if not hand.times:
-        return np.zeros(6)
-    columns = np.asarray(hand.forces)
-    if hand.torques:
-        columns = np.hstack([columns, hand.torques])
-    wrench = np.zeros(6)
-    for k in range(columns.shape[1]):
-        wrench[k] = np.interp(t, hand.times, columns[:, k], left=0.0,
-                              right=0.0)
-    return wrench
+    return HandSchedule(hand)(as_scalar("t", t))
+
+
+class HandSchedule:
+    """`hand_wrench` of a fixed validated HandForce, with its schedule as
+    arrays once: a call takes a float time as it is."""
+
+    def __init__(self, hand):
+        self._times = np.asarray(hand.times, dtype=float)
+        columns = np.zeros((len(hand.times), 6))
+        if hand.times:
+            columns[:, :3] = hand.forces
+            if hand.torques:
+                columns[:, 3:] = hand.torques
+        self._columns = columns.T.copy()
+
+    def __call__(self, t):
+        wrench = np.zeros(6)
+        if self._times.size:
+            for k in range(6):
+                wrench[k] = np.interp(t, self._times, self._columns[k],
+                                      left=0.0, right=0.0)
+        return wrench
 
 
 def planar_shapes(scene, height):
@@ -327,152 +342,3 @@ def add_static_obstacles(plant, scene):
         ids[name] = plant.RegisterCollisionGeometry(world, X, shape, name,
                                                     properties)
     return ids
-
-
-class PeopleSource(LeafSystem):
-    """The walking people: their positions, and their bodies in SceneGraph.
-
-    ::
-
-            ┌──────────────┐
-            │ PeopleSource ├──► positions
-            │              ├──► geometry_pose  (after register_geometry)
-            └──────────────┘
-
-    - positions: (2N) [x0, y0, x1, y1, ...] in the world, m, at the
-      context's time (`person_positions`).
-    - geometry_pose: FramePoseVector of each person's frame, on the floor
-      below the person; to scene_graph.get_source_pose_port(source_id).
-
-    The bodies are illustration cylinders: drawn (in Meshcat at
-    /drake/visualizer/people/<name>, also in recordings), never touched.
-
-    Args:
-        people: list of WalkingPerson (validated; names must differ).
-    """
-
-    def __init__(self, people):
-        super().__init__()
-        self.people = validated_copy(Scene(people=list(people))).people
-        self.source_id = None
-        self._frame_ids = []
-        self.DeclareVectorOutputPort(
-            "positions", 2 * len(self.people), self._calc_positions,
-            prerequisites_of_calc={self.time_ticket()})
-
-    def _calc_positions(self, context, output):
-        output.SetFromVector(
-            person_positions(self.people, context.get_time()).ravel())
-
-    def register_geometry(self, scene_graph):
-        """Registers the people with `scene_graph` as the geometry source
-        "people" (a frame "people::<name>" and a cylinder each) and
-        declares the `geometry_pose` output; returns the SourceId.
-
-        Call it once, before the diagram is built.
-        """
-        if self.source_id is not None:
-            raise ValueError("register_geometry was called already, which "
-                             "is not allowed: register the people once")
-        self.source_id = scene_graph.RegisterSource("people")
-        for person in self.people:
-            frame_id = scene_graph.RegisterFrame(
-                self.source_id, GeometryFrame(f"people::{person.name}"))
-            body = GeometryInstance(
-                RigidTransform([0.0, 0.0, person.height / 2]),
-                Cylinder(person.radius, person.height), "body")
-            body.set_illustration_properties(
-                MakePhongIllustrationProperties(PERSON_COLOR))
-            scene_graph.RegisterGeometry(self.source_id, frame_id, body)
-            self._frame_ids.append(frame_id)
-        self.DeclareAbstractOutputPort(
-            "geometry_pose", lambda: AbstractValue.Make(FramePoseVector()),
-            self._calc_poses, prerequisites_of_calc={self.time_ticket()})
-        return self.source_id
-
-    def _calc_poses(self, context, output):
-        poses = output.get_mutable_value()
-        poses.clear()
-        xy = person_positions(self.people, context.get_time())
-        for frame_id, (x, y) in zip(self._frame_ids, xy, strict=True):
-            poses.set_value(frame_id, RigidTransform([x, y, 0.0]))
-
-
-def add_people(builder, scene_graph, people):
-    """Adds a PeopleSource "people" of `people` to `builder`, registers
-    their bodies with `scene_graph` and connects their poses; returns it."""
-    source = PeopleSource(people)
-    source_id = source.register_geometry(scene_graph)
-    builder.AddSystem(source)
-    source.set_name("people")
-    builder.Connect(source.GetOutputPort("geometry_pose"),
-                    scene_graph.get_source_pose_port(source_id))
-    return source
-
-
-class HandForceSource(LeafSystem):
-    """A person's hand pushing (and twisting) the tool at its centre point.
-
-    ::
-
-            ┌─────────────────┐
-            │ HandForceSource ├──► spatial_forces
-            │                 ├──► force
-            └─────────────────┘
-
-    - spatial_forces: list[ExternallyAppliedSpatialForce], one force on
-      the tool body at the tool centre point, for the plant's
-      applied_spatial_force input.
-    - force: (6) [f; tau] in the world, N and N m: that wrench, the
-      torque about the tool centre point, for logs.
-
-    The tool centre point is fixed in the tool body and the force is in
-    the world frame, as ExternallyAppliedSpatialForce takes it: no body
-    poses are needed, the outputs depend on time alone.
-
-    Args:
-        plant: the MultibodyPlant that holds the robot.
-        model: the McrModel that add_mcr returned for `plant`.
-        hand: a HandForce (validated); None for no hand.
-    """
-
-    def __init__(self, plant, model, hand):
-        super().__init__()
-        self.hand = validated_copy(
-            checked_instance("hand", hand, HandForce, HandForce))
-        self._body_index = model.tcp_frame.body().index()
-        self._p_BoBq_B = (model.tcp_frame.GetFixedPoseInBodyFrame()
-                          .translation())
-        self.DeclareAbstractOutputPort(
-            "spatial_forces",
-            lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]),
-            self._calc_spatial_forces,
-            prerequisites_of_calc={self.time_ticket()})
-        self.DeclareVectorOutputPort(
-            "force", 6, self._calc_force,
-            prerequisites_of_calc={self.time_ticket()})
-
-    def _calc_spatial_forces(self, context, output):
-        wrench = hand_wrench(self.hand, context.get_time())
-        applied = ExternallyAppliedSpatialForce()
-        applied.body_index = self._body_index
-        applied.p_BoBq_B = self._p_BoBq_B
-        applied.F_Bq_W = SpatialForce(tau=wrench[3:], f=wrench[:3])
-        output.set_value([applied])
-
-    def _calc_force(self, context, output):
-        output.SetFromVector(hand_wrench(self.hand, context.get_time()))
-
-
-def add_hand(builder, plant, model, hand):
-    """Adds a HandForceSource "hand" to `builder` and connects it to the
-    finalized `plant`'s applied_spatial_force input, which must be free;
-    returns it."""
-    if not plant.is_finalized():
-        raise ValueError("plant is not finalized, which is not allowed: "
-                         "call plant.Finalize() before add_hand")
-    source = builder.AddSystem(HandForceSource(plant, model, hand))
-    source.set_name("hand")
-    builder.Connect(source.GetOutputPort("spatial_forces"),
-                    plant.get_applied_spatial_force_input_port())
-    return source

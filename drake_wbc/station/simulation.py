@@ -13,13 +13,20 @@
                               │                   ├──► query_object
                               └───────────────────┘
 
-Inside: a discrete MultibodyPlant (SAP, 1 ms) of the robot of models/ and
-the scene's static obstacles; the base's velocity loop and the arm's
-position servo (drake_wbc.station.drivers); the FT-300 on the weld
-`ft300_sensing`; two TiM571 LIDARs that see the static obstacles and the
-walking people; the person's hand on the tool. The ports named like the
-LCM hardware interface's are all the controller may read; `truth.*` are
-for metrics and plots, `query_object` for visualisation.
+Inside: a discrete MultibodyPlant (SAP, StationOptions.time_step: 1 ms
+by default, 5 ms in the scenarios) of the robot of models/ and the
+scene's static obstacles; the base's velocity loop and the arm's position
+servo (the math of drake_wbc.station.drivers, run as C++
+SymbolicVectorSystems, drake_wbc.station.symbolic_drivers); the FT-300 on
+the weld `ft300_sensing`; two TiM571 LIDARs that see the static obstacles
+and the walking people; the person's hand on the tool. The ports named
+like the LCM hardware interface's are all the controller may read;
+`truth.*` are for metrics and plots, `query_object` for visualisation.
+
+What runs at every plant step is C++ (the plant, the drivers, the base
+pose's selection); the Python systems run at their sensors' rates (the
+FT-300 at 100 Hz, the LIDARs at 15 Hz), the scripted scene every
+`scene_period`, and the ground truth only when read.
 
     station = SimulatedStation(StationOptions(), scene)
     builder.AddSystem(station.diagram)
@@ -38,7 +45,7 @@ from pydrake.multibody.tree import (
     RevoluteSpring,
 )
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import Demultiplexer
+from pydrake.systems.primitives import Demultiplexer, MatrixGain, Multiplexer
 
 from drake_wbc.robot_model import (
     ARM_JOINTS,
@@ -52,13 +59,9 @@ from drake_wbc.robot_model import (
 )
 from drake_wbc.station.drivers import (
     ArmDriverParameters,
-    ArmPositionDriver,
     BaseDriverParameters,
-    BaseVelocityDriver,
     check_arm_time_step,
     check_base_time_step,
-    servo_gains,
-    set_servo_gains,
 )
 from drake_wbc.station.force_torque import (
     ForceTorqueSensorParameters,
@@ -72,13 +75,40 @@ from drake_wbc.station.lidar import (
 )
 from drake_wbc.station.scene import (
     Scene,
-    add_hand,
-    add_people,
     add_static_obstacles,
     planar_shapes,
 )
-from drake_wbc.station.state_sensors import BaseOdometry, GroundTruth
-from drake_wbc.validation import as_vector, checked_instance, positive
+from drake_wbc.station.scene_sources import add_hand, add_people
+from drake_wbc.station.servo_gains import (
+    drive_inertias,
+    servo_gains,
+    set_drive_inertias,
+    set_servo_gains,
+)
+from drake_wbc.station.state_sensors import (
+    GroundTruth,
+    base_state_selection,
+    odometry_system,
+    selection_matrix,
+)
+from drake_wbc.station.symbolic_drivers import (
+    arm_interpolator_state,
+    arm_interpolator_system,
+    base_loop_state,
+    base_loop_system,
+    joint_rates_system,
+)
+from drake_wbc.validation import (
+    as_vector,
+    checked_instance,
+    positive,
+    whole_multiple,
+)
+
+MAX_TIME_STEP = 0.005
+"""s, the coarsest plant step allowed: eight steps a period of the arm
+servo's 25 Hz and 25 of the mount's rocking mode (at most 8 Hz), and the
+control period (0.01 s) a whole multiple of it."""
 
 LIDAR_NAMES = ("front_left", "rear_right")
 """The scanners' names in port names, in the order of LIDAR_FRAMES."""
@@ -89,8 +119,11 @@ class StationOptions:
     """How the simulated station is built (a scenario's `station:`).
 
     Attributes:
-        time_step: the plant's discrete step in s (1 ms or finer); the
-            drivers run at it too.
+        time_step: the plant's discrete step in s (at most
+            MAX_TIME_STEP, 5 ms); the drivers run at it too.
+        scene_period: s, how often the scripted scene's hand wrench and
+            the people's drawn poses are sampled (held in between); a
+            whole multiple of time_step (0.01 s, the control period).
         base: the base's velocity loop.
         arm: the arm's position servo.
         wrist: the FT-300 model (noise and quantisation of the real
@@ -107,6 +140,7 @@ class StationOptions:
     """
 
     time_step: float = 0.001
+    scene_period: float = 0.01
     base: BaseDriverParameters = field(default_factory=BaseDriverParameters)
     arm: ArmDriverParameters = field(default_factory=ArmDriverParameters)
     wrist: ForceTorqueSensorParameters = field(
@@ -119,9 +153,9 @@ class StationOptions:
 
     def __post_init__(self):
         h = positive("time_step", self.time_step)
-        if h > 0.001:
+        if h > MAX_TIME_STEP:
             raise ValueError(f"time_step = {h!r} s is not allowed: must be "
-                             "at most 0.001 s (1 ms)")
+                             f"at most {MAX_TIME_STEP!r} s (5 ms)")
         for name, kind in (("base", BaseDriverParameters),
                            ("arm", ArmDriverParameters),
                            ("wrist", ForceTorqueSensorParameters),
@@ -131,6 +165,7 @@ class StationOptions:
         # The drivers run at the plant's step, whatever their own.
         check_base_time_step(self.base, "time_step", h, prefix="base.")
         check_arm_time_step(self.arm, "time_step", h, prefix="arm.")
+        whole_multiple("scene_period", self.scene_period, "time_step", h)
         as_vector("initial_base_pose", self.initial_base_pose, 3)
         q = as_vector("initial_arm_positions", self.initial_arm_positions, 6)
         lower, upper = arm_joint_limits()
@@ -177,36 +212,62 @@ class SimulatedStation:
         self._gains = servo_gains(options.initial_arm_positions,
                                   options.base, options.arm)
         set_servo_gains(plant, model, self._gains)
+        set_drive_inertias(plant, model, drive_inertias(
+            options.initial_arm_positions, options.arm))
         plant.Finalize()
         self.plant, self.scene_graph, self.model = plant, scene_graph, model
         add = builder.AddNamedSystem
         s = self.systems = {}
-        s["odometry"] = add("odometry", BaseOdometry(plant, model))
+        # The odometry and the parts of the state read at every plant step
+        # or control tick, in C++.
+        s["base_state"] = add("base_state", MatrixGain(
+            base_state_selection(plant, model)))
+        s["odometry"] = add("odometry", odometry_system())
+        s["base_pose"] = add("base_pose", MatrixGain(selection_matrix(
+            joint_position_indices(plant, BASE_JOINTS, model.base),
+            plant.num_multibody_states())))
+        s["mount_angles"] = add("mount_angles", MatrixGain(selection_matrix(
+            joint_position_indices(plant, MOUNT_JOINTS, model.base),
+            plant.num_multibody_states())))
         s["truth"] = add("truth", GroundTruth(plant, model))
-        s["base_driver"] = add("base_driver", BaseVelocityDriver(
+        # The drivers, in C++ (drake_wbc.station.symbolic_drivers): they
+        # run at every plant step.
+        s["base_driver"] = add("base_driver", base_loop_system(
             replace(options.base, time_step=h)))
-        s["arm_driver"] = add("arm_driver", ArmPositionDriver(
+        s["base_rates_input"] = add("base_rates_input", Multiplexer([3, 3]))
+        s["base_rates"] = add("base_rates", joint_rates_system())
+        s["arm_driver"] = add("arm_driver", arm_interpolator_system(
             replace(options.arm, time_step=h),
             options.initial_arm_positions))
         s["arm_state"] = add("arm_state", Demultiplexer([6, 6]))
         weld = plant.GetJointByName("ft300_sensing", model.tool)
         s["weld_wrench"] = add("weld_wrench", WeldWrench(plant, weld))
         s["wrist"] = add("wrist", WristForceTorqueSensor(options.wrist))
-        s["people"] = add_people(builder, scene_graph, scene.people)
-        s["hand"] = add_hand(builder, plant, model, scene.hand)
+        s["people"] = add_people(builder, scene_graph, scene.people,
+                                 options.scene_period)
+        s["hand"] = add_hand(builder, plant, model, scene.hand,
+                             options.scene_period)
         connect = builder.Connect
         state = plant.get_state_output_port()
-        connect(state, s["odometry"].GetInputPort("plant_state"))
+        connect(state, s["base_state"].get_input_port())
+        connect(s["base_state"].get_output_port(),
+                s["odometry"].get_input_port())
         connect(state, s["truth"].GetInputPort("plant_state"))
+        connect(state, s["base_pose"].get_input_port())
+        connect(state, s["mount_angles"].get_input_port())
         connect(plant.get_body_poses_output_port(),
                 s["truth"].GetInputPort("body_poses"))
         connect(plant.get_body_spatial_velocities_output_port(),
                 s["truth"].GetInputPort("body_spatial_velocities"))
-        connect(s["odometry"].GetOutputPort("pose"),
-                s["base_driver"].GetInputPort("base_pose"))
-        connect(s["base_driver"].GetOutputPort("desired_state"),
+        connect(s["base_driver"].get_output_port(),
+                s["base_rates_input"].get_input_port(0))
+        connect(s["base_pose"].get_output_port(),
+                s["base_rates_input"].get_input_port(1))
+        connect(s["base_rates_input"].get_output_port(),
+                s["base_rates"].get_input_port())
+        connect(s["base_rates"].get_output_port(),
                 plant.get_desired_state_input_port(model.base))
-        connect(s["arm_driver"].GetOutputPort("desired_state"),
+        connect(s["arm_driver"].get_output_port(),
                 plant.get_desired_state_input_port(model.arm))
         connect(plant.get_state_output_port(model.arm),
                 s["arm_state"].get_input_port())
@@ -217,12 +278,11 @@ class SimulatedStation:
         self._add_lidars(builder, scene)
 
         export_in, export_out = builder.ExportInput, builder.ExportOutput
-        export_in(s["base_driver"].GetInputPort("velocity_command"),
+        export_in(s["base_driver"].get_input_port(),
                   "base.velocity_command")
-        export_in(s["arm_driver"].GetInputPort("position_command"),
-                  "arm.position_command")
+        export_in(s["arm_driver"].get_input_port(), "arm.position_command")
         outputs = (
-            (s["odometry"].GetOutputPort("state_estimated"),
+            (s["odometry"].get_output_port(),
              "base.state_estimated"),
             (s["arm_state"].get_output_port(0), "arm.position_measured"),
             (s["arm_state"].get_output_port(1), "arm.velocity_estimated"),
@@ -233,9 +293,10 @@ class SimulatedStation:
             *((s[f"lidar_{n}"].GetOutputPort("ranges"),
                f"lidar.{n}.ranges") for n in LIDAR_NAMES),
             *((s["truth"].GetOutputPort(n), f"truth.{n}") for n in (
-                "end_effector_pose", "end_effector_velocity", "base_pose",
-                "mount_angles")),
-            (s["base_driver"].GetOutputPort("velocity"),
+                "end_effector_pose", "end_effector_velocity")),
+            (s["base_pose"].get_output_port(), "truth.base_pose"),
+            (s["mount_angles"].get_output_port(), "truth.mount_angles"),
+            (s["base_driver"].get_output_port(),
              "truth.base_loop_velocity"),
             (s["weld_wrench"].GetOutputPort("wrench"), "truth.wrist_wrench"),
             (s["hand"].GetOutputPort("force"), "truth.hand_force"),
@@ -267,7 +328,7 @@ class SimulatedStation:
                     self.options.lidar,
                     mount=(*X_BL.translation()[:2], yaw),
                     circles=circles, boxes=boxes, moving_radii=radii))
-            builder.Connect(s["truth"].GetOutputPort("base_pose"),
+            builder.Connect(s["base_pose"].get_output_port(),
                             lidar.GetInputPort("base_pose"))
             if radii:
                 builder.Connect(s["people"].GetOutputPort("positions"),
@@ -291,13 +352,12 @@ class SimulatedStation:
         plant.SetPositions(context, q)
         plant.SetVelocities(context, np.zeros(plant.num_velocities()))
         self._settle_under_gravity(context, q_cmd)
-        for name in ("base_driver", "arm_driver"):
-            system = self.systems[name]
-            own = system.GetMyMutableContextFromRoot(root_context)
-            if name == "base_driver":
-                system.set_velocity(own, np.zeros(3))
-            else:
-                system.set_positions(own, q_cmd)
+        base, arm = self.systems["base_driver"], self.systems["arm_driver"]
+        base.GetMyMutableContextFromRoot(root_context).SetDiscreteState(
+            base_loop_state(options.base, np.zeros(3)))
+        arm.GetMyMutableContextFromRoot(root_context).SetDiscreteState(
+            arm_interpolator_state(q_cmd, root_context.get_time(),
+                                   options.initial_arm_positions))
 
     def _settle_under_gravity(self, context, q_cmd, iterations=30):
         """Moves the mount's and the arm's joints to where the springs and

@@ -1,7 +1,9 @@
 """What the simulated station reports of the robot's own state.
 
 - `BaseOdometry`: the base's pose and twist, as the base's wheel odometry
-  reports them (here without drift: the plant's planar joints).
+  reports them (here without drift: the plant's planar joints); the
+  station runs the same math as a C++ SymbolicVectorSystem
+  (`odometry_system`, fed by `base_state_selection`).
 - `GroundTruth`: what no sensor of the real robot measures, for metrics
   only (the motion-capture system of the paper's tracking experiment):
   the end effector's pose and velocity in the world, the base's pose and
@@ -11,7 +13,9 @@
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.math import RollPitchYaw
+from pydrake.symbolic import MakeVectorVariable
 from pydrake.systems.framework import LeafSystem, LeafSystem_
+from pydrake.systems.primitives import SymbolicVectorSystem
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.robot_model import (
@@ -22,11 +26,43 @@ from drake_wbc.robot_model import (
 )
 
 
-def _selection(indices, size):
+def selection_matrix(indices, size):
     """The matrix that picks `indices` out of a vector of `size`."""
     S = np.zeros((len(indices), size))
     S[np.arange(len(indices)), indices] = 1.0
     return S
+
+
+def world_to_body_twist(yaw, rates):
+    """The base's twist [vx, vy, wz] in T_b from its joints' rates
+    [x_dot, y_dot, yaw_dot] at heading `yaw` (the inverse of eq. (3)).
+    For double, AutoDiffXd or symbolic scalars."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([c * rates[0] + s * rates[1],
+                     -s * rates[0] + c * rates[1], rates[2]])
+
+
+def odometry_system():
+    """BaseOdometry's state_estimated as a stateless SymbolicVectorSystem
+    (evaluated in C++): input the base joints' [x, y, yaw, x_dot, y_dot,
+    yaw_dot] (6), output [x, y, yaw, vx, vy, wz] (6). Feed it
+    `base_state_selection`."""
+    x = MakeVectorVariable(6, "x")
+    with np.errstate(all="ignore"):  # numpy's checks on symbolic arrays
+        twist = world_to_body_twist(x[2], x[3:])
+    return SymbolicVectorSystem(input=x,
+                                output=np.concatenate([x[:3], twist]))
+
+
+def base_state_selection(plant, model):
+    """The (6, nq + nv) matrix that picks the base joints' positions and
+    rates out of the plant's state [q; v]."""
+    nq, nv = plant.num_positions(), plant.num_velocities()
+    return np.vstack([
+        selection_matrix(joint_position_indices(plant, BASE_JOINTS,
+                                                model.base), nq + nv),
+        selection_matrix(nq + joint_velocity_indices(plant, BASE_JOINTS,
+                                                     model.base), nq + nv)])
 
 
 @TemplateSystem.define("BaseOdometry_", T_list=[float, AutoDiffXd])
@@ -55,10 +91,10 @@ def BaseOdometry_(T):
             LeafSystem_[T].__init__(self, converter)
             self._plant, self._model = plant, model
             nq, nv = plant.num_positions(), plant.num_velocities()
-            self._select_q = _selection(
+            self._select_q = selection_matrix(
                 joint_position_indices(plant, BASE_JOINTS, model.base),
                 nq + nv)
-            self._select_v = _selection(
+            self._select_v = selection_matrix(
                 nq + joint_velocity_indices(plant, BASE_JOINTS, model.base),
                 nq + nv)
             self._state = self.DeclareVectorInputPort("plant_state", nq + nv)
@@ -76,10 +112,8 @@ def BaseOdometry_(T):
         def _state_estimated(self, context, output):
             x = self._state.Eval(context)
             pose, rates = self._select_q @ x, self._select_v @ x
-            c, s = np.cos(pose[2]), np.sin(pose[2])
-            twist = np.array([c * rates[0] + s * rates[1],
-                              -s * rates[0] + c * rates[1], rates[2]])
-            output.SetFromVector(np.concatenate([pose, twist]))
+            output.SetFromVector(np.concatenate(
+                [pose, world_to_body_twist(pose[2], rates)]))
 
     return Impl
 

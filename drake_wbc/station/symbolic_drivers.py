@@ -1,0 +1,119 @@
+"""The drivers' math as Drake SymbolicVectorSystems, evaluated in C++.
+
+The station steps its plant at 1 / time_step, and its drivers with it; a
+Python system there costs far more than the math. These systems build the
+very functions of drake_wbc.station.drivers (`base_loop_step`,
+`body_to_world_rates`, `interpolated_command`) on symbolic variables, so
+the numbers are those of BaseVelocityDriver and ArmPositionDriver (the
+reference implementations, which tests compare against), and the
+SymbolicVectorSystem evaluates them without Python. Like any
+SymbolicVectorSystem they convert to AutoDiffXd.
+
+- `base_loop_system(params)`: the base's velocity loop (state: the loop's
+  velocity in T_b, and its acceleration in the second-order loop); input
+  the velocity command (3), output the loop's velocity (3), from the
+  state alone.
+- `joint_rates_system()`: input [v (3); base pose [x, y, yaw] (3)],
+  output the base's desired state [0 (3); R(yaw) v] (6), for the plant.
+- `arm_interpolator_system(params, initial_positions)`: state [q_from,
+  q_to, t_k] (13, positions relative to the initial ones), input q_cmd
+  (6), output [q_d; v_d] (12) at the context's time.
+"""
+
+import numpy as np
+from pydrake.symbolic import MakeVectorVariable, Variable
+from pydrake.systems.primitives import SymbolicVectorSystem
+
+from drake_wbc.robot_model import HOME_ARM_POSITIONS
+from drake_wbc.station.drivers import (
+    ArmDriverParameters,
+    BaseDriverParameters,
+    base_loop_size,
+    base_loop_step,
+    body_to_world_rates,
+    interpolated_command,
+)
+from drake_wbc.validation import as_vector, checked_instance, validated_copy
+
+
+def _symbolic_numpy():
+    """numpy over arrays of symbolic variables: its floating-point checks
+    after an object loop report flags the symbolic operations leave, not
+    errors of the math."""
+    return np.errstate(all="ignore")
+
+
+def base_loop_system(params=None):
+    """The base's velocity loop (`base_loop_step` at params.time_step) as
+    a discrete SymbolicVectorSystem. Start it with `base_loop_state`."""
+    params = validated_copy(checked_instance(
+        "params", params, BaseDriverParameters, BaseDriverParameters))
+    x = MakeVectorVariable(base_loop_size(params), "x")
+    u = MakeVectorVariable(3, "u")
+    with _symbolic_numpy():
+        dynamics = base_loop_step(x, u, params)
+    return SymbolicVectorSystem(state=x, input=u, dynamics=dynamics,
+                                output=x[:3], time_period=params.time_step)
+
+
+def base_loop_state(params, velocity):
+    """The state of `base_loop_system(params)` at rest at `velocity` (3,)
+    in T_b (zero acceleration)."""
+    state = np.zeros(base_loop_size(params))
+    state[:3] = velocity
+    return state
+
+
+def joint_rates_system():
+    """[v; pose] (6) -> the base's desired state [0, 0, 0, R(yaw) v] (6),
+    stateless (eq. (3), `body_to_world_rates`)."""
+    v = MakeVectorVariable(3, "v")
+    pose = MakeVectorVariable(3, "pose")
+    with _symbolic_numpy():
+        rates = body_to_world_rates(pose[2], v)
+    return SymbolicVectorSystem(
+        input=np.concatenate([v, pose]),
+        output=np.concatenate([np.zeros(3), rates]))
+
+
+def arm_interpolator_system(params=None, initial_positions=None):
+    """The arm's position servo (ArmPositionDriver's math) as a discrete
+    SymbolicVectorSystem updated every params.command_period: at each
+    sample it stores where the interpolation got to, the new command and
+    the time; its output [q_d; v_d] follows `interpolated_command` at the
+    context's time.
+
+    The positions in its state are relative to `initial_positions` (6,)
+    (HOME_ARM_POSITIONS if None), so that its default state, zero, holds
+    the arm there from t = 0, like ArmPositionDriver's; set another start
+    with `arm_interpolator_state`.
+    """
+    params = validated_copy(checked_instance(
+        "params", params, ArmDriverParameters, ArmDriverParameters))
+    q0 = _initial(initial_positions)
+    t = Variable("t")
+    state = MakeVectorVariable(13, "s")
+    command = MakeVectorVariable(6, "q_cmd")
+    with _symbolic_numpy():
+        absolute = np.concatenate([q0 + state[:6], q0 + state[6:12],
+                                   [state[12]]])
+        q_d, v_d = interpolated_command(absolute, t, params.command_period)
+        # At a sample, q_d is where the interpolation got to.
+        dynamics = np.concatenate([q_d - q0, command - q0, [t]])
+    return SymbolicVectorSystem(
+        time=t, state=state, input=command, dynamics=dynamics,
+        output=np.concatenate([q_d, v_d]),
+        time_period=params.command_period)
+
+
+def _initial(initial_positions):
+    if initial_positions is None:
+        return np.asarray(HOME_ARM_POSITIONS, dtype=float)
+    return as_vector("initial_positions", initial_positions, 6)
+
+
+def arm_interpolator_state(positions, time, initial_positions=None):
+    """The state of `arm_interpolator_system(params, initial_positions)`
+    holding the arm at `positions` (6,) from `time` on."""
+    q = as_vector("positions", positions, 6) - _initial(initial_positions)
+    return np.concatenate([q, q, [time]])
