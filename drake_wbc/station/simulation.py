@@ -206,7 +206,8 @@ class SimulatedStation:
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(
             time_step=h, discrete_contact_approximation="sap",
-            contact_model="hydroelastic_with_fallback"), builder)
+            contact_model="hydroelastic_with_fallback",
+            use_sampled_output_ports=False), builder)
         model = add_mcr(plant)
         add_static_obstacles(plant, scene)
         self._gains = servo_gains(options.initial_arm_positions,
