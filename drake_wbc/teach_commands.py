@@ -92,7 +92,7 @@ def run_teach(args, argv=None, echo=print):
     summary = {"scenario": path.stem, "description": scenario.description,
                "experiment": "teach", "runs": {},
                "metrics": plain_values(metrics),
-               "files": [str(file), figure.name]}
+               "files": [figure.name], "movement": str(file)}
     (output / "summary.json").write_text(json.dumps(summary, indent=2))
     if echo is not None:
         echo(format_summary(summary, output))
