@@ -3,6 +3,7 @@ the committed movement, and its replays (diagrams/teach.yaml,
 repeat.yaml, repeat_obstacle.yaml). The runs are shared by the tests."""
 
 import argparse
+import json
 
 import numpy as np
 import pytest
@@ -119,3 +120,22 @@ def test_replay_command_builds_its_scenario():
     assert scenario.scene.cylinders[-1].position == [0.6, -0.6]
     with pytest.raises(ValueError, match="no movement file"):
         teach_commands.replay_scenario(parser.parse_args(["nothing.yaml"]))
+
+
+def test_the_replay_command_runs_and_writes_its_outputs(tmp_path, capsys):
+    """`drake-wbc replay` end to end, through the command line, on a short
+    run with a moved goal, a slower tau and a pillar."""
+    from drake_wbc.cli import main
+
+    code = main(["replay", str(find_scenario("repeat").parent / "movements"
+                               / "teach.yaml"),
+                 "--goal", "1.6", "0.2", "0.7", "-2.9", "--tau", "1.5",
+                 "--obstacle", "1.5", "-1.0", "0.1", "--duration", "1.0",
+                 "--output", str(tmp_path)])
+    assert code == 0
+    assert "Experiment metrics" in capsys.readouterr().out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["metrics"]["tau"] == 1.5
+    assert any(name.endswith(".png") for name in summary["files"])
+    for name in summary["files"]:
+        assert (tmp_path / name).stat().st_size > 0
