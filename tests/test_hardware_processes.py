@@ -169,3 +169,28 @@ def test_plot_draws_the_logged_run(run, capsys):
     capsys.readouterr()
     for name in ("trajectory_tracking.png", "hardware.png"):
         assert (folder / "plot" / name).stat().st_size > 10_000
+
+
+def test_teach_learns_from_the_logged_run(run, tmp_path):
+    """Teaching from the robot: `drake-wbc teach --log` learns the logged
+    run's end-effector motion (here the tracking step, between markers
+    given by hand), from the measured joints and odometry in the log."""
+    from drake_wbc.demonstration import tcp_poses
+    from drake_wbc.movement import LearnedMovement
+
+    folder = run["folder"]
+    file = tmp_path / "movement.yaml"
+    code = main(["teach", str(folder / "scenario.yaml"), "--log",
+                 str(folder / "run.lcmlog"), "--start", "0.3", "--stop",
+                 "1.9", "--output", str(tmp_path), "--movement", str(file)])
+    assert code == 0
+    movement = LearnedMovement.load(file)
+    log = read_lcm_log(folder / "run.lcmlog", run["scenario"].hardware)
+    pose = tcp_poses(log["base.state_estimated"][:, :3],
+                     log["arm.position_measured"])
+    for when, learned in ((0.3, movement.start), (1.9, movement.goal)):
+        index = np.searchsorted(log.time, when)
+        np.testing.assert_allclose(learned, pose[index], atol=2e-3)
+    # The step moved the end effector about 0.1 m along x in 1.1 s.
+    assert movement.goal[0] - movement.start[0] == pytest.approx(0.11,
+                                                                 abs=0.03)
