@@ -54,7 +54,11 @@ Run-time safety (drake_wbc.safety, drake_wbc.systems.safety):
   scaling (its direction kept) before the base filter, by the StopGate,
   so that the filter cannot wind up (its state never asks for more than
   the base can do), and again, with the acceleration limits, after it by
-  BaseCommandLimiter, reported on `base_saturation`; the compensator sees
+  BaseCommandLimiter, reported on `base_saturation`, which also slows it
+  as a whole so that the footprint never approaches an obstacle point
+  faster than it can stop short of it (drake_wbc.separation: the
+  repulsive field alone is a coupling that a steady push overcomes); the
+  compensator sees
   the command actually sent, so the arm makes up for what the limits take
   from the base (eq. (compensation)). The arm's joint rates are scaled
   uniformly to their limits by the arm controller (reported on
@@ -187,7 +191,8 @@ def build_controller(params=None, arm=None):
         base_filter=add("base_filter", BaseVelocityFilter(
             replace(params.base_filter, time_step=h))),
         base_limiter=add("base_limiter", BaseCommandLimiter(
-            params.safety, time_step=h)),
+            params.safety, time_step=h,
+            half_sizes=params.base_cdmp.repulsion.half_sizes)),
         compensator=add("compensator", RobustCompensator(
             params.compensator, arm)),
         arm_cdmp=add("arm_cdmp", ArmCdmp(params.arm_cdmp, time_step=h)),
@@ -241,6 +246,8 @@ def build_controller(params=None, arm=None):
     connect("base_gate", "gated", "base_filter", "velocity")
     connect("base_filter", "filtered_velocity", "base_limiter", "velocity")
     connect("base_gate", "scale", "base_limiter", "envelope_scale")
+    connect("guard", "lidar.obstacle_points", "base_limiter",
+            "obstacle_points")
     connect("distributor", "arm_velocity", "compensator", "arm_velocity")
     connect("distributor", "base_velocity", "compensator", "base_velocity")
     connect("base_limiter", "velocity_command", "compensator",

@@ -33,7 +33,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from drake_wbc.validation import positive, positive_vector
+from drake_wbc.validation import non_negative, positive, positive_vector
 
 BASE_AXES = 3
 """The base's velocity components [vx, vy, wz] (T_b)."""
@@ -103,6 +103,9 @@ class SafetyParameters:
         base_acceleration_limits: (3,) > 0, the limits of the command's
             rate of change [vx, vy, wz] in m/s^2, m/s^2, rad/s^2; the
             robot's 1.0 each.
+        stop_distance: m >= 0 that the base keeps from an obstacle point,
+            and stop_time: s > 0, the time constant of its approach
+            (drake_wbc.separation); 0.1 m and 0.5 s by default.
 
     The arm's limits (joint positions, 1.57 rad/s, 12.56 rad/s^2) are those
     of ArmControllerParameters. Vectors are given as any sequence (a list
@@ -112,9 +115,13 @@ class SafetyParameters:
     hold_time: float = DEFAULT_HOLD_TIME
     base_velocity_limits: list[float] = BASE_VELOCITY_LIMITS
     base_acceleration_limits: list[float] = BASE_ACCELERATION_LIMITS
+    stop_distance: float = 0.1
+    stop_time: float = 0.5
 
     def __post_init__(self):
         positive("hold_time", self.hold_time)
+        non_negative("stop_distance", self.stop_distance)
+        positive("stop_time", self.stop_time)
         for name in ("base_velocity_limits", "base_acceleration_limits"):
             setattr(self, name, tuple(
                 positive_vector(name, getattr(self, name), BASE_AXES)
@@ -260,8 +267,9 @@ class LimitedCommand(NamedTuple):
 
     Attributes:
         command: (3,) the command sent.
-        velocity_scale: the factor in (0, 1] applied to the desired
-            command (1 when it was within the velocity limits).
+        velocity_scale: the factor in [0, 1] applied to the desired
+            command, by the velocity limits and the given `scale` (1 when
+            neither acted).
         acceleration_scale: the factor in [0, 1] applied to the change from
             the previous command (1 when within the acceleration limits).
     """
@@ -277,10 +285,10 @@ class LimitedCommand(NamedTuple):
 
 
 def limit_base_velocity(desired, previous, velocity_limits,
-                        acceleration_limits, time_step):
+                        acceleration_limits, time_step, scale=1.0):
     """The base command within the velocity and acceleration limits.
 
-        v   = s_v desired,              s_v = uniform_scale(desired, v_max),
+        v   = s_v s desired,            s_v = uniform_scale(s desired, v_max),
         out = previous + s_a (v - previous),
                                         s_a = uniform_scale(v - previous,
                                                             a_max h).
@@ -298,11 +306,15 @@ def limit_base_velocity(desired, previous, velocity_limits,
         previous: (3,) the command of the previous tick.
         velocity_limits, acceleration_limits: (3,) > 0.
         time_step: h > 0, s.
+        scale: a further factor s in [0, 1] on the desired command (e.g.
+            drake_wbc.separation.separation_scale); 1 by default.
 
     Returns:
         LimitedCommand.
     """
     desired = np.asarray(desired, dtype=float)
+    if scale < 1.0:
+        desired = scale * desired
     previous = np.asarray(previous, dtype=float)
     velocity_scale = uniform_scale(desired, velocity_limits)
     target = desired if velocity_scale == 1.0 else velocity_scale * desired
@@ -311,7 +323,8 @@ def limit_base_velocity(desired, previous, velocity_limits,
         change, np.asarray(acceleration_limits, dtype=float) * time_step)
     command = (target if acceleration_scale == 1.0
                else previous + acceleration_scale * change)
-    return LimitedCommand(command, velocity_scale, acceleration_scale)
+    return LimitedCommand(command, scale * velocity_scale,
+                          acceleration_scale)
 
 
 STATUS_FIELDS = ("stopped", "invalid", "reason", "input", "entry", "value",

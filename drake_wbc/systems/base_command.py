@@ -10,8 +10,10 @@ from pydrake.systems.framework import LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc import safety
+from drake_wbc.repulsion import RepulsiveFieldParameters
 from drake_wbc.safety import SafetyParameters, limit_base_velocity
 from drake_wbc.scalar_support import through_float_function, value_of
+from drake_wbc.separation import nearest_points, separation_scale
 from drake_wbc.systems.safety import SCALARS, as_scalar_type
 from drake_wbc.validation import (
     as_vector,
@@ -122,6 +124,7 @@ def BaseCommandLimiter_(T):
             velocity ────────►│                    ├──► velocity_command
             stopped ─────────►│ BaseCommandLimiter ├──► saturation
             envelope_scale ──►│                    │
+            obstacle_points ─►│                    │
                               └────────────────────┘
 
         - velocity: (3) the desired command [vx, vy, wz] in T_b (the base
@@ -130,10 +133,18 @@ def BaseCommandLimiter_(T):
         - envelope_scale (1): optional (1 when unconnected), the factor
           by which the StopGate before the filter scaled V_b' into the
           velocity limits; it enters the report only.
+        - obstacle_points: optional (none when unconnected), an (M, 2)
+          float array of obstacle points in T_b; the update keeps the
+          NEAREST_POINTS nearest the footprint, which limit the next
+          tick's command (drake_wbc.separation: the footprint approaches
+          no point faster than max(d - stop_distance, 0) / stop_time).
+          Read only by the update, so the outputs do not depend on it
+          directly.
         - velocity_command: (3) drake_wbc.safety.limit_base_velocity of the
           desired command from the previous tick's command: scaled as a
-          whole to the velocity limits, its change scaled as a whole to
-          the acceleration limits, so that its direction is kept. Zero in
+          whole to the separation from the obstacles and to the velocity
+          limits, its change scaled as a whole to the acceleration
+          limits, so that its direction is kept. Zero in
           a safe stop, at once: zero is the safe stop of a velocity
           controlled base, whose own drive decelerates within its limits
           (the robot's 1.0 m/s^2), and a ramp would keep trusting the
@@ -151,7 +162,8 @@ def BaseCommandLimiter_(T):
 
         Both outputs are direct feedthrough of `velocity` and `stopped`
         (the base filter's and the guard's state), so they add no delay.
-        State: the previous command (3), updated once a tick h.
+        State: the previous command (3) and the nearest obstacle points
+        (2 NEAREST_POINTS), updated once a tick h.
 
         Scalar types: double and AutoDiffXd; the AutoDiff output is the
         double one with derivatives by central differences
@@ -161,18 +173,27 @@ def BaseCommandLimiter_(T):
         Args:
             params: SafetyParameters (the limits); the robot's if None.
             time_step: the control period h > 0, s.
+            half_sizes: the footprint's half-sizes (a, b) in m, those of
+                the repulsive field (0.4, 0.3 by default).
         """
 
-        def _construct(self, params=None, time_step=0.01, converter=None):
+        def _construct(self, params=None, time_step=0.01,
+                       half_sizes=(0.4, 0.3), converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.params = validated_copy(checked_instance(
                 "params", params, SafetyParameters, SafetyParameters))
             self.time_step = positive("time_step", time_step)
+            self.half_sizes = tuple(RepulsiveFieldParameters(
+                half_sizes=half_sizes).half_sizes)
             self._velocity = self.DeclareVectorInputPort(
                 "velocity", safety.BASE_AXES)
             self._stopped = self.DeclareVectorInputPort("stopped", 1)
             self._envelope = self.DeclareVectorInputPort("envelope_scale", 1)
-            state = self.DeclareDiscreteState(safety.BASE_AXES)
+            self._points = self.DeclareAbstractInputPort(
+                "obstacle_points", AbstractValue.Make(np.zeros((0, 2))))
+            state = self.DeclareDiscreteState(np.concatenate([
+                np.zeros(safety.BASE_AXES),
+                nearest_points(np.zeros((0, 2)), self.half_sizes).ravel()]))
             self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0,
                                                     self._update)
             # Not time: the result changes only with the inputs and state.
@@ -192,21 +213,27 @@ def BaseCommandLimiter_(T):
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, other.time_step,
-                            converter=converter)
+                            other.half_sizes, converter=converter)
             self.params = other.params
 
         def float_map(self, z):
-            """[desired (3), previous (3), stopped] -> [command (3),
-            limited, velocity scale, acceleration scale], in double
-            (without the envelope's scale)."""
+            """[desired (3), previous (3), stopped, points (2
+            NEAREST_POINTS)] -> [command (3), limited, velocity scale,
+            acceleration scale], in double (without the envelope's
+            scale)."""
             desired, previous, stopped = z[:3], z[3:6], z[6]
             if stopped >= 0.5:
                 return np.array([0.0, 0.0, 0.0, 0.0, 1.0, 1.0])
             if not np.all(np.isfinite(desired)):
                 return np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
+            params = self.params
+            separation = separation_scale(
+                desired, np.reshape(z[7:], (-1, 2)), self.half_sizes,
+                params.stop_distance, params.stop_time)
             result = limit_base_velocity(
-                desired, previous, self.params.base_velocity_limits,
-                self.params.base_acceleration_limits, self.time_step)
+                desired, previous, params.base_velocity_limits,
+                params.base_acceleration_limits, self.time_step,
+                scale=separation)
             return np.concatenate([
                 result.command, [1.0 if result.limited else 0.0,
                                  result.velocity_scale,
@@ -219,10 +246,10 @@ def BaseCommandLimiter_(T):
             return self._result.Eval(context)
 
         def _evaluate_now(self, context):
+            state = context.get_discrete_state_vector().CopyToVector()
             z = np.concatenate([
-                self._velocity.Eval(context),
-                context.get_discrete_state_vector().CopyToVector(),
-                self._stopped.Eval(context)])
+                self._velocity.Eval(context), state[:safety.BASE_AXES],
+                self._stopped.Eval(context), state[safety.BASE_AXES:]])
             return through_float_function(self.float_map, z)
 
         def _command_output(self, context, output):
@@ -240,13 +267,20 @@ def BaseCommandLimiter_(T):
                 [limited, velocity_scale, acceleration_scale]))
 
         def _update(self, context, discrete_state):
-            discrete_state.set_value(self._evaluate(context)[:3])
+            points = (self._points.Eval(context)
+                      if self._points.HasValue(context)
+                      else np.zeros((0, 2)))
+            discrete_state.set_value(np.concatenate([
+                self._evaluate(context)[:3], as_scalar_type(
+                    T, nearest_points(points, self.half_sizes).ravel())]))
 
         def set_previous(self, context, velocity):
             """Sets the previous command (3,), e.g. the base's measured
             velocity when the controller takes over."""
-            context.SetDiscreteState(as_scalar_type(T, as_vector(
-                "velocity", velocity, safety.BASE_AXES)))
+            state = context.get_discrete_state_vector().CopyToVector()
+            state[:safety.BASE_AXES] = as_scalar_type(T, as_vector(
+                "velocity", velocity, safety.BASE_AXES))
+            context.SetDiscreteState(state)
 
     return Impl
 

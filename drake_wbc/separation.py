@@ -1,0 +1,108 @@
+"""Speed and separation: the base never drives into an obstacle faster
+than it can stop short of it.
+
+The repulsive field of eq. (cdmp-base) is a coupling of the base's DMP,
+not a constraint: a steady velocity input (a worker dragging the robot
+by its tool in pHRI mode, eq. (cdmp-wb); a reference along a wall) is
+integrated by the coupling C without bound, so any bounded field is
+eventually overcome and the base reaches the obstacle. The controller
+therefore limits the base command itself, as its last step: for every
+obstacle point near the footprint, the speed at which the footprint's
+nearest point approaches it,
+
+    a_i = (v + w x r_i) . n_i,
+
+(v the planar velocity, w the yaw rate, r_i the footprint's point
+nearest to point i and n_i the unit direction from it to the point, all
+in T_b) must not exceed
+
+    a_i <= max(d_i - stop_distance, 0) / stop_time,
+
+d_i the point's distance from the footprint. The whole command is scaled
+by the largest factor in [0, 1] that meets every bound
+(`separation_scale`), so its direction is kept, as by the velocity limits
+(drake_wbc.safety.limit_base_velocity); motion away from or along an
+obstacle is not limited. Approaching at the bound, the distance decays
+as exp(-t / stop_time) towards stop_distance, so the base stops
+stop_distance short of the obstacle; the base's own lag and the
+acceleration limit take some of that margin.
+"""
+
+import numpy as np
+
+from drake_wbc.repulsion import RepulsiveFieldParameters, footprint_distance
+
+NEAREST_POINTS = 16
+"""How many obstacle points the base command limiter keeps, the nearest
+to the footprint."""
+
+FAR = 1e3
+"""m: where `nearest_points` puts the padding when there are fewer
+points."""
+
+
+def _field(half_sizes):
+    return RepulsiveFieldParameters(half_sizes=half_sizes)
+
+
+def nearest_points(points, half_sizes, count=NEAREST_POINTS):
+    """The `count` points nearest the footprint, (count, 2) in T_b, the
+    rest padded with points FAR ahead (which never limit anything).
+
+    Args:
+        points: (M, 2) finite obstacle points in T_b, m (M may be 0).
+        half_sizes: the footprint's half-sizes (a, b), m.
+        count: how many to keep, >= 1.
+    """
+    points = np.reshape(np.asarray(points, dtype=float), (-1, 2))
+    kept = np.full((count, 2), [FAR, 0.0])
+    if len(points):
+        distance, _ = footprint_distance(points, _field(half_sizes))
+        order = np.argsort(distance, kind="stable")[:count]
+        kept[:len(order)] = points[order]
+    return kept
+
+
+def approach_speeds(command, points, half_sizes):
+    """The speed a_i at which the footprint approaches each point under
+    `command`, and the points' distances d_i (module docstring).
+
+    Args:
+        command: (3,) [vx, vy, wz] in T_b.
+        points: (M, 2) obstacle points in T_b.
+        half_sizes: the footprint's half-sizes (a, b), m.
+
+    Returns:
+        (a, d), two (M,) arrays; a > 0 means approaching.
+    """
+    points = np.reshape(np.asarray(points, dtype=float), (-1, 2))
+    d, n = footprint_distance(points, _field(half_sizes))
+    nearest = points - d[:, None] * n
+    vx, vy, wz = (float(c) for c in command)
+    velocity = np.stack([vx - wz * nearest[:, 1], vy + wz * nearest[:, 0]],
+                        axis=1)
+    return np.sum(velocity * n, axis=1), d
+
+
+def separation_scale(command, points, half_sizes, stop_distance,
+                     stop_time):
+    """The largest factor s in [0, 1] such that s * command approaches no
+    point faster than max(d_i - stop_distance, 0) / stop_time.
+
+    Args:
+        command: (3,) [vx, vy, wz] in T_b, finite.
+        points: (M, 2) obstacle points in T_b (e.g. `nearest_points`).
+        half_sizes: the footprint's half-sizes (a, b), m.
+        stop_distance: m >= 0 left between the footprint and an obstacle.
+        stop_time: s > 0, the time constant of the approach.
+
+    Returns:
+        s as a float (1.0 when no bound acts).
+    """
+    approach, d = approach_speeds(command, points, half_sizes)
+    allowed = np.maximum(d - stop_distance, 0.0) / stop_time
+    closing = approach > allowed
+    if not np.any(closing):
+        return 1.0
+    return float(np.clip(np.min(allowed[closing] / approach[closing]),
+                         0.0, 1.0))

@@ -1,0 +1,90 @@
+"""Speed and separation (drake_wbc.separation): the footprint's approach
+speed to each obstacle point against finite differences of its distance,
+the scale that bounds it, and the closed loop that a bounded field alone
+lost (a worker dragging the robot into a crate)."""
+
+import numpy as np
+import pytest
+
+from drake_wbc.repulsion import RepulsiveFieldParameters, footprint_distance
+from drake_wbc.separation import (
+    FAR,
+    approach_speeds,
+    nearest_points,
+    separation_scale,
+)
+
+HALF = (0.4, 0.3)
+
+
+def distance_after(points, command, dt):
+    """The points' footprint distances after the base moves by command dt
+    (the points, fixed in the world, move the other way in T_b)."""
+    vx, vy, wz = command
+    c, s = np.cos(-wz * dt), np.sin(-wz * dt)
+    moved = (points - np.array([vx, vy]) * dt) @ np.array([[c, s], [-s, c]])
+    return footprint_distance(moved, RepulsiveFieldParameters(
+        half_sizes=HALF))[0]
+
+
+def test_the_approach_speed_is_the_rate_at_which_the_distance_falls():
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-1.2, 1.2, (200, 2))
+    d0 = footprint_distance(points, RepulsiveFieldParameters(
+        half_sizes=HALF))[0]
+    points = points[d0 > 0.02]  # outside, off the footprint's edge
+    for _ in range(10):
+        command = rng.uniform(-0.8, 0.8, 3)
+        approach, d = approach_speeds(command, points, HALF)
+        dt = 1e-6
+        rate = (distance_after(points, command, -dt)
+                - distance_after(points, command, dt)) / (2 * dt)
+        np.testing.assert_allclose(approach, rate, atol=1e-6)
+
+
+def test_the_scale_meets_every_bound_and_keeps_the_direction():
+    rng = np.random.default_rng(6)
+    for _ in range(50):
+        points = rng.uniform(-1.0, 1.0, (30, 2))
+        command = rng.uniform(-1.0, 1.0, 3)
+        s = separation_scale(command, points, HALF, 0.1, 0.5)
+        assert 0.0 <= s <= 1.0
+        approach, d = approach_speeds(s * command, points, HALF)
+        allowed = np.maximum(d - 0.1, 0.0) / 0.5
+        assert np.all(approach <= allowed + 1e-12)
+        if s < 1.0:  # the largest such factor: one bound is tight
+            assert np.any(np.isclose(approach, allowed, atol=1e-12)
+                          & (approach > 0.0)) or s == 0.0
+
+
+def test_moving_away_or_along_is_not_limited():
+    wall = np.array([[0.9, y] for y in np.linspace(-1.0, 1.0, 21)])
+    assert separation_scale([-0.8, 0.0, 0.0], wall, HALF, 0.1, 0.5) == 1.0
+    assert separation_scale([0.0, 0.8, 0.0], wall, HALF, 0.1, 0.5) == 1.0
+    # Straight at it, 0.5 m away: at most (0.5 - 0.1) / 0.5 = 0.8 m/s.
+    assert separation_scale([1.0, 0.0, 0.0], wall, HALF, 0.1, 0.5) == \
+        pytest.approx(0.8)
+    # At the stop distance, nothing towards it.
+    near = wall - [0.4, 0.0]
+    assert separation_scale([0.3, 0.1, 0.0], near, HALF, 0.1, 0.5) == 0.0
+
+
+def test_nearest_points_keeps_the_closest_and_pads_far():
+    points = np.array([[2.0, 0.0], [0.5, 0.0], [0.0, 0.9], [3.0, 3.0]])
+    kept = nearest_points(points, HALF, count=3)
+    np.testing.assert_array_equal(kept, [[0.5, 0.0], [0.0, 0.9],
+                                         [2.0, 0.0]])
+    padded = nearest_points(np.zeros((0, 2)), HALF, count=2)
+    np.testing.assert_array_equal(padded, [[FAR, 0.0], [FAR, 0.0]])
+    assert separation_scale([1.0, 1.0, 1.0], padded, HALF, 0.1, 0.5) == 1.0
+
+
+def test_a_worker_dragging_the_robot_into_a_crate_is_stopped_short():
+    """Stress case 499 of seed 2026: in pHRI mode a hand pulls the tool
+    with 8 N for 1.6 s towards a crate 0.32 m from the footprint; the
+    repulsive field alone let the base touch it."""
+    from drake_wbc.stress_cases import run_case, violations
+
+    record = run_case(2026, 499, 4.0)
+    assert violations(record) == []
+    assert record["min_static_obstacle_distance_m"] > 0.02
