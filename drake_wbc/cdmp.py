@@ -47,6 +47,7 @@ from drake_wbc.validation import (
     as_matrix,
     as_scalar,
     as_vector,
+    checked_instance,
     non_negative,
     positive,
     selection,
@@ -196,10 +197,8 @@ class WholeBodyCdmpParameters:
         non_negative("k_hri", self.k_hri)
         _set(self, "S_hri", _switch("S_hri", self.S_hri))
         _dmp(self.dmp)
-        if self.movement is not None and not isinstance(
-                self.movement, MovementReplay):
-            raise ValueError(f"movement = {self.movement!r} is not "
-                             "allowed: must be a MovementReplay or None")
+        self.movement = checked_instance("movement", self.movement,
+                                         MovementReplay, lambda: None)
 
 
 @dataclass

@@ -83,7 +83,7 @@ def run_scenario(scenario, output, name=None, duration=None, replay=None,
 def plain_values(value):
     """`value` with numpy scalars and arrays as plain Python, for JSON."""
     if isinstance(value, dict):
-        return {k: plain_values(v) for k, v in value.items()}
+        return {str(k): plain_values(v) for k, v in value.items()}
     if isinstance(value, (list, tuple, np.ndarray)):
         return [plain_values(v) for v in value]
     if isinstance(value, (np.floating, np.integer, np.bool_)):

@@ -180,10 +180,8 @@ class Variant:
                 "digits, _ and - only, and not empty")
         text("label", self.label)
         boolean("base_filter", self.base_filter)
-        if self.movement is not None and not isinstance(
-                self.movement, MovementReplay):
-            raise ValueError(f"movement = {self.movement!r} is not "
-                             "allowed: must be a MovementReplay or None")
+        self.movement = checked_instance("movement", self.movement,
+                                         MovementReplay, lambda: None)
 
 
 @dataclass

@@ -7,7 +7,7 @@ returns: every time in microseconds as timing.summarize statistics
 
 import json
 
-import numpy as np
+from drake_wbc.reports import plain_values
 
 GOALS = (
     ("closed_form_vs_drake_diffik",
@@ -60,20 +60,9 @@ def evaluate_goals(results):
     return goals
 
 
-def plain(value):
-    """`value` with numpy scalars and arrays as plain Python, for JSON."""
-    if isinstance(value, dict):
-        return {str(k): plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return [plain(v) for v in value]
-    if isinstance(value, (np.floating, np.integer, np.bool_)):
-        return value.item()
-    return value
-
-
 def write_json(results, path):
     """Writes `results` as JSON to `path`."""
-    path.write_text(json.dumps(plain(results), indent=2))
+    path.write_text(json.dumps(plain_values(results), indent=2))
     return path
 
 
