@@ -68,6 +68,14 @@ def footprint_distance(obstacle_points, params):
     RepulsiveFieldParameters. Returns (d, n), (M,) and (M, 2).
     """
     P = np.reshape(obstacle_points, (-1, 2))
+    if P.dtype == np.float64:
+        d, nx, ny = footprint_geometry(P, params.half_sizes)
+        return d, np.column_stack([nx, ny])
+    return _footprint_distance_any(P, params)
+
+
+def _footprint_distance_any(P, params):
+    """`footprint_distance` of (M, 2) points of any scalar type."""
     x, y = P[:, 0], P[:, 1]
     a, b = params.half_sizes
     sx, sy = np.where(x >= 0, 1.0, -1.0), np.where(y >= 0, 1.0, -1.0)
@@ -88,8 +96,42 @@ def footprint_distance(obstacle_points, params):
     return np.where(outside, r, zero), n
 
 
+def footprint_gap(points, half_sizes):
+    """The distance d (M,) alone of `footprint_distance`, for (M, 2) float
+    points and the footprint's half-sizes (a, b): the cheapest ranking of
+    LIDAR points by how near they are."""
+    qx = np.abs(points[:, 0]) - half_sizes[0]
+    qy = np.abs(points[:, 1]) - half_sizes[1]
+    return np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0))
+
+
+def footprint_geometry(points, half_sizes):
+    """`footprint_distance` of (M, 2) float points, in few array
+    operations (the controller's tick: hundreds of LIDAR points), with
+    the footprint's half-sizes (a, b) given directly.
+
+    Returns:
+        (d, nx, ny), three (M,) arrays: the distance and the two
+        components of the outward unit direction n.
+    """
+    x, y = points[:, 0], points[:, 1]
+    qx, qy = np.abs(x) - half_sizes[0], np.abs(y) - half_sizes[1]
+    ox, oy = np.maximum(qx, 0.0), np.maximum(qy, 0.0)
+    d = np.hypot(ox, oy)  # > 0 exactly outside: no underflow to 0
+    outside = d > 0.0
+    if outside.all():
+        return d, np.copysign(ox / d, x), np.copysign(oy / d, y)
+    safe = np.where(outside, d, 1.0)
+    sx, sy = np.where(x >= 0, 1.0, -1.0), np.where(y >= 0, 1.0, -1.0)
+    nearer_x = qx >= qy
+    nx = np.where(outside, sx * ox / safe, np.where(nearer_x, sx, 0.0))
+    ny = np.where(outside, sy * oy / safe, np.where(nearer_x, 0.0, sy))
+    return d, nx, ny
+
+
 def _clamped_distance(obstacle_points, params):
-    d, n = footprint_distance(obstacle_points, params)
+    d, n = _footprint_distance_any(np.reshape(obstacle_points, (-1, 2)),
+                                   params)
     return np.where(d > params.d_min, d, 0.0 * d + params.d_min), n
 
 
@@ -156,23 +198,16 @@ def _repulsive_force_float(points, params):
     """`repulsive_force` of (M, 2) float points: the same formula in fewer
     array operations (the controller's tick; hundreds of LIDAR points).
     Non-finite points make the force NaN, as in the general path."""
-    if not np.all(np.isfinite(points)):
+    if not np.isfinite(points).all():
         return np.full(2, np.nan)
     a, b = params.half_sizes
-    x, y = points[:, 0], points[:, 1]
-    qx, qy = np.abs(x) - a, np.abs(y) - b
-    near = ~((qx > params.d_th) | (qy > params.d_th))
-    if not np.all(near):
-        x, y, qx, qy = x[near], y[near], qx[near], qy[near]
-    ox, oy = np.maximum(qx, 0.0), np.maximum(qy, 0.0)
-    outside = (qx > 0.0) | (qy > 0.0)
-    r = np.hypot(ox, oy)  # no underflow to 0 outside
-    safe = np.where(outside, r, 1.0)
-    sx, sy = np.where(x >= 0, 1.0, -1.0), np.where(y >= 0, 1.0, -1.0)
-    nearer_x = qx >= qy
-    nx = np.where(outside, sx * ox / safe, np.where(nearer_x, sx, 0.0))
-    ny = np.where(outside, sy * oy / safe, np.where(nearer_x, 0.0, sy))
-    d = np.maximum(np.where(outside, r, 0.0), params.d_min)
-    slope = params.k_obs * (1.0 / d - 1.0 / params.d_th) / (d * d)
-    slope = np.where(d <= params.d_th, slope, 0.0)
+    reach = params.d_th
+    near = ((np.abs(points[:, 0]) - a <= reach)
+            & (np.abs(points[:, 1]) - b <= reach))
+    if not near.any():
+        return np.zeros(2)
+    d, nx, ny = footprint_geometry(points[near], params.half_sizes)
+    d = np.maximum(d, params.d_min)
+    slope = params.k_obs * (1.0 / d - 1.0 / reach) / (d * d)
+    slope[d > reach] = 0.0
     return _bounded(np.array([-slope @ nx, -slope @ ny]), params)

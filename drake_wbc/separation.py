@@ -30,7 +30,7 @@ acceleration limit take some of that margin.
 
 import numpy as np
 
-from drake_wbc.repulsion import RepulsiveFieldParameters, footprint_distance
+from drake_wbc.repulsion import footprint_gap, footprint_geometry
 
 NEAREST_POINTS = 16
 """How many obstacle points the base command limiter keeps, the nearest
@@ -39,10 +39,6 @@ to the footprint."""
 FAR = 1e3
 """m: where `nearest_points` puts the padding when there are fewer
 points."""
-
-
-def _field(half_sizes):
-    return RepulsiveFieldParameters(half_sizes=half_sizes)
 
 
 def nearest_points(points, half_sizes, count=NEAREST_POINTS):
@@ -57,10 +53,22 @@ def nearest_points(points, half_sizes, count=NEAREST_POINTS):
     points = np.reshape(np.asarray(points, dtype=float), (-1, 2))
     kept = np.full((count, 2), [FAR, 0.0])
     if len(points):
-        distance, _ = footprint_distance(points, _field(half_sizes))
-        order = np.argsort(distance, kind="stable")[:count]
-        kept[:len(order)] = points[order]
+        kept[:min(count, len(points))] = points[
+            _nearest_first(footprint_gap(points, half_sizes), count)]
     return kept
+
+
+def _nearest_first(distance, count):
+    """The indices of the `count` smallest distances, nearest first, ties
+    in their order: the first `count` of a stable argsort, without
+    sorting the far ones."""
+    if len(distance) > 2 * count:
+        # Only the candidates up to the count-th smallest distance.
+        bound = np.partition(distance, count - 1)[count - 1]
+        candidates = np.flatnonzero(distance <= bound)
+        return candidates[np.argsort(distance[candidates],
+                                     kind="stable")[:count]]
+    return np.argsort(distance, kind="stable")[:count]
 
 
 def approach_speeds(command, points, half_sizes):
@@ -76,12 +84,11 @@ def approach_speeds(command, points, half_sizes):
         (a, d), two (M,) arrays; a > 0 means approaching.
     """
     points = np.reshape(np.asarray(points, dtype=float), (-1, 2))
-    d, n = footprint_distance(points, _field(half_sizes))
-    nearest = points - d[:, None] * n
+    d, nx, ny = footprint_geometry(points, half_sizes)
+    # The footprint's nearest point r = p - d n.
+    rx, ry = points[:, 0] - d * nx, points[:, 1] - d * ny
     vx, vy, wz = (float(c) for c in command)
-    velocity = np.stack([vx - wz * nearest[:, 1], vy + wz * nearest[:, 0]],
-                        axis=1)
-    return np.sum(velocity * n, axis=1), d
+    return (vx - wz * ry) * nx + (vy + wz * rx) * ny, d
 
 
 def separation_scale(command, points, half_sizes, stop_distance,
@@ -102,7 +109,7 @@ def separation_scale(command, points, half_sizes, stop_distance,
     approach, d = approach_speeds(command, points, half_sizes)
     allowed = np.maximum(d - stop_distance, 0.0) / stop_time
     closing = approach > allowed
-    if not np.any(closing):
+    if not closing.any():
         return 1.0
-    return float(np.clip(np.min(allowed[closing] / approach[closing]),
-                         0.0, 1.0))
+    return min(max(float(np.min(allowed[closing] / approach[closing])),
+                   0.0), 1.0)

@@ -6,6 +6,7 @@ lost (a worker dragging the robot into a crate)."""
 import numpy as np
 import pytest
 
+from drake_wbc import repulsion
 from drake_wbc.repulsion import RepulsiveFieldParameters, footprint_distance
 from drake_wbc.separation import (
     FAR,
@@ -77,6 +78,48 @@ def test_nearest_points_keeps_the_closest_and_pads_far():
     padded = nearest_points(np.zeros((0, 2)), HALF, count=2)
     np.testing.assert_array_equal(padded, [[FAR, 0.0], [FAR, 0.0]])
     assert separation_scale([1.0, 1.0, 1.0], padded, HALF, 0.1, 0.5) == 1.0
+
+
+def test_the_float_footprint_distance_is_the_any_scalar_formula():
+    """footprint_geometry (the float path of footprint_distance and of the
+    tick) against the any-scalar formulation, on points outside, inside,
+    on the edges and corners and on the axes."""
+    rng = np.random.default_rng(8)
+    a, b = HALF
+    special = np.array([[a, 0.0], [-a, b], [0.0, 0.0], [0.0, -b], [a, -b],
+                        [0.1, 0.1], [-0.35, 0.29], [2.0, 0.0], [0.0, -3.0],
+                        [a + 1e-300, b]])
+    points = np.vstack([rng.uniform(-1.5, 1.5, (500, 2)),
+                        rng.uniform(-0.45, 0.45, (200, 2)), special])
+    params = RepulsiveFieldParameters(half_sizes=HALF)
+    d_any, n_any = repulsion._footprint_distance_any(points, params)
+    d, n = footprint_distance(points, params)
+    np.testing.assert_allclose(d, d_any, rtol=1e-14, atol=1e-300)
+    np.testing.assert_allclose(n, n_any, rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(repulsion.footprint_gap(points, HALF), d,
+                               rtol=0, atol=0)
+    # All outside (the branch without the inside cases).
+    outside = points[d > 0]
+    np.testing.assert_allclose(
+        footprint_distance(outside, params)[1],
+        repulsion._footprint_distance_any(outside, params)[1],
+        rtol=1e-14, atol=1e-15)
+
+
+@pytest.mark.parametrize("count", [1, 5, 16, 40])
+def test_nearest_points_is_a_stable_sort_by_distance(count):
+    """The partial selection keeps exactly the first `count` of a stable
+    argsort, ties (inside points, equal distances) in their order."""
+    rng = np.random.default_rng(count)
+    points = np.vstack([rng.uniform(-2.0, 2.0, (300, 2)),
+                        np.zeros((20, 2)),          # 20 ties at d = 0
+                        np.tile([[1.0, 0.0]], (20, 1))])  # 20 more
+    rng.shuffle(points)
+    d = footprint_distance(points, RepulsiveFieldParameters(
+        half_sizes=HALF))[0]
+    expected = points[np.argsort(d, kind="stable")[:count]]
+    np.testing.assert_array_equal(nearest_points(points, HALF, count),
+                                  expected)
 
 
 def test_a_worker_dragging_the_robot_into_a_crate_is_stopped_short():
