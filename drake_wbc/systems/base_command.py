@@ -85,25 +85,28 @@ def StopGate_(T):
             Impl._construct(self, other.size, other.limits,
                             converter=converter)
 
-        def _scale(self, context, value):
-            if (self.limits is None
-                    or value_of(self._stop.Eval(context))[0] >= 0.5):
+        def _stopped(self, context):
+            stop = self._stop.Eval(context)[0]
+            return (stop if T is float else stop.value()) >= 0.5
+
+        def _scale(self, value):
+            if self.limits is None:
                 return 1.0
-            return safety.uniform_scale(value_of(value), self.limits)
+            return safety.uniform_scale(
+                value if T is float else value_of(value), self.limits)
 
         def _output(self, context, output):
+            if self._stopped(context):
+                output.SetFromVector(as_scalar_type(T, np.zeros(self.size)))
+                return
             value = self._value.Eval(context)
-            if value_of(self._stop.Eval(context))[0] >= 0.5:
-                value = as_scalar_type(T, np.zeros(self.size))
-            else:
-                scale = self._scale(context, value)
-                if scale < 1.0:
-                    value = scale * value
-            output.SetFromVector(value)
+            scale = self._scale(value)
+            output.SetFromVector(value if scale == 1.0 else scale * value)
 
         def _scale_output(self, context, output):
-            output.SetFromVector(as_scalar_type(T, np.array([self._scale(
-                context, self._value.Eval(context))])))
+            scale = 1.0 if self._stopped(context) else self._scale(
+                self._value.Eval(context))
+            output.SetFromVector(as_scalar_type(T, np.array([scale])))
 
     return Impl
 
@@ -224,11 +227,11 @@ def BaseCommandLimiter_(T):
             desired, previous, stopped = z[:3], z[3:6], z[6]
             if stopped >= 0.5:
                 return np.array([0.0, 0.0, 0.0, 0.0, 1.0, 1.0])
-            if not np.all(np.isfinite(desired)):
+            if not np.isfinite(desired).all():
                 return np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
             params = self.params
             separation = separation_scale(
-                desired, np.reshape(z[7:], (-1, 2)), self.half_sizes,
+                desired, z[7:].reshape(-1, 2), self.half_sizes,
                 params.stop_distance, params.stop_time)
             result = limit_base_velocity(
                 desired, previous, params.base_velocity_limits,
@@ -246,10 +249,13 @@ def BaseCommandLimiter_(T):
             return self._result.Eval(context)
 
         def _evaluate_now(self, context):
-            state = context.get_discrete_state_vector().CopyToVector()
+            state = context.get_discrete_state_vector()
+            state = state.value() if T is float else state.CopyToVector()
             z = np.concatenate([
                 self._velocity.Eval(context), state[:safety.BASE_AXES],
                 self._stopped.Eval(context), state[safety.BASE_AXES:]])
+            if T is float:
+                return self.float_map(z)
             return through_float_function(self.float_map, z)
 
         def _command_output(self, context, output):
