@@ -52,6 +52,29 @@ def obstacle_points(count, seed=0):
                             radius * np.sin(angle)])
 
 
+class _Fixed:
+    """An input port's fixed value in a context, written again on demand
+    (which invalidates what depends on it, as a new message does).
+
+    Args:
+        port: an InputPort.
+        context: its system's context.
+        value: a vector (array) or an AbstractValue.
+    """
+
+    def __init__(self, port, context, value):
+        self.value = value
+        self.fixed = port.FixValue(context, value)
+        self.is_vector = not isinstance(value, AbstractValue)
+
+    def write(self):
+        data = self.fixed.GetMutableData()
+        if self.is_vector:
+            data.get_mutable_value().SetFromVector(self.value)
+        else:
+            data.SetFrom(self.value)
+
+
 class ControllerTicker:
     """The controller Diagram in a Simulator of its own, with fixed inputs.
 
@@ -76,18 +99,18 @@ class ControllerTicker:
             "lidar.obstacle_points": AbstractValue.Make(
                 obstacle_points(num_points)),
         }
-        self.ports = {name: diagram.GetInputPort(name)
-                      for name in STATION_INPUTS}
-        self.refresh()
+        self.fixed = [
+            _Fixed(diagram.GetInputPort(name), self.context, self.values[name])
+            for name in STATION_INPUTS]
         diagram.GetInputPort("reference_velocity").FixValue(
             self.context, REFERENCE_VELOCITY)
         self.controller.initialize(self.context)
         self.simulator.Initialize()
 
     def refresh(self):
-        """Fixes the station inputs again (new measurements)."""
-        for name, port in self.ports.items():
-            port.FixValue(self.context, self.values[name])
+        """Writes the station inputs again (new measurements)."""
+        for fixed in self.fixed:
+            fixed.write()
 
     def ticks(self, count, refresh=True):
         """A timing.interleave contender: `count` ticks of the controller
@@ -128,14 +151,14 @@ class StageTicker:
                 value = np.array(port.Eval(inner))
             else:
                 value = port.EvalAbstract(inner).Clone()
-            self.inputs.append((port, value))
+            self.inputs.append(_Fixed(port, self.context, value))
         self.outputs = [stage.get_output_port(i)
                         for i in range(stage.num_output_ports())]
         self.has_state = self.context.num_discrete_state_groups() > 0
 
     def refresh(self):
-        for port, value in self.inputs:
-            port.FixValue(self.context, value)
+        for fixed in self.inputs:
+            fixed.write()
 
     def tick(self):
         """Inputs fixed again, every output evaluated, the discrete
