@@ -84,23 +84,33 @@ def _as_jacobian(J_a, rows=None, wide=True):
 
 
 def _as_limits(q, lower, upper, size=None):
-    """Returns q, lower, upper as checked float vectors of one size."""
+    """Returns q, lower, upper, checked float vectors of one size, as lists
+    of floats."""
     q = as_vector("q", q, size)
     lower, upper = ordered_limits("lower", lower, "upper", upper, q.size)
-    return q, lower, upper
+    return q.tolist(), lower.tolist(), upper.tolist()
 
 
 def _products_of_others(values):
-    """Returns p with p_k = prod_{l != k} values_l, computed without any
-    division (the product of the values before k times that of the values
-    after k), so that it stays exact when some values are 0."""
-    v = values.tolist()  # a few numbers: plain floats are the fastest
-    before, after = [1.0] * len(v), [1.0] * len(v)
-    for k in range(1, len(v)):
-        before[k] = before[k - 1] * v[k - 1]
-    for k in range(len(v) - 2, -1, -1):
-        after[k] = after[k + 1] * v[k + 1]
-    return np.array([b * a for b, a in zip(before, after, strict=True)])
+    """Returns p (a list) with p_k = prod_{l != k} values_l, computed without
+    any division (the product of the values before k times that of the
+    values after k), so that it stays exact when some values are 0.
+
+    Args:
+        values: a sequence of floats (a few numbers: a list of plain
+            floats is the fastest).
+    """
+    n = len(values)
+    products = [1.0] * n
+    before = 1.0
+    for k in range(1, n):  # first the product of the values before k
+        before *= values[k - 1]
+        products[k] = before
+    after = 1.0
+    for k in range(n - 2, -1, -1):  # times that of the values after k
+        after *= values[k + 1]
+        products[k] *= after
+    return products
 
 
 def _cross(a, b):
@@ -121,43 +131,65 @@ def _svd(J):
 
 
 def _manipulability_gradient(J, U, s, Vt):
-    """dm/dq from J and its thin SVD J = U diag(s) Vt (see the public
-    function for the derivation).
+    """dm/dq (a list) from J and its thin SVD J = U diag(s) Vt, s a list
+    (see `manipulability_joint_gradient` for the derivation).
 
     With W = U diag(m / s_k) Vt (6, n), dm/dq_i = sum_j W_j . dJ_j/dq_i
     over the columns j, and by the rules of `jacobian_derivative` and the
     triple product a . (b x c) = b . (c x a) = c . (a x b):
 
-        dm/dq_i = Jw_i . sum_{j >= i} (Jv_j x Wv_j + Jw_j x Ww_j)
-                  + Jv_i . sum_{j < i} (Wv_j x Jw_j),
+        dm/dq_i = Jw_i . a_i + Jv_i . b_i,
+        a_i = sum_{j >= i} (Jv_j x Wv_j + Jw_j x Ww_j),
+        b_i = sum_{j < i} (Wv_j x Jw_j),
 
-    O(n) with running sums, without forming the (n, 6, n) derivative.
+    O(n) with running sums, without forming the (n, 6, n) derivative; in
+    plain floats, which for a few columns beat any sequence of numpy calls.
     """
     W = (U * _products_of_others(s)) @ Vt  # m / s_k, with no division
-    n = J.shape[1]
-    Jv, Jw, Wv, Ww = J[:3], J[3:], W[:3], W[3:]
-    # Jv x Wv, Jw x Ww and Wv x Jw in one product of (3, 3n) arrays.
-    crosses = _cross(np.concatenate([Jv, Jw, Wv], axis=1),
-                     np.concatenate([Wv, Ww, Jw], axis=1))
-    after = crosses[:, :n] + crosses[:, n:2 * n]
-    after = np.cumsum(after[:, ::-1], axis=1)[:, ::-1]
-    before = np.zeros_like(Jv)
-    np.cumsum(crosses[:, 2 * n:-1], axis=1, out=before[:, 1:])
-    return np.sum(Jw * after + Jv * before, axis=0)
+    J0, J1, J2, J3, J4, J5 = J.tolist()
+    W0, W1, W2, W3, W4, W5 = W.tolist()
+    n = len(J0)
+    gradient = [0.0] * n
+    ax = ay = az = 0.0
+    for j in range(n - 1, -1, -1):  # a_j, summed from the last column
+        vx, vy, vz, wx, wy, wz = J0[j], J1[j], J2[j], J3[j], J4[j], J5[j]
+        Vx, Vy, Vz, Wx, Wy, Wz = W0[j], W1[j], W2[j], W3[j], W4[j], W5[j]
+        ax += (vy * Vz - vz * Vy) + (wy * Wz - wz * Wy)
+        ay += (vz * Vx - vx * Vz) + (wz * Wx - wx * Wz)
+        az += (vx * Vy - vy * Vx) + (wx * Wy - wy * Wx)
+        gradient[j] = (wx, wy, wz, ax, ay, az)
+    bx = by = bz = 0.0
+    for i in range(n):  # b_i, summed from the first column
+        wx, wy, wz, ax, ay, az = gradient[i]
+        vx, vy, vz = J0[i], J1[i], J2[i]
+        gradient[i] = ((wx * ax + vx * bx) + (wy * ay + vy * by)
+                       + (wz * az + vz * bz))
+        Vx, Vy, Vz = W0[i], W1[i], W2[i]
+        bx += Vy * wz - Vz * wy
+        by += Vz * wx - Vx * wz
+        bz += Vx * wy - Vy * wx
+    return gradient
 
 
 def _penalty_and_gradient(q, lower, upper, k_j):
-    """P_jnt and dP_jnt/dq for checked inputs (see the public functions)."""
-    q = np.minimum(np.maximum(q, lower), upper)  # np.clip, faster
-    span2 = (upper - lower) ** 2
-    factors = (q - lower) * (upper - q) / span2
-    factor_slopes = (upper + lower - 2.0 * q) / span2
-    product = math.prod(factors.tolist())
+    """P_jnt and dP_jnt/dq (a list) for checked inputs (see the public
+    functions): q, lower and upper lists of floats, k_j a float. Plain
+    floats: a handful of them, for which numpy calls cost more than the
+    arithmetic."""
+    factors, slopes = [], []
+    for q_i, l_i, u_i in zip(q, lower, upper, strict=True):
+        if q_i < l_i:
+            q_i = l_i
+        elif q_i > u_i:
+            q_i = u_i
+        span2 = (u_i - l_i) * (u_i - l_i)
+        factors.append((q_i - l_i) * (u_i - q_i) / span2)
+        slopes.append((u_i + l_i - 2.0 * q_i) / span2)
+    product = math.prod(factors)
     penalty = -math.expm1(-k_j * product)
-    gradient = (
-        k_j * math.exp(-k_j * product)
-        * factor_slopes * _products_of_others(factors)
-    )
+    scale = k_j * math.exp(-k_j * product)
+    gradient = [scale * slope * others for slope, others
+                in zip(slopes, _products_of_others(factors), strict=True)]
     return penalty, gradient
 
 
@@ -201,7 +233,7 @@ def joint_limit_penalty(q, lower, upper, k_j=DEFAULT_JOINT_LIMIT_GAIN):
     """
     q, lower, upper = _as_limits(q, lower, upper)
     k_j = positive("k_j", k_j)
-    return float(_penalty_and_gradient(q, lower, upper, k_j)[0])
+    return _penalty_and_gradient(q, lower, upper, k_j)[0]
 
 
 def capability(J_a, q, lower, upper, k_j=DEFAULT_JOINT_LIMIT_GAIN):
@@ -353,7 +385,8 @@ def manipulability_joint_gradient(J_a):
         (n,) array dm/dq, in units of m (metres^3) per rad.
     """
     J = _as_jacobian(J_a, rows=6)
-    return _manipulability_gradient(J, *_svd(J))
+    U, s, Vt = _svd(J)
+    return np.array(_manipulability_gradient(J, U, s.tolist(), Vt))
 
 
 def joint_limit_penalty_gradient(q, lower, upper,
@@ -379,16 +412,20 @@ def joint_limit_penalty_gradient(q, lower, upper,
     """
     q, lower, upper = _as_limits(q, lower, upper)
     k_j = positive("k_j", k_j)
-    return _penalty_and_gradient(q, lower, upper, k_j)[1]
+    return np.array(_penalty_and_gradient(q, lower, upper, k_j)[1])
 
 
 def _capability_and_gradient(J, q, lower, upper, k_j):
-    """C_m, dC_m/dq and the SVD of J for checked inputs."""
+    """C_m, dC_m/dq (a list) and the SVD (U, s as a list, Vt) of J for
+    checked inputs (q, lower, upper: sequences of floats, lists the
+    fastest)."""
     U, s, Vt = _svd(J)
-    m = math.prod(s.tolist())
+    s = s.tolist()
+    m = math.prod(s)
     penalty, penalty_gradient = _penalty_and_gradient(q, lower, upper, k_j)
-    gradient = (penalty * _manipulability_gradient(J, U, s, Vt)
-                + m * penalty_gradient)
+    gradient = [penalty * dm + m * dp for dm, dp in zip(
+        _manipulability_gradient(J, U, s, Vt), penalty_gradient,
+        strict=True)]
     return m * penalty, gradient, (U, s, Vt)
 
 
@@ -411,7 +448,7 @@ def capability_joint_gradient(J_a, q, lower, upper,
     J = _as_jacobian(J_a, rows=6)
     q, lower, upper = _as_limits(q, lower, upper, J.shape[1])
     k_j = positive("k_j", k_j)
-    return _capability_and_gradient(J, q, lower, upper, k_j)[1]
+    return np.array(_capability_and_gradient(J, q, lower, upper, k_j)[1])
 
 
 def capability_gradient(J_a, q, lower, upper, k_j=DEFAULT_JOINT_LIMIT_GAIN,
@@ -457,18 +494,18 @@ def capability_gradient(J_a, q, lower, upper, k_j=DEFAULT_JOINT_LIMIT_GAIN,
 
 def _cartesian_gradient(joint_gradient, svd, lambda_max, eps):
     """g = (J J^T + lambda^2 I)^-1 J dC_m/dq through the thin SVD
-    svd = (U, s, Vt) of J (see capability_gradient)."""
+    svd = (U, s, Vt) of J, s a list (see capability_gradient);
+    joint_gradient a sequence of n floats. The gains s_k / (s_k^2 +
+    lambda^2) in plain floats (0 for a zero denominator)."""
     U, s, Vt = svd
     s_min = s[-1]
     lambda2 = (lambda_max**2 * (1.0 - (s_min / eps) ** 2)
                if s_min < eps else 0.0)
-    denominators = s**2 + lambda2
-    if denominators.min() > 0.0:
-        gains = s / denominators
-    else:
-        safe = np.where(denominators > 0.0, denominators, 1.0)
-        gains = np.where(denominators > 0.0, s / safe, 0.0)
-    return U @ (gains * (Vt @ joint_gradient))
+    gains = []
+    for s_k in s:
+        denominator = s_k * s_k + lambda2
+        gains.append(s_k / denominator if denominator > 0.0 else 0.0)
+    return U @ (np.array(gains) * (Vt @ np.array(joint_gradient)))
 
 
 def capability_terms_unchecked(J_a, q, lower, upper, k_j, damping,
@@ -478,9 +515,10 @@ def capability_terms_unchecked(J_a, q, lower, upper, k_j, damping,
     whose parameters are checked once at construction.
 
     The same values as `capability` and `capability_gradient` (to
-    rounding); nothing is checked here: J_a (6, n) with n >= 6, q, lower
-    and upper (n,) finite float arrays with lower < upper, k_j > 0,
-    damping >= 0 and damping_threshold > 0.
+    rounding); nothing is checked here: J_a (6, n) float array with
+    n >= 6, q, lower and upper (n,) finite floats (arrays or, the
+    fastest, lists) with lower < upper, k_j > 0, damping >= 0 and
+    damping_threshold > 0.
 
     Returns:
         (C_m, g): C_m as a float and g = grad_x C_m (6,).

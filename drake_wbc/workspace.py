@@ -68,11 +68,16 @@ as deep as the home reach.
 Every function here takes float values or AutoDiffXd scalars (numpy object
 arrays) alike: only elementwise numpy, comparisons and Python branches, no
 conversion to float, so the Drake systems over them can be converted to
-AutoDiffXd. Parameters are plain floats, checked.
+AutoDiffXd. Parameters are plain floats, checked. The one exception is
+the per-tick path of the controller in double, `adaptive_weighting_factors`
+(with its constants from `adaptive_workspace`): the same formulas as
+`local_workspace_state`, in plain Python floats.
 """
 
 import enum
+import math
 import numbers
+import operator
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -518,3 +523,167 @@ def _open_unit(name, value):
             "lie in (0, 1) (0 is locomotion, 1 manipulation)"
         )
     return number
+
+
+# ----------------------------------------------------------------------------
+# The per-tick path of the intuitive pHRI mode, in plain floats
+# ----------------------------------------------------------------------------
+
+class AdaptiveWorkspace(NamedTuple):
+    """The constants of the intuitive pHRI mode, checked once (see
+    `adaptive_workspace`), as plain floats for
+    `adaptive_weighting_factors`.
+
+    Attributes:
+        capability_upper, capability_lower: C_m^u > C_m^l.
+        extent: (d^l, d^u) in m.
+        deflection: (phi^l, phi^u) in rad.
+        R_ab_rows: ^aR_b = R_ba^T as three rows of three floats.
+        R_ba: (3, 3) ^bR_a, checked.
+        origin: (3,) origin of T_a in T_b (m), checked.
+        workspace: the checked LocalWorkspace.
+    """
+
+    capability_upper: float
+    capability_lower: float
+    extent: tuple
+    deflection: tuple
+    R_ab_rows: tuple
+    R_ba: np.ndarray
+    origin: np.ndarray
+    workspace: LocalWorkspace
+
+
+def adaptive_workspace(capability_upper, capability_lower, workspace=None,
+                       R_ba=None, arm_base_in_base=None):
+    """Checks the parameters of `local_workspace_state` once, for
+    `adaptive_weighting_factors`.
+
+    Args:
+        capability_upper, capability_lower: C_m^u > C_m^l of eq.
+            (transition).
+        workspace: LocalWorkspace; the paper's if None.
+        R_ba: (3, 3) ^bR_a, or None for the identity.
+        arm_base_in_base: (3,) origin of T_a in T_b (m), or None for 0.
+
+    Returns:
+        AdaptiveWorkspace.
+    """
+    lower, upper = _ordered("capability_lower", capability_lower,
+                            "capability_upper", capability_upper)
+    ws = checked_instance("workspace", workspace, LocalWorkspace,
+                          LocalWorkspace)
+    R = np.eye(3) if R_ba is None else rotation_matrix("R_ba", R_ba)
+    origin = (np.zeros(3) if arm_base_in_base is None
+              else as_vector("arm_base_in_base", arm_base_in_base, 3))
+    return AdaptiveWorkspace(
+        capability_upper=upper,
+        capability_lower=lower,
+        extent=(float(ws.extent_lower), float(ws.extent_upper)),
+        deflection=(float(ws.deflection_lower), float(ws.deflection_upper)),
+        R_ab_rows=tuple(tuple(row) for row in R.T.tolist()),
+        R_ba=R,
+        origin=origin,
+        workspace=ws,
+    )
+
+
+def _alpha(value, upper, lower):
+    """alpha of eq. (transition) and its derivative at a float value, as
+    `smooth_transition` and `smooth_transition_derivative`."""
+    if value <= lower:
+        return 1.0, 0.0
+    if value >= upper:
+        return 0.0, 0.0
+    width = upper - lower
+    return (0.5 * (1.0 + math.cos(math.pi * (value - lower) / width)),
+            -0.5 * math.pi / width * math.sin(math.pi * (value - lower)
+                                               / width))
+
+
+def _float_leads(covector, V, sign):
+    """`_leads` for sequences of floats of one length."""
+    product = sum(map(operator.mul, covector, V))
+    if not sign * product > 0.0:
+        return False
+    scale = (sum(map(operator.mul, covector, covector))
+             * sum(map(operator.mul, V, V)))
+    return product * product > DEACTIVATION_TOLERANCE**2 * scale
+
+
+def adaptive_weighting_factors(p_ee_in_base, V_ee, C_m, grad_C_m,
+                               constants):
+    """(sigma_xy, sigma_phi) of `local_workspace_state` for float inputs,
+    in plain floats: the per-tick path of the controller's
+    WorkspaceAdapter in the intuitive pHRI mode (Sec. IV-C).
+
+    The same values as `local_workspace_state`, from the same formulas
+    (see its docstring and the module's) and the same elementary
+    functions, to the last bit but for the commanded twist in T_a and the
+    dot products of the deactivation tests (summed in another order,
+    which can only matter within the tests' roundoff guard). The
+    position in T_a comes from the same numpy product as there: the sign
+    of its y coordinate decides, at phi = pi, which way phi grows, which
+    the deactivation's rate test reads. The constants were
+    checked by `adaptive_workspace`; the inputs are not checked entry by
+    entry, but inputs that are not all finite are handed to
+    `local_workspace_state`, which names the bad one in its ValueError.
+
+    Args:
+        p_ee_in_base: (3,) float array, the end-effector position in T_b
+            (m).
+        V_ee: six floats, the commanded twist [v; w] in T_b.
+        C_m: the capability of movement, a float.
+        grad_C_m: six floats, grad_x C_m (T_a, ordered like V_a).
+        constants: AdaptiveWorkspace.
+
+    Returns:
+        (sigma_xy, sigma_phi), floats in [0, 1].
+    """
+    c = constants
+    p = np.asarray(p_ee_in_base, dtype=float)
+    if not math.isfinite(C_m + sum(p.tolist()) + sum(V_ee) + sum(grad_C_m)):
+        state = local_workspace_state(
+            p_ee_in_base, V_ee, C_m, grad_C_m, c.capability_upper,
+            c.capability_lower, c.workspace, c.R_ba, c.origin)
+        return float(state.sigma_xy), float(state.sigma_phi)
+    x, y, _ = (c.R_ba.T @ (p - c.origin)).tolist()
+    rows = c.R_ab_rows
+    V_a = [r[0] * V_ee[k] + r[1] * V_ee[k + 1] + r[2] * V_ee[k + 2]
+           for k in (0, 3) for r in rows]
+    d_squared = x * x + y * y
+    if d_squared <= AXIS_TOLERANCE**2:  # on the axis: no gradients
+        d = 0.0 if d_squared == 0.0 else math.sqrt(d_squared)
+        phi = grad_d_x = grad_d_y = grad_phi_x = grad_phi_y = 0.0
+    else:
+        d = math.sqrt(d_squared)
+        # numpy's arctan2, as deflection: math.atan2 differs in the last
+        # bit for some arguments, which the steep ramps of f would show.
+        phi = abs(float(np.arctan2(y, x)))
+        grad_d_x, grad_d_y = x / d, y / d
+        sign = 0.0 if y == 0.0 else (1.0 if y > 0.0 else -1.0)
+        grad_phi_x = -sign * y / d_squared
+        grad_phi_y = sign * x / d_squared
+    P_d, dP_d = _alpha(d, c.extent[1], c.extent[0])
+    P_phi, dP_phi = _alpha(phi, c.deflection[1], c.deflection[0])
+    # The penalized capabilities and their gradients (penalized_capability).
+    scale_phi = C_m * dP_phi
+    scale_d = C_m * P_phi * dP_d
+    gradient_phi = [P_phi * g for g in grad_C_m]
+    gradient_phi[0] += scale_phi * grad_phi_x
+    gradient_phi[1] += scale_phi * grad_phi_y
+    gradient_d = [P_d * g for g in gradient_phi]
+    gradient_d[0] += scale_d * grad_d_x
+    gradient_d[1] += scale_d * grad_d_y
+    upper, lower = c.capability_upper, c.capability_lower
+    f_xy = 1.0 - _alpha(C_m * P_d * P_phi, upper, lower)[0]
+    f_phi = 1.0 - _alpha(C_m * P_phi, upper, lower)[0]
+    # The deactivation strategy (deactivated).
+    linear = V_a[:3]
+    sigma_xy = (1.0 if _float_leads(gradient_d, V_a, 1.0)
+                or _float_leads((grad_d_x, grad_d_y, 0.0), linear, -1.0)
+                else f_xy)
+    sigma_phi = (1.0 if _float_leads(gradient_phi, V_a, 1.0)
+                 or _float_leads((grad_phi_x, grad_phi_y, 0.0), linear, -1.0)
+                 else f_phi)
+    return sigma_xy, sigma_phi

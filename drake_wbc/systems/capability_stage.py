@@ -195,7 +195,8 @@ def ArmCapability_(T):
         SVD, so the float computation is wrapped in
         scalar_support.through_float_function: the values are exact and
         the derivatives w.r.t. q_a come from central differences (about
-        1e-9 relative).
+        1e-9 relative). For double (chosen once, at construction) the
+        cache entry calls `evaluate` directly.
 
         Args:
             params: ArmCapabilityParameters; the paper's band
@@ -211,9 +212,16 @@ def ArmCapability_(T):
                 ArmCapabilityParameters))
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         ArmKinematics)
+            # The per-tick constants, as plain floats (see evaluate).
+            p = self.params
+            self._limits = (self.arm.lower.tolist(), self.arm.upper.tolist())
+            self._constants = (p.joint_limit_gain, p.gradient_damping,
+                               p.gradient_damping_threshold)
+            self._band = (p.band.upper, p.band.lower)
             self._input = self.DeclareVectorInputPort("arm_position", 6)
             entry = declare_cached_vector(
-                self, "arm kinematics and capability", self._calc,
+                self, "arm kinematics and capability",
+                self._calc_float if T is float else self._calc,
                 {self._input.ticket()})
             declare_slices(self, entry, _CAPABILITY_OUTPUTS)
 
@@ -227,25 +235,26 @@ def ArmCapability_(T):
 
             One evaluation of the kinematics and one SVD of J_a
             (capability.capability_terms_unchecked): the parameters were
-            checked at construction and q_a comes from a port of size 6.
+            checked at construction (and kept as plain floats), q_a is
+            checked (shape (6,), finite) by ArmKinematics.evaluate.
             """
-            p = self.params
             values = self.arm.evaluate(q_a)
+            q = np.asarray(q_a, dtype=float).tolist()
             C_m, gradient = capability.capability_terms_unchecked(
-                values.J_a, q_a, self.arm.lower, self.arm.upper,
-                p.joint_limit_gain, p.gradient_damping,
-                p.gradient_damping_threshold)
+                values.J_a, q, *self._limits, *self._constants)
             result = np.empty(11)
             result[:3] = values.p_ee_in_base
             result[3] = C_m
             result[4:10] = gradient
-            result[10] = capability.transition_unchecked(
-                C_m, p.band.upper, p.band.lower)
+            result[10] = capability.transition_unchecked(C_m, *self._band)
             return result
 
         def _calc(self, context):
             return through_float_function(self.evaluate,
                                           self._input.Eval(context))
+
+        def _calc_float(self, context):
+            return self.evaluate(self._input.Eval(context))
 
     return Impl
 
@@ -321,7 +330,10 @@ def WorkspaceAdapter_(T):
         C_m^(d,phi) or lead back (d_dot, phi_dot < 0), else f (both
         tests beyond a roundoff guard, workspace.DEACTIVATION_TOLERANCE).
         sigma is then discontinuous where the deactivation switches, as
-        in the paper.
+        in the paper. For double (chosen once, at construction) the
+        intuitive pHRI mode takes workspace.adaptive_weighting_factors,
+        the same formulas in plain floats with the parameters checked at
+        construction; AutoDiffXd takes local_workspace_state.
 
         Args:
             params: WorkspaceAdapterParameters; loco-manipulation with
@@ -342,8 +354,14 @@ def WorkspaceAdapter_(T):
                 ("end_effector_position", 3), ("end_effector_velocity", 6),
                 ("capability", 1), ("capability_gradient", 6)))
             adaptive = self.params.mode is MotionMode.INTUITIVE_PHRI
+            p = self.params
+            self._constants = workspace.adaptive_workspace(
+                p.band.upper, p.band.lower, p.workspace, self.R_ba,
+                self.arm_base_position)
+            self._input_list = list(self._inputs.values())
             entry = declare_cached_vector(
-                self, "weighting factors", self._calc,
+                self, "weighting factors",
+                self._calc_float if adaptive and T is float else self._calc,
                 tickets(self._inputs.values()) if adaptive
                 else {self.nothing_ticket()})
             declare_slices(self, entry, (("sigma_xy", slice(0, 1)),
@@ -368,6 +386,13 @@ def WorkspaceAdapter_(T):
                 p.band.upper, p.band.lower, p.workspace, self.R_ba,
                 self.arm_base_position)
             return np.array([state.sigma_xy, state.sigma_phi])
+
+        def _calc_float(self, context):
+            position, velocity, C_m, gradient = (
+                port.Eval(context) for port in self._input_list)
+            return np.array(workspace.adaptive_weighting_factors(
+                position, velocity.tolist(), float(C_m[0]),
+                gradient.tolist(), self._constants))
 
     return Impl
 
