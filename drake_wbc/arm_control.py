@@ -38,10 +38,13 @@ Numpy only: the Drake system (drake_wbc.systems.ArmCartesianVelocityController)
 calls this in double and gives the result its derivatives for AutoDiffXd.
 """
 
+import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
+from scipy.linalg.lapack import dgesdd as _gesdd
+from scipy.linalg.lapack import dgesv as _gesv
 
 from drake_wbc.validation import (
     as_matrix,
@@ -286,10 +289,10 @@ def damped_least_squares(J_a, V_a, damping):
     return _damped_solve(U, s, Vt, V, lambda_)
 
 
-def _braking_rate(distance, time_step, acceleration_limit):
-    """The largest rate towards an edge `distance` away (> 0) from which
+def _braking_rate(distance, step, step_h):
+    """The largest rate towards an edge `distance` away (>= 0) from which
     the joint can still stop at the edge, rates changing by at most
-    a h a step.
+    step = a h a step (step_h = step h); floats.
 
     Braking from rate v = (m + f) a h (m an integer, 0 < f <= 1) at the
     full deceleration runs through v, v - a h, ..., f a h, then 0, and
@@ -299,11 +302,10 @@ def _braking_rate(distance, time_step, acceleration_limit):
     step later is exactly a h lower: braking along it never needs more
     than the acceleration limit, and S(v) >= v h keeps q + v h inside.
     """
-    step = acceleration_limit * time_step
-    D = distance / (step * time_step)
-    r = 0.5 * (np.sqrt(1.0 + 8.0 * D) - 1.0)  # r (r + 1) / 2 = D
-    m = np.maximum(np.ceil(r) - 1.0, 0.0)
-    f = np.clip(D / (m + 1.0) - 0.5 * m, 0.0, 1.0)
+    D = distance / step_h
+    r = 0.5 * (math.sqrt(1.0 + 8.0 * D) - 1.0)  # r (r + 1) / 2 = D
+    m = max(float(math.ceil(r)) - 1.0, 0.0)
+    f = min(max(D / (m + 1.0) - 0.5 * m, 0.0), 1.0)
     return (m + f) * step
 
 
@@ -342,27 +344,39 @@ def joint_position_velocity_bounds(q, lower, upper, time_step,
     if acceleration_limit is not None:
         acceleration_limit = _positive_vector(
             "acceleration_limit", acceleration_limit, q.size)
-    return _position_bounds(q, lower, upper, h, margin, acceleration_limit)
+    bounds = _PositionBounds(lower, upper, h, margin, acceleration_limit)
+    low, high = [], []
+    for i, q_i in enumerate(q.tolist()):
+        low.append(-bounds.rate(i, q_i - bounds.lower[i] - margin))
+        high.append(bounds.rate(i, bounds.upper_band[i] - q_i))
+    return np.array(low), np.array(high)
 
 
-def _position_bounds(q, lower, upper, h, margin, acceleration_limit):
-    """`joint_position_velocity_bounds` on checked arguments
-    (acceleration_limit None or (n,))."""
-    distances = np.stack([upper - margin - q, q - lower - margin])
-    distances = np.maximum(distances, 0.0)
-    rates = distances / h
-    if acceleration_limit is not None:
-        rates = np.minimum(rates, _braking_rate(distances, h,
-                                                acceleration_limit))
-    return -rates[1], rates[0]
+class _PositionBounds:
+    """The joint-limit bounds of `joint_position_velocity_bounds`, one
+    joint and one edge at a time, for arguments already checked: lower,
+    upper (n,) float arrays, h and margin floats, acceleration_limit None
+    or an (n,) float array."""
 
+    def __init__(self, lower, upper, h, margin, acceleration_limit):
+        self.h, self.margin = h, margin
+        self.lower, self.upper = lower.tolist(), upper.tolist()
+        # The band's upper edges, formed as upper - margin - q is.
+        self.upper_band = (upper - margin).tolist()
+        self.acceleration = acceleration_limit is not None
+        if self.acceleration:
+            step = acceleration_limit * h
+            self.step, self.step_h = step.tolist(), (step * h).tolist()
 
-def _uniform_scale(vector, limits):
-    """The largest factor in (0, 1] with |factor * vector_i| <= limits_i."""
-    big = np.abs(vector) > limits
-    if not np.any(big):
-        return 1.0
-    return float(np.min(limits[big] / np.abs(vector[big])))
+    def rate(self, i, distance):
+        """The bound on |q_dot_i| towards an edge `distance` away (rest
+        at or beyond it): min(d / h, _braking_rate(d)), d >= 0."""
+        distance = max(distance, 0.0)
+        rate = distance / self.h
+        if self.acceleration:
+            rate = min(rate, _braking_rate(distance, self.step[i],
+                                           self.step_h[i]))
+        return rate
 
 
 def joint_velocity_for_twist(J_a, V_a, q, lower, upper, velocity_limit,
@@ -431,40 +445,158 @@ def joint_velocity_for_twist(J_a, V_a, q, lower, upper, velocity_limit,
 def joint_velocity_for_twist_unchecked(J, V, q, lower, upper,
                                        velocity_limit, h, lambda_max, eps,
                                        margin, acceleration_limit, previous):
-    """`joint_velocity_for_twist` without its argument checks, for the
-    controller's tick (its parameters are checked once, when it is built):
-    float arrays of the sizes given there, velocity_limit (n,),
-    acceleration_limit None or (n,), previous (n,) when it is not None."""
-    U, s, Vt = np.linalg.svd(J, full_matrices=False)
-    s_min = float(s[-1])
-    # singularity_damping, inline.
-    lambda_ = (0.0 if s_min >= eps
-               else float(lambda_max * (1.0 - (s_min / eps) ** 2)))
-    q_dot = _damped_solve(U, s, Vt, V, lambda_)
+    """`joint_velocity_for_twist` without its argument checks: float
+    arrays of the sizes given there, velocity_limit (n,),
+    acceleration_limit None or (n,), previous (n,) when it is not None.
+    A controller that keeps its limits calls a `TwistSolver` instead."""
+    return TwistSolver(lower, upper, velocity_limit, h, lambda_max, eps,
+                       margin, acceleration_limit).solve(J, V, q, previous)
 
-    low, high = _position_bounds(q, lower, upper, h, margin,
-                                 acceleration_limit)
-    bounded = np.clip(q_dot, low, high)
-    limited_joints = bounded != q_dot
-    q_dot = bounded
 
-    scale = _uniform_scale(q_dot, velocity_limit)
-    q_dot = scale * q_dot
+class TwistSolver(_PositionBounds):
+    """`joint_velocity_for_twist` with its limits and parameters checked
+    once, for the controller's tick: after the least-squares solve, the
+    limits are applied joint by joint in plain floats, with the same
+    operations as `joint_position_velocity_bounds` and the uniform
+    scalings, so that the command is the same to the last bit given the
+    same least-squares q_dot. A joint's bound is only computed on the side
+    it moves towards (the other bound cannot cut it).
 
-    acceleration_scale = 1.0
-    if acceleration_limit is not None:
-        change = q_dot - previous
-        acceleration_scale = _uniform_scale(change, acceleration_limit * h)
-        q_dot = previous + acceleration_scale * change
-        bounded = np.clip(q_dot, low, high)
-        limited_joints |= bounded != q_dot
-        q_dot = bounded
+    At a regular point (s_min >= eps, J_a square) the least-squares
+    solution is J_a^-1 V_a, taken by an LU solve after the singular values
+    alone; otherwise by the thin SVD, as `damped_least_squares`. Both give
+    the same q_dot to rounding.
 
-    return JointVelocityCommand(
-        q_dot=q_dot,
-        scale=scale,
-        acceleration_scale=acceleration_scale,
-        limited_joints=limited_joints,
-        damping=lambda_,
-        smallest_singular_value=s_min,
-    )
+    Args (checked by the caller, as joint_velocity_for_twist checks
+    them): lower, upper, velocity_limit (n,) float arrays; h, lambda_max,
+    eps, margin floats; acceleration_limit None or an (n,) float array.
+    """
+
+    def __init__(self, lower, upper, velocity_limit, h, lambda_max, eps,
+                 margin, acceleration_limit):
+        super().__init__(lower, upper, h, margin, acceleration_limit)
+        self.lambda_max, self.eps = lambda_max, eps
+        self._velocity_limit = velocity_limit.tolist()
+        # Beyond the distance `clear` from an edge a joint's bound is at
+        # least its velocity limit c (with a margin for rounding), so a
+        # rate of at most c towards it is not cut: d / h >= c for
+        # d >= c h and, braking, S(v) <= (v + a h / 2)^2 / (2 a) (the
+        # maximum of a h^2 (m + 1)(f + m / 2) over f at a given v) so
+        # that _braking_rate(d) >= c for d >= (c + a h / 2)^2 / (2 a).
+        clear = velocity_limit * h
+        if self.acceleration:
+            self._change_limit = self.step
+            clear = np.maximum(clear, (velocity_limit + 0.5 * self.h
+                                       * acceleration_limit) ** 2
+                               / (2.0 * acceleration_limit))
+        self._clear = (clear * (1.0 + 1e-9) + 1e-300).tolist()
+
+    def _bounded(self, q_dot, q, limited, bounds):
+        """q_dot (list) clipped to the position bounds at q (list), joint
+        by joint; sets limited[i] where it cuts. `bounds` remembers the
+        bounds computed, by (joint, side)."""
+        result = []
+        for i, (v, q_i) in enumerate(zip(q_dot, q, strict=True)):
+            if v > 0.0:
+                distance = self.upper_band[i] - q_i
+                if (v > self._velocity_limit[i]
+                        or distance < self._clear[i]):
+                    high = bounds.get((i, 1))
+                    if high is None:
+                        high = bounds[i, 1] = self.rate(i, distance)
+                    if v > high:
+                        v, limited[i] = high, True
+            elif v < 0.0:
+                distance = q_i - self.lower[i] - self.margin
+                if (-v > self._velocity_limit[i]
+                        or distance < self._clear[i]):
+                    low = bounds.get((i, 0))
+                    if low is None:
+                        low = bounds[i, 0] = -self.rate(i, distance)
+                    if v < low:
+                        v, limited[i] = low, True
+            result.append(v)
+        return result
+
+    def _least_squares(self, J, V):
+        """(q_dot, lambda, s_min) of the damped least squares."""
+        if J.shape[0] == J.shape[1]:
+            s, info = _singular_values(J)
+            if info == 0 and s[-1] >= self.eps:
+                x, info = _lu_solve(J, V)
+                if info == 0:
+                    return x, 0.0, float(s[-1])
+        U, s, Vt = np.linalg.svd(J, full_matrices=False)
+        s_min = float(s[-1])
+        # singularity_damping, inline.
+        lambda_ = (0.0 if s_min >= self.eps
+                   else float(self.lambda_max
+                              * (1.0 - (s_min / self.eps) ** 2)))
+        return _damped_solve(U, s, Vt, V, lambda_), lambda_, s_min
+
+    def solve_floats(self, J, V, q, previous):
+        """The command in floats: (q_dot, scale, acceleration_scale,
+        limited_joints, damping, smallest_singular_value) as in
+        JointVelocityCommand, with q_dot a list of floats and
+        limited_joints a list of bools. J (6, n) and V (6,) float arrays,
+        q and previous lists of n floats (previous ignored without an
+        acceleration limit)."""
+        x, lambda_, s_min = self._least_squares(J, V)
+        limited = [False] * len(q)
+        bounds = {}
+        q_dot = self._bounded(x.tolist(), q, limited, bounds)
+
+        scale = _scale_to(q_dot, self._velocity_limit)
+        if scale != 1.0:
+            q_dot = [scale * v for v in q_dot]
+
+        acceleration_scale = 1.0
+        if self.acceleration:
+            change = [v - p for v, p in zip(q_dot, previous, strict=True)]
+            acceleration_scale = _scale_to(change, self._change_limit)
+            if acceleration_scale != 1.0:
+                change = [acceleration_scale * c for c in change]
+            q_dot = self._bounded(
+                [p + c for p, c in zip(previous, change, strict=True)], q,
+                limited, bounds)
+        return q_dot, scale, acceleration_scale, limited, lambda_, s_min
+
+    def solve(self, J, V, q, previous):
+        """The JointVelocityCommand of joint_velocity_for_twist(J, V, q,
+        ..., previous_q_dot=previous): float arrays (previous None
+        without an acceleration limit)."""
+        q_dot, scale, acceleration_scale, limited, lambda_, s_min = (
+            self.solve_floats(J, V, q.tolist(),
+                              None if previous is None
+                              else previous.tolist()))
+        return JointVelocityCommand(
+            q_dot=np.array(q_dot),
+            scale=scale,
+            acceleration_scale=acceleration_scale,
+            limited_joints=np.array(limited),
+            damping=lambda_,
+            smallest_singular_value=s_min,
+        )
+
+
+def _scale_to(vector, limits):
+    """The largest factor in (0, 1] with |factor * vector_i| <= limits_i,
+    for lists of floats."""
+    scale = 1.0
+    for value, limit in zip(vector, limits, strict=True):
+        size = abs(value)
+        if size > limit:
+            scale = min(scale, limit / size)
+    return scale
+
+
+def _singular_values(J):
+    """(s descending, info) of a square float matrix, by LAPACK gesdd."""
+    _, s, _, info = _gesdd(J.T, compute_uv=0)  # J^T: no copy
+    return s, info
+
+
+def _lu_solve(J, V):
+    """(J^-1 V, info) by LAPACK gesv."""
+    _, _, x, info = _gesv(J, V)
+    return x, info

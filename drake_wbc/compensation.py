@@ -19,6 +19,8 @@ Twists are [linear; angular] (m/s; rad/s); the arm's are in T_a, the
 base's [vx_b, vy_b, wz_b] in T_b.
 """
 
+import math
+
 import numpy as np
 
 from drake_wbc.kinematics import twist_rotation
@@ -140,3 +142,50 @@ def robust_compensation(delta_V_b, J_b, R_ba, grad_C_m, alpha):
     dV_ee = -a * (P @ dV_a_req)
     dV_a_cmp = dV_a_req + dV_ee
     return dV_a_cmp, dV_ee
+
+
+def compensate_unchecked(V_a, delta_V_b, p_ee_in_base, R_ab, grad_C_m,
+                         alpha, tolerance=1e-12):
+    """V_a^ref and delta_V_ee of eqs. (compensation) and (deviation) for
+    float arguments already checked, in plain floats: the per-tick path
+    of the controller's RobustCompensator.
+
+    The same values as `robust_compensation` (to rounding), with
+    J_b delta_V_b = [dv_x - y dw_z, dv_y + x dw_z, 0, 0, 0, dw_z] of eq.
+    (2) and alpha P_Cm d = alpha g (g . d) / (g . g) written out; a
+    gradient of norm at most `tolerance` gives P_Cm = 0, as in
+    `gradient_projector`.
+
+    Args:
+        V_a: (6,) floats, the arm's distributed twist in T_a.
+        delta_V_b: (3,) floats V_b^flt - V_b in T_b.
+        p_ee_in_base: (3,) floats, p_ee in T_b (only x and y enter).
+        R_ab: ((3,), (3,), (3,)) rows of ^bR_a^T, i.e. ^aR_b, as floats.
+        grad_C_m: (6,) floats, grad_x C_m in T_a.
+        alpha: float s_c alpha in [0, 1].
+        tolerance: float >= 0.
+
+    Returns:
+        list of 12 floats: [V_a^ref (6); delta_V_ee (6)], both in T_a.
+    """
+    dvx, dvy, dwz = delta_V_b
+    x, y = p_ee_in_base[0], p_ee_in_base[1]
+    # J_b delta_V_b (eq. (2)), then delta_V_a^req = -R_ba^T J_b delta_V_b.
+    tx = dvx - y * dwz
+    ty = dvy + x * dwz
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R_ab
+    required = [-(r00 * tx + r01 * ty), -(r10 * tx + r11 * ty),
+                -(r20 * tx + r21 * ty), -(r02 * dwz), -(r12 * dwz),
+                -(r22 * dwz)]
+    g0, g1, g2, g3, g4, g5 = grad_C_m
+    g_squared = g0 * g0 + g1 * g1 + g2 * g2 + g3 * g3 + g4 * g4 + g5 * g5
+    if math.sqrt(g_squared) <= tolerance:
+        return [v + d for v, d in zip(V_a, required, strict=True)] + [
+            0.0] * 6
+    q0, q1, q2, q3, q4, q5 = required
+    factor = -alpha * (g0 * q0 + g1 * q1 + g2 * q2 + g3 * q3 + g4 * q4
+                       + g5 * q5) / g_squared
+    deviation = [factor * g0, factor * g1, factor * g2, factor * g3,
+                 factor * g4, factor * g5]
+    return [v + (d + e) for v, d, e in zip(V_a, required, deviation,
+                                           strict=True)] + deviation

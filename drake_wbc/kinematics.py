@@ -15,6 +15,8 @@ the end-effector point. V_ee is the end effector's velocity relative to
 the world, with its components expressed in T_b, eq. (1) and eq. (3).
 """
 
+import math
+
 import numpy as np
 
 from drake_wbc.validation import as_matrix, as_scalar, as_vector
@@ -39,8 +41,11 @@ def as_float_array(name, value, shape):
     Raises:
         ValueError: as validation.as_vector / as_matrix.
     """
+    # A sum of floats is finite only if every term is (a finite sum that
+    # overflows goes through the full check, which passes it).
     if (type(value) is np.ndarray and value.dtype == np.float64
-            and value.shape == shape and np.isfinite(value).all()):
+            and value.shape == shape
+            and math.isfinite(sum(value.ravel().tolist()))):
         return value
     if len(shape) == 1:
         return as_vector(name, value, shape[0])

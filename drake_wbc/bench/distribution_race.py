@@ -15,8 +15,9 @@ starts from the same kinematics (ArmKinematics.evaluate, as the
 controller's ArmCapability does each tick) and its time includes it.
 
 Contenders:
-- closed_form: the controller's own path (kinematics.whole_body_jacobian
-  and distribution.distribute, as MotionDistributor calls them).
+- closed_form: the controller's own path (distribution.distribute_aligned,
+  the plain-float form of distribution.distribute for R_ba = I, as
+  MotionDistributor calls it).
 - drake_diffik: Drake's DoDifferentialInverseKinematics (a QP solved
   with OSQP inside Drake) in the scaled input u = Q^-1/2 V_wb, where
   the weighted problem is its unweighted one: J = J_wb Q^1/2, joint
@@ -138,24 +139,36 @@ def _problem_data(arm, R_ba, problem):
 def closed_form(arm):
     """The controller's distribution, as its tick runs it
     (systems.MotionDistributor): the end effector from the plant
-    (ArmKinematics), whole_body_jacobian and distribute on their unchecked
-    paths (eqs. (1), (2), (wbsln), (wbccm)); the controller checks its
+    (ArmKinematics.evaluate, the same kinematics as every contender's),
+    then J_wb = [R_ba, J_b] and eqs. (wbsln)/(wbccm) on the unchecked
+    float path (distribution.distribute_aligned for R_ba = I, else
+    kinematics.whole_body_jacobian_unchecked and
+    distribution.distribute_unchecked); the controller checks its
     parameters once, when it is built, and the sigmas and k_n on each
     tick, as here."""
     R_ba = np.array(arm.R_ba, dtype=float)
+    aligned = np.array_equal(R_ba, np.eye(3))
     damping = distribution.DEFAULT_DAMPING
 
     def solve(problem):
         p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
+        sigma_xy, sigma_phi, k_n = (problem.sigma_xy, problem.sigma_phi,
+                                    problem.null_space_gain)
+        if not (0.0 <= sigma_xy <= 1.0 and 0.0 <= sigma_phi <= 1.0
+                and 0.0 <= k_n < np.inf):
+            in_closed_range("sigma_xy", sigma_xy, 0.0, 1.0)
+            in_closed_range("sigma_phi", sigma_phi, 0.0, 1.0)
+            non_negative("k_n", k_n)
+        V_n = [k_n * g for g in problem.capability_gradient.tolist()]
+        if aligned:
+            return distribution.distribute_aligned(
+                problem.end_effector_velocity, p_ee, sigma_xy, sigma_phi,
+                V_n, damping)
         J = kinematics.whole_body_jacobian_unchecked(None, p_ee, R_ba)
-        weights = distribution.weights_of(
-            in_closed_range("sigma_xy", problem.sigma_xy, 0.0, 1.0),
-            in_closed_range("sigma_phi", problem.sigma_phi, 0.0, 1.0))
-        V_n = np.zeros(9)
-        V_n[:6] = non_negative("k_n", problem.null_space_gain) * (
-            problem.capability_gradient)
         return distribution.distribute_unchecked(
-            J, problem.end_effector_velocity, weights, V_n, damping)
+            J, problem.end_effector_velocity,
+            distribution.weights_of(sigma_xy, sigma_phi),
+            np.array(V_n + [0.0, 0.0, 0.0]), damping)
 
     return solve
 

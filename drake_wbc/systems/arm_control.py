@@ -1,6 +1,8 @@
 """ArmCartesianVelocityController: the arm's twist to joint position
 commands as a Drake system."""
 
+import math
+
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import BasicVector_, LeafSystem_
@@ -8,8 +10,8 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.arm_control import (
     ArmControllerParameters,
+    TwistSolver,
     check_margin,
-    joint_velocity_for_twist_unchecked,
 )
 from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.scalar_support import through_float_function, value_of
@@ -129,6 +131,11 @@ def ArmCartesianVelocityController_(T):
             self._acceleration_limits = (
                 np.full(ARM_JOINT_COUNT, float(params.acceleration_limit))
                 if params.use_acceleration_limit else None)
+            self._solver = TwistSolver(
+                self.lower, self.upper, self.velocity_limits,
+                float(params.time_step), float(params.damping),
+                float(params.damping_threshold), float(params.margin),
+                self._acceleration_limits)
             self._input = self.DeclareVectorInputPort("arm_velocity",
                                                       TWIST_SIZE)
             self._hold = self.DeclareVectorInputPort("hold", 1)
@@ -162,33 +169,46 @@ def ArmCartesianVelocityController_(T):
             -> the next state [q_cmd, q_dot, limited] (13); with `hold`
             (or a V_a that is not finite) q_cmd stays, at rest."""
             z = np.asarray(state_and_input, dtype=float)
-            q = z[_Q]
-            previous = z[_Q_DOT]
-            V_a = z[_STATE_SIZE:]
-            if hold or not np.all(np.isfinite(V_a)):
-                limited = 0.0 if hold else 1.0
-                return np.concatenate([q, np.zeros(ARM_JOINT_COUNT),
-                                       [limited]])
-            params = self.params
-            command = joint_velocity_for_twist_unchecked(
-                self.kinematics.evaluate(q).J_a, V_a, q, self.lower,
-                self.upper, self.velocity_limits, params.time_step,
-                params.damping, params.damping_threshold, params.margin,
-                self._acceleration_limits, previous)
+            return self._next_state(z[_Q], z[_Q_DOT], z[_STATE_SIZE:], hold)
+
+        def _next_state(self, q, previous, V_a, hold):
+            """float_update on the state's parts and V_a (float arrays)."""
+            # A finite sum has finite terms; else check them one by one.
+            if hold or not (math.isfinite(sum(V_a.tolist()))
+                            or np.isfinite(V_a).all()):
+                state = np.zeros(_STATE_SIZE)
+                state[_Q] = q
+                state[_LIMITED] = 0.0 if hold else 1.0
+                return state
+            q_list = q.tolist()
+            q_dot, scale, acceleration_scale, limited_joints, _, _ = (
+                self._solver.solve_floats(
+                    self.kinematics.evaluate(q).J_a, V_a, q_list,
+                    previous.tolist()))
+            h = self.params.time_step
             # The bounds keep q in the band up to rounding; the clip makes
             # the joint limits exact.
-            return np.concatenate([
-                np.clip(q + params.time_step * command.q_dot, self.lower,
-                        self.upper),
-                command.q_dot,
-                [1.0 if command.limited else 0.0],
-            ])
+            state = [min(max(q_i + h * v, lower), upper)
+                     for q_i, v, lower, upper in zip(
+                         q_list, q_dot, self._solver.lower,
+                         self._solver.upper, strict=True)]
+            state += q_dot
+            state.append(1.0 if (scale < 1.0 or acceleration_scale < 1.0
+                                 or any(limited_joints)) else 0.0)
+            return np.array(state)
 
         def _update(self, context, discrete_state):
-            z = np.concatenate([self._state(context),
-                                self._input.Eval(context)])
+            if T is float:
+                hold = (self._hold.HasValue(context)
+                        and self._hold.Eval(context)[0] >= 0.5)
+                x = self._state(context)
+                discrete_state.set_value(self._next_state(
+                    x[_Q], x[_Q_DOT], self._input.Eval(context), hold))
+                return
             hold = (self._hold.HasValue(context)
                     and value_of(self._hold.Eval(context))[0] >= 0.5)
+            z = np.concatenate([self._state(context),
+                                self._input.Eval(context)])
             discrete_state.set_value(through_float_function(
                 lambda x: self.float_update(x, hold=hold), z))
 

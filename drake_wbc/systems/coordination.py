@@ -6,13 +6,14 @@ weighting factors come from ArmCapability and WorkspaceAdapter
 
 Both are stateless: their outputs follow directly from their inputs
 (direct feedthrough), neither sits on a feedback edge. The double systems
-run the math layer's unchecked paths (distribution.distribute_unchecked,
-compensate_unchecked below): their parameters and R_ba are checked once
-at construction, their inputs have the ports' sizes, and only the values
-that the ports cannot constrain (sigma, alpha, s_c, k_n) are checked each
-tick. The AutoDiffXd ones run the same formulas elementwise, with
-scalar_support.solve for the linear solve, so that their derivatives are
-exact.
+run the math layer's unchecked paths in plain floats
+(distribution.distribute_aligned for the usual mounting R_ba = I, else
+distribution.distribute_unchecked; compensation.compensate_unchecked):
+their parameters and R_ba are checked once at construction, their inputs
+have the ports' sizes, and only the values that the ports cannot
+constrain (sigma, alpha, s_c, k_n) are checked each tick. The AutoDiffXd
+ones run the same formulas elementwise, with scalar_support.solve for the
+linear solve, so that their derivatives are exact.
 """
 
 from dataclasses import dataclass, field
@@ -22,7 +23,13 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_wbc import capability, distribution, kinematics, workspace
+from drake_wbc import (
+    capability,
+    compensation,
+    distribution,
+    kinematics,
+    workspace,
+)
 from drake_wbc.robot_model import ArmKinematics
 from drake_wbc.scalar_support import solve, value_of
 from drake_wbc.systems.capability_stage import (
@@ -135,24 +142,6 @@ def compensate_any(delta_V_b, p_ee_in_base, R_ba, grad_C_m, alpha):
     return required + deviation, deviation
 
 
-def compensate_unchecked(delta_V_b, p_ee_in_base, R6, grad_C_m, alpha):
-    """compensation.robust_compensation for float arguments already
-    checked, R6 = kinematics.twist_rotation(R_ba) given: (delta_V_a^cmp,
-    delta_V_ee) of eqs. (wb_error) and (deviation), the same operations
-    in the same order, without the argument checks."""
-    J_b = np.zeros((6, 3))
-    J_b[0, 0] = J_b[1, 1] = J_b[5, 2] = 1.0
-    J_b[0, 2] = -p_ee_in_base[1]
-    J_b[1, 2] = p_ee_in_base[0]
-    required = -(R6.T @ (J_b @ delta_V_b))
-    norm = np.linalg.norm(grad_C_m)
-    if norm <= PROJECTOR_TOLERANCE:
-        return required + 0.0 * required, 0.0 * required
-    u = grad_C_m / norm
-    deviation = -alpha * (np.outer(u, u) @ required)
-    return required + deviation, deviation
-
-
 @dataclass
 class MotionDistributorParameters:
     """Parameters of MotionDistributor.
@@ -252,6 +241,13 @@ def MotionDistributor_(T):
                 ("sigma_phi", 1), ("end_effector_position", 3),
                 ("capability", 1), ("capability_gradient", 6),
                 ("null_space_gain", 1)))
+            (self._V_ee_port, self._sigma_xy_port, self._sigma_phi_port,
+             self._p_ee_port, _, self._gradient_port, _) = (
+                self._inputs.values())
+            # Float path in plain floats for the usual mounting, checked
+            # here once.
+            self._aligned = T is float and np.array_equal(self.R_ba,
+                                                          np.eye(3))
             entry = declare_cached_vector(
                 self, "whole-body input V_wb", self._calc,
                 tickets(self._inputs.values()))
@@ -284,6 +280,8 @@ def MotionDistributor_(T):
             return k_n * (1.0 if C_m <= band.upper else 0.0)
 
         def _calc(self, context):
+            if self._aligned:
+                return self._calc_aligned(context)
             value = {name: port.Eval(context)
                      for name, port in self._inputs.items()
                      if name != "null_space_gain"}
@@ -311,6 +309,21 @@ def MotionDistributor_(T):
             V_n = np.concatenate([k * g, g[:3] * 0.0])
             return distribute_any(J, V_ee, sigma_xy, sigma_phi, V_n,
                                   self.params.damping)
+
+        def _calc_aligned(self, context):
+            """_calc in double for R_ba = I (our robot): the same V_wb,
+            in plain floats (distribution.distribute_aligned)."""
+            sigma_xy = float(self._sigma_xy_port.Eval(context)[0])
+            sigma_phi = float(self._sigma_phi_port.Eval(context)[0])
+            if not (0.0 <= sigma_xy <= 1.0 and 0.0 <= sigma_phi <= 1.0):
+                _unit_interval("sigma_xy", sigma_xy)
+                _unit_interval("sigma_phi", sigma_phi)
+            k = float(self.null_space_gain(context))
+            g = self._gradient_port.Eval(context).tolist()
+            return distribution.distribute_aligned(
+                self._V_ee_port.Eval(context),
+                self._p_ee_port.Eval(context), sigma_xy, sigma_phi,
+                [k * e for e in g], self.params.damping)
 
     return Impl
 
@@ -394,12 +407,16 @@ def RobustCompensator_(T):
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         shared_arm_kinematics)
             self.R_ba = np.array(self.arm.R_ba, dtype=float)
-            self._R6 = kinematics.twist_rotation(self.R_ba)
+            kinematics.twist_rotation(self.R_ba)  # checks R_ba
+            self._R_ab = tuple(tuple(row) for row in self.R_ba.T.tolist())
             self._inputs = declare_inputs(self, (
                 ("arm_velocity", 6), ("base_velocity", 3),
                 ("filtered_base_velocity", 3), ("end_effector_position", 3),
                 ("capability_gradient", 6), ("alpha", 1),
                 ("compensation_switch", 1)))
+            (self._V_a_port, self._V_b_port, self._V_b_flt_port,
+             self._p_ee_port, self._gradient_port, self._alpha_port,
+             self._switch_port) = self._inputs.values()
             entry = declare_cached_vector(
                 self, "compensated arm twist and deviation", self._calc,
                 tickets(self._inputs.values()))
@@ -413,6 +430,8 @@ def RobustCompensator_(T):
             self.params = other.params
 
         def _calc(self, context):
+            if T is float:
+                return self._calc_float(context)
             value = {name: port.Eval(context)
                      for name, port in self._inputs.items()
                      if name != "compensation_switch"}
@@ -424,13 +443,26 @@ def RobustCompensator_(T):
                             value["filtered_base_velocity"])
             p = value["end_effector_position"]
             g = value["capability_gradient"]
-            if T is float:
-                cmp, deviation = compensate_unchecked(
-                    V_b_flt - V_b, p, self._R6, g, alpha)
-            else:
-                cmp, deviation = compensate_any(V_b_flt - V_b, p, self.R_ba,
-                                                g, alpha)
+            cmp, deviation = compensate_any(V_b_flt - V_b, p, self.R_ba, g,
+                                            alpha)
             return np.concatenate([value["arm_velocity"] + cmp, deviation])
+
+        def _calc_float(self, context):
+            """_calc in double, in plain floats
+            (compensation.compensate_unchecked): the same values."""
+            s_c = optional_scalar(self._switch_port, context,
+                                  self.params.compensation_switch)
+            alpha = float(self._alpha_port.Eval(context)[0])
+            if not (0.0 <= s_c <= 1.0 and 0.0 <= alpha <= 1.0):
+                _unit_interval("compensation_switch", s_c)
+                _unit_interval("alpha", alpha)
+            delta_V_b = (self._V_b_flt_port.Eval(context)
+                         - self._V_b_port.Eval(context))
+            return np.array(compensation.compensate_unchecked(
+                self._V_a_port.Eval(context).tolist(), delta_V_b.tolist(),
+                self._p_ee_port.Eval(context).tolist(), self._R_ab,
+                self._gradient_port.Eval(context).tolist(),
+                float(s_c) * alpha, PROJECTOR_TOLERANCE))
 
     return Impl
 
