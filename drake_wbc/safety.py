@@ -172,6 +172,10 @@ def check_points(points):
         the number of rows dropped, and VALID or a MALFORMED InputCheck
         (then kept is empty).
     """
+    if (type(points) is np.ndarray and points.dtype == np.float64
+            and points.ndim == 2 and points.shape[1] == 2
+            and np.isfinite(points).all()):
+        return points, 0, VALID
     try:
         array = np.asarray(points, dtype=float)
     except (TypeError, ValueError):
@@ -347,7 +351,8 @@ STATUS_FIELDS = ("stopped", "invalid", "reason", "input", "entry", "value",
   NaN or an infinite coordinate; not a fault).
 """
 
-_FIELD = {name: i for i, name in enumerate(STATUS_FIELDS)}
+(_STOPPED, _INVALID, _REASON, _INPUT, _ENTRY, _VALUE, _VALID_TIME, _TRIPS,
+ _DROPPED) = range(len(STATUS_FIELDS))
 
 _INFINITY_STORED = 1e308
 """How an infinite bad value is stored in the (finite) status."""
@@ -356,14 +361,14 @@ _INFINITY_STORED = 1e308
 def initial_status():
     """The status at the start: not stopped, no fault, no trips."""
     status = np.zeros(len(STATUS_FIELDS))
-    status[[_FIELD["input"], _FIELD["entry"]]] = -1.0
+    status[[_INPUT, _ENTRY]] = -1.0
     return status
 
 
 def stop_state_of(status):
     """The StopState that a status vector records."""
-    return StopState(bool(status[_FIELD["stopped"]] >= 0.5),
-                     float(status[_FIELD["valid_time"]]))
+    return StopState(bool(status[_STOPPED] >= 0.5),
+                     float(status[_VALID_TIME]))
 
 
 def next_status(status, fault, after, dropped=0):
@@ -382,24 +387,26 @@ def next_status(status, fault, after, dropped=0):
         stop.
     """
     new = np.array(status, dtype=float)
-    new[_FIELD["stopped"]] = 1.0 if after.stopped else 0.0
-    new[_FIELD["invalid"]] = 0.0 if fault is None else 1.0
-    new[_FIELD["valid_time"]] = after.valid_time
-    new[_FIELD["dropped_points"]] = dropped
+    was_stopped = new[_STOPPED] >= 0.5
+    new[_STOPPED] = 1.0 if after.stopped else 0.0
+    new[_INVALID] = 0.0 if fault is None else 1.0
+    new[_VALID_TIME] = after.valid_time
+    new[_DROPPED] = dropped
     if fault is not None:
         index, check = fault
         value = check.value
-        if not np.isfinite(value):
-            value = 0.0 if np.isnan(value) else math.copysign(
+        if not math.isfinite(value):
+            value = 0.0 if math.isnan(value) else math.copysign(
                 _INFINITY_STORED, value)
-        new[[_FIELD["reason"], _FIELD["input"], _FIELD["entry"],
-             _FIELD["value"]]] = (int(check.reason), index, check.entry,
-                                  value)
+        new[_REASON] = int(check.reason)
+        new[_INPUT] = index
+        new[_ENTRY] = check.entry
+        new[_VALUE] = value
     elif not after.stopped:
-        new[[_FIELD["reason"], _FIELD["value"]]] = 0.0
-        new[[_FIELD["input"], _FIELD["entry"]]] = -1.0
-    if after.stopped and not stop_state_of(status).stopped:
-        new[_FIELD["trips"]] += 1.0
+        new[_REASON] = new[_VALUE] = 0.0
+        new[_INPUT] = new[_ENTRY] = -1.0
+    if after.stopped and not was_stopped:
+        new[_TRIPS] += 1.0
     return new
 
 
@@ -412,17 +419,17 @@ def status_reason(status, input_names, sizes, hold_time):
         sizes: their sizes (None for the obstacle points).
         hold_time: s, for the message while the stop holds.
     """
-    if status[_FIELD["stopped"]] < 0.5:
+    if status[_STOPPED] < 0.5:
         return ""
-    i = int(status[_FIELD["input"]])
-    reason = Reason(int(status[_FIELD["reason"]]))
-    value = float(status[_FIELD["value"]])
+    i = int(status[_INPUT])
+    reason = Reason(int(status[_REASON]))
+    value = float(status[_VALUE])
     if reason is Reason.INFINITE:
         value = math.copysign(math.inf, value)
     text = describe(input_names[i],
-                    InputCheck(reason, int(status[_FIELD["entry"]]), value),
+                    InputCheck(reason, int(status[_ENTRY]), value),
                     sizes[i])
-    if status[_FIELD["invalid"]] < 0.5:
+    if status[_INVALID] < 0.5:
         text += (f"; the inputs are valid again, resuming after "
                  f"{hold_time:g} s of valid inputs")
     return text

@@ -87,12 +87,7 @@ class _Assessment(NamedTuple):
     points: np.ndarray  # the usable obstacle points
     dropped: int
     points_check: InputCheck
-    after: object       # the StopState after this tick
-
-    @property
-    def stop(self):
-        """The decision of this tick."""
-        return self.after.stopped
+    after: object       # the StopState after this tick: the decision
 
 
 @TemplateSystem.define("InputGuard_", T_list=SCALARS)
@@ -159,6 +154,7 @@ def InputGuard_(T):
             self.points_name = points_name
             self.input_names = tuple(spec.name for spec in self.inputs) + (
                 (points_name,) if points_name else ())
+            self._sizes = [spec.size for spec in self.inputs] + [None]
             self._ports, self._slices, start = [], [], 0
             initial = []
             for spec in self.inputs:
@@ -170,9 +166,19 @@ def InputGuard_(T):
                                else as_vector(spec.name, spec.initial,
                                               spec.size))
             self._status_start = start
-            # The ranges of the entries of the inputs present, by which
-            # are present, for one vectorised check a tick.
-            self._ranges = {}
+            self._status_part = slice(start, None)
+            self._stopped_part = slice(start + _STATUS["stopped"],
+                                       start + _STATUS["stopped"] + 1)
+            # Built once: which inputs may be left unconnected, which have
+            # a range to check, and the checks when every input is valid.
+            self._port_optional = tuple(
+                (port, any(default is not None for _, default in spec.outputs))
+                for port, spec in zip(self._ports, self.inputs, strict=True))
+            self._bounded = tuple(
+                (i, float(spec.lower), float(spec.upper))
+                for i, spec in enumerate(self.inputs)
+                if spec.lower > -math.inf or spec.upper < math.inf)
+            self._all_valid = (VALID,) * len(self.inputs)
             self._points = None
             if points_name:
                 self._points = self.DeclareAbstractInputPort(
@@ -191,14 +197,16 @@ def InputGuard_(T):
                 outputs = spec.outputs or ((spec.name, None),)
                 for name, default in outputs:
                     if default is not None:
-                        default = as_vector(f"{name} default", default,
-                                            spec.size)
+                        default = as_scalar_type(T, as_vector(
+                            f"{name} default", default, spec.size))
                     self.DeclareVectorOutputPort(
                         name, spec.size, self._guarded_calc(i, default))
             if points_name:
                 self.DeclareAbstractOutputPort(
                     points_name, lambda: AbstractValue.Make(np.zeros((0, 2))),
                     self._points_output)
+            self._stop_values = tuple(as_scalar_type(T, [value])
+                                      for value in (0.0, 1.0))
             self.DeclareVectorOutputPort("stop", 1, self._stop_output)
             self.DeclareVectorOutputPort(
                 "stopped", 1, self._stopped_output,
@@ -219,29 +227,32 @@ def InputGuard_(T):
         # --- evaluation ---------------------------------------------------
 
         def _state(self, context):
+            """The state as a new array of T."""
             return context.get_discrete_state_vector().CopyToVector()
 
-        def _status(self, context):
-            return value_of(self._state(context)[self._status_start:])
-
-        def _assess(self, context):
-            """The _Assessment of the inputs at `context` (cached)."""
-            return self._assessment.Eval(context)
+        def _status(self, context, part=None):
+            """The status, or `part` of the state, as floats (for double,
+            a view of the state)."""
+            part = part or self._status_part
+            if T is float:
+                return context.get_discrete_state_vector().get_value()[part]
+            return value_of(self._state(context)[part])
 
         def _calc_assessment(self, context, value):
             value.set_value(self._assessment_of(context))
 
         def _assessment_of(self, context):
-            values = [port.Eval(context) if port.HasValue(context) or (
-                not self._has_default(spec)) else None
-                for spec, port in zip(self.inputs, self._ports, strict=True)]
+            values = [None if optional and not port.HasValue(context)
+                      else port.Eval(context)
+                      for port, optional in self._port_optional]
             checks = self._checks(values)
-            points, dropped, points_check = np.zeros((0, 2)), 0, VALID
             if self._points is not None and self._points.HasValue(context):
                 points, dropped, points_check = check_points(
                     self._points.Eval(context))
-            invalid = not (points_check.valid
-                           and all(c.valid for c in checks))
+            else:
+                points, dropped, points_check = np.zeros((0, 2)), 0, VALID
+            invalid = not (points_check.valid and (
+                checks is self._all_valid or all(c.valid for c in checks)))
             after = next_stop_state(stop_state_of(self._status(context)),
                                     invalid, self.time_step,
                                     self.params.hold_time)
@@ -249,39 +260,38 @@ def InputGuard_(T):
                                points_check, after)
 
         def _checks(self, values):
-            """The InputCheck of each value (VALID for None): one
-            vectorised test of every entry present, the per-input detail
-            only when an entry fails it."""
-            present = tuple(value is not None for value in values)
-            ranges = self._ranges.get(present)
-            if ranges is None:
-                specs = [spec for spec, here in zip(
-                    self.inputs, present, strict=True) if here]
-                ranges = self._ranges[present] = tuple(
-                    np.concatenate([np.full(spec.size, float(getattr(
-                        spec, bound))) for spec in specs] or [np.zeros(0)])
-                    for bound in ("lower", "upper"))
-            flat = value_of(np.concatenate(
-                [value for value in values if value is not None]
-                or [np.zeros(0)]))
-            if np.all(np.isfinite(flat)) and np.all(
-                    (flat >= ranges[0]) & (flat <= ranges[1])):
-                return [VALID] * len(values)
+            """The InputCheck of each value (VALID for None): one test of
+            every entry present and of the ranges, the per-input detail
+            only when one fails."""
+            floats = values if T is float else [
+                None if value is None else value_of(value)
+                for value in values]
+            # A sum of floats is finite only if every term is (a sum that
+            # overflows only sends the values to the detailed checks).
+            total = 0.0
+            for value in floats:
+                if value is not None:
+                    total += sum(value.tolist())
+            valid = math.isfinite(total)
+            for i, lower, upper in self._bounded if valid else ():
+                value = floats[i]
+                if value is not None and not (
+                        lower <= value.min() and value.max() <= upper):
+                    valid = False
+                    break
+            if valid:
+                return self._all_valid
             return [VALID if value is None else check_vector(
-                value_of(value), spec.lower, spec.upper)
-                for spec, value in zip(self.inputs, values, strict=True)]
-
-        @staticmethod
-        def _has_default(spec):
-            return any(default is not None
-                       for _, default in (spec.outputs or ()))
+                value, spec.lower, spec.upper)
+                for spec, value in zip(self.inputs, floats, strict=True)]
 
         def _first_fault(self, assessment):
             """(input index, InputCheck) of the first invalid input, or
             None."""
-            for i, check in enumerate(assessment.checks):
-                if not check.valid:
-                    return i, check
+            if assessment.checks is not self._all_valid:
+                for i, check in enumerate(assessment.checks):
+                    if not check.valid:
+                        return i, check
             if not assessment.points_check.valid:
                 return len(self.inputs), assessment.points_check
             return None
@@ -289,36 +299,46 @@ def InputGuard_(T):
         # --- outputs ------------------------------------------------------
 
         def _guarded_calc(self, i, default):
-            spec, part = self.inputs[i], self._slices[i]
+            spec, part, port = self.inputs[i], self._slices[i], self._ports[i]
+            zeros = as_scalar_type(T, np.zeros(spec.size))
+            # An output with a default is its default while its input is
+            # not connected: no need of the assessment then.
+            zero_when_stopped = spec.zero_when_stopped
+            shortcut = default is not None and not zero_when_stopped
+            assessment, all_valid = self._assessment, self._all_valid
 
             def calc(context, output):
-                a = self._assess(context)
+                if shortcut and not port.HasValue(context):
+                    output.SetFromVector(default)
+                    return
+                a = assessment.Eval(context)
                 value = a.values[i]
-                if spec.zero_when_stopped and a.stop:
-                    result = np.zeros(spec.size)
+                if zero_when_stopped and a.after.stopped:
+                    value = zeros
                 elif value is None:
-                    result = default
-                elif a.checks[i].valid:
-                    result = value
-                else:
-                    result = self._state(context)[part]
-                output.SetFromVector(as_scalar_type(T, result))
+                    value = default
+                elif not (a.checks is all_valid or a.checks[i].valid):
+                    value = self._state(context)[part]
+                output.SetFromVector(value)
 
             return calc
 
         def _points_output(self, context, output):
-            output.set_value(self._assess(context).points)
+            output.set_value(self._assessment.Eval(context).points)
 
         def _stop_output(self, context, output):
-            stop = 1.0 if self._assess(context).stop else 0.0
-            output.SetFromVector(as_scalar_type(T, [stop]))
+            stop = self._assessment.Eval(context).after.stopped
+            output.SetFromVector(self._stop_values[stop])
 
         def _stopped_output(self, context, output):
-            output.SetFromVector(as_scalar_type(
-                T, self._status(context)[_STATUS["stopped"]:][:1]))
+            stopped = self._status(context, self._stopped_part)
+            output.SetFromVector(
+                stopped if T is float else as_scalar_type(T, stopped))
 
         def _status_output(self, context, output):
-            output.SetFromVector(as_scalar_type(T, self._status(context)))
+            status = self._status(context)
+            output.SetFromVector(
+                status if T is float else as_scalar_type(T, status))
 
         def _reason_output(self, context, output):
             output.set_value(self.reason(context))
@@ -329,24 +349,32 @@ def InputGuard_(T):
             return self._reason_of(self._status(context))
 
         def _reason_of(self, status):
-            sizes = [spec.size for spec in self.inputs] + [None]
-            return status_reason(status, self.input_names, sizes,
+            return status_reason(status, self.input_names, self._sizes,
                                  self.params.hold_time)
 
         # --- update -------------------------------------------------------
 
         def _update(self, context, discrete_state):
-            a = self._assess(context)
-            state = self._state(context)
-            old = self._status(context)
-            for i, part in enumerate(self._slices):
-                if a.values[i] is not None and a.checks[i].valid:
-                    state[part] = a.values[i]
+            a = self._assessment.Eval(context)
+            start = self._status_start
+            if T is float:
+                # Drake fills `discrete_state` with the state before the
+                # update: only what changes is written, in place.
+                state = discrete_state.get_mutable_value()
+            else:
+                state = self._state(context)
+            old = state[start:] if T is float else value_of(state[start:])
+            was_stopped = old[_STATUS["stopped"]] >= 0.5
+            valid = a.checks is self._all_valid
+            for value, part, check in zip(a.values, self._slices, a.checks,
+                                          strict=True):
+                if value is not None and (valid or check.valid):
+                    state[part] = value
             new = next_status(old, self._first_fault(a), a.after, a.dropped)
-            was_stopped = stop_state_of(old).stopped
-            state[self._status_start:] = new
-            discrete_state.set_value(as_scalar_type(T, state))
-            if T is float and a.stop != was_stopped:
+            state[start:] = new
+            if T is not float:
+                discrete_state.set_value(as_scalar_type(T, state))
+            elif a.after.stopped != was_stopped:
                 self._log(context.get_time(), new)
 
         def _log(self, t, status):
