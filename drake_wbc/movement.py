@@ -21,6 +21,8 @@ Several demonstrations thus average. `LearnedMovement.save`/`load` write
 and read it as a small YAML file.
 """
 
+import math
+from bisect import bisect_right
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -203,6 +205,20 @@ def learn_movement(demonstrations, params=None, num_basis=None,
         tuple(demonstrations), source)
 
 
+def _interpolate(x, times, rows):
+    """np.interp(x, times, column) of every column of `rows` at one float
+    x, in plain floats (the same formula): `times` a strictly increasing
+    list, `rows` a list of lists (one a time); a new list."""
+    j = bisect_right(times, x) - 1
+    if j < 0:
+        return list(rows[0])
+    if j >= len(times) - 1 or times[j] == x:
+        return list(rows[j])
+    t0, t1 = times[j], times[j + 1]
+    return [(b - a) / (t1 - t0) * (x - t0) + a
+            for a, b in zip(rows[j], rows[j + 1], strict=True)]
+
+
 def resolve_movement_file(file):
     """The path of a movement file: as given if absolute or found from
     the working folder, else in the repository's diagrams/.
@@ -280,9 +296,23 @@ class MovementPlayer:
             path = np.abs(y[:, 3] - y[0, 3])
         self._times = t
         self._progress = path / path[-1] if path[-1] > 0.0 else 0.0 * t + 1
+        # The per-tick path (`drive_terms`, `reference`) on plain floats
+        # and few numpy calls: the tables as lists, the basis and the
+        # weights (in the learned twist entries, zero elsewhere) as arrays.
+        self._time_list = t.tolist()
+        self._progress_rows = [[p] for p in np.broadcast_to(
+            self._progress, t.shape).tolist()]
+        self._goal_change = (self.goal - self.learned_goal).tolist()
+        self._learned_goal_list = self.learned_goal.tolist()
+        self._negative_widths = -self.params.widths
+        self._centres = self.params.centres
+        self._weights = np.zeros((self.params.num_basis, 6))
+        self._weights[:, list(LEARNED_TWIST_INDICES)] = movement.weights
         _, self._reference, _ = dmp.rollout(
             self.params, np.zeros(4), None, length, dt, movement.weights,
             lambda t: self.goal_at(t)[list(LEARNED_TWIST_INDICES)])
+        self._reference_rows = self._reference.tolist()
+        self._start_list = np.asarray(self.start, dtype=float).tolist()
 
     def active(self, t):
         """True from start_time on."""
@@ -290,38 +320,58 @@ class MovementPlayer:
 
     def goal_at(self, elapsed):
         """g (6,) at `elapsed` s after start_time (module docstring)."""
-        p = np.interp(elapsed, self._times, self._progress)
-        return self.learned_goal + p * (self.goal - self.learned_goal)
+        return np.array(self._goal_list(float(elapsed)))
+
+    def _goal_list(self, elapsed):
+        """`goal_at` of a float, as a list."""
+        p = _interpolate(elapsed, self._time_list, self._progress_rows)[0]
+        return [g + p * change for g, change in
+                zip(self._learned_goal_list, self._goal_change,
+                    strict=True)]
 
     def reference(self, t):
         """p*(t): the TCP's pose [x, y, z, yaw] in the world that the DMP
         plays at time t (its own rollout, from rest at the start; the
         start before start_time)."""
-        elapsed = max(t - self.start_time, 0.0)
-        return self.start + np.array([
-            np.interp(elapsed, self._times, self._reference[:, i])
-            for i in range(4)])
+        elapsed = max(float(t) - self.start_time, 0.0)
+        return np.array([s + r for s, r in zip(
+            self._start_list, _interpolate(elapsed, self._time_list,
+                                           self._reference_rows),
+            strict=True)])
 
     def goal_and_forcing(self, t):
-        """(g, f), each (6,), at time t (float); the last few times'
-        values are remembered (a control tick asks for the same ones)."""
+        """(g, f), each (6,), at time t (float)."""
+        terms = self.drive_terms(t)
+        return np.array(terms[:6]), np.array(terms[6:])
+
+    def drive_terms(self, t):
+        """g and f at time t (float) as one list of 12 floats, [g; f], not
+        to be changed; the last few times' values are remembered (a
+        control tick asks for the same ones)."""
         cached = self._cache.get(t)
         if cached is None:
-            cached = self._goal_and_forcing(t)
+            cached = self._drive_terms(t)
             if len(self._cache) >= 8:
                 del self._cache[next(iter(self._cache))]
             self._cache[t] = cached
-        return cached[0].copy(), cached[1].copy()
+        return cached
 
-    def _goal_and_forcing(self, t):
+    def _drive_terms(self, t):
+        """[g; f] at time t: f(s) = s sum psi_i w_i / sum psi_i of eq. (6)
+        (dmp.forcing_term) with the closed-form phase s of eq. (7)
+        (dmp.canonical_phase), its exponents shifted by their maximum
+        (dmp.basis_functions)."""
         if not self.active(t):
-            return np.zeros(6), np.zeros(6)
+            return [0.0] * 12
         elapsed = max(t - self.start_time, 0.0)
-        s = float(dmp.canonical_phase(elapsed, self.params))
-        f = np.zeros(6)
-        f[list(LEARNED_TWIST_INDICES)] = dmp.forcing_term(
-            s, self.movement.weights, self.params)
-        return self.goal_at(elapsed), f
+        s = math.exp(-self.params.resolved_alpha_s * elapsed
+                     / self.params.tau)
+        offset = self._centres - s
+        a = offset * offset
+        a *= self._negative_widths
+        e = np.exp(a - a.max())
+        forcing = e.dot(self._weights) * (s / e.sum())
+        return self._goal_list(elapsed) + forcing.tolist()
 
     def transformation_parameters(self, dmp_params):
         """`dmp_params` with the movement's alpha_z, beta_z and tau."""

@@ -21,6 +21,13 @@ transfer functions. The velocity output y_dot is the first block of
 x_dot; its direct feedthrough is declared explicitly, so that feedback
 edges such as delta_V_ee, which enters only the state, close no algebraic
 loop.
+
+In double the stages take a fast path, chosen at construction: the rows
+of y_dot over those of the update as one matrix acting on [x; u; 1]
+(`AffineDynamics.stacked`), and one cache entry of their product that
+the output and the update share (the inputs are read once a tick): the
+same model, to round-off. AutoDiffXd and the continuous derivatives keep
+the general path, which the fast one is tested against.
 """
 
 import numpy as np
@@ -84,36 +91,48 @@ class AffineDynamics:
         """The state one hold period later, u held constant."""
         return self.A_d @ x + self.B_d @ u + self.c_d
 
+    def stacked(self, num_outputs, columns=None):
+        """One float matrix acting on [x; u[columns]; 1] (the inputs left
+        out count as 0; None: all): the first `num_outputs` rows of
+        [A | B | c] (x_dot), over [A_d | B_d | c_d] when discrete."""
+        columns = slice(None) if columns is None else columns
+        rows = slice(0, num_outputs)
+        blocks = [(self.A[rows], self.B[rows][:, columns], self.c[rows])]
+        if self.time_step > 0.0:
+            blocks.append((self.A_d, self.B_d[:, columns], self.c_d))
+        return np.vstack([np.column_stack(block) for block in blocks])
 
-def _rotation_z(angle):
-    """Rz(angle) for any scalar type."""
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, -s, 0.0 * c], [s, c, 0.0 * c],
-                     [0.0 * c, 0.0 * c, 1.0 + 0.0 * c]])
 
-
-def _rotate_twist(R, twist):
-    return np.concatenate([R @ twist[:3], R @ twist[3:]])
+_ONE = np.ones(1)
+_ONE.flags.writeable = False
 
 
 class _CdmpStage:
-    """Shared mechanics of the three stages (a mixin of LeafSystem_[T])."""
+    """Shared mechanics of the three stages (a mixin of LeafSystem_[T]).
+
+    A stage sets `_fast` (True in double) before `_declare_state`, and
+    with it defines `_fast_vector(context)`, the float [x; u; 1] of its
+    models' `stacked` matrices (`_declare_output`).
+    """
 
     def _declare_state(self, num_states, time_step):
         self._time_step = non_negative("time_step", time_step)
         if self._time_step > 0.0:
             index = self.DeclareDiscreteState(num_states)
             self.DeclarePeriodicDiscreteUpdateEvent(
-                self._time_step, 0.0, self._update
+                self._time_step, 0.0,
+                self._fast_update if self._fast else self._update
             )
             return self.discrete_state_ticket(index)
         self.DeclareContinuousState(num_states)
         return self.xc_ticket()
 
     def _state(self, context):
-        if self._time_step > 0.0:
-            return context.get_discrete_state_vector().CopyToVector()
-        return context.get_continuous_state_vector().CopyToVector()
+        """The state x; in double a read-only view when discrete."""
+        if self._time_step <= 0.0:
+            return context.get_continuous_state_vector().CopyToVector()
+        vector = context.get_discrete_state_vector()
+        return vector.value() if self._fast else vector.CopyToVector()
 
     def _optional(self, port, context, default):
         if port.HasValue(context):
@@ -155,6 +174,41 @@ class _CdmpStage:
         x_dot = model.derivative(self._state(context),
                                  self._drive(context, for_output=True))
         return x_dot[: self._dimension]
+
+    def _output(self, context, output):
+        output.SetFromVector(self._velocity(context))
+
+    def _declare_output(self, name, prerequisites, output_columns=None):
+        """The output y_dot, computed from `prerequisites` alone. In
+        double also, per model, the rows of y_dot over those of the
+        discrete update (if any), on [x; u[output_columns]; 1], and the
+        cache entry of their product, which the output and the update
+        share (the inputs are read once a tick)."""
+        if self._fast:
+            self._fast_models = {
+                key: model.stacked(self._dimension, output_columns)
+                for key, model in self._models.items()
+            }
+            self._fast_result = self.DeclareCacheEntry(
+                "y_dot and the next state", ValueProducer(
+                    allocate=lambda: AbstractValue.Make(np.zeros(0)),
+                    calc=self._calc_fast_result),
+                prerequisites)
+        self.DeclareVectorOutputPort(
+            name, self._dimension,
+            self._fast_output if self._fast else self._output,
+            prerequisites_of_calc=prerequisites)
+
+    def _calc_fast_result(self, context, value):
+        value.set_value(self._fast_models[self._switch(context)].dot(
+            self._fast_vector(context)))
+
+    def _fast_output(self, context, output):
+        output.set_value(self._fast_result.Eval(context)[:self._dimension])
+
+    def _fast_update(self, context, discrete_state):
+        discrete_state.set_value(
+            self._fast_result.Eval(context)[self._dimension:])
 
     def _check_state_only(self, columns):
         """Checks that the inputs u[columns] do not reach y_dot."""
@@ -210,6 +264,7 @@ def BaseCdmp_(T):
 
             model = AffineDynamics(derivative, 9, 6, time_step)
             self._models = {0: model, 1: model}
+            self._fast = T is float
             self._velocity_in = self.DeclareVectorInputPort(
                 "base_velocity", 3)
             self._points = self.DeclareAbstractInputPort(
@@ -223,13 +278,12 @@ def BaseCdmp_(T):
                         self._calc_repulsive_force(context))),
                 {self.input_port_ticket(self._points.get_index())})
             state = self._declare_state(9, time_step)
-            self.DeclareVectorOutputPort(
-                "avoiding_base_velocity", 3, self._output,
-                prerequisites_of_calc={
-                    state,
-                    self.input_port_ticket(self._velocity_in.get_index()),
-                    self.input_port_ticket(self._points.get_index()),
-                })
+            prerequisites = {
+                state,
+                self.input_port_ticket(self._velocity_in.get_index()),
+                self.input_port_ticket(self._points.get_index()),
+            }
+            self._declare_output("avoiding_base_velocity", prerequisites)
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, other._time_step,
@@ -256,8 +310,11 @@ def BaseCdmp_(T):
             return np.concatenate([self._velocity_in.Eval(context),
                                    self.repulsive_force(context)])
 
-        def _output(self, context, output):
-            output.SetFromVector(self._velocity(context))
+        def _fast_vector(self, context):
+            # The cached force is only read here: no copy.
+            return np.concatenate((
+                self._state(context), self._velocity_in.Eval(context),
+                self._force.Eval(context), _ONE))
 
     return Impl
 
@@ -318,20 +375,20 @@ def ArmCdmp_(T):
                 s: AffineDynamics(derivative(s), 18, 18, time_step)
                 for s in (0, 1)
             }
+            self._fast = T is float
             self._velocity_in = self.DeclareVectorInputPort(
                 "arm_velocity", 6)
             self._wrench = self.DeclareVectorInputPort("wrench", 6)
             self._desired = self.DeclareVectorInputPort("desired_wrench", 6)
             self._phri_port = self.DeclareVectorInputPort("phri_switch", 1)
             state = self._declare_state(18, time_step)
-            self.DeclareVectorOutputPort(
-                "arm_velocity_command", 6, self._output,
-                prerequisites_of_calc={
-                    state,
-                    *(self.input_port_ticket(p.get_index())
-                      for p in (self._velocity_in, self._wrench,
-                                self._desired, self._phri_port)),
-                })
+            prerequisites = {
+                state,
+                *(self.input_port_ticket(p.get_index())
+                  for p in (self._velocity_in, self._wrench,
+                            self._desired, self._phri_port)),
+            }
+            self._declare_output("arm_velocity_command", prerequisites)
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, other._time_step,
@@ -345,8 +402,13 @@ def ArmCdmp_(T):
                 self._optional(self._desired, context, self.params.F_d),
             ])
 
-        def _output(self, context, output):
-            output.SetFromVector(self._velocity(context))
+        def _fast_vector(self, context):
+            desired = self._desired
+            return np.concatenate((
+                self._state(context), self._velocity_in.Eval(context),
+                self._wrench.Eval(context),
+                desired.Eval(context) if desired.HasValue(context)
+                else self.params.F_d, _ONE))
 
     return Impl
 

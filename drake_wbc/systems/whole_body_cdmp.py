@@ -19,7 +19,13 @@ reference velocity, the wrench k_hri F_ext S_hri) and the tracking-error
 term still act, so a worker can still push during a replay. In discrete
 time g and f are taken at the middle of each period and held over it (a
 second-order accurate hold of the smooth f).
+
+In double the stage takes the fast path of the other CDMP stages (one
+matrix [A | B | c] per model on [x; u; 1]), with the yaw rotations of
+eq. (3) on plain floats.
 """
+
+import math
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
@@ -31,10 +37,27 @@ from drake_wbc.systems.cdmp_stages import (
     SCALARS,
     AffineDynamics,
     _CdmpStage,
-    _rotate_twist,
-    _rotation_z,
 )
 from drake_wbc.validation import validated_copy
+
+
+def _rotation_z(angle):
+    """Rz(angle) for any scalar type."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0.0 * c], [s, c, 0.0 * c],
+                     [0.0 * c, 0.0 * c, 1.0 + 0.0 * c]])
+
+
+def _rotate_twist(R, twist):
+    return np.concatenate([R @ twist[:3], R @ twist[3:]])
+
+
+def _rotated(c, s, twist):
+    """Rz twist, each half of the float twist (a list of 6) rotated by
+    Rz with cos c and sin s; a list."""
+    vx, vy, vz, wx, wy, wz = twist
+    return [c * vx - s * vy, s * vx + c * vy, vz,
+            c * wx - s * wy, s * wx + c * wy, wz]
 
 
 def movement_player(params):
@@ -139,6 +162,7 @@ def WholeBodyCdmp_(T):
                     for s in (0, 1) for playing in (False, True)
                 }
             self._check_state_only(slice(12, 18))
+            self._fast = T is float
             self._reference = self.DeclareVectorInputPort(
                 "reference_velocity", 6)
             self._wrench = self.DeclareVectorInputPort("wrench", 6)
@@ -155,9 +179,14 @@ def WholeBodyCdmp_(T):
             }
             if self.player is not None:
                 prerequisites.add(self.time_ticket())
-            self.DeclareVectorOutputPort(
-                "end_effector_velocity", 6, self._output,
-                prerequisites_of_calc=prerequisites)
+            # The fast path's shared result leaves out the deviation (state
+            # only), which the update adds: B_d's columns of it.
+            self._declare_output("end_effector_velocity", prerequisites, [
+                i for i in range(num_inputs) if not 12 <= i < 18])
+            if self._fast and time_step > 0.0:
+                self._fast_deviation = {
+                    key: np.ascontiguousarray(model.B_d[:, 12:18])
+                    for key, model in self._models.items()}
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, other._time_step,
@@ -199,6 +228,55 @@ def WholeBodyCdmp_(T):
             R_bw = self._yaw_rotation(context).T
             output.SetFromVector(_rotate_twist(R_bw, self._velocity(context)))
 
+        def _calc_fast_result(self, context, value):
+            """In double: (V_ee in T_b, the next state without the
+            deviation's part, the model of the update, cos and sin of
+            the yaw); a list."""
+            yaw = self._yaw
+            if yaw.HasValue(context):
+                angle = float(yaw.Eval(context)[0])
+                c, s = math.cos(angle), math.sin(angle)
+            else:
+                c, s = 1.0, 0.0
+            phri = self._phri_port
+            if phri.HasValue(context):
+                switch = 1 if phri.Eval(context)[0] >= 0.5 else 0
+            else:
+                switch = int(self._default_switch)
+            known = (self._state(context).tolist()
+                     + self._reference.Eval(context).tolist()
+                     + _rotated(c, s, self._wrench.Eval(context).tolist()))
+            player, d = self.player, self._dimension
+            if player is None:
+                key = switch
+                result = self._fast_models[key].dot(np.array(known + [1.0]))
+                velocity, rest = result[:d].tolist(), result[d:]
+            else:
+                t = context.get_time()
+                key = (switch, player.active(t))
+                velocity = self._fast_models[key][:d].dot(np.array(
+                    known + player.drive_terms(t) + [1.0])).tolist()
+                rest = None
+                if self._time_step > 0.0:
+                    t += 0.5 * self._time_step
+                    key = (switch, player.active(t))
+                    rest = self._fast_models[key][d:].dot(np.array(
+                        known + player.drive_terms(t) + [1.0]))
+            vx, vy, vz, wx, wy, wz = velocity
+            # Back into T_b: Rz^T.
+            value.set_value([[c * vx + s * vy, c * vy - s * vx, vz,
+                              c * wx + s * wy, c * wy - s * wx, wz],
+                             rest, key, c, s])
+
+        def _fast_output(self, context, output):
+            output.set_value(self._fast_result.Eval(context)[0])
+
+        def _fast_update(self, context, discrete_state):
+            _, rest, key, c, s = self._fast_result.Eval(context)
+            deviation = _rotated(c, s, self._deviation.Eval(context).tolist())
+            discrete_state.set_value(
+                rest + self._fast_deviation[key].dot(deviation))
+
     return Impl
 
 
@@ -224,7 +302,8 @@ def MovementTracking_(T):
           K (p*(t) - p) on x, y, z and yaw (0 on roll and pitch, and
           before the movement's start_time), p* = player.reference(t), p
           the TCP's pose through the nominal kinematics
-          (demonstration.TcpPose), the yaw error wrapped into (-pi, pi].
+          (demonstration.TcpPose, here in plain floats: `tcp_pose`), the
+          yaw error wrapped into (-pi, pi].
 
         It enters the whole-body CDMP as the coupling C of eq. (cdmp-wb)
         (C_dot = V_ee^ref), an integral action of gain K on the TCP's
@@ -242,6 +321,12 @@ def MovementTracking_(T):
 
             LeafSystem_[T].__init__(self, converter)
             self.player, self._pose = player, TcpPose(arm)
+            arm = self._pose.arm
+            model = arm.model
+            X_BA = model.arm_base_frame.CalcPose(
+                arm.plant.CreateDefaultContext(),
+                model.base_frame).GetAsMatrix34()
+            self._R_BA, self._p_BA = X_BA[:, :3].copy(), X_BA[:, 3].tolist()
             self._base = self.DeclareVectorInputPort(
                 "base.state_estimated", 6)
             self._arm = self.DeclareVectorInputPort("arm.position_measured",
@@ -253,16 +338,37 @@ def MovementTracking_(T):
             Impl._construct(self, other.player, other._pose.arm,
                             converter=converter)
 
+        def tcp_pose(self, base_pose, arm_positions):
+            """demonstration.TcpPose in plain floats: the TCP's [x, y, z,
+            yaw] (a list) in the world from the base's [x, y, yaw] and the
+            arm's joints, X_WE = X_WB X_BA X_AE, yaw = atan2(R_WE[1, 0],
+            R_WE[0, 0])."""
+            arm = self._pose.arm
+            X_AE = arm.frame_pose(arm_positions,
+                                  arm.model.tcp_frame).GetAsMatrix34()
+            # [R_BE | R_BA p_AE]: its first column and its last one.
+            (r00, _, _, px), (r10, _, _, py), (_, _, _, pz) = (
+                self._R_BA.dot(X_AE).tolist())
+            px, py, pz = (px + self._p_BA[0], py + self._p_BA[1],
+                          pz + self._p_BA[2])
+            x, y, yaw = base_pose
+            c, s = math.cos(yaw), math.sin(yaw)
+            return [c * px - s * py + x, s * px + c * py + y, pz,
+                    math.atan2(s * r00 + c * r10, c * r00 - s * r10)]
+
         def _output(self, context, output):
-            t = _time(context)
-            V = np.zeros(6)
-            if self.player.active(t) and self.player.tracking_gain > 0.0:
-                base = _values(self._base.Eval(context))
-                pose = self._pose(base[:3], _values(self._arm.Eval(context)))
-                error = self.player.reference(t) - pose
-                error[3] = (error[3] + np.pi) % (2.0 * np.pi) - np.pi
-                V[[0, 1, 2, 5]] = self.player.tracking_gain * error
-            output.SetFromVector(V)
+            t, player = _time(context), self.player
+            K = player.tracking_gain
+            if not (player.active(t) and K > 0.0):
+                output.SetFromVector(np.zeros(6))
+                return
+            x, y, yaw = _values(self._base.Eval(context))[:3].tolist()
+            pose = self.tcp_pose((x, y, yaw),
+                                 _values(self._arm.Eval(context)))
+            x, y, z, yaw = [p - q for p, q in zip(
+                player.reference(t).tolist(), pose, strict=True)]
+            yaw = (yaw + math.pi) % (2.0 * math.pi) - math.pi
+            output.SetFromVector([K * x, K * y, K * z, 0.0, 0.0, K * yaw])
 
     return Impl
 

@@ -69,6 +69,12 @@ def tool_weight_reading(arm, q_a):
     return np.concatenate([weight_M, _cross(p_M_com, weight_M)])
 
 
+def _skew(p):
+    """S(p) with S(p) v = p x v."""
+    return np.array([[0.0, -p[2], p[1]], [p[2], 0.0, -p[0]],
+                     [-p[1], p[0], 0.0]])
+
+
 def _cross(a, b):
     """a x b of 3-vectors (np.cross is slow for one pair)."""
     return np.array([a[1] * b[2] - a[2] * b[1],
@@ -99,6 +105,17 @@ def ExternalWrenchEstimator_(T):
         In AutoDiffXd the derivative comes from central differences of the
         double computation (scalar_support.through_float_function).
 
+        In double, when the tool centre point is fixed to the sensor (the
+        tool welded to it), the pose of T in M is taken once and
+        `external_wrench` runs as two constant linear maps and a rotation:
+        with w = R_AM^T [0, 0, -m g] = -m g R_AM[2, :],
+
+            [f_M; tau_M] = reading - [w; p_com x w],
+            F_ext = diag(R_AM, R_AM) [f_M; tau_M + p_TM x f_M],
+
+        p_TM the position of M from T, in M (r_TM = R_AM p_TM): one pose
+        from the plant a tick, the same wrench up to round-off.
+
         Args:
             arm: an ArmKinematics of the robot (a new one if None).
         """
@@ -116,7 +133,26 @@ def ExternalWrenchEstimator_(T):
                 tool.CalcCenterOfMassInBodyFrame(context))
             self._reading = self.DeclareVectorInputPort("wrist_wrench", 6)
             self._position = self.DeclareVectorInputPort("arm_position", 6)
-            self.DeclareVectorOutputPort("external_wrench", 6, self._output)
+            self._prepare_fast_path(plant, context, model)
+            self.DeclareVectorOutputPort(
+                "external_wrench", 6,
+                self._fast_output if self._fast else self._output)
+
+        def _prepare_fast_path(self, plant, context, model):
+            """The constant maps of the fast path (class docstring), in
+            double when the tool centre point is welded to the sensor."""
+            sensor, tcp = model.ft_measurement_frame, model.tcp_frame
+            welded = plant.GetBodiesWeldedTo(sensor.body())
+            self._fast = T is float and tcp.body().index() in [
+                body.index() for body in welded]
+            if not self._fast:
+                return
+            p_TM = -tcp.CalcPose(context, sensor).translation()
+            identity = np.eye(3)
+            self._weight_map = (-self._tool_mass * STANDARD_GRAVITY) * (
+                np.vstack([identity, _skew(self._p_M_com)]))
+            self._lever_map = np.block([[identity, np.zeros((3, 3))],
+                                        [_skew(p_TM), identity]])
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other._arm, converter=converter)
@@ -137,6 +173,14 @@ def ExternalWrenchEstimator_(T):
                                      self._reading.Eval(context)])
             output.SetFromVector(through_float_function(self._estimate,
                                                         inputs))
+
+        def _fast_output(self, context, output):
+            X_AM = self._arm.frame_pose(self._position.Eval(context),
+                                        self._arm.model.ft_measurement_frame)
+            R_AM = X_AM.GetAsMatrix34()[:, :3]
+            in_M = self._lever_map.dot(self._reading.Eval(context)
+                                       - self._weight_map.dot(R_AM[2]))
+            output.set_value(in_M.reshape(2, 3).dot(R_AM.T).ravel())
 
     return Impl
 
