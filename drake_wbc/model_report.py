@@ -12,7 +12,7 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.visualization import AddFrameTriadIllustration
 
-from drake_wbc import capability
+from drake_wbc import capability, capability_gradients
 from drake_wbc.replay import quiet_meshcat, write_static_html
 from drake_wbc.robot_model import (
     ARM_JOINTS,
@@ -100,7 +100,7 @@ def describe_robot(q_a=HOME_ARM_POSITIONS, k_j=None):
     lower, upper = kinematics.lower, kinematics.upper
     m = capability.manipulability(values.J_a)
     penalty = capability.joint_limit_penalty(q_a, lower, upper, k_j)
-    gradient = capability.capability_gradient(
+    gradient = capability_gradients.capability_gradient(
         values.J_a, q_a, lower, upper, k_j
     )
     p = values.p_ee_in_base

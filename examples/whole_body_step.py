@@ -11,7 +11,13 @@ Run:  .venv/bin/python examples/whole_body_step.py
 
 import numpy as np
 
-from drake_wbc import capability, compensation, distribution, kinematics
+from drake_wbc import (
+    capability,
+    capability_gradients,
+    compensation,
+    distribution,
+    kinematics,
+)
 from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
 
 
@@ -22,7 +28,8 @@ def main():
 
     # Capability of movement and its gradient w.r.t. the arm's Cartesian pose.
     C_m = capability.capability(values.J_a, q_a, arm.lower, arm.upper)
-    grad = capability.capability_gradient(values.J_a, q_a, arm.lower, arm.upper)
+    grad = capability_gradients.capability_gradient(values.J_a, q_a,
+                                                    arm.lower, arm.upper)
     print(f"C_m at home = {C_m:.4f}")
 
     # Distribute V_ee between the arm's twist V_a and the base's V_b.

@@ -26,7 +26,7 @@ from drake_wbc.arm_control import (
     joint_velocity_for_twist,
     singularity_damping,
 )
-from drake_wbc.capability import jacobian_derivative
+from drake_wbc.capability_gradients import jacobian_derivative
 from drake_wbc.robot_model import ARM_JOINTS, HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.systems import ArmCartesianVelocityController
 

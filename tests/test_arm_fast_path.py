@@ -9,11 +9,13 @@ import pytest
 from pydrake.autodiffutils import AutoDiffXd, ExtractValue
 
 from drake_wbc import (
+    aligned_distribution,
     arm_control,
     capability,
     compensation,
     distribution,
     kinematics,
+    twist_solver,
 )
 from drake_wbc.bench import distribution_race as race
 from drake_wbc.robot_model import ArmKinematics
@@ -157,9 +159,9 @@ def test_twist_solver_limits_are_bit_for_bit(arm, acceleration):
         expected = twist_as_written(J, V, q, arm.lower, arm.upper,
                                     arm.velocity_limits, H, 0.05, eps,
                                     0.05, a, previous)
-        solver = arm_control.TwistSolver(arm.lower, arm.upper,
-                                         arm.velocity_limits, H, 0.05, eps,
-                                         0.05, a)
+        solver = twist_solver.TwistSolver(arm.lower, arm.upper,
+                                          arm.velocity_limits, H, 0.05, eps,
+                                          0.05, a)
         command = solver.solve(J, V, q, None if a is None else previous)
         np.testing.assert_array_equal(command.q_dot, expected[0])
         np.testing.assert_array_equal(command.limited_joints, expected[3])
@@ -175,8 +177,8 @@ def test_position_bounds_skip_only_where_they_cannot_cut(arm, acceleration):
     rng = np.random.default_rng(4)
     limits = arm.velocity_limits
     a = None if acceleration is None else np.full(6, acceleration)
-    solver = arm_control.TwistSolver(arm.lower, arm.upper, limits, H, 0.05,
-                                     0.05, 0.05, a)
+    solver = twist_solver.TwistSolver(arm.lower, arm.upper, limits, H, 0.05,
+                                      0.05, 0.05, a)
     clear = np.array(solver._clear)
     for _ in range(300):
         distance = clear * rng.choice([0.0, 0.5, 1.0 - 1e-9, 1.0, 1.0 + 1e-9,
@@ -311,12 +313,12 @@ def test_distribute_aligned_matches_the_general_path():
         for damping in (distribution.DEFAULT_DAMPING, None):
             expected = distribution.distribute_unchecked(
                 J, V, distribution.weights_of(s_xy, s_phi), V_n, damping)
-            fast = distribution.distribute_aligned(V, p, s_xy, s_phi, null,
-                                                   damping)
+            fast = aligned_distribution.distribute_aligned(
+                V, p, s_xy, s_phi, null, damping)
             assert relative_difference(fast, expected) < RELATIVE
             # Sequences work as well as arrays.
             np.testing.assert_array_equal(
-                distribution.distribute_aligned(
+                aligned_distribution.distribute_aligned(
                     list(V), list(p), s_xy, s_phi,
                     None if null is None else list(null), damping), fast)
         M = (J * distribution.weights_of(s_xy, s_phi)) @ J.T
@@ -332,8 +334,8 @@ def test_distribute_aligned_keeps_the_task_and_the_general_failures():
     rng = np.random.default_rng(10)
     for _ in range(50):
         V, p = rng.normal(size=6), rng.uniform(-1, 1, 3)
-        V_wb = distribution.distribute_aligned(V, p, *rng.uniform(size=2),
-                                               rng.normal(size=6))
+        V_wb = aligned_distribution.distribute_aligned(
+            V, p, *rng.uniform(size=2), rng.normal(size=6))
         J = kinematics.whole_body_jacobian(None, p)
         np.testing.assert_allclose(J @ V_wb, V, atol=1e-13)
     # Values that are not finite: what the general path gives.
@@ -344,11 +346,12 @@ def test_distribute_aligned_keeps_the_task_and_the_general_failures():
         distribution.DEFAULT_DAMPING)
     assert np.isnan(expected).any()
     np.testing.assert_array_equal(
-        distribution.distribute_aligned(bad_V, [0.4, 0.2, 0.5], 0.5, 0.5),
+        aligned_distribution.distribute_aligned(bad_V, [0.4, 0.2, 0.5], 0.5,
+                                                0.5),
         expected)
     with pytest.raises(np.linalg.LinAlgError):
-        distribution.distribute_aligned(np.zeros(6), [np.inf, 0.2, 0.5],
-                                        0.5, 0.5)
+        aligned_distribution.distribute_aligned(np.zeros(6), [np.inf, 0.2, 0.5],
+                                                0.5, 0.5)
 
 
 def fix(system, context, values):

@@ -21,6 +21,7 @@ from reference_kinematics import (
 )
 
 from drake_wbc import capability as cap
+from drake_wbc import capability_gradients as cap_grad
 
 K_J = cap.DEFAULT_JOINT_LIMIT_GAIN
 CHAINS = chains_under_test()
@@ -225,8 +226,8 @@ Q_OK = np.zeros(6)
     (lambda: cap.manipulability(np.full((6, 6), np.nan)), "J_a"),
     (lambda: cap.manipulability(np.ones((7, 6))), "J_a"),
     (lambda: cap.manipulability(np.ones(6)), "J_a"),
-    (lambda: cap.manipulability_joint_gradient(np.ones((5, 6))), "J_a"),
-    (lambda: cap.jacobian_derivative(np.ones((6, 6, 1))), "J_a"),
+    (lambda: cap_grad.manipulability_joint_gradient(np.ones((5, 6))), "J_a"),
+    (lambda: cap_grad.jacobian_derivative(np.ones((6, 6, 1))), "J_a"),
     (lambda: cap.joint_limit_penalty([0.0, np.nan], [-1, -1], [1, 1], 1.0),
      "q"),
     (lambda: cap.joint_limit_penalty([0.0, np.inf], [-1, -1], [1, 1], 1.0),
@@ -241,16 +242,16 @@ Q_OK = np.zeros(6)
      "upper"),
     (lambda: cap.joint_limit_penalty([0.0, 0.0], [-1, -1], [1, 1], 0.0),
      "k_j"),
-    (lambda: cap.joint_limit_penalty_gradient([0.0], [-1], [1], -2.0),
+    (lambda: cap_grad.joint_limit_penalty_gradient([0.0], [-1], [1], -2.0),
      "k_j"),
     (lambda: cap.capability(J_OK, np.zeros(5), -np.ones(6), np.ones(6)),
      "q"),
-    (lambda: cap.capability_joint_gradient(J_OK, Q_OK, -np.ones(6),
-                                           np.ones(6), np.nan), "k_j"),
-    (lambda: cap.capability_gradient(J_OK, Q_OK, -np.ones(6), np.ones(6),
-                                     damping=-0.1), "damping"),
-    (lambda: cap.capability_gradient(J_OK, Q_OK, -np.ones(6), np.ones(6),
-                                     damping_threshold=0.0),
+    (lambda: cap_grad.capability_joint_gradient(J_OK, Q_OK, -np.ones(6),
+                                                np.ones(6), np.nan), "k_j"),
+    (lambda: cap_grad.capability_gradient(J_OK, Q_OK, -np.ones(6), np.ones(6),
+                                          damping=-0.1), "damping"),
+    (lambda: cap_grad.capability_gradient(J_OK, Q_OK, -np.ones(6), np.ones(6),
+                                          damping_threshold=0.0),
      "damping_threshold"),
     (lambda: cap.transition(0.5, 0.1, 0.2), "upper"),
     (lambda: cap.transition(0.5, 0.2, 0.2), "lower"),

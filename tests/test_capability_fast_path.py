@@ -10,7 +10,11 @@ import pytest
 from pydrake.autodiffutils import AutoDiffXd, ExtractValue
 from scipy.spatial.transform import Rotation
 
-from drake_wbc import capability, workspace
+from drake_wbc import (
+    adaptive_weighting,
+    capability,
+    capability_gradients,
+)
 from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.systems.capability_stage import (
     ArmCapability,
@@ -51,7 +55,7 @@ def manipulability_gradient_by_einsum(J, svd):
     the result follows that of the singular vectors)."""
     U, s, Vt = svd
     return np.einsum("k,rk,irc,kc->i", products_of_others(s), U,
-                     capability.jacobian_derivative(J), Vt)
+                     capability_gradients.jacobian_derivative(J), Vt)
 
 
 def penalty_gradient_as_written(q, lower, upper, k_j):
@@ -85,9 +89,9 @@ def test_manipulability_gradient_matches_the_einsum_form():
         for trial in range(20):
             J = (rng.normal(size=(6, n)) if trial % 4
                  else rank_deficient(rng, n, 5 - trial % 8 // 4))
-            svd = capability._svd(J)
+            svd = capability_gradients._svd(J)
             assert relative_difference(
-                capability.manipulability_joint_gradient(J),
+                capability_gradients.manipulability_joint_gradient(J),
                 manipulability_gradient_by_einsum(J, svd)) < RELATIVE
 
 
@@ -95,7 +99,8 @@ def test_stretched_arm_has_no_manipulability_gradient():
     # Several zero singular values: the exact gradient, 0, to rounding.
     rng = np.random.default_rng(21)
     J = rank_deficient(rng, 6, 3)
-    assert np.abs(capability.manipulability_joint_gradient(J)).max() < 1e-12
+    assert np.abs(capability_gradients.manipulability_joint_gradient(
+        J)).max() < 1e-12
 
 
 def test_products_of_others_as_lists_and_arrays():
@@ -139,8 +144,8 @@ def test_penalty_and_its_gradient_match_the_formula(arm):
     for q in limit_cases(arm, rng, 60):
         k_j = rng.uniform(5e3, 3e4)
         expected = penalty_gradient_as_written(q, arm.lower, arm.upper, k_j)
-        got = capability.joint_limit_penalty_gradient(q, arm.lower,
-                                                      arm.upper, k_j)
+        got = capability_gradients.joint_limit_penalty_gradient(q, arm.lower,
+                                                                arm.upper, k_j)
         assert isinstance(got, np.ndarray) and got.shape == (6,)
         if np.any(expected):
             assert relative_difference(got, expected) < RELATIVE
@@ -162,13 +167,14 @@ def test_cartesian_gradient_matches_the_formula(arm):
     for q in limit_cases(arm, rng, 60):
         J = arm.evaluate(q).J_a
         k_j, lam, eps = rng.uniform(5e3, 3e4), 0.02, rng.uniform(0.01, 0.2)
-        joint_gradient = capability.capability_joint_gradient(
+        joint_gradient = capability_gradients.capability_joint_gradient(
             J, q, arm.lower, arm.upper, k_j)
         expected = cartesian_gradient_as_written(J, joint_gradient, lam, eps)
-        got = capability.capability_gradient(J, q, arm.lower, arm.upper,
-                                             k_j, lam, eps)
+        got = capability_gradients.capability_gradient(J, q, arm.lower,
+                                                       arm.upper, k_j, lam,
+                                                       eps)
         assert relative_difference(got, expected) < RELATIVE
-        fused_C, fused_g = capability.capability_terms_unchecked(
+        fused_C, fused_g = capability_gradients.capability_terms_unchecked(
             J, q.tolist(), arm.lower.tolist(), arm.upper.tolist(), k_j, lam,
             eps)
         assert fused_C == pytest.approx(capability.capability(
@@ -230,9 +236,10 @@ def test_capability_stage_matches_the_public_functions(arm,
         expected_C = capability.capability(values.J_a, q, arm.lower,
                                            arm.upper, p.joint_limit_gain)
         assert C_m[0] == pytest.approx(expected_C, rel=RELATIVE, abs=1e-300)
-        assert relative_difference(gradient, capability.capability_gradient(
-            values.J_a, q, arm.lower, arm.upper, p.joint_limit_gain,
-            p.gradient_damping, p.gradient_damping_threshold)) < RELATIVE
+        assert relative_difference(
+            gradient, capability_gradients.capability_gradient(
+                values.J_a, q, arm.lower, arm.upper, p.joint_limit_gain,
+                p.gradient_damping, p.gradient_damping_threshold)) < RELATIVE
         expected_alpha = capability.transition(C_m[0], p.band.upper,
                                                p.band.lower)
         assert alpha[0] == pytest.approx(expected_alpha, abs=1e-15)
@@ -322,17 +329,17 @@ def test_adaptive_factors_match_local_workspace_state():
     for case in range(1800):
         (p, V, C_m, gradient), (upper, lower, ws, R, origin) = \
             workspace_case(rng, case)
-        state = workspace.local_workspace_state(p, V, C_m, gradient, upper,
-                                                lower, ws, R, origin)
+        state = adaptive_weighting.local_workspace_state(
+            p, V, C_m, gradient, upper, lower, ws, R, origin)
         if case % 3 == 0:  # put C_m^d into the band of the factors
             P = state.P_d * state.P_phi
             if P > 0.0:
                 C_m = rng.uniform(lower, upper) / P
-                state = workspace.local_workspace_state(
+                state = adaptive_weighting.local_workspace_state(
                     p, V, C_m, gradient, upper, lower, ws, R, origin)
-        constants = workspace.adaptive_workspace(upper, lower, ws, R,
-                                                 origin)
-        fast = workspace.adaptive_weighting_factors(
+        constants = adaptive_weighting.adaptive_workspace(upper, lower, ws, R,
+                                                          origin)
+        fast = adaptive_weighting.adaptive_weighting_factors(
             p, V.tolist(), C_m, gradient.tolist(), constants)
         expected = (state.sigma_xy, state.sigma_phi)
         assert all(isinstance(value, float) for value in fast)
@@ -345,7 +352,7 @@ def test_adaptive_factors_match_local_workspace_state():
 
 
 def test_adaptive_factors_reject_non_finite_inputs_by_name():
-    constants = workspace.adaptive_workspace(0.04, 0.035)
+    constants = adaptive_weighting.adaptive_workspace(0.04, 0.035)
     good = (np.array([0.7, 0.1, 0.3]), [0.1] * 6, 0.05, [0.01] * 6)
     names = ("p_ee_in_base", "V_ee", "C_m", "grad_C_m")
     for index, name in enumerate(names):
@@ -360,17 +367,22 @@ def test_adaptive_factors_reject_non_finite_inputs_by_name():
                 args[index] = list(good[index])
                 args[index][2] = bad
             with pytest.raises(ValueError, match=name):
-                workspace.adaptive_weighting_factors(*args, constants)
+                adaptive_weighting.adaptive_weighting_factors(*args, constants)
 
 
 @pytest.mark.parametrize("call, name", [
-    (lambda: workspace.adaptive_workspace(0.03, 0.04), "capability_lower"),
-    (lambda: workspace.adaptive_workspace(0.04, np.nan), "capability_lower"),
-    (lambda: workspace.adaptive_workspace(0.04, 0.03, "big"), "workspace"),
-    (lambda: workspace.adaptive_workspace(0.04, 0.03, None, 2 * np.eye(3)),
+    (lambda: adaptive_weighting.adaptive_workspace(0.03, 0.04),
+     "capability_lower"),
+    (lambda: adaptive_weighting.adaptive_workspace(0.04, np.nan),
+     "capability_lower"),
+    (lambda: adaptive_weighting.adaptive_workspace(0.04, 0.03, "big"),
+     "workspace"),
+    (lambda: adaptive_weighting.adaptive_workspace(0.04, 0.03, None,
+                                                   2 * np.eye(3)),
      "R_ba"),
-    (lambda: workspace.adaptive_workspace(0.04, 0.03, None, None,
-                                          np.zeros(2)), "arm_base_in_base"),
+    (lambda: adaptive_weighting.adaptive_workspace(0.04, 0.03, None, None,
+                                                   np.zeros(2)),
+     "arm_base_in_base"),
 ])
 def test_adaptive_workspace_checks_its_parameters(call, name):
     with pytest.raises(ValueError, match=name):
@@ -416,7 +428,7 @@ def test_adapter_float_path_matches_the_autodiff_one(adapter):
         generic = ExtractValue(np.concatenate(
             stage_outputs(converted, ad_context))).ravel()
         assert np.max(np.abs(fast - generic)) <= RELATIVE
-        state = workspace.local_workspace_state(
+        state = adaptive_weighting.local_workspace_state(
             values[0], values[1], values[2][0], values[3],
             adapter.params.band.upper, adapter.params.band.lower,
             adapter.params.workspace, R, origin)

@@ -15,10 +15,10 @@ from drake_wbc.config import load_controller_parameters
 from drake_wbc.controller import ControllerParameters, build_controller
 from drake_wbc.dmp import DmpParameters
 from drake_wbc.filtering import BaseFilterParameters
+from drake_wbc.motion_mode import MotionMode
 from drake_wbc.systems import ArmCdmp, BaseVelocityFilter, WorkspaceAdapter
 from drake_wbc.systems.capability_stage import WorkspaceAdapterParameters
 from drake_wbc.validation import validate
-from drake_wbc.workspace import MotionMode
 
 CONTROLLER_FILE = Path(__file__).parents[1] / "diagrams" / "controller.yaml"
 

@@ -17,7 +17,14 @@ from pydrake.systems.primitives import (
     VectorLogSink,
 )
 
-from drake_wbc import capability, compensation, distribution, workspace
+from drake_wbc import (
+    adaptive_weighting,
+    capability,
+    capability_gradients,
+    compensation,
+    distribution,
+)
+from drake_wbc.any_scalar_coordination import compensate_any, distribute_any
 from drake_wbc.kinematics import base_jacobian, whole_body_jacobian
 from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.systems import (
@@ -32,7 +39,6 @@ from drake_wbc.systems import (
     WorkspaceAdapter,
     WorkspaceAdapterParameters,
 )
-from drake_wbc.systems.coordination import compensate_any, distribute_any
 from drake_wbc.workspace import LocalWorkspace
 
 ARM = ArmKinematics()
@@ -132,8 +138,8 @@ def test_arm_capability_matches_kinematics_and_capability():
         assert out["capability"][0] == pytest.approx(C_m, rel=1e-12)
         np.testing.assert_allclose(
             out["capability_gradient"],
-            capability.capability_gradient(values.J_a, q, ARM.lower,
-                                           ARM.upper), rtol=1e-10,
+            capability_gradients.capability_gradient(values.J_a, q, ARM.lower,
+                                                     ARM.upper), rtol=1e-10,
             atol=1e-14)
         assert out["alpha"][0] == pytest.approx(
             capability.transition(C_m, 0.04, 0.035), abs=1e-14)
@@ -228,7 +234,7 @@ def test_phri_matches_the_math_layer():
         inputs = phri_inputs(p_a, rng.normal(size=6) * 0.1,
                              rng.uniform(0.03, 0.07), rng.normal(size=6)
                              * 0.01)
-        state = workspace.local_workspace_state(
+        state = adaptive_weighting.local_workspace_state(
             inputs["end_effector_position"], inputs["end_effector_velocity"],
             inputs["capability"], inputs["capability_gradient"], 0.04,
             0.035, LocalWorkspace(), R_BA, ARM_BASE)

@@ -8,6 +8,7 @@ from pydrake.common.value import AbstractValue
 
 from drake_wbc import (
     capability,
+    capability_gradients,
     compensation,
     distribution,
     kinematics,
@@ -192,7 +193,7 @@ def manipulability_gradient_by_einsum(J):
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
     weights = np.array([np.prod(np.delete(s, k)) for k in range(s.size)])
     return np.einsum("k,rk,irc,kc->i", weights, U,
-                     capability.jacobian_derivative(J), Vt)
+                     capability_gradients.jacobian_derivative(J), Vt)
 
 
 def test_manipulability_gradient_matches_the_einsum_form():
@@ -201,7 +202,7 @@ def test_manipulability_gradient_matches_the_einsum_form():
         for _ in range(30):
             J = rng.normal(size=(6, n))
             assert relative_difference(
-                capability.manipulability_joint_gradient(J),
+                capability_gradients.manipulability_joint_gradient(J),
                 manipulability_gradient_by_einsum(J)) < RELATIVE
 
 
@@ -209,7 +210,7 @@ def test_jacobian_derivative_matches_np_cross_form():
     rng = np.random.default_rng(5)
     J = rng.normal(size=(6, 7))
     Jv, Jw = J[:3].T, J[3:].T
-    D = capability.jacobian_derivative(J)
+    D = capability_gradients.jacobian_derivative(J)
     for i in range(7):
         for j in range(7):
             dv = (np.cross(Jw[i], Jv[j]) if i <= j
@@ -234,11 +235,11 @@ def test_fused_capability_terms_match_the_public_functions(arm):
     for q in random_configurations(arm, 40, 8):
         J = arm.evaluate(q).J_a
         k_j, lam, eps = rng.uniform(5e3, 3e4), 0.02, rng.uniform(0.01, 0.2)
-        C_m, g = capability.capability_terms_unchecked(
+        C_m, g = capability_gradients.capability_terms_unchecked(
             J, q, arm.lower, arm.upper, k_j, lam, eps)
         assert abs(C_m - capability.capability(
             J, q, arm.lower, arm.upper, k_j)) <= RELATIVE * C_m
-        assert relative_difference(g, capability.capability_gradient(
+        assert relative_difference(g, capability_gradients.capability_gradient(
             J, q, arm.lower, arm.upper, k_j, lam, eps)) < RELATIVE
     for value in np.linspace(0.03, 0.045, 61):
         assert abs(capability.transition_unchecked(value, 0.04, 0.035)
@@ -293,7 +294,7 @@ def test_arm_capability_stage_matches_the_public_functions(arm):
         C_m = capability.capability(*args)
         expected = np.concatenate([
             values.p_ee_in_base, [C_m],
-            capability.capability_gradient(
+            capability_gradients.capability_gradient(
                 *args, damping=p.gradient_damping,
                 damping_threshold=p.gradient_damping_threshold),
             [capability.transition(C_m, p.band.upper, p.band.lower)]])

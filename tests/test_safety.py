@@ -24,11 +24,11 @@ from drake_wbc.controller import (
     ControllerParameters,
     build_controller,
 )
+from drake_wbc.motion_mode import MotionMode
 from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.safety import Reason, SafetyParameters
 from drake_wbc.systems import BaseCommandLimiter, InputGuard, StopGate
 from drake_wbc.systems.safety import LOGGER, STATUS_FIELDS, GuardedInput
-from drake_wbc.workspace import MotionMode
 
 HOLD = safety.DEFAULT_HOLD_TIME
 V_MAX = np.array(safety.BASE_VELOCITY_LIMITS)

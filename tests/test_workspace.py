@@ -1,5 +1,6 @@
-"""drake_wbc.workspace (Sec. IV-C) against closed forms, the capability
-module's transition and finite differences, for floats and AutoDiffXd."""
+"""drake_wbc.workspace, adaptive_weighting and motion_mode (Sec. IV-C)
+against closed forms, the capability module's transition and finite
+differences, for floats and AutoDiffXd."""
 
 import numpy as np
 import pytest
@@ -10,8 +11,9 @@ from pydrake.autodiffutils import (
 )
 from reference_kinematics import random_rotation
 
-from drake_wbc import capability, workspace
-from drake_wbc.workspace import LocalWorkspace, MotionMode
+from drake_wbc import adaptive_weighting, capability, motion_mode, workspace
+from drake_wbc.motion_mode import MotionMode
+from drake_wbc.workspace import LocalWorkspace
 
 WS = LocalWorkspace()
 UPPER, LOWER = 0.04, 0.035
@@ -144,7 +146,8 @@ def test_penalized_capability_gradients_match_finite_differences():
 def state(p, V=None, C_m=0.06, g=None):
     V = np.zeros(6) if V is None else V
     g = np.zeros(6) if g is None else g
-    return workspace.local_workspace_state(p, V, C_m, g, UPPER, LOWER, WS)
+    return adaptive_weighting.local_workspace_state(p, V, C_m, g, UPPER,
+                                                    LOWER, WS)
 
 
 def test_inside_the_workspace_far_from_constraints_the_arm_moves():
@@ -264,8 +267,8 @@ def test_rates_use_the_arm_frame():
     V_a = np.array([0.05, 0.02, 0.0, 0.0, 0.0, 0.1])
     p_b = origin + R @ p_a
     V_b = np.concatenate([R @ V_a[:3], R @ V_a[3:]])
-    s = workspace.local_workspace_state(p_b, V_b, 0.06, np.zeros(6), UPPER,
-                                        LOWER, WS, R, origin)
+    s = adaptive_weighting.local_workspace_state(p_b, V_b, 0.06, np.zeros(6),
+                                                 UPPER, LOWER, WS, R, origin)
     assert s.d == pytest.approx(0.6)
     assert s.phi == pytest.approx(np.radians(20.0))
     assert s.d_rate == pytest.approx(
@@ -286,8 +289,9 @@ def test_autodiff_state_matches_floats_and_finite_differences():
     x0 = np.concatenate([p, V, [0.0596], g])
 
     def sigmas(x):
-        s = workspace.local_workspace_state(x[:3], x[3:9], x[9], x[10:16],
-                                            UPPER, LOWER, WS)
+        s = adaptive_weighting.local_workspace_state(x[:3], x[3:9], x[9],
+                                                     x[10:16], UPPER, LOWER,
+                                                     WS)
         return np.array([s.sigma_xy, s.sigma_phi])
 
     x = InitializeAutoDiff(x0).ravel()
@@ -304,21 +308,21 @@ def test_autodiff_state_matches_floats_and_finite_differences():
 
 
 def test_fixed_modes():
-    assert workspace.fixed_weighting_factors("locomotion") == (0.0, 0.0)
-    assert workspace.fixed_weighting_factors(MotionMode.MANIPULATION) == \
+    assert motion_mode.fixed_weighting_factors("locomotion") == (0.0, 0.0)
+    assert motion_mode.fixed_weighting_factors(MotionMode.MANIPULATION) == \
         (1.0, 1.0)
-    assert workspace.fixed_weighting_factors("loco-manipulation", 0.3,
-                                             0.8) == (0.3, 0.8)
+    assert motion_mode.fixed_weighting_factors("loco-manipulation", 0.3,
+                                               0.8) == (0.3, 0.8)
     with pytest.raises(ValueError, match="adaptive"):
-        workspace.fixed_weighting_factors("intuitive-phri")
+        motion_mode.fixed_weighting_factors("intuitive-phri")
 
 
 @pytest.mark.parametrize("call, name", [
     (lambda: MotionMode.parse("walking"), "mode"),
-    (lambda: workspace.fixed_weighting_factors("loco-manipulation", 0.0,
-                                               0.5), "sigma_xy"),
-    (lambda: workspace.fixed_weighting_factors("loco-manipulation", 0.5,
-                                               1.2), "sigma_phi"),
+    (lambda: motion_mode.fixed_weighting_factors("loco-manipulation", 0.0,
+                                                 0.5), "sigma_xy"),
+    (lambda: motion_mode.fixed_weighting_factors("loco-manipulation", 0.5,
+                                                 1.2), "sigma_phi"),
     (lambda: LocalWorkspace(extent_lower=0.8, extent_upper=0.75),
      "extent_lower"),
     (lambda: LocalWorkspace(extent_lower=0.8, extent_upper=0.8),

@@ -15,9 +15,9 @@ starts from the same kinematics (ArmKinematics.evaluate, as the
 controller's ArmCapability does each tick) and its time includes it.
 
 Contenders:
-- closed_form: the controller's own path (distribution.distribute_aligned,
-  the plain-float form of distribution.distribute for R_ba = I, as
-  MotionDistributor calls it).
+- closed_form: the controller's own path
+  (aligned_distribution.distribute_aligned, the plain-float form of
+  distribution.distribute for R_ba = I, as MotionDistributor calls it).
 - drake_diffik: Drake's DoDifferentialInverseKinematics (a QP solved
   with OSQP inside Drake) in the scaled input u = Q^-1/2 V_wb, where
   the weighted problem is its unweighted one: J = J_wb Q^1/2, joint
@@ -47,7 +47,7 @@ from pydrake.multibody.inverse_kinematics import (
     DoDifferentialInverseKinematics,
 )
 
-from drake_wbc import distribution, kinematics
+from drake_wbc import aligned_distribution, distribution, kinematics
 from drake_wbc.robot_model import (
     ARM_JOINTS,
     BASE_JOINTS,
@@ -141,7 +141,7 @@ def closed_form(arm):
     (systems.MotionDistributor): the end effector from the plant
     (ArmKinematics.evaluate, the same kinematics as every contender's),
     then J_wb = [R_ba, J_b] and eqs. (wbsln)/(wbccm) on the unchecked
-    float path (distribution.distribute_aligned for R_ba = I, else
+    float path (aligned_distribution.distribute_aligned for R_ba = I, else
     kinematics.whole_body_jacobian_unchecked and
     distribution.distribute_unchecked); the controller checks its
     parameters once, when it is built, and the sigmas and k_n on each
@@ -161,7 +161,7 @@ def closed_form(arm):
             non_negative("k_n", k_n)
         V_n = [k_n * g for g in problem.capability_gradient.tolist()]
         if aligned:
-            return distribution.distribute_aligned(
+            return aligned_distribution.distribute_aligned(
                 problem.end_effector_velocity, p_ee, sigma_xy, sigma_phi,
                 V_n, damping)
         J = kinematics.whole_body_jacobian_unchecked(None, p_ee, R_ba)

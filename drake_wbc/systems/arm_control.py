@@ -8,13 +8,10 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import BasicVector_, LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_wbc.arm_control import (
-    ArmControllerParameters,
-    TwistSolver,
-    check_margin,
-)
+from drake_wbc.arm_control import ArmControllerParameters, check_margin
 from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.scalar_support import through_float_function, value_of
+from drake_wbc.twist_solver import TwistSolver
 from drake_wbc.validation import as_vector, checked_instance, validated_copy
 
 ARM_JOINT_COUNT = 6

@@ -12,7 +12,13 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_wbc import capability, workspace
+from drake_wbc import (
+    adaptive_weighting,
+    capability,
+    capability_gradients,
+    motion_mode,
+)
+from drake_wbc.motion_mode import MotionMode
 from drake_wbc.robot_model import ArmKinematics
 from drake_wbc.scalar_support import through_float_function
 from drake_wbc.validation import (
@@ -23,7 +29,7 @@ from drake_wbc.validation import (
     positive,
     validated_copy,
 )
-from drake_wbc.workspace import LocalWorkspace, MotionMode
+from drake_wbc.workspace import LocalWorkspace
 
 SCALARS = (float, AutoDiffXd)
 """The scalar types of the coordination stages (double and AutoDiffXd; not
@@ -138,14 +144,16 @@ class ArmCapabilityParameters:
     Attributes:
         band: the limitation band of alpha, eq. (transition).
         joint_limit_gain: k_j > 0 of the joint-limit penalization P_jnt.
-        gradient_damping: lambda_max >= 0 of capability.capability_gradient.
+        gradient_damping: lambda_max >= 0 of
+            capability_gradients.capability_gradient.
         gradient_damping_threshold: eps > 0 of the same.
     """
 
     band: CapabilityBand = field(default_factory=CapabilityBand)
     joint_limit_gain: float = capability.DEFAULT_JOINT_LIMIT_GAIN
-    gradient_damping: float = capability.DEFAULT_MAX_DAMPING
-    gradient_damping_threshold: float = capability.DEFAULT_DAMPING_THRESHOLD
+    gradient_damping: float = capability_gradients.DEFAULT_MAX_DAMPING
+    gradient_damping_threshold: float = (
+        capability_gradients.DEFAULT_DAMPING_THRESHOLD)
 
     def __post_init__(self):
         set_band(self)
@@ -234,13 +242,14 @@ def ArmCapability_(T):
             """[p_ee (3), C_m, grad_x C_m (6), alpha] at float q_a (6,).
 
             One evaluation of the kinematics and one SVD of J_a
-            (capability.capability_terms_unchecked): the parameters were
-            checked at construction (and kept as plain floats), q_a is
-            checked (shape (6,), finite) by ArmKinematics.evaluate.
+            (capability_gradients.capability_terms_unchecked): the
+            parameters were checked at construction (and kept as plain
+            floats), q_a is checked (shape (6,), finite) by
+            ArmKinematics.evaluate.
             """
             values = self.arm.evaluate(q_a)
             q = np.asarray(q_a, dtype=float).tolist()
-            C_m, gradient = capability.capability_terms_unchecked(
+            C_m, gradient = capability_gradients.capability_terms_unchecked(
                 values.J_a, q, *self._limits, *self._constants)
             result = np.empty(11)
             result[:3] = values.p_ee_in_base
@@ -295,8 +304,8 @@ class WorkspaceAdapterParameters:
             "workspace", self.workspace, LocalWorkspace, LocalWorkspace)
         set_band(self)
         if self.mode is MotionMode.LOCO_MANIPULATION:
-            workspace.fixed_weighting_factors(self.mode, self.sigma_xy,
-                                              self.sigma_phi)
+            motion_mode.fixed_weighting_factors(self.mode, self.sigma_xy,
+                                                self.sigma_phi)
 
 
 @TemplateSystem.define("WorkspaceAdapter_", T_list=SCALARS)
@@ -323,16 +332,17 @@ def WorkspaceAdapter_(T):
         Locomotion gives (0, 0), manipulation (1, 1), loco-manipulation
         the fixed parameters; these modes read no input (no direct
         feedthrough). The intuitive pHRI mode computes
-        workspace.local_workspace_state: f_xy, f_phi from C_m penalized
-        by the extent d and deflection phi of the end effector w.r.t. the
-        arm's base (defined in drake_wbc.workspace), then sigma = 1 if
-        the commanded twist, carried by the arm alone, would raise
-        C_m^(d,phi) or lead back (d_dot, phi_dot < 0), else f (both
-        tests beyond a roundoff guard, workspace.DEACTIVATION_TOLERANCE).
-        sigma is then discontinuous where the deactivation switches, as
-        in the paper. For double (chosen once, at construction) the
-        intuitive pHRI mode takes workspace.adaptive_weighting_factors,
-        the same formulas in plain floats with the parameters checked at
+        adaptive_weighting.local_workspace_state: f_xy, f_phi from C_m
+        penalized by the extent d and deflection phi of the end effector
+        w.r.t. the arm's base (defined in drake_wbc.workspace), then
+        sigma = 1 if the commanded twist, carried by the arm alone, would
+        raise C_m^(d,phi) or lead back (d_dot, phi_dot < 0), else f (both
+        tests beyond a roundoff guard,
+        adaptive_weighting.DEACTIVATION_TOLERANCE). sigma is then
+        discontinuous where the deactivation switches, as in the paper.
+        For double (chosen once, at construction) the intuitive pHRI mode
+        takes adaptive_weighting.adaptive_weighting_factors, the same
+        formulas in plain floats with the parameters checked at
         construction; AutoDiffXd takes local_workspace_state.
 
         Args:
@@ -355,7 +365,7 @@ def WorkspaceAdapter_(T):
                 ("capability", 1), ("capability_gradient", 6)))
             adaptive = self.params.mode is MotionMode.INTUITIVE_PHRI
             p = self.params
-            self._constants = workspace.adaptive_workspace(
+            self._constants = adaptive_weighting.adaptive_workspace(
                 p.band.upper, p.band.lower, p.workspace, self.R_ba,
                 self.arm_base_position)
             self._input_list = list(self._inputs.values())
@@ -375,11 +385,11 @@ def WorkspaceAdapter_(T):
         def _calc(self, context):
             p = self.params
             if p.mode is not MotionMode.INTUITIVE_PHRI:
-                return np.array(workspace.fixed_weighting_factors(
+                return np.array(motion_mode.fixed_weighting_factors(
                     p.mode, p.sigma_xy, p.sigma_phi))
             inputs = {name: port.Eval(context)
                       for name, port in self._inputs.items()}
-            state = workspace.local_workspace_state(
+            state = adaptive_weighting.local_workspace_state(
                 inputs["end_effector_position"],
                 inputs["end_effector_velocity"],
                 inputs["capability"][0], inputs["capability_gradient"],
@@ -390,7 +400,7 @@ def WorkspaceAdapter_(T):
         def _calc_float(self, context):
             position, velocity, C_m, gradient = (
                 port.Eval(context) for port in self._input_list)
-            return np.array(workspace.adaptive_weighting_factors(
+            return np.array(adaptive_weighting.adaptive_weighting_factors(
                 position, velocity.tolist(), float(C_m[0]),
                 gradient.tolist(), self._constants))
 

@@ -7,31 +7,39 @@ weighting factors come from ArmCapability and WorkspaceAdapter
 Both are stateless: their outputs follow directly from their inputs
 (direct feedthrough), neither sits on a feedback edge. The double systems
 run the math layer's unchecked paths in plain floats
-(distribution.distribute_aligned for the usual mounting R_ba = I, else
-distribution.distribute_unchecked; compensation.compensate_unchecked):
+(aligned_distribution.distribute_aligned for the usual mounting R_ba = I,
+else distribution.distribute_unchecked; compensation.compensate_unchecked):
 their parameters and R_ba are checked once at construction, their inputs
 have the ports' sizes, and only the values that the ports cannot
 constrain (sigma, alpha, s_c, k_n) are checked each tick. The AutoDiffXd
-ones run the same formulas elementwise, with scalar_support.solve for the
-linear solve, so that their derivatives are exact.
+ones run the same formulas elementwise (drake_wbc.any_scalar_coordination),
+with scalar_support.solve for the linear solve, so that their derivatives
+are exact.
 """
 
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc import (
+    aligned_distribution,
     capability,
     compensation,
     distribution,
     kinematics,
     workspace,
 )
+from drake_wbc.any_scalar_coordination import (
+    PROJECTOR_TOLERANCE,
+    _unit_interval,
+    base_jacobian_any,
+    compensate_any,
+    distribute_any,
+)
 from drake_wbc.robot_model import ArmKinematics
-from drake_wbc.scalar_support import solve, value_of
+from drake_wbc.scalar_support import value_of
 from drake_wbc.systems.capability_stage import (
     SCALARS,
     CapabilityBand,
@@ -49,97 +57,6 @@ from drake_wbc.validation import (
     non_negative,
     validated_copy,
 )
-
-PROJECTOR_TOLERANCE = 1e-12
-"""Norm of grad_x C_m below which P_Cm = 0, as in
-compensation.gradient_projector (its default)."""
-
-
-def _autodiff(array):
-    """`array` with every entry an AutoDiffXd (floats get no derivatives)."""
-    array = np.asarray(array, dtype=object)
-    flat = [e if isinstance(e, AutoDiffXd) else AutoDiffXd(float(e))
-            for e in array.ravel()]
-    return np.array(flat, dtype=object).reshape(array.shape)
-
-
-def _unit_interval(name, value):
-    """Checks 0 <= value <= 1 for a float or AutoDiffXd scalar."""
-    if not 0.0 <= value <= 1.0:
-        raise ValueError(
-            f"{name} = {float(value_of(value))!r} is not allowed: must lie "
-            "in [0, 1]"
-        )
-    return value
-
-
-def base_jacobian_any(p_ee_in_base):
-    """J_b of eq. (2) (kinematics.base_jacobian) for any scalar type."""
-    p = np.asarray(p_ee_in_base)
-    zero = p[0] * 0.0
-    one = zero + 1.0
-    return np.array([[one, zero, -p[1]], [zero, one, p[0]], [zero] * 3,
-                     [zero] * 3, [zero] * 3, [zero, zero, one]])
-
-
-def distribute_any(J_wb, V_ee, sigma_xy, sigma_phi, null_velocity,
-                   damping=distribution.DEFAULT_DAMPING):
-    """distribution.distribute for AutoDiffXd arguments (floats also work).
-
-        V_wb = J^+ (V_ee - J V_n^0) + V_n^0,  J^+ = Q J^T (J Q J^T)^-1,
-
-    the same as J^+ V_ee + (I - J^+ J) V_n^0, with the same damping of
-    J Q J^T near singularity; there the eigenvalues s_min, s_max are taken
-    as v^T (J Q J^T) v with the eigenvectors v of its value, which gives
-    them (and lambda^2) their exact first derivatives for simple
-    eigenvalues.
-    """
-    _unit_interval("sigma_xy", sigma_xy)
-    _unit_interval("sigma_phi", sigma_phi)
-    J = _autodiff(J_wb)
-    weights = np.array([sigma_xy, sigma_xy, 1.0, 1.0, 1.0, sigma_phi,
-                        1.0 - sigma_xy, 1.0 - sigma_xy, 1.0 - sigma_phi],
-                       dtype=object)
-    JQ = J * weights[np.newaxis, :]
-    M = JQ @ J.T
-    M = _autodiff(0.5 * (M + M.T))
-    V_n = _autodiff(null_velocity)
-    eigenvalues, vectors = np.linalg.eigh(value_of(M))
-    if eigenvalues[-1] <= 0.0:
-        return V_n  # J^+ = 0: no weighted input moves the end effector
-    if damping is not None:
-        eps = damping.threshold * eigenvalues[-1]
-        if max(eigenvalues[0], 0.0) < eps:
-            s_max = vectors[:, -1] @ M @ vectors[:, -1]
-            s_min = (vectors[:, 0] @ M @ vectors[:, 0]
-                     if eigenvalues[0] > 0.0 else s_max * 0.0)
-            ratio = s_min / (damping.threshold * s_max)
-            lambda_sq = damping.max_squared * s_max * (1.0 - ratio * ratio)
-            M = M + lambda_sq * np.eye(6)
-    try:
-        x = solve(M, _autodiff(V_ee) - J @ V_n)
-    except np.linalg.LinAlgError:
-        raise ValueError(
-            "J_wb with singular J_wb Q J_wb^T is not allowed with "
-            "damping=None: pass a SingularityDamping"
-        ) from None
-    return JQ.T @ x + V_n
-
-
-def compensate_any(delta_V_b, p_ee_in_base, R_ba, grad_C_m, alpha):
-    """compensation.robust_compensation for AutoDiffXd arguments:
-    (delta_V_a^cmp, delta_V_ee), eqs. (wb_error) and (deviation), with
-    P_Cm = g g^T / (g^T g) written as g (g . x) / (g . g)."""
-    _unit_interval("alpha", alpha)
-    R6 = kinematics.twist_rotation(R_ba)
-    required = -(R6.T @ (base_jacobian_any(p_ee_in_base) @ delta_V_b))
-    g = np.asarray(grad_C_m)
-    g_squared = np.dot(g, g)
-    if g_squared > PROJECTOR_TOLERANCE**2:
-        deviation = -alpha * g * (np.dot(g, required) / g_squared)
-    else:
-        deviation = required * 0.0
-    return required + deviation, deviation
 
 
 @dataclass
@@ -312,7 +229,7 @@ def MotionDistributor_(T):
 
         def _calc_aligned(self, context):
             """_calc in double for R_ba = I (our robot): the same V_wb,
-            in plain floats (distribution.distribute_aligned)."""
+            in plain floats (aligned_distribution.distribute_aligned)."""
             sigma_xy = float(self._sigma_xy_port.Eval(context)[0])
             sigma_phi = float(self._sigma_phi_port.Eval(context)[0])
             if not (0.0 <= sigma_xy <= 1.0 and 0.0 <= sigma_phi <= 1.0):
@@ -320,7 +237,7 @@ def MotionDistributor_(T):
                 _unit_interval("sigma_phi", sigma_phi)
             k = float(self.null_space_gain(context))
             g = self._gradient_port.Eval(context).tolist()
-            return distribution.distribute_aligned(
+            return aligned_distribution.distribute_aligned(
                 self._V_ee_port.Eval(context),
                 self._p_ee_port.Eval(context), sigma_xy, sigma_phi,
                 [k * e for e in g], self.params.damping)
