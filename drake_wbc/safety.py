@@ -258,12 +258,22 @@ def uniform_scale(vector, limits):
     Returns:
         s as a float (1.0 when the vector is within its limits).
     """
-    magnitude = np.abs(np.asarray(vector, dtype=float))
-    limits = np.asarray(limits, dtype=float)
-    over = magnitude > limits
-    if not np.any(over):
-        return 1.0
-    return float(np.min(limits[over] / magnitude[over]))
+    return _uniform_scale(_floats(vector), _floats(limits))
+
+
+def _floats(values):
+    return values.tolist() if type(values) is np.ndarray else values
+
+
+def _uniform_scale(vector, limits):
+    """`uniform_scale` of two sequences of floats (the tick's path: a
+    few entries, cheaper in Python floats than in numpy)."""
+    scale = 1.0
+    for value, limit in zip(vector, limits, strict=True):
+        magnitude = abs(value)
+        if magnitude > limit and limit < scale * magnitude:
+            scale = limit / magnitude
+    return scale
 
 
 class LimitedCommand(NamedTuple):
@@ -316,17 +326,24 @@ def limit_base_velocity(desired, previous, velocity_limits,
     Returns:
         LimitedCommand.
     """
-    desired = np.asarray(desired, dtype=float)
+    given = desired
+    desired = [float(v) for v in _floats(desired)]
     if scale < 1.0:
-        desired = scale * desired
-    previous = np.asarray(previous, dtype=float)
-    velocity_scale = uniform_scale(desired, velocity_limits)
-    target = desired if velocity_scale == 1.0 else velocity_scale * desired
-    change = target - previous
-    acceleration_scale = uniform_scale(
-        change, np.asarray(acceleration_limits, dtype=float) * time_step)
-    command = (target if acceleration_scale == 1.0
-               else previous + acceleration_scale * change)
+        desired = [scale * v for v in desired]
+    previous = [float(v) for v in _floats(previous)]
+    velocity_scale = _uniform_scale(desired, _floats(velocity_limits))
+    target = (desired if velocity_scale == 1.0
+              else [velocity_scale * v for v in desired])
+    change = [t - p for t, p in zip(target, previous, strict=True)]
+    acceleration_scale = _uniform_scale(
+        change, [a * time_step for a in _floats(acceleration_limits)])
+    if acceleration_scale < 1.0:
+        command = np.array([p + acceleration_scale * c
+                            for p, c in zip(previous, change, strict=True)])
+    elif target is desired and scale >= 1.0:
+        command = np.asarray(given, dtype=float)  # the very same values
+    else:
+        command = np.array(target)
     return LimitedCommand(command, scale * velocity_scale,
                           acceleration_scale)
 

@@ -71,6 +71,26 @@ def _nearest_first(distance, count):
     return np.argsort(distance, kind="stable")[:count]
 
 
+def approach_rows(points, half_sizes):
+    """The rows G (M, 3) with a = G [vx, vy, wz] the approach speeds of
+    `approach_speeds`, and the points' distances d (M,).
+
+    With r_i = p_i - d_i n_i the footprint's nearest point,
+    a_i = (v + w x r_i) . n_i = [n_x, n_y, r_x n_y - r_y n_x] [vx, vy, wz]:
+    linear in the command, so a tick that keeps its obstacle points needs
+    only G and d, not the geometry again.
+
+    Args:
+        points: (M, 2) obstacle points in T_b, m.
+        half_sizes: the footprint's half-sizes (a, b), m.
+    """
+    points = np.reshape(np.asarray(points, dtype=float), (-1, 2))
+    d, nx, ny = footprint_geometry(points, half_sizes)
+    # The footprint's nearest point r = p - d n.
+    rx, ry = points[:, 0] - d * nx, points[:, 1] - d * ny
+    return np.column_stack([nx, ny, rx * ny - ry * nx]), d
+
+
 def approach_speeds(command, points, half_sizes):
     """The speed a_i at which the footprint approaches each point under
     `command`, and the points' distances d_i (module docstring).
@@ -83,12 +103,14 @@ def approach_speeds(command, points, half_sizes):
     Returns:
         (a, d), two (M,) arrays; a > 0 means approaching.
     """
-    points = np.reshape(np.asarray(points, dtype=float), (-1, 2))
-    d, nx, ny = footprint_geometry(points, half_sizes)
-    # The footprint's nearest point r = p - d n.
-    rx, ry = points[:, 0] - d * nx, points[:, 1] - d * ny
-    vx, vy, wz = (float(c) for c in command)
-    return (vx - wz * ry) * nx + (vy + wz * rx) * ny, d
+    rows, d = approach_rows(points, half_sizes)
+    return rows @ np.asarray(command, dtype=float), d
+
+
+def allowed_speeds(d, stop_distance, stop_time):
+    """The largest approach speed max(d - stop_distance, 0) / stop_time
+    to each point at distance d (M,)."""
+    return np.maximum(d - stop_distance, 0.0) / stop_time
 
 
 def separation_scale(command, points, half_sizes, stop_distance,
@@ -106,8 +128,15 @@ def separation_scale(command, points, half_sizes, stop_distance,
     Returns:
         s as a float (1.0 when no bound acts).
     """
-    approach, d = approach_speeds(command, points, half_sizes)
-    allowed = np.maximum(d - stop_distance, 0.0) / stop_time
+    rows, d = approach_rows(points, half_sizes)
+    return scale_for_rows(command, rows,
+                          allowed_speeds(d, stop_distance, stop_time))
+
+
+def scale_for_rows(command, rows, allowed):
+    """`separation_scale` from the points' `approach_rows` (M, 3) and
+    `allowed_speeds` (M,): the per-tick part, a product and a minimum."""
+    approach = rows @ command
     closing = approach > allowed
     if not closing.any():
         return 1.0

@@ -251,6 +251,35 @@ def test_velocity_scaling_is_parallel_in_closed_form():
     assert safety.uniform_scale([2.0, -4.0], [1.0, 1.0]) == 0.25
 
 
+def _limit_as_written(desired, previous, scale):
+    """limit_base_velocity's formulas, written out in numpy."""
+    def scale_into(vector, limits):
+        over = np.abs(vector) > limits
+        return 1.0 if not over.any() else np.min(
+            limits[over] / np.abs(vector[over]))
+    desired = scale * desired
+    s_v = scale_into(desired, V_MAX)
+    target = s_v * desired
+    s_a = scale_into(target - previous, A_MAX * H)
+    return previous + s_a * (target - previous), scale * s_v, s_a
+
+
+def test_limits_agree_with_the_formulas_written_out():
+    rng = np.random.default_rng(11)
+    for _ in range(2000):
+        desired = rng.uniform(-2.0, 2.0, 3) * rng.choice([0.01, 0.1, 1.0])
+        previous = np.clip(desired + rng.normal(0.0, 0.02, 3), -V_MAX, V_MAX)
+        scale = rng.choice([1.0, rng.uniform(0.0, 1.0)])
+        result = safety.limit_base_velocity(desired, previous, V_MAX, A_MAX,
+                                            H, scale=scale)
+        command, s_v, s_a = _limit_as_written(desired, previous, scale)
+        np.testing.assert_allclose(result.command, command, rtol=1e-14,
+                                   atol=1e-15)
+        assert result.velocity_scale == pytest.approx(s_v, rel=1e-14)
+        assert result.acceleration_scale == pytest.approx(s_a, rel=1e-14)
+        assert np.all(np.abs(result.command) <= V_MAX * (1 + 1e-12))
+
+
 def test_saturated_base_command_is_parallel_and_flagged(arm):
     params = ControllerParameters()
     params.workspace.mode = MotionMode.LOCOMOTION  # sigma = 0: the base

@@ -13,7 +13,13 @@ from drake_wbc import safety
 from drake_wbc.repulsion import RepulsiveFieldParameters
 from drake_wbc.safety import SafetyParameters, limit_base_velocity
 from drake_wbc.scalar_support import through_float_function, value_of
-from drake_wbc.separation import nearest_points, separation_scale
+from drake_wbc.separation import (
+    NEAREST_POINTS,
+    allowed_speeds,
+    approach_rows,
+    nearest_points,
+    scale_for_rows,
+)
 from drake_wbc.systems.safety import SCALARS, as_scalar_type
 from drake_wbc.validation import (
     as_vector,
@@ -115,6 +121,11 @@ StopGate = StopGate_[None]
 """StopGate_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""
 
 
+_ALLOWED = 7 + 3 * NEAREST_POINTS
+"""Where the allowed speeds start in BaseCommandLimiter's float_map
+argument."""
+
+
 @TemplateSystem.define("BaseCommandLimiter_", T_list=SCALARS)
 def BaseCommandLimiter_(T):
     class Impl(LeafSystem_[T]):
@@ -165,8 +176,11 @@ def BaseCommandLimiter_(T):
 
         Both outputs are direct feedthrough of `velocity` and `stopped`
         (the base filter's and the guard's state), so they add no delay.
-        State: the previous command (3) and the nearest obstacle points
-        (2 NEAREST_POINTS), updated once a tick h.
+        State, updated once a tick h: the previous command (3), and of
+        the NEAREST_POINTS obstacle points nearest the footprint their
+        approach rows G (3 NEAREST_POINTS, row by row) and allowed speeds
+        (NEAREST_POINTS), so that the outputs bound G s v <= allowed with
+        a product and a minimum (drake_wbc.separation.scale_for_rows).
 
         Scalar types: double and AutoDiffXd; the AutoDiff output is the
         double one with derivatives by central differences
@@ -196,7 +210,7 @@ def BaseCommandLimiter_(T):
                 "obstacle_points", AbstractValue.Make(np.zeros((0, 2))))
             state = self.DeclareDiscreteState(np.concatenate([
                 np.zeros(safety.BASE_AXES),
-                nearest_points(np.zeros((0, 2)), self.half_sizes).ravel()]))
+                self._separation_state(np.zeros((0, 2)))]))
             self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0,
                                                     self._update)
             # Not time: the result changes only with the inputs and state.
@@ -219,20 +233,27 @@ def BaseCommandLimiter_(T):
                             other.half_sizes, converter=converter)
             self.params = other.params
 
+        def _separation_state(self, points):
+            """The state's separation part for obstacle points (M, 2):
+            the nearest points' approach rows, then allowed speeds."""
+            rows, d = approach_rows(
+                nearest_points(points, self.half_sizes), self.half_sizes)
+            return np.concatenate([rows.ravel(), allowed_speeds(
+                d, self.params.stop_distance, self.params.stop_time)])
+
         def float_map(self, z):
-            """[desired (3), previous (3), stopped, points (2
-            NEAREST_POINTS)] -> [command (3), limited, velocity scale,
-            acceleration scale], in double (without the envelope's
-            scale)."""
+            """[desired (3), previous (3), stopped, approach rows (3
+            NEAREST_POINTS), allowed speeds (NEAREST_POINTS)] ->
+            [command (3), limited, velocity scale, acceleration scale],
+            in double (without the envelope's scale)."""
             desired, previous, stopped = z[:3], z[3:6], z[6]
             if stopped >= 0.5:
                 return np.array([0.0, 0.0, 0.0, 0.0, 1.0, 1.0])
             if not np.isfinite(desired).all():
                 return np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
             params = self.params
-            separation = separation_scale(
-                desired, z[7:].reshape(-1, 2), self.half_sizes,
-                params.stop_distance, params.stop_time)
+            separation = scale_for_rows(
+                desired, z[7:_ALLOWED].reshape(-1, 3), z[_ALLOWED:])
             result = limit_base_velocity(
                 desired, previous, params.base_velocity_limits,
                 params.base_acceleration_limits, self.time_step,
@@ -277,8 +298,8 @@ def BaseCommandLimiter_(T):
                       if self._points.HasValue(context)
                       else np.zeros((0, 2)))
             discrete_state.set_value(np.concatenate([
-                self._evaluate(context)[:3], as_scalar_type(
-                    T, nearest_points(points, self.half_sizes).ravel())]))
+                self._evaluate(context)[:3],
+                as_scalar_type(T, self._separation_state(points))]))
 
         def set_previous(self, context, velocity):
             """Sets the previous command (3,), e.g. the base's measured
