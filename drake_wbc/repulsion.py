@@ -211,3 +211,30 @@ def _repulsive_force_float(points, params):
     slope = params.k_obs * (1.0 / d - 1.0 / reach) / (d * d)
     slope[d > reach] = 0.0
     return _bounded(np.array([-slope @ nx, -slope @ ny]), params)
+
+
+class LastPoints:
+    """A float function of obstacle points that remembers its result for
+    the last points it was given.
+
+    The LIDARs scan at 15 Hz and the controller ticks at 100 Hz, so most
+    ticks see the very points of the tick before; Drake's caches cannot
+    tell (every input is invalidated each step), so the stages that work
+    on the points ask this instead. The points are compared by value
+    (a copy is kept), so an array changed in place is seen as new.
+
+    Args:
+        function: maps (M, 2) float points to a float array.
+    """
+
+    def __init__(self, function):
+        self._function = function
+        self._points = None
+        self._result = None
+
+    def __call__(self, points):
+        """function(points), a fresh copy."""
+        if self._points is None or not np.array_equal(self._points, points):
+            self._result = np.asarray(self._function(points))
+            self._points = np.array(points, dtype=float)
+        return self._result.copy()

@@ -131,3 +131,28 @@ def test_a_worker_dragging_the_robot_into_a_crate_is_stopped_short():
     record = run_case(2026, 499, 4.0)
     assert violations(record) == []
     assert record["min_static_obstacle_distance_m"] > 0.02
+
+
+def test_last_points_recomputes_only_for_new_points():
+    calls = []
+
+    def gap_sum(points):
+        calls.append(1)
+        return np.array([repulsion.footprint_gap(points, HALF).sum()])
+
+    last = repulsion.LastPoints(gap_sum)
+    points = np.random.default_rng(3).uniform(-2.0, 2.0, (50, 2))
+    first = last(points)
+    np.testing.assert_array_equal(last(points.copy()), first)
+    assert len(calls) == 1  # equal values: remembered
+    first[0] = -1.0  # the caller's copy, not the remembered result
+    assert last(points)[0] != -1.0 and len(calls) == 1
+    points[7, 0] += 1e-12  # changed in place: seen as new
+    last(points)
+    assert len(calls) == 2
+    last(points[:10])  # another shape
+    assert len(calls) == 3
+    nan = points.copy()
+    nan[0, 0] = np.nan  # NaN equals nothing: computed each time
+    last(nan), last(nan)
+    assert len(calls) == 5

@@ -52,6 +52,20 @@ def obstacle_points(count, seed=0):
                             radius * np.sin(angle)])
 
 
+def _measurements(arm, num_points, turn):
+    """The station inputs of ControllerTicker's measurement set `turn`
+    (0 or 1): the second one differs in every entry."""
+    q = HOME_ARM_POSITIONS + 1e-3 * turn
+    c, s = np.cos(1e-3 * turn), np.sin(1e-3 * turn)
+    return {
+        "base.state_estimated": BASE_STATE + 1e-4 * turn,
+        "arm.position_measured": q,
+        "wrist.wrench_measured": tool_weight_reading(arm, q),
+        "lidar.obstacle_points": AbstractValue.Make(
+            obstacle_points(num_points) @ np.array([[c, s], [-s, c]])),
+    }
+
+
 class _Fixed:
     """An input port's fixed value in a context, written again on demand
     (which invalidates what depends on it, as a new message does).
@@ -59,20 +73,23 @@ class _Fixed:
     Args:
         port: an InputPort.
         context: its system's context.
-        value: a vector (array) or an AbstractValue.
+        values: the values written in turn, each a vector (array) or an
+            AbstractValue.
     """
 
-    def __init__(self, port, context, value):
-        self.value = value
-        self.fixed = port.FixValue(context, value)
-        self.is_vector = not isinstance(value, AbstractValue)
+    def __init__(self, port, context, values):
+        self.values, self.turn = values, 0
+        self.fixed = port.FixValue(context, values[0])
+        self.is_vector = not isinstance(values[0], AbstractValue)
 
     def write(self):
+        self.turn = (self.turn + 1) % len(self.values)
+        value = self.values[self.turn]
         data = self.fixed.GetMutableData()
         if self.is_vector:
-            data.get_mutable_value().SetFromVector(self.value)
+            data.get_mutable_value().SetFromVector(value)
         else:
-            data.SetFrom(self.value)
+            data.SetFrom(value)
 
 
 class ControllerTicker:
@@ -91,16 +108,11 @@ class ControllerTicker:
         diagram = self.controller.diagram
         self.simulator = Simulator(diagram)
         self.context = self.simulator.get_mutable_context()
-        self.values = {
-            "base.state_estimated": BASE_STATE,
-            "arm.position_measured": HOME_ARM_POSITIONS,
-            "wrist.wrench_measured": tool_weight_reading(
-                arm, HOME_ARM_POSITIONS),
-            "lidar.obstacle_points": AbstractValue.Make(
-                obstacle_points(num_points)),
-        }
+        self.values = [_measurements(arm, num_points, turn)
+                       for turn in (0, 1)]
         self.fixed = [
-            _Fixed(diagram.GetInputPort(name), self.context, self.values[name])
+            _Fixed(diagram.GetInputPort(name), self.context,
+                   [values[name] for values in self.values])
             for name in STATION_INPUTS]
         diagram.GetInputPort("reference_velocity").FixValue(
             self.context, REFERENCE_VELOCITY)
@@ -131,8 +143,11 @@ class ControllerTicker:
 class StageTicker:
     """One stage of a running ControllerTicker, in a context of its own.
 
+    Its inputs alternate, as the ticker's measurements do, between the
+    values they had in the running diagram after two successive ticks.
+
     Args:
-        ticker: a ControllerTicker that has run at least one tick.
+        ticker: a ControllerTicker.
         name: the stage's name (a key of Controller.stages).
     """
 
@@ -140,18 +155,21 @@ class StageTicker:
         stage = ticker.controller.stages[name]
         inner = stage.GetMyContextFromRoot(ticker.context)
         self.stage, self.name = stage, name
+        ports = [stage.get_input_port(i)
+                 for i in range(stage.num_input_ports())]
+        ports = [port for port in ports if port.HasValue(inner)]
+        values = [[] for _ in ports]  # unconnected optional inputs left
+        for _ in range(2):
+            ticker.ticks(1)()
+            for port, seen in zip(ports, values, strict=True):
+                seen.append(
+                    np.array(port.Eval(inner))
+                    if port.get_data_type() == PortDataType.kVectorValued
+                    else port.EvalAbstract(inner).Clone())
         self.context = stage.CreateDefaultContext()
         self.context.SetTimeStateAndParametersFrom(inner)
-        self.inputs = []
-        for i in range(stage.num_input_ports()):
-            port = stage.get_input_port(i)
-            if not port.HasValue(inner):
-                continue  # an optional input left unconnected
-            if port.get_data_type() == PortDataType.kVectorValued:
-                value = np.array(port.Eval(inner))
-            else:
-                value = port.EvalAbstract(inner).Clone()
-            self.inputs.append(_Fixed(port, self.context, value))
+        self.inputs = [_Fixed(port, self.context, seen)
+                       for port, seen in zip(ports, values, strict=True)]
         self.outputs = [stage.get_output_port(i)
                         for i in range(stage.num_output_ports())]
         self.has_state = self.context.num_discrete_state_groups() > 0

@@ -10,7 +10,7 @@ from pydrake.systems.framework import LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc import safety
-from drake_wbc.repulsion import RepulsiveFieldParameters
+from drake_wbc.repulsion import LastPoints, RepulsiveFieldParameters
 from drake_wbc.safety import SafetyParameters, limit_base_velocity
 from drake_wbc.scalar_support import through_float_function, value_of
 from drake_wbc.separation import (
@@ -202,6 +202,7 @@ def BaseCommandLimiter_(T):
             self.time_step = positive("time_step", time_step)
             self.half_sizes = tuple(RepulsiveFieldParameters(
                 half_sizes=half_sizes).half_sizes)
+            self._separation = LastPoints(self._separation_state)
             self._velocity = self.DeclareVectorInputPort(
                 "velocity", safety.BASE_AXES)
             self._stopped = self.DeclareVectorInputPort("stopped", 1)
@@ -299,7 +300,7 @@ def BaseCommandLimiter_(T):
                       else np.zeros((0, 2)))
             discrete_state.set_value(np.concatenate([
                 self._evaluate(context)[:3],
-                as_scalar_type(T, self._separation_state(points))]))
+                as_scalar_type(T, self._separation(points))]))
 
         def set_previous(self, context, velocity):
             """Sets the previous command (3,), e.g. the base's measured

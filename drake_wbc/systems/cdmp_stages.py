@@ -265,6 +265,9 @@ def BaseCdmp_(T):
             model = AffineDynamics(derivative, 9, 6, time_step)
             self._models = {0: model, 1: model}
             self._fast = T is float
+            self._float_force = repulsion.LastPoints(
+                lambda points: np.append(repulsion.repulsive_force(
+                    points, params.repulsion), 0.0))
             self._velocity_in = self.DeclareVectorInputPort(
                 "base_velocity", 3)
             self._points = self.DeclareAbstractInputPort(
@@ -303,6 +306,8 @@ def BaseCdmp_(T):
             points = (self._points.Eval(context)
                       if self._points.HasValue(context)
                       else np.zeros((0, 2)))
+            if T is float and points.dtype == np.float64:
+                return self._float_force(points)
             force = repulsion.repulsive_force(points, self.params.repulsion)
             return np.array([force[0], force[1], 0.0])
 
