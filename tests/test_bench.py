@@ -41,6 +41,7 @@ def test_quick_bench_writes_well_formed_tables(tmp_path):
         assert 0 < stats["p10"] <= stats["median"] <= stats["p90"]
     tick = results["control_tick"]
     assert tick["tick_us"]["median"] > 0
+    assert tick["framework_floor_us"]["median"] > 0
     assert set(tick["stages"]) >= {"capability", "distributor",
                                    "base_cdmp", "arm_controller"}
     assert [e["points"] for e in results["scaling"]["obstacle_points"]] \
@@ -109,3 +110,42 @@ def test_scaled_diffik_is_the_weighted_least_norm_problem(arm):
     for name, solve in same.items():
         np.testing.assert_allclose(solve(problem), expected, atol=1e-7,
                                    err_msg=name)
+
+
+def test_the_hollow_controller_has_the_controller_s_structure(arm):
+    """The framework floor's diagram: every stage hollow, with the same
+    ports, feedthrough, state and connections, and it ticks."""
+    from drake_wbc.bench.control_tick import ControllerTicker
+    from drake_wbc.bench.framework_floor import FloorTicker
+
+    ticker = ControllerTicker(arm, num_points=50)
+    floor = FloorTicker(ticker)
+    assert floor.ticks(3)() == 3
+    stages = ticker.controller.stages
+    for name, stage in stages.items():
+        hollow = floor.diagram.GetSubsystemByName(name)
+        for get, count in (("get_input_port", "num_input_ports"),
+                           ("get_output_port", "num_output_ports")):
+            assert getattr(hollow, count)() == getattr(stage, count)()
+            for i in range(getattr(stage, count)()):
+                ours, theirs = (getattr(s, get)(i) for s in (hollow, stage))
+                assert ours.get_name() == theirs.get_name()
+                assert ours.get_data_type() == theirs.get_data_type()
+        for i in range(stage.num_input_ports()):
+            for j in range(stage.num_output_ports()):
+                assert hollow.HasDirectFeedthrough(i, j) == \
+                    stage.HasDirectFeedthrough(i, j), (name, i, j)
+        ours = hollow.GetMyContextFromRoot(floor.context)
+        theirs = stage.GetMyContextFromRoot(ticker.context)
+        assert ours.num_discrete_state_groups() == \
+            theirs.num_discrete_state_groups()
+    names = {id(s): n for n, s in stages.items()}
+    hollow_names = {id(floor.diagram.GetSubsystemByName(n)): n
+                    for n in stages}
+
+    def wiring(diagram, by_id):
+        return {(by_id[id(d)], i, by_id[id(s)], j) for (d, i), (s, j)
+                in diagram.connection_map().items()}
+
+    assert wiring(floor.diagram, hollow_names) == wiring(
+        ticker.controller.diagram, names)

@@ -105,12 +105,14 @@ def bench_distribution(arm, settings):
 def bench_tick(arm, settings):
     """Part 2: the full tick and each stage."""
     from drake_wbc.bench.control_tick import ControllerTicker, stage_tickers
+    from drake_wbc.bench.framework_floor import FloorTicker
 
     ticker = ControllerTicker(arm, num_points=TICK_POINTS)
     stages = stage_tickers(ticker)
     n = settings["ticks"]
     contenders = {"tick": ticker.ticks(n),
-                  "tick_cached": ticker.ticks(n, refresh=False)}
+                  "tick_cached": ticker.ticks(n, refresh=False),
+                  "tick_floor": FloorTicker(ticker).ticks(n)}
     for name, stage in stages.items():
         contenders[f"stage:{name}"] = stage.contender(n)
         contenders[f"inputs:{name}"] = stage.contender(n, inputs_only=True)
@@ -122,6 +124,7 @@ def bench_tick(arm, settings):
     return dict(
         rate_hz=1.0 / ticker.time_step, obstacle_points=TICK_POINTS,
         tick_us=us("tick"), tick_cached_us=us("tick_cached"),
+        framework_floor_us=us("tick_floor"),
         stages={name: dict(tick_us=us(f"stage:{name}"),
                            inputs_us=us(f"inputs:{name}"))
                 for name in stages})

@@ -66,7 +66,7 @@ def _measurements(arm, num_points, turn):
     }
 
 
-class _Fixed:
+class Fixed:
     """An input port's fixed value in a context, written again on demand
     (which invalidates what depends on it, as a new message does).
 
@@ -111,7 +111,7 @@ class ControllerTicker:
         self.values = [_measurements(arm, num_points, turn)
                        for turn in (0, 1)]
         self.fixed = [
-            _Fixed(diagram.GetInputPort(name), self.context,
+            Fixed(diagram.GetInputPort(name), self.context,
                    [values[name] for values in self.values])
             for name in STATION_INPUTS]
         diagram.GetInputPort("reference_velocity").FixValue(
@@ -168,7 +168,7 @@ class StageTicker:
                     else port.EvalAbstract(inner).Clone())
         self.context = stage.CreateDefaultContext()
         self.context.SetTimeStateAndParametersFrom(inner)
-        self.inputs = [_Fixed(port, self.context, seen)
+        self.inputs = [Fixed(port, self.context, seen)
                        for port, seen in zip(ports, values, strict=True)]
         self.outputs = [stage.get_output_port(i)
                         for i in range(stage.num_output_ports())]

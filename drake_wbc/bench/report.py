@@ -122,7 +122,9 @@ def markdown(results):
         rows = [["full tick (measurements fixed again)",
                  *_time(tick["tick_us"]), ""],
                 ["full tick (cached measurements)",
-                 *_time(tick["tick_cached_us"]), ""]]
+                 *_time(tick["tick_cached_us"]), ""],
+                ["framework floor (the same diagram, stages that do "
+                 "nothing)", *_time(tick["framework_floor_us"]), ""]]
         for name, entry in tick["stages"].items():
             rows.append([f"stage {name}", *_time(entry["tick_us"]),
                          f"{entry['inputs_us']['median']:.1f}"])

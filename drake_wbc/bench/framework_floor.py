@@ -1,0 +1,136 @@
+"""The framework's share of a control tick: the controller Diagram with
+every stage replaced by a hollow one.
+
+A hollow stage is a Python LeafSystem with the ports of the stage it
+stands for (names, sizes, abstract or vector), the same direct
+feedthrough, the same amount of discrete state updated at the same
+period, and no work: each output evaluates the inputs it depends on
+and writes zeros, the update evaluates every input and keeps the state.
+Wired as the controller is and ticked against the same measurements, it
+costs what Drake's systems framework and the Python bindings cost for
+this structure of one system per stage, whatever the stages compute:
+the floor under the controller's tick.
+"""
+
+import numpy as np
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder, LeafSystem, PortDataType
+
+from drake_wbc.bench.control_tick import REFERENCE_VELOCITY, Fixed
+from drake_wbc.controller import STATION_INPUTS
+from drake_wbc.validation import whole_number
+
+
+class HollowStage(LeafSystem):
+    """A stage's ports, feedthrough and discrete state, without its work.
+
+    Args:
+        stage: the stage (a LeafSystem of the controller).
+        context: the stage's context (for its state's size).
+        time_step: the period of its update, s.
+    """
+
+    def __init__(self, stage, context, time_step):
+        super().__init__()
+        self._inputs = []
+        for i in range(stage.num_input_ports()):
+            port = stage.get_input_port(i)
+            self._inputs.append(
+                self.DeclareVectorInputPort(port.get_name(), port.size())
+                if port.get_data_type() == PortDataType.kVectorValued
+                else self.DeclareAbstractInputPort(port.get_name(),
+                                                   port.Allocate()))
+        if context.num_discrete_state_groups() > 0:
+            self.DeclareDiscreteState(
+                context.get_discrete_state_vector().size())
+            self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0,
+                                                    self._update)
+        for j in range(stage.num_output_ports()):
+            port = stage.get_output_port(j)
+            through = [self._inputs[i] for i in range(len(self._inputs))
+                       if stage.HasDirectFeedthrough(i, j)]
+            prerequisites = {self.all_state_ticket(),
+                             *(p.ticket() for p in through)}
+            if port.get_data_type() == PortDataType.kVectorValued:
+                self.DeclareVectorOutputPort(
+                    port.get_name(), port.size(),
+                    self._vector_output(through, port.size()),
+                    prerequisites_of_calc=prerequisites)
+            else:
+                model = port.Allocate()
+                self.DeclareAbstractOutputPort(
+                    port.get_name(), model.Clone,
+                    lambda context, value, through=through:
+                        self._pull(context, through),
+                    prerequisites_of_calc=prerequisites)
+
+    @staticmethod
+    def _pull(context, ports):
+        for port in ports:
+            if port.HasValue(context):
+                port.Eval(context)
+
+    def _vector_output(self, ports, size):
+        zeros = np.zeros(size)
+
+        def calc(context, output):
+            self._pull(context, ports)
+            output.SetFromVector(zeros)
+
+        return calc
+
+    def _update(self, context, discrete_state):
+        self._pull(context, self._inputs)
+
+
+class FloorTicker:
+    """The hollow copy of a ControllerTicker's controller, in a Simulator
+    of its own, against the same alternating measurements.
+
+    Args:
+        ticker: a drake_wbc.bench.control_tick.ControllerTicker.
+    """
+
+    def __init__(self, ticker):
+        controller = ticker.controller
+        self.time_step = ticker.time_step
+        builder = DiagramBuilder()
+        hollow = {}
+        for name, stage in controller.stages.items():
+            hollow[id(stage)] = builder.AddNamedSystem(name, HollowStage(
+                stage, stage.GetMyContextFromRoot(ticker.context),
+                self.time_step))
+        diagram = controller.diagram
+        for (destination, i), (source, j) in (
+                diagram.connection_map().items()):
+            builder.Connect(hollow[id(source)].get_output_port(j),
+                            hollow[id(destination)].get_input_port(i))
+        for i in range(diagram.num_input_ports()):
+            name = diagram.get_input_port(i).get_name()
+            guard = hollow[id(controller.stages["guard"])]
+            builder.ExportInput(guard.GetInputPort(name), name)
+        self.diagram = builder.Build()
+        self.simulator = Simulator(self.diagram)
+        self.context = self.simulator.get_mutable_context()
+        self.fixed = [
+            Fixed(self.diagram.GetInputPort(name), self.context,
+                  [values[name] for values in ticker.values])
+            for name in STATION_INPUTS]
+        self.diagram.GetInputPort("reference_velocity").FixValue(
+            self.context, REFERENCE_VELOCITY)
+        self.simulator.Initialize()
+
+    def ticks(self, count):
+        """A timing.interleave contender: `count` ticks, measurements
+        written again before each."""
+        count = whole_number("count", count, minimum=1)
+        h = self.time_step
+
+        def run():
+            for _ in range(count):
+                for fixed in self.fixed:
+                    fixed.write()
+                self.simulator.AdvanceTo(self.context.get_time() + h)
+            return count
+
+        return run
