@@ -295,6 +295,7 @@ class PlanarLidar(SampledReading, LeafSystem):
         params = checked_instance("params", params, LidarParameters,
                                   LidarParameters)
         self.params = validated_copy(params)
+        self._points_of = (None, None)  # (reading, its points)
         self.mount = as_vector("mount", mount, 3)
         self.circles = shapes_array("circles", circles, 3)
         self.boxes = shapes_array("boxes", boxes, 5)
@@ -333,8 +334,13 @@ class PlanarLidar(SampledReading, LeafSystem):
         output.SetFromVector(self._stored_reading(context))
 
     def _output_points(self, context, output):
-        output.set_value(scan_points(self._stored_reading(context),
-                                     self._beam_angles, self.mount))
+        # The reading changes at the scan rate, the output is evaluated
+        # each step: the points of the last reading are kept.
+        reading = self._stored_reading(context)
+        if not np.array_equal(reading, self._points_of[0]):
+            self._points_of = (reading, scan_points(
+                reading, self._beam_angles, self.mount))
+        output.set_value(self._points_of[1])
 
 
 class ObstaclePointMerger(LeafSystem):
@@ -367,5 +373,13 @@ class ObstaclePointMerger(LeafSystem):
 
     def _merge(self, context, output):
         output.set_value(np.concatenate(
-            [as_matrix(port.get_name(), port.Eval(context), (None, 2))
+            [_checked_points(port.get_name(), port.Eval(context))
              for port in self._inputs], axis=0))
+
+
+def _checked_points(name, points):
+    """`points` as an (M, 2) float array, checked unless it is one."""
+    if (type(points) is np.ndarray and points.dtype == np.float64
+            and points.ndim == 2 and points.shape[1] == 2):
+        return points
+    return as_matrix(name, points, (None, 2))
