@@ -21,7 +21,7 @@ in T_b) must not exceed
 d_i the point's distance from the footprint. The whole command is scaled
 by the largest factor in [0, 1] that meets every bound
 (`separation_scale`), so its direction is kept, as by the velocity limits
-(drake_wbc.safety.limit_base_velocity); motion away from or along an
+(drake_wbc.command_limits.limit_base_velocity); motion away from or along an
 obstacle is not limited. Approaching at the bound, the distance decays
 as exp(-t / stop_time) towards stop_distance, so the base stops
 stop_distance short of the obstacle; the base's own lag and the

@@ -16,7 +16,7 @@ from pydrake.systems.framework import (
 )
 from pydrake.systems.primitives import Linearize
 
-from drake_wbc import safety
+from drake_wbc import command_limits, safety
 from drake_wbc.config import load_controller_parameters
 from drake_wbc.controller import (
     STATION_INPUTS,
@@ -232,23 +232,24 @@ def test_commands_have_no_direct_feedthrough_from_inputs(arm):
 
 def test_velocity_scaling_is_parallel_in_closed_form():
     desired = np.array([3.0, -1.5, 0.5])
-    result = safety.limit_base_velocity(desired, desired / 3.0, V_MAX,
-                                        A_MAX, H)
+    result = command_limits.limit_base_velocity(desired, desired / 3.0,
+                                                V_MAX, A_MAX, H)
     np.testing.assert_allclose(result.command, desired / 3.0, rtol=1e-15)
     assert result.velocity_scale == pytest.approx(1.0 / 3.0, rel=1e-15)
     assert result.acceleration_scale == 1.0 and result.limited
     # The change scaled as a whole: from rest, a_max h on the largest axis.
     change = np.array([0.5, 0.2, -0.1])
-    result = safety.limit_base_velocity(change, np.zeros(3), V_MAX, A_MAX, H)
+    result = command_limits.limit_base_velocity(change, np.zeros(3), V_MAX,
+                                                A_MAX, H)
     np.testing.assert_allclose(result.command, change * (A_MAX[0] * H / 0.5),
                                rtol=1e-15)
     assert result.acceleration_scale == pytest.approx(0.02, rel=1e-15)
     # Within limits: unchanged, bit for bit.
     small = np.array([0.1, 0.2, -0.3]) / 3.0
-    result = safety.limit_base_velocity(small, small + 0.001, V_MAX, A_MAX,
-                                        H)
+    result = command_limits.limit_base_velocity(small, small + 0.001, V_MAX,
+                                                A_MAX, H)
     assert result.command is small and not result.limited
-    assert safety.uniform_scale([2.0, -4.0], [1.0, 1.0]) == 0.25
+    assert command_limits.uniform_scale([2.0, -4.0], [1.0, 1.0]) == 0.25
 
 
 def _limit_as_written(desired, previous, scale):
@@ -270,8 +271,8 @@ def test_limits_agree_with_the_formulas_written_out():
         desired = rng.uniform(-2.0, 2.0, 3) * rng.choice([0.01, 0.1, 1.0])
         previous = np.clip(desired + rng.normal(0.0, 0.02, 3), -V_MAX, V_MAX)
         scale = rng.choice([1.0, rng.uniform(0.0, 1.0)])
-        result = safety.limit_base_velocity(desired, previous, V_MAX, A_MAX,
-                                            H, scale=scale)
+        result = command_limits.limit_base_velocity(
+            desired, previous, V_MAX, A_MAX, H, scale=scale)
         command, s_v, s_a = _limit_as_written(desired, previous, scale)
         np.testing.assert_allclose(result.command, command, rtol=1e-14,
                                    atol=1e-15)

@@ -10,8 +10,9 @@ from pydrake.systems.framework import LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc import safety
+from drake_wbc.command_limits import limit_base_velocity, uniform_scale
 from drake_wbc.repulsion import LastPoints, RepulsiveFieldParameters
-from drake_wbc.safety import SafetyParameters, limit_base_velocity
+from drake_wbc.safety import SafetyParameters
 from drake_wbc.scalar_support import through_float_function, value_of
 from drake_wbc.separation import (
     NEAREST_POINTS,
@@ -47,7 +48,7 @@ def StopGate_(T):
         - stop (1): >= 0.5 during a stop (InputGuard's `stop`).
         - gated: (size) zeros while stop; otherwise value, scaled as a
           whole into `limits` when given and exceeded (|gated_i| <=
-          limits_i, direction kept, drake_wbc.safety.uniform_scale); the
+          limits_i, direction kept, drake_wbc.command_limits.uniform_scale); the
           very same values when within them.
         - scale (1): that factor in [0, 1] (1 when within the limits or
           stopped), for the BaseCommandLimiter's report.
@@ -98,7 +99,7 @@ def StopGate_(T):
         def _scale(self, value):
             if self.limits is None:
                 return 1.0
-            return safety.uniform_scale(
+            return uniform_scale(
                 value if T is float else value_of(value), self.limits)
 
         def _output(self, context, output):
@@ -154,8 +155,9 @@ def BaseCommandLimiter_(T):
           no point faster than max(d - stop_distance, 0) / stop_time).
           Read only by the update, so the outputs do not depend on it
           directly.
-        - velocity_command: (3) drake_wbc.safety.limit_base_velocity of the
-          desired command from the previous tick's command: scaled as a
+        - velocity_command: (3)
+          drake_wbc.command_limits.limit_base_velocity of the desired
+          command from the previous tick's command: scaled as a
           whole to the separation from the obstacles and to the velocity
           limits, its change scaled as a whole to the acceleration
           limits, so that its direction is kept. Zero in
@@ -168,8 +170,9 @@ def BaseCommandLimiter_(T):
         - saturation: (3) [limited, velocity scale, acceleration scale]:
           limited is 1.0 when a limit changed the command or the envelope
           before the filter scaled V_b'; the velocity scale is the
-          product of envelope_scale and drake_wbc.safety.LimitedCommand's,
-          the acceleration scale LimitedCommand's (1.0 when not limited).
+          product of envelope_scale and
+          drake_wbc.command_limits.LimitedCommand's, the acceleration
+          scale LimitedCommand's (1.0 when not limited).
           A desired command that is not finite (which the input guard
           leaves no way to reach) gives a zero command, limited 1.0 and
           both scales 0.0.
