@@ -2,7 +2,7 @@
 (cdmp-wb-error), optionally playing a learned movement (eq. (6) with a
 learned forcing term; drake_wbc.movement).
 
-Like the other stages (drake_wbc.systems.cdmp_stages), it runs the
+Like the other stages (drake_wbc.systems.cdmp_base.CdmpStage), it runs the
 affine model x_dot = A x + B u + c of the math layer's derivative
 (cdmp.whole_body_cdmp_derivative), in continuous time or exactly
 discretised with a zero-order hold at the control period.
@@ -33,10 +33,10 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc import cdmp
-from drake_wbc.systems.cdmp_stages import (
+from drake_wbc.systems.cdmp_base import (
     SCALARS,
     AffineDynamics,
-    _CdmpStage,
+    CdmpStage,
 )
 from drake_wbc.validation import validated_copy
 
@@ -91,7 +91,7 @@ def _time(context):
 
 @TemplateSystem.define("WholeBodyCdmp_", T_list=SCALARS)
 def WholeBodyCdmp_(T):
-    class Impl(_CdmpStage, LeafSystem_[T]):
+    class Impl(CdmpStage, LeafSystem_[T]):
         """CDMP of the whole body, eqs. (cdmp-wb) and (cdmp-wb-error).
 
         ::
