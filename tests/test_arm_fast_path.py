@@ -6,6 +6,7 @@ limits active, degenerate inputs and values that are not finite."""
 
 import numpy as np
 import pytest
+from fast_path_checks import RELATIVE, relative_difference
 from pydrake.autodiffutils import AutoDiffXd, ExtractValue
 
 from drake_wbc import (
@@ -26,15 +27,7 @@ from drake_wbc.systems import (
     RobustCompensator,
 )
 
-RELATIVE = 1e-12
-"""Largest relative difference allowed between two paths."""
-
 H = 0.01
-
-
-def relative_difference(a, b):
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    return np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300)
 
 
 @pytest.fixture(scope="module")

@@ -7,6 +7,7 @@ no result may differ beyond rounding (1e-12 relative)."""
 
 import numpy as np
 import pytest
+from fast_path_checks import RELATIVE, relative_difference
 from pydrake.autodiffutils import AutoDiffXd, ExtractValue
 from scipy.spatial.transform import Rotation
 
@@ -25,16 +26,8 @@ from drake_wbc.systems.capability_stage import (
 )
 from drake_wbc.workspace import LocalWorkspace
 
-RELATIVE = 1e-12
-"""Largest relative difference allowed between two paths."""
-
 WORKSPACE_INPUTS = ("end_effector_position", "end_effector_velocity",
                     "capability", "capability_gradient")
-
-
-def relative_difference(a, b):
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    return np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300)
 
 
 @pytest.fixture(scope="module")

@@ -4,6 +4,7 @@ result may differ beyond rounding (1e-12 relative)."""
 
 import numpy as np
 import pytest
+from fast_path_checks import RELATIVE, relative_difference
 from pydrake.common.value import AbstractValue
 
 from drake_wbc import (
@@ -23,14 +24,6 @@ from drake_wbc.systems import (
 )
 from drake_wbc.systems.cdmp_stages import BaseCdmp
 from drake_wbc.systems.wrench import external_wrench
-
-RELATIVE = 1e-12
-"""Largest relative difference allowed between two paths."""
-
-
-def relative_difference(a, b):
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    return np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300)
 
 
 @pytest.fixture(scope="module")
