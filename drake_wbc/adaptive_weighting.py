@@ -214,12 +214,7 @@ def adaptive_workspace(capability_upper, capability_lower, workspace=None,
     """Checks the parameters of `local_workspace_state` once, for
     `adaptive_weighting_factors`.
 
-    Args:
-        capability_upper, capability_lower: C_m^u > C_m^l of eq.
-            (transition).
-        workspace: LocalWorkspace; the paper's if None.
-        R_ba: (3, 3) ^bR_a, or None for the identity.
-        arm_base_in_base: (3,) origin of T_a in T_b (m), or None for 0.
+    Args: the parameters of the same names of `local_workspace_state`.
 
     Returns:
         AdaptiveWorkspace.
