@@ -66,9 +66,12 @@ def BaseCdmp_(T):
             model = AffineDynamics(derivative, 9, 6, time_step)
             self._models = {0: model, 1: model}
             self._fast = T is float
-            self._float_force = repulsion.LastPoints(
-                lambda points: np.append(repulsion.repulsive_force(
-                    points, params.repulsion), 0.0))
+            def float_force(points):
+                f_x, f_y = repulsion.repulsive_force(points,
+                                                     params.repulsion)
+                return np.array((f_x, f_y, 0.0))
+
+            self._float_force = repulsion.LastPoints(float_force)
             self._velocity_in = self.DeclareVectorInputPort(
                 "base_velocity", 3)
             self._points = self.DeclareAbstractInputPort(
