@@ -115,24 +115,44 @@ def measure(wrench, params, tick):
 class _Measurement:
     """`measure` for fixed parameters, checked once: the per-axis arrays
     are built here, and a call takes a (6,) float wrench and a whole
-    number tick as they are."""
+    number tick as they are.
+
+    A call works in place on one new array: the noise (drawn as
+    `measure` draws it), the saturation, then the rounding with np.rint,
+    which is what np.round does for zero decimals (half to even), so the
+    readings are `measure`'s, bit for bit.
+    """
 
     def __init__(self, params):
         self.seed = params.seed
         self.std = _per_axis(params.force_noise_std, params.torque_noise_std)
         self.noisy = bool(np.any(self.std > 0.0))
         self.limit = _per_axis(params.force_range, params.torque_range)
+        self.negative_limit = -self.limit
         resolution = _per_axis(params.force_resolution,
                                params.torque_resolution)
         self.quantised = resolution > 0.0
+        self.all_quantised = bool(np.all(self.quantised))
+        self.any_quantised = bool(np.any(self.quantised))
         self.step = np.where(self.quantised, resolution, 1.0)
 
     def __call__(self, reading, tick):
         if self.noisy:
             rng = np.random.default_rng([self.seed, int(tick)])
-            reading = reading + self.std * rng.standard_normal(WRENCH_SIZE)
-        reading = np.minimum(np.maximum(reading, -self.limit), self.limit)
-        rounded = np.round(reading / self.step) * self.step
+            noise = rng.standard_normal(WRENCH_SIZE)
+            noise *= self.std
+            reading = np.add(reading, noise, out=noise)
+        else:
+            reading = np.array(reading, dtype=float)
+        np.maximum(reading, self.negative_limit, out=reading)
+        np.minimum(reading, self.limit, out=reading)
+        if not self.any_quantised:
+            return reading
+        rounded = np.divide(reading, self.step)
+        np.rint(rounded, out=rounded)
+        rounded *= self.step
+        if self.all_quantised:
+            return rounded
         return np.where(self.quantised, rounded, reading)
 
 

@@ -270,7 +270,8 @@ class PlanarLidar(SampledReading, LeafSystem):
       when `moving_radii` is not empty, and then it must be connected.
     - ranges: (num_beams) the last scan, m, `inf` = no return.
     - points: abstract, an (M, 2) float array, the last scan's returns as
-      points in T_b (what the controller's `lidar.obstacle_points` takes).
+      points in T_b (what the controller's `lidar.obstacle_points` takes),
+      read-only, the same array until the next scan changes the ranges.
 
     A plain double `LeafSystem` (a sensor with an abstract output is no
     part of what the controller linearises). A periodic discrete update
@@ -331,15 +332,16 @@ class PlanarLidar(SampledReading, LeafSystem):
         self.initialize_reading(context)
 
     def _output_ranges(self, context, output):
-        output.SetFromVector(self._stored_reading(context))
+        output.set_value(self._stored_reading_view(context))
 
     def _output_points(self, context, output):
-        # The reading changes at the scan rate, the output is evaluated
-        # each step: the points of the last reading are kept.
-        reading = self._stored_reading(context)
+        # Evaluated each step, changed at the scan rate: the points of the
+        # last reading are kept, read-only (see ObstaclePointMerger).
+        reading = self._stored_reading_view(context)
         if not np.array_equal(reading, self._points_of[0]):
-            self._points_of = (reading, scan_points(
-                reading, self._beam_angles, self.mount))
+            points = scan_points(reading, self._beam_angles, self.mount)
+            points.flags.writeable = False
+            self._points_of = (reading.copy(), points)
         output.set_value(self._points_of[1])
 
 
@@ -357,7 +359,9 @@ class ObstaclePointMerger(LeafSystem):
     - points_i: abstract, an (M_i, 2) float array of points in T_b; each
       must be connected (a forgotten scanner is an error, not a blind
       side).
-    - points: abstract, their (sum M_i, 2) concatenation, in input order.
+    - points: abstract, their (sum M_i, 2) concatenation, in input order,
+      read-only; while every input is the very read-only array (owning
+      its data) of the last call, the last concatenation is given again.
 
     Args:
         num_inputs: n, a whole number >= 1.
@@ -369,12 +373,25 @@ class ObstaclePointMerger(LeafSystem):
         self._inputs = [self.DeclareAbstractInputPort(f"points_{i}",
                                                       _no_points())
                         for i in range(self.num_inputs)]
+        self._last = ([], None)  # the inputs, their concatenation
         self.DeclareAbstractOutputPort("points", _no_points, self._merge)
 
     def _merge(self, context, output):
-        output.set_value(np.concatenate(
-            [_checked_points(port.get_name(), port.Eval(context))
-             for port in self._inputs], axis=0))
+        # Reused for the very same read-only arrays owning their data
+        # (PlanarLidar's points between scans): they cannot have changed.
+        inputs = [port.Eval(context) for port in self._inputs]
+        last_inputs, merged = self._last
+        if not (len(inputs) == len(last_inputs) and all(
+                a is b and type(a) is np.ndarray and a.base is None
+                and not a.flags.writeable
+                for a, b in zip(inputs, last_inputs, strict=True))):
+            merged = np.concatenate(
+                [_checked_points(port.get_name(), points)
+                 for port, points in zip(self._inputs, inputs,
+                                         strict=True)], axis=0)
+            merged.flags.writeable = False
+            self._last = (inputs, merged)
+        output.set_value(merged)
 
 
 def _checked_points(name, points):

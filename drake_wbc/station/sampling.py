@@ -38,13 +38,21 @@ class SampledReading:
         return context.get_discrete_state(self._tick).GetAtIndex(0)
 
     def _store_reading(self, context, discrete_state):
-        discrete_state.get_mutable_vector(self._reading).SetFromVector(
+        discrete_state.get_mutable_vector(self._reading).set_value(
             self._read(context, self._tick_of(context)))
 
     def _sample(self, context, discrete_state):
-        self._store_reading(context, discrete_state)
-        discrete_state.get_mutable_vector(self._tick).SetAtIndex(
-            0, self._tick_of(context) + 1)
+        tick = self._tick_of(context)
+        discrete_state.get_mutable_vector(self._reading).set_value(
+            self._read(context, tick))
+        discrete_state.get_mutable_vector(self._tick).SetAtIndex(0, tick + 1)
 
     def _stored_reading(self, context):
         return context.get_discrete_state(self._reading).CopyToVector()
+
+    def _stored_reading_view(self, context):
+        """The last reading as a read-only view into `context`: to be
+        used (or copied) before the context changes."""
+        view = context.get_discrete_state(self._reading).get_value()
+        view.flags.writeable = False
+        return view

@@ -14,6 +14,7 @@ In a diagram, `add_static_obstacles` puts the obstacles into the plant
 never touched; the LIDARs take their positions) and the hand.
 """
 
+from bisect import bisect_right
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -225,22 +226,55 @@ def person_positions(people, t):
     return Walks(people)(as_scalar("t", t))
 
 
+def _interp_rows(t, times, rows, left, right):
+    """[np.interp(t, times, row, left, right) for row in rows] in plain
+    floats: numpy's operations in numpy's order (its search, its slope
+    and its fallbacks), so the same numbers, without a numpy call a row.
+
+    Args:
+        t: a float time.
+        times: list of strictly increasing floats.
+        rows: lists of floats, one value per time each.
+        left, right: the value before times[0] and after times[-1]; None
+            for each row's first or last value.
+    """
+    if t != t:  # nan: numpy's own answer
+        return [float(np.interp(t, times, row, left, right)) for row in rows]
+    if t < times[0]:
+        return [row[0] if left is None else left for row in rows]
+    if t > times[-1]:
+        return [row[-1] if right is None else right for row in rows]
+    j = bisect_right(times, t) - 1
+    if j == len(times) - 1 or times[j] == t:
+        return [row[j] for row in rows]
+    values = []
+    for row in rows:
+        slope = (row[j + 1] - row[j]) / (times[j + 1] - times[j])
+        value = slope * (t - times[j]) + row[j]
+        if value != value:
+            value = slope * (t - times[j + 1]) + row[j + 1]
+            if value != value and row[j] == row[j + 1]:
+                value = row[j]
+        values.append(value)
+    return values
+
+
 class Walks:
     """`person_positions` of a fixed validated list of people, with their
-    schedules as arrays once: a call takes a float time as it is."""
+    schedules as float lists once: a call takes a float time as it is."""
 
     def __init__(self, people):
-        self._walks = [(np.asarray(p.times, dtype=float),
-                        np.asarray(p.waypoints, dtype=float).T.copy(),
-                        p.times[0], p.repeat) for p in people]
+        self._walks = [
+            ([float(x) for x in p.times],
+             np.asarray(p.waypoints, dtype=float).T.tolist(),
+             float(p.times[0]), float(p.repeat)) for p in people]
 
     def __call__(self, t):
-        positions = np.zeros((len(self._walks), 2))
-        for i, (times, path, t0, repeat) in enumerate(self._walks):
+        rows = []
+        for times, path, t0, repeat in self._walks:
             s = t0 + (t - t0) % repeat if repeat > 0.0 and t > t0 else t
-            positions[i, 0] = np.interp(s, times, path[0])
-            positions[i, 1] = np.interp(s, times, path[1])
-        return positions
+            rows.append(_interp_rows(s, times, path, None, None))
+        return np.array(rows, dtype=float).reshape(len(rows), 2)
 
 
 def hand_wrench(hand, t):
@@ -252,24 +286,22 @@ def hand_wrench(hand, t):
 
 class HandSchedule:
     """`hand_wrench` of a fixed validated HandForce, with its schedule as
-    arrays once: a call takes a float time as it is."""
+    float lists once: a call takes a float time as it is."""
 
     def __init__(self, hand):
-        self._times = np.asarray(hand.times, dtype=float)
+        self._times = [float(x) for x in hand.times]
         columns = np.zeros((len(hand.times), 6))
         if hand.times:
             columns[:, :3] = hand.forces
             if hand.torques:
                 columns[:, 3:] = hand.torques
-        self._columns = columns.T.copy()
+        self._columns = columns.T.tolist()
 
     def __call__(self, t):
-        wrench = np.zeros(6)
-        if self._times.size:
-            for k in range(6):
-                wrench[k] = np.interp(t, self._times, self._columns[k],
-                                      left=0.0, right=0.0)
-        return wrench
+        if not self._times:
+            return np.zeros(6)
+        return np.array(_interp_rows(t, self._times, self._columns, 0.0,
+                                     0.0), dtype=float)
 
 
 def planar_shapes(scene, height):

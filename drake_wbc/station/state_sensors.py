@@ -12,9 +12,10 @@
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
+from pydrake.common.value import AbstractValue
 from pydrake.math import RollPitchYaw
 from pydrake.symbolic import MakeVectorVariable
-from pydrake.systems.framework import LeafSystem, LeafSystem_
+from pydrake.systems.framework import LeafSystem, LeafSystem_, ValueProducer
 from pydrake.systems.primitives import SymbolicVectorSystem
 from pydrake.systems.scalar_conversion import TemplateSystem
 
@@ -160,9 +161,25 @@ class GroundTruth(LeafSystem):
             "body_spatial_velocities",
             plant.get_body_spatial_velocities_output_port().Allocate())
         self._state = self.DeclareVectorInputPort("plant_state", nq + nv)
-        self.DeclareVectorOutputPort("end_effector_pose", 6, self._ee_pose)
-        self.DeclareVectorOutputPort("end_effector_velocity", 6,
-                                     self._ee_velocity)
+        # Both end-effector outputs come from one evaluation of the body
+        # poses and velocities (each Eval converts a list of every body).
+        self._motion = self.DeclareCacheEntry(
+            "end_effector_motion",
+            ValueProducer(allocate=lambda: AbstractValue.Make(np.zeros(12)),
+                          calc=self._calc_motion),
+            prerequisites_of_calc={
+                self.input_port_ticket(self._poses.get_index()),
+                self.input_port_ticket(self._velocities.get_index())})
+        self.DeclareVectorOutputPort(
+            "end_effector_pose", 6,
+            lambda context, output: output.set_value(
+                self._motion.Eval(context)[:6]),
+            prerequisites_of_calc={self._motion.ticket()})
+        self.DeclareVectorOutputPort(
+            "end_effector_velocity", 6,
+            lambda context, output: output.set_value(
+                self._motion.Eval(context)[6:]),
+            prerequisites_of_calc={self._motion.ticket()})
         self.DeclareVectorOutputPort(
             "base_pose", 3,
             lambda context, output: output.SetFromVector(
@@ -172,19 +189,14 @@ class GroundTruth(LeafSystem):
             lambda context, output: output.SetFromVector(
                 self._state.Eval(context)[self._mount_q]))
 
-    def _X_W_tcp(self, context):
+    def _calc_motion(self, context, value):
+        """[end_effector_pose; end_effector_velocity] (12)."""
         X_W_tool = self._poses.Eval(context)[self._tool_index]
-        return X_W_tool @ self._X_tool_tcp
-
-    def _ee_pose(self, context, output):
-        X = self._X_W_tcp(context)
-        output.SetFromVector(np.concatenate(
-            [X.translation(), RollPitchYaw(X.rotation()).vector()]))
-
-    def _ee_velocity(self, context, output):
         V_W_tool = self._velocities.Eval(context)[self._tool_index]
-        X_W_tool = self._poses.Eval(context)[self._tool_index]
+        X_W_tcp = X_W_tool @ self._X_tool_tcp
         p_tool_tcp_W = X_W_tool.rotation() @ self._X_tool_tcp.translation()
         V_W_tcp = V_W_tool.Shift(p_tool_tcp_W)
-        output.SetFromVector(np.concatenate(
-            [V_W_tcp.translational(), V_W_tcp.rotational()]))
+        value.set_value(np.concatenate([
+            X_W_tcp.translation(),
+            RollPitchYaw(X_W_tcp.rotation()).vector(),
+            V_W_tcp.translational(), V_W_tcp.rotational()]))

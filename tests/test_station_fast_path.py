@@ -1,0 +1,203 @@
+"""The station's float shortcuts against plain formulations of the same
+math: the F/T measurement, the schedules' interpolation, the end
+effector's motion from one cache entry and the merger's reuse."""
+
+import numpy as np
+import pytest
+from pydrake.common.value import AbstractValue
+from pydrake.math import RollPitchYaw
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+
+from drake_wbc.robot_model import add_mcr
+from drake_wbc.station.force_torque import (
+    ForceTorqueSensorParameters,
+    _Measurement,
+    _per_axis,
+)
+from drake_wbc.station.lidar import ObstaclePointMerger
+from drake_wbc.station.scene import (
+    HandForce,
+    HandSchedule,
+    WalkingPerson,
+    Walks,
+    _interp_rows,
+)
+from drake_wbc.station.state_sensors import GroundTruth
+
+
+def reference_measure(wrench, params, tick):
+    """The measurement as first written: noise, np.minimum/np.maximum,
+    np.round, np.where."""
+    std = _per_axis(params.force_noise_std, params.torque_noise_std)
+    limit = _per_axis(params.force_range, params.torque_range)
+    resolution = _per_axis(params.force_resolution, params.torque_resolution)
+    reading = np.asarray(wrench, dtype=float)
+    if np.any(std > 0.0):
+        rng = np.random.default_rng([params.seed, tick])
+        reading = reading + std * rng.standard_normal(6)
+    reading = np.minimum(np.maximum(reading, -limit), limit)
+    step = np.where(resolution > 0.0, resolution, 1.0)
+    return np.where(resolution > 0.0, np.round(reading / step) * step,
+                    reading)
+
+
+@pytest.mark.parametrize("fields", [
+    {}, {"seed": 7}, {"force_noise_std": 0.0, "torque_noise_std": 0.0},
+    {"force_resolution": 0.0}, {"force_resolution": 0.0,
+                                "torque_resolution": 0.0},
+    {"force_range": 1.0, "torque_range": 0.05, "force_resolution": 0.5}])
+def test_measurement_is_the_plain_formula_bit_for_bit(fields):
+    params = ForceTorqueSensorParameters(**fields)
+    fast = _Measurement(params)
+    rng = np.random.default_rng(11)
+    for tick in range(500):
+        wrench = rng.normal(size=6) * rng.choice([1e-3, 1.0, 50.0, 1e3])
+        if tick % 50 == 0:  # halfway between two quantisation steps
+            wrench = np.array([0.005, -0.015, 0.025, 5e-4, -1.5e-3, 0.0])
+        kept = wrench.copy()
+        reading = fast(wrench, tick)
+        np.testing.assert_array_equal(
+            reading, reference_measure(wrench, params, tick))
+        np.testing.assert_array_equal(wrench, kept)  # input untouched
+
+
+def test_interpolation_is_numpys_bit_for_bit():
+    rng = np.random.default_rng(5)
+    for size in (1, 2, 3, 8):
+        times = np.cumsum(rng.uniform(0.1, 2.0, size)) - 1.0
+        rows = rng.normal(size=(3, size)) * 10.0
+        rows[0, -1] = rows[0, 0]  # a flat stretch in one row
+        ts = np.concatenate([times, rng.uniform(times[0] - 1.0,
+                                                times[-1] + 1.0, 300),
+                             [np.nextafter(times[-1], np.inf),
+                              np.nextafter(times[0], -np.inf)]])
+        for left, right in ((None, None), (0.0, 0.0), (-3.0, 4.0)):
+            for t in ts:
+                got = _interp_rows(float(t), times.tolist(), rows.tolist(),
+                                   left, right)
+                want = [np.interp(t, times, row, left, right)
+                        for row in rows]
+                np.testing.assert_array_equal(got, want)
+    assert np.isnan(_interp_rows(np.nan, [0.0, 1.0], [[1.0, 2.0]],
+                                 None, None)[0])
+
+
+def test_schedules_are_numpys_interpolation():
+    people = [WalkingPerson(name="a", times=[0.5, 1.5, 4.0],
+                            waypoints=[[0, 2], [1, 1], [2, 2]]),
+              WalkingPerson(name="b", times=[1.0, 3.0],
+                            waypoints=[[0, 0], [3, -1]], repeat=4.0),
+              WalkingPerson(name="c", times=[2.0], waypoints=[[5, 5]])]
+    hand = HandForce(times=[1.0, 1.5, 3.0], forces=[[0, 0, 0], [0, 15, 2],
+                                                    [1, 0, 0]],
+                     torques=[[0, 0, 0], [0, 0, 0.5], [0, 0, 0]])
+    walks, schedule = Walks(people), HandSchedule(hand)
+    columns = np.hstack([np.asarray(hand.forces), np.asarray(hand.torques)])
+    for t in np.concatenate([np.linspace(-1.0, 12.0, 400),
+                             [0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 9.0]]):
+        want = []
+        for p in people:
+            s = (p.times[0] + (t - p.times[0]) % p.repeat
+                 if p.repeat > 0.0 and t > p.times[0] else t)
+            path = np.asarray(p.waypoints, dtype=float)
+            want.append([np.interp(s, p.times, path[:, 0]),
+                         np.interp(s, p.times, path[:, 1])])
+        np.testing.assert_array_equal(walks(t), want)
+        np.testing.assert_array_equal(
+            schedule(t), [np.interp(t, hand.times, columns[:, k], left=0.0,
+                                    right=0.0) for k in range(6)])
+
+
+@pytest.fixture(scope="module")
+def robot():
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.0),
+                                 builder)
+    model = add_mcr(plant)
+    plant.Finalize()
+    truth = builder.AddSystem(GroundTruth(plant, model))
+    builder.Connect(plant.get_body_poses_output_port(),
+                    truth.GetInputPort("body_poses"))
+    builder.Connect(plant.get_body_spatial_velocities_output_port(),
+                    truth.GetInputPort("body_spatial_velocities"))
+    builder.Connect(plant.get_state_output_port(),
+                    truth.GetInputPort("plant_state"))
+    return builder.Build(), plant, model, truth
+
+
+def test_end_effector_motion_matches_the_plants_kinematics(robot):
+    diagram, plant, model, truth = robot
+    context = diagram.CreateDefaultContext()
+    plant_context = plant.GetMyContextFromRoot(context)
+    truth_context = truth.GetMyContextFromRoot(context)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        plant.SetPositions(plant_context,
+                           rng.uniform(-0.5, 0.5, plant.num_positions()))
+        plant.SetVelocities(plant_context,
+                            rng.uniform(-1.0, 1.0, plant.num_velocities()))
+        tcp = model.tcp_frame
+        X = tcp.CalcPoseInWorld(plant_context)
+        V = tcp.CalcSpatialVelocityInWorld(plant_context)
+        pose = truth.GetOutputPort("end_effector_pose").Eval(truth_context)
+        velocity = truth.GetOutputPort("end_effector_velocity").Eval(
+            truth_context)
+        np.testing.assert_allclose(pose[:3], X.translation(), atol=1e-12)
+        np.testing.assert_allclose(
+            pose[3:], RollPitchYaw(X.rotation()).vector(), atol=1e-12)
+        np.testing.assert_allclose(velocity, V.get_coeffs()[[3, 4, 5, 0, 1,
+                                                             2]],
+                                   atol=1e-12)
+
+
+class PointsSource(LeafSystem):
+    """Outputs the array in `self.points` (the very object)."""
+
+    def __init__(self, points):
+        super().__init__()
+        self.points = points
+        self.DeclareAbstractOutputPort(
+            "points", lambda: AbstractValue.Make(np.zeros((0, 2))),
+            lambda context, output: output.set_value(self.points))
+
+
+def test_merger_reuses_only_unchanged_read_only_inputs():
+    a = np.array([[1.0, 2.0], [3.0, 4.0]])
+    b = np.array([[5.0, 6.0]])
+    a.flags.writeable = b.flags.writeable = False
+    builder = DiagramBuilder()
+    sources = [builder.AddSystem(PointsSource(a)),
+               builder.AddSystem(PointsSource(b))]
+    merger = builder.AddSystem(ObstaclePointMerger(2))
+    for i, source in enumerate(sources):
+        builder.Connect(source.get_output_port(),
+                        merger.GetInputPort(f"points_{i}"))
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    port = merger.GetOutputPort("points")
+
+    def merged(t):
+        context.SetTime(t)  # every output is evaluated again
+        return port.Eval(merger.GetMyContextFromRoot(context))
+
+    np.testing.assert_array_equal(merged(0.0), np.vstack([a, b]))
+    first = merger._last[1]
+    np.testing.assert_array_equal(merged(1.0), np.vstack([a, b]))
+    assert merger._last[1] is first  # reused, not merged again
+    c = np.array([[7.0, 8.0]])  # writeable: merged afresh at each call
+    sources[1].points = c
+    np.testing.assert_array_equal(merged(2.0), np.vstack([a, c]))
+    c[0, 0] = -1.0  # changed in place: seen
+    np.testing.assert_array_equal(merged(3.0), np.vstack([a, c]))
+    new_b = b.copy()  # another read-only array of the same values
+    new_b.flags.writeable = False
+    sources[1].points = new_b
+    np.testing.assert_array_equal(merged(4.0), np.vstack([a, b]))
+    base = np.array([[1.0, 1.0], [2.0, 2.0]])
+    view = base[:1]  # read-only, but a view of memory that may change
+    view.flags.writeable = False
+    sources[1].points = view
+    np.testing.assert_array_equal(merged(5.0), np.vstack([a, base[:1]]))
+    base[0, 0] = 9.0
+    np.testing.assert_array_equal(merged(6.0), np.vstack([a, base[:1]]))
