@@ -234,7 +234,17 @@ class LastPoints:
 
     def __call__(self, points):
         """function(points), a fresh copy."""
-        if self._points is None or not np.array_equal(self._points, points):
+        if not self._same(points):
             self._result = np.asarray(self._function(points))
             self._points = np.array(points, dtype=float)
         return self._result.copy()
+
+    def _same(self, points):
+        """Whether `points` equal the last ones by value (np.array_equal,
+        without its conversions for an array of the same shape)."""
+        last = self._points
+        if last is None:
+            return False
+        if type(points) is np.ndarray and points.shape == last.shape:
+            return bool((last == points).all())
+        return np.array_equal(last, points)

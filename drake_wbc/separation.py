@@ -28,6 +28,8 @@ stop_distance short of the obstacle; the base's own lag and the
 acceleration limit take some of that margin.
 """
 
+import math
+
 import numpy as np
 
 from drake_wbc.repulsion import footprint_gap, footprint_geometry
@@ -65,7 +67,7 @@ def _nearest_first(distance, count):
     if len(distance) > 2 * count:
         # Only the candidates up to the count-th smallest distance.
         bound = np.partition(distance, count - 1)[count - 1]
-        candidates = np.flatnonzero(distance <= bound)
+        candidates = (distance <= bound).nonzero()[0]
         return candidates[np.argsort(distance[candidates],
                                      kind="stable")[:count]]
     return np.argsort(distance, kind="stable")[:count]
@@ -136,9 +138,61 @@ def separation_scale(command, points, half_sizes, stop_distance,
 def scale_for_rows(command, rows, allowed):
     """`separation_scale` from the points' `approach_rows` (M, 3) and
     `allowed_speeds` (M,): the per-tick part, a product and a minimum."""
-    approach = rows @ command
-    closing = approach > allowed
-    if not closing.any():
-        return 1.0
-    return min(max(float(np.min(allowed[closing] / approach[closing])),
-                   0.0), 1.0)
+    approach = (rows @ command).tolist()
+    scale = None
+    # A few rows: a loop in Python floats beats the masked arrays; the
+    # same divisions and minimum, so the same value.
+    for speed, bound in zip(approach, np.asarray(allowed).tolist(),
+                            strict=True):
+        if speed > bound:
+            # speed 0 only with a negative bound: numpy's signed infinity
+            ratio = (bound / speed if speed != 0.0
+                     else -math.copysign(math.inf, speed))
+            if scale is None or ratio < scale:
+                scale = ratio
+    return 1.0 if scale is None else min(max(scale, 0.0), 1.0)
+
+
+def separation_state(points, half_sizes, stop_distance, stop_time,
+                     count=NEAREST_POINTS):
+    """The `approach_rows` (count, 3), raveled row by row, then the
+    `allowed_speeds` (count,) of the `nearest_points` of `points`: what
+    the base command limiter keeps of a scan, as one (4 count,) array.
+
+    The same values, bit for bit, as composing those functions; with at
+    least `count` points all outside the footprint (the usual scan) the
+    selected points' distances and offsets are taken from the ranking
+    rather than computed again.
+
+    Args:
+        points: (M, 2) finite obstacle points in T_b, m (M may be 0).
+        half_sizes: the footprint's half-sizes (a, b), m.
+        stop_distance: m >= 0 left between the footprint and an obstacle.
+        stop_time: s > 0, the time constant of the approach.
+        count: how many points to keep, >= 1.
+    """
+    points = np.reshape(np.asarray(points, dtype=float), (-1, 2))
+    if len(points) >= count:
+        offsets = np.abs(points)
+        offsets[:, 0] -= half_sizes[0]  # no (2,) array made of a tuple
+        offsets[:, 1] -= half_sizes[1]
+        np.maximum(offsets, 0.0, out=offsets)
+        gap = np.hypot(offsets[:, 0], offsets[:, 1])
+        kept = _nearest_first(gap, count)
+        d = gap[kept]
+        if d.min() > 0.0:
+            # footprint_geometry's outside case and approach_rows, on
+            # (count, 2) blocks: n = sign(p) o / d, r = p - d n.
+            near = points[kept]
+            n = np.copysign(offsets[kept] / d[:, None], near)
+            near -= d[:, None] * n
+            state = np.empty(4 * count)
+            rows = state[:3 * count].reshape(count, 3)
+            rows[:, :2] = n
+            rows[:, 2] = near[:, 0] * n[:, 1] - near[:, 1] * n[:, 0]
+            state[3 * count:] = allowed_speeds(d, stop_distance, stop_time)
+            return state
+    rows, d = approach_rows(nearest_points(points, half_sizes, count),
+                            half_sizes)
+    return np.concatenate([rows.ravel(),
+                           allowed_speeds(d, stop_distance, stop_time)])

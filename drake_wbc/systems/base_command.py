@@ -16,10 +16,8 @@ from drake_wbc.safety import SafetyParameters
 from drake_wbc.scalar_support import through_float_function, value_of
 from drake_wbc.separation import (
     NEAREST_POINTS,
-    allowed_speeds,
-    approach_rows,
-    nearest_points,
     scale_for_rows,
+    separation_state,
 )
 from drake_wbc.systems.safety import SCALARS, as_scalar_type
 from drake_wbc.validation import (
@@ -113,7 +111,8 @@ def StopGate_(T):
         def _scale_output(self, context, output):
             scale = 1.0 if self._stopped(context) else self._scale(
                 self._value.Eval(context))
-            output.SetFromVector(as_scalar_type(T, np.array([scale])))
+            output.SetFromVector(np.array([scale]) if T is float
+                                 else as_scalar_type(T, np.array([scale])))
 
     return Impl
 
@@ -240,32 +239,36 @@ def BaseCommandLimiter_(T):
         def _separation_state(self, points):
             """The state's separation part for obstacle points (M, 2):
             the nearest points' approach rows, then allowed speeds."""
-            rows, d = approach_rows(
-                nearest_points(points, self.half_sizes), self.half_sizes)
-            return np.concatenate([rows.ravel(), allowed_speeds(
-                d, self.params.stop_distance, self.params.stop_time)])
+            return separation_state(
+                points, self.half_sizes, self.params.stop_distance,
+                self.params.stop_time)
 
         def float_map(self, z):
             """[desired (3), previous (3), stopped, approach rows (3
             NEAREST_POINTS), allowed speeds (NEAREST_POINTS)] ->
             [command (3), limited, velocity scale, acceleration scale],
             in double (without the envelope's scale)."""
-            desired, previous, stopped = z[:3], z[3:6], z[6]
+            return self._float_result(
+                z[:3], z[3:6], z[6], z[7:_ALLOWED].reshape(-1, 3),
+                z[_ALLOWED:])
+
+        def _float_result(self, desired, previous, stopped, rows, allowed):
+            """`float_map` of its parts: the desired command (3,), the
+            previous one (3,), stopped, the approach rows
+            (NEAREST_POINTS, 3) and the allowed speeds (NEAREST_POINTS,)."""
             if stopped >= 0.5:
                 return np.array([0.0, 0.0, 0.0, 0.0, 1.0, 1.0])
             if not np.isfinite(desired).all():
                 return np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
             params = self.params
-            separation = scale_for_rows(
-                desired, z[7:_ALLOWED].reshape(-1, 3), z[_ALLOWED:])
+            separation = scale_for_rows(desired, rows, allowed)
             result = limit_base_velocity(
                 desired, previous, params.base_velocity_limits,
                 params.base_acceleration_limits, self.time_step,
                 scale=separation)
-            return np.concatenate([
-                result.command, [1.0 if result.limited else 0.0,
-                                 result.velocity_scale,
-                                 result.acceleration_scale]])
+            return np.array(result.command.tolist() + [
+                1.0 if result.limited else 0.0, result.velocity_scale,
+                result.acceleration_scale])
 
         def _calc_result(self, context, value):
             value.set_value(self._evaluate_now(context))
@@ -274,6 +277,14 @@ def BaseCommandLimiter_(T):
             return self._result.Eval(context)
 
         def _evaluate_now(self, context):
+            if T is float:
+                # The state's parts as views: no copy, no concatenation.
+                state = context.get_discrete_state_vector().value()
+                return self._float_result(
+                    self._velocity.Eval(context), state[:3],
+                    self._stopped.Eval(context)[0],
+                    state[3:_ALLOWED - 4].reshape(-1, 3),
+                    state[_ALLOWED - 4:])
             state = context.get_discrete_state_vector()
             state = state.value() if T is float else state.CopyToVector()
             z = np.concatenate([
@@ -287,6 +298,9 @@ def BaseCommandLimiter_(T):
             output.SetFromVector(self._evaluate(context)[:3])
 
         def _saturation_output(self, context, output):
+            if T is float:
+                output.SetFromVector(self._float_saturation(context))
+                return
             limited, velocity_scale, acceleration_scale = (
                 self._evaluate(context)[3:])
             if self._envelope.HasValue(context):
@@ -297,10 +311,28 @@ def BaseCommandLimiter_(T):
             output.SetFromVector(np.array(
                 [limited, velocity_scale, acceleration_scale]))
 
+        def _float_saturation(self, context):
+            """The saturation output in double: the same products as the
+            general path's, without its conversions."""
+            result = self._evaluate(context)
+            limited, velocity_scale = result[3], result[4]
+            if self._envelope.HasValue(context):
+                envelope = self._envelope.Eval(context)[0]
+                if envelope < 1.0:
+                    limited = 1.0
+                velocity_scale = envelope * velocity_scale
+            return np.array([limited, velocity_scale, result[5]])
+
         def _update(self, context, discrete_state):
             points = (self._points.Eval(context)
                       if self._points.HasValue(context)
                       else np.zeros((0, 2)))
+            if T is float:
+                # Written in place: no concatenation, no conversion.
+                state = discrete_state.get_mutable_value()
+                state[:safety.BASE_AXES] = self._evaluate(context)[:3]
+                state[safety.BASE_AXES:] = self._separation(points)
+                return
             discrete_state.set_value(np.concatenate([
                 self._evaluate(context)[:3],
                 as_scalar_type(T, self._separation(points))]))
