@@ -14,9 +14,10 @@ learned shape superposes unchanged on a moved goal.
 Recording and its start and stop markers: drake_wbc.demonstration.
 
 Learning (`learn_movement`): each demonstration is normalised to a
-common duration (their mean), its forcing targets (dmp.forcing_targets,
-goal its last sample) and design matrix (dmp.design_matrix) are stacked
-with the others', and the weights are one ridge fit (dmp.fit_weights).
+common duration (their mean), its forcing targets
+(dmp_learning.forcing_targets, goal its last sample) and design matrix
+(dmp_learning.design_matrix) are stacked with the others', and the
+weights are one ridge fit (dmp_learning.fit_weights).
 Several demonstrations thus average. `LearnedMovement.save`/`load` write
 and read it as a small YAML file.
 """
@@ -29,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from drake_wbc import dmp
+from drake_wbc import dmp, dmp_learning
 from drake_wbc.demonstration import DIMENSIONS, Demonstration
 from drake_wbc.validation import as_matrix, as_vector, positive
 
@@ -172,7 +173,7 @@ def learn_movement(demonstrations, params=None, num_basis=None,
             default of that duration when None). None: the defaults with
             DEFAULT_NUM_BASIS.
         num_basis: overrides params.num_basis when given.
-        regularisation: the relative ridge factor of dmp.fit_weights.
+        regularisation: the relative ridge factor of dmp_learning.fit_weights.
         source: how it was made, kept in the file's header.
 
     Returns:
@@ -192,13 +193,13 @@ def learn_movement(demonstrations, params=None, num_basis=None,
     designs, targets = [], []
     for demo in demonstrations:
         t = (demo.time - demo.time[0]) * (duration / demo.duration)
-        yd, ydd = dmp.demonstration_derivatives(t, demo.tcp)
-        targets.append(dmp.forcing_targets(t, demo.tcp, yd, ydd,
-                                           demo.tcp[-1], params))
-        designs.append(dmp.design_matrix(dmp.canonical_phase(t, params),
-                                         params))
-    weights = dmp.fit_weights(np.vstack(designs), np.vstack(targets),
-                              regularisation)
+        yd, ydd = dmp_learning.demonstration_derivatives(t, demo.tcp)
+        targets.append(dmp_learning.forcing_targets(
+            t, demo.tcp, yd, ydd, demo.tcp[-1], params))
+        designs.append(dmp_learning.design_matrix(
+            dmp.canonical_phase(t, params), params))
+    weights = dmp_learning.fit_weights(np.vstack(designs),
+                                       np.vstack(targets), regularisation)
     return LearnedMovement(
         params, weights, np.mean([d.tcp[0] for d in demonstrations], axis=0),
         np.mean([d.tcp[-1] for d in demonstrations], axis=0),
