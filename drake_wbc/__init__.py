@@ -2,12 +2,12 @@
 robots with Coupling Dynamic Movement Primitives (CDMP-WBC), on Drake.
 
 The math layer (numpy only) is importable without Drake:
-`drake_wbc.kinematics`, `drake_wbc.distribution`, `drake_wbc.capability`,
-`drake_wbc.compensation`, `drake_wbc.filtering`. The robot model and its
-kinematics from a `MultibodyPlant` are in `drake_wbc.robot_model`; the
-controller's stages, as Drake systems, are in `drake_wbc.systems` and
-importable from the package itself (`from drake_wbc import
-BaseVelocityFilter`).
+`drake_wbc.kinematics`, `drake_wbc.pseudoinverse`, `drake_wbc.distribution`,
+`drake_wbc.capability`, `drake_wbc.compensation`, `drake_wbc.filtering`.
+The robot model and its kinematics from a `MultibodyPlant` are in
+`drake_wbc.robot_model`; the controller's stages, as Drake systems, are in
+`drake_wbc.systems` and importable from the package itself (`from
+drake_wbc import BaseVelocityFilter`).
 """
 
 __version__ = "0.1.0"

@@ -14,12 +14,9 @@ import math
 
 import numpy as np
 
-from drake_wbc.distribution import (
-    DEFAULT_DAMPING,
-    distribute_unchecked,
-    weights_of,
-)
+from drake_wbc.distribution import distribute_unchecked
 from drake_wbc.kinematics import whole_body_jacobian_unchecked
+from drake_wbc.pseudoinverse import DEFAULT_DAMPING, weights_of
 
 _IDENTITY = np.eye(3)
 """^bR_a of the usual mounting (see distribute_aligned)."""
@@ -36,8 +33,8 @@ def distribute_aligned(V_ee, p_ee_in_base, sigma_xy, sigma_phi,
         A = diag(s + (1 - s), s + (1 - s), p) + (1 - p) c c^T,
         c = [-y, x, 1],
 
-    (s = sigma_xy, p = sigma_phi, det A = 1 + p (1 - p) r^2 >= 1, see the
-    module docstring), so that x = M^-1 (V_ee - J V_n^0) is a 3x3
+    (s = sigma_xy, p = sigma_phi, det A = 1 + p (1 - p) r^2 >= 1, see
+    drake_wbc.pseudoinverse), so that x = M^-1 (V_ee - J V_n^0) is a 3x3
     Cholesky solve and V_wb = Q J^T x + V_n^0 of eq. (wbccm) has the
     closed form
 
@@ -45,9 +42,10 @@ def distribute_aligned(V_ee, p_ee_in_base, sigma_xy, sigma_phi,
                                       (1 - p)(x_wz - y x_vx + x x_vy)].
 
     The same values as `distribute_unchecked` to rounding. The damping
-    certificate of `_certified_solve` is taken from this factorisation
-    (det M / (tr M / 5)^6 >= 5 threshold); when it does not prove
-    lambda = 0, or a value is not finite, the general path runs instead.
+    certificate of `pseudoinverse.certified_solve` is taken from this
+    factorisation (det M / (tr M / 5)^6 >= 5 threshold); when it does not
+    prove lambda = 0, or a value is not finite, the general path runs
+    instead.
 
     Args:
         V_ee: (6,) floats (a sequence or an array), the twist in T_b.
@@ -87,8 +85,8 @@ def distribute_aligned(V_ee, p_ee_in_base, sigma_xy, sigma_phi,
     d22 = a22 - l20 * l20 - l21 * l21
     l22 = math.sqrt(d22) if d22 > 0.0 else math.nan
     if damping is not None:
-        # _certified_solve's product of 5 L_ii^2 / tr M over the six
-        # pivots, three of them 1.
+        # pseudoinverse.certified_solve's product of 5 L_ii^2 / tr M over
+        # the six pivots, three of them 1.
         ratio = 5.0 / (3.0 + a00 + a11 + a22)
         certificate = ((l00 * l00 * ratio) * (l11 * l11 * ratio)
                        * (l22 * l22 * ratio) * ratio * ratio * ratio)

@@ -14,7 +14,7 @@ systems MotionDistributor and RobustCompensator
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 
-from drake_wbc import distribution, kinematics
+from drake_wbc import kinematics, pseudoinverse
 from drake_wbc.scalar_support import solve, value_of
 
 PROJECTOR_TOLERANCE = 1e-12
@@ -50,7 +50,7 @@ def base_jacobian_any(p_ee_in_base):
 
 
 def distribute_any(J_wb, V_ee, sigma_xy, sigma_phi, null_velocity,
-                   damping=distribution.DEFAULT_DAMPING):
+                   damping=pseudoinverse.DEFAULT_DAMPING):
     """distribution.distribute for AutoDiffXd arguments (floats also work).
 
         V_wb = J^+ (V_ee - J V_n^0) + V_n^0,  J^+ = Q J^T (J Q J^T)^-1,

@@ -16,6 +16,7 @@ from drake_wbc import (
     compensation,
     distribution,
     kinematics,
+    pseudoinverse,
     twist_solver,
 )
 from drake_wbc.bench import distribution_race as race
@@ -303,9 +304,9 @@ def test_distribute_aligned_matches_the_general_path():
     for V, p, s_xy, s_phi, null in distribution_cases(1500, seed=9):
         J = kinematics.whole_body_jacobian(None, p, np.eye(3))
         V_n = None if null is None else np.r_[null, 0.0, 0.0, 0.0]
-        for damping in (distribution.DEFAULT_DAMPING, None):
+        for damping in (pseudoinverse.DEFAULT_DAMPING, None):
             expected = distribution.distribute_unchecked(
-                J, V, distribution.weights_of(s_xy, s_phi), V_n, damping)
+                J, V, pseudoinverse.weights_of(s_xy, s_phi), V_n, damping)
             fast = aligned_distribution.distribute_aligned(
                 V, p, s_xy, s_phi, null, damping)
             assert relative_difference(fast, expected) < RELATIVE
@@ -314,9 +315,9 @@ def test_distribute_aligned_matches_the_general_path():
                 aligned_distribution.distribute_aligned(
                     list(V), list(p), s_xy, s_phi,
                     None if null is None else list(null), damping), fast)
-        M = (J * distribution.weights_of(s_xy, s_phi)) @ J.T
-        fallback += distribution._certified_solve(
-            J, J * distribution.weights_of(s_xy, s_phi), np.ones(6),
+        M = (J * pseudoinverse.weights_of(s_xy, s_phi)) @ J.T
+        fallback += pseudoinverse.certified_solve(
+            J, J * pseudoinverse.weights_of(s_xy, s_phi), np.ones(6),
             1e-4) is None
         assert np.linalg.eigvalsh(M)[0] > 0.0
     assert fallback > 0  # the general path was taken somewhere
@@ -335,8 +336,8 @@ def test_distribute_aligned_keeps_the_task_and_the_general_failures():
     J = kinematics.whole_body_jacobian(None, [0.4, 0.2, 0.5])
     bad_V = np.r_[np.nan, np.zeros(5)]
     expected = distribution.distribute_unchecked(
-        J, bad_V, distribution.weights_of(0.5, 0.5), None,
-        distribution.DEFAULT_DAMPING)
+        J, bad_V, pseudoinverse.weights_of(0.5, 0.5), None,
+        pseudoinverse.DEFAULT_DAMPING)
     assert np.isnan(expected).any()
     np.testing.assert_array_equal(
         aligned_distribution.distribute_aligned(bad_V, [0.4, 0.2, 0.5], 0.5,

@@ -23,6 +23,7 @@ from drake_wbc import (
     capability_gradients,
     compensation,
     distribution,
+    pseudoinverse,
 )
 from drake_wbc.any_scalar_coordination import compensate_any, distribute_any
 from drake_wbc.kinematics import base_jacobian, whole_body_jacobian
@@ -374,7 +375,7 @@ def test_autodiff_distribution_with_damping_matches_the_math_layer():
     J0 = rng.normal(size=(6, 9))
     J0[5] = J0[4] + 1e-4 * rng.normal(size=9)  # nearly rank 5
     V_ee, V_n = rng.normal(size=6), rng.normal(size=9)
-    M = J0 @ distribution.weighting_matrix(0.3, 0.6) @ J0.T
+    M = J0 @ pseudoinverse.weighting_matrix(0.3, 0.6) @ J0.T
     eigenvalues = np.linalg.eigvalsh(M)
     assert eigenvalues[0] < 1e-4 * eigenvalues[-1]  # damping is active
 

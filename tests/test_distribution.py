@@ -1,4 +1,5 @@
-"""Tests of drake_wbc.distribution against independent formulations.
+"""Tests of drake_wbc.distribution and drake_wbc.pseudoinverse against
+independent formulations.
 
 J_wb is built here by hand as [R6, J_b] from its definition in eq. (1),
 not with drake_wbc.kinematics, so that these tests stand on their own.
@@ -10,10 +11,9 @@ import numpy as np
 import pytest
 from reference_kinematics import random_rotation
 
-from drake_wbc.distribution import (
+from drake_wbc.distribution import capability_null_velocity, distribute
+from drake_wbc.pseudoinverse import (
     SingularityDamping,
-    capability_null_velocity,
-    distribute,
     weighted_pseudoinverse,
     weighting_matrix,
 )
@@ -48,7 +48,7 @@ def random_case(rng, upright=False):
 
     With upright=True the arm base's z axis is kept at least 30 deg from
     the horizontal plane of T_b: at sigma = 0 the distribution needs it not
-    horizontal (proof in the distribution module docstring).
+    horizontal (proof in the pseudoinverse module docstring).
     """
     R = random_rotation(rng)
     while upright and abs(R[2, 2]) < 0.5:
@@ -207,8 +207,8 @@ def test_sideways_arm_at_sigma_zero_is_the_one_singular_case():
     contains the vertical, and the base cannot move vertically; at
     sigma_phi = 0 the arm may not turn about its own z axis, which is now
     horizontal, and the base turns only about the vertical. Either way
-    J Q J^T is singular, as the module docstring states. With both sigmas
-    in (0, 1] the same mounting is fine."""
+    J Q J^T is singular, as the pseudoinverse module docstring states.
+    With both sigmas in (0, 1] the same mounting is fine."""
     R = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
     assert R[2, 2] == 0.0
     J = whole_body(R, [0.6, 0.2, 0.8])

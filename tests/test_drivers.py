@@ -19,13 +19,12 @@ from drake_wbc.robot_model import (
     HOME_ARM_POSITIONS,
     make_mcr_plant,
 )
+from drake_wbc.station.driver_dynamics import base_loop_size, base_loop_step
 from drake_wbc.station.drivers import (
     ArmDriverParameters,
     ArmPositionDriver,
     BaseDriverParameters,
     BaseVelocityDriver,
-    base_loop_size,
-    base_loop_step,
 )
 from drake_wbc.station.servo_gains import servo_gains
 from drake_wbc.station.symbolic_drivers import (
@@ -392,7 +391,8 @@ def test_values_at_the_edges_of_the_allowed_ranges_are_accepted():
 
 
 def test_second_order_overshoot_stops_at_the_velocity_limit():
-    from drake_wbc.station.drivers import BaseDriverParameters, base_loop_step
+    from drake_wbc.station.driver_dynamics import base_loop_step
+    from drake_wbc.station.drivers import BaseDriverParameters
 
     params = BaseDriverParameters(damping_ratio=0.2, lag=0.1,
                                   acceleration_limits=[50.0, 50.0, 50.0])

@@ -13,6 +13,7 @@ from drake_wbc import (
     compensation,
     distribution,
     kinematics,
+    pseudoinverse,
     repulsion,
 )
 from drake_wbc.robot_model import ArmKinematics
@@ -41,7 +42,7 @@ def random_configurations(arm, count, seed):
 
 def distribute_as_written(J, V_ee, sigma_xy, sigma_phi, V_n, damping):
     """Eqs. (wbsln)/(wbccm) as written: J^+ from the eigenvalues of
-    J Q J^T with the damping rule of distribution's docstring, then
+    J Q J^T with the damping rule of pseudoinverse's docstring, then
     J^+ V_ee + (I - J^+ J) V_n."""
     Q = np.diag([sigma_xy, sigma_xy, 1, 1, 1, sigma_phi, 1 - sigma_xy,
                  1 - sigma_xy, 1 - sigma_phi])
@@ -76,7 +77,7 @@ def random_jacobians(rng, count):
 
 def test_distribute_matches_the_formula_as_written():
     rng = np.random.default_rng(0)
-    damping = distribution.DEFAULT_DAMPING
+    damping = pseudoinverse.DEFAULT_DAMPING
     worst = {}
     for kind, J in random_jacobians(rng, 600):
         sigma_xy, sigma_phi = rng.choice([0.0, 1.0, *rng.uniform(size=3)], 2)
@@ -85,7 +86,7 @@ def test_distribute_matches_the_formula_as_written():
                                          damping)
         checked = distribution.distribute(J, V_ee, sigma_xy, sigma_phi, V_n)
         fast = distribution.distribute_unchecked(
-            J, V_ee, distribution.weights_of(sigma_xy, sigma_phi), V_n,
+            J, V_ee, pseudoinverse.weights_of(sigma_xy, sigma_phi), V_n,
             damping)
         np.testing.assert_array_equal(fast, checked)
         worst[kind] = max(worst.get(kind, 0.0),
@@ -98,11 +99,11 @@ def test_distribute_matches_the_formula_as_written():
 
 def test_certificate_only_skips_the_damping_when_it_is_inactive():
     rng = np.random.default_rng(1)
-    threshold = distribution.DEFAULT_DAMPING.threshold
+    threshold = pseudoinverse.DEFAULT_DAMPING.threshold
     skipped = 0
     for _, J in random_jacobians(rng, 900):
-        JQ = J * distribution.weights_of(*rng.uniform(size=2))
-        x = distribution._certified_solve(J, JQ, np.ones(6), threshold)
+        JQ = J * pseudoinverse.weights_of(*rng.uniform(size=2))
+        x = pseudoinverse.certified_solve(J, JQ, np.ones(6), threshold)
         e = np.linalg.eigvalsh(JQ @ J.T)
         if x is not None:
             skipped += 1
@@ -116,15 +117,15 @@ def test_weighted_pseudoinverse_unchanged_and_null_velocity_optional():
     rng = np.random.default_rng(2)
     for _, J in random_jacobians(rng, 60):
         sigma = rng.uniform(size=2)
-        Q = distribution.weighting_matrix(*sigma)
+        Q = pseudoinverse.weighting_matrix(*sigma)
         V_ee = rng.normal(size=6)
-        J_pinv = distribution.weighted_pseudoinverse(J, Q)
+        J_pinv = pseudoinverse.weighted_pseudoinverse(J, Q)
         assert relative_difference(
             distribution.distribute(J, V_ee, *sigma), J_pinv @ V_ee) < 1e-12
         assert relative_difference(
             J_pinv, distribute_as_written(
                 J, np.eye(6), *sigma, np.zeros((9, 6)),
-                distribution.DEFAULT_DAMPING)) < 1e-9
+                pseudoinverse.DEFAULT_DAMPING)) < 1e-9
 
 
 def test_distribute_still_checks_its_arguments():

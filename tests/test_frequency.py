@@ -17,6 +17,7 @@ from pydrake.systems.primitives import (
 
 from drake_wbc import cdmp
 from drake_wbc.analysis import chains, closed_forms, plant_chain
+from drake_wbc.analysis.dmp_force_response import linearize_dmp_force
 from drake_wbc.analysis.frequency import (
     bandwidth,
     frequency_grid,
@@ -109,8 +110,8 @@ def test_arm_stiffness_axis_matches_eq_lp_admit(scenario, time_step, dmp,
                                                 k_d):
     arm = replace(scenario.controller.arm_cdmp, k_d=k_d, dmp=dmp)
     params = replace(scenario.controller, arm_cdmp=arm)
-    response = chains.linearize_dmp_force("stiffness", params, time_step,
-                                          axis=1).response(OMEGA)
+    response = linearize_dmp_force("stiffness", params, time_step,
+                                   axis=1).response(OMEGA)
     args = (arm.k_p, k_d, dmp.tau, dmp.alpha_z, dmp.resolved_beta_z)
     # tau = 1: the arm's C_s (no factor tau) is the paper's tau C_f.
     expected = (closed_forms.lp_admit_response(*args, OMEGA)
@@ -126,8 +127,8 @@ def test_admittance_couplings_match_eq_tf_admit(scenario, time_step, kind):
     gain = (params.arm_cdmp.k_f if kind == "admittance"
             else params.whole_body_cdmp.k_hri)
     omega = off_sampling_rate(time_step)
-    response = chains.linearize_dmp_force(kind, params, time_step,
-                                          axis=2).response(omega)
+    response = linearize_dmp_force(kind, params, time_step,
+                                   axis=2).response(omega)
     expected = (closed_forms.tf_admit_response(gain, omega)
                 if time_step == 0.0 else
                 closed_forms.tf_admit_zoh_response(gain, time_step, omega))
@@ -473,10 +474,10 @@ def test_bad_inputs_are_named():
     with pytest.raises(ValueError, match="high_hz"):
         frequency_grid(10.0, 1.0)
     with pytest.raises(ValueError, match="kind = 'spring'"):
-        chains.linearize_dmp_force("spring")
+        linearize_dmp_force("spring")
     with pytest.raises(ValueError, match="loop"):
         stability_margins(3.0, OMEGA)
     with pytest.raises(ValueError, match="axis = 7"):
-        chains.linearize_dmp_force("stiffness", axis=7)
+        linearize_dmp_force("stiffness", axis=7)
     with pytest.raises(ValueError, match="station = None"):
         plant_chain.linearize_base_plant(None)

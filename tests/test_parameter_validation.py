@@ -10,7 +10,7 @@ drake_wbc.validation.validate runs the checks of a whole tree again):
   ArmCapabilityParameters, WorkspaceAdapterParameters
   (systems.capability_stage), MotionDistributorParameters,
   RobustCompensatorParameters (systems.coordination),
-  BaseFilterParameters (filtering), SingularityDamping (distribution),
+  BaseFilterParameters (filtering), SingularityDamping (pseudoinverse),
   LocalWorkspace (workspace), DmpParameters (dmp),
   StiffnessCouplingParameters, AdmittanceCouplingParameters,
   WholeBodyCdmpParameters, RepulsiveFieldParameters, BaseCdmpParameters,
@@ -39,10 +39,10 @@ from drake_wbc.cdmp import (
     WholeBodyCdmpParameters,
 )
 from drake_wbc.controller import ControllerParameters
-from drake_wbc.distribution import SingularityDamping
 from drake_wbc.dmp import DmpParameters
 from drake_wbc.filtering import BaseFilterParameters
 from drake_wbc.hardware.options import HardwareOptions
+from drake_wbc.pseudoinverse import SingularityDamping
 from drake_wbc.scenario import (
     OutputOptions,
     Scenario,

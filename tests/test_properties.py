@@ -18,16 +18,13 @@ from drake_wbc import capability_gradients as cap_grad
 from drake_wbc import dmp, filtering, repulsion
 from drake_wbc.arm_control import joint_velocity_for_twist
 from drake_wbc.compensation import robust_compensation
-from drake_wbc.distribution import (
-    capability_null_velocity,
-    distribute,
-    weighting_matrix,
-)
+from drake_wbc.distribution import capability_null_velocity, distribute
 from drake_wbc.kinematics import (
     base_jacobian,
     twist_rotation,
     whole_body_jacobian,
 )
+from drake_wbc.pseudoinverse import weighting_matrix
 
 
 def checked(max_examples):

@@ -1,4 +1,4 @@
-"""The controller's filter chain and coupled DMPs, linearised with Drake.
+"""The controller's filter chain, linearised with Drake.
 
 Each chain is built from the project's own scalar-convertible systems and
 linearised around the operating point of a scenario (the arm at its
@@ -23,13 +23,11 @@ initial configuration, the robot at rest):
   its servo) at the station's static equilibrium; the base's actual
   velocity and the end effector's through the plant are read off its
   state (`plant_outputs`), and `linearize_base_plant` gives the driver
-  and plant alone;
-- the force responses of the coupled DMPs (`linearize_dmp_force`): the
-  arm's CDMP, eq. (cdmp-arm), on a stiffness axis (eq. (lp-admit)) and on
-  a force axis (eq. (tf-admit), D_a = k_f), and the whole body's CDMP,
-  eq. (cdmp-wb), with S_hri = 1 (eq. (tf-admit), D_a = k_hri).
-"""
+  and plant alone.
 
+The force responses of the coupled DMPs are in
+drake_wbc.analysis.dmp_force_response.
+"""
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -42,7 +40,7 @@ from pydrake.systems.primitives import (
     Multiplexer,
 )
 
-from drake_wbc import cdmp, kinematics
+from drake_wbc import kinematics
 from drake_wbc.analysis.period_map import linearize_period_map
 from drake_wbc.analysis.plant_chain import (
     add_station_plant,
@@ -57,13 +55,11 @@ from drake_wbc.station.drivers import (
     BaseVelocityDriver,
 )
 from drake_wbc.systems import (
-    ArmCdmp,
     BaseVelocityFilter,
     MotionDistributor,
     RobustCompensator,
-    WholeBodyCdmp,
 )
-from drake_wbc.validation import as_vector, checked_instance, whole_number
+from drake_wbc.validation import as_vector, checked_instance
 
 SPLIT_OUTPUTS = ("base_share", "arm_share", "end_effector_velocity")
 """The split diagram's outputs, each a twist (6) of the end effector in
@@ -327,80 +323,3 @@ def linearize_split(params=None, point=None, base_driver=None, alpha=None,
                          output.get_index())
     return linearize_period_map(diagram, context, params.time_step, source,
                                 output)
-
-
-@dataclass
-class DmpForceResponse:
-    """A coupled DMP linearised from the force to its position.
-
-    Attributes:
-        system: the LinearSystem from the wrench (6) to y_dot (6).
-        position: the (6, n) selection of the position y from the state.
-        axis: the axis (0 to 5) whose force-to-position response is meant.
-    """
-
-    system: LinearSystem
-    position: np.ndarray
-    axis: int
-
-    def response(self, omega):
-        """The axis' force-to-position response at `omega` (rad/s)."""
-        from drake_wbc.analysis.frequency import linear_system_response
-
-        H = linear_system_response(self.system, omega, self.position)
-        return H[:, self.axis, self.axis]
-
-
-def linearize_dmp_force(kind, params=None, time_step=None, axis=None):
-    """Linearises a coupled DMP of the controller from the wrench on the
-    tool to its position y.
-
-    Args:
-        kind: 'stiffness' (ArmCdmp on an axis with S_m = 1, eq.
-            (lp-admit) with its C_s entering without the factor tau),
-            'admittance' (ArmCdmp on an axis with S_m = 0, S_hri = 0: eq.
-            (tf-admit) with D_a = k_f) or 'phri' (WholeBodyCdmp with
-            S_hri = 1: eq. (tf-admit) with D_a = k_hri).
-        params: ControllerParameters (the paper's if None): its arm_cdmp's
-            k_p, k_d, k_f and DMP, or its whole_body_cdmp. S_m is set on
-            `axis` as `kind` needs.
-        time_step: 0 for continuous time; params.time_step if None.
-        axis: the axis, 0 to 5; 0 (x) if None.
-
-    Returns:
-        DmpForceResponse.
-    """
-    params = checked_instance("params", params, ControllerParameters,
-                              ControllerParameters)
-    h = params.time_step if time_step is None else time_step
-    axis = 0 if axis is None else whole_number("axis", axis)
-    if axis > 5:
-        raise ValueError(f"axis = {axis!r} is not allowed: must be 0 to 5")
-    if kind == "phri":
-        system = WholeBodyCdmp(params.whole_body_cdmp, time_step=h)
-        switch, others = 1.0, ("reference_velocity", "end_effector_deviation")
-    elif kind in ("stiffness", "admittance"):
-        arm = params.arm_cdmp
-        S_m = np.array(arm.S_m)
-        S_m[axis] = 1.0 if kind == "stiffness" else 0.0
-        system = ArmCdmp(cdmp.ArmCdmpParameters(
-            k_p=arm.k_p, k_d=arm.k_d, k_f=arm.k_f, S_m=S_m, F_d=np.zeros(6),
-            S_hri=0.0, dmp=arm.dmp), time_step=h)
-        switch, others = 0.0, ("arm_velocity", "desired_wrench")
-    else:
-        raise ValueError(f"kind = {kind!r} is not allowed: must be "
-                         "'stiffness', 'admittance' or 'phri'")
-    context = system.CreateDefaultContext()
-    for name in others:
-        system.GetInputPort(name).FixValue(context, np.zeros(6))
-    system.GetInputPort("phri_switch").FixValue(context, [switch])
-    if kind == "phri":
-        system.GetInputPort("base_yaw").FixValue(context, [0.0])
-    wrench = system.GetInputPort("wrench")
-    wrench.FixValue(context, np.zeros(6))
-    linear = Linearize(system, context, wrench.get_index(),
-                       system.get_output_port(0).get_index())
-    n = linear.A().shape[0]
-    position = np.zeros((6, n))
-    position[:, :6] = np.eye(6)
-    return DmpForceResponse(linear, position, axis)

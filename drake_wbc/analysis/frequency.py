@@ -6,7 +6,8 @@ discretised with period h, straight from the matrices that Drake's
 `Linearize` returns, and read off a response its -3 dB bandwidth, its
 peak gain and, for a loop transfer function, its gain and phase margins.
 
-Plain numpy and scipy; the Drake side is in drake_wbc.analysis.chains.
+Plain numpy and scipy; the Drake side is in drake_wbc.analysis.chains
+and drake_wbc.analysis.dmp_force_response.
 """
 
 from dataclasses import dataclass

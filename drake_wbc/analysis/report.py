@@ -39,6 +39,7 @@ from drake_wbc.analysis.bode import (
     write_csv,
     write_summary_csv,
 )
+from drake_wbc.analysis.dmp_force_response import linearize_dmp_force
 from drake_wbc.analysis.frequency import (
     frequency_grid,
     linear_system_response,
@@ -201,8 +202,7 @@ def _dmp_plots(report, params, hertz, omega, h, stiffness):
     for kind, label in (("stiffness", "arm CDMP, stiffness axis"),
                         ("admittance", "arm CDMP, force axis"),
                         ("phri", "whole-body CDMP, S_hri = 1")):
-        responses[kind] = chains.linearize_dmp_force(kind, params).response(
-            omega)
+        responses[kind] = linearize_dmp_force(kind, params).response(omega)
         plot.add(label, responses[kind])
         report.rows.append(summarize(label, hertz, responses[kind]))
     plot.add("eq. (lp-admit)", closed_forms.lp_admit_response(
@@ -219,7 +219,7 @@ def _dmp_plots(report, params, hertz, omega, h, stiffness):
                     f"{stiffness:g} N/m: loop K H(z)", hertz,
                     nyquist_hz=0.5 / h)
     for kind in ("admittance", "stiffness"):
-        linear = chains.linearize_dmp_force(kind, params)
+        linear = linearize_dmp_force(kind, params)
 
         def loop(w, linear=linear):
             return stiffness * linear.response(np.atleast_1d(w))[0]

@@ -47,7 +47,12 @@ from pydrake.multibody.inverse_kinematics import (
     DoDifferentialInverseKinematics,
 )
 
-from drake_wbc import aligned_distribution, distribution, kinematics
+from drake_wbc import (
+    aligned_distribution,
+    distribution,
+    kinematics,
+    pseudoinverse,
+)
 from drake_wbc.robot_model import (
     ARM_JOINTS,
     BASE_JOINTS,
@@ -129,7 +134,7 @@ def _problem_data(arm, R_ba, problem):
     weighting at `problem`."""
     p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
     J = kinematics.whole_body_jacobian(None, p_ee, R_ba)
-    weights = np.diag(distribution.weighting_matrix(problem.sigma_xy,
+    weights = np.diag(pseudoinverse.weighting_matrix(problem.sigma_xy,
                                                     problem.sigma_phi))
     V_n = distribution.capability_null_velocity(
         problem.capability_gradient, problem.null_space_gain)
@@ -148,7 +153,7 @@ def closed_form(arm):
     tick, as here."""
     R_ba = np.array(arm.R_ba, dtype=float)
     aligned = np.array_equal(R_ba, np.eye(3))
-    damping = distribution.DEFAULT_DAMPING
+    damping = pseudoinverse.DEFAULT_DAMPING
 
     def solve(problem):
         p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
@@ -167,7 +172,7 @@ def closed_form(arm):
         J = kinematics.whole_body_jacobian_unchecked(None, p_ee, R_ba)
         return distribution.distribute_unchecked(
             J, problem.end_effector_velocity,
-            distribution.weights_of(sigma_xy, sigma_phi),
+            pseudoinverse.weights_of(sigma_xy, sigma_phi),
             np.array(V_n + [0.0, 0.0, 0.0]), damping)
 
     return solve
@@ -290,7 +295,7 @@ class PlantDiffIk:
 
     def least_norm(self, problem):
         """The 9-DoF least-norm answer of the same joint-space problem
-        (distribution.weighted_pseudoinverse with Q = I), to compare."""
+        (pseudoinverse.weighted_pseudoinverse with Q = I), to compare."""
         self(problem)  # sets the configuration
         from pydrake.multibody.tree import JacobianWrtVariable
 
@@ -304,7 +309,7 @@ class PlantDiffIk:
         V = np.concatenate([twist[3:], twist[:3]])
         z = np.zeros(9)
         z[:6] = problem.null_space_gain * problem.capability_gradient
-        J_pinv = distribution.weighted_pseudoinverse(J, np.eye(9))
+        J_pinv = pseudoinverse.weighted_pseudoinverse(J, np.eye(9))
         v = J_pinv @ V + z - J_pinv @ (J @ z)
         c, s = np.cos(problem.base_yaw), np.sin(problem.base_yaw)
         vx, vy, wz = v[6:]

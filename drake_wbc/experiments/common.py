@@ -12,13 +12,10 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
 from drake_wbc import repulsion
+from drake_wbc.footprint import FOOTPRINT_HALF_SIZES
 from drake_wbc.robot_model import ArmKinematics
 from drake_wbc.station.scene import planar_shapes
 from drake_wbc.systems.safety import STATUS_FIELDS
-
-FOOTPRINT_HALF_SIZES = (0.4, 0.3)
-"""The base's footprint, half length and half width in m (the model's
-0.8 x 0.6 m chassis)."""
 
 BOUNDARY_POINTS_PER_METRE = 200
 """How densely box obstacles' outlines are sampled for distances."""

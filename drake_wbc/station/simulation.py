@@ -16,7 +16,7 @@
 Inside: a discrete MultibodyPlant (SAP, StationOptions.time_step: 1 ms
 by default, 5 ms in the scenarios) of the robot of models/ and the
 scene's static obstacles; the base's velocity loop and the arm's position
-servo (the math of drake_wbc.station.drivers, run as C++
+servo (the math of drake_wbc.station.driver_dynamics, run as C++
 SymbolicVectorSystems, drake_wbc.station.symbolic_drivers); the FT-300 on
 the weld `ft300_sensing`; two TiM571 LIDARs that see the static obstacles
 and the walking people; the person's hand on the tool. The ports named

@@ -2,7 +2,7 @@
 
 The station steps its plant at 1 / time_step, and its drivers with it; a
 Python system there costs far more than the math. These systems build the
-very functions of drake_wbc.station.drivers (`base_loop_step`,
+very functions of drake_wbc.station.driver_dynamics (`base_loop_step`,
 `body_to_world_rates`, `interpolated_command`) on symbolic variables, so
 the numbers are those of BaseVelocityDriver and ArmPositionDriver (the
 reference implementations, which tests compare against), and the
@@ -25,14 +25,13 @@ from pydrake.symbolic import MakeVectorVariable, Variable
 from pydrake.systems.primitives import SymbolicVectorSystem
 
 from drake_wbc.robot_model import HOME_ARM_POSITIONS
-from drake_wbc.station.drivers import (
-    ArmDriverParameters,
-    BaseDriverParameters,
+from drake_wbc.station.driver_dynamics import (
     base_loop_size,
     base_loop_step,
     body_to_world_rates,
     interpolated_command,
 )
+from drake_wbc.station.drivers import ArmDriverParameters, BaseDriverParameters
 from drake_wbc.validation import as_vector, checked_instance, validated_copy
 
 

@@ -1,15 +1,14 @@
 """ArmCapability and WorkspaceAdapter: what the arm's configuration tells
 the coordination stages (systems/coordination.py) once a tick, C_m, its
 gradient and alpha (Sec. III-A, IV-A), and the weighting factors of the
-motion modes (Sec. IV-C); and the helpers all these stages share."""
+motion modes (Sec. IV-C); and CapabilityBand, the band of eq. (transition)
+these stages share. How the stages declare their ports and cache:
+systems/stage_support.py."""
 
-import functools
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydrake.autodiffutils import AutoDiffXd
-from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem_, ValueProducer
+from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc import (
@@ -21,6 +20,15 @@ from drake_wbc import (
 from drake_wbc.motion_mode import MotionMode
 from drake_wbc.robot_model import ArmKinematics
 from drake_wbc.scalar_support import through_float_function
+from drake_wbc.systems.stage_support import (
+    SCALARS,
+    arm_mounting,
+    declare_cached_vector,
+    declare_inputs,
+    declare_slices,
+    shared_arm_kinematics,
+    tickets,
+)
 from drake_wbc.validation import (
     as_scalar,
     checked_instance,
@@ -30,10 +38,6 @@ from drake_wbc.validation import (
     validated_copy,
 )
 from drake_wbc.workspace import LocalWorkspace
-
-SCALARS = (float, AutoDiffXd)
-"""The scalar types of the coordination stages (double and AutoDiffXd; not
-symbolic: they branch on values, as the paper's piecewise functions do)."""
 
 
 @dataclass
@@ -72,69 +76,6 @@ def set_band(params):
     default CapabilityBand in place of None."""
     params.band = checked_instance("band", params.band, CapabilityBand,
                                    CapabilityBand)
-
-
-@functools.cache
-def shared_arm_kinematics():
-    """One ArmKinematics of our robot, for stages that read only its
-    constants (R_ba, the arm base's position)."""
-    return ArmKinematics()
-
-
-def arm_mounting(arm):
-    """(R_ba, p_a): the rotation ^bR_a and the arm base's origin in T_b
-    (m), constants of the nominal kinematics of `arm` (ArmKinematics)."""
-    values = arm.evaluate(np.zeros(6))
-    R_ba = np.array(arm.R_ba, dtype=float)
-    return R_ba, values.p_ee_in_base - R_ba @ values.X_AE.translation()
-
-
-def declare_cached_vector(system, description, calc, prerequisites):
-    """Declares a cache entry holding the vector `calc(context)` (float or
-    AutoDiffXd), computed once per change of `prerequisites` and read by
-    every output of `system` that needs it."""
-
-    def produce(context, value):
-        value.set_value(calc(context))
-
-    return system.DeclareCacheEntry(
-        description,
-        ValueProducer(allocate=lambda: AbstractValue.Make(np.zeros(0)),
-                      calc=produce),
-        prerequisites,
-    )
-
-
-def declare_slices(system, entry, slices):
-    """Declares one vector output port per (name, slice) of the vector in
-    cache `entry`."""
-    for name, part in slices:
-        def calc(context, output, part=part):
-            output.SetFromVector(entry.Eval(context)[part])
-
-        size = part.stop - part.start
-        system.DeclareVectorOutputPort(
-            name, size, calc, prerequisites_of_calc={entry.ticket()})
-
-
-def declare_inputs(system, sizes):
-    """Declares the vector input ports (name, size) of `system`; returns
-    them by name."""
-    return {name: system.DeclareVectorInputPort(name, size)
-            for name, size in sizes}
-
-
-def tickets(ports):
-    """The dependency tickets of `ports`."""
-    return {port.ticket() for port in ports}
-
-
-def optional_scalar(port, context, default):
-    """The value of a one-element input `port`, or `default` if it is
-    neither connected nor fixed."""
-    if port.HasValue(context):
-        return port.Eval(context)[0]
-    return default
 
 
 @dataclass

@@ -29,6 +29,7 @@ from drake_wbc import (
     compensation,
     distribution,
     kinematics,
+    pseudoinverse,
     workspace,
 )
 from drake_wbc.any_scalar_coordination import (
@@ -40,14 +41,13 @@ from drake_wbc.any_scalar_coordination import (
 )
 from drake_wbc.robot_model import ArmKinematics
 from drake_wbc.scalar_support import value_of
-from drake_wbc.systems.capability_stage import (
+from drake_wbc.systems.capability_stage import CapabilityBand, set_band
+from drake_wbc.systems.stage_support import (
     SCALARS,
-    CapabilityBand,
     declare_cached_vector,
     declare_inputs,
     declare_slices,
     optional_scalar,
-    set_band,
     shared_arm_kinematics,
     tickets,
 )
@@ -71,16 +71,16 @@ class MotionDistributorParameters:
         smooth_switch_off: True fades k_n out across the band,
             k_n alpha(C_m, C_m^u, C_m^l); False switches it off in one step
             above C_m^u, the paper's words read literally.
-        damping: distribution.SingularityDamping (never active for our
-            robot's J_wb, see distribution), or None for none; default
-            the values of distribution.DEFAULT_DAMPING.
+        damping: pseudoinverse.SingularityDamping (never active for our
+            robot's J_wb, see pseudoinverse), or None for none; default
+            the values of pseudoinverse.DEFAULT_DAMPING.
     """
 
     null_space_gain: float = 0.0
     band: CapabilityBand = field(default_factory=CapabilityBand)
     smooth_switch_off: bool = True
-    damping: distribution.SingularityDamping | None = field(
-        default_factory=distribution.SingularityDamping)
+    damping: pseudoinverse.SingularityDamping | None = field(
+        default_factory=pseudoinverse.SingularityDamping)
 
     def __post_init__(self):
         non_negative("null_space_gain", self.null_space_gain)
@@ -91,7 +91,7 @@ class MotionDistributorParameters:
                 "allowed: must be True or False"
             )
         if not (self.damping is None or isinstance(
-                self.damping, distribution.SingularityDamping)):
+                self.damping, pseudoinverse.SingularityDamping)):
             raise ValueError(
                 f"damping = {self.damping!r} is not allowed: must be a "
                 "SingularityDamping or None"
@@ -214,7 +214,7 @@ def MotionDistributor_(T):
                 # ports have their sizes, sigma and k_n are checked here.
                 J = kinematics.whole_body_jacobian_unchecked(None, p,
                                                              self.R_ba)
-                weights = distribution.weights_of(
+                weights = pseudoinverse.weights_of(
                     _unit_interval("sigma_xy", sigma_xy),
                     _unit_interval("sigma_phi", sigma_phi))
                 V_n = np.zeros(9)
