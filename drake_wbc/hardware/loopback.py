@@ -21,11 +21,9 @@ DIAGNOSTICS).
 import time as wall_clock
 from dataclasses import dataclass
 
-import numpy as np
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import LogVectorOutput
 
 from drake_wbc.hardware.deployment import (
     COMMANDS,
@@ -35,7 +33,7 @@ from drake_wbc.hardware.deployment import (
 from drake_wbc.hardware.interface import DIAGNOSTICS
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.hardware.robot_side import RobotSide
-from drake_wbc.runner import SIGNALS, RunLog
+from drake_wbc.runner import SIGNALS, SignalLogger
 from drake_wbc.scenario import Scenario
 from drake_wbc.validation import checked_instance
 
@@ -50,10 +48,10 @@ class Loopback:
     """One run over LCM, built.
 
     Attributes:
-        diagram: robot side, controller side and loggers.
+        diagram: robot side, controller side and the log.
         robot: the RobotSide.
         side: the ControllerSide.
-        loggers: dict signal name -> VectorLogSink.
+        log: the runner.SignalLogger of SIGNALS and hardware.diagnostics.
         lcm: the LCM object both sides talk over.
         scenario, variant: what it was built from.
     """
@@ -61,7 +59,7 @@ class Loopback:
     diagram: object
     robot: RobotSide
     side: ControllerSide
-    loggers: dict
+    log: SignalLogger
     lcm: object
     scenario: Scenario
     variant: object
@@ -90,8 +88,7 @@ def build_loopback(scenario, variant=None, options=None, lcm=None):
     robot = RobotSide(scenario, options, lcm, add_lcm_interface=False)
     builder.AddNamedSystem("robot", robot.diagram)
     hardware, controller = side.hardware.diagram, side.controller.diagram
-    loggers = {}
-    period = scenario.outputs.log_period
+    ports = {}
     for name in SIGNALS:
         if name in COMMANDS:
             port = hardware.GetOutputPort(SENT[name])
@@ -103,14 +100,14 @@ def build_loopback(scenario, variant=None, options=None, lcm=None):
             port = side.sources[name].get_output_port()
         else:
             continue
-        if port.size() > 0:
-            loggers[name] = LogVectorOutput(port, builder, period)
-    loggers["hardware.diagnostics"] = LogVectorOutput(
-        side.hardware.diagram.GetOutputPort("hardware.diagnostics"),
-        builder, period)
+        ports[name] = port
+    ports["hardware.diagnostics"] = hardware.GetOutputPort(
+        "hardware.diagnostics")
+    log = SignalLogger(builder, ports, scenario.outputs.log_period,
+                       columns={"hardware.diagnostics": DIAGNOSTICS})
     diagram = builder.Build()
     diagram.set_name(f"loopback_{variant.name}")
-    return Loopback(diagram, robot, side, loggers, lcm, scenario, variant)
+    return Loopback(diagram, robot, side, log, lcm, scenario, variant)
 
 
 def make_simulator(loop):
@@ -147,20 +144,5 @@ def simulate_loopback(loop, duration=None, simulator=None):
     # Deliver what was sent at the last instant to the in-process
     # subscribers (the Diagram's own would take it at the next step).
     loop.lcm.HandleSubscriptions(0)
-    return run_log(loop.loggers, root, duration / max(elapsed, 1e-9))
+    return loop.log.run_log(root, duration / max(elapsed, 1e-9))
 
-
-def run_log(loggers, root_context, real_time_factor=np.nan):
-    """A RunLog of `loggers` (SIGNALS' and hardware.diagnostics' names)."""
-    signals, columns, time = {}, {}, None
-    for name, logger in loggers.items():
-        log = logger.FindLog(root_context)
-        time = log.sample_times() if time is None else time
-        signals[name] = log.data().T
-        columns[name] = (DIAGNOSTICS if name == "hardware.diagnostics"
-                         else SIGNALS[name] or tuple(
-                             f"{'xy'[i % 2]}{i // 2}"
-                             for i in range(signals[name].shape[1])))
-    n = min(len(v) for v in signals.values())
-    return RunLog(np.asarray(time[:n]), {k: v[:n] for k, v in signals.items()},
-                  columns, real_time_factor)

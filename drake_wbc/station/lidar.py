@@ -335,8 +335,8 @@ class PlanarLidar(SampledReading, LeafSystem):
         output.set_value(self._stored_reading_view(context))
 
     def _output_points(self, context, output):
-        # Evaluated each step, changed at the scan rate: the points of the
-        # last reading are kept, read-only (see ObstaclePointMerger).
+        # The points of the last reading are kept, read-only, and given
+        # again while the reading stands.
         reading = self._stored_reading_view(context)
         if not np.array_equal(reading, self._points_of[0]):
             points = scan_points(reading, self._beam_angles, self.mount)
@@ -360,8 +360,8 @@ class ObstaclePointMerger(LeafSystem):
       must be connected (a forgotten scanner is an error, not a blind
       side).
     - points: abstract, their (sum M_i, 2) concatenation, in input order,
-      read-only; while every input is the very read-only array (owning
-      its data) of the last call, the last concatenation is given again.
+      read-only; computed again only when an input changes (the
+      PlanarLidars' points change at their scan rate, not at each step).
 
     Args:
         num_inputs: n, a whole number >= 1.
@@ -373,24 +373,15 @@ class ObstaclePointMerger(LeafSystem):
         self._inputs = [self.DeclareAbstractInputPort(f"points_{i}",
                                                       _no_points())
                         for i in range(self.num_inputs)]
-        self._last = ([], None)  # the inputs, their concatenation
-        self.DeclareAbstractOutputPort("points", _no_points, self._merge)
+        self.DeclareAbstractOutputPort(
+            "points", _no_points, self._merge,
+            prerequisites_of_calc={self.all_input_ports_ticket()})
 
     def _merge(self, context, output):
-        # Reused for the very same read-only arrays owning their data
-        # (PlanarLidar's points between scans): they cannot have changed.
-        inputs = [port.Eval(context) for port in self._inputs]
-        last_inputs, merged = self._last
-        if not (len(inputs) == len(last_inputs) and all(
-                a is b and type(a) is np.ndarray and a.base is None
-                and not a.flags.writeable
-                for a, b in zip(inputs, last_inputs, strict=True))):
-            merged = np.concatenate(
-                [_checked_points(port.get_name(), points)
-                 for port, points in zip(self._inputs, inputs,
-                                         strict=True)], axis=0)
-            merged.flags.writeable = False
-            self._last = (inputs, merged)
+        merged = np.concatenate(
+            [_checked_points(port.get_name(), port.Eval(context))
+             for port in self._inputs], axis=0)
+        merged.flags.writeable = False
         output.set_value(merged)
 
 
