@@ -72,10 +72,10 @@ class ClosedLoop:
     """One run, built: the Diagram and its parts.
 
     Attributes:
-        diagram: station, controller, task sources and the log.
+        diagram: station, controller, task sources and the logger.
         station: the SimulatedStation.
         controller: the drake_wbc.controller.Controller.
-        log: the SignalLogger of SIGNALS.
+        logger: the SignalLogger of SIGNALS.
         scenario, variant: what it was built from.
         recorder: the ReplayRecorder, or None.
     """
@@ -83,7 +83,7 @@ class ClosedLoop:
     diagram: object
     station: SimulatedStation
     controller: object
-    log: "SignalLogger"
+    logger: "SignalLogger"
     scenario: Scenario
     variant: Variant
     recorder: object = None
@@ -251,7 +251,7 @@ def build_closed_loop(scenario, variant=None, replay=False):
                 break
         else:
             ports[name] = sources["reference_velocity"].get_output_port()
-    log = SignalLogger(builder, ports, scenario.outputs.log_period)
+    logger = SignalLogger(builder, ports, scenario.outputs.log_period)
     recorder = None
     if replay:
         from drake_wbc.replay import ReplayRecorder
@@ -261,7 +261,7 @@ def build_closed_loop(scenario, variant=None, replay=False):
             publish_period=1.0 / scenario.outputs.replay_frame_rate)
     diagram = builder.Build()
     diagram.set_name(f"closed_loop_{variant.name}")
-    return ClosedLoop(diagram, station, controller, log, scenario,
+    return ClosedLoop(diagram, station, controller, logger, scenario,
                       variant, recorder)
 
 
@@ -319,7 +319,7 @@ def simulate(loop, duration=None, progress=False):
     elapsed = wall_clock.perf_counter() - started
     if meter is not None:
         meter.update(duration, done=True)
-    return loop.log.run_log(root, real_time_factor=duration / elapsed)
+    return loop.logger.run_log(root, real_time_factor=duration / elapsed)
 
 
 class RunLog:

@@ -61,6 +61,10 @@ def test_quick_bench_writes_well_formed_tables(tmp_path):
     assert any(line.startswith("| stage capability |") for line in tables)
     assert any(line.startswith("| trajectory_tracking |")
                for line in tables)
+    tick_goal = next(line for line in tables
+                     if line.startswith("| a full control tick"))
+    median = tick["tick_us"]["median"]
+    assert f"| {median:.0f} us (median) |" in tick_goal
     # Every table's rows have as many cells as its header.
     blocks, block = [], []
     for line in text.splitlines() + [""]:

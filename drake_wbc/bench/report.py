@@ -20,7 +20,16 @@ GOALS = (
     ("scenario_real_time_factor",
      "every scenario at a real-time factor of at least 5", 5.0),
 )
-"""(key, statement, threshold) of each speed goal."""
+"""(key, statement, threshold) of each speed goal: a ratio (times
+faster), a time in us (control_tick) or a real-time factor."""
+
+_SHOWN = {
+    "closed_form_vs_drake_diffik": "{:.2f}x (median ratio)",
+    "closed_form_vs_qpsolvers": "{:.2f}x (the fastest solver's median ratio)",
+    "control_tick": "{:.0f} us (median)",
+    "scenario_real_time_factor": "{:.2f} (the slowest scenario)",
+}
+"""How the Markdown table shows each goal's measured value."""
 
 
 def evaluate_goals(results):
@@ -160,7 +169,8 @@ def markdown(results):
     rows = []
     for goal in results["goals"]:
         value = goal["measured"]
-        shown = "not measured" if value is None else f"{value:.3g}"
+        shown = ("not measured" if value is None
+                 else _SHOWN[goal["goal"]].format(value))
         met = {None: "-", True: "met", False: "NOT met"}[goal["met"]]
         rows.append([goal["statement"], shown, met])
     lines += _table(["goal", "measured", ""], rows)

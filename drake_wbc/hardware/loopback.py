@@ -48,10 +48,11 @@ class Loopback:
     """One run over LCM, built.
 
     Attributes:
-        diagram: robot side, controller side and the log.
+        diagram: robot side, controller side and the logger.
         robot: the RobotSide.
         side: the ControllerSide.
-        log: the runner.SignalLogger of SIGNALS and hardware.diagnostics.
+        logger: the runner.SignalLogger of SIGNALS and
+            hardware.diagnostics.
         lcm: the LCM object both sides talk over.
         scenario, variant: what it was built from.
     """
@@ -59,7 +60,7 @@ class Loopback:
     diagram: object
     robot: RobotSide
     side: ControllerSide
-    log: SignalLogger
+    logger: SignalLogger
     lcm: object
     scenario: Scenario
     variant: object
@@ -103,11 +104,11 @@ def build_loopback(scenario, variant=None, options=None, lcm=None):
         ports[name] = port
     ports["hardware.diagnostics"] = hardware.GetOutputPort(
         "hardware.diagnostics")
-    log = SignalLogger(builder, ports, scenario.outputs.log_period,
-                       columns={"hardware.diagnostics": DIAGNOSTICS})
+    logger = SignalLogger(builder, ports, scenario.outputs.log_period,
+                          columns={"hardware.diagnostics": DIAGNOSTICS})
     diagram = builder.Build()
     diagram.set_name(f"loopback_{variant.name}")
-    return Loopback(diagram, robot, side, log, lcm, scenario, variant)
+    return Loopback(diagram, robot, side, logger, lcm, scenario, variant)
 
 
 def make_simulator(loop):
@@ -144,5 +145,5 @@ def simulate_loopback(loop, duration=None, simulator=None):
     # Deliver what was sent at the last instant to the in-process
     # subscribers (the Diagram's own would take it at the next step).
     loop.lcm.HandleSubscriptions(0)
-    return loop.log.run_log(root, duration / max(elapsed, 1e-9))
+    return loop.logger.run_log(root, duration / max(elapsed, 1e-9))
 
