@@ -153,3 +153,23 @@ def test_the_hollow_controller_has_the_controller_s_structure(arm):
 
     assert wiring(floor.diagram, hollow_names) == wiring(
         ticker.controller.diagram, names)
+
+
+def test_every_batch_of_ticks_starts_from_the_initial_state():
+    from drake_wbc.bench.control_tick import ControllerTicker
+
+    ticker = ControllerTicker(ArmKinematics(), num_points=50)
+    port = ticker.controller.diagram.GetOutputPort("arm.position_command")
+    start = port.Eval(ticker.context).copy()
+    batch = ticker.ticks(4)
+    batch()
+    first = port.Eval(ticker.context).copy()
+    assert np.abs(first - start).max() > 1e-4  # the ticks move the arm
+    for _ in range(9):
+        batch()
+    # Ten batches end where the first did (to 1e-6): four ticks from
+    # the start, not forty.
+    np.testing.assert_allclose(port.Eval(ticker.context), first, atol=1e-6)
+    for _ in range(36):
+        ticker.advance()  # without the restart: the arm drifts on
+    assert np.abs(port.Eval(ticker.context) - first).max() > 1e-2

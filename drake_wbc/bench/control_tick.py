@@ -4,11 +4,15 @@ The controller runs alone in a Simulator (no plant) against fixed
 measurements: the robot at rest at the home pose, the tool's weight on
 the wrist sensor (no external wrench), obstacle points scattered around
 the base, and a constant reference twist. A tick is one AdvanceTo by the
-control period h. Before every tick the station inputs are fixed again
-(to the same values), as new measurements arrive each period on the
-robot: this invalidates the caches that depend on them, so that the
-stateless stages (ArmCapability, the wrench estimator, ...) compute each
-tick as they do in the closed loop instead of once.
+control period h. Before every tick the station inputs are fixed again,
+alternating between two sets that differ in every entry, as new
+measurements arrive each period on the robot: this invalidates the
+caches that depend on them, so that the stateless stages (ArmCapability,
+the wrench estimator, ...) compute each tick as they do in the closed
+loop instead of once. Each batch of ticks starts from the controller's
+initial state: against fixed measurements the loop is open, and over
+many batches the commanded arm would drift towards its limits and a
+singularity, where a closed loop does not stay.
 
 Per stage, each stage gets a context of its own with the state and the
 input values it has in the running diagram; a tick of it is: fix its
@@ -82,6 +86,10 @@ class Fixed:
         self.fixed = port.FixValue(context, values[0])
         self.is_vector = not isinstance(values[0], AbstractValue)
 
+    def restart(self):
+        """The next `write` writes the first value again."""
+        self.turn = len(self.values) - 1
+
     def write(self):
         self.turn = (self.turn + 1) % len(self.values)
         value = self.values[self.turn]
@@ -118,19 +126,29 @@ class ControllerTicker:
             self.context, REFERENCE_VELOCITY)
         self.controller.initialize(self.context)
         self.simulator.Initialize()
+        self._start = self.context.Clone()
 
     def refresh(self):
         """Writes the station inputs again (new measurements)."""
         for fixed in self.fixed:
             fixed.write()
 
+    def advance(self):
+        """One tick from the current state, measurements written again."""
+        self.refresh()
+        self.simulator.AdvanceTo(self.context.get_time() + self.time_step)
+
     def ticks(self, count, refresh=True):
         """A timing.interleave contender: `count` ticks of the controller
-        (measurements fixed again before each if `refresh`)."""
+        from its initial state (measurements fixed again before each if
+        `refresh`)."""
         count = whole_number("count", count, minimum=1)
         h = self.time_step
 
         def run():
+            self.context.SetStateAndParametersFrom(self._start)
+            for fixed in self.fixed:
+                fixed.restart()
             for _ in range(count):
                 if refresh:
                     self.refresh()
@@ -160,7 +178,7 @@ class StageTicker:
         ports = [port for port in ports if port.HasValue(inner)]
         values = [[] for _ in ports]  # unconnected optional inputs left
         for _ in range(2):
-            ticker.ticks(1)()
+            ticker.advance()
             for port, seen in zip(ports, values, strict=True):
                 seen.append(
                     np.array(port.Eval(inner))
@@ -204,7 +222,7 @@ class StageTicker:
 def stage_tickers(ticker):
     """A StageTicker for every stage of `ticker`'s controller, after one
     tick so that every input has its running value."""
-    ticker.ticks(1)()
+    ticker.advance()
     return {name: StageTicker(ticker, name)
             for name in ticker.controller.stages}
 
