@@ -4,8 +4,12 @@ every stage replaced by a hollow one.
 A hollow stage is a Python LeafSystem with the ports of the stage it
 stands for (names, sizes, abstract or vector), the same direct
 feedthrough, the same amount of discrete state updated at the same
-period, and no work: each output evaluates the inputs it depends on
-and writes zeros, the update evaluates every input and keeps the state.
+period, and no work: the outputs that depend on the same inputs share
+a cache entry that evaluates those inputs (as a stage's outputs share
+its result), each output evaluates its entry and writes zeros, and the
+update evaluates every connected input and keeps the state. Which
+inputs are connected is read once, at construction (an Eval each, no
+HasValue: in Drake, HasValue evaluates the upstream output too).
 Wired as the controller is and ticked against the same measurements, it
 costs what Drake's systems framework and the Python bindings cost for
 this structure of one system per stage, whatever the stages compute:
@@ -13,8 +17,14 @@ the floor under the controller's tick.
 """
 
 import numpy as np
+from pydrake.common.value import AbstractValue
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder, LeafSystem, PortDataType
+from pydrake.systems.framework import (
+    DiagramBuilder,
+    LeafSystem,
+    PortDataType,
+    ValueProducer,
+)
 
 from drake_wbc.bench.control_tick import REFERENCE_VELOCITY, Fixed
 from drake_wbc.controller import STATION_INPUTS
@@ -26,13 +36,14 @@ class HollowStage(LeafSystem):
 
     Args:
         stage: the stage (a LeafSystem of the controller).
-        context: the stage's context (for its state's size).
+        context: the stage's context in the running controller (for its
+            state's size and which of its inputs are connected).
         time_step: the period of its update, s.
     """
 
     def __init__(self, stage, context, time_step):
         super().__init__()
-        self._inputs = []
+        self._inputs, connected = [], []
         for i in range(stage.num_input_ports()):
             port = stage.get_input_port(i)
             self._inputs.append(
@@ -40,47 +51,69 @@ class HollowStage(LeafSystem):
                 if port.get_data_type() == PortDataType.kVectorValued
                 else self.DeclareAbstractInputPort(port.get_name(),
                                                    port.Allocate()))
+            if port.HasValue(context):
+                connected.append(self._inputs[-1])
+        self._connected = connected
         if context.num_discrete_state_groups() > 0:
             self.DeclareDiscreteState(
                 context.get_discrete_state_vector().size())
             self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0,
                                                     self._update)
+        # The outputs that depend on the same inputs share one cache entry
+        # that evaluates them, as a stage's outputs share its result.
+        shared = {}
         for j in range(stage.num_output_ports()):
             port = stage.get_output_port(j)
-            through = [self._inputs[i] for i in range(len(self._inputs))
-                       if stage.HasDirectFeedthrough(i, j)]
-            prerequisites = {self.all_state_ticket(),
-                             *(p.ticket() for p in through)}
+            through = tuple(i for i in range(len(self._inputs))
+                            if stage.HasDirectFeedthrough(i, j))
+            if through not in shared:
+                shared[through] = self._declare_pull(through)
+            prerequisites = {shared[through].ticket()}
             if port.get_data_type() == PortDataType.kVectorValued:
                 self.DeclareVectorOutputPort(
                     port.get_name(), port.size(),
-                    self._vector_output(through, port.size()),
+                    self._vector_output(shared[through], port.size()),
                     prerequisites_of_calc=prerequisites)
             else:
-                model = port.Allocate()
                 self.DeclareAbstractOutputPort(
-                    port.get_name(), model.Clone,
-                    lambda context, value, through=through:
-                        self._pull(context, through),
+                    port.get_name(), port.Allocate().Clone,
+                    lambda context, value, entry=shared[through]:
+                        entry.Eval(context),
                     prerequisites_of_calc=prerequisites)
+
+    def _declare_pull(self, through):
+        """A cache entry that evaluates the connected inputs among
+        `through` (indices), recomputed when they or the state change."""
+        ports = [self._inputs[i] for i in through
+                 if self._inputs[i] in self._connected]
+
+        def calc(context, value):
+            self._pull(context, ports)
+
+        return self.DeclareCacheEntry(
+            f"pull{list(through)}",
+            ValueProducer(allocate=lambda: AbstractValue.Make(0),
+                          calc=calc),
+            {self.all_state_ticket(),
+             *(self._inputs[i].ticket() for i in through)})
 
     @staticmethod
     def _pull(context, ports):
         for port in ports:
-            if port.HasValue(context):
-                port.Eval(context)
+            port.Eval(context)
 
-    def _vector_output(self, ports, size):
+    @staticmethod
+    def _vector_output(entry, size):
         zeros = np.zeros(size)
 
         def calc(context, output):
-            self._pull(context, ports)
+            entry.Eval(context)
             output.SetFromVector(zeros)
 
         return calc
 
     def _update(self, context, discrete_state):
-        self._pull(context, self._inputs)
+        self._pull(context, self._connected)
 
 
 class FloorTicker:
