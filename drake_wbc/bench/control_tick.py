@@ -133,9 +133,11 @@ class ControllerTicker:
         for fixed in self.fixed:
             fixed.write()
 
-    def advance(self):
-        """One tick from the current state, measurements written again."""
-        self.refresh()
+    def advance(self, refresh=True):
+        """One tick from the current state (measurements written again
+        first if `refresh`)."""
+        if refresh:
+            self.refresh()
         self.simulator.AdvanceTo(self.context.get_time() + self.time_step)
 
     def ticks(self, count, refresh=True):
@@ -143,16 +145,13 @@ class ControllerTicker:
         from its initial state (measurements fixed again before each if
         `refresh`)."""
         count = whole_number("count", count, minimum=1)
-        h = self.time_step
 
         def run():
             self.context.SetStateAndParametersFrom(self._start)
             for fixed in self.fixed:
                 fixed.restart()
             for _ in range(count):
-                if refresh:
-                    self.refresh()
-                self.simulator.AdvanceTo(self.context.get_time() + h)
+                self.advance(refresh)
             return count
 
         return run

@@ -296,7 +296,6 @@ class PlanarLidar(SampledReading, LeafSystem):
         params = checked_instance("params", params, LidarParameters,
                                   LidarParameters)
         self.params = validated_copy(params)
-        self._points_of = (None, None)  # (reading, its points)
         self.mount = as_vector("mount", mount, 3)
         self.circles = shapes_array("circles", circles, 3)
         self.boxes = shapes_array("boxes", boxes, 5)
@@ -335,14 +334,12 @@ class PlanarLidar(SampledReading, LeafSystem):
         output.set_value(self._stored_reading_view(context))
 
     def _output_points(self, context, output):
-        # The points of the last reading are kept, read-only, and given
-        # again while the reading stands.
-        reading = self._stored_reading_view(context)
-        if not np.array_equal(reading, self._points_of[0]):
-            points = scan_points(reading, self._beam_angles, self.mount)
-            points.flags.writeable = False
-            self._points_of = (reading.copy(), points)
-        output.set_value(self._points_of[1])
+        # Computed again only when the reading changes (its prerequisite):
+        # once a scan, read-only for the stages that share it.
+        points = scan_points(self._stored_reading_view(context),
+                             self._beam_angles, self.mount)
+        points.flags.writeable = False
+        output.set_value(points)
 
 
 class ObstaclePointMerger(LeafSystem):
