@@ -1,35 +1,25 @@
 """drake_wbc: whole-body control of velocity-controlled mobile collaborative
 robots with Coupling Dynamic Movement Primitives (CDMP-WBC), on Drake.
 
-The math layer (numpy only) is importable without Drake:
-`drake_wbc.kinematics`, `drake_wbc.pseudoinverse`, `drake_wbc.distribution`,
-`drake_wbc.capability`, `drake_wbc.compensation`, `drake_wbc.filtering`.
-The robot model and its kinematics from a `MultibodyPlant` are in
-`drake_wbc.robot_model`; the controller's stages, as Drake systems, are in
-`drake_wbc.systems` and importable from the package itself (`from
-drake_wbc import BaseVelocityFilter`).
+One folder a layer, each importing only those below it
+(tests/test_layers.py holds them to it):
+
+- drake_wbc.math: the paper's equations as plain functions (numpy; no
+  Drake systems), importable without a diagram.
+- drake_wbc.robot: the robot's model in a MultibodyPlant and its
+  kinematics.
+- drake_wbc.stages: each stage of the controller as a Drake system.
+- drake_wbc.controller: the parameters and the controller Diagram.
+- drake_wbc.station, drake_wbc.hardware: what the controller drives, the
+  simulated station or the LCM interface to the real robot, with the
+  same ports.
+- drake_wbc.experiments: scenarios, the closed loop in simulation, and
+  the paper's experiments' metrics and figures.
+- drake_wbc.analysis, drake_wbc.deployment: frequency responses; the
+  controller deployed over LCM and the robot's side.
+- drake_wbc.bench, drake_wbc.stress: benchmarks; the randomised stress
+  run.
+- drake_wbc.cli: the `drake-wbc` command.
 """
 
 __version__ = "0.1.0"
-
-_SYSTEMS = (
-    "ArmCdmp",
-    "BaseCdmp",
-    "WholeBodyCdmp",
-    "ArmCartesianVelocityController",
-    "BaseVelocityFilter",
-    "ArmCapability",
-    "MotionDistributor",
-    "RobustCompensator",
-    "WorkspaceAdapter",
-)
-
-
-def __getattr__(name):
-    # The stages import Drake's systems framework; load them on first use
-    # so that the math layer stays importable on its own.
-    if name in _SYSTEMS:
-        from drake_wbc import systems
-
-        return getattr(systems, name)
-    raise AttributeError(f"module 'drake_wbc' has no attribute {name!r}")

@@ -11,14 +11,14 @@ Run:  .venv/bin/python examples/whole_body_step.py
 
 import numpy as np
 
-from drake_wbc import (
+from drake_wbc.math import (
     capability,
     capability_gradients,
     compensation,
     distribution,
     kinematics,
 )
-from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 
 
 def main():

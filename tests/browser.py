@@ -7,7 +7,7 @@ page run for that much page time, advancing the clock only while the page
 is idle, so a picture does not depend on the machine's speed. Each run has
 a timeout, after which the browser's whole process group is killed.
 
-Two moments of a replay. A page from `drake_wbc.replay` plays its
+Two moments of a replay. A page from `drake_wbc.experiments.replay` plays its
 animation once as soon as it has loaded (Drake's default autoplay), and the
 virtual clock drives it: pictures after 300 and 1800 ms of page time show
 the robot at two places. Which two, though, depends on when in page time

@@ -8,8 +8,8 @@ from pydrake.systems.framework import DiagramBuilder, PortDataType
 from pydrake.systems.primitives import VectorLogSink
 
 from drake_wbc.controller import build_controller
-from drake_wbc.robot_model import HOME_ARM_POSITIONS
-from drake_wbc.systems.wrench import tool_weight_reading
+from drake_wbc.robot.model import HOME_ARM_POSITIONS
+from drake_wbc.stages.wrench import tool_weight_reading
 
 H = 0.01
 """The control period, s."""

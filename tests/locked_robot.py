@@ -16,7 +16,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantValueSource
 
-from drake_wbc.robot_model import ARM_JOINTS, add_mcr, joint_position_indices
+from drake_wbc.robot.model import ARM_JOINTS, add_mcr, joint_position_indices
 
 
 def settle_locked_robot(q_a, push_at_tcp_W=None, duration=0.05):

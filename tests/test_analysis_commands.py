@@ -1,4 +1,4 @@
-"""`drake-wbc bode` and `drake-wbc diagram` (drake_wbc.analysis.commands):
+"""`drake-wbc bode` and `drake-wbc diagram` (drake_wbc.cli.analysis):
 they run on the default scenario and write well-formed files."""
 
 import argparse
@@ -9,8 +9,8 @@ import io
 import numpy as np
 import pytest
 
-from drake_wbc.analysis import commands
 from drake_wbc.analysis.bode import read_csv
+from drake_wbc.cli import analysis as commands
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 PLOTS = ("base_filter", "split_ideal", "split_base_loop", "base_plant",

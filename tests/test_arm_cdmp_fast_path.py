@@ -6,10 +6,10 @@ import numpy as np
 from pydrake.autodiffutils import ExtractValue
 from pydrake.common.value import AbstractValue
 
-from drake_wbc import cdmp, repulsion
-from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
-from drake_wbc.systems.capability_stage import ArmCapability
-from drake_wbc.systems.cdmp_stages import BaseCdmp
+from drake_wbc.math import cdmp, repulsion
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.stages.capability_stage import ArmCapability
+from drake_wbc.stages.cdmp_stages import BaseCdmp
 
 _OUTPUTS = (("end_effector_position", slice(0, 3)),
             ("capability", slice(3, 4)),

@@ -9,7 +9,8 @@ import pytest
 from fast_path_checks import RELATIVE, relative_difference
 from pydrake.autodiffutils import AutoDiffXd, ExtractValue
 
-from drake_wbc import (
+from drake_wbc.bench import distribution_race as race
+from drake_wbc.math import (
     aligned_distribution,
     arm_control,
     capability,
@@ -19,9 +20,8 @@ from drake_wbc import (
     pseudoinverse,
     twist_solver,
 )
-from drake_wbc.bench import distribution_race as race
-from drake_wbc.robot_model import ArmKinematics
-from drake_wbc.systems import (
+from drake_wbc.robot.model import ArmKinematics
+from drake_wbc.stages import (
     ArmCartesianVelocityController,
     MotionDistributor,
     MotionDistributorParameters,

@@ -11,10 +11,10 @@ import pytest
 from pydrake.autodiffutils import ExtractValue
 from pydrake.common.value import AbstractValue
 
-from drake_wbc.command_limits import limit_base_velocity
-from drake_wbc.repulsion import LastPoints
-from drake_wbc.safety import SafetyParameters
-from drake_wbc.separation import (
+from drake_wbc.math.command_limits import limit_base_velocity
+from drake_wbc.math.repulsion import LastPoints
+from drake_wbc.math.safety import SafetyParameters
+from drake_wbc.math.separation import (
     NEAREST_POINTS,
     allowed_speeds,
     approach_rows,
@@ -23,7 +23,7 @@ from drake_wbc.separation import (
     separation_scale,
     separation_state,
 )
-from drake_wbc.systems.base_command import BaseCommandLimiter, StopGate
+from drake_wbc.stages.base_command import BaseCommandLimiter, StopGate
 
 HALF_SIZES = (0.4, 0.3)
 H = 0.01

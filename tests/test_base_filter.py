@@ -12,14 +12,14 @@ from pydrake.systems.primitives import (
 )
 
 from drake_wbc.analysis.frequency import linear_system_response
-from drake_wbc.filtering import (
+from drake_wbc.math.filtering import (
     BaseFilterParameters,
     lowpass_response,
     lowpass_state_space,
     lowpass_zoh_response,
     zero_order_hold,
 )
-from drake_wbc.systems import BaseVelocityFilter
+from drake_wbc.stages import BaseVelocityFilter
 
 FREQUENCIES_HZ = np.logspace(-2, 2, 200)
 OMEGA = 2 * np.pi * FREQUENCIES_HZ

@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from drake_wbc import kinematics, pseudoinverse
 from drake_wbc.bench import add_bench_arguments, run_bench
 from drake_wbc.bench import distribution_race as race
 from drake_wbc.bench.report import GOALS
-from drake_wbc.robot_model import ArmKinematics
+from drake_wbc.math import kinematics, pseudoinverse
+from drake_wbc.robot.model import ArmKinematics
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Tests of drake_wbc.capability's values (manipulability, joint-limit
+"""Tests of drake_wbc.math.capability's values (manipulability, joint-limit
 penalty, C_m, transition) and its argument checks, against closed forms and
 independent formulations.
 
@@ -20,8 +20,8 @@ from reference_kinematics import (
     random_nonsingular_q,
 )
 
-from drake_wbc import capability as cap
-from drake_wbc import capability_gradients as cap_grad
+from drake_wbc.math import capability as cap
+from drake_wbc.math import capability_gradients as cap_grad
 
 K_J = cap.DEFAULT_JOINT_LIMIT_GAIN
 CHAINS = chains_under_test()

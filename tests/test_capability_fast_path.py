@@ -11,20 +11,16 @@ from fast_path_checks import RELATIVE, relative_difference
 from pydrake.autodiffutils import AutoDiffXd, ExtractValue
 from scipy.spatial.transform import Rotation
 
-from drake_wbc import (
-    adaptive_weighting,
-    capability,
-    capability_gradients,
-)
-from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
-from drake_wbc.systems.capability_stage import (
+from drake_wbc.math import adaptive_weighting, capability, capability_gradients
+from drake_wbc.math.workspace import LocalWorkspace
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.stages.capability_stage import (
     ArmCapability,
     ArmCapabilityParameters,
     CapabilityBand,
     WorkspaceAdapter,
     WorkspaceAdapterParameters,
 )
-from drake_wbc.workspace import LocalWorkspace
 
 WORKSPACE_INPUTS = ("end_effector_position", "end_effector_velocity",
                     "capability", "capability_gradient")

@@ -1,4 +1,4 @@
-"""Tests of drake_wbc.capability_gradients against finite
+"""Tests of drake_wbc.math.capability_gradients against finite
 differences of the independent serial-chain kinematics of
 reference_kinematics (the Elfin5 table and random chains).
 """
@@ -17,8 +17,8 @@ from reference_kinematics import (
     random_nonsingular_q,
 )
 
-from drake_wbc import capability as cap
-from drake_wbc import capability_gradients as cap_grad
+from drake_wbc.math import capability as cap
+from drake_wbc.math import capability_gradients as cap_grad
 
 K_J = cap.DEFAULT_JOINT_LIMIT_GAIN
 CHAINS = chains_under_test()

@@ -5,8 +5,8 @@ the default k_j against the paper's limitation band."""
 import numpy as np
 import pytest
 
-from drake_wbc import capability, capability_gradients
-from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.math import capability, capability_gradients
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 
 BAND = (0.035, 0.04)  # the paper's C_m^l, C_m^u
 

@@ -1,4 +1,4 @@
-"""Tests of drake_wbc.cdmp: transfer functions against eqs. (lp-admit) and
+"""Tests of drake_wbc.math.cdmp: transfer functions against eqs. (lp-admit) and
 (tf-admit), the paper's own form of eq. (stiff-dmp), closed-form steady
 states, the repulsive field against U_rep, and AutoDiff gradients."""
 
@@ -7,7 +7,7 @@ import pytest
 from reference_kinematics import central_differences
 from test_dmp import check_autodiff
 
-from drake_wbc.cdmp import (
+from drake_wbc.math.cdmp import (
     AdmittanceCouplingParameters,
     ArmCdmpParameters,
     BaseCdmpParameters,
@@ -21,8 +21,8 @@ from drake_wbc.cdmp import (
     stiffness_coupled_derivative,
     whole_body_cdmp_derivative,
 )
-from drake_wbc.dmp import DmpParameters
-from drake_wbc.repulsion import (
+from drake_wbc.math.dmp import DmpParameters
+from drake_wbc.math.repulsion import (
     RepulsiveFieldParameters,
     footprint_distance,
     repulsive_force,

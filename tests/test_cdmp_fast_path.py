@@ -9,13 +9,13 @@ from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector
 
-from drake_wbc import cdmp, dmp, repulsion
-from drake_wbc import movement as mv
-from drake_wbc.demonstration import TcpPose
-from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
-from drake_wbc.systems.cdmp_stages import ArmCdmp, BaseCdmp
-from drake_wbc.systems.whole_body_cdmp import MovementTracking, WholeBodyCdmp
-from drake_wbc.systems.wrench import (
+from drake_wbc.math import cdmp, dmp, repulsion
+from drake_wbc.math import movement as mv
+from drake_wbc.math.demonstration import TcpPose
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.stages.cdmp_stages import ArmCdmp, BaseCdmp
+from drake_wbc.stages.whole_body_cdmp import MovementTracking, WholeBodyCdmp
+from drake_wbc.stages.wrench import (
     ExternalWrenchEstimator,
     external_wrench,
     tool_weight_reading,
@@ -317,7 +317,7 @@ def test_wrench_fast_path_edge_cases(arm):
 
 
 def original_drive_terms(player, t):
-    """[g; f] by the formulas of drake_wbc.dmp and np.interp."""
+    """[g; f] by the formulas of drake_wbc.math.dmp and np.interp."""
     if t < player.start_time - 1e-9:
         return np.zeros(12)
     elapsed = max(t - player.start_time, 0.0)

@@ -8,11 +8,11 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Linearize, VectorLogSink
 
-from drake_wbc import cdmp, repulsion
 from drake_wbc.analysis.frequency import linear_system_response
-from drake_wbc.systems.cdmp_base import AffineDynamics
-from drake_wbc.systems.cdmp_stages import ArmCdmp, BaseCdmp
-from drake_wbc.systems.whole_body_cdmp import WholeBodyCdmp
+from drake_wbc.math import cdmp, repulsion
+from drake_wbc.stages.cdmp_base import AffineDynamics
+from drake_wbc.stages.cdmp_stages import ArmCdmp, BaseCdmp
+from drake_wbc.stages.whole_body_cdmp import WholeBodyCdmp
 
 OMEGA = 2 * np.pi * np.logspace(-2, 2, 120)
 

@@ -8,9 +8,9 @@ import sys
 import numpy as np
 import pytest
 
-from drake_wbc import capability
-from drake_wbc.cli import main
-from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.cli.main import main
+from drake_wbc.math import capability
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 
 
 def test_help_lists_subcommands():
@@ -68,7 +68,7 @@ def test_demo_at_other_configurations(tmp_path, capsys, q):
 
 
 def test_run_lists_every_scenario(capsys):
-    from drake_wbc.scenario import DEFAULT_SCENARIO, scenario_files
+    from drake_wbc.experiments.scenario import DEFAULT_SCENARIO, scenario_files
 
     assert main(["run", "--list"]) == 0
     out = capsys.readouterr().out.splitlines()

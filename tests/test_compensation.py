@@ -1,16 +1,16 @@
-"""Tests of drake_wbc.compensation against closed forms (Sec. IV-A)."""
+"""Tests of drake_wbc.math.compensation against closed forms (Sec. IV-A)."""
 
 import numpy as np
 import pytest
 from reference_kinematics import random_rotation
 
-from drake_wbc.compensation import (
+from drake_wbc.math.compensation import (
     base_deviation,
     gradient_projector,
     robust_compensation,
 )
-from drake_wbc.distribution import distribute
-from drake_wbc.kinematics import base_jacobian, whole_body_jacobian
+from drake_wbc.math.distribution import distribute
+from drake_wbc.math.kinematics import base_jacobian, whole_body_jacobian
 
 N_CASES = 200
 

@@ -10,15 +10,18 @@ import numpy as np
 import pytest
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_file
 
-from drake_wbc import cdmp
-from drake_wbc.config import load_controller_parameters
-from drake_wbc.controller import ControllerParameters, build_controller
-from drake_wbc.dmp import DmpParameters
-from drake_wbc.filtering import BaseFilterParameters
-from drake_wbc.motion_mode import MotionMode
-from drake_wbc.systems import ArmCdmp, BaseVelocityFilter, WorkspaceAdapter
-from drake_wbc.systems.capability_stage import WorkspaceAdapterParameters
-from drake_wbc.validation import validate
+from drake_wbc.controller import (
+    ControllerParameters,
+    build_controller,
+    load_controller_parameters,
+)
+from drake_wbc.math import cdmp
+from drake_wbc.math.dmp import DmpParameters
+from drake_wbc.math.filtering import BaseFilterParameters
+from drake_wbc.math.motion_mode import MotionMode
+from drake_wbc.math.validation import validate
+from drake_wbc.stages import ArmCdmp, BaseVelocityFilter, WorkspaceAdapter
+from drake_wbc.stages.capability_stage import WorkspaceAdapterParameters
 
 CONTROLLER_FILE = Path(__file__).parents[1] / "diagrams" / "controller.yaml"
 
@@ -247,7 +250,7 @@ def test_the_dmp_basis_follows_its_fields():
 def test_validate_reaches_dataclasses_inside_lists():
     from dataclasses import dataclass, field
 
-    from drake_wbc.validation import positive, validate
+    from drake_wbc.math.validation import positive, validate
 
     @dataclass
     class Item:

@@ -10,17 +10,13 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantValueSource, VectorLogSink
 
-from drake_wbc.controller import (
-    STATION_INPUTS,
-    TASK_INPUTS,
-    ControllerParameters,
-    build_controller,
-)
-from drake_wbc.robot_model import (
+from drake_wbc.controller import ControllerParameters, build_controller
+from drake_wbc.controller.diagram import STATION_INPUTS, TASK_INPUTS
+from drake_wbc.robot.model import (
     HOME_ARM_POSITIONS,
     ArmKinematics,
 )
-from drake_wbc.systems.wrench import (
+from drake_wbc.stages.wrench import (
     ExternalWrenchEstimator,
     tool_weight_reading,
 )

@@ -17,7 +17,7 @@ from pydrake.systems.primitives import (
     VectorLogSink,
 )
 
-from drake_wbc import (
+from drake_wbc.math import (
     adaptive_weighting,
     capability,
     capability_gradients,
@@ -25,10 +25,14 @@ from drake_wbc import (
     distribution,
     pseudoinverse,
 )
-from drake_wbc.any_scalar_coordination import compensate_any, distribute_any
-from drake_wbc.kinematics import base_jacobian, whole_body_jacobian
-from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
-from drake_wbc.systems import (
+from drake_wbc.math.any_scalar_coordination import (
+    compensate_any,
+    distribute_any,
+)
+from drake_wbc.math.kinematics import base_jacobian, whole_body_jacobian
+from drake_wbc.math.workspace import LocalWorkspace
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.stages import (
     ArmCapability,
     ArmCapabilityParameters,
     BaseVelocityFilter,
@@ -40,7 +44,6 @@ from drake_wbc.systems import (
     WorkspaceAdapter,
     WorkspaceAdapterParameters,
 )
-from drake_wbc.workspace import LocalWorkspace
 
 ARM = ArmKinematics()
 R_BA = ARM.R_ba

@@ -1,8 +1,8 @@
-"""Tests of drake_wbc.distribution and drake_wbc.pseudoinverse against
+"""Tests of drake_wbc.math.distribution and drake_wbc.math.pseudoinverse against
 independent formulations.
 
 J_wb is built here by hand as [R6, J_b] from its definition in eq. (1),
-not with drake_wbc.kinematics, so that these tests stand on their own.
+not with drake_wbc.math.kinematics, so that these tests stand on their own.
 """
 
 import itertools
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from reference_kinematics import random_rotation
 
-from drake_wbc.distribution import capability_null_velocity, distribute
-from drake_wbc.pseudoinverse import (
+from drake_wbc.math.distribution import capability_null_velocity, distribute
+from drake_wbc.math.pseudoinverse import (
     SingularityDamping,
     weighted_pseudoinverse,
     weighting_matrix,

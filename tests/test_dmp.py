@@ -1,4 +1,4 @@
-"""Tests of drake_wbc.dmp against closed forms (eqs. (6), (7)), learned
+"""Tests of drake_wbc.math.dmp against closed forms (eqs. (6), (7)), learned
 reproductions of demonstrations, and AutoDiff gradients."""
 
 import numpy as np
@@ -11,7 +11,7 @@ from pydrake.autodiffutils import (
 )
 from reference_kinematics import central_differences
 
-from drake_wbc.dmp import (
+from drake_wbc.math.dmp import (
     DmpParameters,
     basis_functions,
     canonical_derivative,
@@ -20,7 +20,7 @@ from drake_wbc.dmp import (
     rollout,
     transformation_derivative,
 )
-from drake_wbc.dmp_learning import (
+from drake_wbc.math.dmp_learning import (
     demonstration_derivatives,
     design_matrix,
     fit_weights,

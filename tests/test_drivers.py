@@ -13,7 +13,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from drake_wbc.robot_model import (
+from drake_wbc.robot.model import (
     ARM_JOINTS,
     BASE_JOINTS,
     HOME_ARM_POSITIONS,

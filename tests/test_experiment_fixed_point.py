@@ -10,8 +10,12 @@ import numpy as np
 import pytest
 
 from drake_wbc.experiments import experiment_module, fixed_point
-from drake_wbc.runner import build_closed_loop, simulate
-from drake_wbc.scenario import Schedule, find_scenario, load_scenario
+from drake_wbc.experiments.runner import build_closed_loop, simulate
+from drake_wbc.experiments.scenario import (
+    Schedule,
+    find_scenario,
+    load_scenario,
+)
 
 DURATION = 21.5
 """s: up to the start of k_n's ramp (21.5 to 22.5 s in the scenario)."""

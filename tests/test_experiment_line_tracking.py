@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from drake_wbc.experiments import experiment_module, line_tracking
-from drake_wbc.runner import build_closed_loop, simulate
-from drake_wbc.scenario import find_scenario, load_scenario
+from drake_wbc.experiments.runner import build_closed_loop, simulate
+from drake_wbc.experiments.scenario import find_scenario, load_scenario
 
 DURATION = 11.0
 """s: past the pillar (about 4 s) and the crate (about 8 s)."""

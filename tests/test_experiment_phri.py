@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from drake_wbc.experiments import phri
-from drake_wbc.reports import run_scenario
-from drake_wbc.scenario import find_scenario, load_scenario
+from drake_wbc.experiments.reports import run_scenario
+from drake_wbc.experiments.scenario import find_scenario, load_scenario
 from drake_wbc.station.scene import HandForce
 
 DURATION = 15.0

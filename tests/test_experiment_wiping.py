@@ -8,9 +8,13 @@ import numpy as np
 import pytest
 
 from drake_wbc.experiments import wiping
-from drake_wbc.reports import run_scenario
-from drake_wbc.runner import RunLog
-from drake_wbc.scenario import Schedule, find_scenario, load_scenario
+from drake_wbc.experiments.reports import run_scenario
+from drake_wbc.experiments.runner import RunLog
+from drake_wbc.experiments.scenario import (
+    Schedule,
+    find_scenario,
+    load_scenario,
+)
 
 DURATION = 8.0
 """s: contact and settling (under 1 s), then the first stroke along +y

@@ -7,7 +7,7 @@ import pytest
 from fast_path_checks import RELATIVE, relative_difference
 from pydrake.common.value import AbstractValue
 
-from drake_wbc import (
+from drake_wbc.math import (
     capability,
     capability_gradients,
     compensation,
@@ -16,15 +16,15 @@ from drake_wbc import (
     pseudoinverse,
     repulsion,
 )
-from drake_wbc.robot_model import ArmKinematics
-from drake_wbc.systems import (
+from drake_wbc.robot.model import ArmKinematics
+from drake_wbc.stages import (
     ArmCapability,
     MotionDistributor,
     MotionDistributorParameters,
     RobustCompensator,
 )
-from drake_wbc.systems.cdmp_stages import BaseCdmp
-from drake_wbc.systems.wrench import external_wrench
+from drake_wbc.stages.cdmp_stages import BaseCdmp
+from drake_wbc.stages.wrench import external_wrench
 
 
 @pytest.fixture(scope="module")
@@ -376,7 +376,7 @@ def test_external_wrench_matches_np_cross(arm):
 def test_joint_velocity_for_twist_unchecked_matches_checked(acceleration):
     """Random twists, configurations near and beyond the joint limits and
     a singular Jacobian: the same command, bit for bit."""
-    from drake_wbc import arm_control
+    from drake_wbc.math import arm_control
 
     rng = np.random.default_rng(21)
     kinematics = ArmKinematics()

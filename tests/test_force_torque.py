@@ -12,14 +12,14 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from drake_wbc.robot_model import HOME_ARM_POSITIONS, add_mcr, make_mcr_plant
+from drake_wbc.math.validation import validate
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, add_mcr, make_mcr_plant
 from drake_wbc.station.force_torque import (
     ForceTorqueSensorParameters,
     WeldWrench,
     WristForceTorqueSensor,
     measure,
 )
-from drake_wbc.validation import validate
 
 NOISELESS = dict(force_noise_std=0.0, torque_noise_std=0.0)
 

@@ -15,7 +15,6 @@ from pydrake.systems.primitives import (
     Sine,
 )
 
-from drake_wbc import cdmp
 from drake_wbc.analysis import chains, closed_forms, plant_chain
 from drake_wbc.analysis.dmp_force_response import linearize_dmp_force
 from drake_wbc.analysis.frequency import (
@@ -26,15 +25,16 @@ from drake_wbc.analysis.frequency import (
     peak_gain,
     stability_margins,
 )
-from drake_wbc.dmp import DmpParameters
-from drake_wbc.filtering import (
+from drake_wbc.experiments.scenario import find_scenario, load_scenario
+from drake_wbc.math import cdmp
+from drake_wbc.math.dmp import DmpParameters
+from drake_wbc.math.filtering import (
     BaseFilterParameters,
     lowpass_response,
     lowpass_zoh_response,
 )
-from drake_wbc.scenario import find_scenario, load_scenario
-from drake_wbc.systems.cdmp_stages import AffineDynamics
-from drake_wbc.systems.coordination import RobustCompensatorParameters
+from drake_wbc.stages.cdmp_stages import AffineDynamics
+from drake_wbc.stages.coordination import RobustCompensatorParameters
 
 HERTZ, OMEGA = frequency_grid(0.01, 100.0, 40)
 """The log grid of the checks, 0.01 to 100 Hz."""
@@ -136,7 +136,7 @@ def test_admittance_couplings_match_eq_tf_admit(scenario, time_step, kind):
 
 
 def _math_layer_model(derivative, num_states, time_step):
-    """(A, B) of a one-axis DMP of drake_wbc.cdmp from its derivative
+    """(A, B) of a one-axis DMP of drake_wbc.math.cdmp from its derivative
     function (no Drake system)."""
     model = AffineDynamics(derivative, num_states, 1, time_step)
     if time_step > 0.0:
@@ -282,7 +282,7 @@ def _check(measured, predicted):
 
 
 def test_base_filter_linearisation_matches_simulation():
-    from drake_wbc.systems import BaseVelocityFilter
+    from drake_wbc.stages import BaseVelocityFilter
 
     params = BaseFilterParameters(time_step=H)
     measured, omegas = _measured_response(BaseVelocityFilter(params), 3,

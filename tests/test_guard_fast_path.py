@@ -22,9 +22,9 @@ from pydrake.systems.framework import (
 )
 from pydrake.systems.primitives import Linearize
 
-from drake_wbc import safety
-from drake_wbc.safety import Reason, SafetyParameters
-from drake_wbc.systems.safety import STATUS_FIELDS, GuardedInput, InputGuard
+from drake_wbc.math import safety
+from drake_wbc.math.safety import Reason, SafetyParameters
+from drake_wbc.stages.safety import STATUS_FIELDS, GuardedInput, InputGuard
 
 H = 0.01
 HOLD = 0.05  # five ticks, so that the random runs clear their stops often

@@ -7,18 +7,18 @@ import numpy as np
 import pytest
 from pydrake.systems.framework import PortDataType
 
-from drake_wbc.controller import STATION_INPUTS
-from drake_wbc.experiments import trajectory_tracking
-from drake_wbc.hardware.interface import DIAGNOSTICS, HardwareInterface
-from drake_wbc.hardware.lcm_logs import read_lcm_log
-from drake_wbc.hardware.loopback import (
+from drake_wbc.cli.hardware import main
+from drake_wbc.controller.diagram import STATION_INPUTS
+from drake_wbc.deployment.lcm_logs import read_lcm_log
+from drake_wbc.deployment.loopback import (
     build_loopback,
     make_simulator,
     simulate_loopback,
 )
-from drake_wbc.hardware.programs import main
-from drake_wbc.runner import build_closed_loop, simulate
-from drake_wbc.scenario import find_scenario, load_scenario
+from drake_wbc.experiments import trajectory_tracking
+from drake_wbc.experiments.runner import build_closed_loop, simulate
+from drake_wbc.experiments.scenario import find_scenario, load_scenario
+from drake_wbc.hardware.interface import DIAGNOSTICS, HardwareInterface
 
 DURATION = 2.5
 """s: the robot at rest, then 1.5 s of the 0.1 m/s step."""

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from drake_wbc.experiments.scenario import find_scenario, load_scenario
 from drake_wbc.hardware import codecs, messages
 from drake_wbc.hardware.options import ChannelNames, HardwareOptions
-from drake_wbc.scenario import find_scenario, load_scenario
 
 LCMTYPES = Path(messages.__file__).parent / "lcmtypes"
 

@@ -15,15 +15,16 @@ import lcm
 import numpy as np
 import pytest
 
-from drake_wbc.experiments import trajectory_tracking
-from drake_wbc.hardware import messages
-from drake_wbc.hardware.lcm_logs import (
+from drake_wbc.cli.hardware import INTERRUPTED, main
+from drake_wbc.deployment.lcm_logs import (
     deployments,
     read_events,
     read_lcm_log,
 )
-from drake_wbc.hardware.programs import INTERRUPTED, main
-from drake_wbc.scenario import find_scenario, load_scenario
+from drake_wbc.experiments import trajectory_tracking
+from drake_wbc.experiments.scenario import find_scenario, load_scenario
+from drake_wbc.hardware import messages
+from drake_wbc.robot.model import ArmKinematics
 
 URL = "udpm://239.255.76.67:7667?ttl=0"
 
@@ -37,14 +38,14 @@ ip link set lo up
 ip route add 224.0.0.0/4 dev lo
 cd {folder}
 {logger} --quiet -l '{url}' -f run.lcmlog & LOGGER=$!
-{python} -m drake_wbc.hardware.programs robot-sim scenario.yaml \\
+{python} -m drake_wbc.cli.hardware robot-sim scenario.yaml \\
     --realtime-rate {rate} > robot.out 2>&1 & ROBOT=$!
-{python} -m drake_wbc.hardware.programs deploy scenario.yaml \\
+{python} -m drake_wbc.cli.hardware deploy scenario.yaml \\
     --realtime-rate {rate} > deploy.out 2>&1
 echo $? > deploy.code
 # A second deployment, stopped by SIGINT once it runs (the programs
 # handle SIGINT themselves, which a background job of sh ignores).
-{python} -m drake_wbc.hardware.programs deploy scenario.yaml \\
+{python} -m drake_wbc.cli.hardware deploy scenario.yaml \\
     --duration 60 --realtime-rate {rate} > stopped.out 2>&1 & STOPPED=$!
 for i in $(seq 300); do
     grep -q running stopped.out && break
@@ -175,8 +176,8 @@ def test_teach_learns_from_the_logged_run(run, tmp_path):
     """Teaching from the robot: `drake-wbc teach --log` learns the logged
     run's end-effector motion (here the tracking step, between markers
     given by hand), from the measured joints and odometry in the log."""
-    from drake_wbc.demonstration import tcp_poses
-    from drake_wbc.movement import LearnedMovement
+    from drake_wbc.math.demonstration import tcp_poses
+    from drake_wbc.math.movement import LearnedMovement
 
     folder = run["folder"]
     file = tmp_path / "movement.yaml"
@@ -187,7 +188,7 @@ def test_teach_learns_from_the_logged_run(run, tmp_path):
     movement = LearnedMovement.load(file)
     log = read_lcm_log(folder / "run.lcmlog", run["scenario"].hardware)
     pose = tcp_poses(log["base.state_estimated"][:, :3],
-                     log["arm.position_measured"])
+                     log["arm.position_measured"], ArmKinematics())
     for when, learned in ((0.3, movement.start), (1.9, movement.goal)):
         index = np.searchsorted(log.time, when)
         np.testing.assert_allclose(learned, pose[index], atol=2e-3)

@@ -21,7 +21,7 @@ from drake_wbc.hardware.safety import (
     saturate_arm_command,
     saturate_base_velocity,
 )
-from drake_wbc.robot_model import HOME_ARM_POSITIONS
+from drake_wbc.robot.model import HOME_ARM_POSITIONS
 
 H = 0.01
 BASE_COMMAND = np.array([0.3, -0.1, 0.2])

@@ -1,10 +1,11 @@
-"""Tests of drake_wbc.kinematics against independent rigid-body formulas."""
+"""Tests of drake_wbc.math.kinematics against independent rigid-body
+formulas."""
 
 import numpy as np
 import pytest
 from reference_kinematics import random_rotation
 
-from drake_wbc.kinematics import (
+from drake_wbc.math.kinematics import (
     base_jacobian,
     twist_rotation,
     whole_body_jacobian,

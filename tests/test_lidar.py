@@ -10,6 +10,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
+from drake_wbc.math.validation import validate
 from drake_wbc.station.lidar import (
     LidarParameters,
     ObstaclePointMerger,
@@ -18,7 +19,6 @@ from drake_wbc.station.lidar import (
     scan,
     scan_points,
 )
-from drake_wbc.validation import validate
 
 ORIGIN = np.zeros(2)
 FAR = 25.0

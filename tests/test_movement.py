@@ -1,4 +1,5 @@
-"""Learning, saving and playing a whole-body movement (drake_wbc.movement),
+"""Learning, saving and playing a whole-body movement
+(drake_wbc.math.movement),
 and WholeBodyCdmp playing it against the DMP core's own integration."""
 
 import numpy as np
@@ -6,11 +7,11 @@ import pytest
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import Linearize
 
-from drake_wbc import cdmp, dmp
-from drake_wbc import movement as mv
-from drake_wbc.demonstration import Demonstration, teaching_interval
-from drake_wbc.scenario import Schedule
-from drake_wbc.systems import WholeBodyCdmp
+from drake_wbc.experiments.scenario import Schedule
+from drake_wbc.math import cdmp, dmp
+from drake_wbc.math import movement as mv
+from drake_wbc.math.demonstration import Demonstration, teaching_interval
+from drake_wbc.stages import WholeBodyCdmp
 
 START = np.array([0.9, 0.0, 0.65, -3.0])
 GOAL = np.array([1.7, 0.35, 0.7, -2.7])

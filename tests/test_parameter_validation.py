@@ -3,9 +3,9 @@ message that names the field, its value and what is allowed; a scenario
 file's error names the field's dotted path.
 
 The parameter dataclasses (each checks its fields in __post_init__, and
-drake_wbc.validation.validate runs the checks of a whole tree again):
+drake_wbc.math.validation.validate runs the checks of a whole tree again):
 
-- controller: ControllerParameters (drake_wbc.controller),
+- controller: ControllerParameters (drake_wbc.controller.diagram),
   ArmControllerParameters (arm_control), CapabilityBand,
   ArmCapabilityParameters, WorkspaceAdapterParameters
   (systems.capability_stage), MotionDistributorParameters,
@@ -29,8 +29,18 @@ import math
 import numpy as np
 import pytest
 
-from drake_wbc.arm_control import ArmControllerParameters
-from drake_wbc.cdmp import (
+from drake_wbc.controller import ControllerParameters
+from drake_wbc.experiments.scenario import (
+    OutputOptions,
+    Scenario,
+    Schedule,
+    TaskInputs,
+    Variant,
+    load_scenario,
+)
+from drake_wbc.hardware.options import HardwareOptions
+from drake_wbc.math.arm_control import ArmControllerParameters
+from drake_wbc.math.cdmp import (
     AdmittanceCouplingParameters,
     ArmCdmpParameters,
     BaseCdmpParameters,
@@ -38,18 +48,19 @@ from drake_wbc.cdmp import (
     StiffnessCouplingParameters,
     WholeBodyCdmpParameters,
 )
-from drake_wbc.controller import ControllerParameters
-from drake_wbc.dmp import DmpParameters
-from drake_wbc.filtering import BaseFilterParameters
-from drake_wbc.hardware.options import HardwareOptions
-from drake_wbc.pseudoinverse import SingularityDamping
-from drake_wbc.scenario import (
-    OutputOptions,
-    Scenario,
-    Schedule,
-    TaskInputs,
-    Variant,
-    load_scenario,
+from drake_wbc.math.dmp import DmpParameters
+from drake_wbc.math.filtering import BaseFilterParameters
+from drake_wbc.math.pseudoinverse import SingularityDamping
+from drake_wbc.math.validation import validate
+from drake_wbc.math.workspace import LocalWorkspace
+from drake_wbc.stages.capability_stage import (
+    ArmCapabilityParameters,
+    CapabilityBand,
+    WorkspaceAdapterParameters,
+)
+from drake_wbc.stages.coordination import (
+    MotionDistributorParameters,
+    RobustCompensatorParameters,
 )
 from drake_wbc.station.drivers import ArmDriverParameters, BaseDriverParameters
 from drake_wbc.station.force_torque import ForceTorqueSensorParameters
@@ -62,17 +73,6 @@ from drake_wbc.station.scene import (
     WalkingPerson,
 )
 from drake_wbc.station.simulation import StationOptions
-from drake_wbc.systems.capability_stage import (
-    ArmCapabilityParameters,
-    CapabilityBand,
-    WorkspaceAdapterParameters,
-)
-from drake_wbc.systems.coordination import (
-    MotionDistributorParameters,
-    RobustCompensatorParameters,
-)
-from drake_wbc.validation import validate
-from drake_wbc.workspace import LocalWorkspace
 
 NAN, INF = math.nan, math.inf
 
@@ -377,7 +377,7 @@ def test_a_bad_scenario_file_names_the_dotted_field_path(text, fragments):
 
 
 def test_the_defaults_and_the_shipped_scenarios_are_valid():
-    from drake_wbc.scenario import scenario_files
+    from drake_wbc.experiments.scenario import scenario_files
 
     for kind in {case[0] for case in CASES}:
         validate(kind())

@@ -13,18 +13,18 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from reference_kinematics import ELFIN5, ELFIN5_LOWER, ELFIN5_UPPER, jacobian
 
-from drake_wbc import capability as cap
-from drake_wbc import capability_gradients as cap_grad
-from drake_wbc import dmp, filtering, repulsion
-from drake_wbc.arm_control import joint_velocity_for_twist
-from drake_wbc.compensation import robust_compensation
-from drake_wbc.distribution import capability_null_velocity, distribute
-from drake_wbc.kinematics import (
+from drake_wbc.math import capability as cap
+from drake_wbc.math import capability_gradients as cap_grad
+from drake_wbc.math import dmp, filtering, repulsion
+from drake_wbc.math.arm_control import joint_velocity_for_twist
+from drake_wbc.math.compensation import robust_compensation
+from drake_wbc.math.distribution import capability_null_velocity, distribute
+from drake_wbc.math.kinematics import (
     base_jacobian,
     twist_rotation,
     whole_body_jacobian,
 )
-from drake_wbc.pseudoinverse import weighting_matrix
+from drake_wbc.math.pseudoinverse import weighting_matrix
 
 
 def checked(max_examples):
@@ -403,7 +403,7 @@ def test_the_zoh_base_filter_has_unit_dc_gain(ratio, zeta, time_step):
 @checked(200)
 def test_the_arm_controller_keeps_every_limit(q, V_a, previous, time_step,
                                               limited):
-    """joint_velocity_for_twist (drake_wbc.arm_control): |q_dot| within
+    """joint_velocity_for_twist (drake_wbc.math.arm_control): |q_dot| within
     the velocity limits and q + q_dot h within the joint limits less the
     margin, for any twist, at singularities and at the limits; two steps
     in a row change q_dot by at most a h with an acceleration limit."""

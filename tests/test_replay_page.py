@@ -1,4 +1,4 @@
-"""The Meshcat replay of a simulated run (drake_wbc.replay).
+"""The Meshcat replay of a simulated run (drake_wbc.experiments.replay).
 
 The browser tests record a 2 s run of the robot driving along x, open the
 written replay in a real headless browser and check the pictures: the robot
@@ -39,13 +39,13 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink
 
-from drake_wbc.replay import (
+from drake_wbc.experiments.replay import (
     PATHS_PREFIX,
     ReplayRecorder,
     quiet_meshcat,
     write_static_html,
 )
-from drake_wbc.robot_model import (
+from drake_wbc.robot.model import (
     ARM_JOINTS,
     BASE_JOINTS,
     HOME_ARM_POSITIONS,

@@ -16,7 +16,7 @@ from reference_kinematics import (
     forward_kinematics,
 )
 
-from drake_wbc.robot_model import (
+from drake_wbc.robot.model import (
     ARM_JOINTS,
     BASE_JOINTS,
     HOME_ARM_POSITIONS,

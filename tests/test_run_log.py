@@ -12,7 +12,7 @@ from pydrake.systems.primitives import (
     Sine,
 )
 
-from drake_wbc.runner import RunLog, SignalLogger
+from drake_wbc.experiments.runner import RunLog, SignalLogger
 
 
 def _signals(builder):

@@ -16,19 +16,18 @@ from pydrake.systems.framework import (
 )
 from pydrake.systems.primitives import Linearize
 
-from drake_wbc import command_limits, safety
-from drake_wbc.config import load_controller_parameters
 from drake_wbc.controller import (
-    STATION_INPUTS,
-    TASK_INPUTS,
     ControllerParameters,
     build_controller,
+    load_controller_parameters,
 )
-from drake_wbc.motion_mode import MotionMode
-from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
-from drake_wbc.safety import Reason, SafetyParameters
-from drake_wbc.systems import BaseCommandLimiter, InputGuard, StopGate
-from drake_wbc.systems.safety import LOGGER, STATUS_FIELDS, GuardedInput
+from drake_wbc.controller.diagram import STATION_INPUTS, TASK_INPUTS
+from drake_wbc.math import command_limits, safety
+from drake_wbc.math.motion_mode import MotionMode
+from drake_wbc.math.safety import Reason, SafetyParameters
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.stages import BaseCommandLimiter, InputGuard, StopGate
+from drake_wbc.stages.safety import LOGGER, STATUS_FIELDS, GuardedInput
 
 HOLD = safety.DEFAULT_HOLD_TIME
 V_MAX = np.array(safety.BASE_VELOCITY_LIMITS)

@@ -8,7 +8,7 @@ from pydrake.autodiffutils import (
     InitializeAutoDiff,
 )
 
-from drake_wbc.scalar_support import (
+from drake_wbc.math.scalar_support import (
     is_autodiff,
     solve,
     through_float_function,

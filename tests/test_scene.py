@@ -18,7 +18,8 @@ from pydrake.multibody.plant import (
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_wbc.robot_model import (
+from drake_wbc.math.validation import validate
+from drake_wbc.robot.model import (
     ARM_JOINTS,
     HOME_ARM_POSITIONS,
     add_mcr,
@@ -42,7 +43,6 @@ from drake_wbc.station.scene_sources import (
     add_hand,
     add_people,
 )
-from drake_wbc.validation import validate
 
 FULL_SCENE = """
 cylinders:

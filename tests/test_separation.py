@@ -1,4 +1,4 @@
-"""Speed and separation (drake_wbc.separation): the footprint's approach
+"""Speed and separation (drake_wbc.math.separation): the footprint's approach
 speed to each obstacle point against finite differences of its distance,
 the scale that bounds it, and the closed loop that a bounded field alone
 lost (a worker dragging the robot into a crate)."""
@@ -6,9 +6,12 @@ lost (a worker dragging the robot into a crate)."""
 import numpy as np
 import pytest
 
-from drake_wbc import repulsion
-from drake_wbc.repulsion import RepulsiveFieldParameters, footprint_distance
-from drake_wbc.separation import (
+from drake_wbc.math import repulsion
+from drake_wbc.math.repulsion import (
+    RepulsiveFieldParameters,
+    footprint_distance,
+)
+from drake_wbc.math.separation import (
     FAR,
     approach_speeds,
     nearest_points,
@@ -126,7 +129,7 @@ def test_a_worker_dragging_the_robot_into_a_crate_is_stopped_short():
     """Stress case 499 of seed 2026: in pHRI mode a hand pulls the tool
     with 8 N for 1.6 s towards a crate 0.32 m from the footprint; the
     repulsive field alone let the base touch it."""
-    from drake_wbc.stress_cases import run_case, violations
+    from drake_wbc.stress.cases import run_case, violations
 
     record = run_case(2026, 499, 4.0)
     assert violations(record) == []

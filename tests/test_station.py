@@ -10,7 +10,7 @@ from pydrake.multibody.tree import ForceElementIndex, RevoluteSpring
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import MatrixGain
 
-from drake_wbc.robot_model import (
+from drake_wbc.robot.model import (
     ARM_JOINTS,
     BASE_JOINTS,
     MOUNT_JOINTS,

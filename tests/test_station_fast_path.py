@@ -9,7 +9,7 @@ from pydrake.math import RollPitchYaw
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
-from drake_wbc.robot_model import add_mcr
+from drake_wbc.robot.model import add_mcr
 from drake_wbc.station.force_torque import (
     ForceTorqueSensorParameters,
     _Measurement,

@@ -1,4 +1,4 @@
-"""The randomised stress run (drake_wbc.stress): its cases are valid,
+"""The randomised stress run (drake_wbc.stress.run): its cases are valid,
 differ between seeds, and give the same records whoever runs them (this
 process, spawned worker processes, a Dask cluster); a broken invariant
 makes the exit code non-zero."""
@@ -9,10 +9,10 @@ import math
 
 import pytest
 
-from drake_wbc import stress
-from drake_wbc.scenario import Scenario
-from drake_wbc.stress_cases import random_scenario, violations
-from drake_wbc.validation import validate
+from drake_wbc.experiments.scenario import Scenario
+from drake_wbc.math.validation import validate
+from drake_wbc.stress import run as stress
+from drake_wbc.stress.cases import random_scenario, violations
 
 SEED = 11
 CASES = 2
@@ -48,7 +48,7 @@ def test_the_cases_are_valid_scenarios_that_differ_between_seeds():
 def test_the_generated_obstacles_leave_the_way_free():
     """Static obstacles keep CLEARANCE from the footprint's disc at the
     start (the way itself is checked by construction)."""
-    from drake_wbc.stress_cases import CLEARANCE, FOOTPRINT_RADIUS
+    from drake_wbc.stress.cases import CLEARANCE, FOOTPRINT_RADIUS
 
     for index in range(20):
         scene = random_scenario(5, index, 4.0).scene

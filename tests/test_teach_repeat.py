@@ -8,12 +8,13 @@ import json
 import numpy as np
 import pytest
 
-from drake_wbc import movement as mv
-from drake_wbc import teach_commands
-from drake_wbc.demonstration import demonstration_from_log
+from drake_wbc.cli import teach as teach_commands
 from drake_wbc.experiments import repeat, teach
-from drake_wbc.runner import build_closed_loop, simulate
-from drake_wbc.scenario import find_scenario, load_scenario
+from drake_wbc.experiments.runner import build_closed_loop, simulate
+from drake_wbc.experiments.scenario import find_scenario, load_scenario
+from drake_wbc.math import movement as mv
+from drake_wbc.math.demonstration import demonstration_from_log
+from drake_wbc.robot.model import ArmKinematics
 
 REPLAY_DURATION = 9.0
 """s: start time 0.5 s, the movement's 6 s, 2.5 s to come to rest."""
@@ -72,7 +73,7 @@ def test_the_demonstration_is_the_measured_whole_body_movement(teach_run):
     scenario, log = teach_run
     start, stop = teach.interval(scenario)
     assert (start, stop) == (0.5, 6.5)
-    demo = demonstration_from_log(log, start, stop)
+    demo = demonstration_from_log(log, start, stop, ArmKinematics())
     mask = (log.time >= start - 1e-9) & (log.time <= stop + 1e-9)
     truth = log["truth.end_effector_pose"][mask]
     # Nominal kinematics (mount at rest) against the simulated truth.
@@ -125,7 +126,7 @@ def test_replay_command_builds_its_scenario():
 def test_the_replay_command_runs_and_writes_its_outputs(tmp_path, capsys):
     """`drake-wbc replay` end to end, through the command line, on a short
     run with a moved goal, a slower tau and a pillar."""
-    from drake_wbc.cli import main
+    from drake_wbc.cli.main import main
 
     code = main(["replay", str(find_scenario("repeat").parent / "movements"
                                / "teach.yaml"),

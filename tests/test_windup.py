@@ -9,11 +9,11 @@ from controller_rig import Rig
 from pydrake.systems.framework import InputPortIndex, OutputPortIndex
 from pydrake.systems.primitives import Linearize
 
-from drake_wbc import safety
 from drake_wbc.controller import ControllerParameters
-from drake_wbc.repulsion import RepulsiveFieldParameters, repulsive_force
-from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
-from drake_wbc.systems import StopGate
+from drake_wbc.math import safety
+from drake_wbc.math.repulsion import RepulsiveFieldParameters, repulsive_force
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.stages import StopGate
 
 V_MAX = np.array(safety.BASE_VELOCITY_LIMITS)
 TOL = 1e-9

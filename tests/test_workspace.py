@@ -1,4 +1,4 @@
-"""drake_wbc.workspace, adaptive_weighting and motion_mode (Sec. IV-C)
+"""drake_wbc.math.workspace, adaptive_weighting and motion_mode (Sec. IV-C)
 against closed forms, the capability module's transition and finite
 differences, for floats and AutoDiffXd."""
 
@@ -11,9 +11,14 @@ from pydrake.autodiffutils import (
 )
 from reference_kinematics import random_rotation
 
-from drake_wbc import adaptive_weighting, capability, motion_mode, workspace
-from drake_wbc.motion_mode import MotionMode
-from drake_wbc.workspace import LocalWorkspace
+from drake_wbc.math import (
+    adaptive_weighting,
+    capability,
+    motion_mode,
+    workspace,
+)
+from drake_wbc.math.motion_mode import MotionMode
+from drake_wbc.math.workspace import LocalWorkspace
 
 WS = LocalWorkspace()
 UPPER, LOWER = 0.04, 0.035

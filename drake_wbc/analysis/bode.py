@@ -19,7 +19,7 @@ from drake_wbc.analysis.frequency import (
     peak_gain,
     phase_degrees,
 )
-from drake_wbc.validation import as_vector
+from drake_wbc.math.validation import as_vector
 
 TWO_PI = 2.0 * np.pi
 

@@ -40,7 +40,6 @@ from pydrake.systems.primitives import (
     Multiplexer,
 )
 
-from drake_wbc import kinematics
 from drake_wbc.analysis.period_map import linearize_period_map
 from drake_wbc.analysis.plant_chain import (
     add_station_plant,
@@ -48,18 +47,19 @@ from drake_wbc.analysis.plant_chain import (
     station_equilibrium,
 )
 from drake_wbc.controller import ControllerParameters, build_controller
-from drake_wbc.filtering import BaseFilterParameters
-from drake_wbc.robot_model import HOME_ARM_POSITIONS
-from drake_wbc.station.drivers import (
-    BaseDriverParameters,
-    BaseVelocityDriver,
-)
-from drake_wbc.systems import (
+from drake_wbc.math import kinematics
+from drake_wbc.math.filtering import BaseFilterParameters
+from drake_wbc.math.validation import as_vector, checked_instance
+from drake_wbc.robot.model import HOME_ARM_POSITIONS
+from drake_wbc.stages import (
     BaseVelocityFilter,
     MotionDistributor,
     RobustCompensator,
 )
-from drake_wbc.validation import as_vector, checked_instance
+from drake_wbc.station.drivers import (
+    BaseDriverParameters,
+    BaseVelocityDriver,
+)
 
 SPLIT_OUTPUTS = ("base_share", "arm_share", "end_effector_velocity")
 """The split diagram's outputs, each a twist (6) of the end effector in

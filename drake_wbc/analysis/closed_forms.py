@@ -1,7 +1,7 @@
 """The paper's transfer functions in closed form, continuous and as their
 exact zero-order-hold equivalents, to check the linearisations against.
 
-- eq. (filtering): drake_wbc.filtering.lowpass_response and
+- eq. (filtering): drake_wbc.math.filtering.lowpass_response and
   lowpass_zoh_response (the base filter);
 - eq. (lp-admit): the stiffness-coupled DMP, eq. (stiff-dmp), from the
   force F to the position y,
@@ -19,7 +19,7 @@ that discretises the systems, so that the two check each other.
 
 import numpy as np
 
-from drake_wbc.validation import non_negative, positive
+from drake_wbc.math.validation import non_negative, positive
 
 
 def stiffness_coupled_coefficients(k_p, k_d, tau, alpha_z, beta_z,
@@ -35,7 +35,7 @@ def stiffness_coupled_coefficients(k_p, k_d, tau, alpha_z, beta_z,
 
     c = tau (`velocity_scale` None) is the paper's eq. (stiff-dmp) and
     gives eq. (lp-admit); the arm's CDMP, eq. (cdmp-arm), adds C_s
-    without the factor tau (c = 1, drake_wbc.cdmp.arm_cdmp_derivative),
+    without the factor tau (c = 1, drake_wbc.math.cdmp.arm_cdmp_derivative),
     the same for the paper's tau = 1.
     """
     k_p = non_negative("k_p", k_p)
@@ -91,7 +91,7 @@ def second_order_zoh_response(b1, b0, a2, a1, a0, time_step, omega):
       c_2 = (b1 p + b0)/(a2 p), and, since Z{t e^(pt)} = h q z/(z - q)^2,
       H_d = r_0 + c_1 (z - 1)/(z - q) + c_2 h q (z - 1)/(z - q)^2.
     For b1 = 0, b0 = a0 = omega_f^2 this is eq. (filtering)'s
-    drake_wbc.filtering.lowpass_zoh_response. The first form loses
+    drake_wbc.math.filtering.lowpass_zoh_response. The first form loses
     digits as the poles merge (residues ~ 1 / (p_1 - p_2)); it is exact
     to about 1e-9 for a relative separation above 1e-3.
     """

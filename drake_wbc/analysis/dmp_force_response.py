@@ -14,10 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.systems.primitives import Linearize, LinearSystem
 
-from drake_wbc import cdmp
 from drake_wbc.controller import ControllerParameters
-from drake_wbc.systems import ArmCdmp, WholeBodyCdmp
-from drake_wbc.validation import checked_instance, whole_number
+from drake_wbc.math import cdmp
+from drake_wbc.math.validation import checked_instance, whole_number
+from drake_wbc.stages import ArmCdmp, WholeBodyCdmp
 
 
 @dataclass

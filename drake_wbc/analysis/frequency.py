@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
-from drake_wbc.validation import as_vector, non_negative, positive
+from drake_wbc.math.validation import as_vector, non_negative, positive
 
 DEFAULT_BAND_HZ = (0.01, 100.0)
 """The frequency band of the analysis in Hz: 0.01 to 100 Hz."""

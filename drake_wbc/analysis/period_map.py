@@ -27,7 +27,7 @@ from pydrake.systems.analysis import Simulator_
 from pydrake.systems.framework import Diagram
 from pydrake.systems.primitives import LinearSystem
 
-from drake_wbc.validation import positive
+from drake_wbc.math.validation import positive
 
 
 def _discrete_groups(context):

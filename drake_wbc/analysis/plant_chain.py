@@ -17,7 +17,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LinearSystem
 
 from drake_wbc.analysis.period_map import linearize_period_map
-from drake_wbc.robot_model import add_mcr
+from drake_wbc.robot.model import add_mcr
 from drake_wbc.station.drivers import BaseVelocityDriver
 from drake_wbc.station.servo_gains import (
     drive_inertias,

@@ -29,7 +29,6 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_wbc import distribution, kinematics
 from drake_wbc.analysis import chains, closed_forms, plant_chain
 from drake_wbc.analysis.bode import (
     BodePlot,
@@ -45,12 +44,13 @@ from drake_wbc.analysis.frequency import (
     linear_system_response,
     stability_margins,
 )
-from drake_wbc.filtering import (
+from drake_wbc.math import distribution, kinematics
+from drake_wbc.math.filtering import (
     lowpass_response,
     lowpass_zoh_response,
 )
+from drake_wbc.math.validation import positive
 from drake_wbc.station.simulation import SimulatedStation
-from drake_wbc.validation import positive
 
 CONTACT_STIFFNESS = 3.0e3
 """K of the contact loops, N/m: the wiping pad's sponge (about 3e3 N/m,
@@ -94,7 +94,7 @@ class BodeReport:
 def base_share_gain(point, axis=AXIS):
     """k_b: the base's share of V_ee along `axis` at DC, (J_b V_b)_axis
     for a unit V_ee on that axis, from the math layer's eq. (wbccm)
-    (drake_wbc.distribution, k_n = 0)."""
+    (drake_wbc.math.distribution, k_n = 0)."""
     J_b = kinematics.base_jacobian(point.end_effector_position)
     J_wb = kinematics.whole_body_jacobian(None, point.end_effector_position,
                                           np.eye(3))
@@ -258,7 +258,8 @@ def _sweep_plots(report, params, point, driver, hertz, omega, h):
 
 def compute_bode_report(scenario, points_per_decade=60,
                         contact_stiffness=CONTACT_STIFFNESS):
-    """Every response of `scenario` (a drake_wbc.scenario.Scenario), on a
+    """Every response of `scenario` (a
+    drake_wbc.experiments.scenario.Scenario), on a
     grid from 0.01 Hz to the lower of 100 Hz and the control rate's
     Nyquist frequency. Returns a BodeReport (nothing written)."""
     params = scenario.controller

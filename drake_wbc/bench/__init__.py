@@ -10,6 +10,9 @@
 - report: JSON and Markdown tables, the speed goals;
 - profiling: cProfile of ticks and of a scenario;
 - commands: `add_bench_arguments` and `run_bench`, the subcommand.
+
+May import every layer up to the scenarios (drake_wbc.experiments); only
+the command line imports it.
 """
 
 from drake_wbc.bench.commands import add_bench_arguments, run_bench

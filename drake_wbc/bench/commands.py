@@ -15,7 +15,7 @@ import warnings
 from pathlib import Path
 
 from drake_wbc.bench import report, timing
-from drake_wbc.validation import positive, whole_number
+from drake_wbc.math.validation import positive, whole_number
 
 FULL = dict(repeats=30, problems=200, ticks=100, scaling_ticks=50,
             points=(100, 250, 500, 1000, 2000),
@@ -158,7 +158,7 @@ def bench_scaling(arm, settings):
 def bench_scenarios(settings, echo=print):
     """Part 3: each scenario in a child process."""
     from drake_wbc.bench.scenarios import measure_scenarios
-    from drake_wbc.scenario import find_scenario, scenario_files
+    from drake_wbc.experiments.scenario import find_scenario, scenario_files
 
     names = settings["scenarios"]
     paths = (scenario_files() if names is None
@@ -175,7 +175,7 @@ def run_benchmarks(settings, echo=print):
     """Every part with `settings` (see FULL); returns the results dict
     (environment, settings, distribution, control_tick, scaling,
     scenarios, goals)."""
-    from drake_wbc.robot_model import ArmKinematics
+    from drake_wbc.robot.model import ArmKinematics
 
     arm = ArmKinematics()
     results = {"environment": timing.environment(),
@@ -222,7 +222,7 @@ def run_bench(args, echo=print):
 def _write_profiles(output, settings, echo):
     from drake_wbc.bench import profiling
     from drake_wbc.bench.control_tick import make_ticker
-    from drake_wbc.scenario import find_scenario
+    from drake_wbc.experiments.scenario import find_scenario
 
     echo("bench: profiling ...")
     ticker = make_ticker(num_points=TICK_POINTS)

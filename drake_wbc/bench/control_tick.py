@@ -26,14 +26,11 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import PortDataType
 
-from drake_wbc.controller import (
-    STATION_INPUTS,
-    ControllerParameters,
-    build_controller,
-)
-from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
-from drake_wbc.systems.wrench import tool_weight_reading
-from drake_wbc.validation import positive, whole_number
+from drake_wbc.controller import ControllerParameters, build_controller
+from drake_wbc.controller.diagram import STATION_INPUTS
+from drake_wbc.math.validation import positive, whole_number
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.stages.wrench import tool_weight_reading
 
 REFERENCE_VELOCITY = np.array([0.1, 0.05, 0.0, 0.0, 0.0, 0.05])
 """The reference twist V_ee^ref (T_w) of the ticks."""

@@ -47,13 +47,18 @@ from pydrake.multibody.inverse_kinematics import (
     DoDifferentialInverseKinematics,
 )
 
-from drake_wbc import (
+from drake_wbc.math import (
     aligned_distribution,
     distribution,
     kinematics,
     pseudoinverse,
 )
-from drake_wbc.robot_model import (
+from drake_wbc.math.validation import (
+    in_closed_range,
+    non_negative,
+    whole_number,
+)
+from drake_wbc.robot.model import (
     ARM_JOINTS,
     BASE_JOINTS,
     MOUNT_JOINTS,
@@ -61,7 +66,6 @@ from drake_wbc.robot_model import (
     joint_position_indices,
     joint_velocity_indices,
 )
-from drake_wbc.validation import in_closed_range, non_negative, whole_number
 
 REFERENCE = "closed_form"
 """The contender whose time the ratios divide by."""

@@ -27,8 +27,8 @@ from pydrake.systems.framework import (
 )
 
 from drake_wbc.bench.control_tick import REFERENCE_VELOCITY, Fixed
-from drake_wbc.controller import STATION_INPUTS
-from drake_wbc.validation import whole_number
+from drake_wbc.controller.diagram import STATION_INPUTS
+from drake_wbc.math.validation import whole_number
 
 
 class HollowStage(LeafSystem):

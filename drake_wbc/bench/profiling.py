@@ -27,9 +27,10 @@ def profile_ticks(ticker, count=300, top=30):
 
 def profile_scenario(path, duration=2.0, top=30):
     """Profile of `duration` simulated seconds of a scenario's first
-    variant (the closed loop of drake_wbc.runner), in this process."""
-    from drake_wbc.runner import build_closed_loop, simulate
-    from drake_wbc.scenario import load_scenario
+    variant (the closed loop of drake_wbc.experiments.runner), in this
+    process."""
+    from drake_wbc.experiments.runner import build_closed_loop, simulate
+    from drake_wbc.experiments.scenario import load_scenario
 
     scenario = load_scenario(path)
     loop = build_closed_loop(scenario, scenario.variants[0])

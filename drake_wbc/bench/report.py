@@ -7,7 +7,7 @@ returns: every time in microseconds as timing.summarize statistics
 
 import json
 
-from drake_wbc.reports import plain_values
+from drake_wbc.experiments.reports import plain_values
 
 GOALS = (
     ("closed_form_vs_drake_diffik",

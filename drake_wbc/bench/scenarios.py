@@ -4,7 +4,7 @@ Each run happens in a child process of its own (multiprocessing, spawn),
 so that its peak resident memory (resource.getrusage, ru_maxrss) is that
 of one run alone, from a fresh interpreter: Python, Drake, the station
 (plant, LIDARs, scene) and the controller, the loggers of
-drake_wbc.runner included. The run is the scenario's first variant,
+drake_wbc.experiments.runner included. The run is the scenario's first variant,
 built by runner.build_closed_loop and started as runner.simulate starts
 it; it advances in chunks of `chunk` simulated seconds, and the real-time
 factor of every chunk is kept, so that a run gives its spread as well as
@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from drake_wbc.validation import positive, whole_number
+from drake_wbc.math.validation import positive, whole_number
 
 
 def _run_in_child(path, duration, chunk):
@@ -25,8 +25,8 @@ def _run_in_child(path, duration, chunk):
     started = time.perf_counter()
     from pydrake.systems.analysis import Simulator
 
-    from drake_wbc.runner import build_closed_loop
-    from drake_wbc.scenario import load_scenario
+    from drake_wbc.experiments.runner import build_closed_loop
+    from drake_wbc.experiments.scenario import load_scenario
 
     imported = time.perf_counter()
     scenario = load_scenario(path)

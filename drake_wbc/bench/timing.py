@@ -17,7 +17,7 @@ from importlib import metadata
 
 import numpy as np
 
-from drake_wbc.validation import whole_number
+from drake_wbc.math.validation import whole_number
 
 PERCENTILES = (10, 25, 50, 75, 90)
 """The percentiles that `summarize` reports."""

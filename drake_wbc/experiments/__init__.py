@@ -1,7 +1,21 @@
-"""The paper's experiments (Sec. V): each one's metrics and figures.
+"""Scenarios and the paper's experiments (Sec. V).
+
+- scenario: a Scenario, one experiment as a YAML file of diagrams/
+  (`load_scenario`), checked when it is loaded.
+- runner: the controller against the simulated station, one Diagram per
+  run (`build_closed_loop`, `simulate`).
+- replay: a run's Meshcat replay page.
+- reports: `drake-wbc run` (`run_scenario`): runs, metrics, figures.
+- common and one module per experiment: metrics and figures.
+
+May import every layer below it (math, robot, stages, controller,
+station, hardware); never the analysis, the deployment, the benchmarks,
+the stress run or the command line.
+
+The experiments' metrics and figures:
 
 Every module here computes, from the logs of a scenario's runs
-(drake_wbc.runner.RunLog, ground truth included), the metrics of one
+(drake_wbc.experiments.runner.RunLog, ground truth included), the metrics of one
 experiment and draws the figures that mirror the paper's, through two
 functions:
 

@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from drake_wbc import repulsion
-from drake_wbc.footprint import FOOTPRINT_HALF_SIZES
-from drake_wbc.robot_model import ArmKinematics
+from drake_wbc.math import repulsion
+from drake_wbc.robot.footprint import FOOTPRINT_HALF_SIZES
+from drake_wbc.robot.model import ArmKinematics
+from drake_wbc.stages.safety import STATUS_FIELDS
 from drake_wbc.station.scene import planar_shapes
-from drake_wbc.systems.safety import STATUS_FIELDS
 
 BOUNDARY_POINTS_PER_METRE = 200
 """How densely box obstacles' outlines are sampled for distances."""

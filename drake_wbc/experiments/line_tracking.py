@@ -163,7 +163,7 @@ def _draw_scene(axis, scenario, log):
 def _draw_footprints(axis, log):
     from matplotlib.patches import Polygon
 
-    from drake_wbc.footprint import FOOTPRINT_HALF_SIZES
+    from drake_wbc.robot.footprint import FOOTPRINT_HALF_SIZES
 
     a, b = FOOTPRINT_HALF_SIZES
     corners = np.array([[a, b], [-a, b], [-a, -b], [a, -b]])

@@ -29,7 +29,7 @@ Per stage S, each metric named `<run>.<S>.<metric>`:
   "base" (share >= MOVER_SHARE), "arm" (<= 1 - MOVER_SHARE), "both", or
   "none" (less than STILL_PATH in all).
 - sigma_xy_min, sigma_phi_min; d_max_m, phi_max_deg: the TCP's largest
-  extent and deflection from the arm's base (drake_wbc.workspace, the
+  extent and deflection from the arm's base (drake_wbc.math.workspace, the
   controller's nominal kinematics).
 - base_speed_command_max_m_s, base_yaw_rate_command_max_rad_s: V_b^ref.
 - obstacle_min_distance_m: the least distance from the footprint to a
@@ -40,13 +40,13 @@ And `<run>.stages`, the stages' letters.
 
 import numpy as np
 
-from drake_wbc import workspace
 from drake_wbc.experiments.common import (
     new_figure,
     obstacle_distances,
     save_figure,
 )
-from drake_wbc.robot_model import ArmKinematics
+from drake_wbc.math import workspace
+from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.station.scene import Scene
 
 STAGE_GAP = 1.2
@@ -118,7 +118,7 @@ def tcp_in_arm_base(log, arm=None):
 
 
 def extent_and_deflection(log):
-    """d (m) and phi (rad) of the TCP, (N,) each (drake_wbc.workspace)."""
+    """d (m) and phi (rad) of the TCP, (N,) each (drake_wbc.math.workspace)."""
     in_a, _ = tcp_in_arm_base(log)
     return (np.array([workspace.extent(p) for p in in_a]),
             np.array([workspace.deflection(p) for p in in_a]))

@@ -1,5 +1,5 @@
 """Repeating a taught movement: the learned DMP played by the normal
-controller (drake_wbc.movement, cdmp.MovementReplay), against the
+controller (drake_wbc.math.movement, cdmp.MovementReplay), against the
 demonstration it was learned from.
 
 Each run plays its variant's movement (or the controller's). Replay and
@@ -29,13 +29,14 @@ against normalised time.
 
 import numpy as np
 
-from drake_wbc import movement as mv
-from drake_wbc.demonstration import tcp_poses
 from drake_wbc.experiments.common import (
     new_figure,
     obstacle_distances,
     save_figure,
 )
+from drake_wbc.math import movement as mv
+from drake_wbc.math.demonstration import tcp_poses
+from drake_wbc.robot.model import ArmKinematics
 
 SPEED_FILTER_HZ = 2.0
 """Hz: the speed profiles are low-passed (zero phase) at this before
@@ -65,7 +66,7 @@ def replay_comparison(scenario, name, log):
     demo = movement.demonstrations[0]
     u = (demo.time - demo.time[0]) / demo.duration
     tcp = tcp_poses(log["base.state_estimated"][:, :3],
-                       log["arm.position_measured"])
+                    log["arm.position_measured"], ArmKinematics())
     # The same turn of the yaw as the demonstration's.
     tcp[:, 3] += 2 * np.pi * np.round((demo.tcp[0, 3] - tcp[0, 3])
                                       / (2 * np.pi))

@@ -1,5 +1,5 @@
 """Teaching by hand: a demonstration recorded in pHRI mode and the DMP
-learned from it (drake_wbc.movement; the paper's future work, Sec. VI,
+learned from it (drake_wbc.math.movement; the paper's future work, Sec. VI,
 on its Sec. II-C and IV).
 
 The demonstration of each run is the interval in which S_hri is 1
@@ -21,9 +21,13 @@ learned rollout.
 
 import numpy as np
 
-from drake_wbc import movement as mv
-from drake_wbc.demonstration import demonstration_from_log, teaching_interval
 from drake_wbc.experiments.common import new_figure, save_figure
+from drake_wbc.math import movement as mv
+from drake_wbc.math.demonstration import (
+    demonstration_from_log,
+    teaching_interval,
+)
+from drake_wbc.robot.model import ArmKinematics
 
 
 def interval(scenario, start=None, stop=None):
@@ -44,7 +48,7 @@ def learn_from_log(scenario, log, start=None, stop=None, num_basis=None,
     learned with the gains of the scenario's whole-body DMP (so that it
     replays with the same attractor)."""
     start, stop = interval(scenario, start, stop)
-    demo = demonstration_from_log(log, start, stop)
+    demo = demonstration_from_log(log, start, stop, ArmKinematics())
     dmp = scenario.controller.whole_body_cdmp.dmp
     params = mv.dmp.DmpParameters(
         alpha_z=dmp.alpha_z, beta_z=dmp.beta_z, tau=1.0,

@@ -10,7 +10,7 @@ The force is the one the controller regulates: F_ext, the wrench the
 environment exerts on the tool at the tool centre point in T_a, computed
 from the logged FT-300 reading `wrist.wrench_measured` and the measured
 arm configuration by the controller's own ExternalWrenchEstimator
-(drake_wbc.systems.wrench; the tool's weight removed). The same estimate
+(drake_wbc.stages.wrench; the tool's weight removed). The same estimate
 of the noise-free weld wrench `truth.wrist_wrench` is reported alongside.
 With the README's convention, F_ext,x = F_d,x = -10 N means the wall
 pushes the tool back with 10 N: the tool presses 10 N along +x.
@@ -51,8 +51,8 @@ from drake_wbc.experiments.common import (
     obstacle_distances,
     save_figure,
 )
+from drake_wbc.stages.wrench import ExternalWrenchEstimator
 from drake_wbc.station.scene import Scene
-from drake_wbc.systems.wrench import ExternalWrenchEstimator
 
 CONTACT_FORCE = 1.0
 """N: |F_ext,x| above this counts as contact (ten times the FT-300's

@@ -7,12 +7,10 @@
 - `codecs`: Drake systems between LCM bytes and the station's ports.
 - `safety`: the watchdog and the saturation of the commands.
 - `interface`: HardwareInterface, the station's ports over LCM.
-- `robot_side`: the simulated station speaking the robot's side.
-- `deployment`, `loopback`: the controller against LCM in real time, or
-  against the robot side in one Diagram.
-- `lcm_logs`: a log of lcm-logger as the signals of a run.
-- `plots`: the metrics and figures of such a log.
-- `programs`: `drake-wbc robot-sim`, `deploy` and `plot`.
+
+The programs that run a scenario over LCM are in drake_wbc.deployment.
+May import the math layer and the robot; never the controller's
+stages, the simulated station or the scenarios.
 
 See README.md here for the channels and message types.
 """

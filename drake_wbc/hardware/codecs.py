@@ -20,7 +20,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from drake_wbc.hardware import messages
-from drake_wbc.validation import as_vector, non_negative, positive
+from drake_wbc.math.validation import as_vector, non_negative, positive
 
 LOG = logging.getLogger("drake_wbc.hardware")
 

@@ -13,7 +13,7 @@
                               └───────────────────┘
 
 It offers the ports of the simulated station (drake_wbc.station.
-simulation) that the controller reads (drake_wbc.controller.
+simulation) that the controller reads (drake_wbc.controller.diagram.
 STATION_INPUTS), with the same names, sizes and types, so the controller
 Diagram built for a simulation drives the robot unchanged. Inside, for
 each status channel an LcmSubscriberSystem carries the bytes to a
@@ -45,8 +45,8 @@ from drake_wbc.hardware.codecs import MessageDecoder, MessageEncoder
 from drake_wbc.hardware.messages import RawBytesSerializer
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.hardware.safety import GUARD_STATUS, CommandGuard
-from drake_wbc.robot_model import HOME_ARM_POSITIONS
-from drake_wbc.validation import checked_instance
+from drake_wbc.math.validation import checked_instance
+from drake_wbc.robot.model import HOME_ARM_POSITIONS
 
 STATUS_CHANNELS = ("base_state", "arm_status", "wrist_wrench",
                    "obstacle_points")

@@ -8,13 +8,13 @@
 Every field has a default (the channel names of drake_wbc/hardware/
 README.md), so `hardware: {}` chooses LCM with the defaults. The checks
 run in `__post_init__`, as for every parameters dataclass of the library
-(drake_wbc.validation).
+(drake_wbc.math.validation).
 """
 
 import re
 from dataclasses import dataclass, field, fields
 
-from drake_wbc.validation import positive
+from drake_wbc.math.validation import positive
 
 CHANNEL_PATTERN = re.compile(r"^[A-Za-z0-9_.\-/]+$")
 """What a channel name may hold: letters, digits and _ . - /."""

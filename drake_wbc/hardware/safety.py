@@ -14,13 +14,13 @@ import numpy as np
 from pydrake.systems.framework import LeafSystem
 
 from drake_wbc.hardware.options import HardwareOptions
-from drake_wbc.robot_model import HOME_ARM_POSITIONS, ArmKinematics
-from drake_wbc.validation import (
+from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
     ordered_limits,
     positive,
 )
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 
 LOG = logging.getLogger("drake_wbc.hardware")
 

@@ -28,14 +28,7 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_wbc.robot_model import HOME_ARM_POSITIONS
-from drake_wbc.station.driver_dynamics import (
-    base_loop_size,
-    base_loop_step,
-    body_to_world_rates,
-    interpolated_command,
-)
-from drake_wbc.validation import (
+from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
     in_closed_range,
@@ -43,6 +36,13 @@ from drake_wbc.validation import (
     positive,
     validated_copy,
     whole_multiple,
+)
+from drake_wbc.robot.model import HOME_ARM_POSITIONS
+from drake_wbc.station.driver_dynamics import (
+    base_loop_size,
+    base_loop_step,
+    body_to_world_rates,
+    interpolated_command,
 )
 
 SCALARS = [float, AutoDiffXd]

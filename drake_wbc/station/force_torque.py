@@ -1,7 +1,7 @@
 """The station's simulated wrist force/torque sensor (Robotiq FT-300).
 
 The true wrench comes from the plant: the tool hangs on the weld
-`ft300_sensing` at the sensor's measurement frame (drake_wbc.robot_model),
+`ft300_sensing` at the sensor's measurement frame (drake_wbc.robot.model),
 and `WeldWrench` turns that weld's reaction into the wrench [f; tau] the
 tool exerts on the sensor. `measure` models what the sensor makes of it
 (noise, saturation, quantisation), and `WristForceTorqueSensor` samples it
@@ -23,8 +23,7 @@ from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import LeafSystem
 
-from drake_wbc.station.sampling import SampledReading
-from drake_wbc.validation import (
+from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
     non_negative,
@@ -32,6 +31,7 @@ from drake_wbc.validation import (
     validated_copy,
     whole_number,
 )
+from drake_wbc.station.sampling import SampledReading
 
 WRENCH_SIZE = 6
 """[fx, fy, fz, tx, ty, tz]: force first, N, then torque, N m."""

@@ -21,8 +21,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
-from drake_wbc.station.sampling import SampledReading
-from drake_wbc.validation import (
+from drake_wbc.math.validation import (
     as_matrix,
     as_vector,
     checked_instance,
@@ -32,6 +31,7 @@ from drake_wbc.validation import (
     validated_copy,
     whole_number,
 )
+from drake_wbc.station.sampling import SampledReading
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """The scripted scene of the simulated station: static obstacles, people
 walking scheduled paths, a person's hand on the tool. In a scenario file
-(loaded with `yaml_load_typed`, then drake_wbc.validation.validate)::
+(loaded with `yaml_load_typed`, then drake_wbc.math.validation.validate)::
 
     cylinders: [{name: pillar, position: [2.0, 1.0], radius: 0.15,
                  height: 2.5}]
@@ -32,7 +32,7 @@ from pydrake.multibody.plant import (
     CoulombFriction,
 )
 
-from drake_wbc.validation import (
+from drake_wbc.math.validation import (
     as_matrix,
     as_scalar,
     as_vector,

@@ -16,6 +16,7 @@ from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import ExternallyAppliedSpatialForce
 from pydrake.systems.framework import LeafSystem
 
+from drake_wbc.math.validation import checked_instance, positive, validated_copy
 from drake_wbc.station.scene import (
     PERSON_COLOR,
     HandForce,
@@ -23,7 +24,6 @@ from drake_wbc.station.scene import (
     Scene,
     Walks,
 )
-from drake_wbc.validation import checked_instance, positive, validated_copy
 
 
 class PeopleSource(LeafSystem):

@@ -6,13 +6,13 @@ desired states."""
 import numpy as np
 from pydrake.multibody.tree import PdControllerGains
 
-from drake_wbc.robot_model import (
+from drake_wbc.math.validation import as_vector
+from drake_wbc.robot.model import (
     ARM_JOINTS,
     BASE_JOINTS,
     joint_velocity_indices,
     make_mcr_plant,
 )
-from drake_wbc.validation import as_vector
 
 
 def servo_gains(arm_positions, base, arm):

@@ -47,7 +47,13 @@ from pydrake.multibody.tree import (
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Demultiplexer, MatrixGain, Multiplexer
 
-from drake_wbc.robot_model import (
+from drake_wbc.math.validation import (
+    as_vector,
+    checked_instance,
+    positive,
+    whole_multiple,
+)
+from drake_wbc.robot.model import (
     ARM_JOINTS,
     BASE_JOINTS,
     HOME_ARM_POSITIONS,
@@ -97,12 +103,6 @@ from drake_wbc.station.symbolic_drivers import (
     base_loop_state,
     base_loop_system,
     joint_rates_system,
-)
-from drake_wbc.validation import (
-    as_vector,
-    checked_instance,
-    positive,
-    whole_multiple,
 )
 
 MAX_TIME_STEP = 0.005
@@ -181,7 +181,7 @@ class StationOptions:
 @functools.cache
 def arm_joint_limits():
     """(lower, upper): the arm's joint limits in rad, from the model."""
-    from drake_wbc.robot_model import ArmKinematics
+    from drake_wbc.robot.model import ArmKinematics
 
     arm = ArmKinematics()
     return arm.lower.copy(), arm.upper.copy()

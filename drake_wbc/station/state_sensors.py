@@ -19,7 +19,7 @@ from pydrake.systems.framework import LeafSystem, LeafSystem_, ValueProducer
 from pydrake.systems.primitives import SymbolicVectorSystem
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_wbc.robot_model import (
+from drake_wbc.robot.model import (
     BASE_JOINTS,
     MOUNT_JOINTS,
     joint_position_indices,

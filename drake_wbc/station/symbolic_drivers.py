@@ -24,7 +24,12 @@ import numpy as np
 from pydrake.symbolic import MakeVectorVariable, Variable
 from pydrake.systems.primitives import SymbolicVectorSystem
 
-from drake_wbc.robot_model import HOME_ARM_POSITIONS
+from drake_wbc.math.validation import (
+    as_vector,
+    checked_instance,
+    validated_copy,
+)
+from drake_wbc.robot.model import HOME_ARM_POSITIONS
 from drake_wbc.station.driver_dynamics import (
     base_loop_size,
     base_loop_step,
@@ -32,7 +37,6 @@ from drake_wbc.station.driver_dynamics import (
     interpolated_command,
 )
 from drake_wbc.station.drivers import ArmDriverParameters, BaseDriverParameters
-from drake_wbc.validation import as_vector, checked_instance, validated_copy
 
 
 def _symbolic_numpy():

@@ -1,0 +1,270 @@
+"""The commands `drake-wbc robot-sim`, `drake-wbc deploy` and
+`drake-wbc plot`, as argument adders and runners (each runner returns the
+exit code), also runnable as `python -m drake_wbc.cli.hardware`.
+
+- robot-sim SCENARIO: the simulated station speaking the robot's side of
+  the LCM protocol (drake_wbc.deployment.robot_side), paced to the wall
+  clock, until its duration or Ctrl-C.
+- deploy SCENARIO: the scenario's controller and task against the robot
+  over LCM in real time (drake_wbc.deployment.deploy) for the
+  scenario's duration; Ctrl-C stops it cleanly: zero base velocity and
+  the arm held are sent first. Exit code 0 at the end, 130 when stopped.
+- plot LOGFILE: an lcm-logger log as the signals of a run
+  (drake_wbc.deployment.lcm_logs), with the scenario's metrics and figures.
+
+The LCM URL and channels are the scenario's `hardware:` (its defaults
+when the scenario has none); --lcm-url overrides the URL.
+"""
+
+import json
+import logging
+import signal
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+INTERRUPTED = 130
+"""The exit code after a stop by SIGINT or SIGTERM."""
+
+
+class StopRequest:
+    """Turns SIGINT and SIGTERM into a flag (restored on exit), so that a
+    run stops between two steps instead of inside one."""
+
+    def __init__(self):
+        self.requested = False
+        self._previous = {}
+
+    def __call__(self):
+        return self.requested
+
+    def _handle(self, signum, frame):
+        del frame
+        self.requested = True
+        print(f"\n{signal.Signals(signum).name}: stopping", file=sys.stderr)
+
+    def __enter__(self):
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            self._previous[signum] = signal.signal(signum, self._handle)
+        return self
+
+    def __exit__(self, *exc):
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+        return False
+
+
+def _log_to_stderr():
+    """The drake_wbc.hardware logger's warnings (watchdog, rejected
+    messages) on stderr, time-stamped."""
+    logger = logging.getLogger("drake_wbc.hardware")
+    if not logger.handlers:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter(
+            "%(asctime)s %(name)s: %(message)s"))
+        logger.addHandler(handler)
+        logger.setLevel(logging.INFO)
+
+
+def _scenario_and_options(args):
+    from drake_wbc.experiments.scenario import find_scenario, load_scenario
+    from drake_wbc.hardware.options import HardwareOptions
+    from drake_wbc.math.validation import validate
+
+    path = find_scenario(args.scenario)
+    scenario = load_scenario(path)
+    options = scenario.hardware or HardwareOptions()
+    if args.lcm_url is not None:
+        options = validate(replace(options, lcm_url=args.lcm_url))
+    return path, scenario, options
+
+
+def _add_common(parser):
+    parser.add_argument(
+        "scenario", help="a scenario's name or YAML file (its `hardware:` "
+                         "block gives the LCM URL and channels)")
+    parser.add_argument(
+        "--lcm-url", default=None,
+        help="the LCM URL (default: the scenario's, or "
+             "udpm://239.255.76.67:7667?ttl=0)")
+
+
+def _duration(value):
+    if value is not None and not value > 0:
+        raise ValueError(f"--duration = {value!r} is not allowed: must be "
+                         "> 0 s")
+    return value
+
+
+def add_robot_sim_arguments(parser):
+    """`drake-wbc robot-sim`'s arguments."""
+    _add_common(parser)
+    parser.add_argument(
+        "--duration", type=float, default=None,
+        help="simulated time in s (default: until Ctrl-C)")
+    parser.add_argument(
+        "--realtime-rate", type=float, default=1.0,
+        help="target real-time rate (default: %(default)s)")
+
+
+def run_robot_sim(args):
+    """Runs the simulated robot on LCM; returns the exit code."""
+    from pydrake.lcm import DrakeLcm
+    from pydrake.systems.analysis import Simulator
+
+    from drake_wbc.deployment.robot_side import RobotSide
+
+    _log_to_stderr()
+    duration = _duration(args.duration)
+    path, scenario, options = _scenario_and_options(args)
+    lcm = DrakeLcm(options.lcm_url)
+    robot = RobotSide(scenario, options, lcm)
+    simulator = Simulator(robot.diagram)
+    root = simulator.get_mutable_context()
+    robot.set_initial_state(root)
+    robot.set_time_offset(root, time.time())
+    simulator.set_target_realtime_rate(args.realtime_rate)
+    channels = options.channels
+    print(f"drake-wbc robot-sim {path.stem} on {options.lcm_url}: sending "
+          f"{channels.base_state}, {channels.arm_status}, "
+          f"{channels.wrist_wrench}, {channels.obstacle_points}, "
+          f"{channels.truth}; listening to {channels.base_command}, "
+          f"{channels.arm_command}", flush=True)
+    started = time.perf_counter()
+    with StopRequest() as stop:
+        simulator.Initialize()
+        t = 0.0
+        while (duration is None or t < duration - 1e-12) and not stop():
+            t = t + 0.05 if duration is None else min(t + 0.05, duration)
+            simulator.AdvanceTo(t)
+    elapsed = time.perf_counter() - started
+    print(f"robot-sim: {root.get_time():.2f} s simulated in {elapsed:.2f} s "
+          f"(real-time factor {root.get_time() / max(elapsed, 1e-9):.2f})",
+          flush=True)
+    return INTERRUPTED if stop.requested else 0
+
+
+def add_deploy_arguments(parser):
+    """`drake-wbc deploy`'s arguments."""
+    _add_common(parser)
+    parser.add_argument(
+        "--variant", default=None,
+        help="the scenario's run to deploy (default: its first)")
+    parser.add_argument(
+        "--duration", type=float, default=None,
+        help="controller time in s (default: the scenario's)")
+    parser.add_argument(
+        "--realtime-rate", type=float, default=1.0,
+        help="target real-time rate (default: %(default)s; below 1 only "
+             "against a simulated robot run at the same rate)")
+
+
+def run_deploy(args):
+    """Runs the controller against the robot over LCM; returns the exit
+    code."""
+    import numpy as np
+
+    from drake_wbc.deployment.deploy import deploy
+
+    _log_to_stderr()
+    duration = _duration(args.duration)
+    path, scenario, options = _scenario_and_options(args)
+    variant = _variant(scenario, args.variant)
+    print(f"drake-wbc deploy {path.stem} ({variant.name}) on "
+          f"{options.lcm_url}: waiting for {options.channels.base_state} "
+          f"and {options.channels.arm_status}", flush=True)
+    with StopRequest() as stop:
+        try:
+            result = deploy(
+                scenario, variant, options, duration=duration, stop=stop,
+                realtime_rate=args.realtime_rate,
+                on_start=lambda q: print(
+                    "deploy: running from the arm at "
+                    f"{np.array2string(q, precision=3)} rad (Ctrl-C stops "
+                    "the robot)", flush=True))
+        except TimeoutError as error:
+            print(f"drake-wbc deploy: {error}", file=sys.stderr)
+            return 1
+    if result is None:
+        print("deploy: stopped before the robot answered", flush=True)
+        return INTERRUPTED
+    diagnostics = ", ".join(f"{k} {v:g}" for k, v in
+                            result.diagnostics.items()
+                            if not k.endswith("_age"))
+    print(f"deploy: {'stopped' if result.stopped else 'finished'} at "
+          f"t = {result.time:.2f} s (real-time factor "
+          f"{result.real_time_factor:.2f}); sent zero base velocity and "
+          f"held the arm; {diagnostics}", flush=True)
+    return INTERRUPTED if result.stopped else 0
+
+
+def _variant(scenario, name):
+    if name is None:
+        return scenario.variants[0]
+    for variant in scenario.variants:
+        if variant.name == name:
+            return variant
+    names = ", ".join(v.name for v in scenario.variants)
+    raise ValueError(f"--variant = {name!r} is not allowed: must be one of "
+                     f"{names}")
+
+
+def add_plot_arguments(parser):
+    """`drake-wbc plot`'s arguments."""
+    parser.add_argument("logfile", type=Path,
+                        help="an LCM log (lcm-logger's)")
+    parser.add_argument(
+        "--scenario", default=None,
+        help="the scenario that ran (its experiment's metrics and figures, "
+             "and its channels; default: the overview figure only)")
+    parser.add_argument("--variant", default=None,
+                        help="the scenario's run that was deployed (default: "
+                             "its first)")
+    parser.add_argument("--output", type=Path, default=None,
+                        help="output folder (default: out/<logfile's name>)")
+    parser.add_argument(
+        "--deployment", type=int, default=0,
+        help="which deployment when the log holds several (0: the first, "
+             "-1: the last)")
+
+
+def run_plot(args):
+    """Writes the figures, log and summary of an LCM log; returns the exit
+    code."""
+    from drake_wbc.deployment.plots import plot_lcm_log
+
+    if not args.logfile.is_file():
+        raise ValueError(f"logfile = {str(args.logfile)!r} is not allowed: "
+                         "no such file")
+    output = args.output or Path("out") / args.logfile.stem
+    summary = plot_lcm_log(args.logfile, output, scenario=args.scenario,
+                           variant=args.variant, deployment=args.deployment)
+    print(json.dumps({k: v for k, v in summary.items() if k != "runs"},
+                     indent=2))
+    print(f"Written to {output}/: {', '.join(summary['files'])}")
+    return 0
+
+
+PROGRAMS = (
+    ("robot-sim", "run the simulated robot on LCM (the robot's side of the "
+     "protocol), paced to the wall clock", add_robot_sim_arguments,
+     run_robot_sim),
+    ("deploy", "run a scenario's controller against the robot over LCM in "
+     "real time", add_deploy_arguments, run_deploy),
+    ("plot", "the metrics and figures of an LCM log of a run",
+     add_plot_arguments, run_plot),
+)
+"""(name, help, add arguments, run) of each command."""
+
+
+def main(argv=None):
+    """`python -m drake_wbc.cli.hardware robot-sim|deploy|plot ...`:
+    the same as `drake-wbc` (drake_wbc.cli.main), which offers the three."""
+    from drake_wbc.cli.main import main as drake_wbc_main
+
+    return drake_wbc_main(argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

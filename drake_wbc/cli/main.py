@@ -1,0 +1,211 @@
+"""The `drake-wbc` command.
+
+Each subcommand is one entry of `SUBCOMMANDS`: a name, a one-line help, a
+function that adds its arguments and a function that runs it and returns
+the exit code. Heavy imports happen inside the runners, so that
+`drake-wbc --help` answers at once.
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+from drake_wbc.cli import analysis
+from drake_wbc.cli.hardware import PROGRAMS
+
+
+def _add_demo_arguments(parser):
+    parser.add_argument(
+        "--output",
+        type=Path,
+        default=Path("out") / "demo",
+        help="folder for the Meshcat page (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--q-arm",
+        type=float,
+        nargs=6,
+        metavar="Q",
+        help="arm configuration in rad (default: the home pose)",
+    )
+
+
+def _run_demo(args):
+    from drake_wbc.cli.model_report import describe_robot, write_model_page
+    from drake_wbc.robot.model import HOME_ARM_POSITIONS
+
+    q_a = HOME_ARM_POSITIONS if args.q_arm is None else args.q_arm
+    print("drake_wbc robot model: omnidirectional base, flexible mount, "
+          "Elfin5 arm, FT-300, wiping tool\n")
+    print(describe_robot(q_a))
+    page = write_model_page(args.output / "mcr_model.html", q_a)
+    print(f"\nMeshcat page of the model (open it in a browser): {page}")
+    return 0
+
+
+def _add_run_arguments(parser):
+    parser.add_argument(
+        "scenario", nargs="?", default=None,
+        help="a scenario's name (see --list) or YAML file (default: the "
+             "default scenario)")
+    parser.add_argument("--list", action="store_true",
+                        help="list the scenarios, one line each, and exit")
+    parser.add_argument(
+        "--output", type=Path, default=None,
+        help="output folder (default: out/<scenario>)")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="simulated time in s (default: the scenario's)")
+    parser.add_argument("--no-replay", action="store_true",
+                        help="do not write the Meshcat replay pages")
+
+
+def _run_run(args):
+    from drake_wbc.experiments.reports import run_scenario
+    from drake_wbc.experiments.scenario import (
+        DEFAULT_SCENARIO,
+        find_scenario,
+        load_scenario,
+        scenario_files,
+    )
+
+    if args.list:
+        for path in scenario_files():
+            scenario = load_scenario(path)
+            marker = " (default)" if path.stem == DEFAULT_SCENARIO else ""
+            print(f"{path.stem:22s} {scenario.description}{marker}")
+        return 0
+    path = find_scenario(args.scenario or DEFAULT_SCENARIO)
+    if args.duration is not None and not args.duration > 0:
+        raise ValueError(f"--duration = {args.duration!r} is not allowed: "
+                         "must be > 0 s")
+    output = args.output or Path("out") / path.stem
+    print(f"drake-wbc run {path.stem}: writing to {output}/")
+    run_scenario(path, output, duration=args.duration,
+                 replay=False if args.no_replay else None)
+    return 0
+
+
+def _add_bench_arguments(parser):
+    from drake_wbc.bench import add_bench_arguments
+
+    add_bench_arguments(parser)
+
+
+def _run_bench(args):
+    from drake_wbc.bench import run_bench
+
+    return run_bench(args)
+
+
+def _add_teach_arguments(parser):
+    from drake_wbc.cli.teach import add_teach_arguments
+
+    add_teach_arguments(parser)
+
+
+def _run_teach(args):
+    from drake_wbc.cli.teach import run_teach
+
+    return run_teach(args)
+
+
+def _add_replay_arguments(parser):
+    from drake_wbc.cli.teach import add_replay_arguments
+
+    add_replay_arguments(parser)
+
+
+def _run_replay(args):
+    from drake_wbc.cli.teach import run_replay
+
+    return run_replay(args)
+
+
+def _add_stress_arguments(parser):
+    from drake_wbc.stress.run import add_stress_arguments
+
+    add_stress_arguments(parser)
+
+
+def _run_stress(args):
+    from drake_wbc.stress.run import run_stress
+
+    return run_stress(args)
+
+
+SUBCOMMANDS = (
+    (
+        "run",
+        "run a scenario (one of the paper's experiments) in simulation and "
+        "write its logs, figures, metrics and Meshcat replay",
+        _add_run_arguments,
+        _run_run,
+    ),
+    ("bench", "benchmark the closed-form controller against QP-based "
+     "peers (Drake's DiffIK, qpsolvers), a control tick per stage, and each "
+     "scenario's real-time factor and memory", _add_bench_arguments,
+     _run_bench),
+    ("stress", "run N seeded random closed-loop cases (obstacles, people, "
+     "hand forces, references) in parallel or on a Dask cluster and check "
+     "the safety invariants", _add_stress_arguments, _run_stress),
+    ("teach", "run a pHRI scenario (or read an lcm-logger log), record the "
+     "demonstration the hand gave and learn it as a whole-body DMP "
+     "movement file", _add_teach_arguments, _run_teach),
+    ("replay", "play a learned movement through the whole controller in "
+     "simulation, to its goal or a moved one, at another tau or past new "
+     "obstacles, and plot it against the demonstration",
+     _add_replay_arguments, _run_replay),
+    ("bode", analysis.BODE_HELP, analysis.add_bode_arguments,
+     analysis.run_bode),
+    ("diagram", analysis.DIAGRAM_HELP, analysis.add_diagram_arguments,
+     analysis.run_diagram),
+    *PROGRAMS,
+    (
+        "demo",
+        "load the robot model, print its joints, limits and capability of "
+        "movement, and write a Meshcat page of it",
+        _add_demo_arguments,
+        _run_demo,
+    ),
+)
+
+
+def make_parser():
+    """Returns the argument parser of `drake-wbc`."""
+    parser = argparse.ArgumentParser(
+        prog="drake-wbc",
+        description=(
+            "Whole-body control of velocity-controlled mobile collaborative "
+            "robots with Coupling Dynamic Movement Primitives (CDMP-WBC), "
+            "built on Drake."
+        ),
+    )
+    from drake_wbc import __version__
+
+    parser.add_argument(
+        "--version", action="version", version=f"%(prog)s {__version__}"
+    )
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, summary, add_arguments, run in SUBCOMMANDS:
+        sub = commands.add_parser(name, help=summary, description=summary)
+        add_arguments(sub)
+        sub.set_defaults(run=run)
+    return parser
+
+
+def main(argv=None):
+    """Runs `drake-wbc` with `argv` (the process's arguments if None)."""
+    parser = make_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    try:
+        return args.run(args)
+    except ValueError as error:
+        print(f"drake-wbc {args.command}: {error}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

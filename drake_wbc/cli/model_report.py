@@ -1,0 +1,186 @@
+"""A report of the robot model: its joints and limits, its capability of
+movement at a pose, and a Meshcat page of it as a self-contained HTML file.
+
+This is what `drake-wbc demo` prints and writes: the first look a user gets
+at the robot the controller drives.
+"""
+
+import numpy as np
+from pydrake.geometry import MeshcatVisualizer, Rgba
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.visualization import AddFrameTriadIllustration
+
+from drake_wbc.experiments.replay import quiet_meshcat, write_static_html
+from drake_wbc.math import capability, capability_gradients
+from drake_wbc.math.validation import as_vector
+from drake_wbc.robot.model import (
+    ARM_JOINTS,
+    BASE_JOINTS,
+    HOME_ARM_POSITIONS,
+    MOUNT_JOINTS,
+    ArmKinematics,
+    add_mcr,
+    joint_position_indices,
+    make_mcr_plant,
+    mount_rocking_modes,
+)
+
+LIDAR_FIELD_OF_VIEW = np.radians(270.0)
+"""The SICK TiM571's field of view (the facts sheet)."""
+
+
+def describe_robot(q_a=HOME_ARM_POSITIONS, k_j=None):
+    """Returns a text report of the robot model at arm configuration `q_a`.
+
+    Lists every moving joint with its limits and whether it is actuated,
+    the masses, the mount's rocking modes, and the capability of movement
+    (m, P_jnt, C_m and grad_x C_m) at `q_a`.
+    """
+    q_a = as_vector("q_a", q_a, 6)
+    k_j = capability.DEFAULT_JOINT_LIMIT_GAIN if k_j is None else k_j
+    plant, model = make_mcr_plant()
+    context = plant.CreateDefaultContext()
+    actuated = {
+        plant.get_joint_actuator(i).joint().name(): plant.get_joint_actuator(
+            i
+        ).effort_limit()
+        for i in plant.GetJointActuatorIndices()
+    }
+    lines = ["Joints (position limits, velocity limit, effort limit):"]
+    groups = (
+        ("base", model.base, BASE_JOINTS),
+        ("mount", model.base, MOUNT_JOINTS),
+        ("arm", model.arm, ARM_JOINTS),
+    )
+    for group, instance, names in groups:
+        for name in names:
+            joint = plant.GetJointByName(name, instance)
+            unit = "m" if joint.type_name() == "prismatic" else "rad"
+            low = joint.position_lower_limits()[0]
+            high = joint.position_upper_limits()[0]
+            limits = (
+                "unlimited"
+                if np.isinf(low) and np.isinf(high)
+                else f"[{low:+.2f}, {high:+.2f}] {unit}"
+            )
+            effort = (
+                f"{actuated[name]:6.0f} {'N' if unit == 'm' else 'N m'}"
+                if name in actuated
+                else "unactuated (spring-damper)"
+            )
+            speed = f"{joint.velocity_upper_limits()[0]:5.2f} {unit}/s"
+            lines.append(
+                f"  {group:5s} {name:12s} {joint.type_name():9s} "
+                f"{limits:24s} {speed:11s}  {effort}"
+            )
+
+    def mass(instance):
+        return sum(
+            plant.get_body(b).get_mass(context)
+            for b in plant.GetBodyIndices(instance)
+        )
+
+    lines.append(
+        f"Masses: base {mass(model.base):.1f} kg, arm {mass(model.arm):.2f} "
+        f"kg, sensor and tool {mass(model.tool):.2f} kg"
+    )
+    modes = mount_rocking_modes(plant, model, q_a)
+    lines.append(
+        "Mount rocking modes: "
+        + ", ".join(
+            f"{mode.frequency_hz:.2f} Hz (damping ratio "
+            f"{mode.damping_ratio:.3f})"
+            for mode in modes
+        )
+    )
+    kinematics = ArmKinematics(plant, model)
+    values = kinematics.evaluate(q_a)
+    lower, upper = kinematics.lower, kinematics.upper
+    m = capability.manipulability(values.J_a)
+    penalty = capability.joint_limit_penalty(q_a, lower, upper, k_j)
+    gradient = capability_gradients.capability_gradient(
+        values.J_a, q_a, lower, upper, k_j
+    )
+    p = values.p_ee_in_base
+    lines += [
+        f"Arm configuration q_a = {np.array2string(q_a, precision=3)} rad",
+        f"End effector (tool centre point) in the base frame: "
+        f"[{p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}] m",
+        f"Capability of movement (k_j = {k_j:g}): manipulability m = "
+        f"{m:.4f}, joint-limit penalty P_jnt = {penalty:.3f}, "
+        f"C_m = {m * penalty:.4f}",
+        "grad_x C_m = "
+        + np.array2string(gradient, precision=4, suppress_small=True)
+        + "  ([v; w] in the arm's base frame)",
+    ]
+    return "\n".join(lines)
+
+
+def _lidar_fan(radius, segments=48):
+    """Vertices and faces of a flat 270 degree fan about the x axis."""
+    angles = np.linspace(-LIDAR_FIELD_OF_VIEW / 2, LIDAR_FIELD_OF_VIEW / 2,
+                         segments + 1)
+    rim = np.stack(
+        [radius * np.cos(angles), radius * np.sin(angles),
+         np.zeros_like(angles)]
+    )
+    vertices = np.hstack([np.zeros((3, 1)), rim])
+    faces = np.array(
+        [[0, i, i + 1] for i in range(1, segments + 1)], dtype=np.int32
+    ).T
+    return vertices, faces
+
+
+def write_model_page(path, q_a=HOME_ARM_POSITIONS, lidar_range=1.0):
+    """Writes a self-contained HTML page that shows the robot in Meshcat.
+
+    The page draws the robot at arm configuration `q_a` (base and mount at
+    rest), the frames the controller uses (base, arm base, tool centre
+    point, force/torque measurement, LIDARs) as RGB triads, and the LIDARs'
+    270 degree fields of view as translucent fans of radius `lidar_range`.
+    It needs no server or network to open.
+
+    Args:
+        path: the file to write (its folder is created).
+        q_a: the arm configuration (6,) in rad.
+        lidar_range: the radius of the drawn fields of view, m.
+
+    Returns:
+        pathlib.Path: the written file.
+    """
+    q_a = as_vector("q_a", q_a, 6)
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
+    model = add_mcr(plant)
+    plant.Finalize()
+    frames = (
+        model.base_frame,
+        model.arm_base_frame,
+        model.tcp_frame,
+        model.ft_measurement_frame,
+        *model.lidar_frames,
+    )
+    for frame in frames:
+        AddFrameTriadIllustration(
+            scene_graph=scene_graph, frame=frame, length=0.12, radius=0.004
+        )
+    meshcat = quiet_meshcat()
+    MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    q = plant.GetPositions(plant_context)
+    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_a
+    plant.SetPositions(plant_context, q)
+    vertices, faces = _lidar_fan(lidar_range)
+    for frame in model.lidar_frames:
+        name = f"/lidar_fields/{frame.name()}"
+        meshcat.SetTriangleMesh(
+            name, vertices, faces, Rgba(0.95, 0.8, 0.1, 0.25)
+        )
+        meshcat.SetTransform(name, frame.CalcPoseInWorld(plant_context))
+    meshcat.SetTransform("/lidar_fields", RigidTransform())
+    diagram.ForcedPublish(context)
+    return write_static_html(meshcat, path)

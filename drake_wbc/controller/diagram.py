@@ -1,0 +1,315 @@
+"""The CDMP-WBC controller as one Drake Diagram (paper Fig. "cdmp_wbc").
+
+One control tick, as wired here (design notes, "data flow of one tick")::
+
+    every input ─► InputGuard ─► (the stages below; stop, safety_status)
+    reference_velocity ─► WholeBodyCdmp ◄─ F_ext, S_hri, delta_V_ee
+                              │ V_ee (T_b)
+    ArmCapability ─► WorkspaceAdapter ─► sigma_xy, sigma_phi
+       │ p_ee, C_m, grad C_m, alpha   │
+       └──────────────► MotionDistributor ◄─ k_n
+                          │ V_a      │ V_b
+                          │          ▼
+                          │      BaseCdmp ◄─ obstacle points
+                          │          │ V_b'
+                          │          ▼
+                          │   StopGate ◄─ stop (and the velocity limits)
+                          │          ▼
+                          │   BaseVelocityFilter ──► filtered_base_velocity
+                          │          ▼ V_b^flt
+                          │   BaseCommandLimiter ◄─ stopped
+                          │          │ ──► base.velocity_command
+                          ▼          ▼ (the command, limited)
+                   RobustCompensator ◄─ s_c ──► delta_V_ee (to WholeBodyCdmp)
+                          │ V_a^ref
+                          ▼
+                       ArmCdmp ◄─ F_ext, F_d, S_hri
+                          ▼
+             ArmCartesianVelocityController ◄─ stop (hold)
+                          ▼
+                 arm.position_command
+
+The station-facing ports carry the names of the simulated station and of
+the LCM hardware interface, so the same diagram drives either. The only
+feedback edge inside, delta_V_ee, enters WholeBodyCdmp's state alone, and
+the commands leave from state (filter, limiter's inputs, arm controller):
+no algebraic loop, and no direct feedthrough from any input to a command.
+
+Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
+- Every input enters through the InputGuard: a NaN, an infinite value or
+  a value out of range (k_n < 0, s_c outside [0, 1]) never reaches a stage
+  (the guard passes the last valid sample on) and triggers a safe stop:
+  from that tick on the base command is zero, the arm command is held at
+  its last position command (the arm controller's hold), the reference
+  velocity is replaced by zero and the base filter's input is gated to
+  zero, so that the DMPs and the filter settle at rest. The stop clears
+  once every input has been valid for safety.hold_time; the base command
+  then restarts from zero within the acceleration limits and the arm from
+  rest at the held position, so no command jumps. The `safety_status`
+  output (systems.safety.STATUS_FIELDS) and `safety_reason` (a sentence;
+  also Controller.safety_reason) say why; the stop is logged when it trips
+  and when it clears. Obstacle points with a NaN or infinite coordinate
+  are dropped (counted in the status), not a fault.
+- The base command is limited to the robot's velocity limits by uniform
+  scaling (its direction kept) before the base filter, by the StopGate,
+  so that the filter cannot wind up (its state never asks for more than
+  the base can do), and again, with the acceleration limits, after it by
+  BaseCommandLimiter, reported on `base_saturation`, which also slows it
+  as a whole so that the footprint never approaches an obstacle point
+  faster than it can stop short of it (drake_wbc.math.separation: the
+  repulsive field alone is a coupling that a steady push overcomes); the
+  compensator sees
+  the command actually sent, so the arm makes up for what the limits take
+  from the base (eq. (compensation)). The arm's joint rates are scaled
+  uniformly to their limits by the arm controller (reported on
+  `arm_limited`), and its position command never leaves the joint
+  limits.
+"""
+
+from dataclasses import replace
+
+import numpy as np
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import MatrixGain
+
+from drake_wbc.controller.parameters import (
+    ControllerParameters,
+    check_arm_limits,
+)
+from drake_wbc.math.validation import checked_instance, validated_copy
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.stages import (
+    ArmCapability,
+    ArmCartesianVelocityController,
+    ArmCdmp,
+    BaseCdmp,
+    BaseVelocityFilter,
+    MotionDistributor,
+    RobustCompensator,
+    WholeBodyCdmp,
+    WorkspaceAdapter,
+)
+from drake_wbc.stages.base_command import BaseCommandLimiter, StopGate
+from drake_wbc.stages.safety import GuardedInput, InputGuard
+from drake_wbc.stages.wrench import ExternalWrenchEstimator
+
+STATION_INPUTS = (
+    "base.state_estimated",
+    "arm.position_measured",
+    "wrist.wrench_measured",
+    "lidar.obstacle_points",
+)
+"""The controller's inputs from the station (simulated or LCM)."""
+
+TASK_INPUTS = (
+    "reference_velocity",
+    "desired_wrench",
+    "phri_switch",
+    "null_space_gain",
+    "compensation_switch",
+)
+"""The task's inputs; all but reference_velocity are optional (the stage's
+parameter is used while the port is not connected)."""
+
+
+class Controller:
+    """The built controller: its Diagram and its stages by name.
+
+    Attributes:
+        diagram: the Diagram; add it to a builder and connect its ports.
+        stages: dict of the stages (LeafSystems) by name, for logging
+            and inspection.
+        params: the (validated copy of the) ControllerParameters it was
+            built from.
+    """
+
+    def __init__(self, diagram, stages, params):
+        self.diagram, self.stages, self.params = diagram, stages, params
+
+    def initialize(self, root_context, arm_position=HOME_ARM_POSITIONS,
+                   base_velocity=(0.0, 0.0, 0.0)):
+        """Starts the controller's state from the robot's measured state:
+        the arm command at `arm_position`, the base filter at rest at
+        `base_velocity` (T_b) and the base command's limiter from it. The
+        DMPs start at rest; the input guard takes `arm_position` as the
+        last valid arm measurement."""
+        def context_of(name):
+            return self.stages[name].GetMyMutableContextFromRoot(
+                root_context)
+
+        base_velocity = np.asarray(base_velocity, dtype=float)
+        self.stages["arm_controller"].set_arm_position(
+            context_of("arm_controller"), arm_position)
+        self.stages["base_filter"].set_velocity(context_of("base_filter"),
+                                                base_velocity)
+        self.stages["base_limiter"].set_previous(context_of("base_limiter"),
+                                                 base_velocity)
+        self.stages["guard"].set_last_valid(
+            context_of("guard"), "arm.position_measured", arm_position)
+
+    def safety_reason(self, root_context):
+        """Why the controller is in a safe stop, as a sentence ("" when it
+        is not)."""
+        guard = self.stages["guard"]
+        return guard.reason(guard.GetMyContextFromRoot(root_context))
+
+
+def build_controller(params=None, arm=None):
+    """Builds the CDMP-WBC controller Diagram.
+
+    Args:
+        params: ControllerParameters (the paper's values if None); the
+            controller keeps a validated copy.
+        arm: a shared ArmKinematics (a new one if None).
+
+    Returns:
+        Controller: the diagram with named ports (STATION_INPUTS,
+        TASK_INPUTS; outputs base.velocity_command, arm.position_command
+        and the diagnostics capability, alpha, sigma_xy, sigma_phi,
+        end_effector_deviation, base_velocity, filtered_base_velocity,
+        arm_velocity_command, arm_limited, base_saturation,
+        safety_status, safety_reason).
+    """
+    params = validated_copy(checked_instance(
+        "params", params, ControllerParameters, ControllerParameters))
+    h = params.time_step
+    arm = checked_instance("arm", arm, ArmKinematics, ArmKinematics)
+    check_arm_limits(params.arm_controller, arm)
+    builder = DiagramBuilder()
+    add = builder.AddNamedSystem
+    stages = dict(
+        guard=add("guard", _input_guard(params)),
+        capability=add("capability", ArmCapability(params.capability, arm)),
+        wrench=add("wrench", ExternalWrenchEstimator(arm)),
+        base_yaw=add("base_yaw", MatrixGain(
+            np.array([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]]))),
+        whole_body_cdmp=add("whole_body_cdmp", WholeBodyCdmp(
+            params.whole_body_cdmp, time_step=h)),
+        workspace=add("workspace", WorkspaceAdapter(params.workspace, arm)),
+        distributor=add("distributor", MotionDistributor(
+            params.distributor, arm)),
+        base_cdmp=add("base_cdmp", BaseCdmp(params.base_cdmp, time_step=h)),
+        base_gate=add("base_gate", StopGate(
+            3, limits=params.safety.base_velocity_limits)),
+        base_filter=add("base_filter", BaseVelocityFilter(
+            replace(params.base_filter, time_step=h))),
+        base_limiter=add("base_limiter", BaseCommandLimiter(
+            params.safety, time_step=h,
+            half_sizes=params.base_cdmp.repulsion.half_sizes)),
+        compensator=add("compensator", RobustCompensator(
+            params.compensator, arm)),
+        arm_cdmp=add("arm_cdmp", ArmCdmp(params.arm_cdmp, time_step=h)),
+        arm_controller=add("arm_controller", ArmCartesianVelocityController(
+            replace(params.arm_controller, time_step=h), arm)),
+    )
+    s = stages
+
+    def connect(source, output, destination, input_name):
+        builder.Connect(s[source].GetOutputPort(output),
+                        s[destination].GetInputPort(input_name))
+
+    # Every input enters through the guard, and only its outputs (the
+    # inputs' last valid samples) reach the stages.
+    for name in STATION_INPUTS + TASK_INPUTS:
+        builder.ExportInput(s["guard"].GetInputPort(name), name)
+    # Station measurements.
+    connect("guard", "base.state_estimated", "base_yaw", "u0")
+    for stage in ("capability", "wrench"):
+        connect("guard", "arm.position_measured", stage, "arm_position")
+    connect("guard", "wrist.wrench_measured", "wrench", "wrist_wrench")
+    connect("guard", "lidar.obstacle_points", "base_cdmp", "obstacle_points")
+    # Task inputs.
+    connect("guard", "reference_velocity", "whole_body_cdmp",
+            "reference_velocity")
+    connect("guard", "desired_wrench", "arm_cdmp", "desired_wrench")
+    connect("guard", "phri_switch.whole_body", "whole_body_cdmp",
+            "phri_switch")
+    connect("guard", "phri_switch.arm", "arm_cdmp", "phri_switch")
+    connect("guard", "null_space_gain", "distributor", "null_space_gain")
+    connect("guard", "compensation_switch", "compensator",
+            "compensation_switch")
+    # The safe stop.
+    connect("guard", "stop", "base_gate", "stop")
+    connect("guard", "stopped", "base_limiter", "stopped")
+    connect("guard", "stop", "arm_controller", "hold")
+
+    connect("base_yaw", "y0", "whole_body_cdmp", "base_yaw")
+    connect("wrench", "external_wrench", "whole_body_cdmp", "wrench")
+    connect("wrench", "external_wrench", "arm_cdmp", "wrench")
+    for destination in ("workspace", "distributor"):
+        connect("whole_body_cdmp", "end_effector_velocity", destination,
+                "end_effector_velocity")
+        for name in ("end_effector_position", "capability",
+                     "capability_gradient"):
+            connect("capability", name, destination, name)
+    for name in ("sigma_xy", "sigma_phi"):
+        connect("workspace", name, "distributor", name)
+    connect("distributor", "base_velocity", "base_cdmp", "base_velocity")
+    connect("base_cdmp", "avoiding_base_velocity", "base_gate", "value")
+    connect("base_gate", "gated", "base_filter", "velocity")
+    connect("base_filter", "filtered_velocity", "base_limiter", "velocity")
+    connect("base_gate", "scale", "base_limiter", "envelope_scale")
+    connect("guard", "lidar.obstacle_points", "base_limiter",
+            "obstacle_points")
+    connect("distributor", "arm_velocity", "compensator", "arm_velocity")
+    connect("distributor", "base_velocity", "compensator", "base_velocity")
+    connect("base_limiter", "velocity_command", "compensator",
+            "filtered_base_velocity")
+    for name in ("end_effector_position", "capability_gradient", "alpha"):
+        connect("capability", name, "compensator", name)
+    connect("compensator", "end_effector_deviation", "whole_body_cdmp",
+            "end_effector_deviation")
+    connect("compensator", "arm_reference_velocity", "arm_cdmp",
+            "arm_velocity")
+    connect("arm_cdmp", "arm_velocity_command", "arm_controller",
+            "arm_velocity")
+
+    outputs = (
+        ("base_limiter", "velocity_command", "base.velocity_command"),
+        ("arm_controller", "arm_position_command", "arm.position_command"),
+        ("capability", "capability", "capability"),
+        ("capability", "alpha", "alpha"),
+        ("workspace", "sigma_xy", "sigma_xy"),
+        ("workspace", "sigma_phi", "sigma_phi"),
+        ("compensator", "end_effector_deviation", "end_effector_deviation"),
+        ("distributor", "base_velocity", "base_velocity"),
+        ("base_filter", "filtered_velocity", "filtered_base_velocity"),
+        ("arm_cdmp", "arm_velocity_command", "arm_velocity_command"),
+        ("arm_controller", "limited", "arm_limited"),
+        ("base_limiter", "saturation", "base_saturation"),
+        ("guard", "safety_status", "safety_status"),
+        ("guard", "safety_reason", "safety_reason"),
+    )
+    for stage, port, name in outputs:
+        builder.ExportOutput(s[stage].GetOutputPort(port), name)
+    diagram = builder.Build()
+    diagram.set_name("cdmp_wbc_controller")
+    return Controller(diagram, stages, params)
+
+
+def _input_guard(params):
+    """The InputGuard of every controller input: the task inputs' defaults
+    are the stages' parameters (what the stages used while their port was
+    not connected), and their ranges those the stages accept."""
+    inf = np.inf
+    vector = GuardedInput
+    inputs = (
+        vector("base.state_estimated", 6),
+        vector("arm.position_measured", 6, initial=HOME_ARM_POSITIONS),
+        vector("wrist.wrench_measured", 6),
+        vector("reference_velocity", 6, zero_when_stopped=True),
+        vector("desired_wrench", 6,
+               (("desired_wrench", params.arm_cdmp.F_d),)),
+        vector("phri_switch", 1, (
+            ("phri_switch.whole_body", [params.whole_body_cdmp.S_hri]),
+            ("phri_switch.arm", [params.arm_cdmp.S_hri]))),
+        vector("null_space_gain", 1, (
+            ("null_space_gain", [params.distributor.null_space_gain]),),
+            lower=0.0, upper=inf),
+        vector("compensation_switch", 1, (
+            ("compensation_switch",
+             [params.compensator.compensation_switch]),),
+            lower=0.0, upper=1.0),
+    )
+    return InputGuard(inputs, points_name="lidar.obstacle_points",
+                      time_step=params.time_step, params=params.safety)

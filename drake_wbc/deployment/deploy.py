@@ -1,0 +1,293 @@
+"""The controller against the robot over LCM, in real time.
+
+`add_controller_side` puts into a DiagramBuilder what runs on the
+controller's computer: the controller Diagram of drake_wbc.controller.diagram
+(the very one a simulation uses), the task's sources of the scenario, the
+HardwareInterface in place of the simulated station, and a publisher of
+the controller's diagnostics for the logs. `deploy` runs it against the
+robot: it waits for the robot's first status, starts the controller from
+the measured arm positions on the arrival of a base state (so that its
+ticks follow the robot's status), paces the Simulator to the wall clock
+for the scenario's duration, and stops cleanly (zero base velocity and the arm
+held, sent before returning) at the end, on a stop request (Ctrl-C in
+`drake-wbc deploy`) or on an error.
+"""
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.lcm import DrakeLcm
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+
+from drake_wbc.experiments.runner import SIGNALS, add_controller
+from drake_wbc.experiments.scenario import Scenario
+from drake_wbc.hardware import messages
+from drake_wbc.hardware.codecs import SignalBundleEncoder
+from drake_wbc.hardware.interface import (
+    DIAGNOSTICS,
+    HardwareInterface,
+    add_publisher,
+)
+from drake_wbc.hardware.options import HardwareOptions
+from drake_wbc.math.validation import checked_instance, positive
+
+COMMANDS = ("base.velocity_command", "arm.position_command")
+"""The controller's outputs that go to the robot."""
+
+STOP_REPEATS = 3
+"""How many times the stop commands are sent (UDP may drop one)."""
+
+
+@dataclass
+class ControllerSide:
+    """The controller side, added to a builder.
+
+    Attributes:
+        hardware: the HardwareInterface.
+        controller: the drake_wbc.controller.diagram.Controller.
+        sources: dict task input name -> its source system.
+        bundle: the SignalBundleEncoder of the diagnostics.
+        scenario, variant, options: what it was built from.
+    """
+
+    hardware: HardwareInterface
+    controller: object
+    sources: dict
+    bundle: SignalBundleEncoder
+    scenario: Scenario
+    variant: object
+    options: HardwareOptions
+
+    def initialize(self, root_context, arm_positions,
+                   base_velocity=(0.0, 0.0, 0.0)):
+        """Starts the controller from the robot's measured state and holds
+        the arm there until the controller's first command."""
+        self.controller.initialize(root_context, arm_position=arm_positions,
+                                   base_velocity=base_velocity)
+        self.hardware.set_arm_command(root_context, arm_positions)
+
+    def set_time_offset(self, root_context, offset):
+        """Stamps the messages sent with 1e6 (t + offset) microseconds."""
+        self.hardware.set_time_offset(root_context, offset)
+        self.bundle.set_time_offset(root_context, offset)
+
+
+def add_controller_side(builder, scenario, variant=None, options=None,
+                        lcm=None):
+    """Adds the controller, the task sources, the hardware interface and
+    the diagnostics publisher to `builder` (see the module's docstring).
+
+    Args:
+        builder: a DiagramBuilder.
+        scenario: the Scenario (its controller parameters and task).
+        variant: one of scenario.variants (the first if None).
+        options: HardwareOptions (the scenario's, or the defaults, if
+            None).
+        lcm: the DrakeLcmInterface to talk over.
+
+    Returns:
+        ControllerSide.
+    """
+    scenario = checked_instance("scenario", scenario, Scenario, Scenario)
+    variant = variant or scenario.variants[0]
+    options = checked_instance("options", options or scenario.hardware,
+                               HardwareOptions, HardwareOptions)
+    h = scenario.controller.time_step
+    if abs(options.publish_period - h) > 1e-12:
+        raise ValueError(
+            f"hardware.publish_period = {options.publish_period!r} s is not "
+            f"allowed with controller.time_step = {h!r} s: the commands go "
+            "out once a control period, so they must be equal")
+    hardware = HardwareInterface(options, lcm,
+                                 scenario.station.initial_arm_positions)
+    builder.AddNamedSystem("hardware", hardware.diagram)
+    controller, sources = add_controller(builder, scenario, variant,
+                                         hardware.diagram)
+    ports = {name: controller.diagram.GetOutputPort(name)
+             for name in SIGNALS
+             if name not in COMMANDS
+             and controller.diagram.HasOutputPort(name)}
+    ports["reference_velocity"] = sources["reference_velocity"] \
+        .get_output_port()
+    ports["hardware.diagnostics"] = hardware.diagram.GetOutputPort(
+        "hardware.diagnostics")
+    bundle = builder.AddNamedSystem("encoder.controller", SignalBundleEncoder(
+        {name: port.size() for name, port in ports.items()}))
+    for name, port in ports.items():
+        builder.Connect(port, bundle.GetInputPort(name))
+    # At offset 0, as the runner's loggers sample: the values of the
+    # control period that ends.
+    publisher = add_publisher(builder, options.channels.controller, lcm,
+                              "publisher.controller", options.truth_period)
+    builder.Connect(bundle.GetOutputPort("message"),
+                    publisher.get_input_port())
+    return ControllerSide(hardware, controller, sources, bundle, scenario,
+                          variant, options)
+
+
+def wait_for_status(lcm, options, timeout=None, stop=None):
+    """Waits for a good base state and arm status on `lcm`.
+
+    Args:
+        lcm: a DrakeLcmInterface.
+        options: HardwareOptions (channels; startup_timeout if `timeout`
+            is None).
+        timeout: s of wall clock.
+        stop: a callable; waiting ends early when it returns True.
+
+    Returns:
+        (base state (6,), arm positions (6,)), or None if stopped.
+
+    Raises:
+        TimeoutError: naming the channels still silent and the URL.
+    """
+    timeout = options.startup_timeout if timeout is None else positive(
+        "timeout", timeout)
+    decoders = {options.channels.base_state: messages.decode_base_state,
+                options.channels.arm_status: messages.decode_arm_status}
+    received, waiting = {}, [True]
+
+    def handler_for(channel):
+        def handle(data):
+            if not waiting[0]:
+                return
+            try:
+                received[channel] = decoders[channel](data).values[0]
+            except messages.MessageError:
+                pass
+        return handle
+
+    # (pydrake's Subscribe offers no unsubscribe: the handlers stay, idle.)
+    for channel in decoders:
+        lcm.Subscribe(channel, handler_for(channel))
+    deadline = time.monotonic() + timeout
+    while len(received) < len(decoders):
+        if stop is not None and stop():
+            return None
+        if time.monotonic() > deadline:
+            silent = sorted(set(decoders) - set(received))
+            raise TimeoutError(
+                f"no status on {', '.join(silent)} within {timeout:g} s on "
+                f"{getattr(lcm, 'get_lcm_url', lambda: '?')()}: is the robot "
+                "(or `drake-wbc robot-sim`) running on this LCM URL?")
+        lcm.HandleSubscriptions(50)
+    waiting[0] = False
+    return (received[options.channels.base_state],
+            received[options.channels.arm_status])
+
+
+def wait_for_next(lcm, channel, timeout):
+    """Blocks until the next message on `channel` (or `timeout` s of
+    wall clock); returns True if one came."""
+    arrived = []
+    lcm.Subscribe(channel, lambda data: arrived.append(len(data)))
+    lcm.HandleSubscriptions(0)
+    arrived.clear()
+    deadline = time.monotonic() + timeout
+    while not arrived and time.monotonic() < deadline:
+        lcm.HandleSubscriptions(5)
+    return bool(arrived)
+
+
+def send_stop(lcm, options, arm_positions, utime=None):
+    """Sends zero base velocity and `arm_positions` (the arm held) on the
+    command channels, STOP_REPEATS times."""
+    utime = int(time.time() * 1e6) if utime is None else int(utime)
+    for i in range(STOP_REPEATS):
+        lcm.Publish(options.channels.base_command,
+                    messages.encode_base_command(utime + i, np.zeros(3)))
+        lcm.Publish(options.channels.arm_command,
+                    messages.encode_arm_command(utime + i, arm_positions))
+        time.sleep(0.002)
+
+
+@dataclass
+class DeployResult:
+    """How a deployment ended.
+
+    Attributes:
+        time: the controller's clock at the end, s.
+        stopped: True if a stop request ended it early.
+        real_time_factor: controller time over wall-clock time.
+        diagnostics: dict DIAGNOSTICS entry -> its value at the end.
+        held_arm_positions: the arm command sent with the stop.
+    """
+
+    time: float
+    stopped: bool
+    real_time_factor: float
+    diagnostics: dict
+    held_arm_positions: np.ndarray
+
+
+def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
+           stop=None, realtime_rate=1.0, chunk=0.05, on_start=None):
+    """Runs the controller against the robot over LCM (see the module).
+
+    Args:
+        scenario: a Scenario.
+        variant: one of its variants (the first if None).
+        options: HardwareOptions (the scenario's, or the defaults).
+        duration: controller time to run, s (the scenario's if None).
+        lcm: a DrakeLcmInterface (a DrakeLcm of options.lcm_url if None).
+        stop: a callable polled every `chunk` s of controller time; True
+            ends the run there (the stop commands are then sent at once).
+        realtime_rate: the Simulator's target real-time rate.
+        chunk: s of controller time between polls of `stop`.
+        on_start: called with the measured arm positions when the
+            controller starts.
+
+    Returns:
+        DeployResult, or None if stopped before the robot answered.
+    """
+    options = checked_instance("options", options or scenario.hardware,
+                               HardwareOptions, HardwareOptions)
+    duration = scenario.duration if duration is None else positive(
+        "duration", duration)
+    lcm = lcm or DrakeLcm(options.lcm_url)
+    builder = DiagramBuilder()
+    side = add_controller_side(builder, scenario, variant, options, lcm)
+    diagram = builder.Build()
+    diagram.set_name("deployment")
+    status = wait_for_status(lcm, options, stop=stop)
+    if status is None:
+        return None
+    state, arm = status
+    simulator = Simulator(diagram)
+    root = simulator.get_mutable_context()
+    side.initialize(root, arm, base_velocity=state[3:])
+    side.set_time_offset(root, time.time())
+    guard = side.hardware.systems["guard"]
+    held = np.asarray(arm, dtype=float)
+    stopped = False
+    simulator.set_target_realtime_rate(realtime_rate)
+    # Start the clock just after a base state arrives, so that each tick
+    # follows the robot's status by a fraction of a period and the
+    # commands reach the robot well before it samples them.
+    wait_for_next(lcm, options.channels.base_state, options.watchdog_limit)
+    started = time.perf_counter()
+    try:
+        simulator.Initialize()
+        if on_start is not None:
+            on_start(held)
+        t = 0.0
+        while t < duration - 1e-12:
+            if stop is not None and stop():
+                stopped = True
+                break
+            t = min(t + chunk, duration)
+            simulator.AdvanceTo(t)
+            held = guard.GetOutputPort("arm_position_command").Eval(
+                guard.GetMyContextFromRoot(root))
+    finally:
+        send_stop(lcm, options, held)
+    elapsed = time.perf_counter() - started
+    values = side.hardware.diagram.GetOutputPort(
+        "hardware.diagnostics").Eval(
+            side.hardware.diagram.GetMyContextFromRoot(root))
+    return DeployResult(root.get_time(), stopped,
+                        root.get_time() / max(elapsed, 1e-9),
+                        dict(zip(DIAGNOSTICS, values.tolist(), strict=True)),
+                        np.array(held))

@@ -1,0 +1,342 @@
+"""Scenarios: one experiment, written as a YAML file in diagrams/.
+
+A scenario says everything a run needs: the controller's parameters, how
+the simulated station is built, the scene (obstacles, walking people, a
+hand on the tool), the task's inputs over time, the duration, the runs to
+compare and what to write. It is loaded with Drake's `yaml_load_typed`
+into the dataclasses below, then every check of the tree runs, so a wrong
+key or value is reported with the file, the field's dotted path and what
+is allowed (drake_wbc.controller.parameters.load_typed)::
+
+    description: the end effector holds still while a person walks by
+    experiment: fixed_point
+    duration: 20.0
+    controller:                       # ControllerParameters; keys left
+      distributor: {null_space_gain: 0.1}   # out keep their defaults
+    scene:
+      people:
+      - {name: visitor, times: [2, 6], waypoints: [[2, -1], [0.5, -1]]}
+    task:
+      reference_velocity: {times: [1.0], values: [[0.1, 0, 0, 0, 0, 0]]}
+
+The files are in diagrams/ (`scenarios_dir()`); `find_scenario` takes a
+file's path or its name without `.yaml`.
+"""
+
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+
+from drake_wbc.controller import ControllerParameters
+from drake_wbc.controller.parameters import load_typed
+from drake_wbc.hardware.options import HardwareOptions
+from drake_wbc.math.cdmp import MovementReplay
+from drake_wbc.math.validation import (
+    as_vector,
+    boolean,
+    checked_instance,
+    in_closed_range,
+    non_negative,
+    positive,
+    selection,
+    text,
+)
+from drake_wbc.robot.footprint import check_start_is_free
+from drake_wbc.station.scene import Scene
+from drake_wbc.station.simulation import StationOptions
+
+EXPERIMENTS = ("generic", "trajectory_tracking", "fixed_point",
+               "line_tracking", "wiping", "phri", "teach", "repeat")
+"""The experiments whose metrics and plots a run computes (paper Sec. V);
+`generic` gives the common ones only."""
+
+CONTROLLER_FILE = "controller.yaml"
+"""The file in diagrams/ that holds the controller's defaults, not a
+scenario."""
+
+DEFAULT_SCENARIO = "trajectory_tracking"
+"""The scenario `drake-wbc run` runs when given none."""
+
+INTERPOLATIONS = ("hold", "linear")
+
+
+@dataclass
+class Schedule:
+    """A task input over time.
+
+    Attributes:
+        times: strictly increasing times in s.
+        values: one value (a list of numbers of the input's size) per
+            time.
+        interpolation: `hold` (each value from its time until the next;
+            the first value before the first time) or `linear`
+            (piecewise linear between the times, constant outside).
+
+    An empty schedule leaves the input to its default (see TaskInputs).
+    """
+
+    times: list[float] = field(default_factory=list)
+    values: list[list[float]] = field(default_factory=list)
+    interpolation: str = "hold"
+
+    def __post_init__(self):
+        if len(self.times) != len(self.values):
+            raise ValueError(
+                f"values has {len(self.values)} entries, which is not "
+                f"allowed: must have one per time ({len(self.times)})")
+        if self.times:
+            times = as_vector("times", self.times)
+            if np.any(np.diff(times) <= 0.0):
+                raise ValueError(f"times = {self.times} is not allowed: "
+                                 "must be strictly increasing")
+            sizes = {len(v) for v in self.values}
+            if len(sizes) != 1:
+                raise ValueError(f"values = {self.values} is not allowed: "
+                                 "every value must have the same size")
+            for i, value in enumerate(self.values):
+                as_vector(f"values[{i}]", value)
+        if self.interpolation not in INTERPOLATIONS:
+            raise ValueError(
+                f"interpolation = {self.interpolation!r} is not allowed: "
+                f"must be one of {', '.join(INTERPOLATIONS)}")
+
+    def size(self):
+        """The size of the values (0 for an empty schedule)."""
+        return len(self.values[0]) if self.values else 0
+
+
+TASK_SIZES = dict(reference_velocity=6, desired_wrench=6, phri_switch=1,
+                  null_space_gain=1, compensation_switch=1)
+"""The controller's task inputs and their sizes."""
+
+
+@dataclass
+class TaskInputs:
+    """The controller's task inputs over time (see controller.TASK_INPUTS).
+
+    Attributes:
+        reference_velocity: V_ee^ref (6) in the world, [v; w]; zero when
+            empty.
+        desired_wrench: F_d (6), the controller's arm_cdmp.F_d when empty.
+        phri_switch: S_hri (1), the parameter when empty.
+        null_space_gain: k_n (1), the parameter when empty.
+        compensation_switch: s_c (1), the parameter when empty.
+    """
+
+    reference_velocity: Schedule = field(default_factory=Schedule)
+    desired_wrench: Schedule = field(default_factory=Schedule)
+    phri_switch: Schedule = field(default_factory=Schedule)
+    null_space_gain: Schedule = field(default_factory=Schedule)
+    compensation_switch: Schedule = field(default_factory=Schedule)
+
+    def __post_init__(self):
+        for name, size in TASK_SIZES.items():
+            schedule = checked_instance(name, getattr(self, name), Schedule,
+                                        Schedule)
+            setattr(self, name, schedule)
+            if schedule.times and schedule.size() != size:
+                raise ValueError(
+                    f"{name}.values = {schedule.values} is not allowed: "
+                    f"each value must have {size} entries")
+            for i, value in enumerate(schedule.values):
+                _check_task_value(f"{name}.values[{i}]", name, value)
+
+
+def _check_task_value(where, name, value):
+    """Checks one value of the schedule of task input `name`: S_hri is 0
+    or 1 (eq. (cdmp-wb)), s_c lies in [0, 1] and k_n >= 0 (eq. (wbccm))."""
+    if name == "phri_switch":
+        selection(where, value, 1)
+    elif name == "compensation_switch":
+        in_closed_range(where, value[0], 0.0, 1.0)
+    elif name == "null_space_gain":
+        non_negative(where, value[0])
+
+
+@dataclass
+class Variant:
+    """One run of a scenario; several are compared in one figure.
+
+    Attributes:
+        name: a short name, used in file names (letters, digits, _ and -).
+        label: the legend's text (the name if empty).
+        base_filter: False runs without the base filter (the paper's
+            comparison in the trajectory-tracking experiment).
+        movement: the learned movement this run plays, replacing the
+            controller's whole_body_cdmp.movement (None: the
+            controller's).
+    """
+
+    name: str = "run"
+    label: str = ""
+    base_filter: bool = True
+    movement: MovementReplay | None = None
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name or not all(
+                c.isalnum() or c in "_-" for c in self.name):
+            raise ValueError(
+                f"name = {self.name!r} is not allowed: must be letters, "
+                "digits, _ and - only, and not empty")
+        text("label", self.label)
+        boolean("base_filter", self.base_filter)
+        self.movement = checked_instance("movement", self.movement,
+                                         MovementReplay, lambda: None)
+
+
+@dataclass
+class OutputOptions:
+    """What a run writes.
+
+    Attributes:
+        log_period: the logs' sample period in s (the control period by
+            default).
+        replay: write the Meshcat replay (replay.html).
+        replay_frame_rate: the replay's frames per second.
+        plots: write the PNG figures.
+    """
+
+    log_period: float = 0.01
+    replay: bool = True
+    replay_frame_rate: float = 25.0
+    plots: bool = True
+
+    def __post_init__(self):
+        positive("log_period", self.log_period)
+        positive("replay_frame_rate", self.replay_frame_rate)
+        boolean("replay", self.replay)
+        boolean("plots", self.plots)
+
+
+@dataclass
+class Scenario:
+    """One experiment (see the module's docstring).
+
+    Attributes:
+        description: one line, shown by `drake-wbc run --list`.
+        experiment: one of EXPERIMENTS: which metrics and plots a run
+            computes.
+        duration: simulated time in s.
+        controller: the controller's parameters (defaults: the paper's).
+        station: how the simulated station is built.
+        scene: obstacles, people and the hand.
+        task: the task inputs over time.
+        variants: the runs to compare (one run if a single entry).
+        outputs: what to write.
+        hardware: the LCM hardware interface (URL, channels, watchdog) for
+            `drake-wbc deploy` and `drake-wbc robot-sim`; None (the
+            default) runs the simulated station only.
+
+    Besides each part's own checks: controller.time_step is a whole
+    multiple of station.time_step and equals station.arm.command_period
+    (and hardware.publish_period, with hardware), and no static obstacle
+    overlaps the base's footprint at station.initial_base_pose.
+    """
+
+    description: str = ""
+    experiment: str = "generic"
+    duration: float = 10.0
+    controller: ControllerParameters = field(
+        default_factory=ControllerParameters)
+    station: StationOptions = field(default_factory=StationOptions)
+    scene: Scene = field(default_factory=Scene)
+    task: TaskInputs = field(default_factory=TaskInputs)
+    variants: list[Variant] = field(default_factory=lambda: [Variant()])
+    outputs: OutputOptions = field(default_factory=OutputOptions)
+    hardware: HardwareOptions | None = None
+
+    def __post_init__(self):
+        text("description", self.description)
+        for item in fields(self):
+            kind = _PARTS.get(item.name)
+            if kind is not None:
+                setattr(self, item.name, checked_instance(
+                    item.name, getattr(self, item.name), kind, kind))
+        if self.experiment not in EXPERIMENTS:
+            raise ValueError(
+                f"experiment = {self.experiment!r} is not allowed: must be "
+                f"one of {', '.join(EXPERIMENTS)}")
+        positive("duration", self.duration)
+        if not self.variants:
+            raise ValueError("variants = [] is not allowed: give at least "
+                             "one run")
+        names = [v.name for v in self.variants]
+        if len(set(names)) != len(names):
+            raise ValueError(f"variants = {names} is not allowed: the "
+                             "names must differ")
+        ratio = self.controller.time_step / self.station.time_step
+        if abs(ratio - round(ratio)) > 1e-9:
+            raise ValueError(
+                f"controller.time_step = {self.controller.time_step!r} s is "
+                f"not allowed with station.time_step = "
+                f"{self.station.time_step!r} s: must be a whole multiple "
+                "of it")
+        command_period = self.station.arm.command_period
+        if abs(command_period - self.controller.time_step) > 1e-9:
+            raise ValueError(
+                f"station.arm.command_period = {command_period!r} s is not "
+                f"allowed with controller.time_step = "
+                f"{self.controller.time_step!r} s: the arm's driver must "
+                "sample the position command at the control period (it "
+                "moves to each command over one period)")
+        period = (None if self.hardware is None
+                  else self.hardware.publish_period)
+        if period is not None and abs(
+                period - self.controller.time_step) > 1e-9:
+            raise ValueError(
+                f"hardware.publish_period = {self.hardware.publish_period!r}"
+                f" s is not allowed with controller.time_step = "
+                f"{self.controller.time_step!r} s: the controller sends its "
+                "commands once a tick, so the two must be equal")
+        check_start_is_free(self.scene, self.station.initial_base_pose)
+
+
+_PARTS = dict(controller=ControllerParameters, station=StationOptions,
+              scene=Scene, task=TaskInputs, outputs=OutputOptions)
+"""The nested parameters of a Scenario and their types."""
+
+
+def scenarios_dir():
+    """The folder of the scenario files (diagrams/ of the repository, or
+    of the installed package)."""
+    here = Path(__file__).resolve().parents[1]  # the package
+    for candidate in (here / "diagrams", here.parent / "diagrams"):
+        if (candidate / CONTROLLER_FILE).is_file():
+            return candidate
+    raise FileNotFoundError(
+        f"the scenario folder was not found next to {here}: expected "
+        f"diagrams/{CONTROLLER_FILE} in the package or in the repository")
+
+
+def scenario_files():
+    """The scenario files in diagrams/, sorted by name."""
+    return sorted(p for p in scenarios_dir().glob("*.yaml")
+                  if p.name != CONTROLLER_FILE)
+
+
+def find_scenario(name_or_path):
+    """The path of a scenario given as a file or a name in diagrams/.
+
+    Raises:
+        ValueError: naming the scenario and the names available.
+    """
+    path = Path(name_or_path)
+    if path.suffix in (".yaml", ".yml") and path.is_file():
+        return path
+    candidate = scenarios_dir() / f"{name_or_path}.yaml"
+    if candidate.is_file() and candidate.name != CONTROLLER_FILE:
+        return candidate
+    names = ", ".join(p.stem for p in scenario_files())
+    raise ValueError(f"scenario = {str(name_or_path)!r} is not allowed: "
+                     f"must be a scenario file or one of {names}")
+
+
+def load_scenario(path=None, text=None):
+    """A Scenario from a YAML file or string, every field checked.
+
+    Raises:
+        ValueError: naming the file, the field's dotted path (e.g.
+            `scene.people[0].radius`), its value and what is allowed.
+    """
+    return load_typed(Scenario, path=path, text=text)

@@ -1,0 +1,29 @@
+"""The math layer: the paper's equations as plain functions.
+
+numpy (and pydrake's AutoDiffXd scalars) only: nothing here imports
+`pydrake.systems`, a stage, the controller, the station or the hardware,
+so every equation is testable without a diagram. Each equation of the
+paper has one scalar-generic reference body here, cited by its label in
+the docstring; where the control tick needs speed, at most one float
+kernel beside it.
+
+- validation, scalar_support: argument checks; math for every scalar type.
+- kinematics: J_b of eq. (2), J_wb of eq. (fk), the rotation of eq. (3).
+- pseudoinverse, distribution: the weighted distribution, eqs. (wln),
+  (wbsln), (weight-factors), (wbccm).
+- capability: C_m = m P_jnt and its gradient; the transition of eq.
+  (transition).
+- workspace, motion_mode: the local workspace and the weighting factors
+  of intuitive pHRI (Sec. IV-C), the motion modes (Table I).
+- filtering: the base filter, eq. (filtering).
+- compensation: the robust compensation, eqs. (wb_error), (compensation),
+  (deviation).
+- dmp, cdmp, repulsion: the DMP core (eqs. (6), (7)), the coupled DMPs
+  (eqs. (cdmp-wb), (cdmp-base), (cdmp-arm), (cdmp-wb-error)) and the
+  repulsive field U_rep.
+- movement, demonstration: a whole-body movement learned from
+  demonstrations as a DMP (teach and repeat).
+- arm_control: the arm's Cartesian velocity controller (Sec. III-A).
+- safety, command_limits, separation: the run-time checks, the command
+  limits and the speed-and-separation rule.
+"""

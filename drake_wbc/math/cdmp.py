@@ -1,0 +1,399 @@
+"""Coupling DMPs of the controller (paper Sec. II-C and IV-B).
+
+Each function returns the time derivatives of its state pieces, to be
+integrated by a Drake system whose output is the velocity y_dot, the
+paper's velocity interface ("Admittance-coupled DMP exhibits equivalence
+as velocity control interface from C_dot to y_dot"): on its goal, y_dot =
+z / tau + C_dot = C_dot. A coupling C with a given C_dot is a state
+integrated alongside y and z. The goal g is a constant input; f(s) an
+optional value (default 0, as in all of the paper's experiments).
+
+Force convention: F, F_e, F_ext and F_d are the wrench [force; torque]
+that the environment or a person exerts ON the robot, in the frame of y.
+Then every coupling yields to it: y moves along F in eqs. (stiff-dmp) and
+(cdmp-arm) (stiffness), along F_e - F_d in eq. (admit-dmp), along F_ext in
+eq. (cdmp-wb). Sign note on eq. (cdmp-arm): its force term is printed as
+k_f (I - S_m)(F_d - F_ext), the opposite sign of eq. (admit-dmp); with a
+single convention for F_ext that term is unstable against any contact of
+positive stiffness K_env (C_a grows at the rate k_f K_env), so it is
+implemented as k_f (I - S_m)(F_ext - F_d), the sign of eq. (admit-dmp).
+The paper's F_d = -10 N along x thus means the surface pushes the tool
+with 10 N along -x, i.e. the tool presses 10 N along +x.
+
+Derivative of the input (k_d C_dot of eqs. (stiff-dmp), (cdmp-arm)). With
+C = k_p F algebraic, tau z_dot contains k_d k_p F_dot. No derivative of a
+measured force is needed if the state holds the shifted velocity
+
+    z~ = z - (k_d / tau) C,
+
+for then tau z~_dot = alpha_z (beta_z (g - y) - z~ - (k_d / tau) C) + f
+and tau y_dot = z~ + (k_d / tau) C + (the velocity coupling). This is the
+same system (the transfer function of eq. (lp-admit) holds exactly); a
+step of F steps z by (k_d / tau) k_p dF as in the paper while z~ stays
+continuous. `shifted_velocity` and `paper_velocity` convert.
+
+All derivative functions use elementwise arithmetic and products with
+float matrices only, so they accept numpy object arrays of AutoDiffXd;
+their parameters are checked once, in the dataclasses.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from drake_wbc.math.dmp import DmpParameters, transformation_derivative
+from drake_wbc.math.repulsion import RepulsiveFieldParameters, repulsive_force
+from drake_wbc.math.validation import (
+    as_matrix,
+    as_scalar,
+    as_vector,
+    checked_instance,
+    non_negative,
+    positive,
+    selection,
+)
+
+
+def _dmp(params):
+    if not isinstance(params, DmpParameters):
+        raise ValueError(f"dmp = {params!r} is not allowed: must be a "
+                         "DmpParameters")
+
+
+def _switch(name, value):
+    if value not in (0, 1):
+        raise ValueError(f"{name} = {value!r} is not allowed: must be 0 or 1")
+    return float(value)
+
+
+def _set(obj, name, value):
+    """Stores a checked value in `obj`, an array as a read-only copy (so
+    that it changes only by assignment, which `validate` checks)."""
+    if isinstance(value, np.ndarray):
+        value = np.array(value, dtype=float)
+        value.flags.writeable = False
+    setattr(obj, name, value)
+
+
+@dataclass
+class StiffnessCouplingParameters:
+    """Eq. (stiff-dmp): C_f = k_p F and the gain k_d of k_d C_f_dot,
+    both >= 0 (defaults: the paper's k_p of the arm, k_d = 0)."""
+
+    k_p: float = 0.0005
+    k_d: float = 0.0
+    dmp: DmpParameters = field(default_factory=DmpParameters)
+
+    def __post_init__(self):
+        non_negative("k_p", self.k_p)
+        non_negative("k_d", self.k_d)
+        _dmp(self.dmp)
+
+
+@dataclass(eq=False)
+class AdmittanceCouplingParameters:
+    """Eq. (admit-dmp): C_dot = V + D_a (F_e - F_d).
+
+    Attributes:
+        D_a: admittance D_a, a number > 0 (D_a I) or a symmetric positive
+            definite (d, d) matrix; m/(N s). Default 0.01 (the paper's
+            k_f). Stored as a read-only array (0-d for a number).
+        F_d: desired wrench F_d, a number or (d,); default 0. Stored like
+            D_a.
+    """
+
+    D_a: np.ndarray = 0.01
+    F_d: np.ndarray = 0.0
+    dmp: DmpParameters = field(default_factory=DmpParameters)
+
+    def __post_init__(self):
+        if np.ndim(self.D_a) == 0:
+            D_a = positive("D_a", self.D_a)
+        else:
+            D_a = as_matrix("D_a", self.D_a, (None, None))
+            if (D_a.shape[0] != D_a.shape[1]
+                    or not np.allclose(D_a, D_a.T, rtol=0, atol=1e-12)
+                    or np.linalg.eigvalsh(D_a)[0] <= 0.0):
+                raise ValueError(
+                    f"D_a = {D_a!r} is not allowed: must be a number > 0 or "
+                    "a symmetric positive definite matrix")
+        _set(self, "D_a", np.asarray(D_a))
+        if np.ndim(self.F_d) == 0:
+            F_d = as_scalar("F_d", self.F_d)
+        else:
+            F_d = as_vector("F_d", self.F_d, np.shape(D_a)[0] if np.ndim(
+                D_a) else None)
+        _set(self, "F_d", np.asarray(F_d))
+        _dmp(self.dmp)
+
+
+@dataclass
+class MovementReplay:
+    """A learned movement played by the whole-body CDMP (eq. (cdmp-wb)
+    with the forcing term f(s) of eq. (6); drake_wbc.math.movement).
+
+    Attributes:
+        file: the learned movement (a YAML file written by
+            `drake-wbc teach`); a relative path is looked up in the
+            working folder, then in the repository's diagrams/.
+        goal: the TCP's goal [x, y, z, yaw] in the world (m, rad), or
+            None for the demonstrated goal.
+        tau: the temporal scaling tau > 0 (the movement runs tau / tau_0
+            times slower, tau_0 the learned one), or None for the learned
+            one.
+        start_time: when the movement starts, s >= 0 of the controller's
+            clock; before it the DMP runs with g = 0 and f = 0.
+        start: the TCP's pose [x, y, z, yaw] in the world where the
+            controller starts (its DMP's origin), or None for the
+            demonstration's start.
+        tracking_gain: K >= 0, 1/s: from start_time, the task adds
+            V_ee^ref = K (p*(t) - p(t)) on x, y, z and yaw, p* the pose
+            the DMP plays (its own rollout) and p the TCP's pose from the
+            measured joints and odometry (drake_wbc.experiments.runner wires it,
+            systems.whole_body_cdmp.MovementTracking); 0 plays the
+            movement open loop. Default 3: the paper's controller is a
+            velocity interface, and without it the TCP lags the DMP by
+            the whole body's tracking delay (the base's velocity loop)
+            and drifts with the base's yaw lag.
+
+    Checked here for form; the file is read (and its existence checked:
+    an empty name is not allowed then) when the controller is built.
+    """
+
+    file: str = ""
+    goal: list[float] | None = None
+    tau: float | None = None
+    start_time: float = 0.0
+    start: list[float] | None = None
+    tracking_gain: float = 3.0
+
+    def __post_init__(self):
+        if not isinstance(self.file, str):
+            raise ValueError(f"file = {self.file!r} is not allowed: must "
+                             "be the path of the learned movement's file")
+        for name in ("goal", "start"):
+            if getattr(self, name) is not None:
+                _set(self, name, tuple(float(v) for v in as_vector(
+                    name, getattr(self, name), 4)))
+        if self.tau is not None:
+            positive("tau", self.tau)
+        non_negative("start_time", self.start_time)
+        non_negative("tracking_gain", self.tracking_gain)
+
+
+@dataclass
+class WholeBodyCdmpParameters:
+    """Eq. (cdmp-wb): admittance gain k_hri >= 0 (m/(N s); paper 0.05),
+    the default pHRI switch S_hri, 0 or 1 (paper: 1 in pHRI), and an
+    optional learned movement to play (MovementReplay; None, the default,
+    keeps the paper's g = 0 and f = 0)."""
+
+    k_hri: float = 0.05
+    S_hri: float = 0.0
+    dmp: DmpParameters = field(default_factory=DmpParameters)
+    movement: MovementReplay | None = None
+
+    def __post_init__(self):
+        non_negative("k_hri", self.k_hri)
+        _set(self, "S_hri", _switch("S_hri", self.S_hri))
+        _dmp(self.dmp)
+        self.movement = checked_instance("movement", self.movement,
+                                         MovementReplay, lambda: None)
+
+
+@dataclass
+class BaseCdmpParameters:
+    """Eq. (cdmp-base): the repulsive field and the DMP."""
+
+    repulsion: RepulsiveFieldParameters = field(
+        default_factory=RepulsiveFieldParameters)
+    dmp: DmpParameters = field(default_factory=DmpParameters)
+
+    def __post_init__(self):
+        if not isinstance(self.repulsion, RepulsiveFieldParameters):
+            raise ValueError(f"repulsion = {self.repulsion!r} is not "
+                             "allowed: must be a RepulsiveFieldParameters")
+        _dmp(self.dmp)
+
+
+@dataclass(eq=False)
+class ArmCdmpParameters:
+    """Eq. (cdmp-arm), with the paper's wiping values as defaults.
+
+    Attributes:
+        k_p: stiffness gain k_p >= 0 (paper 0.0005); steady offset
+            k_p F / beta_z.
+        k_d: gain k_d >= 0 of k_d C_s_dot (not given; default 0).
+        k_f: force gain k_f >= 0 (paper 0.01), m/(N s) and rad/(N m s).
+        S_m: (6,) diagonal of the selection matrix S_m, each 0 (force
+            control) or 1 (stiffness); default (0, 1, 1, 1, 1, 1).
+        F_d: (6,) desired wrench F_d on the tool; default -10 N along x.
+        S_hri: default pHRI switch, 0 or 1.
+
+    S_m and F_d are stored as read-only float arrays.
+    """
+
+    k_p: float = 0.0005
+    k_d: float = 0.0
+    k_f: float = 0.01
+    S_m: np.ndarray = (0.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+    F_d: np.ndarray = (-10.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    S_hri: float = 0.0
+    dmp: DmpParameters = field(default_factory=DmpParameters)
+
+    def __post_init__(self):
+        for name in ("k_p", "k_d", "k_f"):
+            non_negative(name, getattr(self, name))
+        _set(self, "S_m", selection("S_m", self.S_m, 6))
+        _set(self, "F_d", as_vector("F_d", self.F_d, 6))
+        _set(self, "S_hri", _switch("S_hri", self.S_hri))
+        _dmp(self.dmp)
+
+
+def shifted_velocity(z, C, k_d, tau):
+    """z~ = z - (k_d / tau) C, the state used for eqs. (stiff-dmp) and
+    (cdmp-arm) (module docstring)."""
+    return z - (k_d / tau) * C
+
+
+def paper_velocity(z_tilde, C, k_d, tau):
+    """The paper's z = z~ + (k_d / tau) C."""
+    return z_tilde + (k_d / tau) * C
+
+
+def stiffness_coupled_derivative(y, z_tilde, g, F, params, forcing=0.0):
+    """Stiffness-coupled DMP, eq. (stiff-dmp), transfer function
+    eq. (lp-admit):
+
+        tau z_dot = alpha_z (beta_z (g - y) - z) + k_d C_f_dot + f,
+        tau y_dot = z + tau C_f,    C_f = k_p F,
+
+    with the state (y, z~), z~ = z - (k_d / tau) C_f (module docstring).
+
+    State (y, z~), each (d,); inputs the goal g and the force F, (d,);
+    StiffnessCouplingParameters; forcing f(s) (default 0). Returns
+    (y_dot, z_tilde_dot); y_dot is the velocity command.
+    """
+    tau = params.dmp.tau
+    C_f = params.k_p * F
+    return transformation_derivative(
+        y, paper_velocity(z_tilde, C_f, params.k_d, tau), g, None,
+        params.dmp, forcing, coupling_velocity=tau * C_f)
+
+
+def _admittance(D_a, v):
+    return D_a @ v if D_a.ndim == 2 else D_a * v
+
+
+def admittance_coupled_derivative(y, z, C, g, F_e, params, V=0.0,
+                                  forcing=0.0):
+    """Admittance-coupled DMP, eq. (admit-dmp), with the velocity input of
+    Sec. IV-B:
+
+        tau z_dot = alpha_z (beta_z (g + C - y) - z) + f,
+        tau y_dot = z + tau C_dot,    C_dot = V + D_a (F_e - F_d).
+
+    Transfer function (derivation): e = y - g - C obeys tau e_dot = z,
+    tau z_dot = -alpha_z (beta_z e + z), with no input, so from e(0) =
+    z(0) = 0, y = g + C exactly and L(y) = D_a L(F_e) / s, eq.
+    (tf-admit), at every frequency (the attractor's poles cancel); an
+    initial mismatch e(0) decays critically damped on top.
+
+    State (y, z, C), each (d,); inputs the goal g, the wrench F_e and
+    the velocity V (default 0), (d,); AdmittanceCouplingParameters;
+    forcing f(s) (default 0). Returns (y_dot, z_dot, C_dot); y_dot is the
+    velocity command.
+    """
+    tau = params.dmp.tau
+    C_dot = V + _admittance(params.D_a, F_e - params.F_d)
+    y_dot, z_dot = transformation_derivative(
+        y, z, g + C, None, params.dmp, forcing, coupling_velocity=tau * C_dot)
+    return y_dot, z_dot, C_dot
+
+
+def whole_body_cdmp_derivative(y, z, C, E, g, V_ee, F_ext, delta_V_ee,
+                               params, S_hri=None, forcing=0.0, dmp=None):
+    """CDMP of the whole body, eq. (cdmp-wb) with the tracking-error term
+    of eq. (cdmp-wb-error):
+
+        tau z_dot = alpha_z (beta_z (g + C - (y + E)) - z) + f,
+        tau y_dot = z + tau C_dot,  C_dot = V_ee + k_hri F_ext S_hri,
+        E_dot = delta_V_ee          (E = int delta_V_ee dt),
+
+    E integrated here from the deviation delta_V_ee of eq. (deviation)
+    (it only enters E_dot, so no algebraic loop through the distributor).
+    y + E is where the end effector really is; the DMP drives it to g + C,
+    commanding back any accumulated deviation. Set E = delta_V_ee = 0 for
+    eq. (cdmp-wb) alone.
+
+    State (y, z, C, E), each (d,) (d = 6, twists [v; w]); inputs the
+    goal g, the velocity V_ee, the wrench F_ext on the end effector and
+    delta_V_ee, (d,); WholeBodyCdmpParameters; S_hri 0 or 1 (None:
+    params.S_hri); forcing f(s) (default 0); dmp: the DmpParameters of
+    the transformation system (None: params.dmp; a learned movement's
+    gains and tau while it plays). Returns (y_dot, z_dot, C_dot, E_dot);
+    y_dot is the velocity V_ee^ref sent to the distributor.
+    """
+    S = params.S_hri if S_hri is None else S_hri
+    dmp = params.dmp if dmp is None else dmp
+    C_dot = V_ee + (params.k_hri * S) * F_ext
+    y_dot, z_dot = transformation_derivative(
+        y + E, z, g + C, None, dmp, forcing,
+        coupling_velocity=dmp.tau * C_dot)
+    return y_dot, z_dot, C_dot, delta_V_ee
+
+
+def base_cdmp_derivative(y, z, C, g, V_b, obstacle_points, params,
+                         forcing=0.0):
+    """CDMP of the base, eq. (cdmp-base):
+
+        tau z_dot = alpha_z (beta_z (g + C - y) - z) + f_avoid + f,
+        tau y_dot = z + tau C_dot,    C_dot = V_b,
+
+    f_avoid from `repulsive_force` on x and y; the yaw (third entry, if
+    any) is unaffected by obstacles. The state integrates the commanded
+    motion in the coordinates of T_b (as a velocity filter), where the
+    obstacle points are given.
+
+    State (y, z, C), each (3,) [x, y, yaw] (or (2,)); inputs the goal
+    g, the velocity V_b = [vx, vy, wz] and the (M, 2) obstacle points in
+    T_b; BaseCdmpParameters; forcing f(s) (default 0). Returns (y_dot,
+    z_dot, C_dot); y_dot is the base command V_b'.
+    """
+    f_xy = repulsive_force(obstacle_points, params.repulsion)
+    f_avoid = np.concatenate([f_xy, 0.0 * y[2:]])
+    y_dot, z_dot = transformation_derivative(
+        y, z, g + C, None, params.dmp, forcing, f_avoid,
+        params.dmp.tau * V_b)
+    return y_dot, z_dot, V_b
+
+
+def arm_cdmp_derivative(y, z_tilde, C_a, g, V_a, F_ext, params, S_hri=None,
+                        forcing=0.0):
+    """CDMP of the arm, hybrid stiffness/force control, eq. (cdmp-arm):
+
+        tau z_dot = alpha_z (beta_z (g + C_a - y) - z) + f + k_d C_s_dot,
+        tau y_dot = z + C_s + tau C_a_dot,    C_s = k_p S_m F_ext,
+        C_a_dot = V_a + k_f (I - S_m)(F_ext - F_d)(1 - S_hri),
+
+    (force-term sign and the state z~ = z - (k_d / tau) C_s: module
+    docstring; C_s enters tau y_dot without the factor tau of eq.
+    (stiff-dmp), as printed; the same for the paper's tau = 1). Steady
+    state with V_a = 0: y = g + C_a + C_s / beta_z on the stiffness
+    axes; F_ext = F_d on the force axes (S_hri = 0).
+
+    State (y, z~, C_a), each (6,) (T_a, [v; w] axes); inputs the goal
+    g, the velocity V_a and the wrench F_ext on the tool, (6,);
+    ArmCdmpParameters; S_hri 0 or 1 (None: params.S_hri); forcing f(s)
+    (default 0). Returns (y_dot, z_tilde_dot, C_a_dot); y_dot is the
+    arm's velocity command.
+    """
+    tau = params.dmp.tau
+    S = params.S_hri if S_hri is None else S_hri
+    C_s = params.k_p * params.S_m * F_ext
+    C_a_dot = V_a + (params.k_f * (1.0 - params.S_m)) * (
+        F_ext - params.F_d) * (1.0 - S)
+    y_dot, z_tilde_dot = transformation_derivative(
+        y, paper_velocity(z_tilde, C_s, params.k_d, tau), g + C_a, None,
+        params.dmp, forcing, coupling_velocity=C_s + tau * C_a_dot)
+    return y_dot, z_tilde_dot, C_a_dot

@@ -1,0 +1,145 @@
+"""Demonstrations of a whole-body movement, recorded in pHRI mode, for
+teach and repeat (drake_wbc.math.movement).
+
+Recording. `demonstration_from_log` builds the TCP's pose from the
+MEASURED arm joints and the base's odometry (base.state_estimated)
+through the controller's nominal kinematics (robot_model.ArmKinematics:
+mount at rest), the same for a simulated RunLog and for an lcm-logger log
+read as a RunLog (drake_wbc.deployment.lcm_logs); the yaw is unwrapped.
+
+Start and stop markers. The demonstration is the interval in which the
+worker has pHRI on: the task's S_hri schedule (`teaching_interval`). It
+exists on the real robot as on the simulated one (the scenario's task
+schedule runs on the controller's clock, which an lcm-logger log keeps),
+it is what the worker does anyway to guide the robot, and switching it
+off once the robot rests gives a demonstration that ends at rest, as the
+DMP fit needs. `drake-wbc teach --start/--stop` overrides it.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from drake_wbc.math.validation import as_matrix, as_vector
+
+DIMENSIONS = ("x", "y", "z", "yaw")
+"""The recorded (and learned) dimensions of the TCP's pose, in order."""
+
+
+@dataclass(frozen=True, eq=False)
+class Demonstration:
+    """One demonstration: sample times and what the robot did.
+
+    Attributes:
+        time: (N,) strictly increasing times, s.
+        tcp: (N, 4) the TCP's pose [x, y, z, yaw] in the world (m, rad),
+            yaw unwrapped.
+        base: (N, 3) the base's pose [x, y, yaw] in the world, or None.
+        arm: (N, 6) the arm's joints (rad), or None.
+    """
+
+    time: np.ndarray
+    tcp: np.ndarray
+    base: np.ndarray | None = None
+    arm: np.ndarray | None = None
+
+    def __post_init__(self):
+        time = as_vector("time", self.time)
+        if time.size < 3 or np.any(np.diff(time) <= 0.0):
+            raise ValueError(f"time = {self.time!r} is not allowed: must "
+                             "hold 3 or more strictly increasing times")
+        object.__setattr__(self, "time", time)
+        object.__setattr__(self, "tcp", as_matrix("tcp", self.tcp,
+                                                  (time.size, 4)))
+        for name, width in (("base", 3), ("arm", 6)):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, as_matrix(
+                    name, value, (time.size, width)))
+
+    @property
+    def duration(self):
+        """The demonstration's length, s."""
+        return float(self.time[-1] - self.time[0])
+
+
+class TcpPose:
+    """The TCP's pose [x, y, z, yaw] in the world from the base's pose
+    [x, y, yaw] and the arm's joints (6,), through the nominal kinematics
+    (robot_model.ArmKinematics, the controller's: mount at rest, T_b on
+    the floor). Call it with (base_pose, arm_positions).
+
+    Args:
+        arm: the robot's ArmKinematics (drake_wbc.robot.model).
+    """
+
+    def __init__(self, arm):
+        self.arm = arm
+        context = self.arm.plant.CreateDefaultContext()
+        model = self.arm.model
+        self._X_BA = model.arm_base_frame.CalcPose(context, model.base_frame)
+
+    def __call__(self, base_pose, arm_positions):
+        x, y, yaw = base_pose
+        X_BE = self._X_BA @ self.arm.frame_pose(arm_positions,
+                                                self.arm.model.tcp_frame)
+        c, s = np.cos(yaw), np.sin(yaw)
+        R_WB = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        p = R_WB @ X_BE.translation() + [x, y, 0.0]
+        R = R_WB @ X_BE.rotation().matrix()
+        # The yaw of roll-pitch-yaw angles (R = Rz Ry Rx).
+        return np.array([p[0], p[1], p[2], np.arctan2(R[1, 0], R[0, 0])])
+
+
+def tcp_poses(base_pose, arm_positions, arm):
+    """The TCP's pose [x, y, z, yaw] (N, 4) in the world from the base's
+    pose [x, y, yaw] (N, 3) and the arm's joints (N, 6) (TcpPose); yaw
+    unwrapped."""
+    base_pose = as_matrix("base_pose", base_pose, (None, 3))
+    arm_positions = as_matrix("arm_positions", arm_positions,
+                              (base_pose.shape[0], 6))
+    pose = TcpPose(arm)
+    poses = np.array([pose(b, q) for b, q in zip(base_pose, arm_positions,
+                                                   strict=True)])
+    poses[:, 3] = np.unwrap(poses[:, 3])
+    return poses
+
+
+def demonstration_from_log(log, start, stop, arm):
+    """The demonstration in `log` (a RunLog) between `start` and `stop`
+    (s, inclusive), from the measured joints and the base's odometry
+    through `arm`, the robot's ArmKinematics (module docstring)."""
+    start, stop = float(start), float(stop)
+    mask = (log.time >= start - 1e-9) & (log.time <= stop + 1e-9)
+    if not stop > start or np.count_nonzero(mask) < 3:
+        raise ValueError(
+            f"start = {start!r} s, stop = {stop!r} s is not allowed: must "
+            "be an interval of the log (from "
+            f"{log.time[0]:.3f} to {log.time[-1]:.3f} s) with 3 or more "
+            "samples")
+    base = np.asarray(log["base.state_estimated"])[mask, :3]
+    joints = np.asarray(log["arm.position_measured"])[mask]
+    return Demonstration(np.asarray(log.time)[mask], tcp_poses(
+        base, joints, arm), base, joints)
+
+
+def teaching_interval(schedule, duration, default_switch=0.0):
+    """(start, stop) of the first interval where S_hri is 1 in a task
+    Schedule of phri_switch (hold interpolation, as the runner plays it;
+    an empty schedule is the parameter `default_switch` throughout),
+    clipped to [0, duration]."""
+    times = list(schedule.times)
+    values = [float(v[0]) for v in schedule.values]
+    if not times:
+        times, values = [0.0], [float(default_switch)]
+    on = [v >= 0.5 for v in values]
+    for i, is_on in enumerate(on):
+        if is_on:
+            start = 0.0 if i == 0 else times[i]
+            stop = next((times[j] for j in range(i + 1, len(on))
+                         if not on[j]), duration)
+            return max(start, 0.0), min(stop, duration)
+    raise ValueError(
+        f"phri_switch = {values!r} is not allowed for teaching: S_hri is "
+        "never 1, so there is no demonstration; switch it on while the "
+        "worker guides the robot, or give the start and stop times")

@@ -1,0 +1,133 @@
+"""The base's second-order low-pass filter, eq. (filtering), as plain math.
+
+    V_b^flt(s) = omega_f^2 / (s^2 + 2 zeta omega_f s + omega_f^2) V_b'(s)
+
+The base is much slower than the arm, so the paper filters the base's share
+of the motion and lets the arm make up the difference (Sec. IV-A,
+"Trajectory Filtering"). Per axis the filter is the state-space system
+
+    x = [y, y_dot],  x_dot = A x + B u,  y = C x,
+    A = [[0, 1], [-omega_f^2, -2 zeta omega_f]],  B = [0, omega_f^2]^T,
+    C = [1, 0],  D = 0,
+
+with no direct feedthrough, so its output can close feedback loops in a
+Drake diagram. At a control period h it is discretised exactly for a
+piecewise-constant input (zero-order hold): A_d = e^(A h) and
+B_d = int_0^h e^(A t) dt B. The closed-form responses below are derived
+independently of these matrices, from partial fractions of H(s)/s, so that
+the two can check each other.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import expm
+
+from drake_wbc.math.validation import non_negative, positive
+
+
+@dataclass
+class BaseFilterParameters:
+    """Parameters of the base velocity filter, eq. (filtering).
+
+    Attributes:
+        omega_f: cut-off (natural) frequency omega_f in rad/s, > 0; the
+            paper's experiments use 2 pi (1 Hz).
+        zeta: damping ratio, > 0; the paper uses 1.0 (critically damped:
+            the filtered velocity never overshoots a step).
+        time_step: control period h in s; 0 gives the continuous filter,
+            > 0 its exact zero-order-hold discretisation. omega_f must stay
+            below the Nyquist rate pi / h.
+        enabled: False bypasses the filter (the paper's comparison run
+            "without trajectory filtering"): the command is then V_b'
+            itself, sampled at each tick and held like every discrete
+            command, so the output still leaves from state. Needs
+            time_step > 0.
+    """
+
+    omega_f: float = 2.0 * np.pi
+    zeta: float = 1.0
+    time_step: float = 0.01
+    enabled: bool = True
+
+    def __post_init__(self):
+        positive("omega_f", self.omega_f)
+        positive("zeta", self.zeta)
+        h = non_negative("time_step", self.time_step)
+        if not isinstance(self.enabled, (bool, np.bool_)):
+            raise ValueError(f"enabled = {self.enabled!r} is not allowed: "
+                             "must be true or false")
+        if not self.enabled and h == 0.0:
+            raise ValueError(
+                "enabled = False is not allowed with time_step = 0: the "
+                "bypassed filter is a one-period hold, which needs a "
+                "control period > 0")
+        if h > 0.0 and self.omega_f >= np.pi / h:
+            raise ValueError(
+                f"omega_f = {self.omega_f!r} rad/s is not allowed with "
+                f"time_step = {h!r} s: must be below the Nyquist rate "
+                f"pi / time_step = {np.pi / h:.6g} rad/s"
+            )
+
+
+def lowpass_state_space(omega_f, zeta):
+    """Returns (A, B, C, D) of one axis of eq. (filtering), continuous."""
+    w = positive("omega_f", omega_f)
+    z = positive("zeta", zeta)
+    A = np.array([[0.0, 1.0], [-w * w, -2.0 * z * w]])
+    B = np.array([[0.0], [w * w]])
+    C = np.array([[1.0, 0.0]])
+    D = np.zeros((1, 1))
+    return A, B, C, D
+
+
+def zero_order_hold(A, B, time_step):
+    """Returns (A_d, B_d): the exact discretisation of x_dot = A x + B u for
+    an input held constant over each period `time_step`.
+
+    Both come from one matrix exponential of [[A, B], [0, 0]] h.
+    """
+    h = positive("time_step", time_step)
+    n, m = B.shape
+    augmented = np.zeros((n + m, n + m))
+    augmented[:n, :n] = A
+    augmented[:n, n:] = B
+    transition = expm(augmented * h)
+    return transition[:n, :n], transition[:n, n:]
+
+
+def lowpass_response(omega_f, zeta, omega):
+    """Frequency response of eq. (filtering) at angular frequencies `omega`
+    (rad/s): omega_f^2 / (omega_f^2 - omega^2 + 2j zeta omega_f omega)."""
+    w = positive("omega_f", omega_f)
+    z = positive("zeta", zeta)
+    s = 1j * np.asarray(omega, dtype=float)
+    return w * w / (s * s + 2.0 * z * w * s + w * w)
+
+
+def lowpass_zoh_response(omega_f, zeta, time_step, omega):
+    """Frequency response of the exact zero-order-hold equivalent of
+    eq. (filtering) at angular frequencies `omega` (rad/s), z = e^(j omega h).
+
+    From H_d(z) = (1 - z^-1) Z{H(s)/s}, in closed form:
+    - zeta = 1 (double pole at -omega_f, q = e^(-omega_f h)):
+      H_d = 1 - (z - 1)/(z - q) - omega_f h q (z - 1)/(z - q)^2;
+    - zeta != 1 (poles p_1 != p_2, residues r_i = omega_f^2 /
+      (p_i (p_i - p_j)) of H(s)/s): H_d = 1 + sum_i r_i (z - 1)/(z - e^(p_i h)).
+    The second form loses digits as zeta approaches 1 (the residues grow
+    as 1 / (p_1 - p_2)); it is exact to about 1e-9 for |zeta - 1| > 1e-3.
+    """
+    w = positive("omega_f", omega_f)
+    z_ratio = positive("zeta", zeta)
+    h = positive("time_step", time_step)
+    z = np.exp(1j * np.asarray(omega, dtype=float) * h)
+    if z_ratio == 1.0:
+        q = np.exp(-w * h)
+        return 1.0 - (z - 1.0) / (z - q) - w * h * q * (z - 1.0) / (z - q) ** 2
+    root = np.sqrt(complex(z_ratio * z_ratio - 1.0))
+    poles = (-z_ratio * w + w * root, -z_ratio * w - w * root)
+    response = np.ones_like(z)
+    for p_i, p_j in (poles, poles[::-1]):
+        residue = w * w / (p_i * (p_i - p_j))
+        response = response + residue * (z - 1.0) / (z - np.exp(p_i * h))
+    return response

@@ -1,0 +1,81 @@
+"""The fast float kernels of the control tick, each beside its reference.
+
+Each equation of the paper has one reference body in this package,
+scalar-generic (float and AutoDiffXd), which is what a reader checks
+against the paper and what `Linearize` differentiates. Where the control
+tick needs speed, an equation may have at most ONE fast kernel beside it:
+a float-only function with the reference's arguments and its result (to
+rounding), registered with `fast_kernel`:
+
+    def transition(value, upper, lower):            # the reference
+        ...
+
+    @fast_kernel(transition, sample=_transition_inputs)
+    def transition_float(value, upper, lower):      # the kernel
+        ...
+
+A stage chooses once, when it is built, which body it runs
+(`body_for(reference, T)`): the kernel in double where there is one, the
+reference otherwise (AutoDiffXd, or no kernel). No calculation branches
+on the scalar type.
+
+tests/test_kernels.py holds every registered kernel equal to its
+reference on random inputs drawn by the kernel's own `sample`.
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Kernel:
+    """A fast float kernel and the reference it stands in for.
+
+    Attributes:
+        reference: the scalar-generic reference body of the equation.
+        fast: the float kernel; the same arguments, the same result.
+        sample: sample(rng) -> a tuple of positional arguments that both
+            take, drawn from a numpy Generator (random inputs for the
+            test that holds them equal).
+    """
+
+    reference: Callable
+    fast: Callable
+    sample: Callable
+
+
+_KERNELS: dict[Callable, Kernel] = {}
+
+
+def fast_kernel(reference, sample):
+    """Registers the decorated function as the fast float kernel of
+    `reference` (see the module). One equation has at most one kernel:
+    registering a second raises ValueError."""
+
+    def register(fast):
+        if reference in _KERNELS:
+            raise ValueError(
+                f"{reference.__module__}.{reference.__qualname__} already "
+                f"has a fast kernel ({_KERNELS[reference].fast.__qualname__}"
+                f"); an equation has at most one, {fast.__qualname__} is "
+                "not allowed")
+        _KERNELS[reference] = Kernel(reference, fast, sample)
+        return fast
+
+    return register
+
+
+def body_for(reference, T):
+    """The body a stage of scalar type `T` runs for `reference`, chosen
+    once when the stage is built: its fast kernel for float, if it has
+    one; the reference otherwise."""
+    kernel = _KERNELS.get(reference)
+    if T is float and kernel is not None:
+        return kernel.fast
+    return reference
+
+
+def registered_kernels():
+    """Every registered Kernel, in the order of registration (import the
+    math modules first: registering happens when they load)."""
+    return tuple(_KERNELS.values())

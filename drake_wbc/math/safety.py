@@ -1,0 +1,349 @@
+"""Run-time safety of the controller, as plain math.
+
+The controller (drake_wbc.controller.diagram) must never send a command it
+cannot
+stand behind. Three mechanisms serve that, and this module holds their math
+(numpy only; the Drake systems in drake_wbc.stages.safety are thin over
+it):
+
+1. Input validity (`check_vector`, `check_points`): every value that enters
+   the controller is checked once a tick. A NaN, an infinite value, or a
+   value outside the range a stage accepts (k_n < 0 in eq. (wbccm), s_c
+   outside [0, 1] in eq. (compensation)) is a fault of that input.
+   Obstacle points are the exception: a row with a NaN or infinite
+   coordinate is dropped and counted, not a fault (see `check_points`).
+2. The safe stop (`next_stop_state`): on a fault the controller stops (zero
+   base velocity, the arm held at its last good position command) and it
+   resumes only after every input has been valid again for `hold_time`.
+3. Command limits that keep the direction, in drake_wbc.math.command_limits:
+   the base command is scaled as a whole to the robot's velocity limits
+   (SafetyParameters, below), and its change from one tick to the next as
+   a whole to the acceleration limits.
+
+The robot's limits are those of the robot facts: base 1.0 m/s along x and
+y, 1.0 rad/s in yaw, 1.0 m/s^2 and 1.0 rad/s^2.
+"""
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import NamedTuple
+
+import numpy as np
+
+from drake_wbc.math.validation import non_negative, positive, positive_vector
+
+BASE_AXES = 3
+"""The base's velocity components [vx, vy, wz] (T_b)."""
+
+BASE_VELOCITY_LIMITS = (1.0, 1.0, 1.0)
+"""The base's velocity limits [vx, vy, wz]: m/s, m/s, rad/s."""
+
+BASE_ACCELERATION_LIMITS = (1.0, 1.0, 1.0)
+"""The base's acceleration limits [vx, vy, wz]: m/s^2, m/s^2, rad/s^2."""
+
+DEFAULT_HOLD_TIME = 0.5
+"""Seconds for which every input must be valid again before the controller
+resumes after a safe stop.
+
+0.5 s is longer than a transient glitch of a sensor or of a link (a few
+dropped or corrupted samples at 100 Hz), long enough for the base's
+velocity loop (0.1 to 0.3 s lag) to have come to rest after the stop, and
+short enough not to be a nuisance when an operator clears a fault."""
+
+TIME_TOLERANCE = 1e-9
+"""Rounding allowance (s) when the valid time is compared to the hold
+time."""
+
+
+class Reason(IntEnum):
+    """Why an input is not valid (the reason code of the safety status)."""
+
+    VALID = 0
+    NOT_A_NUMBER = 1
+    INFINITE = 2
+    OUT_OF_RANGE = 3
+    MALFORMED = 4
+
+
+class InputCheck(NamedTuple):
+    """The result of checking one input.
+
+    Attributes:
+        reason: a Reason; VALID when the input is usable.
+        entry: the index of the first bad entry (-1 when valid or when the
+            whole value is malformed).
+        value: the bad entry's value (NaN when valid or malformed).
+    """
+
+    reason: Reason
+    entry: int = -1
+    value: float = math.nan
+
+    @property
+    def valid(self):
+        return self.reason is Reason.VALID
+
+
+VALID = InputCheck(Reason.VALID)
+"""The result of checking a valid input."""
+
+
+@dataclass
+class SafetyParameters:
+    """Parameters of the controller's run-time safety.
+
+    Attributes:
+        hold_time: s > 0 for which every input must be valid again before
+            the controller resumes after a safe stop (`DEFAULT_HOLD_TIME`).
+        base_velocity_limits: (3,) > 0, the base command's limits
+            [vx, vy, wz] in m/s, m/s, rad/s; the robot's 1.0 each.
+        base_acceleration_limits: (3,) > 0, the limits of the command's
+            rate of change [vx, vy, wz] in m/s^2, m/s^2, rad/s^2; the
+            robot's 1.0 each.
+        stop_distance: m >= 0 that the base keeps from an obstacle point,
+            and stop_time: s > 0, the time constant of its approach
+            (drake_wbc.math.separation); 0.1 m and 0.5 s by default.
+
+    The arm's limits (joint positions, 1.57 rad/s, 12.56 rad/s^2) are those
+    of ArmControllerParameters. Vectors are given as any sequence (a list
+    in YAML) and stored as tuples, so that parameters compare with ==.
+    """
+
+    hold_time: float = DEFAULT_HOLD_TIME
+    base_velocity_limits: list[float] = BASE_VELOCITY_LIMITS
+    base_acceleration_limits: list[float] = BASE_ACCELERATION_LIMITS
+    stop_distance: float = 0.1
+    stop_time: float = 0.5
+
+    def __post_init__(self):
+        positive("hold_time", self.hold_time)
+        non_negative("stop_distance", self.stop_distance)
+        positive("stop_time", self.stop_time)
+        for name in ("base_velocity_limits", "base_acceleration_limits"):
+            setattr(self, name, tuple(
+                positive_vector(name, getattr(self, name), BASE_AXES)
+                .tolist()))
+
+
+def check_vector(value, lower=-math.inf, upper=math.inf):
+    """Checks an input vector: every entry finite and in [lower, upper].
+
+    Args:
+        value: a vector (any sequence of numbers).
+        lower, upper: the range allowed for every entry (numbers).
+
+    Returns:
+        InputCheck: VALID, or the reason, index and value of the first bad
+        entry (NaN, then infinite, then out of range, whichever comes
+        first in the vector).
+    """
+    vector = np.asarray(value, dtype=float).ravel()
+    finite = np.isfinite(vector)
+    in_range = finite & (vector >= lower) & (vector <= upper)
+    if np.all(in_range):
+        return VALID
+    i = int(np.flatnonzero(~in_range)[0])
+    if np.isnan(vector[i]):
+        reason = Reason.NOT_A_NUMBER
+    elif not finite[i]:
+        reason = Reason.INFINITE
+    else:
+        reason = Reason.OUT_OF_RANGE
+    return InputCheck(reason, i, float(vector[i]))
+
+
+def check_points(points):
+    """Checks obstacle points and keeps the usable ones.
+
+    A row with a NaN or an infinite coordinate is dropped: a scanner
+    reports a beam without a return that way, and one point less of a
+    scan of hundreds does not hide an obstacle (its neighbours still see
+    it), whereas stopping on it would stop the robot in normal use. An
+    array that is not (M, 2) numbers is malformed: a fault.
+
+    Args:
+        points: the (M, 2) array of the obstacle points' port.
+
+    Returns:
+        (kept, dropped, check): the (K, 2) float array of the finite rows,
+        the number of rows dropped, and VALID or a MALFORMED InputCheck
+        (then kept is empty).
+    """
+    if (type(points) is np.ndarray and points.dtype == np.float64
+            and points.ndim == 2 and points.shape[1] == 2
+            and np.isfinite(points).all()):
+        return points, 0, VALID
+    try:
+        array = np.asarray(points, dtype=float)
+    except (TypeError, ValueError):
+        array = None
+    if array is None or array.ndim != 2 or array.shape[1] != 2:
+        return np.zeros((0, 2)), 0, InputCheck(Reason.MALFORMED)
+    rows = np.all(np.isfinite(array), axis=1)
+    if np.all(rows):
+        return array, 0, VALID
+    return array[rows], int(np.count_nonzero(~rows)), VALID
+
+
+def describe(name, check, size=None):
+    """A sentence that says what is wrong with the input `name`.
+
+    Args:
+        name: the input port's name.
+        check: its InputCheck.
+        size: the port's size, for a malformed value.
+    """
+    where = f"{name}[{check.entry}]"
+    if check.reason is Reason.VALID:
+        return f"{name} is valid"
+    if check.reason is Reason.NOT_A_NUMBER:
+        return f"{where} is NaN"
+    if check.reason is Reason.INFINITE:
+        return f"{where} = {check.value!r} is infinite"
+    if check.reason is Reason.OUT_OF_RANGE:
+        return f"{where} = {check.value!r} is out of the range allowed"
+    shape = "(M, 2)" if size is None else f"({size},)"
+    return f"{name} is malformed: it must be an array of shape {shape}"
+
+
+class StopState(NamedTuple):
+    """The safe stop's state.
+
+    Attributes:
+        stopped: True while the controller is stopped.
+        valid_time: s for which every input has been valid (0 at the tick
+            at which one was not).
+    """
+
+    stopped: bool
+    valid_time: float
+
+
+def next_stop_state(state, invalid, time_step, hold_time):
+    """The safe stop's state after one control tick.
+
+    A tick with an invalid input stops the controller and restarts the
+    valid time at 0; each valid tick adds one period, and the stop clears
+    at the tick at which the valid time reaches `hold_time`, that is
+    ceil(hold_time / time_step) ticks after the last invalid one.
+
+    Args:
+        state: the StopState before the tick.
+        invalid: whether an input is invalid at this tick.
+        time_step: the control period h > 0, s.
+        hold_time: s > 0.
+
+    Returns:
+        StopState after the tick.
+    """
+    if invalid:
+        return StopState(True, 0.0)
+    valid_time = state.valid_time + time_step
+    stopped = bool(state.stopped) and (
+        valid_time < hold_time - TIME_TOLERANCE)
+    return StopState(stopped, valid_time)
+
+
+STATUS_FIELDS = ("stopped", "invalid", "reason", "input", "entry", "value",
+                 "valid_time", "trips", "dropped_points")
+"""The entries of the safety status vector (the controller's
+`safety_status` output):
+
+- stopped: 1.0 while the controller is in a safe stop, else 0.0.
+- invalid: 1.0 while an input is invalid (stopped and not invalid: the
+  inputs are valid again and the hold time runs).
+- reason: the Reason code of the stop (0 when not stopped).
+- input: the index of the input that caused it (among the guard's
+  input_names), -1 when not stopped.
+- entry: the index of its first bad entry, -1 when none.
+- value: that entry's value (0.0 for NaN, so that the status stays finite;
+  +-1e308 for an infinity).
+- valid_time: s for which every input has been valid.
+- trips: how many safe stops have started since the beginning.
+- dropped_points: obstacle points dropped at the last tick (a row with a
+  NaN or an infinite coordinate; not a fault).
+"""
+
+(_STOPPED, _INVALID, _REASON, _INPUT, _ENTRY, _VALUE, _VALID_TIME, _TRIPS,
+ _DROPPED) = range(len(STATUS_FIELDS))
+
+_INFINITY_STORED = 1e308
+"""How an infinite bad value is stored in the (finite) status."""
+
+
+def initial_status():
+    """The status at the start: not stopped, no fault, no trips."""
+    status = np.zeros(len(STATUS_FIELDS))
+    status[[_INPUT, _ENTRY]] = -1.0
+    return status
+
+
+def stop_state_of(status):
+    """The StopState that a status vector records."""
+    return StopState(bool(status[_STOPPED] >= 0.5),
+                     float(status[_VALID_TIME]))
+
+
+def next_status(status, fault, after, dropped=0):
+    """The status after one tick.
+
+    Args:
+        status: the status vector before the tick (see STATUS_FIELDS).
+        fault: (input index, InputCheck) of the first invalid input at this
+            tick, or None.
+        after: the StopState after the tick (`next_stop_state`).
+        dropped: obstacle points dropped at this tick.
+
+    Returns:
+        The new status vector: the fault's details while it lasts, kept
+        while the stop holds, cleared with it; trips counts each start of a
+        stop.
+    """
+    new = np.array(status, dtype=float)
+    was_stopped = new[_STOPPED] >= 0.5
+    new[_STOPPED] = 1.0 if after.stopped else 0.0
+    new[_INVALID] = 0.0 if fault is None else 1.0
+    new[_VALID_TIME] = after.valid_time
+    new[_DROPPED] = dropped
+    if fault is not None:
+        index, check = fault
+        value = check.value
+        if not math.isfinite(value):
+            value = 0.0 if math.isnan(value) else math.copysign(
+                _INFINITY_STORED, value)
+        new[_REASON] = int(check.reason)
+        new[_INPUT] = index
+        new[_ENTRY] = check.entry
+        new[_VALUE] = value
+    elif not after.stopped:
+        new[_REASON] = new[_VALUE] = 0.0
+        new[_INPUT] = new[_ENTRY] = -1.0
+    if after.stopped and not was_stopped:
+        new[_TRIPS] += 1.0
+    return new
+
+
+def status_reason(status, input_names, sizes, hold_time):
+    """What a status vector says, as a sentence ("" when not stopped).
+
+    Args:
+        status: the status vector.
+        input_names: the inputs' names, in the order of its `input`.
+        sizes: their sizes (None for the obstacle points).
+        hold_time: s, for the message while the stop holds.
+    """
+    if status[_STOPPED] < 0.5:
+        return ""
+    i = int(status[_INPUT])
+    reason = Reason(int(status[_REASON]))
+    value = float(status[_VALUE])
+    if reason is Reason.INFINITE:
+        value = math.copysign(math.inf, value)
+    text = describe(input_names[i],
+                    InputCheck(reason, int(status[_ENTRY]), value),
+                    sizes[i])
+    if status[_INVALID] < 0.5:
+        text += (f"; the inputs are valid again, resuming after "
+                 f"{hold_time:g} s of valid inputs")
+    return text

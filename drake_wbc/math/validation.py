@@ -1,0 +1,354 @@
+"""Argument checks that fail early and say exactly what was wrong.
+
+Every public function of the math layer checks its inputs with these helpers,
+so that a bad value is reported where it enters, with the argument's name,
+the value received and what is allowed, instead of surfacing later as a NaN
+in a command to the robot. Each helper returns the checked value as a
+float numpy array (or float), ready to use.
+
+The parameter dataclasses check (and normalise) their fields in
+`__post_init__`. They are plain, mutable dataclasses, so that Drake's
+`yaml_load_typed` can fill them field by field
+(drake_wbc.controller.parameters); after
+assigning fields, `validate` runs every check of a parameters tree again.
+A stage keeps a validated copy of the parameters it is constructed with
+(`validated_copy`), so changing a parameters object afterwards has no
+effect on the stages already built from it.
+"""
+
+import copy
+import dataclasses
+import re
+
+import numpy as np
+
+
+def _shown(value):
+    """A short, readable rendering of a value for an error message."""
+    text = np.array2string(np.asarray(value), precision=6, threshold=20)
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
+def as_vector(name, value, size=None):
+    """Returns `value` as a finite float vector, optionally of a given size.
+
+    Raises:
+        ValueError: naming `name` when the value is not a 1-D array of
+            `size` finite numbers.
+    """
+    return _as_array(name, value, (size,), "vector")
+
+
+def as_matrix(name, value, shape):
+    """Returns `value` as a finite float matrix of `shape`.
+
+    An entry None in `shape` accepts any size along that axis, e.g.
+    (6, None) for a Jacobian with six rows.
+
+    Raises:
+        ValueError: naming `name` when the shape is wrong or an entry is not
+            finite.
+    """
+    return _as_array(name, value, shape, "matrix")
+
+
+def _as_array(name, value, shape, kind):
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"{name} = {value!r} is not allowed: must be a {kind} of numbers"
+        ) from None
+    fits = array.ndim == len(shape) and all(
+        wanted is None or size == wanted
+        for size, wanted in zip(array.shape, shape, strict=False)
+    )
+    if not fits:
+        wanted = ", ".join("any" if n is None else str(n) for n in shape)
+        wanted += "," if len(shape) == 1 else ""
+        raise ValueError(
+            f"{name} has shape {array.shape}, which is not allowed: "
+            f"must have shape ({wanted})"
+        )
+    if not np.all(np.isfinite(array)):
+        raise ValueError(
+            f"{name} = {_shown(array)} is not allowed: "
+            "every entry must be finite (no NaN or infinity)"
+        )
+    return array
+
+
+def as_scalar(name, value):
+    """Returns `value` as a finite float.
+
+    Raises:
+        ValueError: naming `name` when the value is not one finite number.
+    """
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"{name} = {value!r} is not allowed: must be a single number"
+        ) from None
+    if not np.isfinite(number):
+        raise ValueError(
+            f"{name} = {number!r} is not allowed: must be finite"
+        )
+    return number
+
+
+def in_closed_range(name, value, lower, upper):
+    """Returns `value` as a float after checking lower <= value <= upper.
+
+    Raises:
+        ValueError: naming `name`, its value and the allowed range.
+    """
+    number = as_scalar(name, value)
+    if not lower <= number <= upper:
+        raise ValueError(
+            f"{name} = {number!r} is not allowed: "
+            f"must lie in [{lower}, {upper}]"
+        )
+    return number
+
+
+def whole_number(name, value, minimum=0):
+    """`value` as an int >= `minimum` (811.0 is accepted; a bool is not).
+
+    Raises:
+        ValueError: naming `name`, its value and what is allowed.
+    """
+    number = in_closed_range(name, value, minimum, np.inf)
+    if not number.is_integer() or isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} = {value!r} is not allowed: must be a "
+                         "whole number")
+    return int(number)
+
+
+def boolean(name, value):
+    """Returns `value` as a bool after checking that it is True or False
+    (numpy's bools too; not 0, 1 or a string).
+
+    Raises:
+        ValueError: naming `name` and its value.
+    """
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} = {value!r} is not allowed: must be true "
+                         "or false")
+    return bool(value)
+
+
+def text(name, value):
+    """Returns `value` after checking that it is a string.
+
+    Raises:
+        ValueError: naming `name` and its value.
+    """
+    if not isinstance(value, str):
+        raise ValueError(f"{name} = {value!r} is not allowed: must be a "
+                         "string")
+    return value
+
+
+def selection(name, value, size):
+    """Returns `value` as a vector of `size` entries, each exactly 0 or 1
+    (the diagonal of a selection matrix such as S_m, or a switch such as
+    S_hri with size 1).
+
+    Raises:
+        ValueError: naming `name`, its value and the first bad entry.
+    """
+    vector = as_vector(name, np.atleast_1d(value), size)
+    bad = np.flatnonzero((vector != 0.0) & (vector != 1.0))
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"{name} = {_shown(vector)} is not allowed: every entry must "
+            f"be 0 or 1 (here {name}[{i}] = {float(vector[i])!r})")
+    return vector
+
+
+def whole_multiple(name, value, period_name, period, tolerance=1e-9):
+    """Returns `value` as a float after checking that it is a whole
+    multiple (1, 2, ...) of `period` > 0, to a relative `tolerance`.
+
+    Raises:
+        ValueError: naming both, their values and what is allowed.
+    """
+    number = positive(name, value)
+    base = positive(period_name, period)
+    ratio = number / base
+    if ratio < 1.0 - tolerance or abs(ratio - round(ratio)) > tolerance:
+        raise ValueError(
+            f"{name} = {number!r} s is not allowed with {period_name} = "
+            f"{base!r} s: must be a whole multiple (1, 2, ...) of it")
+    return number
+
+
+def positive(name, value):
+    """Returns `value` as a float after checking that it is > 0.
+
+    Raises:
+        ValueError: naming `name` and its value.
+    """
+    return _above(name, value, strict=True)
+
+
+def non_negative(name, value):
+    """Returns `value` as a float after checking that it is >= 0.
+
+    Raises:
+        ValueError: naming `name` and its value.
+    """
+    return _above(name, value, strict=False)
+
+
+def _above(name, value, strict):
+    number = as_scalar(name, value)
+    if not (number > 0.0 if strict else number >= 0.0):
+        wanted = "greater than 0" if strict else "0 or greater"
+        raise ValueError(
+            f"{name} = {number!r} is not allowed: must be {wanted}"
+        )
+    return number
+
+
+def ordered_limits(lower_name, lower, upper_name, upper, size=None):
+    """Returns (lower, upper) as vectors after checking lower < upper.
+
+    Works for scalars too (pass size=None and numbers): the result is then
+    a pair of 1-element vectors.
+
+    Raises:
+        ValueError: naming both arguments and the first index where the
+            lower limit is not below the upper one.
+    """
+    lower = as_vector(lower_name, np.atleast_1d(lower), size)
+    upper = as_vector(upper_name, np.atleast_1d(upper), lower.shape[0])
+    bad = np.flatnonzero(lower >= upper)
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"{lower_name}[{i}] = {float(lower[i])!r} and {upper_name}[{i}] "
+            f"= {float(upper[i])!r} are not allowed: each lower limit must be "
+            "strictly below its upper limit"
+        )
+    return lower, upper
+
+
+def rotation_matrix(name, value, tolerance=1e-6):
+    """Returns `value` as a 3x3 rotation matrix after checking R^T R = I and
+    det R = +1 to `tolerance`.
+
+    Raises:
+        ValueError: naming `name` when the matrix is not a proper rotation.
+    """
+    R = as_matrix(name, value, (3, 3))
+    orthogonality = np.max(np.abs(R.T @ R - np.eye(3)))
+    determinant = np.linalg.det(R)
+    if orthogonality > tolerance or abs(determinant - 1.0) > tolerance:
+        raise ValueError(
+            f"{name} = {_shown(R)} is not allowed: must be a rotation matrix "
+            f"(R^T R = I and det R = 1 to {tolerance}; here the largest "
+            f"entry of R^T R - I is {orthogonality:.3g} and det R = "
+            f"{determinant:.6g})"
+        )
+    return R
+
+
+def validate(params, path=""):
+    """Runs the checks of the parameters dataclass `params` again, and those
+    of every dataclass nested in it (also as items of a list or tuple, e.g.
+    a scene's obstacles), innermost first; returns `params`.
+
+    The checks are each class's `__post_init__`, which also normalises the
+    values (e.g. a list into a read-only array or a tuple), so they are
+    safe to run more than once. They are needed again after fields have
+    been assigned, as `yaml_load_typed` does.
+
+    Args:
+        params: a dataclass instance.
+        path: the dotted name of `params` in an enclosing tree, if any
+            (e.g. "arm_cdmp"), used in error messages.
+
+    Raises:
+        ValueError: naming the field by its dotted path from the root
+            (e.g. `arm_cdmp.S_m = [0.5 1. 1. 1. 1. 1.] is not allowed: ...`).
+    """
+    if not _is_instance(params):
+        name = path or "params"
+        raise ValueError(f"{name} = {params!r} is not allowed: must be a "
+                         "parameters dataclass")
+    prefix = f"{path}." if path else ""
+    names = [f.name for f in dataclasses.fields(params)]
+    for name in names:
+        value = getattr(params, name)
+        if _is_instance(value):
+            validate(value, prefix + name)
+        elif isinstance(value, (list, tuple)):
+            for i, item in enumerate(value):
+                if _is_instance(item):
+                    validate(item, f"{prefix}{name}[{i}]")
+    check = getattr(params, "__post_init__", None)
+    if check is None:
+        return params
+    try:
+        check()
+    except ValueError as error:
+        raise ValueError(_qualified(str(error), prefix, names)) from None
+    return params
+
+
+def _is_instance(value):
+    """True for a dataclass instance (not a dataclass type)."""
+    return dataclasses.is_dataclass(value) and not isinstance(value, type)
+
+
+def validated_copy(params):
+    """A deep copy of the parameters dataclass `params`, validated (see
+    `validate`): what a stage keeps, so that later changes to `params`
+    do not reach it."""
+    return validate(copy.deepcopy(params))
+
+
+def _qualified(message, prefix, names):
+    """`message` with the fields `names` it reports (`name = ...`,
+    `name[i] = ...`, `name.sub[j].x = ...`, `name has shape ...`) renamed
+    `prefix + name`; the message is prefixed with the path instead when it
+    reports no field."""
+    if not prefix:
+        return message
+    pattern = re.compile(
+        r"(?<![\w.])(" + "|".join(map(re.escape, names))
+        + r")(?=(?:\[\d+\]|\.\w+)* (?:=|has shape))")
+    renamed, count = pattern.subn(lambda m: prefix + m.group(1), message)
+    return renamed if count else f"{prefix[:-1]}: {message}"
+
+
+def checked_instance(name, value, kind, default):
+    """`value` if it is a `kind`, `default()` if it is None; else raises a
+    ValueError naming `name`."""
+    if value is None:
+        return default()
+    if not isinstance(value, kind):
+        raise ValueError(
+            f"{name} = {value!r} is not allowed: must be a {kind.__name__} "
+            "or None"
+        )
+    return value
+
+
+def positive_vector(name, value, size):
+    """`value` as a vector of `size` finite entries, each > 0.
+
+    Raises:
+        ValueError: naming `name`, the first bad entry and what is allowed.
+    """
+    vector = as_vector(name, value, size)
+    bad = np.flatnonzero(vector <= 0.0)
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"{name}[{i}] = {float(vector[i])!r} is not allowed: every entry "
+            "must be greater than 0")
+    return vector

@@ -1,0 +1,244 @@
+"""ArmCartesianVelocityController: the arm's twist to joint position
+commands as a Drake system."""
+
+import math
+
+import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.systems.framework import BasicVector_, LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from drake_wbc.math.arm_control import ArmControllerParameters, check_margin
+from drake_wbc.math.scalar_support import through_float_function, value_of
+from drake_wbc.math.twist_solver import TwistSolver
+from drake_wbc.math.validation import (
+    as_vector,
+    checked_instance,
+    validated_copy,
+)
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+
+ARM_JOINT_COUNT = 6
+"""The arm's joints (the Elfin5's six)."""
+
+TWIST_SIZE = 6
+"""V_a = [v_a; w_a] in T_a."""
+
+_Q = slice(0, ARM_JOINT_COUNT)
+_Q_DOT = slice(ARM_JOINT_COUNT, 2 * ARM_JOINT_COUNT)
+_LIMITED = 2 * ARM_JOINT_COUNT
+_STATE_SIZE = 2 * ARM_JOINT_COUNT + 1
+
+
+@TemplateSystem.define("ArmCartesianVelocityController_",
+                       T_list=[float, AutoDiffXd])
+def ArmCartesianVelocityController_(T):
+    class Impl(LeafSystem_[T]):
+        """The arm's Cartesian velocity controller of Sec. III-A, for a
+        position-controlled arm: V_a -> q_dot_a -> q_a by damped least
+        squares, joint-limit, velocity and acceleration limits
+        (drake_wbc.math.arm_control.joint_velocity_for_twist), integrated once a
+        control period.
+
+        ::
+
+                           ┌──────────────────────┐
+            arm_velocity ─►│ ArmCartesianVelocity ├─► arm_position_command
+            hold ─────────►│ Controller           ├─► arm_velocity_command
+                           │                      ├─► limited
+                           └──────────────────────┘
+
+        - arm_velocity: V_a (6), the arm's Cartesian twist command
+          [v_a; w_a] in T_a (m/s, rad/s), at the end effector.
+        - hold (1): optional (no hold while unconnected); >= 0.5 holds the
+          command where it is, at rest (a safe stop, see
+          drake_wbc.stages.safety.InputGuard's `stop`): the update
+          leaves q_cmd unchanged and sets q_dot to 0, so that when the
+          hold ends the arm restarts from the held command, from rest,
+          within the acceleration limit (no jump). A twist that is not
+          finite is held the same way (with `limited` 1.0), never
+          integrated.
+        - arm_position_command: q_cmd (6, rad), the joint positions for the
+          arm's position servo. It is the state: no direct feedthrough.
+        - arm_velocity_command: q_dot (6, rad/s) of the last update, the
+          rate at which q_cmd moves now (diagnostics, or feed-forward for a
+          servo that takes one).
+        - limited: 1.0 when the last update was cut by a joint's position
+          limit, scaled by the velocity limits or by the acceleration limit,
+          else 0.0 (damping near a singularity alone does not count).
+
+        q_cmd never leaves the joint limits [lower, upper]: the update keeps
+        it in the band [lower + margin, upper - margin] (a joint outside the
+        band only moves back in), and `set_arm_position` clamps a start
+        outside the limits onto them.
+
+        One periodic discrete update at the control period h:
+
+            q_dot  = joint_velocity_for_twist(J_a(q_cmd), V_a, q_cmd, ...,
+                                              previous q_dot),
+            q_cmd <- q_cmd + h q_dot.
+
+        J_a is taken at the commanded configuration q_cmd, not at a
+        measured one: the command is what the stiff position servo follows
+        (the measurement differs from it only by the servo's small lag),
+        and it keeps the controller's own kinematics consistent: q_cmd is
+        the integral of exactly the rates computed from it, so a constant
+        twist moves the commanded end effector along the commanded line up
+        to the O(h) error of the explicit integration, with no feedback of
+        the servo's tracking error or of sensor noise into the IK.
+
+        State: [q_cmd (6), q_dot (6), limited (1)], one discrete group. It
+        starts at robot_model.HOME_ARM_POSITIONS at rest; use
+        `set_arm_position` to start from the measured arm position.
+
+        Scalar types: double and AutoDiffXd. The update is float math (a
+        double MultibodyPlant for J_a, an SVD), so in AutoDiffXd it runs
+        through scalar_support.through_float_function over the float update
+        map (q_cmd, q_dot, limited, V_a) -> next state: the value is exact
+        and the derivatives come from central differences of that map.
+        `Linearize` at a point away from singularities and limits (where
+        the map is smooth) is therefore accurate to about 1e-9 relative;
+        where a limit is just switching, the derivative is that of one side
+        or an average of both. The system is at equilibrium only with
+        V_a = 0 and at rest, where `Linearize` applies; while it moves,
+        use Drake's `FirstOrderTaylorApproximation` (same A and B).
+
+        Args:
+            params: ArmControllerParameters; 100 Hz with the defaults of
+                drake_wbc.math.arm_control and the model's limits if None.
+            kinematics: the ArmKinematics for J_a (e.g. one built on the
+                user's plant); one of the robot alone if None. Scalar
+                conversion shares it with the converted copy (its
+                `evaluate` sets its own context, so the copies must not
+                run their updates concurrently from several threads).
+        """
+
+        def _construct(self, params=None, kinematics=None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            params = checked_instance("params", params,
+                                      ArmControllerParameters,
+                                      ArmControllerParameters)
+            kinematics = checked_instance("kinematics", kinematics,
+                                          ArmKinematics, ArmKinematics)
+            self.params = params = validated_copy(params)
+            self.kinematics = kinematics
+            self.lower = np.array(params.lower or kinematics.lower, float)
+            self.upper = np.array(params.upper or kinematics.upper, float)
+            self.velocity_limits = np.array(
+                params.velocity_limits or kinematics.velocity_limits, float
+            )
+            check_margin(params.margin, self.lower, self.upper)
+            # Checked once here, for the unchecked path of each tick.
+            self._acceleration_limits = (
+                np.full(ARM_JOINT_COUNT, float(params.acceleration_limit))
+                if params.use_acceleration_limit else None)
+            self._solver = TwistSolver(
+                self.lower, self.upper, self.velocity_limits,
+                float(params.time_step), float(params.damping),
+                float(params.damping_threshold), float(params.margin),
+                self._acceleration_limits)
+            self._input = self.DeclareVectorInputPort("arm_velocity",
+                                                      TWIST_SIZE)
+            self._hold = self.DeclareVectorInputPort("hold", 1)
+            initial = np.zeros(_STATE_SIZE)
+            initial[_Q] = HOME_ARM_POSITIONS
+            state = self.DeclareDiscreteState(BasicVector_[T](initial))
+            self.DeclarePeriodicDiscreteUpdateEvent(
+                params.time_step, 0.0, self._update
+            )
+            prerequisites = {self.discrete_state_ticket(state)}
+            for name, size, calc in (
+                ("arm_position_command", ARM_JOINT_COUNT, self._position),
+                ("arm_velocity_command", ARM_JOINT_COUNT, self._velocity),
+                ("limited", 1, self._limited),
+            ):
+                self.DeclareVectorOutputPort(
+                    name, size, calc, prerequisites_of_calc=prerequisites
+                )
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.params, other.kinematics,
+                            converter=converter)
+            self.params = other.params
+
+        @staticmethod
+        def _state(context):
+            return context.get_discrete_state_vector().CopyToVector()
+
+        def float_update(self, state_and_input, hold=False):
+            """The update map in double: [q_cmd, q_dot, limited, V_a] (19)
+            -> the next state [q_cmd, q_dot, limited] (13); with `hold`
+            (or a V_a that is not finite) q_cmd stays, at rest."""
+            z = np.asarray(state_and_input, dtype=float)
+            return self._next_state(z[_Q], z[_Q_DOT], z[_STATE_SIZE:], hold)
+
+        def _next_state(self, q, previous, V_a, hold):
+            """float_update on the state's parts and V_a (float arrays)."""
+            # A finite sum has finite terms; else check them one by one.
+            if hold or not (math.isfinite(sum(V_a.tolist()))
+                            or np.isfinite(V_a).all()):
+                state = np.zeros(_STATE_SIZE)
+                state[_Q] = q
+                state[_LIMITED] = 0.0 if hold else 1.0
+                return state
+            q_list = q.tolist()
+            q_dot, scale, acceleration_scale, limited_joints, _, _ = (
+                self._solver.solve_floats(
+                    self.kinematics.evaluate(q).J_a, V_a, q_list,
+                    previous.tolist()))
+            h = self.params.time_step
+            # The bounds keep q in the band up to rounding; the clip makes
+            # the joint limits exact.
+            state = [min(max(q_i + h * v, lower), upper)
+                     for q_i, v, lower, upper in zip(
+                         q_list, q_dot, self._solver.lower,
+                         self._solver.upper, strict=True)]
+            state += q_dot
+            state.append(1.0 if (scale < 1.0 or acceleration_scale < 1.0
+                                 or any(limited_joints)) else 0.0)
+            return np.array(state)
+
+        def _update(self, context, discrete_state):
+            if T is float:
+                hold = (self._hold.HasValue(context)
+                        and self._hold.Eval(context)[0] >= 0.5)
+                x = self._state(context)
+                discrete_state.set_value(self._next_state(
+                    x[_Q], x[_Q_DOT], self._input.Eval(context), hold))
+                return
+            hold = (self._hold.HasValue(context)
+                    and value_of(self._hold.Eval(context))[0] >= 0.5)
+            z = np.concatenate([self._state(context),
+                                self._input.Eval(context)])
+            discrete_state.set_value(through_float_function(
+                lambda x: self.float_update(x, hold=hold), z))
+
+        def _position(self, context, output):
+            output.SetFromVector(self._state(context)[_Q])
+
+        def _velocity(self, context, output):
+            output.SetFromVector(self._state(context)[_Q_DOT])
+
+        def _limited(self, context, output):
+            output.SetFromVector(self._state(context)[_LIMITED:])
+
+        def set_arm_position(self, context, q):
+            """Starts the command at `q` (6, rad), at rest: e.g. the
+            measured arm position when the controller takes over, so that
+            the servo sees no jump. A joint outside the band
+            [lower + margin, upper - margin] is kept where it is and is
+            only prevented from moving further out; one outside the joint
+            limits [lower, upper] starts on the limit, so that the command
+            never leaves them."""
+            q = np.clip(as_vector("q", q, ARM_JOINT_COUNT), self.lower,
+                        self.upper)
+            state = np.zeros(_STATE_SIZE)
+            state[_Q] = q
+            context.SetDiscreteState(state)
+
+    return Impl
+
+
+ArmCartesianVelocityController = ArmCartesianVelocityController_[None]
+"""ArmCartesianVelocityController_ for double; `ToAutoDiffXd()` gives the
+AutoDiff one."""

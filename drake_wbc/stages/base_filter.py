@@ -1,0 +1,131 @@
+"""BaseVelocityFilter: the base's low-pass filter as a Drake system."""
+
+import numpy as np
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from drake_wbc.math.filtering import (
+    BaseFilterParameters,
+    lowpass_state_space,
+    zero_order_hold,
+)
+from drake_wbc.math.validation import checked_instance, validated_copy
+
+BASE_AXES = 3
+"""The base's velocity components [vx, vy, wz] (T_b)."""
+
+
+@TemplateSystem.define("BaseVelocityFilter_")
+def BaseVelocityFilter_(T):
+    class Impl(LeafSystem_[T]):
+        """Second-order low-pass of eq. (filtering) on each base axis.
+
+        ::
+
+                            ┌────────────────────┐
+            velocity ──────►│ BaseVelocityFilter ├──► filtered_velocity
+                            └────────────────────┘
+
+        - velocity: V_b' (3), the base's share after obstacle avoidance,
+          [vx, vy, wz] in T_b.
+        - filtered_velocity: V_b^flt (3), the base velocity command; it is
+          the filter's state (no direct feedthrough).
+
+        With params.enabled False it is bypassed: the output is the input
+        sampled at the last tick and held (x+ = [u, 0] per axis).
+
+        Continuous (time_step = 0) or exactly discretised with a zero-order
+        hold at the control period (time_step > 0, one periodic discrete
+        update), so that Drake's `Linearize` applies either way. The state
+        is [y, y_dot] per axis, axes stacked: [vx, vx_dot, vy, vy_dot, wz,
+        wz_dot]; it starts at rest.
+
+        Args:
+            params: BaseFilterParameters; the paper's omega_f = 2 pi rad/s,
+                zeta = 1 at 100 Hz if None.
+        """
+
+        def _construct(self, params=None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            params = checked_instance("params", params,
+                                      BaseFilterParameters,
+                                      BaseFilterParameters)
+            self.params = params = validated_copy(params)
+            A, B, C, _ = lowpass_state_space(params.omega_f, params.zeta)
+            eye = np.eye(BASE_AXES)
+            self._A = np.kron(eye, A)
+            self._B = np.kron(eye, B)
+            self._C = np.kron(eye, C)
+            self._input = self.DeclareVectorInputPort("velocity", BASE_AXES)
+            n = 2 * BASE_AXES
+            if not params.enabled:
+                # Bypassed: x+ = [u, 0] per axis, y = u sampled and held.
+                self._A = np.zeros_like(self._A)
+                self._B = np.kron(eye, [[1.0], [0.0]])
+            elif params.time_step > 0.0:
+                self._A, self._B = zero_order_hold(
+                    self._A, self._B, params.time_step
+                )
+            if params.time_step > 0.0:
+                state = self.DeclareDiscreteState(n)
+                self.DeclarePeriodicDiscreteUpdateEvent(
+                    params.time_step, 0.0, self._update
+                )
+                self._get_state = self._discrete_state
+            else:
+                state = self.DeclareContinuousState(n)
+                self._get_state = self._continuous_state
+            self.DeclareVectorOutputPort(
+                "filtered_velocity",
+                BASE_AXES,
+                self._output,
+                prerequisites_of_calc={
+                    self.discrete_state_ticket(state)
+                    if params.time_step > 0.0
+                    else self.xc_ticket()
+                },
+            )
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.params, converter=converter)
+            self.params = other.params
+
+        @staticmethod
+        def _discrete_state(context):
+            return context.get_discrete_state_vector().CopyToVector()
+
+        @staticmethod
+        def _continuous_state(context):
+            return context.get_continuous_state_vector().CopyToVector()
+
+        def _update(self, context, discrete_state):
+            x = self._discrete_state(context)
+            u = self._input.Eval(context)
+            discrete_state.set_value(self._A @ x + self._B @ u)
+
+        def DoCalcTimeDerivatives(self, context, derivatives):
+            x = self._continuous_state(context)
+            u = self._input.Eval(context)
+            derivatives.get_mutable_vector().SetFromVector(
+                self._A @ x + self._B @ u
+            )
+
+        def _output(self, context, output):
+            output.SetFromVector(self._C @ self._get_state(context))
+
+        def set_velocity(self, context, velocity):
+            """Sets the filter at rest at `velocity` (3,): output equal to
+            it and zero rate, e.g. to start from the base's measured
+            velocity."""
+            x = np.repeat(np.asarray(velocity), 2) * np.tile([1.0, 0.0],
+                                                             BASE_AXES)
+            if self.params.time_step > 0.0:
+                context.SetDiscreteState(x)
+            else:
+                context.SetContinuousState(x)
+
+    return Impl
+
+
+BaseVelocityFilter = BaseVelocityFilter_[None]
+"""BaseVelocityFilter_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""

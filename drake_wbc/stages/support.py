@@ -1,0 +1,125 @@
+"""What the stages share in how they are built: their scalar types and
+their definition as scalar-convertible templates (`define_stage`), a
+vector computed once per change of its inputs in a cache entry and
+sliced into named output ports, their named vector inputs and dependency
+tickets, optional one-element inputs, and the constants of the arm's
+mounting (^bR_a and the arm base's origin in T_b) they read."""
+
+import functools
+import inspect
+
+import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import ValueProducer
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from drake_wbc.robot.model import ArmKinematics
+
+SCALARS = (float, AutoDiffXd)
+"""The scalar types of every stage: double, and AutoDiffXd for `Linearize`
+and `ToAutoDiffXd` of the whole controller (not symbolic: the stages
+branch on values, as the paper's piecewise functions do)."""
+
+
+def define_stage(name):
+    """Defines a stage as a scalar-convertible template, like
+    `TemplateSystem.define(name, T_list=SCALARS)`, for a function
+    `instantiate(T)` that returns the stage's class for scalar type T.
+
+    The class defines `_construct(self, ..., converter=None)` only: its
+    scalar-converted copies are constructed from the very arguments the
+    original was (the parameters are not copied or checked again, and a
+    copy shares them with its original), so that no stage writes a
+    `_construct_copy` of its own. A class that needs another copy rule
+    may still define `_construct_copy`.
+    """
+
+    def decorate(instantiate):
+        def instantiate_with_copy(T):
+            cls = instantiate(T)
+            if "_construct_copy" in cls.__dict__:
+                return cls
+            construct = cls.__dict__["_construct"]
+
+            def _construct(self, *args, converter=None, **kwargs):
+                self._construction = (args, kwargs)
+                construct(self, *args, converter=converter, **kwargs)
+
+            def _construct_copy(self, other, converter=None):
+                args, kwargs = other._construction
+                _construct(self, *args, converter=converter, **kwargs)
+
+            _construct.__doc__ = construct.__doc__
+            cls._construct = _construct
+            cls._construct_copy = _construct_copy
+            return cls
+
+        return TemplateSystem.define(
+            name, T_list=SCALARS, scope=inspect.getmodule(instantiate))(
+                instantiate_with_copy)
+
+    return decorate
+
+
+@functools.cache
+def shared_arm_kinematics():
+    """One ArmKinematics of our robot, for stages that read only its
+    constants (R_ba, the arm base's position)."""
+    return ArmKinematics()
+
+
+def arm_mounting(arm):
+    """(R_ba, p_a): the rotation ^bR_a and the arm base's origin in T_b
+    (m), constants of the nominal kinematics of `arm` (ArmKinematics)."""
+    values = arm.evaluate(np.zeros(6))
+    R_ba = np.array(arm.R_ba, dtype=float)
+    return R_ba, values.p_ee_in_base - R_ba @ values.X_AE.translation()
+
+
+def declare_cached_vector(system, description, calc, prerequisites):
+    """Declares a cache entry holding the vector `calc(context)` (float or
+    AutoDiffXd), computed once per change of `prerequisites` and read by
+    every output of `system` that needs it."""
+
+    def produce(context, value):
+        value.set_value(calc(context))
+
+    return system.DeclareCacheEntry(
+        description,
+        ValueProducer(allocate=lambda: AbstractValue.Make(np.zeros(0)),
+                      calc=produce),
+        prerequisites,
+    )
+
+
+def declare_slices(system, entry, slices):
+    """Declares one vector output port per (name, slice) of the vector in
+    cache `entry`."""
+    for name, part in slices:
+        def calc(context, output, part=part):
+            output.SetFromVector(entry.Eval(context)[part])
+
+        size = part.stop - part.start
+        system.DeclareVectorOutputPort(
+            name, size, calc, prerequisites_of_calc={entry.ticket()})
+
+
+def declare_inputs(system, sizes):
+    """Declares the vector input ports (name, size) of `system`; returns
+    them by name."""
+    return {name: system.DeclareVectorInputPort(name, size)
+            for name, size in sizes}
+
+
+def tickets(ports):
+    """The dependency tickets of `ports`."""
+    return {port.ticket() for port in ports}
+
+
+def optional_scalar(port, context, default):
+    """The value of a one-element input `port`, or `default` if it is
+    neither connected nor fixed."""
+    if port.HasValue(context):
+        return port.Eval(context)[0]
+    return default

@@ -1,0 +1,325 @@
+"""The cases of the randomised stress run (drake_wbc.stress.run).
+
+`random_scenario(seed, index, duration)` draws one closed-loop scenario
+from `numpy.random.default_rng([seed, index])` and nothing else, so a case
+is the same whichever process, machine or cluster builds it:
+
+- the controller's mode: loco-manipulation (random sigma_xy, sigma_phi of
+  eq. (weight-factors), a random V_ee^ref in the world) or intuitive pHRI
+  (S_hri = 1 in eqs. (cdmp-wb) and (cdmp-arm), a hand guiding the tool);
+  a random null-space gain k_n of eq. (wbccm) and a random k_obs of the
+  repulsive field of eq. (cdmp-base);
+- static obstacles (pillars and crates) beside the base's way: at least
+  `CLEARANCE` m from the disc swept by the footprint's corners along the
+  straight line that the reference velocity would carry the base, so that
+  a base that follows its task never needs to touch them;
+- people walking past, a hand pushing (and twisting) the tool, a start
+  pose of the arm near its home pose.
+
+`run_case(seed, index, duration)` builds the scenario, runs it with
+drake_wbc.experiments.runner and returns its record (`case_record`): plain
+numbers,
+the same for the same arguments wherever it runs (its `wall_time_s` and
+`real_time_factor` aside). `violations(record)` lists the invariants a
+record breaks (see drake_wbc.stress.run).
+"""
+
+import copy
+import math
+import time
+
+import numpy as np
+
+from drake_wbc.experiments.common import obstacle_distances, run_metrics
+from drake_wbc.experiments.scenario import Scenario, Schedule
+from drake_wbc.math.validation import validate
+from drake_wbc.robot.model import HOME_ARM_POSITIONS
+from drake_wbc.station.scene import (
+    BoxObstacle,
+    CylinderObstacle,
+    HandForce,
+    WalkingPerson,
+)
+
+MODES = ("loco-manipulation", "intuitive-phri")
+"""The controller's modes a case is drawn from (Table T:motion-mode)."""
+
+FOOTPRINT_RADIUS = math.hypot(0.4, 0.3)
+"""The distance from the base's centre to a corner of its 0.8 x 0.6 m
+footprint, m: the footprint stays inside this disc whatever its yaw."""
+
+CLEARANCE = 0.25
+"""The least gap, m, between a static obstacle and the disc of radius
+FOOTPRINT_RADIUS swept along the base's nominal way."""
+
+LIDAR_BEAMS = 271
+"""Beams per scan in the stress cases (1 degree over 270 degrees instead of
+the TiM571's 811, to keep a case cheap; obstacles of 0.1 m or more are
+still hit by several beams within a few metres)."""
+
+TIMING_KEYS = ("wall_time_s", "real_time_factor")
+"""The keys of a record that depend on the machine, not on the case."""
+
+
+def _path_distance(point, end):
+    """The distance from `point` (2,) to the segment from 0 to `end`."""
+    length2 = float(end @ end)
+    t = 0.0 if length2 == 0.0 else min(max(point @ end / length2, 0.0), 1.0)
+    return float(np.linalg.norm(point - t * end))
+
+
+def _place(rng, end, size):
+    """A random position 0.9 to 2.5 m from the way's start whose distance
+    to the segment [0, end] is at least FOOTPRINT_RADIUS + CLEARANCE +
+    `size` (the obstacle's radius)."""
+    for _ in range(100):
+        radius = rng.uniform(0.9, 2.5)
+        angle = rng.uniform(-math.pi, math.pi)
+        point = radius * np.array([math.cos(angle), math.sin(angle)])
+        if _path_distance(point, end) >= FOOTPRINT_RADIUS + CLEARANCE + size:
+            return point
+    return None
+
+
+def _obstacles(rng, end):
+    cylinders, boxes = [], []
+    for i in range(int(rng.integers(0, 3))):
+        radius = rng.uniform(0.08, 0.25)
+        point = _place(rng, end, radius)
+        if point is not None:
+            cylinders.append(CylinderObstacle(
+                name=f"pillar_{i}", position=point.tolist(), radius=radius,
+                height=rng.uniform(0.6, 2.0)))
+    for i in range(int(rng.integers(0, 2))):
+        size = rng.uniform(0.2, 0.6, 3)
+        point = _place(rng, end, 0.5 * math.hypot(size[0], size[1]))
+        if point is not None:
+            boxes.append(BoxObstacle(
+                name=f"crate_{i}", center=[*point, 0.5 * size[2] + 0.1],
+                size=[size[0], size[1], size[2] + 0.2],
+                yaw=rng.uniform(-math.pi, math.pi)))
+    return cylinders, boxes
+
+
+def _people(rng, duration):
+    people = []
+    for i in range(int(rng.integers(0, 3))):
+        start = rng.uniform(-2.5, 2.5, 2)
+        goal = rng.uniform(-2.5, 2.5, 2)
+        begin = rng.uniform(0.0, 0.5 * duration)
+        walk = np.linalg.norm(goal - start) / rng.uniform(0.5, 1.5)
+        people.append(WalkingPerson(
+            name=f"person_{i}", radius=rng.uniform(0.15, 0.3),
+            times=[begin, begin + max(walk, 0.1)],
+            waypoints=[start.tolist(), goal.tolist()]))
+    return people
+
+
+def _hand(rng, duration, scale):
+    """A hand that pushes for a random stretch of the run, ramped in and
+    out, with forces up to `scale` N and torques up to scale / 20 N m."""
+    if scale == 0.0:
+        return HandForce()
+    start = rng.uniform(0.0, 0.4 * duration)
+    end = rng.uniform(start + 0.2 * duration, duration)
+    ramp = 0.1 * (end - start)
+    force = rng.uniform(-scale, scale, 3)
+    torque = rng.uniform(-0.05 * scale, 0.05 * scale, 3)
+    zero = [0.0, 0.0, 0.0]
+    return HandForce(
+        times=[start, start + ramp, end - ramp, end],
+        forces=[zero, force.tolist(), force.tolist(), zero],
+        torques=[zero, torque.tolist(), torque.tolist(), zero])
+
+
+def _ramped(duration, value, size):
+    """A Schedule that ramps from zero to `value` over the first fifth of
+    the run and back to zero over the last fifth."""
+    zero = [0.0] * size
+    times = [0.0, 0.2 * duration, 0.8 * duration, duration]
+    return Schedule(times=times, values=[zero, list(value), list(value),
+                                         zero], interpolation="linear")
+
+
+def random_scenario(seed, index, duration=4.0):
+    """The scenario of case `index` of the stress run of `seed`.
+
+    Drawn from numpy.random.default_rng([seed, index]) only (module
+    docstring).
+
+    Args:
+        seed: a whole number >= 0.
+        index: the case's index, a whole number >= 0.
+        duration: the simulated time, s.
+
+    Returns:
+        A validated drake_wbc.experiments.scenario.Scenario.
+    """
+    rng = np.random.default_rng([seed, index])
+    scenario = Scenario(description=f"stress case {index} of seed {seed}",
+                        duration=duration)
+    scenario.outputs.replay = scenario.outputs.plots = False
+    params = scenario.controller
+    mode = MODES[int(rng.integers(0, len(MODES)))]
+    params.workspace.mode = mode
+    params.distributor.null_space_gain = float(rng.choice([0.0, 0.05, 0.1]))
+    params.base_cdmp.repulsion.k_obs = rng.uniform(0.01, 0.04)
+    velocity = np.zeros(6)
+    if mode == "loco-manipulation":
+        params.workspace.sigma_xy = rng.uniform(0.1, 0.9)
+        params.workspace.sigma_phi = rng.uniform(0.1, 0.9)
+        velocity[:3] = rng.uniform(-1.0, 1.0, 3) * [0.25, 0.25, 0.03]
+        velocity[5] = rng.uniform(-0.3, 0.3)
+        hand_scale = float(rng.choice([0.0, 3.0]))
+    else:
+        params.whole_body_cdmp.S_hri = 1.0
+        params.arm_cdmp.S_hri = 1.0
+        hand_scale = rng.uniform(2.0, 6.0)
+    scenario.task.reference_velocity = _ramped(duration, velocity, 6)
+    yaw = rng.uniform(-math.pi, math.pi)
+    scenario.station.initial_base_pose = [0.0, 0.0, yaw]
+    scenario.station.initial_arm_positions = (
+        HOME_ARM_POSITIONS + rng.uniform(-0.15, 0.15, 6)).tolist()
+    scenario.station.lidar.num_beams = LIDAR_BEAMS
+    scenario.station.wrist.seed = int(rng.integers(0, 2**31))
+    # The base's nominal way in the world: the end effector's reference
+    # motion in the plane, at most all of it carried by the base.
+    end = 0.6 * duration * velocity[:2]
+    cylinders, boxes = _obstacles(rng, end)
+    scene = scenario.scene
+    scene.cylinders, scene.boxes = cylinders, boxes
+    scene.people = _people(rng, duration)
+    scene.hand = _hand(rng, duration, hand_scale)
+    return validate(scenario)
+
+
+def _none_if_inf(x):
+    """`x` as a float, None for an infinity (nothing to measure to)."""
+    return None if np.isinf(x) else float(x)
+
+
+def _limits():
+    from drake_wbc.robot.model import ArmKinematics
+
+    arm = ArmKinematics()
+    return arm.lower, arm.upper, arm.velocity_limits
+
+
+def case_record(seed, index, scenario, log):
+    """The record of one case: what drake_wbc.stress.run checks and reports.
+
+    Args:
+        seed, index: the case.
+        scenario: its Scenario.
+        log: its drake_wbc.experiments.runner.RunLog.
+
+    Returns:
+        dict of plain numbers and strings (JSON-ready; distances are None
+        when there is nothing to measure them to).
+    """
+    lower, upper, joint_speed_limits = _limits()
+    metrics = run_metrics(scenario, log)
+    static = copy.deepcopy(scenario.scene)
+    static.people = []
+    distance = obstacle_distances(static, log["truth.base_pose"])
+    command = log["arm.position_command"]
+    dt = np.diff(log.time)[:, None]
+    joint_speed = np.abs(np.diff(command, axis=0)) / dt
+    base = np.abs(log["base.velocity_command"])
+    base_limits = np.asarray(scenario.station.base.velocity_limits)
+    filtered = np.abs(log["filtered_base_velocity"])
+    filter_limits = np.asarray(
+        scenario.controller.safety.base_velocity_limits)
+    with np.errstate(invalid="ignore"):
+        command_margin = np.min(np.minimum(command - lower, upper - command))
+    return {
+        "case": int(index),
+        "seed": int(seed),
+        "mode": str(scenario.controller.workspace.mode),
+        "obstacles": len(scenario.scene.cylinders) + len(scenario.scene.boxes),
+        "people": len(scenario.scene.people),
+        "hand": bool(scenario.scene.hand.times),
+        "duration_s": metrics["duration_s"],
+        "all_finite": metrics["all_finite"],
+        "min_capability": metrics["min_capability"],
+        "min_static_obstacle_distance_m": _none_if_inf(np.min(distance)),
+        "min_obstacle_distance_m": _none_if_inf(
+            metrics["min_obstacle_distance_m"]),
+        "min_joint_limit_margin_rad": metrics["min_joint_limit_margin_rad"],
+        "min_command_joint_limit_margin_rad": float(command_margin),
+        "max_base_speed_command_m_s":
+            metrics["max_base_speed_command_m_s"],
+        "max_base_command_ratio": float(np.max(base / base_limits)),
+        "max_filter_state_ratio": float(np.max(filtered / filter_limits)),
+        "max_joint_speed_command_rad_s":
+            metrics["max_arm_joint_speed_command_rad_s"],
+        "max_joint_speed_command_ratio": float(
+            np.max(joint_speed / joint_speed_limits)),
+        "error": "",
+        "wall_time_s": float("nan"),
+        "real_time_factor": metrics["real_time_factor"],
+    }
+
+
+def failed_record(seed, index, error):
+    """The record of a case whose simulation raised `error`."""
+    return {"case": int(index), "seed": int(seed),
+            "error": f"{type(error).__name__}: {error}",
+            "wall_time_s": float("nan"), "real_time_factor": float("nan")}
+
+
+def run_case(seed, index, duration=4.0):
+    """Builds and simulates case `index` of `seed`; returns its record.
+
+    An exception in the simulation (e.g. a non-finite state) does not
+    propagate: the record then holds it in "error", a broken invariant.
+    """
+    from drake_wbc.experiments.runner import build_closed_loop, simulate
+
+    started = time.perf_counter()
+    scenario = random_scenario(seed, index, duration)
+    try:
+        log = simulate(build_closed_loop(scenario))
+        record = case_record(seed, index, scenario, log)
+    except (RuntimeError, ValueError, SystemExit) as error:
+        record = failed_record(seed, index, error)
+    record["wall_time_s"] = time.perf_counter() - started
+    return record
+
+
+TOLERANCE = 1e-6
+"""Relative slack of the limit checks (rounding of the logged commands)."""
+
+
+def violations(record):
+    """The invariants that `record` breaks, each as one line of text (an
+    empty list for a sound case); see drake_wbc.stress.run for the list."""
+    if record.get("error"):
+        return [f"the simulation failed: {record['error']}"]
+    found = []
+    for key, value in record.items():
+        if key in TIMING_KEYS or isinstance(value, (str, bool)) or \
+                value is None:
+            continue
+        if not math.isfinite(value):
+            found.append(f"{key} = {value!r}: not finite")
+    if not record["all_finite"]:
+        found.append("a logged signal is NaN or infinite")
+    checks = (
+        ("max_base_command_ratio", "a base velocity command exceeds the "
+         "base's velocity limit", lambda x: x <= 1.0 + TOLERANCE),
+        ("max_filter_state_ratio", "the base filter's output exceeds the "
+         "base's velocity limit (wind-up)", lambda x: x <= 1.0 + TOLERANCE),
+        ("max_joint_speed_command_ratio", "a joint position command moves "
+         "faster than the joint's velocity limit",
+         lambda x: x <= 1.0 + TOLERANCE),
+        ("min_command_joint_limit_margin_rad", "a joint position command "
+         "lies beyond a joint limit", lambda x: x >= -TOLERANCE),
+        ("min_static_obstacle_distance_m", "the base touched a static "
+         "obstacle", lambda x: x is None or x > 0.0),
+    )
+    for key, what, holds in checks:
+        value = record[key]
+        if value is not None and math.isfinite(value) and not holds(value):
+            found.append(f"{what} ({key} = {value:.6g})")
+    return found

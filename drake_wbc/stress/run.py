@@ -1,0 +1,391 @@
+"""`drake-wbc stress`: a seeded, randomised stress run of the closed loop.
+
+N short closed-loop simulations (the controller of drake_wbc.controller.diagram
+against the simulated station), each built from a random scenario
+(drake_wbc.stress.cases.random_scenario): static obstacles, walking
+people, a hand on the tool, a reference velocity, the loco-manipulation
+or the intuitive pHRI mode. Case i of seed S is drawn from
+numpy.random.default_rng([S, i]) only, so its result is the same run
+serially, in worker processes or on a Dask cluster.
+
+The invariants checked on every case (drake_wbc.stress.cases.violations):
+
+1. the simulation runs to its end (no exception from Drake or the
+   controller);
+2. every logged signal is finite: the commands, the controller's
+   diagnostics and the station's state (no NaN, no infinity);
+3. every base velocity command lies within the base's velocity limits
+   (station.base.velocity_limits: 1 m/s in x and y, 1 rad/s in yaw);
+4. every joint position command moves each joint no faster than its
+   velocity limit (1.57 rad/s on the Elfin5): the change between two
+   consecutive commands over the control period;
+5. every joint position command lies within the joint's limits;
+6. the base's footprint never touches a static obstacle (distance from
+   ground truth > 0);
+7. every number of the case's record is finite;
+8. the base filter's output V_b^flt stays within the base's velocity
+   limits (no wind-up: the controller's StopGate keeps the filter's input
+   within them, and a filter with zeta >= 1 does not overshoot).
+
+Recorded but not an invariant: the least C_m, the least margin of the
+measured joint positions to their limits, the closest approach of a
+person (people walk where they like).
+
+`run_stress(args)` prints a progress line (cases done / total, failures so
+far; a failing case's broken invariants at once), appends each record to
+`stress.jsonl` in the output folder as it completes (so a long run that is
+stopped keeps what it did, and `--resume` runs only the cases missing from
+it), then prints a summary (every case for a short run; for a long one
+the spread of each column and the failing cases), writes `stress.json`
+and `stress.csv` and returns 0 when every invariant held, 1 otherwise.
+"""
+
+import csv
+import json
+import math
+import multiprocessing
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+from drake_wbc.math.validation import positive, whole_number
+from drake_wbc.stress.cases import TIMING_KEYS, run_case, violations
+
+DEFAULT_DURATION = 4.0
+"""Simulated time of each case, s."""
+
+COLUMNS = (
+    ("case", "case", "{:d}"),
+    ("mode", "mode", "{}"),
+    ("obstacles", "obst", "{:d}"),
+    ("people", "ppl", "{:d}"),
+    ("min_static_obstacle_distance_m", "d_obs m", "{:.3f}"),
+    ("min_capability", "min C_m", "{:.4f}"),
+    ("min_command_joint_limit_margin_rad", "q margin", "{:.3f}"),
+    ("max_base_speed_command_m_s", "|v_b| m/s", "{:.3f}"),
+    ("max_joint_speed_command_rad_s", "qdot rad/s", "{:.3f}"),
+    ("all_finite", "finite", "{}"),
+)
+"""The summary table's columns: record key, heading, format."""
+
+
+def add_stress_arguments(parser):
+    """Adds the arguments of `drake-wbc stress` to `parser`."""
+    parser.add_argument("--cases", type=int, default=20,
+                        help="how many cases (default: %(default)s)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="the run's seed (default: %(default)s)")
+    parser.add_argument(
+        "--workers", type=int, default=None,
+        help="worker processes (default: one per core); 1 runs the cases "
+             "in this process")
+    parser.add_argument(
+        "--scheduler", default=None, metavar="ADDRESS",
+        help="run the cases on the Dask distributed cluster of this "
+             "scheduler (e.g. tcp://10.0.0.5:8786) instead of local "
+             "processes")
+    parser.add_argument(
+        "--duration", type=float, default=DEFAULT_DURATION,
+        help="simulated time of each case in s (default: %(default)s)")
+    parser.add_argument(
+        "--output", type=Path, default=Path("out") / "stress",
+        help="folder for stress.jsonl, stress.json and stress.csv "
+             "(default: %(default)s)")
+    parser.add_argument(
+        "--resume", action="store_true",
+        help="keep the records of an earlier run of the same seed and "
+             "duration found in the output folder's stress.jsonl and run "
+             "only the missing cases")
+
+
+class ProgressLine:
+    """`stress: k / N cases done, f failed` on one line of `stream` (a new
+    line per case when `stream` is not a terminal)."""
+
+    def __init__(self, total, stream=None):
+        self.total, self.done, self.failed = total, 0, 0
+        self.stream = stream or sys.stderr
+
+    def update(self, record):
+        self.done += 1
+        broken = violations(record)
+        self.failed += bool(broken)
+        text = (f"stress: {self.done} / {self.total} cases done, "
+                f"{self.failed} failed")
+        if broken:
+            text = (f"stress: case {record['case']} broke "
+                    f"{'; '.join(broken)}\n{text}")
+        if self.stream.isatty():
+            end = "\n" if self.done == self.total else ""
+            self.stream.write("\r" + text + end)
+        else:
+            self.stream.write(text + "\n")
+        self.stream.flush()
+
+
+def run_cases(seed, cases, duration=DEFAULT_DURATION, workers=1,
+              scheduler=None, on_done=None, done=()):
+    """Runs cases 0 .. cases - 1 of `seed`; returns their records, in case
+    order.
+
+    Args:
+        seed: a whole number >= 0.
+        cases: how many cases, >= 1.
+        duration: simulated time of each case, s.
+        workers: worker processes (spawned); 1 runs the cases here, None
+            one per core. Ignored with `scheduler`.
+        scheduler: the address of a Dask distributed scheduler, a
+            dask.distributed.Client, or None.
+        on_done: called with each record as it comes in (any order).
+        done: records of cases already run (e.g. `Journal.records`): they
+            are returned as they are, and only the other cases run.
+
+    Raises:
+        ValueError: naming a bad argument.
+    """
+    seed = whole_number("seed", seed)
+    cases = whole_number("cases", cases, 1)
+    duration = positive("duration", duration)
+    on_done = on_done or (lambda record: None)
+    kept = {record["case"]: record for record in done
+            if record["case"] < cases}
+    pending = [index for index in range(cases) if index not in kept]
+    if not pending:
+        records = []
+    elif scheduler is not None:
+        records = _on_dask(scheduler, seed, pending, duration, on_done)
+    else:
+        if workers is None:
+            workers = os.cpu_count() or 1
+        workers = whole_number("workers", workers, 1)
+        records = _in_processes(seed, pending, duration,
+                                min(workers, len(pending)), on_done)
+    return sorted([*kept.values(), *records],
+                  key=lambda record: record["case"])
+
+
+def _in_processes(seed, indices, duration, workers, on_done):
+    records = []
+    if workers == 1:
+        for index in indices:
+            records.append(run_case(seed, index, duration))
+            on_done(records[-1])
+        return records
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers,
+                             mp_context=context) as pool:
+        futures = [pool.submit(run_case, seed, index, duration)
+                   for index in indices]
+        for future in as_completed(futures):
+            records.append(future.result())
+            on_done(records[-1])
+    return records
+
+
+def _on_dask(scheduler, seed, indices, duration, on_done):
+    from dask.distributed import Client
+    from dask.distributed import as_completed as dask_completed
+
+    client = scheduler if isinstance(scheduler, Client) else Client(
+        scheduler)
+    try:
+        futures = [client.submit(run_case, seed, index, duration,
+                                 pure=False, key=f"stress-{seed}-{index}")
+                   for index in indices]
+        records = []
+        for future in dask_completed(futures):
+            records.append(future.result())
+            on_done(records[-1])
+        return records
+    finally:
+        if client is not scheduler:
+            client.close()
+
+
+def exit_code(records):
+    """0 when no record breaks an invariant, else 1."""
+    return 1 if any(violations(record) for record in records) else 0
+
+
+def comparable(record):
+    """`record` without the keys that depend on the machine (timing)."""
+    return {k: v for k, v in record.items() if k not in TIMING_KEYS}
+
+
+class Journal:
+    """`stress.jsonl`: the run's settings on the first line, then one
+    record a line, appended and flushed as each case completes.
+
+    Args:
+        folder: the output folder (created if missing).
+        settings: a dict of the run's settings (seed, duration_s, ...).
+        resume: keep the records of a journal already in `folder` whose
+            seed and duration match `settings` (`records`); otherwise the
+            journal starts afresh.
+    """
+
+    def __init__(self, folder, settings, resume=False):
+        self.path = Path(folder) / "stress.jsonl"
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.records = self._earlier(settings) if resume else []
+        with self.path.open("w", encoding="utf-8") as stream:
+            stream.write(json.dumps(_json_ready(
+                {"settings": settings})) + "\n")
+            for record in self.records:
+                stream.write(json.dumps(_json_ready(record)) + "\n")
+
+    def _earlier(self, settings):
+        if not self.path.exists():
+            return []
+        lines = self.path.read_text(encoding="utf-8").splitlines()
+        if not lines:
+            return []
+        earlier = json.loads(lines[0]).get("settings", {})
+        if any(earlier.get(key) != settings[key]
+               for key in ("seed", "duration_s")):
+            raise ValueError(
+                f"--resume is not allowed with seed {settings['seed']} and "
+                f"duration {settings['duration_s']} s: {self.path} holds a "
+                f"run of seed {earlier.get('seed')} and duration "
+                f"{earlier.get('duration_s')} s (choose another --output)")
+        records = {}
+        for line in lines[1:]:
+            try:
+                record = _from_json(json.loads(line))
+            except json.JSONDecodeError:
+                continue    # a line cut short when the run was stopped
+            records[record["case"]] = record
+        return [records[index] for index in sorted(records)]
+
+    def append(self, record):
+        """Appends `record` as one line, flushed to disk at once."""
+        with self.path.open("a", encoding="utf-8") as stream:
+            stream.write(json.dumps(_json_ready(record)) + "\n")
+
+
+SUMMARY_ROWS = 30
+"""Runs of more cases than this print the spread of each column and the
+failing cases, not every case."""
+
+
+def summary_table(records):
+    """The summary of `records` as text: one line a case, or, for more
+    than SUMMARY_ROWS cases, the least, median and largest value of each
+    column followed by the failing cases."""
+    if len(records) > SUMMARY_ROWS:
+        return _spread(records)
+    return _rows(records)
+
+
+def _spread(records):
+    lines = [f"{'':>12}  {'least':>10}  {'median':>10}  {'largest':>10}"]
+    for key, heading, form in COLUMNS[4:-1]:
+        values = [record[key] for record in records
+                  if isinstance(record.get(key), (int, float))]
+        if not values:
+            continue
+        least, median, largest = (min(values), sorted(values)[
+            len(values) // 2], max(values))
+        lines.append(f"{heading:>12}  " + "  ".join(
+            form.format(v).rjust(10) for v in (least, median, largest)))
+    failing = [record for record in records if violations(record)]
+    lines.append(f"{len(failing)} failing case(s)" + (
+        ":" if failing else ""))
+    if failing:
+        lines.append(_rows(failing))
+    return "\n".join(lines)
+
+
+def _rows(records):
+    rows = [[heading for _, heading, _ in COLUMNS] + ["invariants"]]
+    for record in records:
+        broken = violations(record)
+        row = []
+        for key, _, form in COLUMNS:
+            value = record.get(key)
+            row.append("-" if value is None else form.format(value))
+        row.append("; ".join(broken) if broken else "ok")
+        rows.append(row)
+    widths = [max(len(row[i]) for row in rows) for i in range(len(COLUMNS))]
+    lines = ["  ".join(cell.rjust(width) for cell, width
+                       in zip(row[:-1], widths, strict=True)) + "  " + row[-1]
+             for row in rows]
+    return "\n".join(lines)
+
+
+def _json_ready(value):
+    """`value` with non-finite floats as the strings "nan", "inf", "-inf"
+    (strict JSON has no such numbers)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if isinstance(value, dict):
+        return {k: _json_ready(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_json_ready(v) for v in value]
+    return value
+
+
+def _from_json(value):
+    """Inverse of `_json_ready` for a record's values."""
+    if value in ("nan", "inf", "-inf"):
+        return float(value)
+    if isinstance(value, dict):
+        return {k: _from_json(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_from_json(v) for v in value]
+    return value
+
+
+def write_results(folder, settings, records):
+    """Writes stress.json (the settings, each record with its broken
+    invariants) and stress.csv (one row a case); returns both paths."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = [dict(record, violations=violations(record))
+            for record in records]
+    document = dict(settings, failed=sum(bool(r["violations"]) for r in rows),
+                    cases=rows)
+    json_path = folder / "stress.json"
+    json_path.write_text(json.dumps(_json_ready(document), indent=1),
+                         encoding="utf-8")
+    keys = list(dict.fromkeys(k for record in records for k in record))
+    csv_path = folder / "stress.csv"
+    with csv_path.open("w", newline="", encoding="utf-8") as stream:
+        writer = csv.DictWriter(stream, fieldnames=keys + ["violations"])
+        writer.writeheader()
+        for row in rows:
+            writer.writerow(dict(row, violations="; ".join(
+                row["violations"])))
+    return json_path, csv_path
+
+
+def run_stress(args):
+    """Runs `drake-wbc stress` with the parsed `args`; returns the exit
+    code (0: every invariant held; 1: one broke)."""
+    workers = args.workers
+    where = (f"on the Dask cluster at {args.scheduler}" if args.scheduler
+             else f"in {workers or os.cpu_count() or 1} worker process(es)")
+    print(f"drake-wbc stress: {args.cases} cases of {args.duration} s, seed "
+          f"{args.seed}, {where}; writing to {args.output}/")
+    settings = dict(seed=args.seed, duration_s=args.duration,
+                    scheduler=args.scheduler, workers=workers)
+    journal = Journal(args.output, settings, resume=args.resume)
+    kept = [r for r in journal.records if r["case"] < args.cases]
+    if kept:
+        print(f"resuming: {len(kept)} case(s) kept from {journal.path}")
+    progress = ProgressLine(args.cases - len(kept))
+
+    def on_done(record):
+        journal.append(record)
+        progress.update(record)
+
+    records = run_cases(args.seed, args.cases, args.duration, workers,
+                        args.scheduler, on_done=on_done, done=kept)
+    print(summary_table(records))
+    json_path, csv_path = write_results(args.output, settings, records)
+    code = exit_code(records)
+    failed = sum(bool(violations(r)) for r in records)
+    print(f"{failed} of {len(records)} cases broke an invariant; wrote "
+          f"{json_path} and {csv_path}")
+    return code
