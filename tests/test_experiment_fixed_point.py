@@ -9,10 +9,10 @@ switch of k_n (C_m in the band from about 19.5 s, s_c = 1 throughout).
 import numpy as np
 import pytest
 
+from drake_wbc.controller.task import Schedule
 from drake_wbc.experiments import experiment_module, fixed_point
 from drake_wbc.experiments.runner import build_closed_loop, simulate
 from drake_wbc.experiments.scenario import (
-    Schedule,
     find_scenario,
     load_scenario,
 )

@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 
+from drake_wbc.controller.run_log import RunLog
+from drake_wbc.controller.task import Schedule
 from drake_wbc.experiments import wiping
 from drake_wbc.experiments.reports import run_scenario
-from drake_wbc.experiments.runner import RunLog
 from drake_wbc.experiments.scenario import (
-    Schedule,
     find_scenario,
     load_scenario,
 )

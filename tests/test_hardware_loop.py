@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from pydrake.systems.framework import PortDataType
 
-from drake_wbc.cli.hardware import main
+from drake_wbc.cli.main import main
 from drake_wbc.controller.diagram import STATION_INPUTS
 from drake_wbc.deployment.lcm_logs import read_lcm_log
 from drake_wbc.deployment.loopback import (

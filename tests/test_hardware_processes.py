@@ -15,7 +15,8 @@ import lcm
 import numpy as np
 import pytest
 
-from drake_wbc.cli.hardware import INTERRUPTED, main
+from drake_wbc.cli.hardware import INTERRUPTED
+from drake_wbc.cli.main import main
 from drake_wbc.deployment.lcm_logs import (
     deployments,
     read_events,
@@ -38,14 +39,14 @@ ip link set lo up
 ip route add 224.0.0.0/4 dev lo
 cd {folder}
 {logger} --quiet -l '{url}' -f run.lcmlog & LOGGER=$!
-{python} -m drake_wbc.cli.hardware robot-sim scenario.yaml \\
+{python} -m drake_wbc.cli robot-sim scenario.yaml \\
     --realtime-rate {rate} > robot.out 2>&1 & ROBOT=$!
-{python} -m drake_wbc.cli.hardware deploy scenario.yaml \\
+{python} -m drake_wbc.cli deploy scenario.yaml \\
     --realtime-rate {rate} > deploy.out 2>&1
 echo $? > deploy.code
 # A second deployment, stopped by SIGINT once it runs (the programs
 # handle SIGINT themselves, which a background job of sh ignores).
-{python} -m drake_wbc.cli.hardware deploy scenario.yaml \\
+{python} -m drake_wbc.cli deploy scenario.yaml \\
     --duration 60 --realtime-rate {rate} > stopped.out 2>&1 & STOPPED=$!
 for i in $(seq 300); do
     grep -q running stopped.out && break

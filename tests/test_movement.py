@@ -7,7 +7,7 @@ import pytest
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import Linearize
 
-from drake_wbc.experiments.scenario import Schedule
+from drake_wbc.controller.task import Schedule
 from drake_wbc.math import cdmp, dmp
 from drake_wbc.math import movement as mv
 from drake_wbc.math.demonstration import Demonstration, teaching_interval

@@ -30,11 +30,10 @@ import numpy as np
 import pytest
 
 from drake_wbc.controller import ControllerParameters
+from drake_wbc.controller.task import Schedule, TaskInputs
 from drake_wbc.experiments.scenario import (
     OutputOptions,
     Scenario,
-    Schedule,
-    TaskInputs,
     Variant,
     load_scenario,
 )

@@ -12,7 +12,7 @@ from pydrake.systems.primitives import (
     Sine,
 )
 
-from drake_wbc.experiments.runner import RunLog, SignalLogger
+from drake_wbc.controller.run_log import RunLog, SignalLogger
 
 
 def _signals(builder):
@@ -52,7 +52,7 @@ def test_one_sink_logs_what_one_logger_a_signal_logs():
         np.testing.assert_array_equal(run[name], reference.data().T)
     assert run.columns == {"sine": ("x0", "y0", "x1"),  # unnamed
                            "delayed": ("a", "b", "c"),  # named here
-                           "alpha": ("alpha",)}  # named in runner.SIGNALS
+                           "alpha": ("alpha",)}  # named in run_log.SIGNALS
 
 
 def test_a_log_without_signals_is_refused():

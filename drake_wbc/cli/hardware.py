@@ -1,6 +1,6 @@
 """The commands `drake-wbc robot-sim`, `drake-wbc deploy` and
 `drake-wbc plot`, as argument adders and runners (each runner returns the
-exit code), also runnable as `python -m drake_wbc.cli.hardware`.
+exit code); `drake-wbc` (drake_wbc.cli.main) offers them.
 
 - robot-sim SCENARIO: the simulated station speaking the robot's side of
   the LCM protocol (drake_wbc.deployment.robot_side), paced to the wall
@@ -256,15 +256,3 @@ PROGRAMS = (
      add_plot_arguments, run_plot),
 )
 """(name, help, add arguments, run) of each command."""
-
-
-def main(argv=None):
-    """`python -m drake_wbc.cli.hardware robot-sim|deploy|plot ...`:
-    the same as `drake-wbc` (drake_wbc.cli.main), which offers the three."""
-    from drake_wbc.cli.main import main as drake_wbc_main
-
-    return drake_wbc_main(argv)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

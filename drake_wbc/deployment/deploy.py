@@ -21,8 +21,9 @@ from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_wbc.experiments.runner import SIGNALS, add_controller
-from drake_wbc.experiments.scenario import Scenario
+from drake_wbc.controller.run_log import SIGNALS
+from drake_wbc.controller.task import add_controller
+from drake_wbc.experiments.scenario import Scenario, controller_for
 from drake_wbc.hardware import messages
 from drake_wbc.hardware.codecs import SignalBundleEncoder
 from drake_wbc.hardware.interface import (
@@ -103,8 +104,9 @@ def add_controller_side(builder, scenario, variant=None, options=None,
     hardware = HardwareInterface(options, lcm,
                                  scenario.station.initial_arm_positions)
     builder.AddNamedSystem("hardware", hardware.diagram)
-    controller, sources = add_controller(builder, scenario, variant,
-                                         hardware.diagram)
+    controller, sources = add_controller(
+        builder, controller_for(scenario, variant), scenario.task,
+        hardware.diagram)
     ports = {name: controller.diagram.GetOutputPort(name)
              for name in SIGNALS
              if name not in COMMANDS

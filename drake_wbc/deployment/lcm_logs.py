@@ -3,7 +3,7 @@ of a run.
 
 `read_lcm_log` decodes every channel of the protocol (channel names of
 HardwareOptions) and samples the signals on one time grid, as a
-drake_wbc.experiments.runner.RunLog with the signal names of runner.SIGNALS
+drake_wbc.controller.run_log.RunLog with the signal names of run_log.SIGNALS
 where
 they exist, so that the experiments' metrics and figures
 (drake_wbc.experiments) apply to a run on the robot as to a simulated
@@ -35,7 +35,7 @@ from collections import defaultdict
 import lcm
 import numpy as np
 
-from drake_wbc.experiments.runner import SIGNALS, RunLog
+from drake_wbc.controller.run_log import SIGNALS, RunLog
 from drake_wbc.hardware import messages
 from drake_wbc.hardware.interface import DIAGNOSTICS
 from drake_wbc.hardware.options import HardwareOptions
@@ -60,7 +60,7 @@ EXTRA_COLUMNS = {
     "arm.velocity_estimated": tuple(f"v{i}" for i in range(1, 7)),
     "hardware.diagnostics": DIAGNOSTICS,
 }
-"""Column names of the signals that runner.SIGNALS does not list."""
+"""Column names of the signals that run_log.SIGNALS does not list."""
 
 
 def read_events(path):

@@ -13,7 +13,7 @@ deployment::
     log = simulate_loopback(loop)
     log["truth.end_effector_pose"]     # as runner.simulate's log
 
-The log has runner.SIGNALS: the station's outputs and ground truth as the
+The log has run_log.SIGNALS: the station's outputs and ground truth as the
 robot side had them, the commands as the hardware interface sent them,
 the controller's diagnostics; and `hardware.diagnostics` (interface.
 DIAGNOSTICS).
@@ -26,13 +26,13 @@ from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
+from drake_wbc.controller.run_log import SIGNALS, SignalLogger
 from drake_wbc.deployment.deploy import (
     COMMANDS,
     ControllerSide,
     add_controller_side,
 )
 from drake_wbc.deployment.robot_side import RobotSide
-from drake_wbc.experiments.runner import SIGNALS, SignalLogger
 from drake_wbc.experiments.scenario import Scenario
 from drake_wbc.hardware.interface import DIAGNOSTICS
 from drake_wbc.hardware.options import HardwareOptions
@@ -52,7 +52,7 @@ class Loopback:
         diagram: robot side, controller side and the logger.
         robot: the RobotSide.
         side: the ControllerSide.
-        logger: the runner.SignalLogger of SIGNALS and
+        logger: the run_log.SignalLogger of SIGNALS and
             hardware.diagnostics.
         lcm: the LCM object both sides talk over.
         scenario, variant: what it was built from.
@@ -134,7 +134,7 @@ def simulate_loopback(loop, duration=None, simulator=None):
             if None).
 
     Returns:
-        RunLog (runner.SIGNALS and hardware.diagnostics).
+        RunLog (run_log.SIGNALS and hardware.diagnostics).
     """
     duration = loop.scenario.duration if duration is None else duration
     simulator = simulator or make_simulator(loop)

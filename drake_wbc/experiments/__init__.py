@@ -15,7 +15,7 @@ the stress run or the command line.
 The experiments' metrics and figures:
 
 Every module here computes, from the logs of a scenario's runs
-(drake_wbc.experiments.runner.RunLog, ground truth included), the metrics of one
+(drake_wbc.controller.run_log.RunLog, ground truth included), the metrics of one
 experiment and draws the figures that mirror the paper's, through two
 functions:
 

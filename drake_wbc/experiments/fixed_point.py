@@ -54,7 +54,7 @@ APPROACH_GAP = 0.5
 
 def schedule_values(schedule, times, default):
     """A task input's Schedule evaluated at `times`, as the runner plays it
-    (drake_wbc.experiments.runner.schedule_source): (N, k) values, or `default`
+    (drake_wbc.controller.task.schedule_source): (N, k) values, or `default`
     (a
     number or a sequence) at every time when the schedule is empty."""
     times = np.asarray(times, dtype=float)

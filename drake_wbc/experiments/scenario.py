@@ -23,23 +23,19 @@ The files are in diagrams/ (`scenarios_dir()`); `find_scenario` takes a
 file's path or its name without `.yaml`.
 """
 
+import copy
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
-import numpy as np
-
 from drake_wbc.controller import ControllerParameters
 from drake_wbc.controller.parameters import load_typed
+from drake_wbc.controller.task import TaskInputs
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.math.cdmp import MovementReplay
 from drake_wbc.math.validation import (
-    as_vector,
     boolean,
     checked_instance,
-    in_closed_range,
-    non_negative,
     positive,
-    selection,
     text,
 )
 from drake_wbc.robot.footprint import check_start_is_free
@@ -57,101 +53,6 @@ scenario."""
 
 DEFAULT_SCENARIO = "trajectory_tracking"
 """The scenario `drake-wbc run` runs when given none."""
-
-INTERPOLATIONS = ("hold", "linear")
-
-
-@dataclass
-class Schedule:
-    """A task input over time.
-
-    Attributes:
-        times: strictly increasing times in s.
-        values: one value (a list of numbers of the input's size) per
-            time.
-        interpolation: `hold` (each value from its time until the next;
-            the first value before the first time) or `linear`
-            (piecewise linear between the times, constant outside).
-
-    An empty schedule leaves the input to its default (see TaskInputs).
-    """
-
-    times: list[float] = field(default_factory=list)
-    values: list[list[float]] = field(default_factory=list)
-    interpolation: str = "hold"
-
-    def __post_init__(self):
-        if len(self.times) != len(self.values):
-            raise ValueError(
-                f"values has {len(self.values)} entries, which is not "
-                f"allowed: must have one per time ({len(self.times)})")
-        if self.times:
-            times = as_vector("times", self.times)
-            if np.any(np.diff(times) <= 0.0):
-                raise ValueError(f"times = {self.times} is not allowed: "
-                                 "must be strictly increasing")
-            sizes = {len(v) for v in self.values}
-            if len(sizes) != 1:
-                raise ValueError(f"values = {self.values} is not allowed: "
-                                 "every value must have the same size")
-            for i, value in enumerate(self.values):
-                as_vector(f"values[{i}]", value)
-        if self.interpolation not in INTERPOLATIONS:
-            raise ValueError(
-                f"interpolation = {self.interpolation!r} is not allowed: "
-                f"must be one of {', '.join(INTERPOLATIONS)}")
-
-    def size(self):
-        """The size of the values (0 for an empty schedule)."""
-        return len(self.values[0]) if self.values else 0
-
-
-TASK_SIZES = dict(reference_velocity=6, desired_wrench=6, phri_switch=1,
-                  null_space_gain=1, compensation_switch=1)
-"""The controller's task inputs and their sizes."""
-
-
-@dataclass
-class TaskInputs:
-    """The controller's task inputs over time (see controller.TASK_INPUTS).
-
-    Attributes:
-        reference_velocity: V_ee^ref (6) in the world, [v; w]; zero when
-            empty.
-        desired_wrench: F_d (6), the controller's arm_cdmp.F_d when empty.
-        phri_switch: S_hri (1), the parameter when empty.
-        null_space_gain: k_n (1), the parameter when empty.
-        compensation_switch: s_c (1), the parameter when empty.
-    """
-
-    reference_velocity: Schedule = field(default_factory=Schedule)
-    desired_wrench: Schedule = field(default_factory=Schedule)
-    phri_switch: Schedule = field(default_factory=Schedule)
-    null_space_gain: Schedule = field(default_factory=Schedule)
-    compensation_switch: Schedule = field(default_factory=Schedule)
-
-    def __post_init__(self):
-        for name, size in TASK_SIZES.items():
-            schedule = checked_instance(name, getattr(self, name), Schedule,
-                                        Schedule)
-            setattr(self, name, schedule)
-            if schedule.times and schedule.size() != size:
-                raise ValueError(
-                    f"{name}.values = {schedule.values} is not allowed: "
-                    f"each value must have {size} entries")
-            for i, value in enumerate(schedule.values):
-                _check_task_value(f"{name}.values[{i}]", name, value)
-
-
-def _check_task_value(where, name, value):
-    """Checks one value of the schedule of task input `name`: S_hri is 0
-    or 1 (eq. (cdmp-wb)), s_c lies in [0, 1] and k_n >= 0 (eq. (wbccm))."""
-    if name == "phri_switch":
-        selection(where, value, 1)
-    elif name == "compensation_switch":
-        in_closed_range(where, value[0], 0.0, 1.0)
-    elif name == "null_space_gain":
-        non_negative(where, value[0])
 
 
 @dataclass
@@ -290,6 +191,17 @@ class Scenario:
                 f"{self.controller.time_step!r} s: the controller sends its "
                 "commands once a tick, so the two must be equal")
         check_start_is_free(self.scene, self.station.initial_base_pose)
+
+
+def controller_for(scenario, variant):
+    """The controller's parameters for one run of `scenario`: a copy of
+    scenario.controller with the `variant`'s base filter switch and
+    learned movement."""
+    params = copy.deepcopy(scenario.controller)
+    params.base_filter.enabled = variant.base_filter
+    if variant.movement is not None:
+        params.whole_body_cdmp.movement = variant.movement
+    return params
 
 
 _PARTS = dict(controller=ControllerParameters, station=StationOptions,

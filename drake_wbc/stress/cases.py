@@ -30,8 +30,9 @@ import time
 
 import numpy as np
 
+from drake_wbc.controller.task import Schedule
 from drake_wbc.experiments.common import obstacle_distances, run_metrics
-from drake_wbc.experiments.scenario import Scenario, Schedule
+from drake_wbc.experiments.scenario import Scenario
 from drake_wbc.math.validation import validate
 from drake_wbc.robot.model import HOME_ARM_POSITIONS
 from drake_wbc.station.scene import (
@@ -211,7 +212,7 @@ def case_record(seed, index, scenario, log):
     Args:
         seed, index: the case.
         scenario: its Scenario.
-        log: its drake_wbc.experiments.runner.RunLog.
+        log: its drake_wbc.controller.run_log.RunLog.
 
     Returns:
         dict of plain numbers and strings (JSON-ready; distances are None

@@ -12,7 +12,7 @@ class signal_bundle_t(object):
     Named vector signals sampled at one time, for logs and plots: the
     robot's ground truth (channel WBC_TRUTH) and the controller's
     diagnostics (channel WBC_CONTROLLER). Signal i, named names[i] (as in
-    drake_wbc.experiments.runner.SIGNALS), is the sizes[i] values that follow those of
+    drake_wbc.controller.run_log.SIGNALS), is the sizes[i] values that follow those of
     signals 0 to i - 1 in values.
     """
 

@@ -1,0 +1,156 @@
+"""The log of a run: the signals logged, sampled together, and the RunLog
+they make.
+
+The same format for a simulated run (drake_wbc.experiments.runner), a
+deployment's loopback (drake_wbc.deployment.loopback) and a log of
+lcm-logger read back (drake_wbc.deployment.lcm_logs), so that the
+experiments' metrics and figures apply to each.
+"""
+
+import numpy as np
+from pydrake.systems.primitives import LogVectorOutput, Multiplexer
+
+from drake_wbc.stages.safety import STATUS_FIELDS
+
+SIGNALS = {
+    # station: what the robot's sensors report
+    "base.state_estimated": ("x", "y", "yaw", "vx", "vy", "wz"),
+    "arm.position_measured": tuple(f"q{i}" for i in range(1, 7)),
+    "wrist.wrench_measured": ("fx", "fy", "fz", "tx", "ty", "tz"),
+    # station: ground truth, for metrics
+    "truth.end_effector_pose": ("x", "y", "z", "roll", "pitch", "yaw"),
+    "truth.end_effector_velocity": ("vx", "vy", "vz", "wx", "wy", "wz"),
+    "truth.base_pose": ("x", "y", "yaw"),
+    "truth.base_loop_velocity": ("vx", "vy", "wz"),
+    "truth.mount_angles": ("roll", "pitch"),
+    "truth.wrist_wrench": ("fx", "fy", "fz", "tx", "ty", "tz"),
+    "truth.hand_force": ("fx", "fy", "fz", "tx", "ty", "tz"),
+    "truth.people_positions": None,  # x0, y0, x1, y1, ...
+    # controller: commands and diagnostics
+    "base.velocity_command": ("vx", "vy", "wz"),
+    "arm.position_command": tuple(f"q{i}" for i in range(1, 7)),
+    "capability": ("C_m",),
+    "alpha": ("alpha",),
+    "sigma_xy": ("sigma_xy",),
+    "sigma_phi": ("sigma_phi",),
+    "end_effector_deviation": ("vx", "vy", "vz", "wx", "wy", "wz"),
+    "base_velocity": ("vx", "vy", "wz"),
+    "filtered_base_velocity": ("vx", "vy", "wz"),
+    "arm_velocity_command": ("vx", "vy", "vz", "wx", "wy", "wz"),
+    "arm_limited": ("limited",),
+    "base_saturation": ("limited", "velocity_scale", "acceleration_scale"),
+    "safety_status": STATUS_FIELDS,
+    # task
+    "reference_velocity": ("vx", "vy", "vz", "wx", "wy", "wz"),
+}
+"""The logged signals and the names of their columns."""
+
+
+class SignalLogger:
+    """Named signals of a Diagram sampled together by one VectorLogSink.
+
+    The ports are stacked by a Multiplexer into a single
+    LogVectorOutput: one periodic publish a sample for all of them
+    instead of one per signal (two dozen sinks cost a closed-loop run
+    about 7% of its time). `run_log` splits the stack again by name.
+
+    Args:
+        builder: the DiagramBuilder holding the ports' systems.
+        ports: dict signal name -> vector OutputPort, in logging order
+            (ports of size 0 are left out).
+        period: the sample period in s.
+        columns: dict signal name -> column names, for the signals that
+            SIGNALS does not name (x0, y0, x1, ... where neither does).
+    """
+
+    def __init__(self, builder, ports, period, columns=None):
+        given = list(ports)
+        ports = {name: port for name, port in ports.items()
+                 if port.size() > 0}
+        if not ports:
+            raise ValueError(f"ports = {given!r} is not allowed: must "
+                             "name at least one port of size > 0")
+        sizes = [port.size() for port in ports.values()]
+        mux = builder.AddNamedSystem("log.signals", Multiplexer(sizes))
+        for i, port in enumerate(ports.values()):
+            builder.Connect(port, mux.get_input_port(i))
+        self.sink = LogVectorOutput(mux.get_output_port(), builder, period)
+        self.sink.set_name("log.sink")
+        ends = np.cumsum([0] + sizes)
+        self.slices = {name: slice(int(a), int(b)) for name, a, b in
+                       zip(ports, ends[:-1], ends[1:], strict=True)}
+        columns = columns or {}
+        for name, names in columns.items():
+            if name in ports and len(names) != ports[name].size():
+                raise ValueError(
+                    f"columns[{name!r}] = {names!r} is not allowed: must "
+                    f"have {ports[name].size()} names, one per entry of "
+                    "the port")
+        self.columns = {
+            name: columns.get(name) or SIGNALS.get(name) or tuple(
+                f"{'xy'[i % 2]}{i // 2}" for i in range(part.stop - part.start))
+            for name, part in self.slices.items()}
+
+    def run_log(self, root_context, real_time_factor=np.nan):
+        """The RunLog of the samples taken in `root_context`."""
+        log = self.sink.FindLog(root_context)
+        data = log.data().T
+        n = min(len(log.sample_times()), len(data))
+        signals = {name: data[:n, part].copy()
+                   for name, part in self.slices.items()}
+        return RunLog(np.asarray(log.sample_times()[:n]), signals,
+                      dict(self.columns), real_time_factor)
+
+
+class RunLog:
+    """The signals of one run: `log[name]` is an (N, k) array sampled at
+    `log.time` (N,); `log.columns[name]` names its k columns.
+
+    Attributes:
+        time: (N,) sample times in s.
+        signals: dict name -> (N, k) array.
+        columns: dict name -> tuple of column names.
+        real_time_factor: simulated over wall-clock time of the run.
+    """
+
+    def __init__(self, time, signals, columns, real_time_factor=np.nan):
+        self.time, self.signals, self.columns = time, signals, columns
+        self.real_time_factor = real_time_factor
+
+    def __getitem__(self, name):
+        return self.signals[name]
+
+    def __contains__(self, name):
+        return name in self.signals
+
+    def save(self, path):
+        """Writes the log as NPZ (arrays `time` and one per signal, and
+        `header`, a JSON description of the columns and units) and as CSV
+        next to it (one column per signal's component)."""
+        import json
+
+        header = json.dumps({
+            "time": "s",
+            "signals": {k: list(v) for k, v in self.columns.items()},
+            "units": "SI: m, rad, s, N, N m; twists [v; w]; see "
+                     "drake_wbc.controller.run_log.SIGNALS",
+        })
+        np.savez_compressed(path.with_suffix(".npz"), time=self.time,
+                            header=header, **self.signals)
+        names = ["time"] + [f"{k}.{c}" for k, cols in self.columns.items()
+                            for c in cols]
+        table = np.column_stack([self.time] + list(self.signals.values()))
+        np.savetxt(path.with_suffix(".csv"), table, delimiter=",",
+                   header=",".join(names), comments="", fmt="%.9g")
+        return path.with_suffix(".npz")
+
+    @classmethod
+    def load(cls, path):
+        """Reads a log written by `save` (the .npz file)."""
+        import json
+
+        with np.load(path) as data:
+            header = json.loads(str(data["header"]))
+            signals = {k: data[k] for k in header["signals"]}
+            columns = {k: tuple(v) for k, v in header["signals"].items()}
+            return cls(data["time"], signals, columns)
