@@ -10,7 +10,6 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector
 
 from drake_wbc.math import cdmp, dmp, repulsion
-from drake_wbc.math import movement as mv
 from drake_wbc.math.demonstration import TcpPose
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.stages.cdmp_stages import ArmCdmp, BaseCdmp
@@ -353,19 +352,6 @@ def test_player_terms_and_reference(player_stage):
         progress = np.interp(elapsed, grid, player._progress)
         assert_close(player.goal_at(elapsed), player.learned_goal + progress
                      * (player.goal - player.learned_goal), 1.0)
-
-
-def test_interpolation_is_np_interp():
-    rng = np.random.default_rng(10)
-    times = np.cumsum(rng.uniform(0.01, 1.0, 50))
-    rows = rng.normal(size=(50, 3))
-    queries = np.concatenate([times[[0, 7, 49]], [times[0] - 1.0,
-                                                  times[-1] + 1.0],
-                              rng.uniform(times[0], times[-1], 40)])
-    for x in queries:
-        got = mv._interpolate(float(x), times.tolist(), rows.tolist())
-        expected = [np.interp(x, times, rows[:, i]) for i in range(3)]
-        np.testing.assert_allclose(got, expected, rtol=1e-14, atol=1e-15)
 
 
 def test_movement_tracking(player_stage, arm):
