@@ -46,7 +46,8 @@ def test_base_cdmp_force_is_the_repulsive_force_with_no_yaw_part():
     for size in (0, 1, 5, 40, 40):
         points = rng.uniform(-1.5, 1.5, (size, 2))
         port.FixValue(context, AbstractValue.Make(points))
-        f_x, f_y = repulsion.repulsive_force(points, params.repulsion)
+        f_x, f_y = repulsion.repulsive_force_float(points,
+                                                   params.repulsion)
         force = system.repulsive_force(context)
         assert force.dtype == np.float64
         np.testing.assert_array_equal(force, [f_x, f_y, 0.0])

@@ -349,7 +349,8 @@ def test_base_cdmp_force_is_cached_on_the_points():
     for _ in range(3):
         points = rng.uniform(-0.9, 0.9, (50, 2))
         port.FixValue(context, AbstractValue.Make(points))
-        expected = repulsion.repulsive_force(points, stage.params.repulsion)
+        expected = repulsion.repulsive_force_float(
+            points, stage.params.repulsion)
         force = stage.repulsive_force(context)
         np.testing.assert_array_equal(force, [*expected, 0.0])
         force[:] = np.nan  # a copy: the cached value stays
@@ -406,21 +407,3 @@ def test_joint_velocity_for_twist_unchecked_matches_checked(acceleration):
         assert (fast.scale, fast.acceleration_scale, fast.damping) == (
             checked.scale, checked.acceleration_scale, checked.damping)
 
-
-def test_repulsive_force_float_path_matches_the_general_one():
-    """Points inside, on, near and far from the footprint, and a crowd
-    that hits the bound: the float path against the general one (written
-    for AutoDiffXd, here on floats)."""
-    rng = np.random.default_rng(23)
-    for max_force in (80.0, 1e12):
-        params = repulsion.RepulsiveFieldParameters(k_obs=0.02,
-                                                    max_force=max_force)
-        for count in (1, 5, 300):
-            points = rng.uniform(-1.5, 1.5, (count, 2))
-            points[:: 7] = rng.uniform(-0.45, 0.45, points[:: 7].shape)
-            fast = repulsion.repulsive_force(points, params)
-            general = repulsion._repulsive_force_any(points, params)
-            assert relative_difference(fast, general) < RELATIVE
-    nan = np.array([[0.5, 0.0], [np.nan, 0.1]])
-    assert np.all(np.isnan(repulsion.repulsive_force(
-        nan, repulsion.RepulsiveFieldParameters())))

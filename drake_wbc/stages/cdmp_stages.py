@@ -67,8 +67,8 @@ def BaseCdmp_(T):
             self._models = {0: model, 1: model}
             self._fast = T is float
             def float_force(points):
-                f_x, f_y = repulsion.repulsive_force(points,
-                                                     params.repulsion)
+                f_x, f_y = repulsion.repulsive_force_float(
+                    points, params.repulsion)
                 return np.array((f_x, f_y, 0.0))
 
             self._float_force = repulsion.LastPoints(float_force)
