@@ -1,7 +1,7 @@
-"""The double fast paths of the CDMP stages, the wrench estimator and the
-movement player against their general paths (the AutoDiffXd code, run
-here in double) and against the formulas they replace, on seeded random
-inputs, edge cases included."""
+"""The double fast paths of the CDMP stages and the movement player
+against their general paths (the AutoDiffXd code, run here in double)
+and against the formulas they replace, on seeded random inputs, edge
+cases included."""
 
 import numpy as np
 import pytest
@@ -11,14 +11,9 @@ from pydrake.systems.framework import BasicVector
 
 from drake_wbc.math import cdmp, dmp, repulsion
 from drake_wbc.math.demonstration import TcpPose
-from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.cdmp_stages import ArmCdmp, BaseCdmp
 from drake_wbc.stages.whole_body_cdmp import MovementTracking, WholeBodyCdmp
-from drake_wbc.stages.wrench import (
-    ExternalWrenchEstimator,
-    external_wrench,
-    tool_weight_reading,
-)
 
 RELATIVE = 1e-12
 """Round-off: the largest allowed difference, relative to the scale of
@@ -265,54 +260,6 @@ def test_converted_stages_take_the_general_path(player_stage):
             ad_context).get_vector().CopyToVector()
         assert_close(fast_update(system, context),
                      [a.value() for a in update], 100.0)
-
-
-def test_wrench_fast_path(arm):
-    """Random configurations and readings, and the tool's own weight
-    (F_ext = 0 up to round-off), against the general path and
-    `external_wrench` with both poses from the plant."""
-    rng = np.random.default_rng(8)
-    system = ExternalWrenchEstimator(arm)
-    assert system._fast
-    context = system.CreateDefaultContext()
-    model = arm.model
-    scale = 10.0 * system._tool_mass * 9.81
-    for trial in range(20):
-        q = rng.uniform(arm.lower, arm.upper)
-        reading = (tool_weight_reading(arm, q) if trial % 5 == 0
-                   else 10.0 ** rng.uniform(-2, 3) * rng.normal(size=6))
-        system.GetInputPort("arm_position").FixValue(context, q)
-        system.GetInputPort("wrist_wrench").FixValue(context, reading)
-        fast = fast_output(system, context)
-        size = scale + np.abs(reading).max()
-        assert_close(fast, general_output(system, context), size)
-        assert_close(fast, external_wrench(
-            reading, arm.frame_pose(q, model.ft_measurement_frame),
-            arm.frame_pose(q, model.tcp_frame), system._tool_mass,
-            system._p_M_com), size)
-        if trial % 5 == 0:
-            assert_close(fast, np.zeros(6), size)
-
-
-def test_wrench_fast_path_edge_cases(arm):
-    system = ExternalWrenchEstimator(arm)
-    context = system.CreateDefaultContext()
-    q = np.array(HOME_ARM_POSITIONS, dtype=float)
-    system.GetInputPort("arm_position").FixValue(context, q)
-    reading = np.ones(6)
-    reading[2] = np.nan
-    system.GetInputPort("wrist_wrench").FixValue(context, reading)
-    np.testing.assert_array_equal(np.isfinite(fast_output(system, context)),
-                                  np.isfinite(general_output(system,
-                                                             context)))
-    assert not np.all(np.isfinite(fast_output(system, context)))
-    q[1] = np.nan  # a bad measurement is refused as before, naming q_a
-    system.GetInputPort("arm_position").FixValue(context, q)
-    for evaluate in (fast_output, general_output):
-        with pytest.raises(Exception, match="q_a"):
-            evaluate(system, context)
-    converted = system.ToAutoDiffXd()
-    assert not converted._fast
 
 
 def original_drive_terms(player, t):

@@ -24,7 +24,6 @@ from drake_wbc.stages import (
     RobustCompensator,
 )
 from drake_wbc.stages.cdmp_stages import BaseCdmp
-from drake_wbc.stages.wrench import external_wrench
 
 
 @pytest.fixture(scope="module")
@@ -356,21 +355,6 @@ def test_base_cdmp_force_is_cached_on_the_points():
         force[:] = np.nan  # a copy: the cached value stays
         np.testing.assert_array_equal(stage.repulsive_force(context)[:2],
                                       expected)
-
-
-def test_external_wrench_matches_np_cross(arm):
-    rng = np.random.default_rng(14)
-    for q in random_configurations(arm, 5, 15):
-        X_AM = arm.frame_pose(q, arm.model.ft_measurement_frame)
-        X_AT = arm.frame_pose(q, arm.model.tcp_frame)
-        reading, p_com, mass = rng.normal(size=6), rng.normal(size=3), 1.3
-        R = X_AM.rotation().matrix()
-        weight = R.T @ [0.0, 0.0, -mass * 9.81]
-        f = R @ (reading[:3] - weight)
-        tau = R @ (reading[3:] - np.cross(p_com, weight)) + np.cross(
-            X_AM.translation() - X_AT.translation(), f)
-        np.testing.assert_array_equal(
-            external_wrench(reading, X_AM, X_AT, mass, p_com), np.r_[f, tau])
 
 
 @pytest.mark.parametrize("acceleration", [None, 12.56])
