@@ -15,12 +15,11 @@ from drake_wbc.controller import (
     build_controller,
     load_controller_parameters,
 )
-from drake_wbc.math import cdmp
 from drake_wbc.math.dmp import DmpParameters
 from drake_wbc.math.filtering import BaseFilterParameters
 from drake_wbc.math.motion_mode import MotionMode
 from drake_wbc.math.validation import validate
-from drake_wbc.stages import ArmCdmp, BaseVelocityFilter, WorkspaceAdapter
+from drake_wbc.stages import BaseVelocityFilter, WorkspaceAdapter
 from drake_wbc.stages.capability_stage import WorkspaceAdapterParameters
 
 CONTROLLER_FILE = Path(__file__).parents[1] / "diagrams" / "controller.yaml"
@@ -229,10 +228,6 @@ def test_stages_keep_a_validated_copy_of_their_parameters():
     before = update()
     params.zeta = 2.0
     np.testing.assert_array_equal(update(), before)
-    arm = cdmp.ArmCdmpParameters()
-    arm.S_m = [0.5] * 6
-    with pytest.raises(ValueError, match="S_m"):
-        ArmCdmp(arm)
     workspace = WorkspaceAdapterParameters()
     stage = WorkspaceAdapter(workspace)
     workspace.mode = "manipulation"

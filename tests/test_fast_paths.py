@@ -5,7 +5,6 @@ result may differ beyond rounding (1e-12 relative)."""
 import numpy as np
 import pytest
 from fast_path_checks import RELATIVE, relative_difference
-from pydrake.common.value import AbstractValue
 
 from drake_wbc.math import (
     capability,
@@ -14,7 +13,6 @@ from drake_wbc.math import (
     distribution,
     kinematics,
     pseudoinverse,
-    repulsion,
 )
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages import (
@@ -23,7 +21,6 @@ from drake_wbc.stages import (
     MotionDistributorParameters,
     RobustCompensator,
 )
-from drake_wbc.stages.cdmp_stages import BaseCdmp
 
 
 @pytest.fixture(scope="module")
@@ -339,24 +336,6 @@ def test_distributor_and_compensator_match_the_checked_math(arm):
                 c_context), deviation) < RELATIVE
 
 
-def test_base_cdmp_force_is_cached_on_the_points():
-    stage = BaseCdmp()
-    context = stage.CreateDefaultContext()
-    stage.GetInputPort("base_velocity").FixValue(context, np.zeros(3))
-    port = stage.GetInputPort("obstacle_points")
-    rng = np.random.default_rng(13)
-    for _ in range(3):
-        points = rng.uniform(-0.9, 0.9, (50, 2))
-        port.FixValue(context, AbstractValue.Make(points))
-        expected = repulsion.repulsive_force_float(
-            points, stage.params.repulsion)
-        force = stage.repulsive_force(context)
-        np.testing.assert_array_equal(force, [*expected, 0.0])
-        force[:] = np.nan  # a copy: the cached value stays
-        np.testing.assert_array_equal(stage.repulsive_force(context)[:2],
-                                      expected)
-
-
 @pytest.mark.parametrize("acceleration", [None, 12.56])
 def test_joint_velocity_for_twist_unchecked_matches_checked(acceleration):
     """Random twists, configurations near and beyond the joint limits and
@@ -390,4 +369,3 @@ def test_joint_velocity_for_twist_unchecked_matches_checked(acceleration):
                                       checked.limited_joints)
         assert (fast.scale, fast.acceleration_scale, fast.damping) == (
             checked.scale, checked.acceleration_scale, checked.damping)
-
