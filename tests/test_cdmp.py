@@ -26,6 +26,7 @@ from drake_wbc.math.repulsion import (
     RepulsiveFieldParameters,
     footprint_distance,
     repulsive_force,
+    repulsive_force_float,
     repulsive_potential,
 )
 
@@ -287,6 +288,16 @@ def test_repulsive_force_zero_beyond_threshold_finite_inside():
         f = repulsive_force([p], FIELD)
         assert np.all(np.isfinite(f))
         np.testing.assert_allclose(f, -push * np.array(n), rtol=1e-12)
+
+
+@pytest.mark.parametrize("force", [repulsive_force, repulsive_force_float])
+def test_a_non_finite_point_makes_the_force_nan(force):
+    """In the reference and in its float kernel (so that the checks
+    downstream see a bad scan)."""
+    for bad in (np.nan, np.inf):
+        points = np.array([[0.5, 0.0], [bad, 0.1], [3.0, 3.0]])
+        with np.errstate(invalid="ignore"):
+            assert np.all(np.isnan(force(points, FIELD)))
 
 
 def test_base_cdmp_avoids_and_passes_velocity():

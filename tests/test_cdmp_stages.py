@@ -256,9 +256,11 @@ def test_phri_switch_turns_the_force_control_off():
     assert output.Eval(context)[0] == 0.0
 
 
-@pytest.mark.parametrize("stage", [WholeBodyCdmp, BaseCdmp, ArmCdmp])
-def test_scalar_conversion(stage):
-    system = stage(time_step=0.005)
+@pytest.mark.parametrize(("stage", "params"), [
+    (WholeBodyCdmp, cdmp.WholeBodyCdmpParameters),
+    (BaseCdmp, cdmp.BaseCdmpParameters), (ArmCdmp, cdmp.ArmCdmpParameters)])
+def test_scalar_conversion(stage, params):
+    system = stage(params(), time_step=0.005)
     converted = system.ToAutoDiffXd()
     assert converted.params is system.params
     assert converted.num_output_ports() == system.num_output_ports()
@@ -267,3 +269,171 @@ def test_scalar_conversion(stage):
 def test_bad_time_step_is_rejected():
     with pytest.raises(ValueError, match="time_step"):
         ArmCdmp(time_step=-0.01)
+
+
+def set_state(system, context, x):
+    if system._time_step > 0.0:
+        context.SetDiscreteState(x)
+    else:
+        context.SetContinuousState(x)
+
+
+def update_of(system, context):
+    return system.EvalUniquePeriodicDiscreteUpdate(
+        context).get_vector().CopyToVector()
+
+
+def to_world(yaw, twist):
+    R = rotation_z(yaw)
+    return np.concatenate([R @ twist[:3], R @ twist[3:]])
+
+
+@pytest.mark.parametrize("switch", [0, 1, None])
+def test_whole_body_cdmp_output_and_update_are_its_model(switch):
+    """In discrete time, the output is y_dot of eq. (cdmp-wb) rotated into
+    T_b and the update the model's exact hold, with the wrench and the
+    deviation rotated into the world (eq. (3))."""
+    rng = np.random.default_rng(4)
+    system = WholeBodyCdmp(cdmp.WholeBodyCdmpParameters(S_hri=1.0))
+    for _ in range(5):
+        context = system.CreateDefaultContext()
+        scale = 10.0 ** rng.uniform(-3, 3)
+        x = scale * rng.normal(size=24)
+        context.SetDiscreteState(x)
+        V_ref, dV = scale * rng.normal(size=(2, 6))
+        F = 100 * scale * rng.normal(size=6)
+        yaw = rng.uniform(-4, 4) if switch is not None else 0.0
+        inputs = dict(reference_velocity=V_ref, wrench=F,
+                      end_effector_deviation=dV)
+        if switch is not None:
+            inputs.update(base_yaw=yaw, phri_switch=switch)
+        fix_inputs(system, context, inputs)
+        model = system._models[1 if switch is None else switch]
+        u = np.concatenate([V_ref, to_world(yaw, F), to_world(yaw, dV)])
+        y_dot = (model.derivative(x, u * np.r_[np.ones(12), np.zeros(6)])
+                 [:6])
+        size = 100 * scale
+        np.testing.assert_allclose(
+            system.get_output_port().Eval(context), to_world(-yaw, y_dot),
+            rtol=1e-12, atol=1e-12 * size)
+        np.testing.assert_allclose(update_of(system, context),
+                                   model.next_state(x, u), rtol=1e-12,
+                                   atol=1e-12 * size)
+
+
+def test_the_deviation_reaches_only_the_update():
+    system = WholeBodyCdmp()
+    context = system.CreateDefaultContext()
+    rng = np.random.default_rng(5)
+    fix_inputs(system, context, dict(
+        reference_velocity=rng.normal(size=6), wrench=rng.normal(size=6),
+        end_effector_deviation=rng.normal(size=6), base_yaw=0.3))
+    output = system.get_output_port().Eval(context).copy()
+    update = update_of(system, context)
+    fix_inputs(system, context, dict(end_effector_deviation=rng.normal(
+        size=6)))
+    np.testing.assert_array_equal(system.get_output_port().Eval(context),
+                                  output)
+    assert not np.allclose(update_of(system, context), update)
+
+
+def test_base_cdmp_shares_one_force_and_result_a_tick():
+    """The output computes the repulsive force and the shared result once;
+    the update finds both up to date (computes neither again); the force
+    is the repulsive field's with no yaw part, and a copy."""
+    system = BaseCdmp()
+    context = system.CreateDefaultContext()
+    fix_inputs(system, context, dict(base_velocity=[0.1, 0.0, 0.0]))
+    points = np.array([[0.6, 0.1], [-0.2, 0.5]])
+    fix_inputs(system, context, dict(obstacle_points=points))
+    entries = (system._force, system._result)
+    assert all(entry.is_out_of_date(context) for entry in entries)
+    output = system.get_output_port().Eval(context)
+    assert not any(entry.is_out_of_date(context) for entry in entries)
+    update = update_of(system, context)
+    assert not any(entry.is_out_of_date(context) for entry in entries)
+    force = system.repulsive_force(context)
+    expected = repulsion.repulsive_force(points, system.params.repulsion)
+    np.testing.assert_allclose(force, [*expected, 0.0], rtol=1e-14)
+    force[:] = np.nan  # a copy: the cached value stays
+    assert np.all(np.isfinite(system.repulsive_force(context)))
+    model = system._models[0]
+    x = np.zeros(9)
+    u = np.r_[0.1, 0.0, 0.0, system.repulsive_force(context)]
+    np.testing.assert_allclose(output, model.derivative(x, u)[:3],
+                               atol=1e-15)
+    np.testing.assert_allclose(update, model.next_state(x, u), atol=1e-15)
+
+
+def test_base_cdmp_without_points_feels_no_force():
+    system = BaseCdmp()
+    context = system.CreateDefaultContext()
+    fix_inputs(system, context, dict(base_velocity=[0.1, 0.2, 0.3]))
+    np.testing.assert_array_equal(system.repulsive_force(context),
+                                  np.zeros(3))
+    np.testing.assert_allclose(system.get_output_port().Eval(context),
+                               [0.1, 0.2, 0.3], rtol=1e-15)
+
+
+@pytest.mark.parametrize("value", [np.nan, np.inf])
+def test_non_finite_inputs_stay_non_finite(value):
+    """A non-finite input makes the output and the update non-finite (so
+    the checks downstream still see it)."""
+    rng = np.random.default_rng(6)
+    for make, port, size in ((ArmCdmp, "wrench", 6),
+                             (BaseCdmp, "base_velocity", 3),
+                             (WholeBodyCdmp, "wrench", 6),
+                             (WholeBodyCdmp, "reference_velocity", 6)):
+        system = make()
+        context = system.CreateDefaultContext()
+        for i in range(system.num_input_ports()):
+            name = system.get_input_port(i).get_name()
+            if name not in ("obstacle_points", "phri_switch", "base_yaw",
+                            "desired_wrench"):
+                system.get_input_port(i).FixValue(context,
+                                                  rng.normal(size=size))
+        bad = rng.normal(size=size)
+        bad[size - 1] = value
+        system.GetInputPort(port).FixValue(context, bad)
+        with np.errstate(invalid="ignore"):
+            assert not np.all(np.isfinite(
+                system.get_output_port().Eval(context)))
+            assert not np.all(np.isfinite(update_of(system, context)))
+
+
+def autodiff_copy_values(system, rng, time=1.2):
+    """(double output, double update, AutoDiffXd output values, AutoDiffXd
+    update values) of `system` and its AutoDiffXd copy at random states
+    and inputs."""
+    from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff
+
+    converted = system.ToAutoDiffXd()
+    context = system.CreateDefaultContext()
+    context.SetTime(time)
+    context.SetDiscreteState(rng.normal(size=context.num_total_states()))
+    ad_context = converted.CreateDefaultContext()
+    ad_context.SetTime(AutoDiffXd(time))
+    ad_context.SetDiscreteState(InitializeAutoDiff(
+        context.get_discrete_state_vector().CopyToVector()).ravel())
+    for i in range(system.num_input_ports()):
+        port = system.get_input_port(i)
+        if port.get_name() == "obstacle_points":
+            value = AbstractValue.Make(rng.uniform(-1, 1, (30, 2)))
+        else:
+            value = rng.normal(size=port.size())
+        port.FixValue(context, value)
+        converted.get_input_port(i).FixValue(ad_context, value)
+    return (system.get_output_port().Eval(context),
+            update_of(system, context),
+            [a.value() for a in converted.get_output_port().Eval(
+                ad_context)],
+            [a.value() for a in converted.EvalUniquePeriodicDiscreteUpdate(
+                ad_context).get_vector().CopyToVector()])
+
+
+@pytest.mark.parametrize("stage", [ArmCdmp, BaseCdmp, WholeBodyCdmp])
+def test_autodiff_copies_compute_the_same_values(stage):
+    rng = np.random.default_rng(7)
+    output, update, ad_output, ad_update = autodiff_copy_values(stage(), rng)
+    np.testing.assert_allclose(ad_output, output, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(ad_update, update, rtol=1e-12, atol=1e-12)

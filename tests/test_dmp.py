@@ -16,16 +16,14 @@ from drake_wbc.math.dmp import (
     basis_functions,
     canonical_derivative,
     canonical_phase,
-    forcing_term,
-    rollout,
-    transformation_derivative,
-)
-from drake_wbc.math.dmp_learning import (
     demonstration_derivatives,
     design_matrix,
     fit_weights,
     forcing_targets,
+    forcing_term,
     learn_forcing_term,
+    rollout,
+    transformation_derivative,
 )
 
 DT = 1e-3

@@ -5,7 +5,6 @@ result may differ beyond rounding (1e-12 relative)."""
 import numpy as np
 import pytest
 from fast_path_checks import RELATIVE, relative_difference
-from pydrake.common.value import AbstractValue
 
 from drake_wbc.math import (
     capability,
@@ -14,7 +13,6 @@ from drake_wbc.math import (
     distribution,
     kinematics,
     pseudoinverse,
-    repulsion,
 )
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages import (
@@ -23,8 +21,6 @@ from drake_wbc.stages import (
     MotionDistributorParameters,
     RobustCompensator,
 )
-from drake_wbc.stages.cdmp_stages import BaseCdmp
-from drake_wbc.stages.wrench import external_wrench
 
 
 @pytest.fixture(scope="module")
@@ -340,38 +336,6 @@ def test_distributor_and_compensator_match_the_checked_math(arm):
                 c_context), deviation) < RELATIVE
 
 
-def test_base_cdmp_force_is_cached_on_the_points():
-    stage = BaseCdmp()
-    context = stage.CreateDefaultContext()
-    stage.GetInputPort("base_velocity").FixValue(context, np.zeros(3))
-    port = stage.GetInputPort("obstacle_points")
-    rng = np.random.default_rng(13)
-    for _ in range(3):
-        points = rng.uniform(-0.9, 0.9, (50, 2))
-        port.FixValue(context, AbstractValue.Make(points))
-        expected = repulsion.repulsive_force(points, stage.params.repulsion)
-        force = stage.repulsive_force(context)
-        np.testing.assert_array_equal(force, [*expected, 0.0])
-        force[:] = np.nan  # a copy: the cached value stays
-        np.testing.assert_array_equal(stage.repulsive_force(context)[:2],
-                                      expected)
-
-
-def test_external_wrench_matches_np_cross(arm):
-    rng = np.random.default_rng(14)
-    for q in random_configurations(arm, 5, 15):
-        X_AM = arm.frame_pose(q, arm.model.ft_measurement_frame)
-        X_AT = arm.frame_pose(q, arm.model.tcp_frame)
-        reading, p_com, mass = rng.normal(size=6), rng.normal(size=3), 1.3
-        R = X_AM.rotation().matrix()
-        weight = R.T @ [0.0, 0.0, -mass * 9.81]
-        f = R @ (reading[:3] - weight)
-        tau = R @ (reading[3:] - np.cross(p_com, weight)) + np.cross(
-            X_AM.translation() - X_AT.translation(), f)
-        np.testing.assert_array_equal(
-            external_wrench(reading, X_AM, X_AT, mass, p_com), np.r_[f, tau])
-
-
 @pytest.mark.parametrize("acceleration", [None, 12.56])
 def test_joint_velocity_for_twist_unchecked_matches_checked(acceleration):
     """Random twists, configurations near and beyond the joint limits and
@@ -405,22 +369,3 @@ def test_joint_velocity_for_twist_unchecked_matches_checked(acceleration):
                                       checked.limited_joints)
         assert (fast.scale, fast.acceleration_scale, fast.damping) == (
             checked.scale, checked.acceleration_scale, checked.damping)
-
-
-def test_repulsive_force_float_path_matches_the_general_one():
-    """Points inside, on, near and far from the footprint, and a crowd
-    that hits the bound: the float path against the general one (written
-    for AutoDiffXd, here on floats)."""
-    rng = np.random.default_rng(23)
-    for max_force in (80.0, 1e12):
-        params = repulsion.RepulsiveFieldParameters(k_obs=0.02,
-                                                    max_force=max_force)
-        for count in (1, 5, 300):
-            points = rng.uniform(-1.5, 1.5, (count, 2))
-            points[:: 7] = rng.uniform(-0.45, 0.45, points[:: 7].shape)
-            fast = repulsion.repulsive_force(points, params)
-            general = repulsion._repulsive_force_any(points, params)
-            assert relative_difference(fast, general) < RELATIVE
-    nan = np.array([[0.5, 0.0], [np.nan, 0.1]])
-    assert np.all(np.isnan(repulsion.repulsive_force(
-        nan, repulsion.RepulsiveFieldParameters())))

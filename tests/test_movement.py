@@ -4,14 +4,21 @@ and WholeBodyCdmp playing it against the DMP core's own integration."""
 
 import numpy as np
 import pytest
+from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import Linearize
 
 from drake_wbc.controller.task import Schedule
 from drake_wbc.math import cdmp, dmp
 from drake_wbc.math import movement as mv
-from drake_wbc.math.demonstration import Demonstration, teaching_interval
+from drake_wbc.math.demonstration import (
+    Demonstration,
+    TcpPose,
+    teaching_interval,
+)
+from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages import WholeBodyCdmp
+from drake_wbc.stages.whole_body_cdmp import MovementTracking
 
 START = np.array([0.9, 0.0, 0.65, -3.0])
 GOAL = np.array([1.7, 0.35, 0.7, -2.7])
@@ -204,3 +211,147 @@ def test_bad_movement_parameters_are_explained(tmp_path):
         mv.learn_movement([])
     with pytest.raises(ValueError, match="time"):
         Demonstration([0.0, 0.0, 1.0], np.zeros((3, 4)))
+
+
+MOVEMENT = cdmp.MovementReplay(file="movements/teach.yaml", start_time=0.5,
+                               goal=[1.7, 0.3, 0.7, -2.9], tau=1.3)
+"""The committed movement, to a moved goal and slower."""
+
+
+@pytest.fixture(scope="module")
+def player_stage():
+    return WholeBodyCdmp(cdmp.WholeBodyCdmpParameters(movement=MOVEMENT))
+
+
+def terms_as_written(player, t):
+    """[g; f] by the formulas of drake_wbc.math.dmp and np.interp: f(s) at
+    the closed-form phase of t - start_time, g = g_0 + p(t) (g - g_0)."""
+    if t < player.start_time - 1e-9:
+        return np.zeros(12)
+    elapsed = max(t - player.start_time, 0.0)
+    s = float(dmp.canonical_phase(elapsed, player.params))
+    f = np.zeros(6)
+    f[[0, 1, 2, 5]] = dmp.forcing_term(s, player.movement.weights,
+                                       player.params)
+    p = np.interp(elapsed, player._times, player._progress)
+    g = player.learned_goal + p * (player.goal - player.learned_goal)
+    return np.concatenate([g, f])
+
+
+def test_player_terms_and_reference(player_stage):
+    player = player_stage.player
+    rng = np.random.default_rng(9)
+    grid = player._times
+    times = np.concatenate([
+        [0.0, player.start_time - 1e-10, player.start_time,
+         player.start_time + grid[-1], player.start_time + grid[-1] + 3.0],
+        player.start_time + grid[rng.integers(0, grid.size, 10)],
+        rng.uniform(0.0, player.start_time + grid[-1], 30)])
+    weight_scale = np.abs(player.movement.weights).max()
+    for t in times:
+        terms = player.drive_terms(t)
+        np.testing.assert_allclose(terms, terms_as_written(player, t),
+                                   rtol=1e-12, atol=1e-12 * weight_scale)
+        g, f = player.goal_and_forcing(t)
+        np.testing.assert_array_equal(np.r_[g, f], terms)
+        elapsed = max(t - player.start_time, 0.0)
+        expected = player.start + [np.interp(elapsed, grid,
+                                             player._reference[:, i])
+                                   for i in range(4)]
+        np.testing.assert_allclose(player.reference(t), expected,
+                                   rtol=1e-12, atol=1e-12)
+
+
+def test_whole_body_cdmp_plays_g_and_f_of_the_period(player_stage):
+    """The output takes the movement's g and f at the context's time, the
+    update at the middle of the period: before, at and after the start
+    time, across the movement's end, and over a period that starts just
+    before the start time (the update plays, the output does not)."""
+    system, rng = player_stage, np.random.default_rng(4)
+    player, h = system.player, system._time_step
+    start = MOVEMENT.start_time
+    for t in [0.0, start - 0.004, start, start + 0.013, 2.0, 7.5, 30.0]:
+        context = system.CreateDefaultContext()
+        context.SetTime(t)
+        x = rng.normal(size=24)
+        context.SetDiscreteState(x)
+        V_ref, F = rng.normal(size=6), 100 * rng.normal(size=6)
+        for name, value in (("reference_velocity", V_ref), ("wrench", F),
+                            ("end_effector_deviation", np.zeros(6))):
+            system.GetInputPort(name).FixValue(context, value)
+
+        def model_and_inputs(time, V_ref=V_ref, F=F):
+            key = (0, player.active(time))
+            return system._models[key], np.concatenate(
+                [V_ref, F, np.zeros(6), player.drive_terms(time)])
+
+        model, u = model_and_inputs(t)
+        size = 100.0 + np.abs(u).max()
+        np.testing.assert_allclose(
+            system.get_output_port().Eval(context),
+            model.derivative(x, u)[:6], rtol=1e-12, atol=1e-12 * size)
+        model, u = model_and_inputs(t + 0.5 * h)
+        np.testing.assert_allclose(
+            system.EvalUniquePeriodicDiscreteUpdate(
+                context).get_vector().CopyToVector(),
+            model.next_state(x, u), rtol=1e-12, atol=1e-12 * size)
+
+
+def test_movement_tracking(player_stage):
+    """K (p* - p) on x, y, z and yaw (wrapped), p from
+    demonstration.TcpPose and p* from np.interp of the played rollout;
+    the same values in AutoDiffXd."""
+    arm = ArmKinematics()
+    player = player_stage.player
+    system = MovementTracking(player, arm)
+    context = system.CreateDefaultContext()
+    rng, pose = np.random.default_rng(11), TcpPose(arm)
+    for t in (0.2, 0.5, 1.7, 4.0, 20.0):
+        context.SetTime(t)
+        base = np.r_[rng.uniform(-1, 1, 2), rng.uniform(-4, 4),
+                     np.zeros(3)]
+        q = rng.uniform(arm.lower, arm.upper)
+        system.GetInputPort("base.state_estimated").FixValue(context, base)
+        system.GetInputPort("arm.position_measured").FixValue(context, q)
+        expected = np.zeros(6)
+        if t >= player.start_time:
+            elapsed = t - player.start_time
+            error = player.start + [
+                np.interp(elapsed, player._times, player._reference[:, i])
+                for i in range(4)] - pose(base[:3], q)
+            error[3] = (error[3] + np.pi) % (2 * np.pi) - np.pi
+            expected[[0, 1, 2, 5]] = player.tracking_gain * error
+        np.testing.assert_allclose(system.get_output_port(0).Eval(context),
+                                   expected, rtol=1e-12, atol=1e-11)
+    converted = system.ToAutoDiffXd()
+    ad_context = converted.CreateDefaultContext()
+    ad_context.SetTime(AutoDiffXd(t))
+    for name, value in (("base.state_estimated", base),
+                        ("arm.position_measured", q)):
+        converted.GetInputPort(name).FixValue(ad_context, value)
+    np.testing.assert_allclose([v.value() for v in converted.get_output_port(
+        0).Eval(ad_context)], expected, rtol=1e-12, atol=1e-11)
+
+
+def test_tcp_pose_is_the_plants():
+    """TcpPose against the TCP's pose from the plant and a rotation of the
+    base by its yaw, with RigidTransforms."""
+    from pydrake.math import RigidTransform, RotationMatrix
+
+    arm = ArmKinematics()
+    pose = TcpPose(arm)
+    model = arm.model
+    X_BA = model.arm_base_frame.CalcPose(arm.plant.CreateDefaultContext(),
+                                         model.base_frame)
+    rng = np.random.default_rng(12)
+    for _ in range(10):
+        base = np.r_[rng.uniform(-1, 1, 2), rng.uniform(-4, 4)]
+        q = rng.uniform(arm.lower, arm.upper)
+        X_WB = RigidTransform(RotationMatrix.MakeZRotation(base[2]),
+                              [base[0], base[1], 0.0])
+        X_WT = X_WB @ X_BA @ arm.frame_pose(q, model.tcp_frame)
+        R = X_WT.rotation().matrix()
+        np.testing.assert_allclose(
+            pose(base, q), np.r_[X_WT.translation(),
+                                 np.arctan2(R[1, 0], R[0, 0])],
+            rtol=0, atol=1e-14)

@@ -18,9 +18,11 @@ kernel beside it.
 - filtering: the base filter, eq. (filtering).
 - compensation: the robust compensation, eqs. (wb_error), (compensation),
   (deviation).
-- dmp, cdmp, repulsion: the DMP core (eqs. (6), (7)), the coupled DMPs
-  (eqs. (cdmp-wb), (cdmp-base), (cdmp-arm), (cdmp-wb-error)) and the
-  repulsive field U_rep.
+- dmp, cdmp, repulsion: the DMP core (eqs. (6), (7), and learning its
+  forcing term), the coupled DMPs (eqs. (stiff-dmp), (admit-dmp),
+  (cdmp-wb), (cdmp-base), (cdmp-arm), (cdmp-wb-error)) and the repulsive
+  field U_rep, f_avoid.
+- wrench: the external wrench F_ext on the tool from the wrist reading.
 - movement, demonstration: a whole-body movement learned from
   demonstrations as a DMP (teach and repeat).
 - arm_control: the arm's Cartesian velocity controller (Sec. III-A).

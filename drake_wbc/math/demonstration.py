@@ -16,10 +16,12 @@ off once the robot rests gives a demonstration that ends at rest, as the
 DMP fit needs. `drake-wbc teach --start/--stop` overrides it.
 """
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.validation import as_matrix, as_vector
 
 DIMENSIONS = ("x", "y", "z", "yaw")
@@ -63,11 +65,55 @@ class Demonstration:
         return float(self.time[-1] - self.time[0])
 
 
+def tcp_pose_in_world(base_pose, X_BT):
+    """The TCP's pose [x, y, z, yaw] in the world from the base's pose
+    [x, y, yaw] in the world and the TCP's pose in T_b.
+
+    With the base's heading Rz(yaw) (eq. (3); T_b on the floor): the
+    position Rz(yaw) p_BT + [x, y, 0], and the yaw of the roll-pitch-yaw
+    angles (R = Rz Ry Rx) of R = Rz(yaw) R_BT, atan2(R[1, 0], R[0, 0]).
+
+    Args:
+        base_pose: (3,) [x, y, yaw] of T_b in the world (m, rad).
+        X_BT: (3, 4) the TCP's pose [R_BT | p_BT] in T_b.
+
+    Returns:
+        (4,) [x, y, z, yaw] (float or AutoDiffXd).
+    """
+    x, y, yaw = base_pose
+    c, s = np.cos(yaw), np.sin(yaw)
+    r00, r10 = X_BT[0][0], X_BT[1][0]
+    px, py, pz = X_BT[0][3], X_BT[1][3], X_BT[2][3]
+    return np.array([c * px - s * py + x, s * px + c * py + y, pz,
+                     np.arctan2(s * r00 + c * r10, c * r00 - s * r10)])
+
+
+def _pose_inputs(rng):
+    """A random base pose (any heading) and a random TCP pose in T_b."""
+    R = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    R *= np.sign(np.linalg.det(R))
+    X_BT = np.column_stack([R, rng.uniform(-1.0, 1.0, 3)])
+    return np.r_[rng.uniform(-5.0, 5.0, 2), rng.uniform(-10.0, 10.0)], X_BT
+
+
+@fast_kernel(tcp_pose_in_world, sample=_pose_inputs)
+def tcp_pose_in_world_float(base_pose, X_BT):
+    """`tcp_pose_in_world` in plain floats (math.cos, math.atan2), a
+    list: the replay's tracking (MovementTracking), each control tick."""
+    x, y, yaw = base_pose
+    c, s = math.cos(yaw), math.sin(yaw)
+    (r00, _, _, px), (r10, _, _, py), (_, _, _, pz) = np.asarray(
+        X_BT).tolist()
+    return [c * px - s * py + x, s * px + c * py + y, pz,
+            math.atan2(s * r00 + c * r10, c * r00 - s * r10)]
+
+
 class TcpPose:
     """The TCP's pose [x, y, z, yaw] in the world from the base's pose
     [x, y, yaw] and the arm's joints (6,), through the nominal kinematics
     (robot_model.ArmKinematics, the controller's: mount at rest, T_b on
-    the floor). Call it with (base_pose, arm_positions).
+    the floor) and `tcp_pose_in_world`. Call it with (base_pose,
+    arm_positions); float only.
 
     Args:
         arm: the robot's ArmKinematics (drake_wbc.robot.model).
@@ -75,20 +121,23 @@ class TcpPose:
 
     def __init__(self, arm):
         self.arm = arm
-        context = self.arm.plant.CreateDefaultContext()
-        model = self.arm.model
-        self._X_BA = model.arm_base_frame.CalcPose(context, model.base_frame)
+        model = arm.model
+        X_BA = model.arm_base_frame.CalcPose(
+            arm.plant.CreateDefaultContext(),
+            model.base_frame).GetAsMatrix34()
+        self._R_BA, self._p_BA = X_BA[:, :3].copy(), X_BA[:, 3].copy()
+
+    def in_base(self, arm_positions):
+        """X_BT (3, 4): the TCP's pose [R_BT | p_BT] in T_b at the arm's
+        joints, ^bR_a X_AT plus the arm base's origin."""
+        X = self._R_BA.dot(self.arm.frame_pose(
+            arm_positions, self.arm.model.tcp_frame).GetAsMatrix34())
+        X[:, 3] += self._p_BA
+        return X
 
     def __call__(self, base_pose, arm_positions):
-        x, y, yaw = base_pose
-        X_BE = self._X_BA @ self.arm.frame_pose(arm_positions,
-                                                self.arm.model.tcp_frame)
-        c, s = np.cos(yaw), np.sin(yaw)
-        R_WB = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        p = R_WB @ X_BE.translation() + [x, y, 0.0]
-        R = R_WB @ X_BE.rotation().matrix()
-        # The yaw of roll-pitch-yaw angles (R = Rz Ry Rx).
-        return np.array([p[0], p[1], p[2], np.arctan2(R[1, 0], R[0, 0])])
+        return np.array(tcp_pose_in_world_float(
+            base_pose, self.in_base(arm_positions)))
 
 
 def tcp_poses(base_pose, arm_positions, arm):

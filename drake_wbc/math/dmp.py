@@ -29,17 +29,30 @@ everywhere, gives f = 0 without evaluating any basis function.
 The derivative functions (`canonical_derivative`, `basis_functions`,
 `forcing_term`, `transformation_derivative`) use elementwise arithmetic
 and np.exp only, so they accept numpy object arrays of Drake's AutoDiffXd
-as well as floats; parameters are checked once, in `DmpParameters`.
-Learning the forcing term from a demonstration is in
-drake_wbc.math.dmp_learning.
+as well as floats; parameters are checked once, in `DmpParameters`. The
+closed-form phase and the forcing term have each one float kernel
+(drake_wbc.math.kernels), the arithmetic a learned movement's replay
+runs every control tick (drake_wbc.math.movement.MovementPlayer).
+
+Learning the forcing term. The paper leaves f = 0 and names learning it
+as future work. A demonstration's velocities and accelerations are
+estimated by `demonstration_derivatives`; eq. (6) solved for f at each
+sample gives the targets (`forcing_targets`, with the demonstration's own
+goal and the canonical phase of eq. (7)); the gated normalised basis
+values at those phases form the design matrix (`design_matrix`); and the
+weights are one ridge least-squares fit (`fit_weights`).
+`learn_forcing_term` does all of it for one demonstration;
+drake_wbc.math.movement stacks several. Learning is float only.
 """
 
+import math
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from numbers import Integral
 
 import numpy as np
 
+from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.validation import as_matrix, as_vector, positive
 
 FINAL_PHASE = 0.01
@@ -155,22 +168,57 @@ def canonical_phase(t, params):
     return np.exp(-params.resolved_alpha_s * np.asarray(t) / params.tau)
 
 
+def _phase_inputs(rng):
+    """A time (inside, at the start of and far beyond the movement) and
+    random DmpParameters, for canonical_phase_float."""
+    params = _random_parameters(rng)
+    t = float(rng.choice([0.0, rng.uniform(0.0, params.duration),
+                          rng.uniform(0.0, 50.0 * params.duration)]))
+    return t, params
+
+
+def _random_parameters(rng):
+    """DmpParameters with random gains, timing and basis, the default
+    alpha_s or a given one."""
+    return DmpParameters(
+        alpha_z=rng.uniform(1.0, 60.0), tau=rng.uniform(0.2, 3.0),
+        alpha_s=None if rng.random() < 0.5 else rng.uniform(0.5, 10.0),
+        duration=rng.uniform(0.1, 10.0),
+        num_basis=int(rng.choice([1, 2, int(rng.integers(3, 60))])))
+
+
+@fast_kernel(canonical_phase, sample=_phase_inputs)
+def canonical_phase_float(t, params):
+    """`canonical_phase` of one float t, in plain floats (math.exp): a
+    learned movement's replay, each control tick."""
+    return math.exp(-params.resolved_alpha_s * t / params.tau)
+
+
 def canonical_derivative(s, params):
     """s_dot = -alpha_s s / tau of eq. (7) (float or AutoDiffXd)."""
     return -params.resolved_alpha_s * s / params.tau
 
 
 def basis_functions(s, params):
-    """Normalised Gaussian basis psi_i(s) / sum_j psi_j(s), (num_basis,).
+    """Normalised Gaussian basis psi_i(s) / sum_j psi_j(s) of eq. (6).
 
     psi_i(s) = exp(-h_i (s - c_i)^2) with the centres and widths of
-    `params`, s a number (float or AutoDiffXd). The exponents are shifted
-    by their maximum before np.exp (the ratio, and its gradient, are
-    unchanged), so the sum never underflows.
+    `params`. The exponents are shifted by their maximum before np.exp
+    (the ratio, and its gradient, are unchanged), so the sum never
+    underflows.
+
+    Args:
+        s: the phase, a number (float or AutoDiffXd), or an (N,) array of
+            phases.
+        params: DmpParameters (its basis).
+
+    Returns:
+        (num_basis,) for a number s, (N, num_basis) for N phases.
     """
-    a = -params.widths * (s - params.centres) ** 2
-    e = np.exp(a - np.max(a))
-    return e / np.sum(e)
+    s = np.asarray(s)
+    a = -params.widths * (s[..., None] - params.centres) ** 2
+    e = np.exp(a - np.max(a, axis=-1, keepdims=True))
+    return e / np.sum(e, axis=-1, keepdims=True)
 
 
 def forcing_term(s, weights, params, scale=1.0):
@@ -195,6 +243,36 @@ def forcing_term(s, weights, params, scale=1.0):
     return (basis_functions(s, params) @ weights) * (s * scale)
 
 
+def _forcing_inputs(rng):
+    """A phase (the start, inside, near 0 and past the movement's end),
+    weights (None, zeros or random, in one or several columns), random
+    DmpParameters and a scale, for forcing_term_float."""
+    params = _random_parameters(rng)
+    s = float(rng.choice([1.0, rng.uniform(0.0, 1.0), 1e-6 * rng.random(),
+                          params.centres[-1] * rng.random(), 0.0]))
+    d = int(rng.integers(1, 7))
+    kind = rng.integers(0, 4)
+    weights = (None if kind == 0 else np.zeros((params.num_basis, d))
+               if kind == 1 else 10.0 ** rng.uniform(-3, 3) * rng.normal(
+                   size=(params.num_basis, d)))
+    return s, weights, params, float(rng.choice([1.0, rng.normal()]))
+
+
+@fast_kernel(forcing_term, sample=_forcing_inputs)
+def forcing_term_float(s, weights, params, scale=1.0):
+    """`forcing_term` of a float phase s, in few array operations: the
+    basis' exponents shifted by their maximum, the normalisation folded
+    into the gate, f(s) = (e . W) (s scale / sum e) (a learned movement's
+    replay, each control tick)."""
+    if weights is None:
+        return 0.0
+    offset = params.centres - s
+    a = offset * offset
+    a *= -params.widths
+    e = np.exp(a - a.max())
+    return e.dot(weights) * (s * scale / e.sum())
+
+
 def transformation_derivative(y, z, g, s, params, forcing=0.0,
                               coupling_acceleration=0.0,
                               coupling_velocity=0.0):
@@ -213,7 +291,7 @@ def transformation_derivative(y, z, g, s, params, forcing=0.0,
         s: phase; only used when `forcing` is callable (else may be None).
         params: DmpParameters (alpha_z, beta_z, tau).
         forcing: f(s) as a number or (d,) array, or a callable of s
-            (e.g. a dmp_learning.LearnedForcingTerm); default 0.
+            (e.g. a LearnedForcingTerm); default 0.
         coupling_acceleration, coupling_velocity: C_acc, C_vel, numbers
             or (d,); default 0.
 
@@ -296,3 +374,143 @@ def rollout(params, y0, goal, duration, dt, weights=None,
         k4 = derivative(t + dt, x + dt * k3)
         x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     return times, ys, yds
+
+
+# Learning the forcing term (module docstring).
+
+
+def _demonstration(t, y):
+    """Checked (t, y): t strictly increasing (N >= 3,), y (N, d)."""
+    t = as_vector("t", t)
+    if t.size < 3 or np.any(np.diff(t) <= 0.0):
+        raise ValueError(
+            f"t = {t!r} is not allowed: must hold 3 or more strictly "
+            "increasing times")
+    if np.ndim(y) == 1:
+        y = np.reshape(y, (-1, 1))
+    return t, as_matrix("y", y, (t.size, None))
+
+
+def demonstration_derivatives(t, y):
+    """Velocities and accelerations of a demonstration by finite
+    differences.
+
+    np.gradient (second-order central differences inside, second-order
+    one-sided at both ends, valid for uneven sample times) applied once
+    for yd and again to yd for ydd; exact for quadratics. Sample densely
+    (hundreds of samples per movement): the error is of order dt^2 times
+    the third and fourth derivatives.
+
+    Args:
+        t: (N,) strictly increasing sample times, N >= 3, s.
+        y: (N, d) positions, or (N,) for d = 1.
+
+    Returns:
+        (yd, ydd), each (N, d).
+    """
+    t, y = _demonstration(t, y)
+    yd = np.gradient(y, t, axis=0, edge_order=2)
+    return yd, np.gradient(yd, t, axis=0, edge_order=2)
+
+
+def forcing_targets(t, y, yd, ydd, g, params):
+    """Forcing term that reproduces a demonstration exactly (eq. (6)),
+
+        f_target = tau^2 ydd - alpha_z (beta_z (g - y) - tau yd),
+
+    in absolute units (no amplitude scaling), (N, d), from the sample
+    times t (N,), the (N, d) positions, velocities and accelerations, the
+    goal g (d,) (usually y[-1]) and DmpParameters (alpha_z, beta_z, tau).
+    """
+    params = _checked_parameters(params)
+    t, y = _demonstration(t, y)
+    yd = as_matrix("yd", yd, y.shape)
+    ydd = as_matrix("ydd", ydd, y.shape)
+    g = as_vector("g", np.atleast_1d(g), y.shape[1])
+    tau = params.tau
+    return tau**2 * ydd - params.alpha_z * (
+        params.resolved_beta_z * (g - y) - tau * yd)
+
+
+def design_matrix(s, params):
+    """Gated normalised basis values X[k, i] = s_k psi_i(s_k) / sum psi
+    (`basis_functions`) for (N,) phases s: (N, num_basis), so that
+    f(s_k) = X[k] @ weights."""
+    params = _checked_parameters(params)
+    s = as_vector("s", np.atleast_1d(s))
+    return s[:, None] * basis_functions(s, params)
+
+
+def fit_weights(design, targets, regularisation=1e-6):
+    """Ridge least squares weights W = (X^T X + lambda I)^-1 X^T F.
+
+    X is the (N, num_basis) design matrix, F the (N, d) (or (N,))
+    targets; lambda = regularisation * trace(X^T X) / num_basis (relative
+    to the mean diagonal, so one value suits any number of samples;
+    absolute if X = 0), regularisation > 0. Returns (num_basis, d) (or
+    (num_basis,)) weights.
+    """
+    X = as_matrix("design", design, (None, None))
+    if np.ndim(targets) == 1:
+        F = as_vector("targets", targets, X.shape[0])
+    else:
+        F = as_matrix("targets", targets, (X.shape[0], None))
+    regularisation = positive("regularisation", regularisation)
+    M = X.T @ X
+    mean_diagonal = np.trace(M) / M.shape[0]
+    M[np.diag_indices_from(M)] += regularisation * (
+        mean_diagonal if mean_diagonal > 0.0 else 1.0)
+    return np.linalg.solve(M, X.T @ F)
+
+
+@dataclass(frozen=True, eq=False)
+class LearnedForcingTerm:
+    """A forcing term learned from a demonstration; call it with s.
+
+    Attributes: weights (num_basis, d) in absolute units (those of z),
+    the DmpParameters `params` it was learned with, the demonstration's
+    start y0 (d,) and end `goal` (d,). Nothing else is needed: there is
+    no amplitude scaling.
+    """
+
+    weights: np.ndarray
+    params: DmpParameters
+    y0: np.ndarray
+    goal: np.ndarray
+
+    def __call__(self, s, scale=1.0):
+        """f(s), (d,) (float or AutoDiffXd s); see `forcing_term`."""
+        return forcing_term(s, self.weights, self.params, scale)
+
+
+def learn_forcing_term(t, y, params=None, regularisation=1e-6):
+    """Learns f from one demonstration (positions y at times t).
+
+    Derivatives by `demonstration_derivatives`, targets by
+    `forcing_targets` with g = y[-1], phase by `canonical_phase` of
+    t - t[0], weights by `fit_weights`. The demonstration should end at
+    rest (zero velocity and acceleration): otherwise f stays non-zero at
+    its end and keeps pushing, decaying with s, after t = duration.
+
+    Args:
+        t: (N,) strictly increasing times, s.
+        y: (N, d) positions, or (N,) for d = 1.
+        params: DmpParameters, or None for the defaults with duration =
+            t[-1] - t[0].
+        regularisation: relative ridge factor of `fit_weights`.
+
+    Returns:
+        LearnedForcingTerm.
+    """
+    t, y = _demonstration(t, y)
+    if params is None:
+        params = DmpParameters(duration=t[-1] - t[0])
+    params = _checked_parameters(params)
+    yd, ydd = demonstration_derivatives(t, y)
+    targets = forcing_targets(t, y, yd, ydd, y[-1], params)
+    design = design_matrix(canonical_phase(t - t[0], params), params)
+    weights = fit_weights(design, targets, regularisation)
+    y0, goal = y[0].copy(), y[-1].copy()
+    for array in (weights, y0, goal):
+        array.flags.writeable = False
+    return LearnedForcingTerm(weights, params, y0, goal)

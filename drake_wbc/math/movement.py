@@ -15,14 +15,13 @@ Recording and its start and stop markers: drake_wbc.math.demonstration.
 
 Learning (`learn_movement`): each demonstration is normalised to a
 common duration (their mean), its forcing targets
-(dmp_learning.forcing_targets, goal its last sample) and design matrix
-(dmp_learning.design_matrix) are stacked with the others', and the
-weights are one ridge fit (dmp_learning.fit_weights).
+(dmp.forcing_targets, goal its last sample) and design matrix
+(dmp.design_matrix) are stacked with the others', and the
+weights are one ridge fit (dmp.fit_weights).
 Several demonstrations thus average. `LearnedMovement.save`/`load` write
 and read it as a small YAML file.
 """
 
-import math
 from bisect import bisect_right
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -30,8 +29,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from drake_wbc.math import dmp, dmp_learning
+from drake_wbc.math import dmp
 from drake_wbc.math.demonstration import DIMENSIONS, Demonstration
+from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.validation import as_matrix, as_vector, positive
 
 LEARNED_TWIST_INDICES = (0, 1, 2, 5)
@@ -174,7 +174,7 @@ def learn_movement(demonstrations, params=None, num_basis=None,
             default of that duration when None). None: the defaults with
             DEFAULT_NUM_BASIS.
         num_basis: overrides params.num_basis when given.
-        regularisation: the relative ridge factor of dmp_learning.fit_weights.
+        regularisation: the relative ridge factor of dmp.fit_weights.
         source: how it was made, kept in the file's header.
 
     Returns:
@@ -194,12 +194,12 @@ def learn_movement(demonstrations, params=None, num_basis=None,
     designs, targets = [], []
     for demo in demonstrations:
         t = (demo.time - demo.time[0]) * (duration / demo.duration)
-        yd, ydd = dmp_learning.demonstration_derivatives(t, demo.tcp)
-        targets.append(dmp_learning.forcing_targets(
+        yd, ydd = dmp.demonstration_derivatives(t, demo.tcp)
+        targets.append(dmp.forcing_targets(
             t, demo.tcp, yd, ydd, demo.tcp[-1], params))
-        designs.append(dmp_learning.design_matrix(
+        designs.append(dmp.design_matrix(
             dmp.canonical_phase(t, params), params))
-    weights = dmp_learning.fit_weights(np.vstack(designs),
+    weights = dmp.fit_weights(np.vstack(designs),
                                        np.vstack(targets), regularisation)
     return LearnedMovement(
         params, weights, np.mean([d.tcp[0] for d in demonstrations], axis=0),
@@ -207,10 +207,39 @@ def learn_movement(demonstrations, params=None, num_basis=None,
         tuple(demonstrations), source)
 
 
-def _interpolate(x, times, rows):
-    """np.interp(x, times, column) of every column of `rows` at one float
-    x, in plain floats (the same formula): `times` a strictly increasing
-    list, `rows` a list of lists (one a time); a new list."""
+def interpolated_row(x, times, rows):
+    """The row of a table at x, linear between its times: np.interp(x,
+    times, column) of every column of `rows` (held at the first and last
+    row outside the times).
+
+    Args:
+        x: a float.
+        times: a strictly increasing list of N floats.
+        rows: a list of N lists of floats (one a time, all as long).
+
+    Returns:
+        a new list, one float a column.
+    """
+    columns = np.asarray(rows, dtype=float).T
+    return [float(np.interp(x, times, column)) for column in columns]
+
+
+def _table_inputs(rng):
+    """A random table and a time before, after, on and between its
+    times, for interpolated_row_float."""
+    n = int(rng.integers(1, 40))
+    times = np.cumsum(rng.uniform(1e-3, 1.0, n)) - rng.uniform(0.0, 5.0)
+    rows = rng.normal(size=(n, int(rng.integers(1, 5))))
+    x = rng.choice([times[0] - rng.random(), times[-1] + rng.random(),
+                    times[rng.integers(n)],
+                    rng.uniform(times[0], times[-1])])
+    return float(x), times.tolist(), rows.tolist()
+
+
+@fast_kernel(interpolated_row, sample=_table_inputs)
+def interpolated_row_float(x, times, rows):
+    """`interpolated_row` in plain floats (a bisection and the same
+    formula as np.interp): the replay's tables each control tick."""
     j = bisect_right(times, x) - 1
     if j < 0:
         return list(rows[0])
@@ -298,16 +327,15 @@ class MovementPlayer:
             path = np.abs(y[:, 3] - y[0, 3])
         self._times = t
         self._progress = path / path[-1] if path[-1] > 0.0 else 0.0 * t + 1
-        # The per-tick path (`drive_terms`, `reference`) on plain floats
-        # and few numpy calls: the tables as lists, the basis and the
-        # weights (in the learned twist entries, zero elsewhere) as arrays.
+        # The per-tick path (`drive_terms`, `reference`) runs the float
+        # kernels of eqs. (6), (7) and of the tables (plain floats and few
+        # numpy calls): the tables as lists, the weights (in the learned
+        # twist entries, zero elsewhere) as an array.
         self._time_list = t.tolist()
         self._progress_rows = [[p] for p in np.broadcast_to(
             self._progress, t.shape).tolist()]
         self._goal_change = (self.goal - self.learned_goal).tolist()
         self._learned_goal_list = self.learned_goal.tolist()
-        self._negative_widths = -self.params.widths
-        self._centres = self.params.centres
         self._weights = np.zeros((self.params.num_basis, 6))
         self._weights[:, list(LEARNED_TWIST_INDICES)] = movement.weights
         _, self._reference, _ = dmp.rollout(
@@ -326,7 +354,8 @@ class MovementPlayer:
 
     def _goal_list(self, elapsed):
         """`goal_at` of a float, as a list."""
-        p = _interpolate(elapsed, self._time_list, self._progress_rows)[0]
+        p = interpolated_row_float(elapsed, self._time_list,
+                                   self._progress_rows)[0]
         return [g + p * change for g, change in
                 zip(self._learned_goal_list, self._goal_change,
                     strict=True)]
@@ -337,8 +366,8 @@ class MovementPlayer:
         start before start_time)."""
         elapsed = max(float(t) - self.start_time, 0.0)
         return np.array([s + r for s, r in zip(
-            self._start_list, _interpolate(elapsed, self._time_list,
-                                           self._reference_rows),
+            self._start_list, interpolated_row_float(
+                elapsed, self._time_list, self._reference_rows),
             strict=True)])
 
     def goal_and_forcing(self, t):
@@ -359,20 +388,14 @@ class MovementPlayer:
         return cached
 
     def _drive_terms(self, t):
-        """[g; f] at time t: f(s) = s sum psi_i w_i / sum psi_i of eq. (6)
-        (dmp.forcing_term) with the closed-form phase s of eq. (7)
-        (dmp.canonical_phase), its exponents shifted by their maximum
-        (dmp.basis_functions)."""
+        """[g; f] at time t: f(s) of eq. (6) (the float kernel of
+        dmp.forcing_term) at the closed-form phase s of eq. (7) (that of
+        dmp.canonical_phase)."""
         if not self.active(t):
             return [0.0] * 12
         elapsed = max(t - self.start_time, 0.0)
-        s = math.exp(-self.params.resolved_alpha_s * elapsed
-                     / self.params.tau)
-        offset = self._centres - s
-        a = offset * offset
-        a *= self._negative_widths
-        e = np.exp(a - a.max())
-        forcing = e.dot(self._weights) * (s / e.sum())
+        s = dmp.canonical_phase_float(elapsed, self.params)
+        forcing = dmp.forcing_term_float(s, self._weights, self.params)
         return self._goal_list(elapsed) + forcing.tolist()
 
     def transformation_parameters(self, dmp_params):

@@ -3,15 +3,22 @@
 
 The distance d of an obstacle point is measured from the footprint's
 rectangle (not from the base's centre), so that a long base keeps its
-corners clear too. The functions accept float points (a fast path for the
-controller's tick) and numpy object arrays of AutoDiffXd; their parameters
-are checked once, in RepulsiveFieldParameters.
+corners clear too. The reference bodies (`footprint_distance`,
+`repulsive_potential`, `repulsive_force`) accept float points and numpy
+object arrays of AutoDiffXd; their parameters are checked once, in
+RepulsiveFieldParameters. The distance and the force have each one float
+kernel (drake_wbc.math.kernels), what the controller's tick runs on
+hundreds of LIDAR points: `footprint_distance_float` (whose arithmetic,
+`footprint_geometry`, and its distance alone, `footprint_gap`, the speed
+and separation limits of drake_wbc.math.separation share) and
+`repulsive_force_float`.
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 
+from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.validation import as_vector, non_negative, positive
 
 
@@ -68,14 +75,6 @@ def footprint_distance(obstacle_points, params):
     RepulsiveFieldParameters. Returns (d, n), (M,) and (M, 2).
     """
     P = np.reshape(obstacle_points, (-1, 2))
-    if P.dtype == np.float64:
-        d, nx, ny = footprint_geometry(P, params.half_sizes)
-        return d, np.column_stack([nx, ny])
-    return _footprint_distance_any(P, params)
-
-
-def _footprint_distance_any(P, params):
-    """`footprint_distance` of (M, 2) points of any scalar type."""
     x, y = P[:, 0], P[:, 1]
     a, b = params.half_sizes
     sx, sy = np.where(x >= 0, 1.0, -1.0), np.where(y >= 0, 1.0, -1.0)
@@ -96,19 +95,58 @@ def _footprint_distance_any(P, params):
     return np.where(outside, r, zero), n
 
 
-def footprint_gap(points, half_sizes):
-    """The distance d (M,) alone of `footprint_distance`, for (M, 2) float
-    points and the footprint's half-sizes (a, b): the cheapest ranking of
-    LIDAR points by how near they are."""
-    qx = np.abs(points[:, 0]) - half_sizes[0]
-    qy = np.abs(points[:, 1]) - half_sizes[1]
-    return np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0))
+def _field(rng):
+    """Random RepulsiveFieldParameters: thin, point and usual footprints,
+    small and large gains, bounds that act and bounds that do not."""
+    half_sizes = [(0.4, 0.3), (0.0, 0.0), (1.0, 0.05),
+                  tuple(rng.uniform(0.0, 1.0, 2))][rng.integers(4)]
+    d_th = rng.uniform(0.05, 2.0)
+    return RepulsiveFieldParameters(
+        k_obs=float(rng.choice([0.0, 0.01, rng.uniform(0.0, 10.0)])),
+        d_th=d_th, half_sizes=half_sizes,
+        d_min=d_th * rng.uniform(1e-3, 0.99),
+        max_force=float(rng.choice([80.0, 1e12, rng.uniform(0.1, 100.0)])))
+
+
+def _points(rng, params):
+    """(M, 2) points around the footprint of `params` (M from 0 to a
+    few hundred): anywhere, inside it, on its edges and corners, just
+    outside it, at the reach d_th along x or y and beyond it."""
+    a, b = params.half_sizes
+    count = int(rng.choice([0, 1, 2, rng.integers(3, 400)]))
+    kind = rng.integers(0, 6, count)
+    u = rng.uniform(-1.0, 1.0, (count, 2))
+    sign = np.where(u >= 0.0, 1.0, -1.0)
+    reach = params.d_th
+    points = np.select(
+        [kind[:, None] == k for k in range(5)],
+        [u * (np.array([a, b]) + 2.0 * reach),
+         u * [a, b],
+         np.column_stack([a * sign[:, 0], b * u[:, 1]]),
+         sign * [a, b] + sign * 1e-7 * np.abs(u),
+         np.column_stack([(a + reach) * sign[:, 0], b * u[:, 1]])],
+        default=u * 50.0)
+    return points
+
+
+def _distance_inputs(rng):
+    params = _field(rng)
+    return _points(rng, params), params
+
+
+@fast_kernel(footprint_distance, sample=_distance_inputs)
+def footprint_distance_float(obstacle_points, params):
+    """`footprint_distance` of float points, in few array operations
+    (`footprint_geometry`): the controller's tick."""
+    d, nx, ny = footprint_geometry(np.reshape(obstacle_points, (-1, 2)),
+                                   params.half_sizes)
+    return d, np.column_stack([nx, ny])
 
 
 def footprint_geometry(points, half_sizes):
-    """`footprint_distance` of (M, 2) float points, in few array
-    operations (the controller's tick: hundreds of LIDAR points), with
-    the footprint's half-sizes (a, b) given directly.
+    """The arithmetic of `footprint_distance_float`: (M, 2) float points
+    and the footprint's half-sizes (a, b) given directly, the direction
+    in its components.
 
     Returns:
         (d, nx, ny), three (M,) arrays: the distance and the two
@@ -129,9 +167,17 @@ def footprint_geometry(points, half_sizes):
     return d, nx, ny
 
 
+def footprint_gap(points, half_sizes):
+    """The distance d (M,) alone of `footprint_geometry`, for (M, 2)
+    float points and the footprint's half-sizes (a, b): the cheapest
+    ranking of LIDAR points by how near they are."""
+    qx = np.abs(points[:, 0]) - half_sizes[0]
+    qy = np.abs(points[:, 1]) - half_sizes[1]
+    return np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0))
+
+
 def _clamped_distance(obstacle_points, params):
-    d, n = _footprint_distance_any(np.reshape(obstacle_points, (-1, 2)),
-                                   params)
+    d, n = footprint_distance(obstacle_points, params)
     return np.where(d > params.d_min, d, 0.0 * d + params.d_min), n
 
 
@@ -156,31 +202,14 @@ def repulsive_force(obstacle_points, params):
     for d <= d_th (0 beyond; continuous at d_th), n from
     `footprint_distance`. Below d_min the magnitude is the one at d_min
     (along n), a bounded push out of the footprint. A sum longer than
-    params.max_force is scaled down to it, its direction kept.
+    params.max_force is scaled down to it, its direction kept. A
+    non-finite point makes the force NaN.
 
     obstacle_points: (M, 2) points [x, y] in T_b, m (M may be 0);
     params: RepulsiveFieldParameters. Returns the (2,) force [f_x, f_y] in
     T_b (entering tau z_dot).
     """
-    points = np.reshape(obstacle_points, (-1, 2))
-    if points.dtype == np.float64:
-        return _repulsive_force_float(points, params)
-    return _repulsive_force_any(points, params)
-
-
-def _repulsive_force_any(points, params):
-    """`repulsive_force` of (M, 2) points of any scalar type; float points
-    farther than d_th along x or y are dropped first."""
-    if points.dtype == np.float64:
-        # A finite point farther than d_th from the footprint along x or
-        # y gives an exact zero: drop those (non-finite ones stay, and
-        # make the force NaN as before).
-        a, b = params.half_sizes
-        x, y = points[:, 0], points[:, 1]
-        far = (((np.abs(x) - a > params.d_th) | (np.abs(y) - b > params.d_th))
-               & np.isfinite(x) & np.isfinite(y))
-        points = points[~far]
-    d, n = _clamped_distance(points, params)
+    d, n = _clamped_distance(obstacle_points, params)
     slope = params.k_obs * (1.0 / d - 1.0 / params.d_th) / d**2
     slope = np.where(d <= params.d_th, slope, 0.0 * slope)
     return _bounded(np.sum(-slope[:, None] * n, axis=0) + np.zeros(2),
@@ -188,16 +217,32 @@ def _repulsive_force_any(points, params):
 
 
 def _bounded(force, params):
+    """`force` (2,) scaled down to params.max_force if longer."""
     squared = force[0] * force[0] + force[1] * force[1]
     if squared > params.max_force**2:
         force = force * (params.max_force / np.sqrt(squared))
     return force
 
 
-def _repulsive_force_float(points, params):
-    """`repulsive_force` of (M, 2) float points: the same formula in fewer
-    array operations (the controller's tick; hundreds of LIDAR points).
-    Non-finite points make the force NaN, as in the general path."""
+def _force_inputs(rng):
+    """Points around the footprint (crowds whose force is bounded
+    included), for repulsive_force_float."""
+    params = _field(rng)
+    points = _points(rng, params)
+    if len(points) and rng.random() < 0.2:  # a crowd on a corner
+        a, b = params.half_sizes
+        points[:] = np.array([a, -b]) + rng.uniform(-0.1, 0.1,
+                                                    points.shape)
+    return points, params
+
+
+@fast_kernel(repulsive_force, sample=_force_inputs)
+def repulsive_force_float(obstacle_points, params):
+    """`repulsive_force` of float points, in fewer array operations (the
+    controller's tick; hundreds of LIDAR points): the points farther than
+    d_th from the footprint along x or y, which give exact zeros, are
+    dropped first; non-finite points make the force NaN."""
+    points = np.reshape(obstacle_points, (-1, 2))
     if not np.isfinite(points).all():
         return np.full(2, np.nan)
     a, b = params.half_sizes

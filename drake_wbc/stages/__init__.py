@@ -7,10 +7,11 @@ controller uses.
 May import the math layer and the robot (its kinematics); never the
 controller, the station or the hardware.
 
-Parameters are read when a stage is constructed: it checks them and keeps
-a validated copy (drake_wbc.math.validation.validated_copy), shared with its
-scalar-converted copies, so changing a parameters object afterwards has
-no effect on the stages built from it.
+Parameters are checked where they enter (their dataclasses, at load and
+build time) and read when a stage is constructed: a stage takes what it
+needs from them then, shares them with its scalar-converted copies
+(stages.support.define_stage), and never checks them again, so changing
+a parameters object afterwards has no effect on the stages built from it.
 """
 
 from drake_wbc.stages.arm_control import (

@@ -1,21 +1,25 @@
-"""BaseVelocityFilter: the base's low-pass filter as a Drake system."""
+"""BaseVelocityFilter: the base's low-pass filter, eq. (filtering), as a
+Drake system (its math: drake_wbc.math.filtering)."""
 
 import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.symbolic import Expression
 from pydrake.systems.framework import LeafSystem_
-from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.math.filtering import (
     BaseFilterParameters,
     lowpass_state_space,
     zero_order_hold,
 )
-from drake_wbc.math.validation import checked_instance, validated_copy
+from drake_wbc.math.validation import checked_instance
+from drake_wbc.stages.support import define_stage
 
 BASE_AXES = 3
 """The base's velocity components [vx, vy, wz] (T_b)."""
 
 
-@TemplateSystem.define("BaseVelocityFilter_")
+@define_stage("BaseVelocityFilter_",
+              scalars=(float, AutoDiffXd, Expression))
 def BaseVelocityFilter_(T):
     class Impl(LeafSystem_[T]):
         """Second-order low-pass of eq. (filtering) on each base axis.
@@ -38,19 +42,21 @@ def BaseVelocityFilter_(T):
         hold at the control period (time_step > 0, one periodic discrete
         update), so that Drake's `Linearize` applies either way. The state
         is [y, y_dot] per axis, axes stacked: [vx, vx_dot, vy, vy_dot, wz,
-        wz_dot]; it starts at rest.
+        wz_dot]; it starts at rest. Linear, with no branch on values: also
+        symbolic (`ToSymbolic`).
 
         Args:
-            params: BaseFilterParameters; the paper's omega_f = 2 pi rad/s,
-                zeta = 1 at 100 Hz if None.
+            params: BaseFilterParameters (checked where they were made);
+                the paper's omega_f = 2 pi rad/s, zeta = 1 at 100 Hz if
+                None. Read here: changing them afterwards does not reach
+                the stage.
         """
 
         def _construct(self, params=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            params = checked_instance("params", params,
-                                      BaseFilterParameters,
-                                      BaseFilterParameters)
-            self.params = params = validated_copy(params)
+            self.params = params = checked_instance(
+                "params", params, BaseFilterParameters, BaseFilterParameters)
+            self._time_step = h = float(params.time_step)
             A, B, C, _ = lowpass_state_space(params.omega_f, params.zeta)
             eye = np.eye(BASE_AXES)
             self._A = np.kron(eye, A)
@@ -62,33 +68,21 @@ def BaseVelocityFilter_(T):
                 # Bypassed: x+ = [u, 0] per axis, y = u sampled and held.
                 self._A = np.zeros_like(self._A)
                 self._B = np.kron(eye, [[1.0], [0.0]])
-            elif params.time_step > 0.0:
-                self._A, self._B = zero_order_hold(
-                    self._A, self._B, params.time_step
-                )
-            if params.time_step > 0.0:
-                state = self.DeclareDiscreteState(n)
-                self.DeclarePeriodicDiscreteUpdateEvent(
-                    params.time_step, 0.0, self._update
-                )
+            elif h > 0.0:
+                self._A, self._B = zero_order_hold(self._A, self._B, h)
+            if h > 0.0:
+                state = self.discrete_state_ticket(
+                    self.DeclareDiscreteState(n))
+                self.DeclarePeriodicDiscreteUpdateEvent(h, 0.0,
+                                                        self._update)
                 self._get_state = self._discrete_state
             else:
-                state = self.DeclareContinuousState(n)
+                self.DeclareContinuousState(n)
+                state = self.xc_ticket()
                 self._get_state = self._continuous_state
             self.DeclareVectorOutputPort(
-                "filtered_velocity",
-                BASE_AXES,
-                self._output,
-                prerequisites_of_calc={
-                    self.discrete_state_ticket(state)
-                    if params.time_step > 0.0
-                    else self.xc_ticket()
-                },
-            )
-
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.params, converter=converter)
-            self.params = other.params
+                "filtered_velocity", BASE_AXES, self._output,
+                prerequisites_of_calc={state})
 
         @staticmethod
         def _discrete_state(context):
@@ -119,7 +113,7 @@ def BaseVelocityFilter_(T):
             velocity."""
             x = np.repeat(np.asarray(velocity), 2) * np.tile([1.0, 0.0],
                                                              BASE_AXES)
-            if self.params.time_step > 0.0:
+            if self._time_step > 0.0:
                 context.SetDiscreteState(x)
             else:
                 context.SetContinuousState(x)

@@ -23,25 +23,22 @@ The velocity output y_dot is the first block of x_dot; its direct
 feedthrough is declared explicitly, so that feedback edges such as
 delta_V_ee, which enters only the state, close no algebraic loop.
 
-In double the stages take a fast path, chosen at construction: the rows
-of y_dot over those of the update as one matrix acting on [x; u; 1]
-(`AffineDynamics.stacked`), and one cache entry of their product that
-the output and the update share (the inputs are read once a tick): the
-same model, to round-off. AutoDiffXd and the continuous derivatives keep
-the general path, which the fast one is tested against.
+Each tick, for double and AutoDiffXd alike, a stage takes the rows of
+y_dot over those of the update as one float matrix acting on [x; u; 1]
+(`AffineDynamics.stacked`), and one cache entry holds their product,
+which the output and the update share (the inputs are read once a tick).
 """
 
 import numpy as np
-from pydrake.autodiffutils import AutoDiffXd
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import ValueProducer
 
 from drake_wbc.math.filtering import zero_order_hold
 from drake_wbc.math.validation import non_negative
 
-SCALARS = [float, AutoDiffXd]
-"""Double, and AutoDiffXd for Linearize; not symbolic (the stage branches
-on values)."""
+ONE = np.ones(1)
+ONE.flags.writeable = False
+"""The constant 1 that ends the [x; u; 1] of AffineDynamics.stacked."""
 
 
 class AffineDynamics:
@@ -105,9 +102,11 @@ class AffineDynamics:
 class CdmpStage:
     """Shared mechanics of the three stages (a mixin of LeafSystem_[T]).
 
-    A stage sets `_fast` (True in double) before `_declare_state`, and
-    with it defines `_fast_vector(context)`, the float [x; u; 1] of its
-    models' `stacked` matrices (`_declare_output`).
+    A stage sets `_models` (AffineDynamics by key) and `_dimension`, and
+    defines `_inputs(context)`, its whole input u (for the continuous
+    derivatives), and `_stacked_vector(context)`, the [x; u[columns]; 1]
+    of its models' `stacked` matrices (`_declare_output`); it may replace
+    `_calc_result`, `_output` and `_update` (WholeBodyCdmp does).
     """
 
     def _declare_state(self, num_states, time_step):
@@ -115,19 +114,16 @@ class CdmpStage:
         if self._time_step > 0.0:
             index = self.DeclareDiscreteState(num_states)
             self.DeclarePeriodicDiscreteUpdateEvent(
-                self._time_step, 0.0,
-                self._fast_update if self._fast else self._update
-            )
+                self._time_step, 0.0, self._update)
             return self.discrete_state_ticket(index)
         self.DeclareContinuousState(num_states)
         return self.xc_ticket()
 
     def _state(self, context):
-        """The state x; in double a read-only view when discrete."""
+        """The state x."""
         if self._time_step <= 0.0:
             return context.get_continuous_state_vector().CopyToVector()
-        vector = context.get_discrete_state_vector()
-        return vector.value() if self._fast else vector.CopyToVector()
+        return context.get_discrete_state_vector().CopyToVector()
 
     def _optional(self, port, context, default):
         if port.HasValue(context):
@@ -142,68 +138,42 @@ class CdmpStage:
             return int(self._default_switch)
         return 1 if value[0] >= 0.5 else 0
 
-    def _model(self, context, for_update=False):
-        """The affine model in force (by S_hri); `for_update`: for the
-        discrete update over the period that starts at the context's
-        time."""
-        return self._models[self._switch(context)]
-
-    def _update(self, context, discrete_state):
-        model = self._model(context, for_update=True)
-        discrete_state.set_value(
-            model.next_state(self._state(context),
-                             self._drive(context, for_update=True))
-        )
+    def _model_key(self, context):
+        """The key of the affine model in force (by S_hri)."""
+        return self._switch(context)
 
     def DoCalcTimeDerivatives(self, context, derivatives):
-        model = self._model(context)
+        model = self._models[self._model_key(context)]
         derivatives.get_mutable_vector().SetFromVector(
-            model.derivative(self._state(context), self._drive(context))
-        )
-
-    def _velocity(self, context):
-        """y_dot: the first block of x_dot. Inputs that enter the state
-        alone (see `_check_state_only`) are not evaluated, so that a
-        feedback edge into them closes no loop."""
-        model = self._model(context)
-        x_dot = model.derivative(self._state(context),
-                                 self._drive(context, for_output=True))
-        return x_dot[: self._dimension]
-
-    def _output(self, context, output):
-        output.SetFromVector(self._velocity(context))
+            model.derivative(self._state(context), self._inputs(context)))
 
     def _declare_output(self, name, prerequisites, output_columns=None):
-        """The output y_dot, computed from `prerequisites` alone. In
-        double also, per model, the rows of y_dot over those of the
-        discrete update (if any), on [x; u[output_columns]; 1], and the
-        cache entry of their product, which the output and the update
-        share (the inputs are read once a tick)."""
-        if self._fast:
-            self._fast_models = {
-                key: model.stacked(self._dimension, output_columns)
-                for key, model in self._models.items()
-            }
-            self._fast_result = self.DeclareCacheEntry(
-                "y_dot and the next state", ValueProducer(
-                    allocate=lambda: AbstractValue.Make(np.zeros(0)),
-                    calc=self._calc_fast_result),
-                prerequisites)
-        self.DeclareVectorOutputPort(
-            name, self._dimension,
-            self._fast_output if self._fast else self._output,
-            prerequisites_of_calc=prerequisites)
+        """The output y_dot, computed from `prerequisites` alone: per
+        model, the rows of y_dot over those of the discrete update (if
+        any), on [x; u[output_columns]; 1], and the cache entry of their
+        product, which the output and the update share."""
+        self._stacked = {
+            key: model.stacked(self._dimension, output_columns)
+            for key, model in self._models.items()
+        }
+        self._result = self.DeclareCacheEntry(
+            "y_dot and the next state", ValueProducer(
+                allocate=lambda: AbstractValue.Make(np.zeros(0)),
+                calc=self._calc_result),
+            prerequisites)
+        self.DeclareVectorOutputPort(name, self._dimension, self._output,
+                                     prerequisites_of_calc=prerequisites)
 
-    def _calc_fast_result(self, context, value):
-        value.set_value(self._fast_models[self._switch(context)].dot(
-            self._fast_vector(context)))
+    def _calc_result(self, context, value):
+        value.set_value(self._stacked[self._model_key(context)].dot(
+            self._stacked_vector(context)))
 
-    def _fast_output(self, context, output):
-        output.set_value(self._fast_result.Eval(context)[:self._dimension])
+    def _output(self, context, output):
+        output.set_value(self._result.Eval(context)[:self._dimension])
 
-    def _fast_update(self, context, discrete_state):
+    def _update(self, context, discrete_state):
         discrete_state.set_value(
-            self._fast_result.Eval(context)[self._dimension:])
+            self._result.Eval(context)[self._dimension:])
 
     def _check_state_only(self, columns):
         """Checks that the inputs u[columns] do not reach y_dot."""

@@ -9,17 +9,15 @@ drake_wbc.stages.whole_body_cdmp.
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem_, ValueProducer
-from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.math import cdmp, repulsion
-from drake_wbc.math.validation import validated_copy
-from drake_wbc.stages.cdmp_base import SCALARS, AffineDynamics, CdmpStage
+from drake_wbc.math.kernels import body_for
+from drake_wbc.math.validation import checked_instance
+from drake_wbc.stages.cdmp_base import ONE, AffineDynamics, CdmpStage
+from drake_wbc.stages.support import define_stage
 
-_ONE = np.ones(1)
-_ONE.flags.writeable = False
-"""The constant 1 ending the [x; u; 1] of AffineDynamics.stacked."""
 
-@TemplateSystem.define("BaseCdmp_", T_list=SCALARS)
+@define_stage("BaseCdmp_")
 def BaseCdmp_(T):
     class Impl(CdmpStage, LeafSystem_[T]):
         """CDMP of the base with obstacle avoidance, eq. (cdmp-base).
@@ -35,25 +33,27 @@ def BaseCdmp_(T):
         - obstacle_points: an (M, 2) float array of obstacle points in T_b
           (abstract-valued; optional, none when unconnected). The
           repulsive force f_avoid, the gradient of U_rep around the
-          footprint (repulsion.repulsive_force), is computed once per new set
-          of points (a cache entry that the output and the update share)
-          and held over the period.
+          footprint (repulsion.repulsive_force, its float kernel in
+          double), is computed once per new set of points (a cache entry
+          that the output and the update share, and
+          repulsion.LastPoints) and held over the period.
         - avoiding_base_velocity: V_b' (3), y_dot, for the base filter.
 
         State [y, z, C] (9) in T_b coordinates, goal g = 0: once the
         obstacle is gone the base returns onto its commanded path.
 
         Args:
-            params: cdmp.BaseCdmpParameters (paper values if None).
+            params: cdmp.BaseCdmpParameters (checked where they were
+                made; paper values if None), read here.
             time_step: control period h (0: continuous), default 0.01 s.
         """
 
         def _construct(self, params=None, time_step=0.01, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            params = validated_copy(cdmp.BaseCdmpParameters()
-                                    if params is None else params)
-            self.params, self._dimension = params, 3
-            self._default_switch = 0
+            self.params = params = checked_instance(
+                "params", params, cdmp.BaseCdmpParameters,
+                cdmp.BaseCdmpParameters)
+            self._dimension = 3
             no_points = np.zeros((0, 2))
 
             def derivative(x, u):
@@ -64,25 +64,26 @@ def BaseCdmp_(T):
                     forcing=u[3:]))
 
             model = AffineDynamics(derivative, 9, 6, time_step)
-            self._models = {0: model, 1: model}
-            self._fast = T is float
-            def float_force(points):
-                f_x, f_y = repulsion.repulsive_force(points,
-                                                     params.repulsion)
+            self._models = {0: model}
+            force = body_for(repulsion.repulsive_force, T)
+            field = params.repulsion
+
+            def force_with_no_yaw(points):
+                f_x, f_y = force(points, field)
                 return np.array((f_x, f_y, 0.0))
 
-            self._float_force = repulsion.LastPoints(float_force)
+            self._force_of = repulsion.LastPoints(force_with_no_yaw)
             self._velocity_in = self.DeclareVectorInputPort(
                 "base_velocity", 3)
             self._points = self.DeclareAbstractInputPort(
                 "obstacle_points", AbstractValue.Make(no_points))
-            self._phri_port = None
             self._force = self.DeclareCacheEntry(
                 "repulsive force f_avoid",
                 ValueProducer(
                     allocate=lambda: AbstractValue.Make(np.zeros(3)),
                     calc=lambda context, value: value.set_value(
-                        self._calc_repulsive_force(context))),
+                        self._force_of(self._optional(
+                            self._points, context, no_points)))),
                 {self.input_port_ticket(self._points.get_index())})
             state = self._declare_state(9, time_step)
             prerequisites = {
@@ -92,12 +93,7 @@ def BaseCdmp_(T):
             }
             self._declare_output("avoiding_base_velocity", prerequisites)
 
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.params, other._time_step,
-                            converter=converter)
-            self.params = other.params
-
-        def _switch(self, context):
+        def _model_key(self, context):
             return 0
 
         def repulsive_force(self, context):
@@ -106,29 +102,20 @@ def BaseCdmp_(T):
             per new set of points, shared by the output and the update."""
             return np.array(self._force.Eval(context))
 
-        def _calc_repulsive_force(self, context):
-            points = (self._points.Eval(context)
-                      if self._points.HasValue(context)
-                      else np.zeros((0, 2)))
-            if T is float and points.dtype == np.float64:
-                return self._float_force(points)
-            force = repulsion.repulsive_force(points, self.params.repulsion)
-            return np.array([force[0], force[1], 0.0])
-
-        def _drive(self, context, for_output=False, for_update=False):
+        def _inputs(self, context):
             return np.concatenate([self._velocity_in.Eval(context),
-                                   self.repulsive_force(context)])
+                                   self._force.Eval(context)])
 
-        def _fast_vector(self, context):
+        def _stacked_vector(self, context):
             # The cached force is only read here: no copy.
             return np.concatenate((
                 self._state(context), self._velocity_in.Eval(context),
-                self._force.Eval(context), _ONE))
+                self._force.Eval(context), ONE))
 
     return Impl
 
 
-@TemplateSystem.define("ArmCdmp_", T_list=SCALARS)
+@define_stage("ArmCdmp_")
 def ArmCdmp_(T):
     class Impl(CdmpStage, LeafSystem_[T]):
         """CDMP of the arm: hybrid stiffness/force control, eq. (cdmp-arm).
@@ -157,17 +144,19 @@ def ArmCdmp_(T):
         [y, z~, C_a] (18), T_a, goal g = 0.
 
         Args:
-            params: cdmp.ArmCdmpParameters (the paper's wiping values if
-                None).
+            params: cdmp.ArmCdmpParameters (checked where they were made;
+                the paper's wiping values if None), read here.
             time_step: control period h (0: continuous), default 0.01 s.
         """
 
         def _construct(self, params=None, time_step=0.01, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            params = validated_copy(cdmp.ArmCdmpParameters()
-                                    if params is None else params)
-            self.params, self._dimension = params, 6
+            self.params = params = checked_instance(
+                "params", params, cdmp.ArmCdmpParameters,
+                cdmp.ArmCdmpParameters)
+            self._dimension = 6
             self._default_switch = params.S_hri
+            self._default_desired = params.F_d
             base = dict(k_p=params.k_p, k_d=params.k_d, k_f=params.k_f,
                         S_m=params.S_m, dmp=params.dmp)
 
@@ -185,7 +174,6 @@ def ArmCdmp_(T):
                 s: AffineDynamics(derivative(s), 18, 18, time_step)
                 for s in (0, 1)
             }
-            self._fast = T is float
             self._velocity_in = self.DeclareVectorInputPort(
                 "arm_velocity", 6)
             self._wrench = self.DeclareVectorInputPort("wrench", 6)
@@ -200,29 +188,23 @@ def ArmCdmp_(T):
             }
             self._declare_output("arm_velocity_command", prerequisites)
 
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.params, other._time_step,
-                            converter=converter)
-            self.params = other.params
-
-        def _drive(self, context, for_output=False, for_update=False):
+        def _inputs(self, context):
             return np.concatenate([
                 self._velocity_in.Eval(context),
                 self._wrench.Eval(context),
-                self._optional(self._desired, context, self.params.F_d),
+                self._optional(self._desired, context,
+                               self._default_desired),
             ])
 
-        def _fast_vector(self, context):
-            desired = self._desired
+        def _stacked_vector(self, context):
             return np.concatenate((
                 self._state(context), self._velocity_in.Eval(context),
                 self._wrench.Eval(context),
-                desired.Eval(context) if desired.HasValue(context)
-                else self.params.F_d, _ONE))
+                self._optional(self._desired, context,
+                               self._default_desired), ONE))
 
     return Impl
 
 
 BaseCdmp = BaseCdmp_[None]
 ArmCdmp = ArmCdmp_[None]
-

@@ -22,10 +22,12 @@ and `ToAutoDiffXd` of the whole controller (not symbolic: the stages
 branch on values, as the paper's piecewise functions do)."""
 
 
-def define_stage(name):
+def define_stage(name, scalars=SCALARS):
     """Defines a stage as a scalar-convertible template, like
-    `TemplateSystem.define(name, T_list=SCALARS)`, for a function
-    `instantiate(T)` that returns the stage's class for scalar type T.
+    `TemplateSystem.define(name, T_list=scalars)`, for a function
+    `instantiate(T)` that returns the stage's class for scalar type T
+    (`scalars`: SCALARS unless a stage allows more, e.g. symbolic
+    Expressions for one that never branches on values).
 
     The class defines `_construct(self, ..., converter=None)` only: its
     scalar-converted copies are constructed from the very arguments the
@@ -56,7 +58,7 @@ def define_stage(name):
             return cls
 
         return TemplateSystem.define(
-            name, T_list=SCALARS, scope=inspect.getmodule(instantiate))(
+            name, T_list=scalars, scope=inspect.getmodule(instantiate))(
                 instantiate_with_copy)
 
     return decorate

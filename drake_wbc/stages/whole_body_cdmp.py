@@ -20,9 +20,9 @@ term still act, so a worker can still push during a replay. In discrete
 time g and f are taken at the middle of each period and held over it (a
 second-order accurate hold of the smooth f).
 
-In double the stage takes the fast path of the other CDMP stages (one
-matrix [A | B | c] per model on [x; u; 1]), with the yaw rotations of
-eq. (3) on plain floats.
+Like the other CDMP stages, one matrix [A | B | c] per model acts on
+[x; u; 1] each tick; the yaw rotations of eq. (3) are cdmp.twist_in_world
+and cdmp.twist_in_base (their float kernels in double).
 """
 
 import math
@@ -30,35 +30,19 @@ import math
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
-from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.math import cdmp
-from drake_wbc.math.validation import validated_copy
-from drake_wbc.stages.cdmp_base import (
-    SCALARS,
-    AffineDynamics,
-    CdmpStage,
+from drake_wbc.math.demonstration import TcpPose, tcp_pose_in_world_float
+from drake_wbc.math.kernels import body_for
+from drake_wbc.math.movement import (
+    LearnedMovement,
+    MovementPlayer,
+    resolve_movement_file,
 )
-from drake_wbc.stages.support import shared_arm_kinematics
-
-
-def _rotation_z(angle):
-    """Rz(angle) for any scalar type."""
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, -s, 0.0 * c], [s, c, 0.0 * c],
-                     [0.0 * c, 0.0 * c, 1.0 + 0.0 * c]])
-
-
-def _rotate_twist(R, twist):
-    return np.concatenate([R @ twist[:3], R @ twist[3:]])
-
-
-def _rotated(c, s, twist):
-    """Rz twist, each half of the float twist (a list of 6) rotated by
-    Rz with cos c and sin s; a list."""
-    vx, vy, vz, wx, wy, wz = twist
-    return [c * vx - s * vy, s * vx + c * vy, vz,
-            c * wx - s * wy, s * wx + c * wy, wz]
+from drake_wbc.math.scalar_support import value_of
+from drake_wbc.math.validation import checked_instance
+from drake_wbc.stages.cdmp_base import ONE, AffineDynamics, CdmpStage
+from drake_wbc.stages.support import define_stage, shared_arm_kinematics
 
 
 def movement_player(params):
@@ -71,12 +55,6 @@ def movement_player(params):
     """
     if params.movement is None:
         return None
-    from drake_wbc.math.movement import (
-        LearnedMovement,
-        MovementPlayer,
-        resolve_movement_file,
-    )
-
     try:
         movement = LearnedMovement.load(resolve_movement_file(
             params.movement.file))
@@ -90,7 +68,7 @@ def _time(context):
     return t.value() if isinstance(t, AutoDiffXd) else float(t)
 
 
-@TemplateSystem.define("WholeBodyCdmp_", T_list=SCALARS)
+@define_stage("WholeBodyCdmp_")
 def WholeBodyCdmp_(T):
     class Impl(CdmpStage, LeafSystem_[T]):
         """CDMP of the whole body, eqs. (cdmp-wb) and (cdmp-wb-error).
@@ -122,20 +100,26 @@ def WholeBodyCdmp_(T):
         exact for the velocity interface; a learned yaw is its z entry.
 
         Args:
-            params: cdmp.WholeBodyCdmpParameters (paper values if None);
-                its `movement`, if any, is read here.
+            params: cdmp.WholeBodyCdmpParameters (checked where they were
+                made; paper values if None), read here; its `movement`,
+                if any, is read here too.
             time_step: control period h (0: continuous), default 0.01 s.
+            player: the movement.MovementPlayer to run, or None for that
+                of params.movement.
         """
 
         def _construct(self, params=None, time_step=0.01, converter=None,
                        player=None):
             LeafSystem_[T].__init__(self, converter)
-            params = validated_copy(cdmp.WholeBodyCdmpParameters()
-                                    if params is None else params)
-            self.params, self._dimension = params, 6
+            self.params = params = checked_instance(
+                "params", params, cdmp.WholeBodyCdmpParameters,
+                cdmp.WholeBodyCdmpParameters)
+            self._dimension = 6
             self._default_switch = params.S_hri
             self.player = player or movement_player(params)
             num_inputs = 18 if self.player is None else 30
+            self._in_world = body_for(cdmp.twist_in_world, T)
+            self._in_base = body_for(cdmp.twist_in_base, T)
 
             def derivative(switch, playing):
                 dmp = (self.player.transformation_parameters(params.dmp)
@@ -163,7 +147,6 @@ def WholeBodyCdmp_(T):
                     for s in (0, 1) for playing in (False, True)
                 }
             self._check_state_only(slice(12, 18))
-            self._fast = T is float
             self._reference = self.DeclareVectorInputPort(
                 "reference_velocity", 6)
             self._wrench = self.DeclareVectorInputPort("wrench", 6)
@@ -180,103 +163,80 @@ def WholeBodyCdmp_(T):
             }
             if self.player is not None:
                 prerequisites.add(self.time_ticket())
-            # The fast path's shared result leaves out the deviation (state
-            # only), which the update adds: B_d's columns of it.
+            # The shared result leaves out the deviation (state only),
+            # which the update adds: B_d's columns of it.
             self._declare_output("end_effector_velocity", prerequisites, [
                 i for i in range(num_inputs) if not 12 <= i < 18])
-            if self._fast and time_step > 0.0:
-                self._fast_deviation = {
+            if time_step > 0.0:
+                self._deviation_columns = {
                     key: np.ascontiguousarray(model.B_d[:, 12:18])
                     for key, model in self._models.items()}
 
         def _construct_copy(self, other, converter=None):
+            # The copy shares the original's parameters and its player
+            # (which read the movement's file once).
             Impl._construct(self, other.params, other._time_step,
                             converter=converter, player=other.player)
-            self.params = other.params
 
-        def _movement_time(self, context, for_update):
-            """The time at which the movement's g and f are taken: the
-            middle of the period for a discrete update."""
-            t = _time(context)
-            if for_update and self._time_step > 0.0:
-                t += 0.5 * self._time_step
-            return t
+        def _base_yaw(self, context):
+            """phi_b from its input port, 0 when unconnected."""
+            yaw = self._yaw
+            return yaw.Eval(context)[0] if yaw.HasValue(context) else 0.0
 
-        def _model(self, context, for_update=False):
+        def _model_key(self, context, t=None):
+            """The model in force at time t (the context's if None)."""
             switch = self._switch(context)
             if self.player is None:
-                return self._models[switch]
-            playing = self.player.active(self._movement_time(context,
-                                                             for_update))
-            return self._models[(switch, playing)]
+                return switch
+            return (switch, self.player.active(
+                _time(context) if t is None else t))
 
-        def _yaw_rotation(self, context):
-            yaw = self._optional(self._yaw, context, np.zeros(1))[0]
-            return _rotation_z(yaw)
-
-        def _drive(self, context, for_output=False, for_update=False):
-            R_wb = self._yaw_rotation(context)
-            wrench = _rotate_twist(R_wb, self._wrench.Eval(context))
-            deviation = (0.0 * wrench if for_output else
-                         _rotate_twist(R_wb, self._deviation.Eval(context)))
-            parts = [self._reference.Eval(context), wrench, deviation]
+        def _inputs(self, context):
+            """u (continuous time): the reference, the wrench and the
+            deviation in the world, and the movement's g and f at t."""
+            yaw = self._base_yaw(context)
+            parts = [self._reference.Eval(context),
+                     self._in_world(self._wrench.Eval(context), yaw),
+                     self._in_world(self._deviation.Eval(context), yaw)]
             if self.player is not None:
-                parts += self.player.goal_and_forcing(
-                    self._movement_time(context, for_update))
+                parts.append(self.player.drive_terms(_time(context)))
             return np.concatenate(parts)
 
-        def _output(self, context, output):
-            R_bw = self._yaw_rotation(context).T
-            output.SetFromVector(_rotate_twist(R_bw, self._velocity(context)))
-
-        def _calc_fast_result(self, context, value):
-            """In double: (V_ee in T_b, the next state without the
-            deviation's part, the model of the update, cos and sin of
-            the yaw); a list."""
-            yaw = self._yaw
-            if yaw.HasValue(context):
-                angle = float(yaw.Eval(context)[0])
-                c, s = math.cos(angle), math.sin(angle)
-            else:
-                c, s = 1.0, 0.0
-            phri = self._phri_port
-            if phri.HasValue(context):
-                switch = 1 if phri.Eval(context)[0] >= 0.5 else 0
-            else:
-                switch = int(self._default_switch)
-            known = (self._state(context).tolist()
-                     + self._reference.Eval(context).tolist()
-                     + _rotated(c, s, self._wrench.Eval(context).tolist()))
+        def _calc_result(self, context, value):
+            """(V_ee in T_b, the next state without the deviation's part,
+            the model of the update, the yaw)."""
+            yaw = self._base_yaw(context)
+            known = (self._state(context), self._reference.Eval(context),
+                     self._in_world(self._wrench.Eval(context), yaw))
             player, d = self.player, self._dimension
             if player is None:
-                key = switch
-                result = self._fast_models[key].dot(np.array(known + [1.0]))
-                velocity, rest = result[:d].tolist(), result[d:]
+                key = self._model_key(context)
+                result = self._stacked[key].dot(np.concatenate(
+                    (*known, ONE)))
+                velocity, rest = result[:d], result[d:]
             else:
-                t = context.get_time()
-                key = (switch, player.active(t))
-                velocity = self._fast_models[key][:d].dot(np.array(
-                    known + player.drive_terms(t) + [1.0])).tolist()
-                rest = None
+                t = _time(context)
+                velocity = self._stacked[self._model_key(context, t)][
+                    :d].dot(np.concatenate(
+                        (*known, player.drive_terms(t), ONE)))
+                key, rest = None, None
                 if self._time_step > 0.0:
+                    # g and f at the middle of the period (module
+                    # docstring).
                     t += 0.5 * self._time_step
-                    key = (switch, player.active(t))
-                    rest = self._fast_models[key][d:].dot(np.array(
-                        known + player.drive_terms(t) + [1.0]))
-            vx, vy, vz, wx, wy, wz = velocity
-            # Back into T_b: Rz^T.
-            value.set_value([[c * vx + s * vy, c * vy - s * vx, vz,
-                              c * wx + s * wy, c * wy - s * wx, wz],
-                             rest, key, c, s])
+                    key = self._model_key(context, t)
+                    rest = self._stacked[key][d:].dot(np.concatenate(
+                        (*known, player.drive_terms(t), ONE)))
+            value.set_value([self._in_base(velocity, yaw), rest, key, yaw])
 
-        def _fast_output(self, context, output):
-            output.set_value(self._fast_result.Eval(context)[0])
+        def _output(self, context, output):
+            output.set_value(self._result.Eval(context)[0])
 
-        def _fast_update(self, context, discrete_state):
-            _, rest, key, c, s = self._fast_result.Eval(context)
-            deviation = _rotated(c, s, self._deviation.Eval(context).tolist())
+        def _update(self, context, discrete_state):
+            _, rest, key, yaw = self._result.Eval(context)
             discrete_state.set_value(
-                rest + self._fast_deviation[key].dot(deviation))
+                rest + self._deviation_columns[key].dot(
+                    self._in_world(self._deviation.Eval(context), yaw)))
 
     return Impl
 
@@ -284,7 +244,7 @@ def WholeBodyCdmp_(T):
 WholeBodyCdmp = WholeBodyCdmp_[None]
 
 
-@TemplateSystem.define("MovementTracking_", T_list=SCALARS)
+@define_stage("MovementTracking_")
 def MovementTracking_(T):
     class Impl(LeafSystem_[T]):
         """The task's feedback of a learned movement's replay: the TCP's
@@ -303,14 +263,14 @@ def MovementTracking_(T):
           K (p*(t) - p) on x, y, z and yaw (0 on roll and pitch, and
           before the movement's start_time), p* = player.reference(t), p
           the TCP's pose through the nominal kinematics
-          (demonstration.TcpPose, here in plain floats: `tcp_pose`), the
-          yaw error wrapped into (-pi, pi].
+          (demonstration.TcpPose), the yaw error wrapped into (-pi, pi].
 
         It enters the whole-body CDMP as the coupling C of eq. (cdmp-wb)
         (C_dot = V_ee^ref), an integral action of gain K on the TCP's
         error: the TCP follows the played pose with no steady error on a
-        ramp and ends on the goal. Evaluated on values (no gradient
-        through the kinematics in AutoDiffXd).
+        ramp and ends on the goal. Evaluated on values in every scalar
+        type (no gradient through the kinematics in AutoDiffXd), by the
+        float kernel of demonstration.tcp_pose_in_world.
 
         Args:
             player: the movement.MovementPlayer of the WholeBodyCdmp.
@@ -318,17 +278,9 @@ def MovementTracking_(T):
         """
 
         def _construct(self, player, arm=None, converter=None):
-            from drake_wbc.math.demonstration import TcpPose
-
             LeafSystem_[T].__init__(self, converter)
             self.player = player
             self._pose = TcpPose(arm or shared_arm_kinematics())
-            arm = self._pose.arm
-            model = arm.model
-            X_BA = model.arm_base_frame.CalcPose(
-                arm.plant.CreateDefaultContext(),
-                model.base_frame).GetAsMatrix34()
-            self._R_BA, self._p_BA = X_BA[:, :3].copy(), X_BA[:, 3].tolist()
             self._base = self.DeclareVectorInputPort(
                 "base.state_estimated", 6)
             self._arm = self.DeclareVectorInputPort("arm.position_measured",
@@ -336,51 +288,21 @@ def MovementTracking_(T):
             self.DeclareVectorOutputPort("reference_velocity", 6,
                                          self._output)
 
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.player, other._pose.arm,
-                            converter=converter)
-
-        def tcp_pose(self, base_pose, arm_positions):
-            """demonstration.TcpPose in plain floats: the TCP's [x, y, z,
-            yaw] (a list) in the world from the base's [x, y, yaw] and the
-            arm's joints, X_WE = X_WB X_BA X_AE, yaw = atan2(R_WE[1, 0],
-            R_WE[0, 0])."""
-            arm = self._pose.arm
-            X_AE = arm.frame_pose(arm_positions,
-                                  arm.model.tcp_frame).GetAsMatrix34()
-            # [R_BE | R_BA p_AE]: its first column and its last one.
-            (r00, _, _, px), (r10, _, _, py), (_, _, _, pz) = (
-                self._R_BA.dot(X_AE).tolist())
-            px, py, pz = (px + self._p_BA[0], py + self._p_BA[1],
-                          pz + self._p_BA[2])
-            x, y, yaw = base_pose
-            c, s = math.cos(yaw), math.sin(yaw)
-            return [c * px - s * py + x, s * px + c * py + y, pz,
-                    math.atan2(s * r00 + c * r10, c * r00 - s * r10)]
-
         def _output(self, context, output):
             t, player = _time(context), self.player
             K = player.tracking_gain
             if not (player.active(t) and K > 0.0):
                 output.SetFromVector(np.zeros(6))
                 return
-            x, y, yaw = _values(self._base.Eval(context))[:3].tolist()
-            pose = self.tcp_pose((x, y, yaw),
-                                 _values(self._arm.Eval(context)))
+            base = value_of(self._base.Eval(context))[:3].tolist()
+            pose = tcp_pose_in_world_float(base, self._pose.in_base(
+                value_of(self._arm.Eval(context))))
             x, y, z, yaw = [p - q for p, q in zip(
                 player.reference(t).tolist(), pose, strict=True)]
             yaw = (yaw + math.pi) % (2.0 * math.pi) - math.pi
             output.SetFromVector([K * x, K * y, K * z, 0.0, 0.0, K * yaw])
 
     return Impl
-
-
-def _values(vector):
-    """Float values of a float or AutoDiffXd vector."""
-    vector = np.asarray(vector)
-    if vector.dtype == object:
-        return np.array([v.value() for v in vector])
-    return vector
 
 
 MovementTracking = MovementTracking_[None]

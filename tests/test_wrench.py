@@ -1,0 +1,147 @@
+"""The external wrench on the tool (drake_wbc.math.wrench) and its stage,
+ExternalWrenchEstimator, against the formula as written with both poses
+from the plant, the tool's weight alone, and bad measurements."""
+
+import numpy as np
+import pytest
+from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue
+
+from drake_wbc.math.wrench import STANDARD_GRAVITY, ToolPayload, external_wrench
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.stages.wrench import ExternalWrenchEstimator, tool_weight_reading
+
+
+@pytest.fixture(scope="module")
+def arm():
+    return ArmKinematics()
+
+
+@pytest.fixture(scope="module")
+def estimator(arm):
+    return ExternalWrenchEstimator(arm)
+
+
+def wrench_as_written(reading, X_AM, X_AT, mass, p_com):
+    """F_ext with np.cross and both poses: the weight removed in M, then
+    the wrench moved to T and expressed in T_a."""
+    R = X_AM.rotation().matrix()
+    weight = R.T @ [0.0, 0.0, -mass * STANDARD_GRAVITY]
+    f = R @ (reading[:3] - weight)
+    tau = R @ (reading[3:] - np.cross(p_com, weight)) + np.cross(
+        X_AM.translation() - X_AT.translation(), f)
+    return np.r_[f, tau]
+
+
+def random_configurations(arm, count, seed):
+    rng = np.random.default_rng(seed)
+    return [rng.uniform(arm.lower, arm.upper) for _ in range(count)]
+
+
+def test_external_wrench_is_the_formula_as_written(arm):
+    rng = np.random.default_rng(14)
+    model = arm.model
+    for q in random_configurations(arm, 5, 15):
+        X_AM = arm.frame_pose(q, model.ft_measurement_frame)
+        X_AT = arm.frame_pose(q, model.tcp_frame)
+        reading, p_com, mass = rng.normal(size=6), rng.normal(size=3), 1.3
+        R = X_AM.rotation().matrix()
+        payload = ToolPayload(mass, p_com, R.T @ (X_AM.translation()
+                                                  - X_AT.translation()))
+        np.testing.assert_allclose(
+            external_wrench(reading, R, payload),
+            wrench_as_written(reading, X_AM, X_AT, mass, p_com),
+            rtol=0, atol=1e-13)
+
+
+def test_the_estimate_uses_both_poses_of_the_plant(arm, estimator):
+    """Random configurations and readings, and the tool's own weight
+    (F_ext = 0): the stage against the formula with both poses from the
+    plant."""
+    rng = np.random.default_rng(8)
+    context = estimator.CreateDefaultContext()
+    model = arm.model
+    mass, p_com = estimator._tool_mass, estimator._p_M_com
+    for trial in range(20):
+        q = rng.uniform(arm.lower, arm.upper)
+        reading = (tool_weight_reading(arm, q) if trial % 5 == 0
+                   else 10.0 ** rng.uniform(-2, 3) * rng.normal(size=6))
+        estimator.GetInputPort("arm_position").FixValue(context, q)
+        estimator.GetInputPort("wrist_wrench").FixValue(context, reading)
+        actual = estimator.get_output_port().Eval(context)
+        size = 10.0 * mass * STANDARD_GRAVITY + np.abs(reading).max()
+        np.testing.assert_allclose(actual, wrench_as_written(
+            reading, arm.frame_pose(q, model.ft_measurement_frame),
+            arm.frame_pose(q, model.tcp_frame), mass, p_com),
+            rtol=0, atol=1e-12 * size)
+        if trial % 5 == 0:
+            np.testing.assert_allclose(actual, 0.0, atol=1e-12 * size)
+
+
+def test_the_weight_alone_is_removed_at_home(arm, estimator):
+    context = estimator.CreateDefaultContext()
+    q = np.array(HOME_ARM_POSITIONS, dtype=float)
+    estimator.GetInputPort("arm_position").FixValue(context, q)
+    weight = tool_weight_reading(arm, q)
+    np.testing.assert_allclose(np.linalg.norm(weight[:3]),
+                               estimator._tool_mass * STANDARD_GRAVITY)
+    estimator.GetInputPort("wrist_wrench").FixValue(context, weight)
+    np.testing.assert_array_equal(estimator.get_output_port().Eval(context),
+                                  np.zeros(6))
+
+
+def test_bad_measurements(arm, estimator):
+    """A non-finite reading makes the wrench non-finite (the checks
+    downstream see it); a non-finite joint is refused, naming q_a."""
+    context = estimator.CreateDefaultContext()
+    q = np.array(HOME_ARM_POSITIONS, dtype=float)
+    estimator.GetInputPort("arm_position").FixValue(context, q)
+    reading = np.ones(6)
+    reading[2] = np.nan
+    estimator.GetInputPort("wrist_wrench").FixValue(context, reading)
+    assert not np.all(np.isfinite(estimator.get_output_port().Eval(context)))
+    q[1] = np.nan
+    estimator.GetInputPort("arm_position").FixValue(context, q)
+    with pytest.raises(Exception, match="q_a"):
+        estimator.get_output_port().Eval(context)
+
+
+def test_autodiff_values_and_the_readings_derivative(arm, estimator):
+    """In AutoDiffXd the same values, and the derivative w.r.t. the
+    reading is the constant map diag(R_AM, R_AM) [[I, 0], [S(p_TM), I]]
+    (central differences of a linear function: exact to round-off)."""
+    converted = estimator.ToAutoDiffXd()
+    rng = np.random.default_rng(3)
+    q = rng.uniform(arm.lower, arm.upper)
+    reading = rng.normal(size=6)
+    context = estimator.CreateDefaultContext()
+    estimator.GetInputPort("arm_position").FixValue(context, q)
+    estimator.GetInputPort("wrist_wrench").FixValue(context, reading)
+    ad_context = converted.CreateDefaultContext()
+    converted.GetInputPort("arm_position").FixValue(ad_context, q)
+    converted.GetInputPort("wrist_wrench").FixValue(ad_context, np.array(
+        [AutoDiffXd(r, e) for r, e in zip(reading, np.eye(6), strict=True)],
+        dtype=object))
+    value = converted.get_output_port().Eval(ad_context)
+    np.testing.assert_allclose(ExtractValue(value).ravel(),
+                               estimator.get_output_port().Eval(context),
+                               rtol=0, atol=1e-12)
+    R = arm.frame_pose(q, arm.model.ft_measurement_frame).rotation().matrix()
+    p_TM = estimator._payload.sensor_from_tcp
+    S = np.array([[0.0, -p_TM[2], p_TM[1]], [p_TM[2], 0.0, -p_TM[0]],
+                  [-p_TM[1], p_TM[0], 0.0]])
+    expected = np.block([[R, np.zeros((3, 3))], [R @ S, R]])
+    np.testing.assert_allclose(ExtractGradient(value), expected, atol=1e-8)
+
+
+def test_the_lever_from_the_plant_is_the_welded_one(arm, estimator):
+    """The estimate of a tool not welded to the sensor (the lever from the
+    plant each tick) gives, on our welded tool, the stage's wrench."""
+    rng = np.random.default_rng(4)
+    context = estimator.CreateDefaultContext()
+    for q in random_configurations(arm, 5, 16):
+        reading = 10.0 * rng.normal(size=6)
+        estimator.GetInputPort("arm_position").FixValue(context, q)
+        estimator.GetInputPort("wrist_wrench").FixValue(context, reading)
+        np.testing.assert_allclose(
+            estimator._estimate(np.r_[q, reading]),
+            estimator.get_output_port().Eval(context), rtol=0, atol=1e-12)
