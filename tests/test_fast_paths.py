@@ -167,18 +167,6 @@ def test_remembered_rotation_is_checked_again_when_it_changes():
         kinematics.whole_body_jacobian(None, np.zeros(3), R)
 
 
-def test_as_float_array_fast_path_and_errors():
-    x = np.arange(3.0)
-    assert kinematics.as_float_array("x", x, (3,)) is x
-    np.testing.assert_array_equal(
-        kinematics.as_float_array("x", [1, 2, 3], (3,)), [1.0, 2.0, 3.0])
-    huge = np.full(3, 1e308)  # finite, though its sum would overflow
-    assert kinematics.as_float_array("x", huge, (3,)) is huge
-    for bad in (np.array([0.0, np.nan, 1.0]), np.zeros(4), "abc"):
-        with pytest.raises(ValueError, match="x"):
-            kinematics.as_float_array("x", bad, (3,))
-
-
 # --- capability --------------------------------------------------------------
 
 def manipulability_gradient_by_einsum(J):

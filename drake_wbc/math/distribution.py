@@ -20,7 +20,6 @@ import math
 
 import numpy as np
 
-from drake_wbc.math.kinematics import as_float_array
 from drake_wbc.math.pseudoinverse import (
     DEFAULT_DAMPING,
     certified_solve,
@@ -28,7 +27,11 @@ from drake_wbc.math.pseudoinverse import (
     pseudoinverse_by_rule,
     weights_of,
 )
-from drake_wbc.math.validation import in_closed_range, non_negative
+from drake_wbc.math.validation import (
+    as_float_array,
+    in_closed_range,
+    non_negative,
+)
 
 
 def _unit_interval(name, value):

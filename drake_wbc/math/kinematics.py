@@ -15,41 +15,14 @@ the end-effector point. V_ee is the end effector's velocity relative to
 the world, with its components expressed in T_b, eq. (1) and eq. (3).
 """
 
-import math
-
 import numpy as np
 
-from drake_wbc.math.validation import as_matrix, as_scalar, as_vector
+from drake_wbc.math.validation import (
+    as_float_array,
+    as_scalar,
+    as_vector,
+)
 from drake_wbc.math.validation import rotation_matrix as checked_rotation
-
-
-def as_float_array(name, value, shape):
-    """validation.as_vector / as_matrix with a fast path.
-
-    A float64 ndarray of exactly `shape` with finite entries is returned
-    as it is, as np.asarray would; anything else goes through the full
-    check, which names `name` on a bad value.
-
-    Args:
-        name: the argument's name, for the error message.
-        value: the argument.
-        shape: the wanted shape, e.g. (6,) or (6, 9).
-
-    Returns:
-        `value` as a finite float array of `shape`.
-
-    Raises:
-        ValueError: as validation.as_vector / as_matrix.
-    """
-    # A sum of floats is finite only if every term is (a finite sum that
-    # overflows goes through the full check, which passes it).
-    if (type(value) is np.ndarray and value.dtype == np.float64
-            and value.shape == shape
-            and math.isfinite(sum(value.ravel().tolist()))):
-        return value
-    if len(shape) == 1:
-        return as_vector(name, value, shape[0])
-    return as_matrix(name, value, shape)
 
 
 class _RotationCheck:
