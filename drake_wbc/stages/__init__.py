@@ -48,7 +48,6 @@ from drake_wbc.stages.coordination import (
     MotionDistributorParameters,
     RobustCompensator,
     RobustCompensator_,
-    RobustCompensatorParameters,
 )
 from drake_wbc.stages.safety import (
     GuardedInput,
@@ -86,7 +85,6 @@ __all__ = [
     "MotionDistributorParameters",
     "MotionDistributor_",
     "RobustCompensator",
-    "RobustCompensatorParameters",
     "RobustCompensator_",
     "WorkspaceAdapter",
     "WorkspaceAdapterParameters",
