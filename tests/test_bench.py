@@ -10,7 +10,7 @@ import pytest
 from drake_wbc.bench import add_bench_arguments, run_bench
 from drake_wbc.bench import distribution_race as race
 from drake_wbc.bench.report import GOALS
-from drake_wbc.math import kinematics, pseudoinverse
+from drake_wbc.math import distribution, kinematics
 from drake_wbc.robot.model import ArmKinematics
 
 
@@ -103,7 +103,7 @@ def test_scaled_diffik_is_the_weighted_least_norm_problem(arm):
     problem = race.make_problems(1, seed=3, arm=arm)[0]
     p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
     J = kinematics.whole_body_jacobian(None, p_ee, arm.R_ba)
-    W = np.diag(1.0 / np.diag(pseudoinverse.weighting_matrix(
+    W = np.diag(1.0 / np.diag(distribution.weighting_matrix(
         problem.sigma_xy, problem.sigma_phi)))
     V_n = np.concatenate([problem.null_space_gain
                           * problem.capability_gradient, np.zeros(3)])

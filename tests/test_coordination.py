@@ -23,12 +23,8 @@ from drake_wbc.math import (
     capability_gradients,
     compensation,
     distribution,
-    pseudoinverse,
 )
-from drake_wbc.math.any_scalar_coordination import (
-    compensate_any,
-    distribute_any,
-)
+from drake_wbc.math.compensation import RobustCompensatorParameters
 from drake_wbc.math.kinematics import base_jacobian, whole_body_jacobian
 from drake_wbc.math.workspace import LocalWorkspace
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
@@ -40,7 +36,6 @@ from drake_wbc.stages import (
     MotionDistributor,
     MotionDistributorParameters,
     RobustCompensator,
-    RobustCompensatorParameters,
     WorkspaceAdapter,
     WorkspaceAdapterParameters,
 )
@@ -371,14 +366,15 @@ def test_distributor_autodiff_matches_finite_differences():
 
 
 def test_autodiff_distribution_with_damping_matches_the_math_layer():
-    """distribute_any on a general J near singularity (damping active):
-    its value is distribution.distribute's, its derivative central
-    differences of it."""
+    """distribution.weighted_distribution in AutoDiffXd on a general J
+    near singularity (damping active): its value is
+    distribution.distribute's, its derivative central differences of
+    it."""
     rng = np.random.default_rng(17)
     J0 = rng.normal(size=(6, 9))
     J0[5] = J0[4] + 1e-4 * rng.normal(size=9)  # nearly rank 5
     V_ee, V_n = rng.normal(size=6), rng.normal(size=9)
-    M = J0 @ pseudoinverse.weighting_matrix(0.3, 0.6) @ J0.T
+    M = J0 @ distribution.weighting_matrix(0.3, 0.6) @ J0.T
     eigenvalues = np.linalg.eigvalsh(M)
     assert eigenvalues[0] < 1e-4 * eigenvalues[-1]  # damping is active
 
@@ -387,7 +383,9 @@ def test_autodiff_distribution_with_damping_matches_the_math_layer():
 
     x0 = np.concatenate([J0.ravel(), V_ee, [0.3, 0.6], V_n])
     x = InitializeAutoDiff(x0).ravel()
-    result = distribute_any(*pack(x))
+    J, V, sigma_xy, sigma_phi, null = pack(x)
+    result = distribution.weighted_distribution(
+        J, V, distribution.weight_factors(sigma_xy, sigma_phi), null)
     np.testing.assert_allclose(ExtractValue(result).ravel(),
                                distribution.distribute(*pack(x0)),
                                rtol=1e-9, atol=1e-12)
@@ -492,9 +490,43 @@ def test_compensator_autodiff_matches_finite_differences():
     inputs = compensator_inputs(rng, alpha=0.4)
     inputs["compensation_switch"] = 0.7
     assert_autodiff_matches(RobustCompensator(arm=ARM), inputs)
-    value, _ = compensate_any(np.zeros(3), np.ones(3), R_BA, np.zeros(6),
-                              0.5)
-    np.testing.assert_array_equal(value, 0.0)
+    # A zero gradient (P_Cm = 0) in AutoDiffXd: the full compensation.
+    inputs = {**inputs, "capability_gradient": np.zeros(6)}
+    exact = autodiff_jacobians(RobustCompensator(arm=ARM), inputs)
+    np.testing.assert_array_equal(exact["end_effector_deviation"][0], 0.0)
+    np.testing.assert_array_equal(exact["end_effector_deviation"][1], 0.0)
+
+
+BAD_PORT_VALUES = [
+    (MotionDistributor, "arm_velocity", "sigma_xy", np.nan),
+    (MotionDistributor, "arm_velocity", "sigma_phi", 1.5),
+    (MotionDistributor, "arm_velocity", "null_space_gain", -0.1),
+    (RobustCompensator, "arm_reference_velocity", "alpha", np.nan),
+    (RobustCompensator, "arm_reference_velocity", "alpha", 1.5),
+    (RobustCompensator, "arm_reference_velocity", "compensation_switch",
+     -0.5),
+]
+
+
+@pytest.mark.parametrize("autodiff", [False, True])
+@pytest.mark.parametrize("stage, output, name, value", BAD_PORT_VALUES)
+def test_values_the_ports_cannot_constrain_are_checked(stage, output, name,
+                                                       value, autodiff):
+    """A weighting factor, alpha or s_c outside [0, 1], or a negative
+    k_n, on its port is an error naming the port, in double and in
+    AutoDiffXd."""
+    system = stage(arm=ARM)
+    if autodiff:
+        system = system.ToAutoDiffXd()
+    rng = np.random.default_rng(24)
+    inputs = (distributor_inputs(rng) if stage is MotionDistributor
+              else compensator_inputs(rng))
+    context = system.CreateDefaultContext()
+    for port_name, port_value in {**inputs, name: value}.items():
+        system.GetInputPort(port_name).FixValue(context,
+                                                np.atleast_1d(port_value))
+    with pytest.raises(ValueError, match=name):
+        system.GetOutputPort(output).Eval(context)
 
 
 # The complementary split -------------------------------------------------

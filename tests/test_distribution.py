@@ -1,5 +1,4 @@
-"""Tests of drake_wbc.math.distribution and drake_wbc.math.pseudoinverse against
-independent formulations.
+"""Tests of drake_wbc.math.distribution against independent formulations.
 
 J_wb is built here by hand as [R6, J_b] from its definition in eq. (1),
 not with drake_wbc.math.kinematics, so that these tests stand on their own.
@@ -11,9 +10,11 @@ import numpy as np
 import pytest
 from reference_kinematics import random_rotation
 
-from drake_wbc.math.distribution import capability_null_velocity, distribute
-from drake_wbc.math.pseudoinverse import (
+from drake_wbc.math.distribution import (
+    DEFAULT_DAMPING,
     SingularityDamping,
+    capability_null_velocity,
+    distribute,
     weighted_pseudoinverse,
     weighting_matrix,
 )
@@ -147,6 +148,73 @@ def test_capability_null_velocity_in_distribution():
                                                            np.zeros(3)]))
         V_wb = distribute(J, V_ee, 0.5, 0.5, null_velocity=V_n)
         np.testing.assert_allclose(J @ V_wb, V_ee, rtol=0, atol=1e-9)
+
+
+def distribute_as_written(J, V_ee, sigma_xy, sigma_phi, V_n, damping):
+    """Eqs. (wbsln)/(wbccm) as written: J^+ from the eigenvalues of
+    J Q J^T with the damping rule of the module docstring and an explicit
+    inverse, then J^+ V_ee + (I - J^+ J) V_n."""
+    Q = np.diag([sigma_xy, sigma_xy, 1, 1, 1, sigma_phi, 1 - sigma_xy,
+                 1 - sigma_xy, 1 - sigma_phi])
+    M = J @ Q @ J.T
+    M = 0.5 * (M + M.T)
+    if damping is not None:
+        e = np.linalg.eigvalsh(M)
+        s_min, s_max = max(e[0], 0.0), e[-1]
+        eps = damping.threshold * s_max
+        if s_min < eps:
+            M += np.eye(6) * damping.max_squared * s_max * (
+                1 - (s_min / eps) ** 2)
+    J_pinv = Q @ J.T @ np.linalg.inv(M)
+    return J_pinv @ V_ee + (np.eye(9) - J_pinv @ J) @ V_n
+
+
+def jacobians_of_three_kinds(rng, count):
+    """(kind, J): the controller's [R_ba, J_b] (kind 0), random ones (1)
+    and random ones made nearly singular so that the damping acts (2)."""
+    for i in range(count):
+        kind = i % 3
+        if kind == 0:
+            J = whole_body(random_rotation(rng), rng.uniform(-1.0, 1.0, 3))
+        else:
+            J = rng.normal(size=(6, 9))
+            if kind == 2:
+                J[5] = J[4] + rng.choice([0.0, 1e-6, 1e-3, 3e-2]) * J[5]
+        yield kind, J
+
+
+def test_distribute_matches_the_formula_as_written():
+    rng = np.random.default_rng(25)
+    worst = {}
+    for kind, J in jacobians_of_three_kinds(rng, 600):
+        sigma_xy, sigma_phi = rng.choice([0.0, 1.0, *rng.uniform(size=3)], 2)
+        V_ee, V_n = rng.normal(size=6), rng.normal(size=9)
+        expected = distribute_as_written(J, V_ee, sigma_xy, sigma_phi, V_n,
+                                         DEFAULT_DAMPING)
+        actual = distribute(J, V_ee, sigma_xy, sigma_phi, V_n)
+        error = np.max(np.abs(actual - expected)) / np.max(np.abs(expected))
+        worst[kind] = max(worst.get(kind, 0.0), error)
+    # Kind 2 (damped, condition numbers up to 1e4) loses digits in the
+    # explicit inverse of the formula as written itself.
+    assert worst[0] < 1e-12 and worst[1] < 1e-12
+    assert worst[2] < 1e-9
+
+
+def test_the_pseudoinverse_is_the_distribution_of_the_unit_twists():
+    """J^+ V_ee = distribute(V_ee) without null-space term, and J^+ is
+    the formula as written applied to I, damped or not."""
+    rng = np.random.default_rng(26)
+    for _, J in jacobians_of_three_kinds(rng, 60):
+        sigma = rng.uniform(size=2)
+        V_ee = rng.normal(size=6)
+        J_pinv = weighted_pseudoinverse(J, weighting_matrix(*sigma))
+        np.testing.assert_allclose(distribute(J, V_ee, *sigma),
+                                   J_pinv @ V_ee, rtol=0,
+                                   atol=1e-12 * np.abs(J_pinv @ V_ee).max())
+        expected = distribute_as_written(J, np.eye(6), *sigma,
+                                         np.zeros((9, 6)), DEFAULT_DAMPING)
+        np.testing.assert_allclose(J_pinv, expected, rtol=0,
+                                   atol=1e-9 * np.abs(expected).max())
 
 
 def test_weighted_least_norm_matches_kkt_solution():

@@ -6,21 +6,9 @@ import numpy as np
 import pytest
 from fast_path_checks import RELATIVE, relative_difference
 
-from drake_wbc.math import (
-    capability,
-    capability_gradients,
-    compensation,
-    distribution,
-    kinematics,
-    pseudoinverse,
-)
+from drake_wbc.math import capability, capability_gradients
 from drake_wbc.robot.model import ArmKinematics
-from drake_wbc.stages import (
-    ArmCapability,
-    MotionDistributor,
-    MotionDistributorParameters,
-    RobustCompensator,
-)
+from drake_wbc.stages import ArmCapability
 
 
 @pytest.fixture(scope="module")
@@ -32,147 +20,6 @@ def random_configurations(arm, count, seed):
     rng = np.random.default_rng(seed)
     middle, half = 0.5 * (arm.lower + arm.upper), 0.45 * (arm.upper - arm.lower)
     return [rng.uniform(middle - half, middle + half) for _ in range(count)]
-
-
-# --- distribution ----------------------------------------------------------
-
-def distribute_as_written(J, V_ee, sigma_xy, sigma_phi, V_n, damping):
-    """Eqs. (wbsln)/(wbccm) as written: J^+ from the eigenvalues of
-    J Q J^T with the damping rule of pseudoinverse's docstring, then
-    J^+ V_ee + (I - J^+ J) V_n."""
-    Q = np.diag([sigma_xy, sigma_xy, 1, 1, 1, sigma_phi, 1 - sigma_xy,
-                 1 - sigma_xy, 1 - sigma_phi])
-    M = J @ Q @ J.T
-    M = 0.5 * (M + M.T)
-    if damping is not None:
-        e = np.linalg.eigvalsh(M)
-        s_min, s_max = max(e[0], 0.0), e[-1]
-        eps = damping.threshold * s_max
-        if s_min < eps:
-            M += np.eye(6) * damping.max_squared * s_max * (
-                1 - (s_min / eps) ** 2)
-    J_pinv = Q @ J.T @ np.linalg.inv(M)
-    return J_pinv @ V_ee + (np.eye(9) - J_pinv @ J) @ V_n
-
-
-def random_jacobians(rng, count):
-    """Controller J_wb = [R_ba, J_b], random ones, and ones made nearly
-    singular so that the damping acts (kind 2)."""
-    for i in range(count):
-        kind = i % 3
-        if kind == 0:
-            yield kind, kinematics.whole_body_jacobian(
-                None, rng.uniform(-1.0, 1.0, 3), np.eye(3))
-        elif kind == 1:
-            yield kind, rng.normal(size=(6, 9))
-        else:
-            J = rng.normal(size=(6, 9))
-            J[5] = J[4] + rng.choice([0.0, 1e-6, 1e-3, 3e-2]) * J[5]
-            yield kind, J
-
-
-def test_distribute_matches_the_formula_as_written():
-    rng = np.random.default_rng(0)
-    damping = pseudoinverse.DEFAULT_DAMPING
-    worst = {}
-    for kind, J in random_jacobians(rng, 600):
-        sigma_xy, sigma_phi = rng.choice([0.0, 1.0, *rng.uniform(size=3)], 2)
-        V_ee, V_n = rng.normal(size=6), rng.normal(size=9)
-        expected = distribute_as_written(J, V_ee, sigma_xy, sigma_phi, V_n,
-                                         damping)
-        checked = distribution.distribute(J, V_ee, sigma_xy, sigma_phi, V_n)
-        fast = distribution.distribute_unchecked(
-            J, V_ee, pseudoinverse.weights_of(sigma_xy, sigma_phi), V_n,
-            damping)
-        np.testing.assert_array_equal(fast, checked)
-        worst[kind] = max(worst.get(kind, 0.0),
-                          relative_difference(fast, expected))
-    # Kind 2 (damped, condition numbers up to 1e4) loses digits in the
-    # inverse of the formula as written itself.
-    assert worst[0] < RELATIVE and worst[1] < RELATIVE
-    assert worst[2] < 1e-9
-
-
-def test_certificate_only_skips_the_damping_when_it_is_inactive():
-    rng = np.random.default_rng(1)
-    threshold = pseudoinverse.DEFAULT_DAMPING.threshold
-    skipped = 0
-    for _, J in random_jacobians(rng, 900):
-        JQ = J * pseudoinverse.weights_of(*rng.uniform(size=2))
-        x = pseudoinverse.certified_solve(J, JQ, np.ones(6), threshold)
-        e = np.linalg.eigvalsh(JQ @ J.T)
-        if x is not None:
-            skipped += 1
-            assert e[0] >= threshold * e[-1]
-            assert relative_difference(x, np.linalg.solve(JQ @ J.T,
-                                                          np.ones(6))) < 1e-10
-    assert skipped > 500  # the controller's and the random ones
-
-
-def test_weighted_pseudoinverse_unchanged_and_null_velocity_optional():
-    rng = np.random.default_rng(2)
-    for _, J in random_jacobians(rng, 60):
-        sigma = rng.uniform(size=2)
-        Q = pseudoinverse.weighting_matrix(*sigma)
-        V_ee = rng.normal(size=6)
-        J_pinv = pseudoinverse.weighted_pseudoinverse(J, Q)
-        assert relative_difference(
-            distribution.distribute(J, V_ee, *sigma), J_pinv @ V_ee) < 1e-12
-        assert relative_difference(
-            J_pinv, distribute_as_written(
-                J, np.eye(6), *sigma, np.zeros((9, 6)),
-                pseudoinverse.DEFAULT_DAMPING)) < 1e-9
-
-
-def test_distribute_still_checks_its_arguments():
-    J = kinematics.whole_body_jacobian(None, [0.5, 0.1, 0.6])
-    with pytest.raises(ValueError, match="V_ee"):
-        distribution.distribute(J, [0.0, np.nan, 0, 0, 0, 0], 0.5, 0.5)
-    with pytest.raises(ValueError, match="sigma_phi"):
-        distribution.distribute(J, np.zeros(6), 0.5, 1.5)
-    with pytest.raises(ValueError, match="null_velocity"):
-        distribution.distribute(J, np.zeros(6), 0.5, 0.5, np.zeros(8))
-    with pytest.raises(ValueError, match="J_wb"):
-        distribution.distribute(np.full((6, 9), np.inf), np.zeros(6), 0, 0)
-
-
-# --- kinematics --------------------------------------------------------------
-
-def test_whole_body_jacobian_unchecked_matches_checked():
-    rng = np.random.default_rng(3)
-    for _ in range(50):
-        R = np.linalg.qr(rng.normal(size=(3, 3)))[0]
-        R *= np.sign(np.linalg.det(R))
-        J_a, p = rng.normal(size=(6, 6)), rng.normal(size=3)
-        for arm_jacobian in (None, J_a):
-            np.testing.assert_array_equal(
-                kinematics.whole_body_jacobian_unchecked(arm_jacobian, p, R),
-                kinematics.whole_body_jacobian(arm_jacobian, p, R))
-        expected = np.hstack([np.kron(np.eye(2), R),
-                              kinematics.base_jacobian(p)])
-        np.testing.assert_array_equal(
-            kinematics.whole_body_jacobian(None, p, R), expected)
-
-
-def test_remembered_rotation_is_checked_again_when_it_changes():
-    R = np.eye(3)
-    kinematics.whole_body_jacobian(None, np.zeros(3), R)
-    kinematics.whole_body_jacobian(None, np.zeros(3), R)  # remembered
-    R[0, 0] = 2.0  # the same array, changed in place
-    with pytest.raises(ValueError, match="R_ba"):
-        kinematics.whole_body_jacobian(None, np.zeros(3), R)
-
-
-def test_as_float_array_fast_path_and_errors():
-    x = np.arange(3.0)
-    assert kinematics.as_float_array("x", x, (3,)) is x
-    np.testing.assert_array_equal(
-        kinematics.as_float_array("x", [1, 2, 3], (3,)), [1.0, 2.0, 3.0])
-    huge = np.full(3, 1e308)  # finite, though its sum would overflow
-    assert kinematics.as_float_array("x", huge, (3,)) is huge
-    for bad in (np.array([0.0, np.nan, 1.0]), np.zeros(4), "abc"):
-        with pytest.raises(ValueError, match="x"):
-            kinematics.as_float_array("x", bad, (3,))
 
 
 # --- capability --------------------------------------------------------------
@@ -291,49 +138,6 @@ def test_arm_capability_stage_matches_the_public_functions(arm):
         assert relative_difference(stage.evaluate(q), expected) < RELATIVE
 
 
-def test_distributor_and_compensator_match_the_checked_math(arm):
-    rng = np.random.default_rng(12)
-    distributor = MotionDistributor(
-        MotionDistributorParameters(null_space_gain=0.1), arm)
-    compensator = RobustCompensator(None, arm)
-    d_context = distributor.CreateDefaultContext()
-    c_context = compensator.CreateDefaultContext()
-    R_ba = np.array(arm.R_ba)
-    for _ in range(20):
-        V_ee, p, g = rng.normal(size=6), rng.uniform(-1, 1, 3), rng.normal(
-            size=6)
-        sigma, C_m = rng.uniform(size=2), rng.uniform(0.03, 0.045)
-        for name, value in (("end_effector_velocity", V_ee),
-                            ("sigma_xy", sigma[:1]), ("sigma_phi", sigma[1:]),
-                            ("end_effector_position", p),
-                            ("capability", [C_m]),
-                            ("capability_gradient", g)):
-            distributor.GetInputPort(name).FixValue(d_context, value)
-        k_n = 0.1 * capability.transition(C_m, 0.04, 0.035)
-        expected = distribution.distribute(
-            kinematics.whole_body_jacobian(None, p, R_ba), V_ee, *sigma,
-            distribution.capability_null_velocity(g, k_n))
-        actual = np.concatenate([
-            distributor.GetOutputPort("arm_velocity").Eval(d_context),
-            distributor.GetOutputPort("base_velocity").Eval(d_context)])
-        assert relative_difference(actual, expected) < RELATIVE
-
-        V_a, V_b, V_b_flt = (rng.normal(size=6), rng.normal(size=3),
-                             rng.normal(size=3))
-        alpha = rng.uniform()
-        for name, value in (("arm_velocity", V_a), ("base_velocity", V_b),
-                            ("filtered_base_velocity", V_b_flt),
-                            ("end_effector_position", p),
-                            ("capability_gradient", g), ("alpha", [alpha])):
-            compensator.GetInputPort(name).FixValue(c_context, value)
-        cmp, deviation = compensation.robust_compensation(
-            V_b_flt - V_b, kinematics.base_jacobian(p), R_ba, g, alpha)
-        assert relative_difference(
-            compensator.GetOutputPort("arm_reference_velocity").Eval(
-                c_context), V_a + cmp) < RELATIVE
-        assert relative_difference(
-            compensator.GetOutputPort("end_effector_deviation").Eval(
-                c_context), deviation) < RELATIVE
 
 
 @pytest.mark.parametrize("acceleration", [None, 12.56])

@@ -27,6 +27,7 @@ from drake_wbc.analysis.frequency import (
 )
 from drake_wbc.experiments.scenario import find_scenario, load_scenario
 from drake_wbc.math import cdmp
+from drake_wbc.math.compensation import RobustCompensatorParameters
 from drake_wbc.math.dmp import DmpParameters
 from drake_wbc.math.filtering import (
     BaseFilterParameters,
@@ -34,7 +35,6 @@ from drake_wbc.math.filtering import (
     lowpass_zoh_response,
 )
 from drake_wbc.stages.cdmp_stages import AffineDynamics
-from drake_wbc.stages.coordination import RobustCompensatorParameters
 
 HERTZ, OMEGA = frequency_grid(0.01, 100.0, 40)
 """The log grid of the checks, 0.01 to 100 Hz."""

@@ -8,9 +8,9 @@ drake_wbc.math.validation.validate runs the checks of a whole tree again):
 - controller: ControllerParameters (drake_wbc.controller.diagram),
   ArmControllerParameters (arm_control), CapabilityBand,
   ArmCapabilityParameters, WorkspaceAdapterParameters
-  (systems.capability_stage), MotionDistributorParameters,
-  RobustCompensatorParameters (systems.coordination),
-  BaseFilterParameters (filtering), SingularityDamping (pseudoinverse),
+  (stages.capability_stage), MotionDistributorParameters
+  (stages.coordination), RobustCompensatorParameters (compensation),
+  BaseFilterParameters (filtering), SingularityDamping (distribution),
   LocalWorkspace (workspace), DmpParameters (dmp),
   StiffnessCouplingParameters, AdmittanceCouplingParameters,
   WholeBodyCdmpParameters, RepulsiveFieldParameters, BaseCdmpParameters,
@@ -47,9 +47,10 @@ from drake_wbc.math.cdmp import (
     StiffnessCouplingParameters,
     WholeBodyCdmpParameters,
 )
+from drake_wbc.math.compensation import RobustCompensatorParameters
+from drake_wbc.math.distribution import SingularityDamping
 from drake_wbc.math.dmp import DmpParameters
 from drake_wbc.math.filtering import BaseFilterParameters
-from drake_wbc.math.pseudoinverse import SingularityDamping
 from drake_wbc.math.validation import validate
 from drake_wbc.math.workspace import LocalWorkspace
 from drake_wbc.stages.capability_stage import (
@@ -57,10 +58,7 @@ from drake_wbc.stages.capability_stage import (
     CapabilityBand,
     WorkspaceAdapterParameters,
 )
-from drake_wbc.stages.coordination import (
-    MotionDistributorParameters,
-    RobustCompensatorParameters,
-)
+from drake_wbc.stages.coordination import MotionDistributorParameters
 from drake_wbc.station.drivers import ArmDriverParameters, BaseDriverParameters
 from drake_wbc.station.force_torque import ForceTorqueSensorParameters
 from drake_wbc.station.lidar import LidarParameters

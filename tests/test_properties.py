@@ -18,13 +18,16 @@ from drake_wbc.math import capability_gradients as cap_grad
 from drake_wbc.math import dmp, filtering, repulsion
 from drake_wbc.math.arm_control import joint_velocity_for_twist
 from drake_wbc.math.compensation import robust_compensation
-from drake_wbc.math.distribution import capability_null_velocity, distribute
+from drake_wbc.math.distribution import (
+    capability_null_velocity,
+    distribute,
+    weighting_matrix,
+)
 from drake_wbc.math.kinematics import (
     base_jacobian,
     twist_rotation,
     whole_body_jacobian,
 )
-from drake_wbc.math.pseudoinverse import weighting_matrix
 
 
 def checked(max_examples):

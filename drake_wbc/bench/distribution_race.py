@@ -16,8 +16,8 @@ controller's ArmCapability does each tick) and its time includes it.
 
 Contenders:
 - closed_form: the controller's own path
-  (aligned_distribution.distribute_aligned, the plain-float form of
-  distribution.distribute for R_ba = I, as MotionDistributor calls it).
+  (distribution.whole_body_distribution as MotionDistributor runs it in
+  double: its float kernel, the closed form for R_ba = I).
 - drake_diffik: Drake's DoDifferentialInverseKinematics (a QP solved
   with OSQP inside Drake) in the scaled input u = Q^-1/2 V_wb, where
   the weighted problem is its unweighted one: J = J_wb Q^1/2, joint
@@ -47,12 +47,7 @@ from pydrake.multibody.inverse_kinematics import (
     DoDifferentialInverseKinematics,
 )
 
-from drake_wbc.math import (
-    aligned_distribution,
-    distribution,
-    kinematics,
-    pseudoinverse,
-)
+from drake_wbc.math import distribution, kernels, kinematics
 from drake_wbc.math.validation import (
     in_closed_range,
     non_negative,
@@ -138,8 +133,8 @@ def _problem_data(arm, R_ba, problem):
     weighting at `problem`."""
     p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
     J = kinematics.whole_body_jacobian(None, p_ee, R_ba)
-    weights = np.diag(pseudoinverse.weighting_matrix(problem.sigma_xy,
-                                                    problem.sigma_phi))
+    weights = np.diag(distribution.weighting_matrix(problem.sigma_xy,
+                                                   problem.sigma_phi))
     V_n = distribution.capability_null_velocity(
         problem.capability_gradient, problem.null_space_gain)
     return J, weights, V_n
@@ -147,17 +142,18 @@ def _problem_data(arm, R_ba, problem):
 
 def closed_form(arm):
     """The controller's distribution, as its tick runs it
-    (systems.MotionDistributor): the end effector from the plant
+    (stages.MotionDistributor): the end effector from the plant
     (ArmKinematics.evaluate, the same kinematics as every contender's),
-    then J_wb = [R_ba, J_b] and eqs. (wbsln)/(wbccm) on the unchecked
-    float path (aligned_distribution.distribute_aligned for R_ba = I, else
-    kinematics.whole_body_jacobian_unchecked and
-    distribution.distribute_unchecked); the controller checks its
-    parameters once, when it is built, and the sigmas and k_n on each
-    tick, as here."""
+    then eqs. (wbsln)/(wbccm) for J_wb = [R_ba, J_b] by the body
+    MotionDistributor runs in double
+    (distribution.whole_body_distribution's float kernel: the closed form
+    for R_ba = I); the controller checks its parameters once, when it is
+    built, and the sigmas and k_n on each tick, as here."""
     R_ba = np.array(arm.R_ba, dtype=float)
-    aligned = np.array_equal(R_ba, np.eye(3))
-    damping = pseudoinverse.DEFAULT_DAMPING
+    R_ba = None if np.array_equal(R_ba, np.eye(3)) else R_ba
+    damping = distribution.DEFAULT_DAMPING
+    distribute = kernels.body_for(distribution.whole_body_distribution,
+                                  float)
 
     def solve(problem):
         p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
@@ -168,16 +164,9 @@ def closed_form(arm):
             in_closed_range("sigma_xy", sigma_xy, 0.0, 1.0)
             in_closed_range("sigma_phi", sigma_phi, 0.0, 1.0)
             non_negative("k_n", k_n)
-        V_n = [k_n * g for g in problem.capability_gradient.tolist()]
-        if aligned:
-            return aligned_distribution.distribute_aligned(
-                problem.end_effector_velocity, p_ee, sigma_xy, sigma_phi,
-                V_n, damping)
-        J = kinematics.whole_body_jacobian_unchecked(None, p_ee, R_ba)
-        return distribution.distribute_unchecked(
-            J, problem.end_effector_velocity,
-            pseudoinverse.weights_of(sigma_xy, sigma_phi),
-            np.array(V_n + [0.0, 0.0, 0.0]), damping)
+        return distribute(problem.end_effector_velocity, p_ee, R_ba,
+                          sigma_xy, sigma_phi, problem.capability_gradient,
+                          k_n, damping)
 
     return solve
 
@@ -299,7 +288,7 @@ class PlantDiffIk:
 
     def least_norm(self, problem):
         """The 9-DoF least-norm answer of the same joint-space problem
-        (pseudoinverse.weighted_pseudoinverse with Q = I), to compare."""
+        (distribution.weighted_pseudoinverse with Q = I), to compare."""
         self(problem)  # sets the configuration
         from pydrake.multibody.tree import JacobianWrtVariable
 
@@ -313,7 +302,7 @@ class PlantDiffIk:
         V = np.concatenate([twist[3:], twist[:3]])
         z = np.zeros(9)
         z[:6] = problem.null_space_gain * problem.capability_gradient
-        J_pinv = pseudoinverse.weighted_pseudoinverse(J, np.eye(9))
+        J_pinv = distribution.weighted_pseudoinverse(J, np.eye(9))
         v = J_pinv @ V + z - J_pinv @ (J @ z)
         c, s = np.cos(problem.base_yaw), np.sin(problem.base_yaw)
         vx, vy, wz = v[6:]

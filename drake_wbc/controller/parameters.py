@@ -30,6 +30,7 @@ from pydrake.common.yaml import yaml_dump, yaml_load_data, yaml_load_typed
 
 from drake_wbc.math import cdmp
 from drake_wbc.math.arm_control import ArmControllerParameters
+from drake_wbc.math.compensation import RobustCompensatorParameters
 from drake_wbc.math.filtering import BaseFilterParameters
 from drake_wbc.math.safety import SafetyParameters
 from drake_wbc.math.validation import positive, validate
@@ -37,10 +38,7 @@ from drake_wbc.stages.capability_stage import (
     ArmCapabilityParameters,
     WorkspaceAdapterParameters,
 )
-from drake_wbc.stages.coordination import (
-    MotionDistributorParameters,
-    RobustCompensatorParameters,
-)
+from drake_wbc.stages.coordination import MotionDistributorParameters
 
 
 @dataclass

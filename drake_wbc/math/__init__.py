@@ -9,7 +9,7 @@ kernel beside it.
 
 - validation, scalar_support: argument checks; math for every scalar type.
 - kinematics: J_b of eq. (2), J_wb of eq. (fk), the rotation of eq. (3).
-- pseudoinverse, distribution: the weighted distribution, eqs. (wln),
+- distribution: the weighted distribution and pseudo-inverse, eqs. (wln),
   (wbsln), (weight-factors), (wbccm).
 - capability: C_m = m P_jnt and its gradient; the transition of eq.
   (transition).

@@ -17,13 +17,34 @@ of eq. (deviation).
 
 Twists are [linear; angular] (m/s; rad/s); the arm's are in T_a, the
 base's [vx_b, vy_b, wz_b] in T_b.
+
+- delta_V_b: `base_deviation_of`, checked `base_deviation`;
+- P_Cm of eq. (wb_error): `project_on_gradient` (P_Cm applied), checked
+  `gradient_projector` (the matrix);
+- delta_V_a^req: `required_compensation`, and eqs. (wb_error) and
+  (deviation): `projected_compensation`, both checked
+  `robust_compensation`;
+- eq. (compensation) with J_b of eq. (2) at p_ee: `arm_compensation`.
+
+The references are scalar-generic (float, and numpy object arrays of
+AutoDiffXd for the stage's derivatives) and check nothing; the checked
+functions, for a user's call by hand, check their arguments and call them.
+`arm_compensation` is what RobustCompensator runs each tick; its fast
+float kernel is `arm_compensation_float`.
 """
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from drake_wbc.math.kinematics import twist_rotation
+from drake_wbc.math.kernels import fast_kernel
+from drake_wbc.math.kinematics import (
+    base_jacobian_of,
+    random_rotation,
+    rotate_twist,
+)
+from drake_wbc.math.scalar_support import value_of
 from drake_wbc.math.validation import (
     as_matrix,
     as_vector,
@@ -32,6 +53,154 @@ from drake_wbc.math.validation import (
     rotation_matrix,
 )
 
+PROJECTOR_TOLERANCE = 1e-12
+"""Norm of grad_x C_m at and below which P_Cm = 0 (gradient_projector's
+default and the compensator's)."""
+
+
+@dataclass
+class RobustCompensatorParameters:
+    """Parameters of RobustCompensator (drake_wbc.stages.coordination).
+
+    Attributes:
+        compensation_switch: s_c in [0, 1], used when the
+            compensation_switch port is not connected. The paper's s_c is
+            1 (robust compensation, alpha as computed) or 0 (alpha = 0:
+            exact compensation whatever C_m); values in between scale
+            alpha.
+    """
+
+    compensation_switch: float = 1.0
+
+    def __post_init__(self):
+        in_closed_range("compensation_switch", self.compensation_switch,
+                        0.0, 1.0)
+
+
+# --- the reference bodies ---------------------------------------------------
+
+def base_deviation_of(V_b_filtered, V_b):
+    """delta_V_b = V_b^flt - V_b for any scalar type (the reference body
+    of `base_deviation`, which documents it)."""
+    return np.asarray(V_b_filtered) - np.asarray(V_b)
+
+
+def project_on_gradient(twist, grad, tolerance=PROJECTOR_TOLERANCE):
+    """P_Cm twist = g (g . twist) / (g . g) of eq. (wb_error) for any
+    scalar type, twist (6,) or (6, k); zero when ||g|| <= tolerance (the
+    reference body of `gradient_projector`, which documents P_Cm)."""
+    g, twist = np.asarray(grad), np.asarray(twist)
+    g_squared = g @ g
+    if math.sqrt(value_of(g_squared)) <= tolerance:
+        return 0.0 * twist
+    along = g @ twist
+    return (g * along if twist.ndim == 1 else np.outer(g, along)) / g_squared
+
+
+def required_compensation(delta_V_b, J_b, R_ba):
+    """delta_V_a^req = -R_ba^T J_b delta_V_b for any scalar type: the arm
+    twist in T_a that cancels the base deviation at the end effector,
+    from eq. (fk) (R_ba delta_V_a + J_b delta_V_b = 0); R_ba a rotation
+    matrix (3, 3)."""
+    return -rotate_twist(np.asarray(R_ba).T,
+                         np.asarray(J_b) @ np.asarray(delta_V_b))
+
+
+def projected_compensation(required, grad, alpha,
+                           tolerance=PROJECTOR_TOLERANCE):
+    """(delta_V_a^cmp, delta_V_ee) of eqs. (wb_error) and (deviation) for
+    any scalar type: delta_V_ee = -alpha P_Cm delta_V_a^req and
+    delta_V_a^cmp = delta_V_a^req + delta_V_ee."""
+    deviation = -alpha * project_on_gradient(required, grad, tolerance)
+    return np.asarray(required) + deviation, deviation
+
+
+def arm_compensation(V_a, V_b, V_b_filtered, p_ee_in_base, R_ba, grad_C_m,
+                     alpha, tolerance=PROJECTOR_TOLERANCE):
+    """[V_a^ref; delta_V_ee] of eqs. (compensation) and (deviation), with
+    J_b of eq. (2) at the end effector's position, for any scalar type,
+    unchecked: what RobustCompensator runs each tick (its fast float
+    kernel is `arm_compensation_float`).
+
+    Args:
+        V_a: (6,) the arm's distributed twist in T_a.
+        V_b, V_b_filtered: (3,) the base's distributed and filtered
+            commands in T_b.
+        p_ee_in_base: (3,) p_ee in T_b (only x and y enter J_b).
+        R_ba: (3, 3) ^bR_a (an array or rows), or None for the identity.
+        grad_C_m: (6,) grad_x C_m in T_a.
+        alpha: the transition value (times s_c), in [0, 1].
+        tolerance: the norm of grad_C_m at and below which P_Cm = 0.
+
+    Returns:
+        (12,) array [V_a^ref (6); delta_V_ee (6)], both in T_a.
+    """
+    required = required_compensation(
+        base_deviation_of(V_b_filtered, V_b), base_jacobian_of(p_ee_in_base),
+        np.eye(3) if R_ba is None else R_ba)
+    cmp, deviation = projected_compensation(required, grad_C_m, alpha,
+                                            tolerance)
+    return np.concatenate([np.asarray(V_a) + cmp, deviation])
+
+
+# --- the controller's kernel ------------------------------------------------
+
+_IDENTITY_ROWS = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+
+def _compensation_problems(rng):
+    """Arguments of arm_compensation: mountings the identity (as None and
+    as rows) and random; gradients zero, below, just above and far above
+    the tolerance; alpha at 0, 1 and between."""
+    mounting = rng.choice(3)
+    R = (None, _IDENTITY_ROWS, random_rotation(rng))[mounting]
+    gradient = rng.normal(size=6) * rng.choice([0.0, 1e-13, 1e-11, 1.0,
+                                                 1e3])
+    alpha = float(rng.choice([0.0, 1.0, rng.uniform()]))
+    return (rng.normal(size=6), rng.normal(size=3), rng.normal(size=3),
+            rng.uniform(-1.5, 1.5, 3), R, gradient, alpha,
+            PROJECTOR_TOLERANCE)
+
+
+@fast_kernel(arm_compensation, sample=_compensation_problems)
+def arm_compensation_float(V_a, V_b, V_b_filtered, p_ee_in_base, R_ba,
+                           grad_C_m, alpha, tolerance=PROJECTOR_TOLERANCE):
+    """`arm_compensation` in plain floats: J_b delta_V_b = [dv_x - y dw_z,
+    dv_y + x dw_z, 0, 0, 0, dw_z] of eq. (2) and alpha P_Cm d = alpha g
+    (g . d) / (g . g) written out (the same values to rounding).
+
+    Args:
+        as arm_compensation; the vectors float arrays, R_ba None or its
+        rows (a tuple of 3 tuples of floats, or a (3, 3) array).
+    """
+    alpha = float(alpha)
+    b0, b1, b2 = V_b.tolist()
+    f0, f1, f2 = V_b_filtered.tolist()
+    dvx, dvy, dwz = f0 - b0, f1 - b1, f2 - b2
+    x, y = float(p_ee_in_base[0]), float(p_ee_in_base[1])
+    # J_b delta_V_b (eq. (2)), then delta_V_a^req = -R_ba^T J_b delta_V_b.
+    tx = dvx - y * dwz
+    ty = dvy + x * dwz
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = (
+        _IDENTITY_ROWS if R_ba is None else R_ba)
+    required = [-(r00 * tx + r10 * ty), -(r01 * tx + r11 * ty),
+                -(r02 * tx + r12 * ty), -(r20 * dwz), -(r21 * dwz),
+                -(r22 * dwz)]
+    g0, g1, g2, g3, g4, g5 = grad_C_m.tolist()
+    g_squared = g0 * g0 + g1 * g1 + g2 * g2 + g3 * g3 + g4 * g4 + g5 * g5
+    if math.sqrt(g_squared) <= tolerance:
+        return np.array([v + d for v, d in zip(V_a.tolist(), required,
+                                               strict=True)] + [0.0] * 6)
+    q0, q1, q2, q3, q4, q5 = required
+    factor = -alpha * (g0 * q0 + g1 * q1 + g2 * q2 + g3 * q3 + g4 * q4
+                       + g5 * q5) / g_squared
+    deviation = [factor * g0, factor * g1, factor * g2, factor * g3,
+                 factor * g4, factor * g5]
+    return np.array([v + (d + e) for v, d, e in zip(
+        V_a.tolist(), required, deviation, strict=True)] + deviation)
+
+
+# --- the checked functions --------------------------------------------------
 
 def base_deviation(V_b_filtered, V_b):
     """Motion deviation of the base, delta_V_b = V_b^flt - V_b.
@@ -50,11 +219,11 @@ def base_deviation(V_b_filtered, V_b):
     Raises:
         ValueError: if either argument is not 3 finite numbers.
     """
-    V_b_flt = as_vector("V_b_filtered", V_b_filtered, 3)
-    return V_b_flt - as_vector("V_b", V_b, 3)
+    return base_deviation_of(as_vector("V_b_filtered", V_b_filtered, 3),
+                             as_vector("V_b", V_b, 3))
 
 
-def gradient_projector(grad, tolerance=1e-12):
+def gradient_projector(grad, tolerance=PROJECTOR_TOLERANCE):
     """Projector P_Cm onto the gradient of C_m, eq. (wb_error).
 
     With the gradient g = grad_x C_m (a row vector in the paper),
@@ -82,20 +251,15 @@ def gradient_projector(grad, tolerance=1e-12):
         ValueError: if grad is not 6 finite numbers or tolerance is
             negative.
     """
-    g = as_vector("grad", grad, 6)
-    tolerance = non_negative("tolerance", tolerance)
-    norm = np.linalg.norm(g)
-    if norm <= tolerance:
-        return np.zeros((6, 6))
-    u = g / norm
-    return np.outer(u, u)
+    return project_on_gradient(np.eye(6), as_vector("grad", grad, 6),
+                               non_negative("tolerance", tolerance))
 
 
 def robust_compensation(delta_V_b, J_b, R_ba, grad_C_m, alpha):
     """Arm compensation of the base deviation, eqs. (wb_error)-(deviation).
 
     The arm twist that cancels the base deviation at the end effector
-    follows from eq. (1) (R_ba delta_V_a + J_b delta_V_b = 0):
+    follows from eq. (fk) (R_ba delta_V_a + J_b delta_V_b = 0):
 
         delta_V_a^req = -R_ba^T J_b delta_V_b.
 
@@ -135,57 +299,6 @@ def robust_compensation(delta_V_b, J_b, R_ba, grad_C_m, alpha):
     dV_b = as_vector("delta_V_b", delta_V_b, 3)
     J_b = as_matrix("J_b", J_b, (6, 3))
     R = np.eye(3) if R_ba is None else rotation_matrix("R_ba", R_ba)
-    P = gradient_projector(as_vector("grad_C_m", grad_C_m, 6))
+    g = as_vector("grad_C_m", grad_C_m, 6)
     a = in_closed_range("alpha", alpha, 0.0, 1.0)
-    R6 = twist_rotation(R)
-    dV_a_req = -(R6.T @ (J_b @ dV_b))
-    dV_ee = -a * (P @ dV_a_req)
-    dV_a_cmp = dV_a_req + dV_ee
-    return dV_a_cmp, dV_ee
-
-
-def compensate_unchecked(V_a, delta_V_b, p_ee_in_base, R_ab, grad_C_m,
-                         alpha, tolerance=1e-12):
-    """V_a^ref and delta_V_ee of eqs. (compensation) and (deviation) for
-    float arguments already checked, in plain floats: the per-tick path
-    of the controller's RobustCompensator.
-
-    The same values as `robust_compensation` (to rounding), with
-    J_b delta_V_b = [dv_x - y dw_z, dv_y + x dw_z, 0, 0, 0, dw_z] of eq.
-    (2) and alpha P_Cm d = alpha g (g . d) / (g . g) written out; a
-    gradient of norm at most `tolerance` gives P_Cm = 0, as in
-    `gradient_projector`.
-
-    Args:
-        V_a: (6,) floats, the arm's distributed twist in T_a.
-        delta_V_b: (3,) floats V_b^flt - V_b in T_b.
-        p_ee_in_base: (3,) floats, p_ee in T_b (only x and y enter).
-        R_ab: ((3,), (3,), (3,)) rows of ^bR_a^T, i.e. ^aR_b, as floats.
-        grad_C_m: (6,) floats, grad_x C_m in T_a.
-        alpha: float s_c alpha in [0, 1].
-        tolerance: float >= 0.
-
-    Returns:
-        list of 12 floats: [V_a^ref (6); delta_V_ee (6)], both in T_a.
-    """
-    dvx, dvy, dwz = delta_V_b
-    x, y = p_ee_in_base[0], p_ee_in_base[1]
-    # J_b delta_V_b (eq. (2)), then delta_V_a^req = -R_ba^T J_b delta_V_b.
-    tx = dvx - y * dwz
-    ty = dvy + x * dwz
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R_ab
-    required = [-(r00 * tx + r01 * ty), -(r10 * tx + r11 * ty),
-                -(r20 * tx + r21 * ty), -(r02 * dwz), -(r12 * dwz),
-                -(r22 * dwz)]
-    g0, g1, g2, g3, g4, g5 = grad_C_m
-    g_squared = g0 * g0 + g1 * g1 + g2 * g2 + g3 * g3 + g4 * g4 + g5 * g5
-    if math.sqrt(g_squared) <= tolerance:
-        return [v + d for v, d in zip(V_a, required, strict=True)] + [
-            0.0] * 6
-    q0, q1, q2, q3, q4, q5 = required
-    factor = -alpha * (g0 * q0 + g1 * q1 + g2 * q2 + g3 * q3 + g4 * q4
-                       + g5 * q5) / g_squared
-    deviation = [factor * g0, factor * g1, factor * g2, factor * g3,
-                 factor * g4, factor * g5]
-    return [v + (d + e) for v, d, e in zip(V_a, required, deviation,
-                                           strict=True)] + deviation
+    return projected_compensation(required_compensation(dV_b, J_b, R), g, a)

@@ -8,69 +8,84 @@ and T_ee (end effector). Inputs:
   expressed in T_b.
 - V_a = [v_a; w_a] (m/s; rad/s): Cartesian twist command of the arm,
   linear part first, expressed in T_a.
-- V_wb = [V_a; V_b] (9,): the whole-body input, arm first, eq. (1).
+- V_wb = [V_a; V_b] (9,): the whole-body input, arm first, eq. (fk).
 
 Every twist here is [linear; angular]; the linear part is the velocity of
 the end-effector point. V_ee is the end effector's velocity relative to
-the world, with its components expressed in T_b, eq. (1) and eq. (3).
-"""
+the world, with its components expressed in T_b, eqs. (fk) and (3).
 
-import math
+Each equation has one reference body, scalar-generic (float arrays and
+numpy object arrays of AutoDiffXd), which checks nothing: what the stages
+and the other reference bodies call. The public functions a user calls
+by hand check their arguments and call it:
+
+- J_b of eq. (2): `base_jacobian_of`, checked `base_jacobian`;
+- J_wb of eq. (fk): `whole_body_jacobian_of`, checked
+  `whole_body_jacobian`;
+- block-diag(R, R) of eqs. (fk) and (3): `rotate_twist`, checked
+  `twist_rotation` (the matrix);
+- ^bR_w V_ee^ref of eq. (3): `world_to_base_twist_of`, checked
+  `world_to_base_twist`.
+
+None has a fast kernel of its own: the controller's tick runs them inside
+the kernels of the distribution and of the compensation.
+"""
 
 import numpy as np
 
-from drake_wbc.math.validation import as_matrix, as_scalar, as_vector
-from drake_wbc.math.validation import rotation_matrix as checked_rotation
+from drake_wbc.math.validation import (
+    as_matrix,
+    as_scalar,
+    as_vector,
+    rotation_matrix,
+)
+
+_IDENTITY_6 = np.eye(6)
 
 
-def as_float_array(name, value, shape):
-    """validation.as_vector / as_matrix with a fast path.
-
-    A float64 ndarray of exactly `shape` with finite entries is returned
-    as it is, as np.asarray would; anything else goes through the full
-    check, which names `name` on a bad value.
-
-    Args:
-        name: the argument's name, for the error message.
-        value: the argument.
-        shape: the wanted shape, e.g. (6,) or (6, 9).
-
-    Returns:
-        `value` as a finite float array of `shape`.
-
-    Raises:
-        ValueError: as validation.as_vector / as_matrix.
-    """
-    # A sum of floats is finite only if every term is (a finite sum that
-    # overflows goes through the full check, which passes it).
-    if (type(value) is np.ndarray and value.dtype == np.float64
-            and value.shape == shape
-            and math.isfinite(sum(value.ravel().tolist()))):
-        return value
-    if len(shape) == 1:
-        return as_vector(name, value, shape[0])
-    return as_matrix(name, value, shape)
+def base_jacobian_of(p_ee_in_base):
+    """J_b of eq. (2) at p_ee = [x, y, z] in T_b, for any scalar type
+    (the reference body of `base_jacobian`, which documents it); a (6, 3)
+    array of the scalar type of p_ee_in_base."""
+    p = np.asarray(p_ee_in_base)
+    zero = p[0] * 0.0
+    one = zero + 1.0
+    return np.array([[one, zero, -p[1]], [zero, one, p[0]], [zero] * 3,
+                     [zero] * 3, [zero] * 3, [zero, zero, one]])
 
 
-class _RotationCheck:
-    """validation.rotation_matrix, remembering the last value it passed:
-    the same matrix (bytes equal) is not checked again, so that a constant
-    R_ba costs one comparison per call."""
-
-    def __init__(self):
-        self._last = None
-
-    def __call__(self, name, value):
-        if (type(value) is np.ndarray and value.dtype == np.float64
-                and value.shape == (3, 3)
-                and value.tobytes() == self._last):
-            return value
-        R = checked_rotation(name, value)
-        self._last = R.tobytes()
-        return R
+def rotate_twist(R, twist):
+    """block-diag(R, R) twist: both halves of the twist [v; w] (6,), or of
+    each column of a (6, k) array, rotated by R (3, 3), for any scalar
+    type. With R = ^bR_a it maps a twist from T_a to T_b (R_ba of eq.
+    (fk)), with R = ^bR_w from T_w to T_b (eq. (3))."""
+    R, twist = np.asarray(R), np.asarray(twist)
+    return np.concatenate([R @ twist[:3], R @ twist[3:]])
 
 
-_checked_rotation_cached = _RotationCheck()
+def whole_body_jacobian_of(J_a, p_ee_in_base, R_ba):
+    """J_wb = [R_ba J_a, J_b] of eq. (fk) for any scalar type (the
+    reference body of `whole_body_jacobian`, which documents it); J_a None
+    is the identity (the arm input is its Cartesian twist V_a), R_ba a
+    rotation matrix (3, 3). A (6, 9) array."""
+    arm = rotate_twist(R_ba, _IDENTITY_6 if J_a is None else J_a)
+    return np.hstack([arm, base_jacobian_of(p_ee_in_base)])
+
+
+def world_to_base_twist_of(V_ee_ref_world, base_yaw):
+    """^bR_w V_ee^ref of eq. (3), ^bR_w = Rz(-phi_b), for any scalar type
+    (the reference body of `world_to_base_twist`, which documents it)."""
+    c, s = np.cos(base_yaw), np.sin(base_yaw)
+    zero = c * 0.0
+    R_bw = np.array([[c, s, zero], [-s, c, zero], [zero, zero, zero + 1.0]])
+    return rotate_twist(R_bw, V_ee_ref_world)
+
+
+def random_rotation(rng):
+    """A random rotation matrix (3, 3) from the numpy Generator `rng`
+    (random mountings ^bR_a for the kernels' samplers)."""
+    R, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return R * np.sign(np.linalg.det(R))
 
 
 def base_jacobian(p_ee_in_base):
@@ -98,18 +113,11 @@ def base_jacobian(p_ee_in_base):
     Raises:
         ValueError: if p_ee_in_base is not 3 finite numbers.
     """
-    p = as_float_array("p_ee_in_base", p_ee_in_base, (3,))
-    J_b = np.zeros((6, 3))
-    J_b[0, 0] = 1.0
-    J_b[1, 1] = 1.0
-    J_b[0, 2] = -p[1]
-    J_b[1, 2] = p[0]
-    J_b[5, 2] = 1.0
-    return J_b
+    return base_jacobian_of(as_vector("p_ee_in_base", p_ee_in_base, 3))
 
 
 def twist_rotation(R):
-    """The 6x6 twist rotation block-diag(R, R), e.g. R_ba of eq. (1).
+    """The 6x6 twist rotation block-diag(R, R), e.g. R_ba of eq. (fk).
 
     Rotates a twist [v; w] from one frame to another: with R = ^bR_a it
     is the paper's R_ba, which maps a twist expressed in T_a to T_b.
@@ -123,17 +131,13 @@ def twist_rotation(R):
     Raises:
         ValueError: if R is not a finite 3x3 rotation matrix.
     """
-    R = checked_rotation("R", R)
-    R6 = np.zeros((6, 6))
-    R6[:3, :3] = R
-    R6[3:, 3:] = R
-    return R6
+    return rotate_twist(rotation_matrix("R", R), _IDENTITY_6)
 
 
 def whole_body_jacobian(J_a, p_ee_in_base, R_ba=None):
-    """Whole-body Jacobian [R_ba J_a, J_b] of eq. (1).
+    """Whole-body Jacobian [R_ba J_a, J_b] of eq. (fk).
 
-    Eq. (1) has two lines; this function gives both:
+    Eq. (fk) has two lines; this function gives both:
 
     - Bottom line, the controller's case (J_a = None): the arm input is its
       Cartesian twist V_a in T_a and
@@ -168,32 +172,11 @@ def whole_body_jacobian(J_a, p_ee_in_base, R_ba=None):
         ValueError: if J_a is not a finite 6x6 matrix, p_ee_in_base not 3
             finite numbers, or R_ba not a rotation matrix.
     """
-    R = (np.eye(3) if R_ba is None
-         else _checked_rotation_cached("R_ba", R_ba))
+    R = np.eye(3) if R_ba is None else rotation_matrix("R_ba", R_ba)
     if J_a is not None:
-        J_a = as_float_array("J_a", J_a, (6, 6))
-    p = as_float_array("p_ee_in_base", p_ee_in_base, (3,))
-    return whole_body_jacobian_unchecked(J_a, p, R)
-
-
-def whole_body_jacobian_unchecked(J_a, p_ee_in_base, R_ba):
-    """whole_body_jacobian for float arguments already checked: J_a (6, 6)
-    or None, p_ee_in_base (3,) and the rotation matrix R_ba (3, 3), which
-    is not optional here. The per-tick path of the controller."""
-    J_wb = np.zeros((6, 9))
-    if J_a is None:
-        J_wb[:3, :3] = R_ba
-        J_wb[3:, 3:6] = R_ba
-    else:
-        J_wb[:3, :6] = R_ba @ J_a[:3]
-        J_wb[3:, :6] = R_ba @ J_a[3:]
-    # J_b of eq. (2) (base_jacobian).
-    J_wb[0, 6] = 1.0
-    J_wb[1, 7] = 1.0
-    J_wb[0, 8] = -p_ee_in_base[1]
-    J_wb[1, 8] = p_ee_in_base[0]
-    J_wb[5, 8] = 1.0
-    return J_wb
+        J_a = as_matrix("J_a", J_a, (6, 6))
+    p = as_vector("p_ee_in_base", p_ee_in_base, 3)
+    return whole_body_jacobian_of(J_a, p, R)
 
 
 def world_to_base_twist(V_ee_ref_world, base_yaw):
@@ -218,12 +201,6 @@ def world_to_base_twist(V_ee_ref_world, base_yaw):
         ValueError: if V_ee_ref_world is not 6 finite numbers or base_yaw
             is not finite.
     """
-    V_ref = as_vector("V_ee_ref_world", V_ee_ref_world, 6)
-    phi_b = as_scalar("base_yaw", base_yaw)
-    c, s = np.cos(phi_b), np.sin(phi_b)
-    # ^bR_w = Rz(-phi_b) = [[c, s, 0], [-s, c, 0], [0, 0, 1]].
-    R_bw = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-    V_ee = np.empty(6)
-    V_ee[:3] = R_bw @ V_ref[:3]
-    V_ee[3:] = R_bw @ V_ref[3:]
-    return V_ee
+    return world_to_base_twist_of(
+        as_vector("V_ee_ref_world", V_ee_ref_world, 6),
+        as_scalar("base_yaw", base_yaw))

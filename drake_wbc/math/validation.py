@@ -18,9 +18,12 @@ effect on the stages already built from it.
 
 import copy
 import dataclasses
+import math
 import re
 
 import numpy as np
+
+from drake_wbc.math.scalar_support import value_of
 
 
 def _shown(value):
@@ -50,6 +53,31 @@ def as_matrix(name, value, shape):
             finite.
     """
     return _as_array(name, value, shape, "matrix")
+
+
+def as_float_array(name, value, shape):
+    """as_vector / as_matrix for a value that is usually right already:
+    a float64 ndarray of exactly `shape` with finite entries is returned
+    as it is (no copy), anything else goes through the full check, which
+    names `name` on a bad value.
+
+    Args:
+        name: the argument's name, for the error message.
+        value: the argument.
+        shape: the wanted shape, e.g. (6,) or (6, 9).
+
+    Raises:
+        ValueError: as as_vector / as_matrix.
+    """
+    # A sum of floats is finite only if every term is (a finite sum that
+    # overflows goes through the full check, which passes it).
+    if (type(value) is np.ndarray and value.dtype == np.float64
+            and value.shape == shape
+            and math.isfinite(sum(value.ravel().tolist()))):
+        return value
+    if len(shape) == 1:
+        return as_vector(name, value, shape[0])
+    return as_matrix(name, value, shape)
 
 
 def _as_array(name, value, shape, kind):
@@ -110,6 +138,22 @@ def in_closed_range(name, value, lower, upper):
             f"must lie in [{lower}, {upper}]"
         )
     return number
+
+
+def unit_interval(name, value):
+    """Returns `value`, a float or AutoDiffXd scalar, as it is after
+    checking 0 <= value <= 1 (a NaN fails): the check of an input port's
+    value that the port's size cannot constrain (a weighting factor, a
+    transition value, a switch), for every scalar type of a stage.
+
+    Raises:
+        ValueError: naming `name`, its value and the allowed range.
+    """
+    if not 0.0 <= value <= 1.0:
+        number = float(value_of(value))
+        raise ValueError(
+            f"{name} = {number!r} is not allowed: must lie in [0, 1]")
+    return value
 
 
 def whole_number(name, value, minimum=0):

@@ -35,8 +35,7 @@ from pydrake.multibody.tree import (
     RevoluteSpring,
 )
 
-from drake_wbc.math.kinematics import as_float_array
-from drake_wbc.math.validation import as_vector
+from drake_wbc.math.validation import as_float_array, as_vector
 
 PACKAGE_NAME = "drake_wbc"
 """The package name under which models/ is registered."""

@@ -49,7 +49,6 @@ from drake_wbc.stages.coordination import (
     MotionDistributorParameters,
     RobustCompensator,
     RobustCompensator_,
-    RobustCompensatorParameters,
 )
 from drake_wbc.stages.safety import (
     GuardedInput,
@@ -87,7 +86,6 @@ __all__ = [
     "MotionDistributorParameters",
     "MotionDistributor_",
     "RobustCompensator",
-    "RobustCompensatorParameters",
     "RobustCompensator_",
     "WorkspaceAdapter",
     "WorkspaceAdapterParameters",

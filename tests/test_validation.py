@@ -1,0 +1,38 @@
+"""The argument checks of drake_wbc.math.validation that the math and the
+stages share: as_float_array's pass-through and unit_interval for every
+scalar type."""
+
+import numpy as np
+import pytest
+from pydrake.autodiffutils import AutoDiffXd
+
+from drake_wbc.math.validation import as_float_array, unit_interval
+
+
+def test_as_float_array_passes_a_right_array_and_checks_the_rest():
+    x = np.arange(3.0)
+    assert as_float_array("x", x, (3,)) is x
+    np.testing.assert_array_equal(as_float_array("x", [1, 2, 3], (3,)),
+                                  [1.0, 2.0, 3.0])
+    huge = np.full(3, 1e308)  # finite, though its sum would overflow
+    assert as_float_array("x", huge, (3,)) is huge
+    for bad in (np.array([0.0, np.nan, 1.0]), np.zeros(4), "abc"):
+        with pytest.raises(ValueError, match="x"):
+            as_float_array("x", bad, (3,))
+    with pytest.raises(ValueError, match="shape"):
+        as_float_array("M", np.zeros((2, 3)), (3, 2))
+
+
+def test_unit_interval_keeps_the_scalar_type():
+    value = AutoDiffXd(0.25, [1.0, 2.0])
+    assert unit_interval("alpha", value) is value
+    assert unit_interval("alpha", 1.0) == 1.0
+    assert unit_interval("alpha", np.float64(0.0)) == 0.0
+
+
+@pytest.mark.parametrize("value", [-1e-12, 1.5, np.nan, np.inf,
+                                   AutoDiffXd(1.5, [1.0])])
+def test_unit_interval_names_the_value_outside(value):
+    with pytest.raises(ValueError,
+                       match=r"^sigma_xy = .* must lie in \[0, 1\]"):
+        unit_interval("sigma_xy", value)
