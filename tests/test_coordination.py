@@ -20,7 +20,6 @@ from pydrake.systems.primitives import (
 from drake_wbc.math import (
     adaptive_weighting,
     capability,
-    capability_gradients,
     compensation,
     distribution,
     pseudoinverse,
@@ -29,14 +28,13 @@ from drake_wbc.math.any_scalar_coordination import (
     compensate_any,
     distribute_any,
 )
+from drake_wbc.math.capability import ArmCapabilityParameters, CapabilityBand
 from drake_wbc.math.kinematics import base_jacobian, whole_body_jacobian
 from drake_wbc.math.workspace import LocalWorkspace
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.stages import (
     ArmCapability,
-    ArmCapabilityParameters,
     BaseVelocityFilter,
-    CapabilityBand,
     MotionDistributor,
     MotionDistributorParameters,
     RobustCompensator,
@@ -142,8 +140,8 @@ def test_arm_capability_matches_kinematics_and_capability():
         assert out["capability"][0] == pytest.approx(C_m, rel=1e-12)
         np.testing.assert_allclose(
             out["capability_gradient"],
-            capability_gradients.capability_gradient(values.J_a, q, ARM.lower,
-                                                     ARM.upper), rtol=1e-10,
+            capability.capability_gradient(values.J_a, q, ARM.lower,
+                                           ARM.upper), rtol=1e-10,
             atol=1e-14)
         assert out["alpha"][0] == pytest.approx(
             capability.transition(C_m, 0.04, 0.035), abs=1e-14)

@@ -7,7 +7,7 @@ drake_wbc.math.validation.validate runs the checks of a whole tree again):
 
 - controller: ControllerParameters (drake_wbc.controller.diagram),
   ArmControllerParameters (arm_control), CapabilityBand,
-  ArmCapabilityParameters, WorkspaceAdapterParameters
+  ArmCapabilityParameters (capability), WorkspaceAdapterParameters
   (systems.capability_stage), MotionDistributorParameters,
   RobustCompensatorParameters (systems.coordination),
   BaseFilterParameters (filtering), SingularityDamping (pseudoinverse),
@@ -40,6 +40,10 @@ from drake_wbc.experiments.scenario import (
 )
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.math.arm_control import ArmControllerParameters
+from drake_wbc.math.capability import (
+    ArmCapabilityParameters,
+    CapabilityBand,
+)
 from drake_wbc.math.cdmp import (
     AdmittanceCouplingParameters,
     ArmCdmpParameters,
@@ -53,11 +57,7 @@ from drake_wbc.math.filtering import BaseFilterParameters
 from drake_wbc.math.pseudoinverse import SingularityDamping
 from drake_wbc.math.validation import validate
 from drake_wbc.math.workspace import LocalWorkspace
-from drake_wbc.stages.capability_stage import (
-    ArmCapabilityParameters,
-    CapabilityBand,
-    WorkspaceAdapterParameters,
-)
+from drake_wbc.stages.capability_stage import WorkspaceAdapterParameters
 from drake_wbc.stages.coordination import (
     MotionDistributorParameters,
     RobustCompensatorParameters,

@@ -30,8 +30,6 @@ from drake_wbc.stages.base_filter import (
 from drake_wbc.stages.capability_stage import (
     ArmCapability,
     ArmCapability_,
-    ArmCapabilityParameters,
-    CapabilityBand,
     WorkspaceAdapter,
     WorkspaceAdapter_,
     WorkspaceAdapterParameters,
@@ -79,9 +77,7 @@ __all__ = [
     "BaseVelocityFilter",
     "BaseVelocityFilter_",
     "ArmCapability",
-    "ArmCapabilityParameters",
     "ArmCapability_",
-    "CapabilityBand",
     "MotionDistributor",
     "MotionDistributorParameters",
     "MotionDistributor_",

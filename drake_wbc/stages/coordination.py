@@ -39,6 +39,7 @@ from drake_wbc.math.any_scalar_coordination import (
     compensate_any,
     distribute_any,
 )
+from drake_wbc.math.capability import CapabilityBand, set_band
 from drake_wbc.math.scalar_support import value_of
 from drake_wbc.math.validation import (
     checked_instance,
@@ -47,7 +48,6 @@ from drake_wbc.math.validation import (
     validated_copy,
 )
 from drake_wbc.robot.model import ArmKinematics
-from drake_wbc.stages.capability_stage import CapabilityBand, set_band
 from drake_wbc.stages.support import (
     SCALARS,
     declare_cached_vector,
@@ -190,7 +190,7 @@ def MotionDistributor_(T):
             band = self.params.band
             if self.params.smooth_switch_off:
                 if T is float:  # the band was checked at construction
-                    return k_n * capability.transition_unchecked(
+                    return k_n * capability.transition_float(
                         C_m, band.upper, band.lower)
                 return k_n * workspace.smooth_transition(C_m, band.upper,
                                                          band.lower)
