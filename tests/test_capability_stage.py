@@ -1,16 +1,25 @@
-"""The ArmCapability stage: its outputs are the math layer's
-(drake_wbc.math.capability) at the configurations that matter (joints at
-and beyond their limits, the wrist singularity, C_m in the band and on
-either side of it), the same for AutoDiffXd, and bad inputs are named."""
+"""The ArmCapability and WorkspaceAdapter stages: their outputs are the math
+layer's (drake_wbc.math.capability and workspace) at the configurations
+that matter (joints at and beyond their limits, the wrist singularity,
+C_m in the band and on either side of it; the end effector on the arm
+base's axis, behind it, in the bands), the same for AutoDiffXd, and bad
+inputs are named."""
 
 import numpy as np
 import pytest
 from pydrake.autodiffutils import AutoDiffXd, ExtractValue
 
-from drake_wbc.math import capability
+from drake_wbc.math import capability, workspace
 from drake_wbc.math.capability import ArmCapabilityParameters, CapabilityBand
+from drake_wbc.math.workspace import (
+    LocalWorkspace,
+    WorkspaceAdapterParameters,
+)
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
-from drake_wbc.stages.capability_stage import ArmCapability
+from drake_wbc.stages.capability_stage import ArmCapability, WorkspaceAdapter
+
+WORKSPACE_INPUTS = ("end_effector_position", "end_effector_velocity",
+                    "capability", "capability_gradient")
 
 
 @pytest.fixture(scope="module")
@@ -135,3 +144,87 @@ def test_capability_stage_rejects_non_finite_positions(capability_stage,
     capability_stage.get_input_port().FixValue(context, q)
     with pytest.raises(ValueError, match="q_a"):
         capability_stage.GetOutputPort("capability").Eval(context)
+
+
+# --- WorkspaceAdapter ---------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def adapter(arm):
+    params = WorkspaceAdapterParameters(
+        mode="intuitive-phri", band=CapabilityBand(0.02, 0.06),
+        workspace=LocalWorkspace(extent_lower=0.6, extent_upper=0.8,
+                                 deflection_lower=0.3, deflection_upper=0.7))
+    return WorkspaceAdapter(params, arm)
+
+
+def fix_workspace_inputs(system, context, values):
+    for name, value in zip(WORKSPACE_INPUTS, values, strict=True):
+        system.GetInputPort(name).FixValue(context, value)
+
+
+def test_adapter_gives_the_local_workspace_state(adapter):
+    """The double system and the AutoDiffXd one give sigma_xy, sigma_phi
+    of workspace.local_workspace_state, on the ramps, at 0 and at 1."""
+    converted = adapter.ToAutoDiffXd()
+    context = adapter.CreateDefaultContext()
+    ad_context = converted.CreateDefaultContext()
+    R, origin = adapter.R_ba, adapter.arm_base_position
+    params = adapter.params
+    rng = np.random.default_rng(28)
+    seen = set()
+    for case in range(120):
+        radius = rng.uniform(0.4, 1.0) if case % 5 else 0.0
+        azimuth = rng.uniform(-1.2, 1.2) if case % 7 else np.pi
+        p_a = np.array([radius * np.cos(azimuth), radius * np.sin(azimuth),
+                        0.2])
+        values = [R @ p_a + origin, rng.normal(size=6),
+                  [rng.uniform(0.0, 0.1)], rng.normal(size=6) * 0.1]
+        fix_workspace_inputs(adapter, context, values)
+        state = workspace.local_workspace_state(
+            values[0], values[1], values[2][0], values[3],
+            params.band.upper, params.band.lower, params.workspace, R,
+            origin)
+        expected = [state.sigma_xy, state.sigma_phi]
+        double = np.concatenate(stage_outputs(adapter, context))
+        np.testing.assert_allclose(double, expected, rtol=0, atol=1e-12)
+        if case % 4 == 0:
+            fix_workspace_inputs(converted, ad_context, [
+                np.array([AutoDiffXd(x) for x in np.ravel(v)])
+                for v in values])
+            np.testing.assert_allclose(ExtractValue(np.concatenate(
+                stage_outputs(converted, ad_context))).ravel(), expected,
+                rtol=0, atol=1e-12)
+        seen.update("ramp" if 0.0 < v < 1.0 else v for v in double)
+    assert seen == {0.0, 1.0, "ramp"}
+
+
+@pytest.mark.parametrize("mode, expected", [
+    ("locomotion", (0.0, 0.0)), ("manipulation", (1.0, 1.0)),
+    ("loco-manipulation", (0.2, 0.7))])
+def test_adapter_in_a_fixed_mode_reads_no_input(mode, expected):
+    params = WorkspaceAdapterParameters(mode=mode, sigma_xy=0.2,
+                                        sigma_phi=0.7)
+    system = WorkspaceAdapter(params)
+    for stage in (system, system.ToAutoDiffXd()):
+        factors = np.concatenate(stage_outputs(stage,
+                                               stage.CreateDefaultContext()))
+        np.testing.assert_array_equal(ExtractValue(factors).ravel()
+                                      if factors.dtype == object
+                                      else factors, expected)
+        assert not stage.HasAnyDirectFeedthrough()
+    params.sigma_xy = 0.4  # read when the stage was built
+    np.testing.assert_array_equal(np.concatenate(stage_outputs(
+        system, system.CreateDefaultContext())), expected)
+
+
+@pytest.mark.parametrize("index", range(4))
+def test_adapter_rejects_non_finite_inputs(adapter, index):
+    context = adapter.CreateDefaultContext()
+    values = [np.array([0.9, 0.1, 0.3]), np.full(6, 0.1), np.array([0.05]),
+              np.full(6, 0.01)]
+    values[index] = values[index].copy()
+    values[index][-1] = np.nan
+    fix_workspace_inputs(adapter, context, values)
+    name = ("p_ee_in_base", "V_ee", "C_m", "grad_C_m")[index]
+    with pytest.raises(ValueError, match=name):
+        adapter.GetOutputPort("sigma_xy").Eval(context)

@@ -18,11 +18,11 @@ from pydrake.systems.primitives import (
 )
 
 from drake_wbc.math import (
-    adaptive_weighting,
     capability,
     compensation,
     distribution,
     pseudoinverse,
+    workspace,
 )
 from drake_wbc.math.any_scalar_coordination import (
     compensate_any,
@@ -30,7 +30,10 @@ from drake_wbc.math.any_scalar_coordination import (
 )
 from drake_wbc.math.capability import ArmCapabilityParameters, CapabilityBand
 from drake_wbc.math.kinematics import base_jacobian, whole_body_jacobian
-from drake_wbc.math.workspace import LocalWorkspace
+from drake_wbc.math.workspace import (
+    LocalWorkspace,
+    WorkspaceAdapterParameters,
+)
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.stages import (
     ArmCapability,
@@ -40,7 +43,6 @@ from drake_wbc.stages import (
     RobustCompensator,
     RobustCompensatorParameters,
     WorkspaceAdapter,
-    WorkspaceAdapterParameters,
 )
 
 ARM = ArmKinematics()
@@ -236,7 +238,7 @@ def test_phri_matches_the_math_layer():
         inputs = phri_inputs(p_a, rng.normal(size=6) * 0.1,
                              rng.uniform(0.03, 0.07), rng.normal(size=6)
                              * 0.01)
-        state = adaptive_weighting.local_workspace_state(
+        state = workspace.local_workspace_state(
             inputs["end_effector_position"], inputs["end_effector_velocity"],
             inputs["capability"], inputs["capability_gradient"], 0.04,
             0.035, LocalWorkspace(), R_BA, ARM_BASE)

@@ -7,11 +7,11 @@ drake_wbc.math.validation.validate runs the checks of a whole tree again):
 
 - controller: ControllerParameters (drake_wbc.controller.diagram),
   ArmControllerParameters (arm_control), CapabilityBand,
-  ArmCapabilityParameters (capability), WorkspaceAdapterParameters
-  (systems.capability_stage), MotionDistributorParameters,
+  ArmCapabilityParameters (capability), MotionDistributorParameters,
   RobustCompensatorParameters (systems.coordination),
   BaseFilterParameters (filtering), SingularityDamping (pseudoinverse),
-  LocalWorkspace (workspace), DmpParameters (dmp),
+  LocalWorkspace, WorkspaceAdapterParameters (workspace), DmpParameters
+  (dmp),
   StiffnessCouplingParameters, AdmittanceCouplingParameters,
   WholeBodyCdmpParameters, RepulsiveFieldParameters, BaseCdmpParameters,
   ArmCdmpParameters (cdmp);
@@ -56,8 +56,10 @@ from drake_wbc.math.dmp import DmpParameters
 from drake_wbc.math.filtering import BaseFilterParameters
 from drake_wbc.math.pseudoinverse import SingularityDamping
 from drake_wbc.math.validation import validate
-from drake_wbc.math.workspace import LocalWorkspace
-from drake_wbc.stages.capability_stage import WorkspaceAdapterParameters
+from drake_wbc.math.workspace import (
+    LocalWorkspace,
+    WorkspaceAdapterParameters,
+)
 from drake_wbc.stages.coordination import (
     MotionDistributorParameters,
     RobustCompensatorParameters,

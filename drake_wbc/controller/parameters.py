@@ -34,7 +34,7 @@ from drake_wbc.math.capability import ArmCapabilityParameters
 from drake_wbc.math.filtering import BaseFilterParameters
 from drake_wbc.math.safety import SafetyParameters
 from drake_wbc.math.validation import positive, validate
-from drake_wbc.stages.capability_stage import WorkspaceAdapterParameters
+from drake_wbc.math.workspace import WorkspaceAdapterParameters
 from drake_wbc.stages.coordination import (
     MotionDistributorParameters,
     RobustCompensatorParameters,

@@ -32,7 +32,6 @@ from drake_wbc.stages.capability_stage import (
     ArmCapability_,
     WorkspaceAdapter,
     WorkspaceAdapter_,
-    WorkspaceAdapterParameters,
 )
 from drake_wbc.stages.cdmp_stages import (
     ArmCdmp,
@@ -85,6 +84,5 @@ __all__ = [
     "RobustCompensatorParameters",
     "RobustCompensator_",
     "WorkspaceAdapter",
-    "WorkspaceAdapterParameters",
     "WorkspaceAdapter_",
 ]

@@ -1,34 +1,22 @@
 """ArmCapability and WorkspaceAdapter: what the arm's configuration tells
 the coordination stages (stages/coordination.py) once a tick, C_m, its
 gradient and alpha (Sec. IV-A), and the weighting factors of the motion
-modes (Sec. IV-C). The parameters and math of C_m and alpha are in
-drake_wbc.math.capability; how the stages declare their ports and cache:
-stages/support.py."""
-
-from dataclasses import dataclass, field
+modes (Sec. IV-C). Their parameters and math are in
+drake_wbc.math.capability and drake_wbc.math.workspace; how the stages
+declare their ports and cache: stages/support.py."""
 
 import numpy as np
 from pydrake.systems.framework import LeafSystem_
-from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_wbc.math import adaptive_weighting, capability, motion_mode
-from drake_wbc.math.capability import (
-    ArmCapabilityParameters,
-    CapabilityBand,
-    set_band,
-)
+from drake_wbc.math import capability, motion_mode, workspace
+from drake_wbc.math.capability import ArmCapabilityParameters
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.motion_mode import MotionMode
 from drake_wbc.math.scalar_support import through_float_function
-from drake_wbc.math.validation import (
-    checked_instance,
-    in_closed_range,
-    validated_copy,
-)
-from drake_wbc.math.workspace import LocalWorkspace
+from drake_wbc.math.validation import checked_instance
+from drake_wbc.math.workspace import WorkspaceAdapterParameters
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.support import (
-    SCALARS,
     arm_mounting,
     declare_cached_vector,
     declare_inputs,
@@ -139,43 +127,7 @@ ArmCapability = ArmCapability_[None]
 """ArmCapability_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""
 
 
-@dataclass
-class WorkspaceAdapterParameters:
-    """Parameters of WorkspaceAdapter.
-
-    Attributes:
-        mode: a MotionMode or its name, 'locomotion', 'manipulation',
-            'loco-manipulation' or 'intuitive-phri' (Table T:motion-mode);
-            stored as the MotionMode (a str enum, so that YAML gives the
-            name).
-        sigma_xy, sigma_phi: the fixed weighting factors of the
-            loco-manipulation mode, in (0, 1) there (checked in [0, 1] in
-            the other modes, which do not use them). The default 0.5 is the
-            paper's trajectory-tracking experiment.
-        workspace: the local workspace of the intuitive pHRI mode; the
-            paper's d^l = 0.75, d^u = 0.8 m, phi^l = 30, phi^u = 35 deg.
-        band: C_m^l, C_m^u of f_xy and f_phi (intuitive pHRI).
-    """
-
-    mode: str = MotionMode.LOCO_MANIPULATION
-    sigma_xy: float = 0.5
-    sigma_phi: float = 0.5
-    workspace: LocalWorkspace = field(default_factory=LocalWorkspace)
-    band: CapabilityBand = field(default_factory=CapabilityBand)
-
-    def __post_init__(self):
-        self.mode = MotionMode.parse(self.mode)
-        in_closed_range("sigma_xy", self.sigma_xy, 0.0, 1.0)
-        in_closed_range("sigma_phi", self.sigma_phi, 0.0, 1.0)
-        self.workspace = checked_instance(
-            "workspace", self.workspace, LocalWorkspace, LocalWorkspace)
-        set_band(self)
-        if self.mode is MotionMode.LOCO_MANIPULATION:
-            motion_mode.fixed_weighting_factors(self.mode, self.sigma_xy,
-                                                self.sigma_phi)
-
-
-@TemplateSystem.define("WorkspaceAdapter_", T_list=SCALARS)
+@define_stage("WorkspaceAdapter_")
 def WorkspaceAdapter_(T):
     class Impl(LeafSystem_[T]):
         """The weighting factors of eq. (weight-factors) for a motion mode,
@@ -199,77 +151,62 @@ def WorkspaceAdapter_(T):
         Locomotion gives (0, 0), manipulation (1, 1), loco-manipulation
         the fixed parameters; these modes read no input (no direct
         feedthrough). The intuitive pHRI mode computes
-        adaptive_weighting.local_workspace_state: f_xy, f_phi from C_m
+        workspace.adaptive_weighting_factors_unchecked (its float kernel
+        in double, chosen when the stage is built): f_xy, f_phi from C_m
         penalized by the extent d and deflection phi of the end effector
         w.r.t. the arm's base (defined in drake_wbc.math.workspace), then
         sigma = 1 if the commanded twist, carried by the arm alone, would
         raise C_m^(d,phi) or lead back (d_dot, phi_dot < 0), else f (both
-        tests beyond a roundoff guard,
-        adaptive_weighting.DEACTIVATION_TOLERANCE). sigma is then
-        discontinuous where the deactivation switches, as in the paper.
-        For double (chosen once, at construction) the intuitive pHRI mode
-        takes adaptive_weighting.adaptive_weighting_factors, the same
-        formulas in plain floats with the parameters checked at
-        construction; AutoDiffXd takes local_workspace_state.
+        tests beyond a roundoff guard, workspace.DEACTIVATION_TOLERANCE).
+        sigma is then discontinuous where the deactivation switches, as in
+        the paper.
 
         Args:
-            params: WorkspaceAdapterParameters; loco-manipulation with
-                sigma_xy = sigma_phi = 0.5 if None.
+            params: WorkspaceAdapterParameters (read here, when the stage
+                is built); loco-manipulation with sigma_xy = sigma_phi =
+                0.5 if None.
             arm: ArmKinematics whose R_ba and arm-base position define
                 T_a; our robot's if None.
         """
 
         def _construct(self, params=None, arm=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self.params = validated_copy(checked_instance(
+            self.params = checked_instance(
                 "params", params, WorkspaceAdapterParameters,
-                WorkspaceAdapterParameters))
+                WorkspaceAdapterParameters)
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         shared_arm_kinematics)
             self.R_ba, self.arm_base_position = arm_mounting(self.arm)
             self._inputs = declare_inputs(self, (
                 ("end_effector_position", 3), ("end_effector_velocity", 6),
                 ("capability", 1), ("capability_gradient", 6)))
-            adaptive = self.params.mode is MotionMode.INTUITIVE_PHRI
             p = self.params
-            self._constants = adaptive_weighting.adaptive_workspace(
-                p.band.upper, p.band.lower, p.workspace, self.R_ba,
-                self.arm_base_position)
-            self._input_list = list(self._inputs.values())
-            entry = declare_cached_vector(
-                self, "weighting factors",
-                self._calc_float if adaptive and T is float else self._calc,
-                tickets(self._inputs.values()) if adaptive
-                else {self.nothing_ticket()})
+            if p.mode is MotionMode.INTUITIVE_PHRI:
+                self._constants = workspace.AdaptiveWorkspace.of(
+                    p.band.upper, p.band.lower, p.workspace, self.R_ba,
+                    self.arm_base_position)
+                self._factors = body_for(
+                    workspace.adaptive_weighting_factors_unchecked, T)
+                calc, prerequisites = (self._calc_adaptive,
+                                       tickets(self._inputs.values()))
+            else:
+                self._fixed = np.array(motion_mode.fixed_weighting_factors(
+                    p.mode, p.sigma_xy, p.sigma_phi))
+                calc, prerequisites = (self._calc_fixed,
+                                       {self.nothing_ticket()})
+            entry = declare_cached_vector(self, "weighting factors", calc,
+                                          prerequisites)
             declare_slices(self, entry, (("sigma_xy", slice(0, 1)),
                                          ("sigma_phi", slice(1, 2))))
 
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.params, other.arm,
-                            converter=converter)
-            self.params = other.params
+        def _calc_fixed(self, context):
+            return self._fixed
 
-        def _calc(self, context):
-            p = self.params
-            if p.mode is not MotionMode.INTUITIVE_PHRI:
-                return np.array(motion_mode.fixed_weighting_factors(
-                    p.mode, p.sigma_xy, p.sigma_phi))
-            inputs = {name: port.Eval(context)
-                      for name, port in self._inputs.items()}
-            state = adaptive_weighting.local_workspace_state(
-                inputs["end_effector_position"],
-                inputs["end_effector_velocity"],
-                inputs["capability"][0], inputs["capability_gradient"],
-                p.band.upper, p.band.lower, p.workspace, self.R_ba,
-                self.arm_base_position)
-            return np.array([state.sigma_xy, state.sigma_phi])
-
-        def _calc_float(self, context):
+        def _calc_adaptive(self, context):
             position, velocity, C_m, gradient = (
-                port.Eval(context) for port in self._input_list)
-            return np.array(adaptive_weighting.adaptive_weighting_factors(
-                position, velocity.tolist(), float(C_m[0]),
-                gradient.tolist(), self._constants))
+                port.Eval(context) for port in self._inputs.values())
+            return np.array(self._factors(position, velocity, C_m[0],
+                                          gradient, self._constants))
 
     return Impl
 

@@ -30,7 +30,6 @@ from drake_wbc.math import (
     distribution,
     kinematics,
     pseudoinverse,
-    workspace,
 )
 from drake_wbc.math.any_scalar_coordination import (
     PROJECTOR_TOLERANCE,
@@ -192,8 +191,8 @@ def MotionDistributor_(T):
                 if T is float:  # the band was checked at construction
                     return k_n * capability.transition_float(
                         C_m, band.upper, band.lower)
-                return k_n * workspace.smooth_transition(C_m, band.upper,
-                                                         band.lower)
+                return k_n * capability.transition_unchecked(
+                    C_m, band.upper, band.lower)
             return k_n * (1.0 if C_m <= band.upper else 0.0)
 
         def _calc(self, context):
