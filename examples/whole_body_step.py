@@ -13,7 +13,6 @@ import numpy as np
 
 from drake_wbc.math import (
     capability,
-    capability_gradients,
     compensation,
     distribution,
     kinematics,
@@ -28,8 +27,8 @@ def main():
 
     # Capability of movement and its gradient w.r.t. the arm's Cartesian pose.
     C_m = capability.capability(values.J_a, q_a, arm.lower, arm.upper)
-    grad = capability_gradients.capability_gradient(values.J_a, q_a,
-                                                    arm.lower, arm.upper)
+    grad = capability.capability_gradient(values.J_a, q_a, arm.lower,
+                                          arm.upper)
     print(f"C_m at home = {C_m:.4f}")
 
     # Distribute V_ee between the arm's twist V_a and the base's V_b.

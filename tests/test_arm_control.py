@@ -25,7 +25,7 @@ from drake_wbc.math.arm_control import (
     joint_velocity_for_twist,
     singularity_damping,
 )
-from drake_wbc.math.capability_gradients import jacobian_derivative
+from drake_wbc.math.capability import jacobian_derivative
 from drake_wbc.robot.model import ARM_JOINTS, HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.stages import ArmCartesianVelocityController
 

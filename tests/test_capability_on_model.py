@@ -5,7 +5,7 @@ the default k_j against the paper's limitation band."""
 import numpy as np
 import pytest
 
-from drake_wbc.math import capability, capability_gradients
+from drake_wbc.math import capability
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 
 BAND = (0.035, 0.04)  # the paper's C_m^l, C_m^u
@@ -31,7 +31,7 @@ def _random_configurations(kinematics, count, seed):
 def test_manipulability_gradient_matches_drake(kinematics):
     step = 1e-6
     for q in _random_configurations(kinematics, 10, seed=5):
-        analytic = capability_gradients.manipulability_joint_gradient(
+        analytic = capability.manipulability_joint_gradient(
             kinematics.evaluate(q).J_a
         )
         numeric = np.zeros(6)
@@ -58,7 +58,7 @@ def test_cartesian_gradient_is_rate_of_change_along_twists(kinematics):
 
     for q in _random_configurations(kinematics, 10, seed=7):
         J_a = kinematics.evaluate(q).J_a
-        g = capability_gradients.capability_gradient(J_a, q, lower, upper)
+        g = capability.capability_gradient(J_a, q, lower, upper)
         V = rng.normal(size=6)
         q_dot = np.linalg.solve(J_a, V)
         rate = (C_m(q + step * q_dot) - C_m(q - step * q_dot)) / (2 * step)

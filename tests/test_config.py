@@ -19,8 +19,8 @@ from drake_wbc.math.dmp import DmpParameters
 from drake_wbc.math.filtering import BaseFilterParameters
 from drake_wbc.math.motion_mode import MotionMode
 from drake_wbc.math.validation import validate
+from drake_wbc.math.workspace import WorkspaceAdapterParameters
 from drake_wbc.stages import BaseVelocityFilter, WorkspaceAdapter
-from drake_wbc.stages.capability_stage import WorkspaceAdapterParameters
 
 CONTROLLER_FILE = Path(__file__).parents[1] / "diagrams" / "controller.yaml"
 
@@ -230,8 +230,9 @@ def test_stages_keep_a_validated_copy_of_their_parameters():
     np.testing.assert_array_equal(update(), before)
     workspace = WorkspaceAdapterParameters()
     stage = WorkspaceAdapter(workspace)
-    workspace.mode = "manipulation"
-    assert stage.params.mode is MotionMode.LOCO_MANIPULATION
+    workspace.mode = "manipulation"  # read when the stage was built
+    context = stage.CreateDefaultContext()
+    assert stage.GetOutputPort("sigma_xy").Eval(context)[0] == 0.5
     controller_params = ControllerParameters()
     controller = build_controller(controller_params)
     controller_params.distributor.null_space_gain = 0.1

@@ -18,26 +18,26 @@ from pydrake.systems.primitives import (
 )
 
 from drake_wbc.math import (
-    adaptive_weighting,
     capability,
-    capability_gradients,
     compensation,
     distribution,
+    workspace,
 )
+from drake_wbc.math.capability import ArmCapabilityParameters, CapabilityBand
 from drake_wbc.math.compensation import RobustCompensatorParameters
 from drake_wbc.math.kinematics import base_jacobian, whole_body_jacobian
-from drake_wbc.math.workspace import LocalWorkspace
+from drake_wbc.math.workspace import (
+    LocalWorkspace,
+    WorkspaceAdapterParameters,
+)
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.stages import (
     ArmCapability,
-    ArmCapabilityParameters,
     BaseVelocityFilter,
-    CapabilityBand,
     MotionDistributor,
     MotionDistributorParameters,
     RobustCompensator,
     WorkspaceAdapter,
-    WorkspaceAdapterParameters,
 )
 
 ARM = ArmKinematics()
@@ -137,8 +137,8 @@ def test_arm_capability_matches_kinematics_and_capability():
         assert out["capability"][0] == pytest.approx(C_m, rel=1e-12)
         np.testing.assert_allclose(
             out["capability_gradient"],
-            capability_gradients.capability_gradient(values.J_a, q, ARM.lower,
-                                                     ARM.upper), rtol=1e-10,
+            capability.capability_gradient(values.J_a, q, ARM.lower,
+                                           ARM.upper), rtol=1e-10,
             atol=1e-14)
         assert out["alpha"][0] == pytest.approx(
             capability.transition(C_m, 0.04, 0.035), abs=1e-14)
@@ -233,7 +233,7 @@ def test_phri_matches_the_math_layer():
         inputs = phri_inputs(p_a, rng.normal(size=6) * 0.1,
                              rng.uniform(0.03, 0.07), rng.normal(size=6)
                              * 0.01)
-        state = adaptive_weighting.local_workspace_state(
+        state = workspace.local_workspace_state(
             inputs["end_effector_position"], inputs["end_effector_velocity"],
             inputs["capability"], inputs["capability_gradient"], 0.04,
             0.035, LocalWorkspace(), R_BA, ARM_BASE)

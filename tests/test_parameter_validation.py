@@ -7,11 +7,11 @@ drake_wbc.math.validation.validate runs the checks of a whole tree again):
 
 - controller: ControllerParameters (drake_wbc.controller.diagram),
   ArmControllerParameters (arm_control), CapabilityBand,
-  ArmCapabilityParameters, WorkspaceAdapterParameters
-  (stages.capability_stage), MotionDistributorParameters
-  (stages.coordination), RobustCompensatorParameters (compensation),
-  BaseFilterParameters (filtering), SingularityDamping (distribution),
-  LocalWorkspace (workspace), DmpParameters (dmp),
+  ArmCapabilityParameters (capability), WorkspaceAdapterParameters
+  (workspace), MotionDistributorParameters (stages.coordination),
+  RobustCompensatorParameters (compensation), BaseFilterParameters
+  (filtering), SingularityDamping (distribution), LocalWorkspace
+  (workspace), DmpParameters (dmp),
   StiffnessCouplingParameters, AdmittanceCouplingParameters,
   WholeBodyCdmpParameters, RepulsiveFieldParameters, BaseCdmpParameters,
   ArmCdmpParameters (cdmp);
@@ -39,6 +39,10 @@ from drake_wbc.experiments.scenario import (
 )
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.math.arm_control import ArmControllerParameters
+from drake_wbc.math.capability import (
+    ArmCapabilityParameters,
+    CapabilityBand,
+)
 from drake_wbc.math.cdmp import (
     AdmittanceCouplingParameters,
     ArmCdmpParameters,
@@ -52,10 +56,8 @@ from drake_wbc.math.distribution import SingularityDamping
 from drake_wbc.math.dmp import DmpParameters
 from drake_wbc.math.filtering import BaseFilterParameters
 from drake_wbc.math.validation import validate
-from drake_wbc.math.workspace import LocalWorkspace
-from drake_wbc.stages.capability_stage import (
-    ArmCapabilityParameters,
-    CapabilityBand,
+from drake_wbc.math.workspace import (
+    LocalWorkspace,
     WorkspaceAdapterParameters,
 )
 from drake_wbc.stages.coordination import MotionDistributorParameters

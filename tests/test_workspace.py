@@ -1,6 +1,6 @@
-"""drake_wbc.math.workspace, adaptive_weighting and motion_mode (Sec. IV-C)
-against closed forms, the capability module's transition and finite
-differences, for floats and AutoDiffXd."""
+"""drake_wbc.math.workspace and motion_mode (Sec. IV-C) against closed
+forms, the capability module's transition and finite differences, for
+floats and AutoDiffXd."""
 
 import numpy as np
 import pytest
@@ -11,12 +11,7 @@ from pydrake.autodiffutils import (
 )
 from reference_kinematics import random_rotation
 
-from drake_wbc.math import (
-    adaptive_weighting,
-    capability,
-    motion_mode,
-    workspace,
-)
+from drake_wbc.math import capability, motion_mode, workspace
 from drake_wbc.math.motion_mode import MotionMode
 from drake_wbc.math.workspace import LocalWorkspace
 
@@ -33,33 +28,6 @@ def test_defaults_are_the_papers():
     assert (WS.extent_lower, WS.extent_upper) == (0.75, 0.8)
     assert np.degrees(WS.deflection_lower) == pytest.approx(30.0)
     assert np.degrees(WS.deflection_upper) == pytest.approx(35.0)
-
-
-def test_transition_matches_capability_module():
-    rng = np.random.default_rng(0)
-    values = np.concatenate([rng.uniform(0.03, 0.045, 200),
-                             [LOWER, UPPER, 0.0375]])
-    for v in values:
-        assert workspace.smooth_transition(v, UPPER, LOWER) == \
-            pytest.approx(capability.transition(v, UPPER, LOWER), abs=1e-15)
-        assert workspace.smooth_transition_derivative(v, UPPER, LOWER) == \
-            pytest.approx(capability.transition_derivative(v, UPPER, LOWER),
-                          abs=1e-12)
-    assert workspace.smooth_transition(LOWER, UPPER, LOWER) == 1.0
-    assert workspace.smooth_transition(UPPER, UPPER, LOWER) == 0.0
-    assert workspace.smooth_transition(0.0375, UPPER, LOWER) == \
-        pytest.approx(0.5)
-
-
-def test_transition_autodiff_derivative():
-    for v in (0.033, 0.036, 0.0375, 0.039, 0.05):
-        x = InitializeAutoDiff(np.array([v]))[0, 0]
-        alpha = workspace.smooth_transition(x, UPPER, LOWER)
-        assert alpha.value() == pytest.approx(
-            capability.transition(v, UPPER, LOWER))
-        assert alpha.derivatives()[0] == pytest.approx(
-            workspace.smooth_transition_derivative(v, UPPER, LOWER),
-            abs=1e-12)
 
 
 def test_extent_and_deflection_closed_forms():
@@ -151,7 +119,7 @@ def test_penalized_capability_gradients_match_finite_differences():
 def state(p, V=None, C_m=0.06, g=None):
     V = np.zeros(6) if V is None else V
     g = np.zeros(6) if g is None else g
-    return adaptive_weighting.local_workspace_state(p, V, C_m, g, UPPER,
+    return workspace.local_workspace_state(p, V, C_m, g, UPPER,
                                                     LOWER, WS)
 
 
@@ -272,7 +240,7 @@ def test_rates_use_the_arm_frame():
     V_a = np.array([0.05, 0.02, 0.0, 0.0, 0.0, 0.1])
     p_b = origin + R @ p_a
     V_b = np.concatenate([R @ V_a[:3], R @ V_a[3:]])
-    s = adaptive_weighting.local_workspace_state(p_b, V_b, 0.06, np.zeros(6),
+    s = workspace.local_workspace_state(p_b, V_b, 0.06, np.zeros(6),
                                                  UPPER, LOWER, WS, R, origin)
     assert s.d == pytest.approx(0.6)
     assert s.phi == pytest.approx(np.radians(20.0))
@@ -294,7 +262,7 @@ def test_autodiff_state_matches_floats_and_finite_differences():
     x0 = np.concatenate([p, V, [0.0596], g])
 
     def sigmas(x):
-        s = adaptive_weighting.local_workspace_state(x[:3], x[3:9], x[9],
+        s = workspace.local_workspace_state(x[:3], x[3:9], x[9],
                                                      x[10:16], UPPER, LOWER,
                                                      WS)
         return np.array([s.sigma_xy, s.sigma_phi])
@@ -322,6 +290,10 @@ def test_fixed_modes():
         motion_mode.fixed_weighting_factors("intuitive-phri")
 
 
+STATE_INPUTS = (np.array([0.7, 0.1, 0.3]), np.full(6, 0.1), 0.05,
+                np.full(6, 0.01))
+
+
 @pytest.mark.parametrize("call, name", [
     (lambda: MotionMode.parse("walking"), "mode"),
     (lambda: motion_mode.fixed_weighting_factors("loco-manipulation", 0.0,
@@ -336,10 +308,30 @@ def test_fixed_modes():
     (lambda: LocalWorkspace(deflection_lower=0.7, deflection_upper=0.6),
      "deflection_lower"),
     (lambda: LocalWorkspace(deflection_upper=4.0), "deflection_upper"),
-    (lambda: workspace.smooth_transition(0.5, 0.3, 0.4), "lower"),
     (lambda: workspace.extent(np.zeros(2)), "p_in_arm_base"),
     (lambda: workspace.workspace_penalties(np.zeros(3), "big"),
      "workspace"),
+    (lambda: workspace.local_workspace_state(*STATE_INPUTS, 0.03, 0.04),
+     "capability_lower"),
+    (lambda: workspace.local_workspace_state(*STATE_INPUTS, 0.04, np.nan),
+     "capability_lower"),
+    (lambda: workspace.local_workspace_state(*STATE_INPUTS, 0.04, 0.03,
+                                             "big"), "workspace"),
+    (lambda: workspace.local_workspace_state(*STATE_INPUTS, 0.04, 0.03,
+                                             None, 2 * np.eye(3)), "R_ba"),
+    (lambda: workspace.local_workspace_state(*STATE_INPUTS, 0.04, 0.03,
+                                             None, None, np.zeros(2)),
+     "arm_base_in_base"),
+    (lambda: workspace.local_workspace_state(
+        np.array([0.7, np.nan, 0.3]), *STATE_INPUTS[1:], 0.04, 0.03),
+     "p_ee_in_base"),
+    (lambda: workspace.local_workspace_state(
+        STATE_INPUTS[0], [0.1, np.inf, 0, 0, 0, 0], *STATE_INPUTS[2:], 0.04,
+        0.03), "V_ee"),
+    (lambda: workspace.local_workspace_state(
+        *STATE_INPUTS[:2], np.nan, STATE_INPUTS[3], 0.04, 0.03), "C_m"),
+    (lambda: workspace.local_workspace_state(
+        *STATE_INPUTS[:3], [0.0] * 5, 0.04, 0.03), "grad_C_m"),
 ])
 def test_bad_arguments_are_rejected(call, name):
     with pytest.raises(ValueError, match=name):

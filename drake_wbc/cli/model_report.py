@@ -13,7 +13,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.visualization import AddFrameTriadIllustration
 
 from drake_wbc.experiments.replay import quiet_meshcat, write_static_html
-from drake_wbc.math import capability, capability_gradients
+from drake_wbc.math import capability
 from drake_wbc.math.validation import as_vector
 from drake_wbc.robot.model import (
     ARM_JOINTS,
@@ -100,9 +100,8 @@ def describe_robot(q_a=HOME_ARM_POSITIONS, k_j=None):
     lower, upper = kinematics.lower, kinematics.upper
     m = capability.manipulability(values.J_a)
     penalty = capability.joint_limit_penalty(q_a, lower, upper, k_j)
-    gradient = capability_gradients.capability_gradient(
-        values.J_a, q_a, lower, upper, k_j
-    )
+    gradient = capability.capability_gradient(values.J_a, q_a, lower, upper,
+                                              k_j)
     p = values.p_ee_in_base
     lines += [
         f"Arm configuration q_a = {np.array2string(q_a, precision=3)} rad",

@@ -30,14 +30,12 @@ from pydrake.common.yaml import yaml_dump, yaml_load_data, yaml_load_typed
 
 from drake_wbc.math import cdmp
 from drake_wbc.math.arm_control import ArmControllerParameters
+from drake_wbc.math.capability import ArmCapabilityParameters
 from drake_wbc.math.compensation import RobustCompensatorParameters
 from drake_wbc.math.filtering import BaseFilterParameters
 from drake_wbc.math.safety import SafetyParameters
 from drake_wbc.math.validation import positive, validate
-from drake_wbc.stages.capability_stage import (
-    ArmCapabilityParameters,
-    WorkspaceAdapterParameters,
-)
+from drake_wbc.math.workspace import WorkspaceAdapterParameters
 from drake_wbc.stages.coordination import MotionDistributorParameters
 
 

@@ -1,29 +1,54 @@
-"""Capability of movement C_m of the arm and the transition alpha (Sec. III-A).
+"""The capability of movement C_m, its gradients and the transition alpha
+(paper Sec. IV-A, "Movement Capability Optimization" and eq. (transition)).
 
-The capability of movement C_m = m * P_jnt ("Movement Capability
-Optimization") multiplies Yoshikawa's manipulability index m (distance to
-singularity) by the joint-limit penalization P_jnt (distance to the joint
-limits). Its gradient w.r.t. the arm's Cartesian pose, grad_x C_m, drives
-the null-space term of eq. (wbccm) and is the direction that the
-compensation of eq. (wb_error) must not worsen, a projection faded in by
-the transition alpha of eq. (transition) as C_m drops from C_m^u to C_m^l.
-Here: m, P_jnt, C_m and alpha with its derivative; the gradients of C_m
-are in drake_wbc.math.capability_gradients.
+The capability of movement C_m = m * P_jnt multiplies Yoshikawa's
+manipulability index m (distance to singularity) by the joint-limit
+penalization P_jnt (distance to the joint limits). Its gradient w.r.t.
+the arm's Cartesian pose, grad_x C_m, drives the null-space term of eq.
+(wbccm) and is the direction that the compensation of eq. (wb_error) must
+not worsen, a projection faded in by the transition alpha of eq.
+(transition) as C_m drops from C_m^u to C_m^l (the band, CapabilityBand).
 
-J_a is the 6 x n geometric Jacobian of the tool point in the arm's base frame
-T_a, rows [v; w] (linear velocity of the tool point in m/s, angular velocity
-in rad/s per joint rate in rad/s), columns the joint rates of an
-all-revolute serial chain (n = 6 for the Elfin5).
+J_a is the 6 x n geometric Jacobian of the tool point in the arm's base
+frame T_a, rows [v; w] (linear velocity of the tool point in m/s, angular
+velocity in rad/s per joint rate in rad/s), columns the joint rates of an
+all-revolute serial chain (n = 6 for the Elfin5). The gradients are
+analytic, from J_a and q alone: dJ_a/dq from J_a itself, no finite
+differences of the kinematics.
+
+How the module is laid out, for each equation:
+
+- its reference body, scalar-generic (float, or numpy object arrays of
+  AutoDiffXd) and unchecked: the formula as written. The tick's bodies are
+  public (`capability_terms_unchecked`, `transition_unchecked`,
+  `transition_derivative_unchecked`), the others private. Where a body
+  takes an SVD, which numpy has for floats only, AutoDiffXd goes through
+  scalar_support.through_float_function (exact values, derivatives by
+  central differences);
+- its checked public function of the plain name (`capability`,
+  `capability_gradient`, `transition`, ...), for calls by hand: one thin
+  layer that checks the arguments and calls the reference body;
+- at most one float kernel (`*_float`), the controller's per-tick path,
+  registered with drake_wbc.math.kernels.fast_kernel: C_m and grad_x C_m
+  from one SVD in plain floats, and alpha and its derivative.
 """
 
+import functools
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
+from scipy.linalg.lapack import dgesdd
 
+from drake_wbc.math.kernels import fast_kernel
+from drake_wbc.math.scalar_support import through_float_function
 from drake_wbc.math.validation import (
     as_matrix,
     as_scalar,
     as_vector,
+    checked_instance,
+    non_negative,
     ordered_limits,
     positive,
 )
@@ -56,6 +81,300 @@ home itself inside the band; a larger one (3e4) would let joints come
 within about 4% of a limit before the band is reached.
 """
 
+DEFAULT_DAMPING_THRESHOLD = 0.02
+"""Default threshold eps on the smallest singular value s_min of J_a, below
+which `capability_gradient` damps its solve. For the Elfin5, s_min is about
+0.2 d within d rad of the wrist singularity (q_5 = 0) and about 0.16 d near
+the stretched elbow (q_3 = 0): 0.02 damps roughly the last 0.1 rad."""
+
+DEFAULT_MAX_DAMPING = 0.02
+"""Default damping lambda_max of `capability_gradient` (at s_min = 0). Equal
+to eps, so that below eps s_min^2 + lambda^2 = eps^2: the gain
+s_min / eps^2 of the weakest direction falls linearly from 1/eps to 0,
+meeting the undamped gain 1/s_min continuously at s_min = eps."""
+
+
+# ----------------------------------------------------------------------------
+# Parameters
+# ----------------------------------------------------------------------------
+
+@dataclass
+class CapabilityBand:
+    """The limitation band C_m^l < C_m < C_m^u of eq. (transition).
+
+    One band serves every stage that looks at C_m: alpha of the robust
+    compensation (ArmCapability), the adaptive weighting factors of the
+    intuitive pHRI mode (WorkspaceAdapter) and the switch-off of the
+    null-space gain (MotionDistributor).
+
+    Attributes:
+        lower: C_m^l >= 0 (m^3, like C_m); alpha = 1 at and below it.
+        upper: C_m^u > C_m^l; alpha = 0 at and above it.
+
+    The defaults are the paper's 0.035 and 0.04 (fixed-point experiment);
+    see DEFAULT_JOINT_LIMIT_GAIN for what they mean on our arm.
+    """
+
+    lower: float = 0.035
+    upper: float = 0.04
+
+    def __post_init__(self):
+        lower = non_negative("lower", self.lower)
+        upper = as_scalar("upper", self.upper)
+        if not lower < upper:
+            raise ValueError(
+                f"lower = {lower!r} and upper = {upper!r} are not allowed: "
+                "the band's lower threshold C_m^l must be strictly below "
+                "its upper threshold C_m^u"
+            )
+
+
+def set_band(params):
+    """Checks `params.band` (a parameters dataclass's field), putting the
+    default CapabilityBand in place of None."""
+    params.band = checked_instance("band", params.band, CapabilityBand,
+                                   CapabilityBand)
+
+
+@dataclass
+class ArmCapabilityParameters:
+    """Parameters of the ArmCapability stage: C_m, grad_x C_m and alpha.
+
+    Attributes:
+        band: the limitation band of alpha, eq. (transition).
+        joint_limit_gain: k_j > 0 of the joint-limit penalization P_jnt.
+        gradient_damping: lambda_max >= 0 of `capability_gradient`.
+        gradient_damping_threshold: eps > 0 of the same.
+    """
+
+    band: CapabilityBand = field(default_factory=CapabilityBand)
+    joint_limit_gain: float = DEFAULT_JOINT_LIMIT_GAIN
+    gradient_damping: float = DEFAULT_MAX_DAMPING
+    gradient_damping_threshold: float = DEFAULT_DAMPING_THRESHOLD
+
+    def __post_init__(self):
+        set_band(self)
+        positive("joint_limit_gain", self.joint_limit_gain)
+        non_negative("gradient_damping", self.gradient_damping)
+        positive("gradient_damping_threshold",
+                 self.gradient_damping_threshold)
+
+
+# ----------------------------------------------------------------------------
+# Scalar-generic helpers of the reference bodies
+# ----------------------------------------------------------------------------
+
+def _zero_like(value):
+    """0 of the scalar type of `value` (a float, or AutoDiffXd 0 with zero
+    derivatives)."""
+    return value * 0.0
+
+
+def _expm1(x):
+    """e^x - 1, accurate for small |x|, for a float or AutoDiffXd x."""
+    if isinstance(x, AutoDiffXd):
+        return AutoDiffXd(math.expm1(x.value()),
+                          math.exp(x.value()) * x.derivatives())
+    return math.expm1(x)
+
+
+def _holds_autodiff(array):
+    array = np.asarray(array)
+    return array.dtype == object and any(
+        isinstance(v, AutoDiffXd) for v in array.flat)
+
+
+def _through_floats(count):
+    """Lets a float-only body (one that takes an SVD) take AutoDiffXd in its
+    first `count` arguments: their entries are stacked into one vector for
+    scalar_support.through_float_function, so that the value is the float
+    body's and the derivative comes from central differences of it."""
+
+    def decorate(body):
+        @functools.wraps(body)
+        def generic(*args):
+            arrays, others = args[:count], args[count:]
+            if not any(_holds_autodiff(a) for a in arrays):
+                return body(*args)
+            shapes = [np.shape(a) for a in arrays]
+            ends = np.cumsum([int(np.prod(s)) for s in shapes])[:-1]
+
+            def on_floats(x):
+                parts = [p.reshape(s) for p, s in zip(
+                    np.split(x, ends), shapes, strict=True)]
+                return np.asarray(body(*parts, *others), dtype=float)
+
+            stacked = np.array([
+                v if isinstance(v, AutoDiffXd) else AutoDiffXd(float(v))
+                for a in arrays for v in np.ravel(np.asarray(a, object))],
+                dtype=object)
+            result = through_float_function(on_floats, stacked)
+            return result[()] if np.ndim(result) == 0 else result
+
+        return generic
+
+    return decorate
+
+
+def _others_as_written(values):
+    """p_k = prod_{l != k} values_l, from its definition."""
+    values = np.asarray(values)
+    return np.array([np.prod(np.delete(values, k))
+                     for k in range(values.size)])
+
+
+def _cross(a, b):
+    """a x b along the first axis of (3, ...) arrays, for any scalar type
+    (np.cross is also slow for small arrays)."""
+    return np.array([a[1] * b[2] - a[2] * b[1],
+                     a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
+
+
+# ----------------------------------------------------------------------------
+# Reference bodies: scalar-generic, arguments not checked
+# ----------------------------------------------------------------------------
+
+@_through_floats(1)
+def _manipulability(J):
+    """m = sqrt(det(J_a J_a^T)) = prod_i s_i (Sec. IV-A): the product of the
+    singular values s_i of J_a, which stays accurate near a singularity
+    where det(J_a J_a^T) loses all its digits."""
+    return np.prod(np.linalg.svd(J, compute_uv=False))
+
+
+def _limit_factors(q, lower, upper):
+    """The factors f_i = (q_i - l_i)(u_i - q_i) / (u_i - l_i)^2 of P_jnt and
+    their slopes df_i/dq_i, with each joint clamped to its limits."""
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    q = np.clip(np.asarray(q), lower, upper)
+    span2 = (upper - lower) ** 2
+    return (q - lower) * (upper - q) / span2, (upper + lower - 2.0 * q) / span2
+
+
+def _joint_limit_penalty(q, lower, upper, k_j):
+    """P_jnt = 1 - exp(-k_j prod_i f_i) (Sec. IV-A, "penalization"), with
+    each joint clamped to its limits."""
+    factors, _ = _limit_factors(q, lower, upper)
+    return -_expm1(-k_j * np.prod(factors))
+
+
+def _joint_limit_penalty_gradient(q, lower, upper, k_j):
+    """dP_jnt/dq_i = k_j exp(-k_j F) f_i' prod_{j != i} f_j, F = prod f_j, at
+    the clamped configuration."""
+    factors, slopes = _limit_factors(q, lower, upper)
+    return (k_j * np.exp(-k_j * np.prod(factors))) * slopes * (
+        _others_as_written(factors))
+
+
+def _capability(J, q, lower, upper, k_j):
+    """C_m = m * P_jnt (Sec. IV-A, the equation before eq. (wbccm))."""
+    return _manipulability(J) * _joint_limit_penalty(q, lower, upper, k_j)
+
+
+def _jacobian_derivative(J):
+    """(n, 6, n) D with D[i] = dJ_a/dq_i (see `jacobian_derivative`)."""
+    Jv, Jw = J[:3].T, J[3:].T  # (n, 3): row j is column j of J_a
+    # [:, i, j] = Jw_i x Jv_j and Jw_i x Jw_j (vector first).
+    w_x_v = _cross(Jw.T[:, :, None], Jv.T[:, None, :])
+    w_x_w = _cross(Jw.T[:, :, None], Jw.T[:, None, :])
+    upper = np.triu(np.ones((J.shape[1],) * 2, dtype=bool))
+    dJv = np.where(upper, w_x_v, np.swapaxes(w_x_v, 1, 2))
+    dJw = np.where(upper, w_x_w, 0.0)
+    return np.concatenate([dJv, dJw], axis=0).transpose(1, 0, 2)
+
+
+@_through_floats(1)
+def _manipulability_joint_gradient(J):
+    """dm/dq_i = sum_k (prod_{l != k} s_l) u_k^T (dJ_a/dq_i) v_k (see
+    `manipulability_joint_gradient`)."""
+    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    W = (U * _others_as_written(s)) @ Vt  # m J_a^+T, without division
+    return np.einsum("rc,irc->i", W, _jacobian_derivative(J))
+
+
+def _capability_joint_gradient(J, q, lower, upper, k_j):
+    """dC_m/dq = P_jnt dm/dq + m dP_jnt/dq."""
+    return (_joint_limit_penalty(q, lower, upper, k_j)
+            * _manipulability_joint_gradient(J)
+            + _manipulability(J)
+            * _joint_limit_penalty_gradient(q, lower, upper, k_j))
+
+
+@_through_floats(2)
+def _capability_gradient(J, q, lower, upper, k_j, damping,
+                         damping_threshold):
+    """grad_x C_m = (J_a J_a^T + lambda^2 I)^-1 J_a dC_m/dq through the SVD
+    of J_a, lambda^2 = lambda_max^2 (1 - (s_min / eps)^2) below eps, else 0
+    (see `capability_gradient`)."""
+    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    lambda2 = (damping**2 * (1.0 - (s[-1] / damping_threshold) ** 2)
+               if s[-1] < damping_threshold else 0.0)
+    denominators = s * s + lambda2
+    gains = np.divide(s, denominators, out=np.zeros_like(s),
+                      where=denominators > 0.0)
+    return U @ (gains * (Vt @ _capability_joint_gradient(J, q, lower, upper,
+                                                         k_j)))
+
+
+def capability_terms_unchecked(J_a, q, lower, upper, k_j, damping,
+                               damping_threshold):
+    """C_m and grad_x C_m together (Sec. IV-A; eqs. (wbccm), (wb_error)):
+    the reference body of what the ArmCapability stage gives each tick.
+
+    The same values as `capability` and `capability_gradient`, for
+    arguments already checked (nothing is checked here): J_a (6, n) with
+    n >= 6, q, lower and upper (n,) (arrays or sequences) with
+    lower < upper, k_j > 0, damping >= 0 and damping_threshold > 0. J_a and
+    q may hold AutoDiffXd (see the module: the SVD goes through
+    scalar_support.through_float_function). The float kernel
+    `capability_terms_float` gives the same from one SVD.
+
+    Returns:
+        (C_m, g): C_m and g = grad_x C_m (6,).
+    """
+    return (_capability(J_a, q, lower, upper, k_j),
+            _capability_gradient(J_a, q, lower, upper, k_j, damping,
+                                 damping_threshold))
+
+
+def transition_unchecked(value, upper, lower):
+    """alpha(C_m, C_m^u, C_m^l) of eq. (transition), the reference body:
+
+        alpha = 1                                 for value <= lower,
+        alpha = 0.5 (1 + cos(pi x)),
+                x = (value - lower) / (upper - lower)  in between,
+        alpha = 0                                 for value >= upper.
+
+    Args:
+        value: a float or AutoDiffXd scalar (C_m, or d and phi for the
+            penalties of the local workspace, Sec. IV-C).
+        upper, lower: floats, lower < upper (not checked; `transition`
+            checks them).
+
+    Returns:
+        alpha in [0, 1], of the scalar type of `value`.
+    """
+    if value <= lower:
+        return _zero_like(value) + 1.0
+    if value >= upper:
+        return _zero_like(value)
+    return 0.5 * (1.0 + np.cos(np.pi * (value - lower) / (upper - lower)))
+
+
+def transition_derivative_unchecked(value, upper, lower):
+    """d alpha / d value of eq. (transition), the reference body:
+    -0.5 pi / (upper - lower) sin(pi x) inside the band, 0 outside, with x
+    as in `transition_unchecked` (the same arguments)."""
+    if value <= lower or value >= upper:
+        return _zero_like(value)
+    width = upper - lower
+    return -0.5 * np.pi / width * np.sin(np.pi * (value - lower) / width)
+
+
+# ----------------------------------------------------------------------------
+# The checked public functions
+# ----------------------------------------------------------------------------
 
 def _as_jacobian(J_a, rows=None, wide=True):
     """Returns J_a as a finite float matrix with `rows` rows (any number if
@@ -71,12 +390,284 @@ def _as_jacobian(J_a, rows=None, wide=True):
 
 
 def _as_limits(q, lower, upper, size=None):
-    """Returns q, lower, upper, checked float vectors of one size, as lists
-    of floats."""
+    """Returns q, lower, upper, checked float vectors of one size."""
     q = as_vector("q", q, size)
     lower, upper = ordered_limits("lower", lower, "upper", upper, q.size)
-    return q.tolist(), lower.tolist(), upper.tolist()
+    return q, lower, upper
 
+
+def manipulability(J_a):
+    """Yoshikawa's manipulability index m (Sec. IV-A, "manipulability
+    index"): m = sqrt(det(J_a J_a^T)) = prod_i s_i.
+
+    Computed as the product of the singular values s_i of J_a, which stays
+    accurate near a singularity where det(J_a J_a^T) loses all its digits.
+
+    Args:
+        J_a: (k, n) matrix with k <= n; for the arm the (6, n) geometric
+            Jacobian [v; w] of the tool point in T_a.
+
+    Returns:
+        m >= 0 as a float, in metres^3 for the arm's Jacobian (three rows
+        in m/rad); 0, to rounding, only at a singularity.
+    """
+    return float(_manipulability(_as_jacobian(J_a)))
+
+
+def joint_limit_penalty(q, lower, upper, k_j=DEFAULT_JOINT_LIMIT_GAIN):
+    """Joint-limit penalization P_jnt (Sec. IV-A, "penalization"):
+
+        P_jnt = 1 - exp(-k_j prod_i (q_i - l_i)(u_i - q_i) / (u_i - l_i)^2).
+
+    P_jnt is 0 when any joint is at a limit and largest, 1 - exp(-k_j 4^-n),
+    when every joint is mid-range (see `DEFAULT_JOINT_LIMIT_GAIN`). A joint
+    beyond a limit (a simulated joint can overshoot by a hair) is clamped to
+    that limit, so that P_jnt = 0 there rather than a meaningless value.
+
+    Args:
+        q: (n,) joint angles q_a, rad.
+        lower: (n,) lower joint limits q^l, rad.
+        upper: (n,) upper joint limits q^u, rad, each > its lower limit.
+        k_j: scaling factor k_j > 0, dimensionless.
+
+    Returns:
+        P_jnt in [0, 1), dimensionless, as a float.
+    """
+    q, lower, upper = _as_limits(q, lower, upper)
+    return float(_joint_limit_penalty(q, lower, upper, positive("k_j", k_j)))
+
+
+def capability(J_a, q, lower, upper, k_j=DEFAULT_JOINT_LIMIT_GAIN):
+    """Capability of movement C_m = m * P_jnt (Sec. IV-A, the equation
+    before eq. (wbccm)).
+
+    Args:
+        J_a: (6, n) geometric Jacobian [v; w] of the tool point in T_a at q.
+        q: (n,) joint angles q_a, rad.
+        lower, upper: (n,) joint limits, rad (see `joint_limit_penalty`).
+        k_j: scaling factor k_j > 0 of P_jnt.
+
+    Returns:
+        C_m >= 0 as a float, in the units of m (metres^3 for the arm).
+    """
+    J = _as_jacobian(J_a, rows=6)
+    q, lower, upper = _as_limits(q, lower, upper, J.shape[1])
+    return float(_capability(J, q, lower, upper, positive("k_j", k_j)))
+
+
+def jacobian_derivative(J_a):
+    """Partial derivatives dJ_a/dq_i of a revolute chain's geometric
+    Jacobian, from J_a alone.
+
+    Column j of J_a is [z_j x (p - p_j); z_j]: z_j the unit axis of joint
+    j, p_j a point on it, p the tool point, all in the fixed frame T_a.
+    Turning joint i moves the links after it rigidly about axis i: a vector r
+    on them changes as dr/dq_i = z_i x r, the tool point as dp/dq_i = Jv_i.
+    With J_j = [Jv_j; Jw_j]:
+
+    - i <= j: z_j and p - p_j ride on the moving links, and by the Jacobi
+      identity dJv_j/dq_i = z_i x Jv_j = Jw_i x Jv_j, dJw_j/dq_i =
+      Jw_i x Jw_j;
+    - i > j: z_j and p_j stay, only p moves: dJv_j/dq_i = Jw_j x Jv_i,
+      dJw_j/dq_i = 0.
+
+    Args:
+        J_a: (6, n) geometric Jacobian [v; w] of the tool point in the fixed
+            frame T_a, all joints revolute; m/rad and rad/rad.
+
+    Returns:
+        (n, 6, n) array D with D[i] = dJ_a/dq_i, per rad.
+    """
+    return _jacobian_derivative(_as_jacobian(J_a, rows=6, wide=False))
+
+
+def manipulability_joint_gradient(J_a):
+    """Gradient dm/dq of the manipulability index, analytic from J_a.
+
+    Derivation: m^2 = det(J J^T), so 2 m dm = m^2 tr((J J^T)^-1 d(J J^T))
+    = 2 m^2 tr((J J^T)^-1 J dJ^T), hence dm = m tr(J^+ dJ) with
+    J^+ = J^T (J J^T)^-1. With the thin SVD J = U diag(s) V^T,
+    m J^+ = V diag(m / s_k) U^T and m / s_k = prod_{l != k} s_l, so
+
+        dm/dq_i = sum_k (prod_{l != k} s_l) u_k^T (dJ/dq_i) v_k,
+
+    with dJ/dq_i from `jacobian_derivative`. This form has no division and
+    stays finite as m -> 0. Where m > 0 it is the exact gradient. At an
+    exact singularity m has no gradient: with one zero singular value m
+    behaves like |linear| and the value returned is one of its two
+    one-sided gradients, either of them an ascent direction out of the
+    singularity; with two or more zero singular values m vanishes to
+    second order and the exact gradient, 0, is returned.
+
+    Args:
+        J_a: (6, n) geometric Jacobian [v; w] of the tool point in T_a,
+            n >= 6, all joints revolute.
+
+    Returns:
+        (n,) array dm/dq, in units of m (metres^3) per rad.
+    """
+    return _manipulability_joint_gradient(_as_jacobian(J_a, rows=6))
+
+
+def joint_limit_penalty_gradient(q, lower, upper,
+                                 k_j=DEFAULT_JOINT_LIMIT_GAIN):
+    """Gradient dP_jnt/dq of the penalization of `joint_limit_penalty`.
+
+    With f_i = (q_i - l_i)(u_i - q_i) / (u_i - l_i)^2 and F = prod_i f_i:
+
+        dP_jnt/dq_i = k_j exp(-k_j F) (u_i + l_i - 2 q_i) / (u_i - l_i)^2
+                      * prod_{j != i} f_j,
+
+    the product of the other factors computed directly (not F / f_i), so
+    that it stays right with a joint at a limit (f_i = 0): there the
+    component of that joint points back into the range and the others are
+    0. A joint beyond a limit is clamped to it as in `joint_limit_penalty`,
+    and the gradient is the one at the clamped configuration.
+
+    Args:
+        q, lower, upper, k_j: as for `joint_limit_penalty`.
+
+    Returns:
+        (n,) array dP_jnt/dq, per rad.
+    """
+    q, lower, upper = _as_limits(q, lower, upper)
+    return _joint_limit_penalty_gradient(q, lower, upper,
+                                         positive("k_j", k_j))
+
+
+def capability_joint_gradient(J_a, q, lower, upper,
+                              k_j=DEFAULT_JOINT_LIMIT_GAIN):
+    """Gradient dC_m/dq = P_jnt dm/dq + m dP_jnt/dq of C_m = m * P_jnt.
+
+    See `manipulability_joint_gradient` for the value at an exact
+    singularity and `joint_limit_penalty_gradient` for joints at or beyond
+    a limit.
+
+    Args:
+        J_a: (6, n) geometric Jacobian [v; w] of the tool point in T_a at q,
+            n >= 6, all joints revolute.
+        q, lower, upper, k_j: as for `joint_limit_penalty`.
+
+    Returns:
+        (n,) array dC_m/dq, in units of C_m per rad.
+    """
+    J = _as_jacobian(J_a, rows=6)
+    q, lower, upper = _as_limits(q, lower, upper, J.shape[1])
+    return _capability_joint_gradient(J, q, lower, upper,
+                                      positive("k_j", k_j))
+
+
+def capability_gradient(J_a, q, lower, upper, k_j=DEFAULT_JOINT_LIMIT_GAIN,
+                        damping=DEFAULT_MAX_DAMPING,
+                        damping_threshold=DEFAULT_DAMPING_THRESHOLD):
+    """Gradient grad_x C_m of C_m w.r.t. the arm's Cartesian pose, as used
+    in eq. (wbccm) and eq. (wb_error).
+
+    Definition: the covector g such that dC_m/dt = g . V_a for every arm
+    twist V_a = [v_a; w_a] = J_a qdot (in T_a, at the tool point), i.e.
+    J_a^T g = dC_m/dq, so g = J_a^-T dC_m/dq for a square nonsingular J_a.
+    It is analytic, from J_a alone (see `capability_joint_gradient`); no
+    AutoDiff.
+
+    It is solved as g = (J_a J_a^T + lambda^2 I)^-1 J_a dC_m/dq, evaluated
+    through the SVD of J_a. lambda = 0 (the exact J_a^-T, or the
+    least-squares solution if n > 6) unless the smallest singular value
+    s_min is below the threshold eps, where
+    lambda^2 = lambda_max^2 (1 - (s_min / eps)^2) grows continuously from 0.
+    This damping is the only approximation. A zero singular value with
+    lambda = 0 gets gain 0 (pseudo-inverse).
+
+    Args:
+        J_a: (6, n) geometric Jacobian [v; w] of the tool point in T_a at q,
+            n >= 6, all joints revolute.
+        q, lower, upper, k_j: as for `joint_limit_penalty`.
+        damping: lambda_max >= 0, in the units of the singular values of
+            J_a; 0 turns damping off. Default `DEFAULT_MAX_DAMPING`.
+        damping_threshold: eps > 0. Default `DEFAULT_DAMPING_THRESHOLD`.
+
+    Returns:
+        (6,) array g = [g_v; g_w]: C_m per m along v_a, C_m per rad along
+        w_a.
+    """
+    J = _as_jacobian(J_a, rows=6)
+    q, lower, upper = _as_limits(q, lower, upper, J.shape[1])
+    return _capability_gradient(
+        J, q, lower, upper, positive("k_j", k_j),
+        non_negative("damping", damping),
+        positive("damping_threshold", damping_threshold))
+
+
+def _as_values(value):
+    """Returns (value as float or float array, whether it was a scalar)."""
+    try:
+        shape = np.shape(value)
+    except ValueError:
+        raise ValueError(
+            f"value = {value!r} is not allowed: must be a number or an "
+            "array of numbers"
+        ) from None
+    if shape == ():
+        return as_scalar("value", value), True
+    return as_vector("value", np.ravel(value)).reshape(shape), False
+
+
+def _elementwise(body, value, upper, lower):
+    """body(value, upper, lower) of checked arguments, as a float for a
+    scalar `value` and elementwise for an array."""
+    values, scalar = _as_values(value)
+    lower, upper = ordered_limits("lower", lower, "upper", upper, 1)
+    lower, upper = float(lower[0]), float(upper[0])
+    if scalar:
+        return float(body(values, upper, lower))
+    return np.array([body(v, upper, lower) for v in values.ravel()],
+                    dtype=float).reshape(values.shape)
+
+
+def transition(value, upper, lower):
+    """Transition function alpha(C_m, C_m^u, C_m^l) of eq. (transition):
+
+        alpha = 0                                   for value >= upper,
+        alpha = 0.5 (1 + cos(pi x)),
+                x = (value - lower) / (upper - lower)  in between,
+        alpha = 1                                   for value <= lower.
+
+    alpha is continuous with a continuous derivative (0 at both band edges)
+    and non-increasing in `value`. The checked form of
+    `transition_unchecked` (which also takes AutoDiffXd).
+
+    Args:
+        value: C_m, a number or an array of numbers (elementwise).
+        upper: upper threshold C_m^u.
+        lower: lower threshold C_m^l, < upper.
+
+    Returns:
+        alpha in [0, 1], dimensionless: a float for a scalar `value`, else
+        an array of the shape of `value`.
+    """
+    return _elementwise(transition_unchecked, value, upper, lower)
+
+
+def transition_derivative(value, upper, lower):
+    """Derivative d alpha / d value of eq. (transition):
+
+        -0.5 pi / (upper - lower) * sin(pi x)  inside the band, else 0,
+
+    with x as in `transition`. It vanishes at both band edges, so alpha is
+    C^1 across them. The checked form of `transition_derivative_unchecked`.
+
+    Args:
+        value, upper, lower: as for `transition`.
+
+    Returns:
+        d alpha / d value <= 0, in 1 / (units of value): a float for a
+        scalar `value`, else an array of the shape of `value`.
+    """
+    return _elementwise(transition_derivative_unchecked, value, upper, lower)
+
+
+# ----------------------------------------------------------------------------
+# The float kernels of the tick
+# ----------------------------------------------------------------------------
 
 def _products_of_others(values):
     """Returns p (a list) with p_k = prod_{l != k} values_l, computed without
@@ -101,10 +692,9 @@ def _products_of_others(values):
 
 
 def _penalty_and_gradient(q, lower, upper, k_j):
-    """P_jnt and dP_jnt/dq (a list) for checked inputs (see the public
-    functions): q, lower and upper lists of floats, k_j a float. Plain
-    floats: a handful of them, for which numpy calls cost more than the
-    arithmetic."""
+    """P_jnt and dP_jnt/dq (a list) in plain floats: q, lower and upper
+    sequences of floats (a handful of them, for which numpy calls cost more
+    than the arithmetic), k_j a float."""
     factors, slopes = [], []
     for q_i, l_i, u_i in zip(q, lower, upper, strict=True):
         if q_i < l_i:
@@ -122,139 +712,158 @@ def _penalty_and_gradient(q, lower, upper, k_j):
     return penalty, gradient
 
 
-def manipulability(J_a):
-    """Yoshikawa's manipulability index m (Sec. III-A, "manipulability
-    index"): m = sqrt(det(J_a J_a^T)) = prod_i s_i.
+def _svd(J):
+    """The thin SVD (U, s, Vt) of J (rows <= columns), by LAPACK's dgesdd
+    directly (as np.linalg.svd, without its overhead)."""
+    U, s, Vt, info = dgesdd(J, compute_uv=1, full_matrices=0)
+    if info != 0:
+        return np.linalg.svd(J, full_matrices=False)
+    return U, s, Vt
 
-    Computed as the product of the singular values s_i of J_a, which stays
-    accurate near a singularity where det(J_a J_a^T) loses all its digits.
 
-    Args:
-        J_a: (k, n) matrix with k <= n; for the arm the (6, n) geometric
-            Jacobian [v; w] of the tool point in T_a.
+def _manipulability_gradient(J, U, s, Vt):
+    """dm/dq (a list) from J and its thin SVD J = U diag(s) Vt, s a list.
+
+    With W = U diag(m / s_k) Vt (6, n), dm/dq_i = sum_j W_j . dJ_j/dq_i
+    over the columns j, and by the rules of `jacobian_derivative` and the
+    triple product a . (b x c) = b . (c x a) = c . (a x b):
+
+        dm/dq_i = Jw_i . a_i + Jv_i . b_i,
+        a_i = sum_{j >= i} (Jv_j x Wv_j + Jw_j x Ww_j),
+        b_i = sum_{j < i} (Wv_j x Jw_j),
+
+    O(n) with running sums, without forming the (n, 6, n) derivative; in
+    plain floats, which for a few columns beat any sequence of numpy calls.
+    """
+    W = (U * _products_of_others(s)) @ Vt  # m / s_k, with no division
+    J0, J1, J2, J3, J4, J5 = J.tolist()
+    W0, W1, W2, W3, W4, W5 = W.tolist()
+    n = len(J0)
+    gradient = [0.0] * n
+    ax = ay = az = 0.0
+    for j in range(n - 1, -1, -1):  # a_j, summed from the last column
+        vx, vy, vz, wx, wy, wz = J0[j], J1[j], J2[j], J3[j], J4[j], J5[j]
+        Vx, Vy, Vz, Wx, Wy, Wz = W0[j], W1[j], W2[j], W3[j], W4[j], W5[j]
+        ax += (vy * Vz - vz * Vy) + (wy * Wz - wz * Wy)
+        ay += (vz * Vx - vx * Vz) + (wz * Wx - wx * Wz)
+        az += (vx * Vy - vy * Vx) + (wx * Wy - wy * Wx)
+        gradient[j] = (wx, wy, wz, ax, ay, az)
+    bx = by = bz = 0.0
+    for i in range(n):  # b_i, summed from the first column
+        wx, wy, wz, ax, ay, az = gradient[i]
+        vx, vy, vz = J0[i], J1[i], J2[i]
+        gradient[i] = ((wx * ax + vx * bx) + (wy * ay + vy * by)
+                       + (wz * az + vz * bz))
+        Vx, Vy, Vz = W0[i], W1[i], W2[i]
+        bx += Vy * wz - Vz * wy
+        by += Vz * wx - Vx * wz
+        bz += Vx * wy - Vy * wx
+    return gradient
+
+
+def _capability_terms_sample(rng):
+    """Random arguments of `capability_terms_unchecked`: J_a from chosen
+    singular values (well conditioned, near-singular and singular, the
+    damping on and off), n = 6 or 7, joints inside their range, at a
+    limit, beyond one, two at limits; as the stage passes them (J_a an
+    array, q and the limits lists)."""
+    n = 6 if rng.uniform() < 0.75 else 7
+    U, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+    V, _ = np.linalg.qr(rng.normal(size=(n, n)))
+    s = np.sort(rng.uniform(0.05, 1.5, 6))[::-1]
+    eps = rng.uniform(0.01, 0.2)
+    damping = 0.0 if rng.uniform() < 0.2 else rng.uniform(0.005, 0.05)
+    kind = rng.integers(4)
+    if damping > 0.0 and kind == 1:
+        s[-1] = rng.uniform(0.0, eps)  # near a singularity: damped
+    elif damping > 0.0 and kind == 2:
+        s[-1] = 0.0  # at a singularity
+        s[-2] *= 0.0 if rng.uniform() < 0.3 else 1.0  # or two
+    J = (U * s) @ V[:6]
+    lower = rng.uniform(-3.0, -0.5, n)
+    upper = rng.uniform(0.5, 3.0, n)
+    q = rng.uniform(lower + 0.05, upper - 0.05)
+    j, k = rng.choice(n, size=2, replace=False)
+    limits = rng.integers(4)
+    if limits == 1:
+        q[j] = lower[j] if rng.uniform() < 0.5 else upper[j]
+    elif limits == 2:
+        q[j] = lower[j] - 0.02 if rng.uniform() < 0.5 else upper[j] + 0.02
+    elif limits == 3:
+        q[j], q[k] = lower[j], upper[k]
+    k_j = rng.uniform(5e3, 3e4) * 4.0 ** (n - 6)
+    return (J, q.tolist(), lower.tolist(), upper.tolist(), k_j, damping,
+            eps)
+
+
+@fast_kernel(capability_terms_unchecked, sample=_capability_terms_sample)
+def capability_terms_float(J_a, q, lower, upper, k_j, damping,
+                           damping_threshold):
+    """`capability_terms_unchecked` for floats, from one SVD of J_a (by
+    LAPACK's dgesdd) and the gradients in plain floats: the per-tick path
+    of the ArmCapability stage. Lists of floats for q, lower and upper are
+    the fastest.
 
     Returns:
-        m >= 0 as a float, in metres^3 for the arm's Jacobian (three rows
-        in m/rad); 0, to rounding, only at a singularity.
+        (C_m, g): C_m as a float and g = grad_x C_m (6,).
     """
-    J = _as_jacobian(J_a)
-    return float(np.prod(np.linalg.svd(J, compute_uv=False)))
+    U, s, Vt = _svd(J_a)
+    s = s.tolist()
+    m = math.prod(s)
+    penalty, penalty_gradient = _penalty_and_gradient(q, lower, upper, k_j)
+    joint_gradient = [penalty * dm + m * dp for dm, dp in zip(
+        _manipulability_gradient(J_a, U, s, Vt), penalty_gradient,
+        strict=True)]
+    # g = U diag(s_k / (s_k^2 + lambda^2)) Vt dC_m/dq (0 for a zero
+    # denominator).
+    s_min = s[-1]
+    lambda2 = (damping**2 * (1.0 - (s_min / damping_threshold) ** 2)
+               if s_min < damping_threshold else 0.0)
+    gains = []
+    for s_k in s:
+        denominator = s_k * s_k + lambda2
+        gains.append(s_k / denominator if denominator > 0.0 else 0.0)
+    return float(m * penalty), U @ (np.array(gains)
+                                    * (Vt @ np.array(joint_gradient)))
 
 
-def joint_limit_penalty(q, lower, upper, k_j=DEFAULT_JOINT_LIMIT_GAIN):
-    """Joint-limit penalization P_jnt (Sec. III-A, "penalization"):
-
-        P_jnt = 1 - exp(-k_j prod_i (q_i - l_i)(u_i - q_i) / (u_i - l_i)^2).
-
-    P_jnt is 0 when any joint is at a limit and largest, 1 - exp(-k_j 4^-n),
-    when every joint is mid-range (see `DEFAULT_JOINT_LIMIT_GAIN`). A joint
-    beyond a limit (a simulated joint can overshoot by a hair) is clamped to
-    that limit, so that P_jnt = 0 there rather than a meaningless value.
-
-    Args:
-        q: (n,) joint angles q_a, rad.
-        lower: (n,) lower joint limits q^l, rad.
-        upper: (n,) upper joint limits q^u, rad, each > its lower limit.
-        k_j: scaling factor k_j > 0, dimensionless.
-
-    Returns:
-        P_jnt in [0, 1), dimensionless, as a float.
-    """
-    q, lower, upper = _as_limits(q, lower, upper)
-    k_j = positive("k_j", k_j)
-    return _penalty_and_gradient(q, lower, upper, k_j)[0]
+def _transition_sample(rng):
+    """(value, upper, lower): a band of any width at any place (C_m's, or a
+    workspace's d and phi), the value inside it, on either edge or beyond
+    either."""
+    lower = rng.uniform(0.0, 1.0) if rng.uniform() < 0.8 else 0.0
+    upper = lower + 10.0 ** rng.uniform(-4.0, 0.0)
+    kind = rng.integers(5)
+    if kind == 0:
+        value = lower
+    elif kind == 1:
+        value = upper
+    elif kind == 2:
+        value = lower - rng.uniform(0.0, 1.0)
+    elif kind == 3:
+        value = upper + rng.uniform(0.0, 1.0)
+    else:
+        value = rng.uniform(lower, upper)
+    return value, upper, lower
 
 
-def capability(J_a, q, lower, upper, k_j=DEFAULT_JOINT_LIMIT_GAIN):
-    """Capability of movement C_m = m * P_jnt (Sec. III-A, the equation
-    before eq. (wbccm)).
-
-    Args:
-        J_a: (6, n) geometric Jacobian [v; w] of the tool point in T_a at q.
-        q: (n,) joint angles q_a, rad.
-        lower, upper: (n,) joint limits, rad (see `joint_limit_penalty`).
-        k_j: scaling factor k_j > 0 of P_jnt.
-
-    Returns:
-        C_m >= 0 as a float, in the units of m (metres^3 for the arm).
-    """
-    J = _as_jacobian(J_a, rows=6)
-    q, lower, upper = _as_limits(q, lower, upper, J.shape[1])
-    k_j = positive("k_j", k_j)
-    penalty = _penalty_and_gradient(q, lower, upper, k_j)[0]
-    return float(np.prod(np.linalg.svd(J, compute_uv=False)) * penalty)
+@fast_kernel(transition_unchecked, sample=_transition_sample)
+def transition_float(value, upper, lower):
+    """`transition_unchecked` for a float value, in plain floats: the
+    per-tick path of the stages that read alpha."""
+    if value <= lower:
+        return 1.0
+    if value >= upper:
+        return 0.0
+    return 0.5 * (1.0 + math.cos(math.pi * (value - lower) / (upper - lower)))
 
 
-def _as_values(value):
-    """Returns (value as float or float array, whether it was a scalar)."""
-    try:
-        shape = np.shape(value)
-    except ValueError:
-        raise ValueError(
-            f"value = {value!r} is not allowed: must be a number or an "
-            "array of numbers"
-        ) from None
-    if shape == ():
-        return as_scalar("value", value), True
-    return as_vector("value", np.ravel(value)).reshape(shape), False
-
-
-def _transition_band(value, upper, lower):
-    """Checked value, the position x of value in the band and its width."""
-    value, scalar = _as_values(value)
-    lower, upper = ordered_limits("lower", lower, "upper", upper, 1)
-    width = upper[0] - lower[0]
-    return (value - lower[0]) / width, width, scalar
-
-
-def transition(value, upper, lower):
-    """Transition function alpha(C_m, C_m^u, C_m^l) of eq. (transition):
-
-        alpha = 0                                   for value >= upper,
-        alpha = 0.5 (1 + cos(pi x)),
-                x = (value - lower) / (upper - lower)  in between,
-        alpha = 1                                   for value <= lower.
-
-    alpha is continuous with a continuous derivative (0 at both band edges)
-    and non-increasing in `value`.
-
-    Args:
-        value: C_m, a number or an array of numbers (elementwise).
-        upper: upper threshold C_m^u.
-        lower: lower threshold C_m^l, < upper.
-
-    Returns:
-        alpha in [0, 1], dimensionless: a float for a scalar `value`, else
-        an array of the shape of `value`.
-    """
-    x, _, scalar = _transition_band(value, upper, lower)
-    alpha = 0.5 * (1.0 + np.cos(np.pi * np.clip(x, 0.0, 1.0)))
-    return float(alpha) if scalar else alpha
-
-
-def transition_derivative(value, upper, lower):
-    """Derivative d alpha / d value of eq. (transition):
-
-        -0.5 pi / (upper - lower) * sin(pi x)  inside the band, else 0,
-
-    with x as in `transition`. It vanishes at both band edges, so alpha is
-    C^1 across them.
-
-    Args:
-        value, upper, lower: as for `transition`.
-
-    Returns:
-        d alpha / d value <= 0, in 1 / (units of value): a float for a
-        scalar `value`, else an array of the shape of `value`.
-    """
-    x, width, scalar = _transition_band(value, upper, lower)
-    inside = (x > 0.0) & (x < 1.0)
-    slope = np.where(inside, -0.5 * np.pi / width * np.sin(np.pi * x), 0.0)
-    return float(slope) if scalar else slope
-
-
-def transition_unchecked(value, upper, lower):
-    """alpha of eq. (transition) (see `transition`) for a float value and
-    thresholds already checked (lower < upper); a float."""
-    x = min(max((value - lower) / (upper - lower), 0.0), 1.0)
-    return 0.5 * (1.0 + math.cos(math.pi * x))
+@fast_kernel(transition_derivative_unchecked, sample=_transition_sample)
+def transition_derivative_float(value, upper, lower):
+    """`transition_derivative_unchecked` for a float value, in plain
+    floats."""
+    if value <= lower or value >= upper:
+        return 0.0
+    width = upper - lower
+    return -0.5 * math.pi / width * math.sin(math.pi * (value - lower)
+                                              / width)

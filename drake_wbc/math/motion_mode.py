@@ -11,7 +11,7 @@ motion mode, Table (T:motion-mode):
 
 `fixed_weighting_factors` gives the factors of the three fixed modes; those
 of the intuitive pHRI mode adapt to the arm's configuration
-(drake_wbc.math.adaptive_weighting.local_workspace_state).
+(drake_wbc.math.workspace.local_workspace_state).
 """
 
 import enum

@@ -1,18 +1,32 @@
-"""The local workspace of intuitive pHRI and its penalties (paper Sec. IV-C,
-"Local Workspace").
+"""The local workspace of intuitive pHRI, its penalties, the adaptive
+weighting factors and the deactivation strategy (paper Sec. IV-C).
 
 In the intuitive pHRI mode the arm alone follows the person's guidance while
 the end effector stays in a local workspace in front of the arm, and the
-base takes over as it leaves it. The workspace is bounded by the extent d
-and the deflection angle phi of the end effector w.r.t. the arm's base.
-The capability of movement C_m is penalized as d crosses [d^l, d^u] and phi
-crosses [phi^l, phi^u], with the transition alpha of eq. (transition):
+base takes over as it leaves it: the weighting factors of eq.
+(weight-factors) follow the arm's configuration, sigma_xy,phi =
+f_xy,phi(q_a) (Table (T:motion-mode)). The workspace is bounded by the
+extent d and the deflection angle phi of the end effector w.r.t. the arm's
+base ("Local Workspace"). The capability of movement C_m is penalized as d
+crosses [d^l, d^u] and phi crosses [phi^l, phi^u], with the transition
+alpha of eq. (transition) (drake_wbc.math.capability):
 
     P_d = alpha(d, d^u, d^l),  P_phi = alpha(phi, phi^u, phi^l),
     C_m^d = C_m P_d P_phi,     C_m^phi = C_m P_phi,
+    f_xy = 1 - alpha(C_m^d, C_m^u, C_m^l),
+    f_phi = 1 - alpha(C_m^phi, C_m^u, C_m^l),
 
-from which the weighting factors of the intuitive pHRI mode follow
-(drake_wbc.math.adaptive_weighting).
+so f = 1 inside the workspace (with C_m above C_m^u), 0 outside it (or with
+C_m below C_m^l), and in between across the boundaries. f falls from 1 to 0
+where C_m P_d (or C_m P_phi) crosses [C_m^l, C_m^u], a slice of
+[d^l, d^u] (or [phi^l, phi^u]) that is the narrower the larger C_m is: at
+C_m = 0.06, d from 0.7696 to 0.7723 m and phi from 31.96 to 32.23 deg with
+the paper's values, a steep ramp (still C^1). The deactivation strategy
+("Deactivation Strategy") then gives the motion back to the arm when it
+leads back:
+
+    sigma = 1    if grad_x C_m^(d,phi) . V_ee > 0  or  d_dot (phi_dot) < 0,
+    sigma = f    otherwise
 
 Definitions used here (the paper names d and phi but does not define them;
 p = [x, y, z] is the end effector's position in the arm's base frame T_a):
@@ -37,24 +51,43 @@ p = [x, y, z] is the end effector's position in the arm's base frame T_a):
   phi has a gradient; 0 is used for both. phi has a kink at y = 0, where
   P_phi is flat (phi = 0 < phi^l for x > 0) or 0 (phi = pi), so C_m^d and
   C_m^phi stay differentiable there.
+- d_dot and phi_dot are the rates that d and phi would have if the arm
+  alone carried out the commanded twist V_ee: d_dot = grad d . v, phi_dot
+  = grad phi . v with v the linear part of R_ba^T V_ee. phi_dot < 0 means
+  moving back towards the forward axis (the magnitude decreasing), from
+  either side. The same twist enters the test grad_x C_m^(d,phi) . V_ee.
 
 For our robot, home puts the tool centre point at d = 0.736 m and phi = 0
 (the arm base is 0.2 m ahead of the base's centre), just inside the paper's
 d^l = 0.75 m: the paper's limits on our tool make the local workspace about
 as deep as the home reach.
 
-Every function here takes float values or AutoDiffXd scalars (numpy object
-arrays) alike: only elementwise numpy, comparisons and Python branches, no
-conversion to float, so the Drake systems over them can be converted to
-AutoDiffXd. Parameters are plain floats, checked.
+As in drake_wbc.math.capability: the reference bodies are scalar-generic
+(float values or AutoDiffXd scalars in numpy object arrays: only
+elementwise numpy, comparisons and Python branches) and unchecked, private
+but for the tick's `adaptive_weighting_factors_unchecked`; the public
+functions of plain names check their arguments and call them;
+`adaptive_weighting_factors_float` is the float kernel of the tick.
 """
 
+import math
 import numbers
-from dataclasses import dataclass
+import operator
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
 
+from drake_wbc.math.capability import (
+    CapabilityBand,
+    set_band,
+    transition_derivative_float,
+    transition_derivative_unchecked,
+    transition_float,
+    transition_unchecked,
+)
+from drake_wbc.math.kernels import fast_kernel
+from drake_wbc.math.motion_mode import MotionMode, fixed_weighting_factors
 from drake_wbc.math.validation import (
     as_scalar,
     as_vector,
@@ -68,6 +101,11 @@ AXIS_TOLERANCE = 1e-9
 """Horizontal distance (m) from the arm base's z axis below which the end
 effector counts as on the axis: phi = 0 and no gradient of d or phi."""
 
+DEACTIVATION_TOLERANCE = 1e-9
+"""The deactivation's tests count only beyond this cosine between the
+commanded motion and the gradient (or the direction of growing d or phi):
+a guard against rounding, not a dead band one could feel."""
+
 
 def _ordered(lower_name, lower, upper_name, upper):
     """Checks that lower < upper (both finite) and returns them."""
@@ -80,6 +118,10 @@ def _ordered(lower_name, lower, upper_name, upper):
         )
     return lower, upper
 
+
+# ----------------------------------------------------------------------------
+# Parameters
+# ----------------------------------------------------------------------------
 
 @dataclass
 class LocalWorkspace:
@@ -111,6 +153,267 @@ class LocalWorkspace:
                         0.0, np.pi)
 
 
+@dataclass
+class WorkspaceAdapterParameters:
+    """Parameters of the WorkspaceAdapter stage: the weighting factors of a
+    motion mode (Table (T:motion-mode)).
+
+    Attributes:
+        mode: a MotionMode or its name, 'locomotion', 'manipulation',
+            'loco-manipulation' or 'intuitive-phri' (Table T:motion-mode);
+            stored as the MotionMode (a str enum, so that YAML gives the
+            name).
+        sigma_xy, sigma_phi: the fixed weighting factors of the
+            loco-manipulation mode, in (0, 1) there (checked in [0, 1] in
+            the other modes, which do not use them). The default 0.5 is the
+            paper's trajectory-tracking experiment.
+        workspace: the local workspace of the intuitive pHRI mode; the
+            paper's d^l = 0.75, d^u = 0.8 m, phi^l = 30, phi^u = 35 deg.
+        band: C_m^l, C_m^u of f_xy and f_phi (intuitive pHRI).
+    """
+
+    mode: str = MotionMode.LOCO_MANIPULATION
+    sigma_xy: float = 0.5
+    sigma_phi: float = 0.5
+    workspace: LocalWorkspace = field(default_factory=LocalWorkspace)
+    band: CapabilityBand = field(default_factory=CapabilityBand)
+
+    def __post_init__(self):
+        self.mode = MotionMode.parse(self.mode)
+        in_closed_range("sigma_xy", self.sigma_xy, 0.0, 1.0)
+        in_closed_range("sigma_phi", self.sigma_phi, 0.0, 1.0)
+        self.workspace = checked_instance(
+            "workspace", self.workspace, LocalWorkspace, LocalWorkspace)
+        set_band(self)
+        if self.mode is MotionMode.LOCO_MANIPULATION:
+            fixed_weighting_factors(self.mode, self.sigma_xy, self.sigma_phi)
+
+
+class AdaptiveWorkspace(NamedTuple):
+    """The constants of the intuitive pHRI mode, as plain floats (see
+    `AdaptiveWorkspace.of`).
+
+    Attributes:
+        capability_upper, capability_lower: C_m^u > C_m^l.
+        extent: (d^l, d^u) in m.
+        deflection: (phi^l, phi^u) in rad.
+        R_ab_rows: ^aR_b = R_ba^T as three rows of three floats.
+        R_ba: (3, 3) ^bR_a.
+        origin: (3,) origin of T_a in T_b (m).
+    """
+
+    capability_upper: float
+    capability_lower: float
+    extent: tuple
+    deflection: tuple
+    R_ab_rows: tuple
+    R_ba: np.ndarray
+    origin: np.ndarray
+
+    @classmethod
+    def of(cls, capability_upper, capability_lower, workspace, R_ba,
+           arm_base_in_base):
+        """The constants from parameters that were checked where they
+        entered, nothing checked again: the band C_m^u > C_m^l (a
+        CapabilityBand's), a LocalWorkspace, the rotation ^bR_a (3, 3) and
+        the origin of T_a in T_b (3,) (the arm's mounting)."""
+        R = np.asarray(R_ba, dtype=float)
+        return cls(
+            capability_upper=float(capability_upper),
+            capability_lower=float(capability_lower),
+            extent=(float(workspace.extent_lower),
+                    float(workspace.extent_upper)),
+            deflection=(float(workspace.deflection_lower),
+                        float(workspace.deflection_upper)),
+            R_ab_rows=tuple(tuple(row) for row in R.T.tolist()),
+            R_ba=R,
+            origin=np.asarray(arm_base_in_base, dtype=float),
+        )
+
+
+# ----------------------------------------------------------------------------
+# Reference bodies: scalar-generic, arguments not checked
+# ----------------------------------------------------------------------------
+
+def _zero_like(value):
+    """0 of the scalar type of `value` (a float, or AutoDiffXd 0 with zero
+    derivatives)."""
+    return value * 0.0
+
+
+def _horizontal(p):
+    x, y = p[0], p[1]
+    return x, y, x * x + y * y
+
+
+def _on_axis(d_squared):
+    return d_squared <= AXIS_TOLERANCE**2
+
+
+def _extent(p):
+    _, _, d_squared = _horizontal(p)
+    if d_squared == 0.0:
+        return d_squared  # sqrt has no derivative at 0; d^2 has 0 there
+    return np.sqrt(d_squared)
+
+
+def _deflection(p):
+    x, y, d_squared = _horizontal(p)
+    if _on_axis(d_squared):
+        return _zero_like(x)
+    azimuth = np.arctan2(y, x)
+    return -azimuth if azimuth < 0.0 else azimuth
+
+
+def _extent_gradient(p):
+    x, y, d_squared = _horizontal(p)
+    zero = _zero_like(x)
+    if _on_axis(d_squared):
+        return np.array([zero] * 6)
+    d = np.sqrt(d_squared)
+    return np.array([x / d, y / d] + [zero] * 4)
+
+
+def _deflection_gradient(p):
+    x, y, d_squared = _horizontal(p)
+    zero = _zero_like(x)
+    if _on_axis(d_squared) or y == 0.0:
+        return np.array([zero] * 6)
+    sign = 1.0 if y > 0.0 else -1.0
+    return np.array([-sign * y / d_squared, sign * x / d_squared]
+                    + [zero] * 4)
+
+
+def _penalties(p, extent, deflection):
+    """(P_d, P_phi) = (alpha(d, d^u, d^l), alpha(phi, phi^u, phi^l)), the
+    bands (d^l, d^u) and (phi^l, phi^u)."""
+    return (transition_unchecked(_extent(p), extent[1], extent[0]),
+            transition_unchecked(_deflection(p), deflection[1],
+                                 deflection[0]))
+
+
+def _penalized(C_m, g, p, extent, deflection):
+    """PenalizedCapability (see `penalized_capability`)."""
+    d, phi = _extent(p), _deflection(p)
+    P_d = transition_unchecked(d, extent[1], extent[0])
+    P_phi = transition_unchecked(phi, deflection[1], deflection[0])
+    dP_d = transition_derivative_unchecked(d, extent[1], extent[0])
+    dP_phi = transition_derivative_unchecked(phi, deflection[1],
+                                             deflection[0])
+    gradient_phi = P_phi * g + (C_m * dP_phi) * _deflection_gradient(p)
+    gradient_d = P_d * gradient_phi + (C_m * P_phi * dP_d) * (
+        _extent_gradient(p))
+    return PenalizedCapability(C_m * P_d * P_phi, C_m * P_phi,
+                               gradient_d, gradient_phi)
+
+
+def _adaptive_factor(C_m_penalized, upper, lower):
+    """f = 1 - alpha(C_m^(d,phi), C_m^u, C_m^l) (Sec. IV-C): f_xy from
+    C_m^d, f_phi from C_m^phi."""
+    return 1.0 - transition_unchecked(C_m_penalized, upper, lower)
+
+
+def _leads(covector, V, sign):
+    """True if covector . V has the given sign, beyond the roundoff guard:
+    (c . V)^2 > tol^2 |c|^2 |V|^2 (a cosine above DEACTIVATION_TOLERANCE),
+    squared so that no square root of an AutoDiffXd 0 is taken."""
+    product = np.dot(covector, V)
+    if not sign * product > 0.0:
+        return False
+    scale = np.dot(covector, covector) * np.dot(V, V)
+    return product * product > DEACTIVATION_TOLERANCE**2 * scale
+
+
+def _deactivated(factor, gradient, V_a, direction):
+    """The deactivation strategy (see `deactivated`)."""
+    if _leads(gradient, V_a, 1.0) or _leads(direction[:3], V_a[:3], -1.0):
+        return _zero_like(factor) + 1.0
+    return factor
+
+
+class PenalizedCapability(NamedTuple):
+    """C_m penalized by the local workspace, and its Cartesian gradients
+    (6,) in T_a, ordered like V_a (see penalized_capability)."""
+
+    C_m_d: object
+    C_m_phi: object
+    gradient_d: np.ndarray
+    gradient_phi: np.ndarray
+
+
+class LocalWorkspaceState(NamedTuple):
+    """Every quantity of the intuitive pHRI mode at one instant (see
+    local_workspace_state); twists and gradients (6,) in T_a."""
+
+    d: object
+    phi: object
+    d_rate: object
+    phi_rate: object
+    P_d: object
+    P_phi: object
+    capability: PenalizedCapability
+    f_xy: object
+    f_phi: object
+    sigma_xy: object
+    sigma_phi: object
+
+
+def _state(p_ee_in_base, V_ee, C_m, grad_C_m, constants):
+    """LocalWorkspaceState (see `local_workspace_state`)."""
+    c = constants
+    R = c.R_ba
+    p = R.T @ (p_ee_in_base - c.origin)
+    V = np.asarray(V_ee)
+    V_a = np.concatenate([R.T @ V[:3], R.T @ V[3:]])
+    grad_d = _extent_gradient(p)
+    grad_phi = _deflection_gradient(p)
+    P_d, P_phi = _penalties(p, c.extent, c.deflection)
+    penalized = _penalized(C_m, np.asarray(grad_C_m), p, c.extent,
+                           c.deflection)
+    upper, lower = c.capability_upper, c.capability_lower
+    f_xy = _adaptive_factor(penalized.C_m_d, upper, lower)
+    f_phi = _adaptive_factor(penalized.C_m_phi, upper, lower)
+    return LocalWorkspaceState(
+        d=_extent(p),
+        phi=_deflection(p),
+        d_rate=np.dot(grad_d, V_a),
+        phi_rate=np.dot(grad_phi, V_a),
+        P_d=P_d,
+        P_phi=P_phi,
+        capability=penalized,
+        f_xy=f_xy,
+        f_phi=f_phi,
+        sigma_xy=_deactivated(f_xy, penalized.gradient_d, V_a, grad_d),
+        sigma_phi=_deactivated(f_phi, penalized.gradient_phi, V_a,
+                               grad_phi),
+    )
+
+
+def adaptive_weighting_factors_unchecked(p_ee_in_base, V_ee, C_m, grad_C_m,
+                                         constants):
+    """(sigma_xy, sigma_phi) of the intuitive pHRI mode (Sec. IV-C: f_xy,
+    f_phi after the deactivation strategy), the reference body of what
+    the WorkspaceAdapter stage gives each tick: `local_workspace_state`'s
+    factors, for any scalar type, with nothing checked.
+
+    Args:
+        p_ee_in_base: (3,) end-effector position in T_b (m).
+        V_ee: (6,) commanded end-effector twist [v; w] in T_b.
+        C_m: capability of movement, a scalar.
+        grad_C_m: (6,) grad_x C_m (T_a, ordered like V_a).
+        constants: AdaptiveWorkspace.
+
+    Returns:
+        (sigma_xy, sigma_phi), of the scalar type of the inputs.
+    """
+    state = _state(p_ee_in_base, V_ee, C_m, grad_C_m, constants)
+    return state.sigma_xy, state.sigma_phi
+
+
+# ----------------------------------------------------------------------------
+# The checked public functions
+# ----------------------------------------------------------------------------
+
 def _vector(name, value, size):
     """`value` as a vector of `size`: checked floats, or an object array
     (AutoDiffXd) of the right shape."""
@@ -139,47 +442,13 @@ def _scalar(name, value):
     return value
 
 
-def _zero_like(value):
-    """0 of the scalar type of `value` (a float, or AutoDiffXd 0 with zero
-    derivatives)."""
-    return value * 0.0
-
-
-def smooth_transition(value, upper, lower):
-    """alpha(value, upper, lower) of eq. (transition), for any scalar type.
-
-        1 for value <= lower, 0 for value >= upper,
-        0.5 (1 + cos(pi (value - lower) / (upper - lower))) in between.
-
-    The same function as `capability.transition` (which takes floats only),
-    written so that AutoDiffXd passes through.
-
-    Args:
-        value: a float or AutoDiffXd scalar.
-        upper, lower: floats, lower < upper.
-
-    Returns:
-        alpha in [0, 1], of the scalar type of `value`.
-    """
-    value = _scalar("value", value)
-    lower, upper = _ordered("lower", lower, "upper", upper)
-    if value <= lower:
-        return _zero_like(value) + 1.0
-    if value >= upper:
-        return _zero_like(value)
-    return 0.5 * (1.0 + np.cos(np.pi * (value - lower) / (upper - lower)))
-
-
-def smooth_transition_derivative(value, upper, lower):
-    """d alpha / d value of eq. (transition), for any scalar type: -0.5 pi /
-    (upper - lower) sin(pi x) inside the band, 0 outside (as
-    `capability.transition_derivative`, which takes floats only)."""
-    value = _scalar("value", value)
-    lower, upper = _ordered("lower", lower, "upper", upper)
-    if value <= lower or value >= upper:
-        return _zero_like(value)
-    width = upper - lower
-    return -0.5 * np.pi / width * np.sin(np.pi * (value - lower) / width)
+def _bands(workspace):
+    """((d^l, d^u), (phi^l, phi^u)) of a LocalWorkspace or None (the
+    paper's), checked to be one."""
+    ws = checked_instance("workspace", workspace, LocalWorkspace,
+                          LocalWorkspace)
+    return ((ws.extent_lower, ws.extent_upper),
+            (ws.deflection_lower, ws.deflection_upper))
 
 
 def in_arm_base(p_ee_in_base, R_ba=None, arm_base_in_base=None):
@@ -201,86 +470,46 @@ def in_arm_base(p_ee_in_base, R_ba=None, arm_base_in_base=None):
     return R.T @ (p - origin)
 
 
-def _horizontal(p_in_arm_base):
-    p = _vector("p_in_arm_base", p_in_arm_base, 3)
-    x, y = p[0], p[1]
-    return x, y, x * x + y * y
-
-
-def _on_axis(d_squared):
-    return d_squared <= AXIS_TOLERANCE**2
-
-
 def extent(p_in_arm_base):
     """d: the horizontal distance of the end effector from the arm base's
     z axis, sqrt(x^2 + y^2) (m); see the module docstring."""
-    _, _, d_squared = _horizontal(p_in_arm_base)
-    if d_squared == 0.0:
-        return d_squared  # sqrt has no derivative at 0; d^2 has 0 there
-    return np.sqrt(d_squared)
+    return _extent(_vector("p_in_arm_base", p_in_arm_base, 3))
 
 
 def deflection(p_in_arm_base):
     """phi: |azimuth| of the end effector about the arm base's z axis from
     its x axis, |atan2(y, x)| in [0, pi] (rad); 0 on the axis."""
-    x, y, d_squared = _horizontal(p_in_arm_base)
-    if _on_axis(d_squared):
-        return _zero_like(x)
-    azimuth = np.arctan2(y, x)
-    return -azimuth if azimuth < 0.0 else azimuth
+    return _deflection(_vector("p_in_arm_base", p_in_arm_base, 3))
 
 
 def extent_gradient(p_in_arm_base):
     """grad_x d (6,), ordered like V_a: [x/d, y/d, 0, 0, 0, 0]; 0 on the
     axis."""
-    x, y, d_squared = _horizontal(p_in_arm_base)
-    zero = _zero_like(x)
-    if _on_axis(d_squared):
-        return np.array([zero] * 6)
-    d = np.sqrt(d_squared)
-    return np.array([x / d, y / d] + [zero] * 4)
+    return _extent_gradient(_vector("p_in_arm_base", p_in_arm_base, 3))
 
 
 def deflection_gradient(p_in_arm_base):
     """grad_x phi (6,), ordered like V_a: sign(y) [-y, x, 0, 0_3] / d^2
     (phi = |azimuth|); 0 on the axis and at y = 0."""
-    x, y, d_squared = _horizontal(p_in_arm_base)
-    zero = _zero_like(x)
-    if _on_axis(d_squared) or y == 0.0:
-        return np.array([zero] * 6)
-    sign = 1.0 if y > 0.0 else -1.0
-    return np.array([-sign * y / d_squared, sign * x / d_squared]
-                    + [zero] * 4)
+    return _deflection_gradient(_vector("p_in_arm_base", p_in_arm_base, 3))
 
 
 def workspace_penalties(p_in_arm_base, workspace=None):
-    """(P_d, P_phi) = (alpha(d, d^u, d^l), alpha(phi, phi^u, phi^l)).
+    """(P_d, P_phi) = (alpha(d, d^u, d^l), alpha(phi, phi^u, phi^l))
+    (Sec. IV-C, "Local Workspace").
 
     Args:
         p_in_arm_base: (3,) end-effector position in T_a.
         workspace: LocalWorkspace; the paper's if None.
     """
-    ws = checked_instance("workspace", workspace, LocalWorkspace,
-                          LocalWorkspace)
-    P_d = smooth_transition(extent(p_in_arm_base), ws.extent_upper,
-                            ws.extent_lower)
-    P_phi = smooth_transition(deflection(p_in_arm_base),
-                              ws.deflection_upper, ws.deflection_lower)
-    return P_d, P_phi
-
-
-class PenalizedCapability(NamedTuple):
-    """C_m penalized by the local workspace, and its Cartesian gradients
-    (6,) in T_a, ordered like V_a (see penalized_capability)."""
-
-    C_m_d: object
-    C_m_phi: object
-    gradient_d: np.ndarray
-    gradient_phi: np.ndarray
+    extent_band, deflection_band = _bands(workspace)
+    return _penalties(_vector("p_in_arm_base", p_in_arm_base, 3),
+                      extent_band, deflection_band)
 
 
 def penalized_capability(C_m, grad_C_m, p_in_arm_base, workspace=None):
-    """C_m^d = C_m P_d P_phi and C_m^phi = C_m P_phi with their gradients.
+    """C_m^d = C_m P_d P_phi and C_m^phi = C_m P_phi with their gradients
+    (Sec. IV-C, "Local Workspace"):
 
         grad C_m^d   = P_d P_phi grad C_m
                        + C_m (P_d' P_phi grad d + P_d P_phi' grad phi),
@@ -298,20 +527,211 @@ def penalized_capability(C_m, grad_C_m, p_in_arm_base, workspace=None):
     Returns:
         PenalizedCapability.
     """
+    extent_band, deflection_band = _bands(workspace)
+    return _penalized(_scalar("C_m", C_m), _vector("grad_C_m", grad_C_m, 6),
+                      _vector("p_in_arm_base", p_in_arm_base, 3),
+                      extent_band, deflection_band)
+
+
+def deactivated(factor, gradient, V_a, direction):
+    """The deactivation strategy (Sec. IV-C, "Deactivation Strategy"):
+    1 if gradient . V_a > 0 or the rate direction . v_a < 0 (d_dot or
+    phi_dot), else `factor`.
+
+    Both tests are strict up to a roundoff guard: the cosine between the
+    two vectors must exceed DEACTIVATION_TOLERANCE in magnitude, so that a
+    motion along the boundary (a purely tangential or vertical one) or
+    none at all keeps sigma = f, whatever the rounding.
+
+    Args:
+        factor: f_xy or f_phi.
+        gradient: (6,) grad_x C_m^d or grad_x C_m^phi (T_a).
+        V_a: (6,) the commanded twist in T_a, R_ba^T V_ee.
+        direction: (6,) grad_x d or grad_x phi (its angular part 0), whose
+            product with V_a is d_dot or phi_dot.
+    """
+    return _deactivated(factor, _vector("gradient", gradient, 6),
+                        _vector("V_a", V_a, 6),
+                        _vector("direction", direction, 6))
+
+
+def local_workspace_state(p_ee_in_base, V_ee, C_m, grad_C_m,
+                          capability_upper, capability_lower,
+                          workspace=None, R_ba=None, arm_base_in_base=None):
+    """The weighting factors of the intuitive pHRI mode (Sec. IV-C), with
+    every quantity on the way.
+
+    Args:
+        p_ee_in_base: (3,) end-effector position in T_b (m).
+        V_ee: (6,) commanded end-effector twist [v; w] in T_b.
+        C_m: capability of movement.
+        grad_C_m: (6,) grad_x C_m (T_a, ordered like V_a).
+        capability_upper, capability_lower: C_m^u > C_m^l of eq.
+            (transition).
+        workspace: LocalWorkspace; the paper's if None.
+        R_ba: (3, 3) ^bR_a, or None for the identity.
+        arm_base_in_base: (3,) origin of T_a in T_b (m), or None for 0.
+
+    Returns:
+        LocalWorkspaceState; sigma_xy and sigma_phi are the weighting
+        factors, after the deactivation strategy.
+    """
+    lower, upper = _ordered("capability_lower", capability_lower,
+                            "capability_upper", capability_upper)
     ws = checked_instance("workspace", workspace, LocalWorkspace,
                           LocalWorkspace)
-    C_m = _scalar("C_m", C_m)
-    g = _vector("grad_C_m", grad_C_m, 6)
-    d = extent(p_in_arm_base)
-    phi = deflection(p_in_arm_base)
-    P_d = smooth_transition(d, ws.extent_upper, ws.extent_lower)
-    P_phi = smooth_transition(phi, ws.deflection_upper, ws.deflection_lower)
-    dP_d = smooth_transition_derivative(d, ws.extent_upper, ws.extent_lower)
-    dP_phi = smooth_transition_derivative(phi, ws.deflection_upper,
-                                          ws.deflection_lower)
-    grad_d = extent_gradient(p_in_arm_base)
-    grad_phi = deflection_gradient(p_in_arm_base)
-    gradient_phi = P_phi * g + (C_m * dP_phi) * grad_phi
-    gradient_d = P_d * gradient_phi + (C_m * P_phi * dP_d) * grad_d
-    return PenalizedCapability(C_m * P_d * P_phi, C_m * P_phi,
-                               gradient_d, gradient_phi)
+    R = np.eye(3) if R_ba is None else rotation_matrix("R_ba", R_ba)
+    origin = (np.zeros(3) if arm_base_in_base is None
+              else as_vector("arm_base_in_base", arm_base_in_base, 3))
+    return _state(_vector("p_ee_in_base", p_ee_in_base, 3),
+                  _vector("V_ee", V_ee, 6), _scalar("C_m", C_m),
+                  _vector("grad_C_m", grad_C_m, 6),
+                  AdaptiveWorkspace.of(upper, lower, ws, R, origin))
+
+
+# ----------------------------------------------------------------------------
+# The float kernel of the tick
+# ----------------------------------------------------------------------------
+
+def _random_rotation(rng):
+    Q, R = np.linalg.qr(rng.normal(size=(3, 3)))
+    Q = Q * np.sign(np.diag(R))
+    return Q if np.linalg.det(Q) > 0.0 else -Q
+
+
+def _weighting_sample(rng):
+    """Random arguments of `adaptive_weighting_factors_unchecked`: the end
+    effector on the arm base's axis, straight ahead, straight behind
+    (phi = pi), in the extent band, in the deflection band, or anywhere;
+    the twist zero, vertical or any; C_m anywhere or with C_m^d in the
+    band of the factors (the ramp); the mounting the identity or any."""
+    upper = rng.uniform(0.03, 0.07)
+    lower = upper - rng.uniform(0.002, 0.02)
+    ws = LocalWorkspace(extent_lower=rng.uniform(0.5, 0.75),
+                        extent_upper=rng.uniform(0.76, 0.9),
+                        deflection_lower=np.radians(rng.uniform(5, 30)),
+                        deflection_upper=np.radians(rng.uniform(31, 60)))
+    R = np.eye(3) if rng.uniform() < 0.5 else _random_rotation(rng)
+    origin = rng.normal(size=3) * 0.3
+    constants = AdaptiveWorkspace.of(upper, lower, ws, R, origin)
+    radius, azimuth = rng.uniform(0.0, 1.0), rng.uniform(-np.pi, np.pi)
+    shape = rng.integers(6)
+    if shape == 1:
+        radius = 0.0
+    elif shape == 2:
+        azimuth = 0.0
+    elif shape == 3:
+        azimuth = np.pi
+    elif shape == 4:
+        radius = rng.uniform(ws.extent_lower, ws.extent_upper)
+    elif shape == 5:
+        azimuth = rng.choice([-1, 1]) * rng.uniform(ws.deflection_lower,
+                                                    ws.deflection_upper)
+    p_a = np.array([radius * np.cos(azimuth), radius * np.sin(azimuth),
+                    rng.normal() * 0.3])
+    V = rng.normal(size=6)
+    twist = rng.integers(3)
+    if twist == 1:
+        V[:] = 0.0
+    elif twist == 2:
+        V[:] = 0.0
+        V[:3] = R[:, 2] * rng.normal()  # along the arm base's z axis
+    p = R @ p_a + origin
+    C_m = rng.uniform(0.0, 0.1)
+    if rng.uniform() < 0.4:  # C_m^d in the band of the factors
+        P_d, P_phi = _penalties(R.T @ (p - origin), constants.extent,
+                                constants.deflection)
+        if P_d * P_phi > 0.0:
+            C_m = rng.uniform(lower, upper) / (P_d * P_phi)
+    return p, V, C_m, rng.normal(size=6) * 0.1, constants
+
+
+def _float_leads(covector, V, sign):
+    """`_leads` for sequences of floats of one length."""
+    product = sum(map(operator.mul, covector, V))
+    if not sign * product > 0.0:
+        return False
+    scale = (sum(map(operator.mul, covector, covector))
+             * sum(map(operator.mul, V, V)))
+    return product * product > DEACTIVATION_TOLERANCE**2 * scale
+
+
+@fast_kernel(adaptive_weighting_factors_unchecked, sample=_weighting_sample)
+def adaptive_weighting_factors_float(p_ee_in_base, V_ee, C_m, grad_C_m,
+                                     constants):
+    """`adaptive_weighting_factors_unchecked` for float inputs, in plain
+    floats: the per-tick path of the WorkspaceAdapter stage in the
+    intuitive pHRI mode.
+
+    The same formulas (see the module) and the same elementary functions
+    (the float kernels of eq. (transition) and its derivative), to
+    rounding; the dot products of the deactivation tests are summed in
+    another order, which can only matter within the tests' roundoff
+    guard. The position in T_a comes from the same numpy product as in
+    the reference: the sign of its y coordinate decides, at phi = pi,
+    which way phi grows, which the deactivation's rate test reads.
+
+    An input that is not finite raises a ValueError that names it.
+
+    Returns:
+        (sigma_xy, sigma_phi), floats in [0, 1].
+    """
+    c = constants
+    p = np.asarray(p_ee_in_base, dtype=float)
+    V_ee = np.asarray(V_ee, dtype=float).tolist()
+    grad_C_m = np.asarray(grad_C_m, dtype=float).tolist()
+    C_m = float(C_m)
+    if not math.isfinite(C_m + sum(p.tolist()) + sum(V_ee) + sum(grad_C_m)):
+        # Name the input that is not finite; finite ones whose sum
+        # overflowed take the reference.
+        _vector("p_ee_in_base", p, 3)
+        _vector("V_ee", V_ee, 6)
+        _scalar("C_m", C_m)
+        _vector("grad_C_m", grad_C_m, 6)
+        return tuple(float(sigma) for sigma in
+                     adaptive_weighting_factors_unchecked(
+                         p, V_ee, C_m, grad_C_m, constants))
+    x, y, _ = (c.R_ba.T @ (p - c.origin)).tolist()
+    rows = c.R_ab_rows
+    V_a = [r[0] * V_ee[k] + r[1] * V_ee[k + 1] + r[2] * V_ee[k + 2]
+           for k in (0, 3) for r in rows]
+    d_squared = x * x + y * y
+    if d_squared <= AXIS_TOLERANCE**2:  # on the axis: no gradients
+        d = 0.0 if d_squared == 0.0 else math.sqrt(d_squared)
+        phi = grad_d_x = grad_d_y = grad_phi_x = grad_phi_y = 0.0
+    else:
+        d = math.sqrt(d_squared)
+        # numpy's arctan2, as the reference: math.atan2 differs in the
+        # last bit for some arguments, which the steep ramps of f would
+        # show.
+        phi = abs(float(np.arctan2(y, x)))
+        grad_d_x, grad_d_y = x / d, y / d
+        sign = 0.0 if y == 0.0 else (1.0 if y > 0.0 else -1.0)
+        grad_phi_x = -sign * y / d_squared
+        grad_phi_y = sign * x / d_squared
+    (d_lower, d_upper), (phi_lower, phi_upper) = c.extent, c.deflection
+    P_d = transition_float(d, d_upper, d_lower)
+    dP_d = transition_derivative_float(d, d_upper, d_lower)
+    P_phi = transition_float(phi, phi_upper, phi_lower)
+    dP_phi = transition_derivative_float(phi, phi_upper, phi_lower)
+    # The penalized capabilities and their gradients (penalized_capability).
+    scale_phi = C_m * dP_phi
+    scale_d = C_m * P_phi * dP_d
+    gradient_phi = [P_phi * g for g in grad_C_m]
+    gradient_phi[0] += scale_phi * grad_phi_x
+    gradient_phi[1] += scale_phi * grad_phi_y
+    gradient_d = [P_d * g for g in gradient_phi]
+    gradient_d[0] += scale_d * grad_d_x
+    gradient_d[1] += scale_d * grad_d_y
+    upper, lower = c.capability_upper, c.capability_lower
+    f_xy = 1.0 - transition_float(C_m * P_d * P_phi, upper, lower)
+    f_phi = 1.0 - transition_float(C_m * P_phi, upper, lower)
+    # The deactivation strategy (deactivated).
+    linear = V_a[:3]
+    sigma_xy = (1.0 if _float_leads(gradient_d, V_a, 1.0)
+                or _float_leads((grad_d_x, grad_d_y, 0.0), linear, -1.0)
+                else f_xy)
+    sigma_phi = (1.0 if _float_leads(gradient_phi, V_a, 1.0)
+                 or _float_leads((grad_phi_x, grad_phi_y, 0.0), linear, -1.0)
+                 else f_phi)
+    return sigma_xy, sigma_phi

@@ -31,11 +31,8 @@ from drake_wbc.stages.base_filter import (
 from drake_wbc.stages.capability_stage import (
     ArmCapability,
     ArmCapability_,
-    ArmCapabilityParameters,
-    CapabilityBand,
     WorkspaceAdapter,
     WorkspaceAdapter_,
-    WorkspaceAdapterParameters,
 )
 from drake_wbc.stages.cdmp_stages import (
     ArmCdmp,
@@ -79,15 +76,12 @@ __all__ = [
     "BaseVelocityFilter",
     "BaseVelocityFilter_",
     "ArmCapability",
-    "ArmCapabilityParameters",
     "ArmCapability_",
-    "CapabilityBand",
     "MotionDistributor",
     "MotionDistributorParameters",
     "MotionDistributor_",
     "RobustCompensator",
     "RobustCompensator_",
     "WorkspaceAdapter",
-    "WorkspaceAdapterParameters",
     "WorkspaceAdapter_",
 ]

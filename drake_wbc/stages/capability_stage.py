@@ -1,108 +1,30 @@
 """ArmCapability and WorkspaceAdapter: what the arm's configuration tells
-the coordination stages (systems/coordination.py) once a tick, C_m, its
-gradient and alpha (Sec. III-A, IV-A), and the weighting factors of the
-motion modes (Sec. IV-C); and CapabilityBand, the band of eq. (transition)
-these stages share. How the stages declare their ports and cache:
-systems/stage_support.py."""
-
-from dataclasses import dataclass, field
+the coordination stages (stages/coordination.py) once a tick, C_m, its
+gradient and alpha (Sec. IV-A), and the weighting factors of the motion
+modes (Sec. IV-C). Their parameters and math are in
+drake_wbc.math.capability and drake_wbc.math.workspace; how the stages
+declare their ports and cache: stages/support.py."""
 
 import numpy as np
 from pydrake.systems.framework import LeafSystem_
-from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_wbc.math import (
-    adaptive_weighting,
-    capability,
-    capability_gradients,
-    motion_mode,
-)
+from drake_wbc.math import capability, motion_mode, workspace
+from drake_wbc.math.capability import ArmCapabilityParameters
+from drake_wbc.math.kernels import body_for
 from drake_wbc.math.motion_mode import MotionMode
 from drake_wbc.math.scalar_support import through_float_function
-from drake_wbc.math.validation import (
-    as_scalar,
-    checked_instance,
-    in_closed_range,
-    non_negative,
-    positive,
-    validated_copy,
-)
-from drake_wbc.math.workspace import LocalWorkspace
+from drake_wbc.math.validation import checked_instance
+from drake_wbc.math.workspace import WorkspaceAdapterParameters
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.support import (
-    SCALARS,
     arm_mounting,
     declare_cached_vector,
     declare_inputs,
     declare_slices,
+    define_stage,
     shared_arm_kinematics,
     tickets,
 )
-
-
-@dataclass
-class CapabilityBand:
-    """The limitation band C_m^l < C_m < C_m^u of eq. (transition).
-
-    One band serves every stage that looks at C_m: alpha of the robust
-    compensation (ArmCapability), the adaptive weighting factors of the
-    intuitive pHRI mode (WorkspaceAdapter) and the switch-off of the
-    null-space gain (MotionDistributor).
-
-    Attributes:
-        lower: C_m^l >= 0 (m^3, like C_m); alpha = 1 at and below it.
-        upper: C_m^u > C_m^l; alpha = 0 at and above it.
-
-    The defaults are the paper's 0.035 and 0.04 (fixed-point experiment);
-    see capability.DEFAULT_JOINT_LIMIT_GAIN for what they mean on our arm.
-    """
-
-    lower: float = 0.035
-    upper: float = 0.04
-
-    def __post_init__(self):
-        lower = non_negative("lower", self.lower)
-        upper = as_scalar("upper", self.upper)
-        if not lower < upper:
-            raise ValueError(
-                f"lower = {lower!r} and upper = {upper!r} are not allowed: "
-                "the band's lower threshold C_m^l must be strictly below "
-                "its upper threshold C_m^u"
-            )
-
-
-def set_band(params):
-    """Checks `params.band` (a parameters dataclass's field), putting the
-    default CapabilityBand in place of None."""
-    params.band = checked_instance("band", params.band, CapabilityBand,
-                                   CapabilityBand)
-
-
-@dataclass
-class ArmCapabilityParameters:
-    """Parameters of ArmCapability.
-
-    Attributes:
-        band: the limitation band of alpha, eq. (transition).
-        joint_limit_gain: k_j > 0 of the joint-limit penalization P_jnt.
-        gradient_damping: lambda_max >= 0 of
-            capability_gradients.capability_gradient.
-        gradient_damping_threshold: eps > 0 of the same.
-    """
-
-    band: CapabilityBand = field(default_factory=CapabilityBand)
-    joint_limit_gain: float = capability.DEFAULT_JOINT_LIMIT_GAIN
-    gradient_damping: float = capability_gradients.DEFAULT_MAX_DAMPING
-    gradient_damping_threshold: float = (
-        capability_gradients.DEFAULT_DAMPING_THRESHOLD)
-
-    def __post_init__(self):
-        set_band(self)
-        positive("joint_limit_gain", self.joint_limit_gain)
-        non_negative("gradient_damping", self.gradient_damping)
-        positive("gradient_damping_threshold",
-                 self.gradient_damping_threshold)
-
 
 _CAPABILITY_OUTPUTS = (
     ("end_effector_position", slice(0, 3)),
@@ -112,12 +34,12 @@ _CAPABILITY_OUTPUTS = (
 )
 
 
-@TemplateSystem.define("ArmCapability_", T_list=SCALARS)
+@define_stage("ArmCapability_")
 def ArmCapability_(T):
     class Impl(LeafSystem_[T]):
         """What several stages need from the arm's configuration, once a
-        tick: the end effector's position, C_m (Sec. III-A and IV-A), its
-        Cartesian gradient and alpha of eq. (transition).
+        tick: the end effector's position, C_m (Sec. IV-A), its Cartesian
+        gradient and alpha of eq. (transition).
 
         ::
 
@@ -140,71 +62,63 @@ def ArmCapability_(T):
         context, in a cache entry that every output reads; all outputs
         depend on arm_position only (direct feedthrough, stateless).
 
-        AutoDiffXd: the kinematics need a double MultibodyPlant and C_m an
-        SVD, so the float computation is wrapped in
+        The kinematics need a double MultibodyPlant, so the evaluation
+        (`evaluate`) is in floats, with the float kernels of
+        capability.capability_terms_unchecked and
+        capability.transition_unchecked; for AutoDiffXd it goes through
         scalar_support.through_float_function: the values are exact and
         the derivatives w.r.t. q_a come from central differences (about
-        1e-9 relative). For double (chosen once, at construction) the
-        cache entry calls `evaluate` directly.
+        1e-9 relative).
 
         Args:
-            params: ArmCapabilityParameters; the paper's band
-                0.035 < C_m < 0.04 if None.
+            params: ArmCapabilityParameters (read here, when the stage is
+                built); the paper's band 0.035 < C_m < 0.04 if None.
             arm: the ArmKinematics to use; a new ArmKinematics() of our
-                robot if None. A scalar-converted copy shares it.
+                robot if None.
         """
 
         def _construct(self, params=None, arm=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self.params = validated_copy(checked_instance(
+            self.params = checked_instance(
                 "params", params, ArmCapabilityParameters,
-                ArmCapabilityParameters))
+                ArmCapabilityParameters)
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         ArmKinematics)
-            # The per-tick constants, as plain floats (see evaluate).
+            # What the tick needs, as plain floats (see evaluate).
             p = self.params
             self._limits = (self.arm.lower.tolist(), self.arm.upper.tolist())
             self._constants = (p.joint_limit_gain, p.gradient_damping,
                                p.gradient_damping_threshold)
             self._band = (p.band.upper, p.band.lower)
+            self._terms = body_for(capability.capability_terms_unchecked,
+                                   float)
+            self._alpha = body_for(capability.transition_unchecked, float)
             self._input = self.DeclareVectorInputPort("arm_position", 6)
             entry = declare_cached_vector(
-                self, "arm kinematics and capability",
-                self._calc_float if T is float else self._calc,
+                self, "arm kinematics and capability", self._calc,
                 {self._input.ticket()})
             declare_slices(self, entry, _CAPABILITY_OUTPUTS)
-
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.params, other.arm,
-                            converter=converter)
-            self.params = other.params
 
         def evaluate(self, q_a):
             """[p_ee (3), C_m, grad_x C_m (6), alpha] at float q_a (6,).
 
-            One evaluation of the kinematics and one SVD of J_a
-            (capability_gradients.capability_terms_unchecked): the
-            parameters were checked at construction (and kept as plain
-            floats), q_a is checked (shape (6,), finite) by
-            ArmKinematics.evaluate.
+            One evaluation of the kinematics and one SVD of J_a; q_a is
+            checked (shape (6,), finite) by ArmKinematics.evaluate.
             """
             values = self.arm.evaluate(q_a)
             q = np.asarray(q_a, dtype=float).tolist()
-            C_m, gradient = capability_gradients.capability_terms_unchecked(
-                values.J_a, q, *self._limits, *self._constants)
+            C_m, gradient = self._terms(values.J_a, q, *self._limits,
+                                        *self._constants)
             result = np.empty(11)
             result[:3] = values.p_ee_in_base
             result[3] = C_m
             result[4:10] = gradient
-            result[10] = capability.transition_unchecked(C_m, *self._band)
+            result[10] = self._alpha(C_m, *self._band)
             return result
 
         def _calc(self, context):
             return through_float_function(self.evaluate,
                                           self._input.Eval(context))
-
-        def _calc_float(self, context):
-            return self.evaluate(self._input.Eval(context))
 
     return Impl
 
@@ -213,43 +127,7 @@ ArmCapability = ArmCapability_[None]
 """ArmCapability_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""
 
 
-@dataclass
-class WorkspaceAdapterParameters:
-    """Parameters of WorkspaceAdapter.
-
-    Attributes:
-        mode: a MotionMode or its name, 'locomotion', 'manipulation',
-            'loco-manipulation' or 'intuitive-phri' (Table T:motion-mode);
-            stored as the MotionMode (a str enum, so that YAML gives the
-            name).
-        sigma_xy, sigma_phi: the fixed weighting factors of the
-            loco-manipulation mode, in (0, 1) there (checked in [0, 1] in
-            the other modes, which do not use them). The default 0.5 is the
-            paper's trajectory-tracking experiment.
-        workspace: the local workspace of the intuitive pHRI mode; the
-            paper's d^l = 0.75, d^u = 0.8 m, phi^l = 30, phi^u = 35 deg.
-        band: C_m^l, C_m^u of f_xy and f_phi (intuitive pHRI).
-    """
-
-    mode: str = MotionMode.LOCO_MANIPULATION
-    sigma_xy: float = 0.5
-    sigma_phi: float = 0.5
-    workspace: LocalWorkspace = field(default_factory=LocalWorkspace)
-    band: CapabilityBand = field(default_factory=CapabilityBand)
-
-    def __post_init__(self):
-        self.mode = MotionMode.parse(self.mode)
-        in_closed_range("sigma_xy", self.sigma_xy, 0.0, 1.0)
-        in_closed_range("sigma_phi", self.sigma_phi, 0.0, 1.0)
-        self.workspace = checked_instance(
-            "workspace", self.workspace, LocalWorkspace, LocalWorkspace)
-        set_band(self)
-        if self.mode is MotionMode.LOCO_MANIPULATION:
-            motion_mode.fixed_weighting_factors(self.mode, self.sigma_xy,
-                                                self.sigma_phi)
-
-
-@TemplateSystem.define("WorkspaceAdapter_", T_list=SCALARS)
+@define_stage("WorkspaceAdapter_")
 def WorkspaceAdapter_(T):
     class Impl(LeafSystem_[T]):
         """The weighting factors of eq. (weight-factors) for a motion mode,
@@ -273,77 +151,62 @@ def WorkspaceAdapter_(T):
         Locomotion gives (0, 0), manipulation (1, 1), loco-manipulation
         the fixed parameters; these modes read no input (no direct
         feedthrough). The intuitive pHRI mode computes
-        adaptive_weighting.local_workspace_state: f_xy, f_phi from C_m
+        workspace.adaptive_weighting_factors_unchecked (its float kernel
+        in double, chosen when the stage is built): f_xy, f_phi from C_m
         penalized by the extent d and deflection phi of the end effector
         w.r.t. the arm's base (defined in drake_wbc.math.workspace), then
         sigma = 1 if the commanded twist, carried by the arm alone, would
         raise C_m^(d,phi) or lead back (d_dot, phi_dot < 0), else f (both
-        tests beyond a roundoff guard,
-        adaptive_weighting.DEACTIVATION_TOLERANCE). sigma is then
-        discontinuous where the deactivation switches, as in the paper.
-        For double (chosen once, at construction) the intuitive pHRI mode
-        takes adaptive_weighting.adaptive_weighting_factors, the same
-        formulas in plain floats with the parameters checked at
-        construction; AutoDiffXd takes local_workspace_state.
+        tests beyond a roundoff guard, workspace.DEACTIVATION_TOLERANCE).
+        sigma is then discontinuous where the deactivation switches, as in
+        the paper.
 
         Args:
-            params: WorkspaceAdapterParameters; loco-manipulation with
-                sigma_xy = sigma_phi = 0.5 if None.
+            params: WorkspaceAdapterParameters (read here, when the stage
+                is built); loco-manipulation with sigma_xy = sigma_phi =
+                0.5 if None.
             arm: ArmKinematics whose R_ba and arm-base position define
                 T_a; our robot's if None.
         """
 
         def _construct(self, params=None, arm=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self.params = validated_copy(checked_instance(
+            self.params = checked_instance(
                 "params", params, WorkspaceAdapterParameters,
-                WorkspaceAdapterParameters))
+                WorkspaceAdapterParameters)
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         shared_arm_kinematics)
             self.R_ba, self.arm_base_position = arm_mounting(self.arm)
             self._inputs = declare_inputs(self, (
                 ("end_effector_position", 3), ("end_effector_velocity", 6),
                 ("capability", 1), ("capability_gradient", 6)))
-            adaptive = self.params.mode is MotionMode.INTUITIVE_PHRI
             p = self.params
-            self._constants = adaptive_weighting.adaptive_workspace(
-                p.band.upper, p.band.lower, p.workspace, self.R_ba,
-                self.arm_base_position)
-            self._input_list = list(self._inputs.values())
-            entry = declare_cached_vector(
-                self, "weighting factors",
-                self._calc_float if adaptive and T is float else self._calc,
-                tickets(self._inputs.values()) if adaptive
-                else {self.nothing_ticket()})
+            if p.mode is MotionMode.INTUITIVE_PHRI:
+                self._constants = workspace.AdaptiveWorkspace.of(
+                    p.band.upper, p.band.lower, p.workspace, self.R_ba,
+                    self.arm_base_position)
+                self._factors = body_for(
+                    workspace.adaptive_weighting_factors_unchecked, T)
+                calc, prerequisites = (self._calc_adaptive,
+                                       tickets(self._inputs.values()))
+            else:
+                self._fixed = np.array(motion_mode.fixed_weighting_factors(
+                    p.mode, p.sigma_xy, p.sigma_phi))
+                calc, prerequisites = (self._calc_fixed,
+                                       {self.nothing_ticket()})
+            entry = declare_cached_vector(self, "weighting factors", calc,
+                                          prerequisites)
             declare_slices(self, entry, (("sigma_xy", slice(0, 1)),
                                          ("sigma_phi", slice(1, 2))))
 
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.params, other.arm,
-                            converter=converter)
-            self.params = other.params
+        def _calc_fixed(self, context):
+            return self._fixed
 
-        def _calc(self, context):
-            p = self.params
-            if p.mode is not MotionMode.INTUITIVE_PHRI:
-                return np.array(motion_mode.fixed_weighting_factors(
-                    p.mode, p.sigma_xy, p.sigma_phi))
-            inputs = {name: port.Eval(context)
-                      for name, port in self._inputs.items()}
-            state = adaptive_weighting.local_workspace_state(
-                inputs["end_effector_position"],
-                inputs["end_effector_velocity"],
-                inputs["capability"][0], inputs["capability_gradient"],
-                p.band.upper, p.band.lower, p.workspace, self.R_ba,
-                self.arm_base_position)
-            return np.array([state.sigma_xy, state.sigma_phi])
-
-        def _calc_float(self, context):
+        def _calc_adaptive(self, context):
             position, velocity, C_m, gradient = (
-                port.Eval(context) for port in self._input_list)
-            return np.array(adaptive_weighting.adaptive_weighting_factors(
-                position, velocity.tolist(), float(C_m[0]),
-                gradient.tolist(), self._constants))
+                port.Eval(context) for port in self._inputs.values())
+            return np.array(self._factors(position, velocity, C_m[0],
+                                          gradient, self._constants))
 
     return Impl
 

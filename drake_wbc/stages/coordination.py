@@ -25,8 +25,8 @@ from drake_wbc.math import (
     compensation,
     distribution,
     kernels,
-    workspace,
 )
+from drake_wbc.math.capability import CapabilityBand, set_band
 from drake_wbc.math.compensation import (
     PROJECTOR_TOLERANCE,
     RobustCompensatorParameters,
@@ -39,7 +39,6 @@ from drake_wbc.math.validation import (
     unit_interval,
 )
 from drake_wbc.robot.model import ArmKinematics
-from drake_wbc.stages.capability_stage import CapabilityBand, set_band
 from drake_wbc.stages.support import (
     declare_cached_vector,
     declare_inputs,
@@ -159,11 +158,9 @@ def MotionDistributor_(T):
             self._damping = self.params.damping
             self._distribute = kernels.body_for(
                 distribution.whole_body_distribution, T)
-            # eq. (transition) of the capability family, chosen here once
-            # for T (its float and its any-scalar body).
-            self._transition = (capability.transition_unchecked
-                                if T is float
-                                else workspace.smooth_transition)
+            # eq. (transition): its float kernel in double, chosen once.
+            self._transition = kernels.body_for(
+                capability.transition_unchecked, T)
             self._inputs = declare_inputs(self, (
                 ("end_effector_velocity", 6), ("sigma_xy", 1),
                 ("sigma_phi", 1), ("end_effector_position", 3),
