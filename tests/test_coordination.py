@@ -25,6 +25,7 @@ from drake_wbc.math import (
 )
 from drake_wbc.math.capability import ArmCapabilityParameters, CapabilityBand
 from drake_wbc.math.compensation import RobustCompensatorParameters
+from drake_wbc.math.distribution import MotionDistributorParameters
 from drake_wbc.math.kinematics import base_jacobian, whole_body_jacobian
 from drake_wbc.math.workspace import (
     LocalWorkspace,
@@ -35,7 +36,6 @@ from drake_wbc.stages import (
     ArmCapability,
     BaseVelocityFilter,
     MotionDistributor,
-    MotionDistributorParameters,
     RobustCompensator,
     WorkspaceAdapter,
 )

@@ -8,7 +8,7 @@ drake_wbc.math.validation.validate runs the checks of a whole tree again):
 - controller: ControllerParameters (drake_wbc.controller.diagram),
   ArmControllerParameters (arm_control), CapabilityBand,
   ArmCapabilityParameters (capability), WorkspaceAdapterParameters
-  (workspace), MotionDistributorParameters (stages.coordination),
+  (workspace), MotionDistributorParameters (distribution),
   RobustCompensatorParameters (compensation), BaseFilterParameters
   (filtering), SingularityDamping (distribution), LocalWorkspace
   (workspace), DmpParameters (dmp),
@@ -52,7 +52,10 @@ from drake_wbc.math.cdmp import (
     WholeBodyCdmpParameters,
 )
 from drake_wbc.math.compensation import RobustCompensatorParameters
-from drake_wbc.math.distribution import SingularityDamping
+from drake_wbc.math.distribution import (
+    MotionDistributorParameters,
+    SingularityDamping,
+)
 from drake_wbc.math.dmp import DmpParameters
 from drake_wbc.math.filtering import BaseFilterParameters
 from drake_wbc.math.validation import validate
@@ -60,7 +63,6 @@ from drake_wbc.math.workspace import (
     LocalWorkspace,
     WorkspaceAdapterParameters,
 )
-from drake_wbc.stages.coordination import MotionDistributorParameters
 from drake_wbc.station.drivers import ArmDriverParameters, BaseDriverParameters
 from drake_wbc.station.force_torque import ForceTorqueSensorParameters
 from drake_wbc.station.lidar import LidarParameters

@@ -32,11 +32,11 @@ from drake_wbc.math import cdmp
 from drake_wbc.math.arm_control import ArmControllerParameters
 from drake_wbc.math.capability import ArmCapabilityParameters
 from drake_wbc.math.compensation import RobustCompensatorParameters
+from drake_wbc.math.distribution import MotionDistributorParameters
 from drake_wbc.math.filtering import BaseFilterParameters
 from drake_wbc.math.safety import SafetyParameters
 from drake_wbc.math.validation import positive, validate
 from drake_wbc.math.workspace import WorkspaceAdapterParameters
-from drake_wbc.stages.coordination import MotionDistributorParameters
 
 
 @dataclass

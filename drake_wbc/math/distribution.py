@@ -88,10 +88,11 @@ exact first derivatives for simple eigenvalues.
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from drake_wbc.math.capability import CapabilityBand, set_band
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.kinematics import (
     random_rotation,
@@ -538,3 +539,42 @@ def distribute(
            else as_vector("null_velocity", null_velocity, 9))
     return weighted_distribution(J, V_ee, weights, V_n,
                                  _checked_damping(damping))
+
+
+@dataclass
+class MotionDistributorParameters:
+    """Parameters of MotionDistributor.
+
+    Attributes:
+        null_space_gain: k_n >= 0 of eq. (wbccm), used when the
+            null_space_gain port is not connected; the paper starts with 0
+            and switches to 0.1.
+        band: C_m^l, C_m^u; k_n is off at and above C_m^u.
+        smooth_switch_off: True fades k_n out across the band,
+            k_n alpha(C_m, C_m^u, C_m^l); False switches it off in one step
+            above C_m^u, the paper's words read literally.
+        damping: SingularityDamping (never active for our
+            robot's J_wb, see the module), or None for
+            none; default the values of DEFAULT_DAMPING.
+    """
+
+    null_space_gain: float = 0.0
+    band: CapabilityBand = field(default_factory=CapabilityBand)
+    smooth_switch_off: bool = True
+    damping: SingularityDamping | None = field(
+        default_factory=SingularityDamping)
+
+    def __post_init__(self):
+        non_negative("null_space_gain", self.null_space_gain)
+        set_band(self)
+        if not isinstance(self.smooth_switch_off, bool):
+            raise ValueError(
+                f"smooth_switch_off = {self.smooth_switch_off!r} is not "
+                "allowed: must be True or False"
+            )
+        if not (self.damping is None or isinstance(
+                self.damping, SingularityDamping)):
+            raise ValueError(
+                f"damping = {self.damping!r} is not allowed: must be a "
+                "SingularityDamping or None"
+            )

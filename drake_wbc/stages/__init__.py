@@ -43,7 +43,6 @@ from drake_wbc.stages.cdmp_stages import (
 from drake_wbc.stages.coordination import (
     MotionDistributor,
     MotionDistributor_,
-    MotionDistributorParameters,
     RobustCompensator,
     RobustCompensator_,
 )
@@ -78,7 +77,6 @@ __all__ = [
     "ArmCapability",
     "ArmCapability_",
     "MotionDistributor",
-    "MotionDistributorParameters",
     "MotionDistributor_",
     "RobustCompensator",
     "RobustCompensator_",

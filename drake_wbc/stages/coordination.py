@@ -15,7 +15,6 @@ checks only the input values that the ports' sizes cannot constrain
 (sigma, alpha, s_c, k_n).
 """
 
-from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.systems.framework import LeafSystem_
@@ -26,15 +25,14 @@ from drake_wbc.math import (
     distribution,
     kernels,
 )
-from drake_wbc.math.capability import CapabilityBand, set_band
 from drake_wbc.math.compensation import (
     PROJECTOR_TOLERANCE,
     RobustCompensatorParameters,
 )
+from drake_wbc.math.distribution import MotionDistributorParameters
 from drake_wbc.math.scalar_support import value_of
 from drake_wbc.math.validation import (
     checked_instance,
-    non_negative,
     rotation_matrix,
     unit_interval,
 )
@@ -48,49 +46,6 @@ from drake_wbc.stages.support import (
     shared_arm_kinematics,
     tickets,
 )
-
-
-@dataclass
-class MotionDistributorParameters:
-    """Parameters of MotionDistributor.
-
-    They hold the band of eq. (transition), a CapabilityBand (this
-    folder's, for now), so they live beside their stage rather than
-    beside eq. (wbccm) in drake_wbc.math.distribution.
-
-    Attributes:
-        null_space_gain: k_n >= 0 of eq. (wbccm), used when the
-            null_space_gain port is not connected; the paper starts with 0
-            and switches to 0.1.
-        band: C_m^l, C_m^u; k_n is off at and above C_m^u.
-        smooth_switch_off: True fades k_n out across the band,
-            k_n alpha(C_m, C_m^u, C_m^l); False switches it off in one step
-            above C_m^u, the paper's words read literally.
-        damping: distribution.SingularityDamping (never active for our
-            robot's J_wb, see drake_wbc.math.distribution), or None for
-            none; default the values of distribution.DEFAULT_DAMPING.
-    """
-
-    null_space_gain: float = 0.0
-    band: CapabilityBand = field(default_factory=CapabilityBand)
-    smooth_switch_off: bool = True
-    damping: distribution.SingularityDamping | None = field(
-        default_factory=distribution.SingularityDamping)
-
-    def __post_init__(self):
-        non_negative("null_space_gain", self.null_space_gain)
-        set_band(self)
-        if not isinstance(self.smooth_switch_off, bool):
-            raise ValueError(
-                f"smooth_switch_off = {self.smooth_switch_off!r} is not "
-                "allowed: must be True or False"
-            )
-        if not (self.damping is None or isinstance(
-                self.damping, distribution.SingularityDamping)):
-            raise ValueError(
-                f"damping = {self.damping!r} is not allowed: must be a "
-                "SingularityDamping or None"
-            )
 
 
 @define_stage("MotionDistributor_")
