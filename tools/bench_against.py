@@ -7,7 +7,9 @@ controller of drake_wbc.bench.control_tick (the controller alone against
 measurements that change every tick) and waits; the rounds then alternate
 between the two, each timing a batch of ticks from the controller's
 initial state, so that a slow spell of the machine hits both alike. It
-prints the median tick of each and the median of the per-round ratios.
+prints the median tick of each and the median of the per-round ratios,
+in wall-clock time and in the thread's CPU time (steadier when other
+processes share the cores).
 
     python tools/bench_against.py --against c7eced0
     python tools/bench_against.py --against main --rounds 40 --ticks 300
@@ -31,9 +33,10 @@ run = make_ticker().ticks(int(sys.argv[1]))
 run()  # warm up
 print("ready", flush=True)
 for line in sys.stdin:
-    start = time.perf_counter()
+    wall, cpu = time.perf_counter(), time.thread_time()
     count = run()
-    print(json.dumps((time.perf_counter() - start) / count), flush=True)
+    print(json.dumps([(time.perf_counter() - wall) / count,
+                      (time.thread_time() - cpu) / count]), flush=True)
 """
 
 
@@ -49,7 +52,8 @@ def start_worker(checkout, ticks):
 
 
 def time_batch(worker):
-    """One batch's mean tick in s."""
+    """One batch's mean tick in s: [wall-clock time, the thread's CPU
+    time]."""
     worker.stdin.write("go\n")
     worker.stdin.flush()
     return json.loads(worker.stdout.readline())
@@ -86,15 +90,19 @@ def main(argv=None):
         finally:
             subprocess.run(["git", "worktree", "remove", "--force",
                             str(other)], cwd=ROOT, check=True)
-    ratios = [a / b for a, b in zip(times["here"], times[commit],
-                                    strict=True)]
-    for name, values in times.items():
-        print(f"{name:>10}: median tick {statistics.median(values) * 1e6:7.1f}"
-              f" us (min {min(values) * 1e6:.1f}, max "
-              f"{max(values) * 1e6:.1f}; {args.rounds} batches of "
-              f"{args.ticks})")
-    print(f"here / {commit}: median ratio {statistics.median(ratios):.3f} "
-          f"(per-round ratios {min(ratios):.3f} to {max(ratios):.3f})")
+    for column, clock in enumerate(("wall-clock", "CPU")):
+        print(f"{clock} time:")
+        for name, values in times.items():
+            values = [v[column] for v in values]
+            print(f"  {name:>10}: median tick "
+                  f"{statistics.median(values) * 1e6:7.1f} us (min "
+                  f"{min(values) * 1e6:.1f}, max {max(values) * 1e6:.1f};"
+                  f" {args.rounds} batches of {args.ticks})")
+        ratios = [a[column] / b[column] for a, b in
+                  zip(times["here"], times[commit], strict=True)]
+        print(f"  here / {commit}: median ratio "
+              f"{statistics.median(ratios):.3f} (per-round ratios "
+              f"{min(ratios):.3f} to {max(ratios):.3f})")
     return 0
 
 
