@@ -372,41 +372,6 @@ def test_external_wrench_matches_np_cross(arm):
             external_wrench(reading, X_AM, X_AT, mass, p_com), np.r_[f, tau])
 
 
-@pytest.mark.parametrize("acceleration", [None, 12.56])
-def test_joint_velocity_for_twist_unchecked_matches_checked(acceleration):
-    """Random twists, configurations near and beyond the joint limits and
-    a singular Jacobian: the same command, bit for bit."""
-    from drake_wbc.math import arm_control
-
-    rng = np.random.default_rng(21)
-    kinematics = ArmKinematics()
-    lower, upper = kinematics.lower, kinematics.upper
-    limits = kinematics.velocity_limits
-    for trial in range(60):
-        q = rng.uniform(lower - 0.02, upper + 0.02)
-        J = kinematics.evaluate(q).J_a
-        if trial % 10 == 0:
-            J = J.copy()
-            J[:, 4] = J[:, 3]  # rank deficient
-        V = rng.normal(0.0, 0.5, 6)
-        previous = rng.normal(0.0, 0.5, 6)
-        checked = arm_control.joint_velocity_for_twist(
-            J, V, q, lower, upper, limits, 0.01,
-            acceleration_limit=acceleration, previous_q_dot=previous)
-        fast = arm_control.joint_velocity_for_twist_unchecked(
-            J, V, q, lower, upper, limits, 0.01,
-            arm_control.DEFAULT_DAMPING,
-            arm_control.DEFAULT_DAMPING_THRESHOLD,
-            arm_control.DEFAULT_JOINT_LIMIT_MARGIN,
-            None if acceleration is None else np.full(6, acceleration),
-            None if acceleration is None else previous)
-        np.testing.assert_array_equal(fast.q_dot, checked.q_dot)
-        np.testing.assert_array_equal(fast.limited_joints,
-                                      checked.limited_joints)
-        assert (fast.scale, fast.acceleration_scale, fast.damping) == (
-            checked.scale, checked.acceleration_scale, checked.damping)
-
-
 def test_repulsive_force_float_path_matches_the_general_one():
     """Points inside, on, near and far from the footprint, and a crowd
     that hits the bound: the float path against the general one (written

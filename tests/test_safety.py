@@ -9,6 +9,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pytest
 from controller_rig import H, Rig
+from pydrake.autodiffutils import ExtractValue
 from pydrake.systems.framework import (
     InputPortIndex,
     OutputPortIndex,
@@ -24,10 +25,10 @@ from drake_wbc.controller import (
 from drake_wbc.controller.diagram import STATION_INPUTS, TASK_INPUTS
 from drake_wbc.math import command_limits, safety
 from drake_wbc.math.motion_mode import MotionMode
-from drake_wbc.math.safety import Reason, SafetyParameters
+from drake_wbc.math.safety import STATUS_FIELDS, Reason, SafetyParameters
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.stages import BaseCommandLimiter, InputGuard, StopGate
-from drake_wbc.stages.safety import LOGGER, STATUS_FIELDS, GuardedInput
+from drake_wbc.stages.safety import LOGGER, GuardedInput
 
 HOLD = safety.DEFAULT_HOLD_TIME
 V_MAX = np.array(safety.BASE_VELOCITY_LIMITS)
@@ -247,7 +248,8 @@ def test_velocity_scaling_is_parallel_in_closed_form():
     small = np.array([0.1, 0.2, -0.3]) / 3.0
     result = command_limits.limit_base_velocity(small, small + 0.001, V_MAX,
                                                 A_MAX, H)
-    assert result.command is small and not result.limited
+    np.testing.assert_array_equal(result.command, small)
+    assert not result.limited
     assert command_limits.uniform_scale([2.0, -4.0], [1.0, 1.0]) == 0.25
 
 
@@ -393,6 +395,36 @@ def test_systems_convert_to_autodiff():
         converted.EvalUniquePeriodicDiscreteUpdate(context) if (
             converted.num_discrete_state_groups()) else None
     assert guard.ToAutoDiffXd().params == guard.params
+
+
+def test_stop_gate_zeroes_or_scales_as_a_whole():
+    """The gate in closed form, in double and in AutoDiffXd: zeros while
+    stopped; else the value scaled by min(1, min_i limit_i / |v_i|)."""
+    limits = (0.5, 0.4, 0.9)
+    double = StopGate(3, limits)
+    autodiff = double.ToAutoDiffXd()
+    rng = np.random.default_rng(13)
+    contexts = [system.CreateDefaultContext()
+                for system in (double, autodiff)]
+    for _ in range(60):
+        value = rng.normal(size=3) * rng.choice([0.1, 1.0])
+        stop = float(rng.random() < 0.2)
+        expected = 1.0 if stop else min(
+            [1.0] + [lim / abs(v) for v, lim in zip(value, limits,
+                                                     strict=True)
+                     if abs(v) > lim])
+        for system, context in zip((double, autodiff), contexts,
+                                   strict=True):
+            system.GetInputPort("value").FixValue(context, value)
+            system.GetInputPort("stop").FixValue(context, [stop])
+            gated, scale = (
+                np.asarray(ExtractValue(np.asarray(
+                    system.GetOutputPort(name).Eval(context), dtype=object)),
+                    dtype=float).ravel() for name in ("gated", "scale"))
+            assert scale[0] == expected
+            np.testing.assert_array_equal(
+                gated, np.zeros(3) if stop else
+                (value if expected == 1.0 else expected * value))
 
 
 def test_limiter_linearises_to_the_identity_within_limits():

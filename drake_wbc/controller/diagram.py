@@ -46,7 +46,7 @@ Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
   once every input has been valid for safety.hold_time; the base command
   then restarts from zero within the acceleration limits and the arm from
   rest at the held position, so no command jumps. The `safety_status`
-  output (systems.safety.STATUS_FIELDS) and `safety_reason` (a sentence;
+  output (drake_wbc.math.safety.STATUS_FIELDS) and `safety_reason` (a sentence;
   also Controller.safety_reason) say why; the stop is logged when it trips
   and when it clears. Obstacle points with a NaN or infinite coordinate
   are dropped (counted in the status), not a fault.
@@ -89,8 +89,8 @@ from drake_wbc.stages import (
     WholeBodyCdmp,
     WorkspaceAdapter,
 )
-from drake_wbc.stages.base_command import BaseCommandLimiter, StopGate
-from drake_wbc.stages.safety import GuardedInput, InputGuard
+from drake_wbc.stages.base_command import BaseCommandLimiter
+from drake_wbc.stages.safety import GuardedInput, InputGuard, StopGate
 from drake_wbc.stages.wrench import ExternalWrenchEstimator
 
 STATION_INPUTS = (

@@ -30,8 +30,8 @@ from pydrake.trajectories import PiecewisePolynomial
 from drake_wbc.controller import build_controller
 from drake_wbc.controller.diagram import STATION_INPUTS
 from drake_wbc.experiments.scenario import TASK_SIZES, Scenario, Variant
+from drake_wbc.math.safety import STATUS_FIELDS
 from drake_wbc.math.validation import checked_instance
-from drake_wbc.stages.safety import STATUS_FIELDS
 from drake_wbc.station.simulation import SimulatedStation
 
 SIGNALS = {

@@ -6,12 +6,14 @@ stand behind. Three mechanisms serve that, and this module holds their math
 (numpy only; the Drake systems in drake_wbc.stages.safety are thin over
 it):
 
-1. Input validity (`check_vector`, `check_points`): every value that enters
-   the controller is checked once a tick. A NaN, an infinite value, or a
-   value outside the range a stage accepts (k_n < 0 in eq. (wbccm), s_c
-   outside [0, 1] in eq. (compensation)) is a fault of that input.
-   Obstacle points are the exception: a row with a NaN or infinite
-   coordinate is dropped and counted, not a fault (see `check_points`).
+1. Input validity (`check_vector`, `check_inputs`, `check_points`): every
+   value that enters the controller is checked once a tick. A NaN, an
+   infinite value, or a value outside the range a stage accepts (k_n < 0
+   in eq. (wbccm), s_c outside [0, 1] in eq. (compensation)) is a fault of
+   that input. Obstacle points are the exception: a row with a NaN or
+   infinite coordinate is dropped and counted, not a fault (see
+   `check_points`). `check_inputs` has a float kernel for the control
+   tick (`check_inputs_float`, drake_wbc.math.kernels).
 2. The safe stop (`next_stop_state`): on a fault the controller stops (zero
    base velocity, the arm held at its last good position command) and it
    resumes only after every input has been valid again for `hold_time`.
@@ -31,6 +33,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from drake_wbc.math import kernels
+from drake_wbc.math.scalar_support import value_of
 from drake_wbc.math.validation import non_negative, positive, positive_vector
 
 BASE_AXES = 3
@@ -153,6 +157,69 @@ def check_vector(value, lower=-math.inf, upper=math.inf):
     return InputCheck(reason, i, float(vector[i]))
 
 
+def check_inputs(values, ranges):
+    """Checks every input vector of the controller at once.
+
+    Args:
+        values: a sequence of input vectors (float or AutoDiffXd arrays;
+            their values are checked), None for an input that is not
+            connected.
+        ranges: a sequence of (lower, upper), the range allowed for every
+            entry of each input, or None for any finite value.
+
+    Returns:
+        A tuple of one InputCheck per input (`check_vector`; VALID for
+        None).
+    """
+    return tuple(
+        VALID if value is None else check_vector(
+            value_of(value), *(bounds or (-math.inf, math.inf)))
+        for value, bounds in zip(values, ranges, strict=True))
+
+
+def _input_samples(rng):
+    """Random arguments of check_inputs: up to eight inputs of 1 to 6
+    entries, some not connected, some with a range; valid ones (now and
+    then with entries so large that their sum overflows) and ones with a
+    NaN, an infinity or an entry out of its range."""
+    values, ranges = [], []
+    for _ in range(rng.integers(1, 9)):
+        ranges.append([None, (-math.inf, math.inf), (0.0, math.inf),
+                       (0.0, 1.0)][rng.integers(4)])
+        if rng.uniform() < 0.15:
+            values.append(None)
+            continue
+        value = rng.uniform(0.05, 0.95, rng.integers(1, 7))
+        if rng.uniform() < 0.05:
+            value[:] = 1e308
+        if rng.uniform() < 0.1:
+            value[rng.integers(value.size)] = rng.choice(
+                [np.nan, np.inf, -np.inf, -3.0, 3.0])
+        values.append(value)
+    return values, ranges
+
+
+@kernels.fast_kernel(check_inputs, sample=_input_samples)
+def check_inputs_float(values, ranges):
+    """`check_inputs` of float vectors, for the control tick: one test of
+    every entry present and of the ranges, the per-input detail only when
+    one fails."""
+    # A sum of floats is finite only if every term is (a sum that
+    # overflows only sends the values to the detailed checks).
+    total = 0.0
+    for value in values:
+        if value is not None:
+            total += sum(value.tolist())
+    if math.isfinite(total):
+        for value, bounds in zip(values, ranges, strict=True):
+            if bounds is not None and value is not None and not (
+                    bounds[0] <= value.min() and value.max() <= bounds[1]):
+                break
+        else:
+            return (VALID,) * len(values)
+    return check_inputs(values, ranges)
+
+
 def check_points(points):
     """Checks obstacle points and keeps the usable ones.
 
@@ -166,23 +233,21 @@ def check_points(points):
         points: the (M, 2) array of the obstacle points' port.
 
     Returns:
-        (kept, dropped, check): the (K, 2) float array of the finite rows,
-        the number of rows dropped, and VALID or a MALFORMED InputCheck
-        (then kept is empty).
+        (kept, dropped, check): the (K, 2) float array of the finite rows
+        (`points` itself when it is a float array with none to drop), the
+        number of rows dropped, and VALID or a MALFORMED InputCheck (then
+        kept is empty).
     """
-    if (type(points) is np.ndarray and points.dtype == np.float64
-            and points.ndim == 2 and points.shape[1] == 2
-            and np.isfinite(points).all()):
-        return points, 0, VALID
     try:
         array = np.asarray(points, dtype=float)
     except (TypeError, ValueError):
         array = None
     if array is None or array.ndim != 2 or array.shape[1] != 2:
         return np.zeros((0, 2)), 0, InputCheck(Reason.MALFORMED)
-    rows = np.all(np.isfinite(array), axis=1)
-    if np.all(rows):
+    finite = np.isfinite(array)
+    if finite.all():
         return array, 0, VALID
+    rows = finite.all(axis=1)
     return array[rows], int(np.count_nonzero(~rows)), VALID
 
 
