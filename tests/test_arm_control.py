@@ -465,17 +465,44 @@ def test_controller_update_is_the_stages_as_written(arm):
                                   or limited.any())
 
 
-def test_controller_holds_on_hold_and_on_a_twist_that_is_not_finite(arm):
+def test_controller_brakes_on_hold_and_on_a_twist_that_is_not_finite(arm):
+    """A hold (or a twist that is not finite) brakes the command to rest
+    within the acceleration limit, along its direction, then holds it;
+    without an acceleration limit it stops at once."""
     system = ArmCartesianVelocityController(None, arm)
     context = system.CreateDefaultContext()
-    q = 0.5 * (arm.lower + arm.upper) + 0.1
-    previous = np.full(6, 0.2)
+    q0 = 0.5 * (arm.lower + arm.upper) + 0.1
+    previous = np.array([1.5, -1.2, 0.8, 0.3, -0.1, 0.0])
+    step = ELFIN5_ACCELERATION_LIMIT * H
     for V, hold, flag in (([np.nan, 0, 0, 0, 0, 0], None, 1.0),
                           ([0, 0, np.inf, 0, 0, 0], 0.0, 1.0),
-                          ([0.1, 0, 0, 0, 0, 0], 1.0, 0.0)):
-        state = controller_update(system, context, q, previous,
-                                  np.array(V, dtype=float), hold)
-        np.testing.assert_array_equal(state, np.r_[q, np.zeros(6), flag])
+                          ([0.1, 0, 0, 0, 0, 0], 1.0, None)):
+        q, rate = q0, previous
+        for _ in range(20):
+            state = controller_update(system, context, q, rate,
+                                      np.array(V, dtype=float), hold)
+            change = state[6:12] - rate
+            assert np.abs(change).max() <= step * (1 + 1e-12)
+            np.testing.assert_allclose(  # along the last direction
+                state[6:12], rate * (1.0 - min(1.0, step / np.abs(
+                    rate).max())) if rate.any() else 0.0, atol=1e-15)
+            np.testing.assert_allclose(state[:6], q + H * state[6:12],
+                                       rtol=1e-15)
+            # Limited while the acceleration limit cuts the braking.
+            assert state[12] == (flag if flag is not None else float(
+                np.abs(rate).max() > step))
+            q, rate = state[:6], state[6:12]
+        np.testing.assert_array_equal(rate, 0.0)  # at rest, 0.12 s later
+        # Braking as a whole took v_max / a (+ a tick): joint i ran
+        # |v_i| (v_max / (2 a) + h) at most.
+        stop_time = np.abs(previous).max() / ELFIN5_ACCELERATION_LIMIT
+        assert np.all(np.abs(q - q0) <= np.abs(previous) * (
+            0.5 * stop_time + H) + 1e-12)
+    at_once = ArmCartesianVelocityController(
+        ArmControllerParameters(use_acceleration_limit=False), arm)
+    state = controller_update(at_once, at_once.CreateDefaultContext(), q0,
+                              previous, np.full(6, 0.1), 1.0)
+    np.testing.assert_array_equal(state, np.r_[q0, np.zeros(6), 0.0])
 
 
 # --- the system -------------------------------------------------------
@@ -605,6 +632,8 @@ def test_model_limits_are_the_defaults(arm):
     np.testing.assert_array_equal(system.lower, arm.lower)
     np.testing.assert_array_equal(system.upper, arm.upper)
     np.testing.assert_array_equal(system.velocity_limits, np.full(6, 1.57))
+    np.testing.assert_array_equal(arm.acceleration_limits,
+                                  np.full(6, ELFIN5_ACCELERATION_LIMIT))
     plant = arm._plant
     for name in ARM_JOINTS:
         joint = plant.GetJointByName(name)

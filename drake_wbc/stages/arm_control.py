@@ -48,14 +48,21 @@ def ArmCartesianVelocityController_(T):
 
         - arm_velocity: V_a (6), the arm's Cartesian twist command
           [v_a; w_a] in T_a (m/s, rad/s), at the end effector.
-        - hold (1): optional (no hold while unconnected); >= 0.5 holds the
-          command where it is, at rest (a safe stop, see
-          drake_wbc.stages.safety.InputGuard's `stop`): the update
-          leaves q_cmd unchanged and sets q_dot to 0, so that when the
-          hold ends the arm restarts from the held command, from rest,
-          within the acceleration limit (no jump). A twist that is not
-          finite is held the same way (with `limited` 1.0), never
-          integrated.
+        - hold (1): optional (no hold while unconnected); >= 0.5 brings
+          the command to rest and holds it there (a safe stop, see
+          drake_wbc.stages.safety.InputGuard's `stop`): the update runs
+          as for a zero twist, so q_dot falls to 0 within the
+          acceleration limit, along its direction, and within the joint
+          limits' braking bounds (at 12.56 rad/s^2, at most 0.125 s and
+          0.1 rad from 1.57 rad/s), then q_cmd stays. A position command
+          held at once would ask the arm's servo for an unbounded
+          deceleration; braking never asks for more than the arm can do.
+          When the hold ends the arm restarts from the command it was
+          last sent, from rest, within the acceleration limit: no jump
+          either way. Without an acceleration limit
+          (`use_acceleration_limit` false) the command stops at once. A
+          twist that is not finite is treated the same way (with
+          `limited` 1.0), never integrated.
         - arm_position_command: q_cmd (6, rad), the joint positions for the
           arm's position servo. It is the state: no direct feedthrough.
         - arm_velocity_command: q_dot (6, rad/s) of the last update, the
@@ -134,6 +141,7 @@ def ArmCartesianVelocityController_(T):
                 params.acceleration_limit if params.use_acceleration_limit
                 else None)
             self._command = body_for(joint_velocity_command, T)
+            self._no_twist = np.zeros(TWIST_SIZE)
             self._input = self.DeclareVectorInputPort("arm_velocity",
                                                       TWIST_SIZE)
             self._hold = self.DeclareVectorInputPort("hold", 1)
@@ -170,10 +178,10 @@ def ArmCartesianVelocityController_(T):
         def _next_state(self, q, previous, V_a, hold):
             """The next state [q_cmd, q_dot, limited] from the state's
             parts and V_a (arrays of T); with `hold` (or a V_a that is not
-            finite) q_cmd stays, at rest."""
-            if hold or not _all_finite(V_a):
-                return np.concatenate(
-                    [q, np.zeros(ARM_JOINT_COUNT), [0.0 if hold else 1.0]])
+            finite) the command brakes to rest as for a zero twist."""
+            finite = _all_finite(V_a)
+            if hold or not finite:
+                V_a = self._no_twist
             command = self._command(
                 through_float_function(self._jacobian, q), V_a, q, previous,
                 self._limits)
@@ -186,7 +194,7 @@ def ArmCartesianVelocityController_(T):
                          q.tolist(), q_dot, self._lower, self._upper,
                          strict=True)]
             state += q_dot
-            state.append(1.0 if command.limited else 0.0)
+            state.append(1.0 if command.limited or not finite else 0.0)
             return np.array(state)
 
         def _update(self, context, discrete_state):

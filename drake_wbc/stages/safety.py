@@ -50,15 +50,20 @@ class GuardedInput(NamedTuple):
     Attributes:
         name: the input port's name.
         size: its size.
-        outputs: ((output name, default), ...), the guarded copies of the
-            input; a default (a vector of `size`) is what the output
-            carries while the input is not connected, None to require a
-            connection. () means one output named like the input, required.
+        outputs: ((output name, default[, while stopped]), ...), the
+            guarded copies of the input; a default (a vector of `size`) is
+            what the output carries while the input is not connected, None
+            to require a connection; a third entry (a vector of `size`),
+            what it carries during a safe stop instead of the input (e.g.
+            a switch that turns an integrating term off). () means one
+            output named like the input, required.
         lower, upper: the range allowed for every entry.
-        zero_when_stopped: the outputs carry zeros during a safe stop (a
-            reference that must not drive anything while stopped).
+        zero_when_stopped: every output carries zeros during a safe stop
+            (a reference that must not drive anything while stopped).
         initial: the value passed on if the very first sample is invalid
             (zeros if None).
+        switch: every entry must be exactly 0 or 1 (a switch; anything
+            else is a fault, drake_wbc.math.safety.check_vector).
     """
 
     name: str
@@ -68,6 +73,7 @@ class GuardedInput(NamedTuple):
     upper: float = math.inf
     zero_when_stopped: bool = False
     initial: tuple | None = None
+    switch: bool = False
 
 
 class _Assessment(NamedTuple):
@@ -96,12 +102,13 @@ def InputGuard_(T):
                                └────────────┘──► safety_reason (abstract)
 
         - Each GuardedInput's outputs carry the input while it is valid
-          (NaN, infinite or out of range is not), and the last valid
+          (NaN, infinite, out of range or, for a switch, neither 0 nor 1
+          is not), and the last valid
           sample of the whole vector while it is not, so that no stage
           behind it ever integrates an invalid value; with
-          zero_when_stopped they carry zeros during a stop. While an
-          optional input is not connected, its outputs carry their
-          defaults.
+          zero_when_stopped they carry zeros during a stop, and an output
+          given a value while stopped carries that. While an optional
+          input is not connected, its outputs carry their defaults.
         - obstacle_points: the (M, 2) points in T_b less the rows with a NaN
           or infinite coordinate, which are dropped and counted
           (drake_wbc.math.safety.check_points); a malformed array is a fault,
@@ -162,11 +169,12 @@ def InputGuard_(T):
             # Built once: which inputs may be left unconnected, their
             # ranges, and which body checks them.
             self._port_optional = tuple(
-                (port, any(default is not None for _, default in spec.outputs))
+                (port, any(entry[1] is not None for entry in spec.outputs))
                 for port, spec in zip(self._ports, self.inputs, strict=True))
             self._ranges = tuple(
-                (float(spec.lower), float(spec.upper))
-                if spec.lower > -math.inf or spec.upper < math.inf else None
+                (float(spec.lower), float(spec.upper), bool(spec.switch))
+                if (spec.lower > -math.inf or spec.upper < math.inf
+                    or spec.switch) else None
                 for spec in self.inputs)
             self._check_inputs = body_for(check_inputs, T)
             self._points = None
@@ -192,12 +200,18 @@ def InputGuard_(T):
                 {self.all_sources_ticket()})
             for i, spec in enumerate(self.inputs):
                 outputs = spec.outputs or ((spec.name, None),)
-                for name, default in outputs:
+                for name, default, *while_stopped in outputs:
                     if default is not None:
                         default = as_vector(f"{name} default", default,
                                             spec.size)
+                    stopped = (np.zeros(spec.size) if spec.zero_when_stopped
+                               else None)
+                    if while_stopped and while_stopped[0] is not None:
+                        stopped = as_vector(f"{name} while stopped",
+                                            while_stopped[0], spec.size)
                     self.DeclareVectorOutputPort(
-                        name, spec.size, self._guarded_calc(i, default))
+                        name, spec.size,
+                        self._guarded_calc(i, default, stopped))
             if points_name:
                 self.DeclareAbstractOutputPort(
                     points_name, lambda: AbstractValue.Make(np.zeros((0, 2))),
@@ -260,13 +274,12 @@ def InputGuard_(T):
 
         # --- outputs ------------------------------------------------------
 
-        def _guarded_calc(self, i, default):
-            spec, part, port = self.inputs[i], self._slices[i], self._ports[i]
-            zeros = np.zeros(spec.size)
+        def _guarded_calc(self, i, default, while_stopped):
+            part, port = self._slices[i], self._ports[i]
             # An output with a default is its default while its input is
-            # not connected: no need of the assessment then.
-            zero_when_stopped = spec.zero_when_stopped
-            shortcut = default is not None and not zero_when_stopped
+            # not connected: no need of the assessment then (unless a stop
+            # changes it).
+            shortcut = default is not None and while_stopped is None
             assessment = self._assessment
 
             def calc(context, output):
@@ -275,8 +288,8 @@ def InputGuard_(T):
                     return
                 a = assessment.Eval(context)
                 value = a.values[i]
-                if zero_when_stopped and a.after.stopped:
-                    value = zeros
+                if while_stopped is not None and a.after.stopped:
+                    value = while_stopped
                 elif value is None:
                     value = default
                 elif not (a.all_valid or a.checks[i].valid):
@@ -391,6 +404,11 @@ def StopGate_(T):
         walking into the footprint, whose repulsion eq. (cdmp-base) bounds
         only by RepulsiveFieldParameters.max_force); the arm compensates
         the part taken away (eq. (compensation)).
+
+        Without limits it holds an integrating stage while stopped: the
+        controller zeroes the inputs of the DMPs' couplings with it
+        (drake_wbc.controller.diagram), so that they do not integrate
+        during a stop.
 
         The scale is computed on the values, so in AutoDiffXd the gate is
         exact where no limit acts (the identity) and treats the scale as
