@@ -23,7 +23,8 @@ from drake_wbc.math.separation import (
     separation_scale,
     separation_state,
 )
-from drake_wbc.stages.base_command import BaseCommandLimiter, StopGate
+from drake_wbc.stages.base_command import BaseCommandLimiter
+from drake_wbc.stages.safety import StopGate
 
 HALF_SIZES = (0.4, 0.3)
 H = 0.01

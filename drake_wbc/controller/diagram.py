@@ -36,17 +36,26 @@ the commands leave from state (filter, limiter's inputs, arm controller):
 no algebraic loop, and no direct feedthrough from any input to a command.
 
 Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
-- Every input enters through the InputGuard: a NaN, an infinite value or
-  a value out of range (k_n < 0, s_c outside [0, 1]) never reaches a stage
-  (the guard passes the last valid sample on) and triggers a safe stop:
-  from that tick on the base command is zero, the arm command is held at
-  its last position command (the arm controller's hold), the reference
-  velocity is replaced by zero and the base filter's input is gated to
-  zero, so that the DMPs and the filter settle at rest. The stop clears
+- Every input enters through the InputGuard: a NaN, an infinite value, a
+  value out of range (k_n < 0, s_c outside [0, 1]) or a pHRI switch other
+  than 0 or 1 never reaches a stage (the guard passes the last valid
+  sample on) and triggers a safe stop. From that tick on the base command
+  is zero (at once: the base's own drive brakes it within its limits, the
+  shortest stop it can make) and the arm command brakes to rest within
+  the joint acceleration limit (the arm controller's hold: a position
+  command held at once would ask the servo for an unbounded
+  deceleration). Nothing integrates meanwhile: the DMPs' couplings are
+  held (the reference is zero, the phri switches turn the whole body's
+  admittance term and the arm's force term off, StopGates zero the
+  base's and the arm's DMP inputs and the tracking error into
+  WholeBodyCdmp), because they are the task's progress, which a reset
+  would lose; the transformation systems and the base filter (its input
+  gated to zero) are stable and come to rest on them. The stop clears
   once every input has been valid for safety.hold_time; the base command
   then restarts from zero within the acceleration limits and the arm from
-  rest at the held position, so no command jumps. The `safety_status`
-  output (systems.safety.STATUS_FIELDS) and `safety_reason` (a sentence;
+  rest at its last command, so no command jumps and none makes up for
+  the stop. The `safety_status`
+  output (drake_wbc.math.safety.STATUS_FIELDS) and `safety_reason` (a sentence;
   also Controller.safety_reason) say why; the stop is logged when it trips
   and when it clears. Obstacle points with a NaN or infinite coordinate
   are dropped (counted in the status), not a fault.
@@ -76,6 +85,7 @@ from drake_wbc.controller.parameters import (
     ControllerParameters,
     check_arm_limits,
 )
+from drake_wbc.math.safety import check_within_robot
 from drake_wbc.math.validation import checked_instance, validated_copy
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.stages import (
@@ -89,8 +99,8 @@ from drake_wbc.stages import (
     WholeBodyCdmp,
     WorkspaceAdapter,
 )
-from drake_wbc.stages.base_command import BaseCommandLimiter, StopGate
-from drake_wbc.stages.safety import GuardedInput, InputGuard
+from drake_wbc.stages.base_command import BaseCommandLimiter
+from drake_wbc.stages.safety import GuardedInput, InputGuard, StopGate
 from drake_wbc.stages.wrench import ExternalWrenchEstimator
 
 STATION_INPUTS = (
@@ -175,6 +185,7 @@ def build_controller(params=None, arm=None):
     h = params.time_step
     arm = checked_instance("arm", arm, ArmKinematics, ArmKinematics)
     check_arm_limits(params.arm_controller, arm)
+    check_within_robot(params.safety)
     builder = DiagramBuilder()
     add = builder.AddNamedSystem
     stages = dict(
@@ -191,6 +202,10 @@ def build_controller(params=None, arm=None):
         base_cdmp=add("base_cdmp", BaseCdmp(params.base_cdmp, time_step=h)),
         base_gate=add("base_gate", StopGate(
             3, limits=params.safety.base_velocity_limits)),
+        # The couplings' inputs held at zero while stopped.
+        base_cdmp_gate=add("base_cdmp_gate", StopGate(3)),
+        arm_cdmp_gate=add("arm_cdmp_gate", StopGate(6)),
+        deviation_gate=add("deviation_gate", StopGate(6)),
         base_filter=add("base_filter", BaseVelocityFilter(
             replace(params.base_filter, time_step=h))),
         base_limiter=add("base_limiter", BaseCommandLimiter(
@@ -232,6 +247,8 @@ def build_controller(params=None, arm=None):
     connect("guard", "stop", "base_gate", "stop")
     connect("guard", "stopped", "base_limiter", "stopped")
     connect("guard", "stop", "arm_controller", "hold")
+    for gate in ("base_cdmp_gate", "arm_cdmp_gate", "deviation_gate"):
+        connect("guard", "stop", gate, "stop")
 
     connect("base_yaw", "y0", "whole_body_cdmp", "base_yaw")
     connect("wrench", "external_wrench", "whole_body_cdmp", "wrench")
@@ -244,7 +261,8 @@ def build_controller(params=None, arm=None):
             connect("capability", name, destination, name)
     for name in ("sigma_xy", "sigma_phi"):
         connect("workspace", name, "distributor", name)
-    connect("distributor", "base_velocity", "base_cdmp", "base_velocity")
+    connect("distributor", "base_velocity", "base_cdmp_gate", "value")
+    connect("base_cdmp_gate", "gated", "base_cdmp", "base_velocity")
     connect("base_cdmp", "avoiding_base_velocity", "base_gate", "value")
     connect("base_gate", "gated", "base_filter", "velocity")
     connect("base_filter", "filtered_velocity", "base_limiter", "velocity")
@@ -257,10 +275,13 @@ def build_controller(params=None, arm=None):
             "filtered_base_velocity")
     for name in ("end_effector_position", "capability_gradient", "alpha"):
         connect("capability", name, "compensator", name)
-    connect("compensator", "end_effector_deviation", "whole_body_cdmp",
+    connect("compensator", "end_effector_deviation", "deviation_gate",
+            "value")
+    connect("deviation_gate", "gated", "whole_body_cdmp",
             "end_effector_deviation")
-    connect("compensator", "arm_reference_velocity", "arm_cdmp",
-            "arm_velocity")
+    connect("compensator", "arm_reference_velocity", "arm_cdmp_gate",
+            "value")
+    connect("arm_cdmp_gate", "gated", "arm_cdmp", "arm_velocity")
     connect("arm_cdmp", "arm_velocity_command", "arm_controller",
             "arm_velocity")
 
@@ -300,9 +321,14 @@ def _input_guard(params):
         vector("reference_velocity", 6, zero_when_stopped=True),
         vector("desired_wrench", 6,
                (("desired_wrench", params.arm_cdmp.F_d),)),
+        # A switch, 0 or 1. While stopped: the admittance term of eq.
+        # (cdmp-wb) off (0), and so is the arm's force term of eq.
+        # (cdmp-arm) (1), so that neither DMP integrates a wrench.
         vector("phri_switch", 1, (
-            ("phri_switch.whole_body", [params.whole_body_cdmp.S_hri]),
-            ("phri_switch.arm", [params.arm_cdmp.S_hri]))),
+            ("phri_switch.whole_body", [params.whole_body_cdmp.S_hri],
+             [0.0]),
+            ("phri_switch.arm", [params.arm_cdmp.S_hri], [1.0])),
+            switch=True),
         vector("null_space_gain", 1, (
             ("null_space_gain", [params.distributor.null_space_gain]),),
             lower=0.0, upper=inf),

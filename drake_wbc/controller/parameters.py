@@ -126,8 +126,9 @@ class ControllerParameters:
 
 
 def check_arm_limits(params, arm):
-    """Checks that arm_controller's joint and velocity limits lie within
-    the arm's own (the model's), which they may tighten but not widen.
+    """Checks that arm_controller's joint, velocity and acceleration limits
+    lie within the arm's own (the model's), which they may tighten but not
+    widen; the acceleration limit may not be turned off.
 
     Args:
         params: ArmControllerParameters.
@@ -151,7 +152,17 @@ def check_arm_limits(params, arm):
                 f"arm_controller.{name}[{i}] = {float(value[i])!r} is not "
                 f"allowed: must be {allowed} the arm's own "
                 f"{float(own[i])!r}")
-
+    own = float(np.min(arm.acceleration_limits))
+    if not params.use_acceleration_limit:
+        raise ValueError(
+            "arm_controller.use_acceleration_limit = False is not allowed: "
+            f"the arm's own acceleration limit ({own!r} rad/s^2) holds; "
+            "tighten acceleration_limit instead")
+    if params.acceleration_limit > own:
+        raise ValueError(
+            f"arm_controller.acceleration_limit = "
+            f"{params.acceleration_limit!r} is not allowed: must be at most "
+            f"the arm's own {own!r} rad/s^2")
 
 
 _LOADER_ERRORS = (yaml.YAMLError, RuntimeError, TypeError, ValueError,

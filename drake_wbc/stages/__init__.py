@@ -21,8 +21,6 @@ from drake_wbc.stages.arm_control import (
 from drake_wbc.stages.base_command import (
     BaseCommandLimiter,
     BaseCommandLimiter_,
-    StopGate,
-    StopGate_,
 )
 from drake_wbc.stages.base_filter import (
     BaseVelocityFilter,
@@ -50,6 +48,8 @@ from drake_wbc.stages.safety import (
     GuardedInput,
     InputGuard,
     InputGuard_,
+    StopGate,
+    StopGate_,
 )
 from drake_wbc.stages.whole_body_cdmp import (
     WholeBodyCdmp,

@@ -1,8 +1,8 @@
-"""The base's command at a safe stop and at the robot's limits, as Drake
-systems thin over drake_wbc.math.safety: StopGate (a signal zeroed while
-stopped) and BaseCommandLimiter (the base command within the robot's
-velocity and acceleration limits, its direction kept). InputGuard, which
-decides the stop, is in drake_wbc.stages.safety."""
+"""The base's command at a safe stop and at the robot's limits, as a Drake
+system thin over drake_wbc.math.safety: BaseCommandLimiter (the base
+command within the robot's velocity and acceleration limits, its direction
+kept). InputGuard, which decides the stop, and StopGate are in
+drake_wbc.stages.safety."""
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -10,7 +10,7 @@ from pydrake.systems.framework import LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.math import safety
-from drake_wbc.math.command_limits import limit_base_velocity, uniform_scale
+from drake_wbc.math.command_limits import limit_base_velocity
 from drake_wbc.math.repulsion import LastPoints, RepulsiveFieldParameters
 from drake_wbc.math.safety import SafetyParameters
 from drake_wbc.math.scalar_support import through_float_function, value_of
@@ -23,104 +23,9 @@ from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
     positive,
-    positive_vector,
     validated_copy,
 )
-from drake_wbc.stages.safety import SCALARS, as_scalar_type
-
-
-@TemplateSystem.define("StopGate_", T_list=SCALARS)
-def StopGate_(T):
-    class Impl(LeafSystem_[T]):
-        """Passes a vector on, within an envelope, or zeros during a safe
-        stop.
-
-        ::
-
-                     ┌──────────┐
-            value ──►│          ├──► gated
-            stop ───►│ StopGate ├──► scale
-                     └──────────┘
-
-        - value: (size) the signal.
-        - stop (1): >= 0.5 during a stop (InputGuard's `stop`).
-        - gated: (size) zeros while stop; otherwise value, scaled as a
-          whole into `limits` when given and exceeded (|gated_i| <=
-          limits_i, direction kept,
-          drake_wbc.math.command_limits.uniform_scale); the
-          very same values when within them.
-        - scale (1): that factor in [0, 1] (1 when within the limits or
-          stopped), for the BaseCommandLimiter's report.
-        Both outputs are direct feedthrough of both inputs.
-
-        Before the base filter of eq. (filtering) it lets the filter's
-        state settle towards rest during a stop (to (1 + omega_f t)
-        exp(-omega_f t) of its value, 18% after the shortest stop of 0.5 s
-        with the paper's omega_f = 2 pi rad/s and zeta = 1), so that the
-        filter restarts from near zero velocity when the stop clears; the
-        BaseCommandLimiter ramps the command from zero from there. With
-        the base's velocity limits as the envelope it is the filter's
-        anti-windup: a critically or over-damped filter (zeta >= 1) has a
-        non-negative impulse response of unit area, continuous or sampled
-        (its step response is monotone), so its state never asks for more
-        than the base can do, however large V_b' grows (e.g. a person
-        walking into the footprint, whose repulsion eq. (cdmp-base) bounds
-        only by RepulsiveFieldParameters.max_force); the arm compensates
-        the part taken away (eq. (compensation)).
-
-        The scale is computed on the values, so in AutoDiffXd the gate is
-        exact where no limit acts (the identity) and treats the scale as
-        a constant where one does.
-
-        Args:
-            size: the signal's size.
-            limits: None (no envelope), or (size,) limits > 0.
-        """
-
-        def _construct(self, size=3, limits=None, converter=None):
-            LeafSystem_[T].__init__(self, converter)
-            self.size = int(size)
-            self.limits = None if limits is None else tuple(
-                positive_vector("limits", limits, self.size).tolist())
-            self._value = self.DeclareVectorInputPort("value", self.size)
-            self._stop = self.DeclareVectorInputPort("stop", 1)
-            self.DeclareVectorOutputPort("gated", self.size, self._output)
-            self.DeclareVectorOutputPort("scale", 1, self._scale_output)
-
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.size, other.limits,
-                            converter=converter)
-
-        def _stopped(self, context):
-            stop = self._stop.Eval(context)[0]
-            return (stop if T is float else stop.value()) >= 0.5
-
-        def _scale(self, value):
-            if self.limits is None:
-                return 1.0
-            return uniform_scale(
-                value if T is float else value_of(value), self.limits)
-
-        def _output(self, context, output):
-            if self._stopped(context):
-                output.SetFromVector(as_scalar_type(T, np.zeros(self.size)))
-                return
-            value = self._value.Eval(context)
-            scale = self._scale(value)
-            output.SetFromVector(value if scale == 1.0 else scale * value)
-
-        def _scale_output(self, context, output):
-            scale = 1.0 if self._stopped(context) else self._scale(
-                self._value.Eval(context))
-            output.SetFromVector(np.array([scale]) if T is float
-                                 else as_scalar_type(T, np.array([scale])))
-
-    return Impl
-
-
-StopGate = StopGate_[None]
-"""StopGate_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""
-
+from drake_wbc.stages.support import SCALARS, as_scalar_type
 
 _ALLOWED = 7 + 3 * NEAREST_POINTS
 """Where the allowed speeds start in BaseCommandLimiter's float_map
