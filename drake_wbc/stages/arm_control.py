@@ -14,6 +14,7 @@ from drake_wbc.math.twist_solver import TwistSolver
 from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
+    positive,
     validated_copy,
 )
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
@@ -104,16 +105,19 @@ def ArmCartesianVelocityController_(T):
         use Drake's `FirstOrderTaylorApproximation` (same A and B).
 
         Args:
-            params: ArmControllerParameters; 100 Hz with the defaults of
+            params: ArmControllerParameters; the defaults of
                 drake_wbc.math.arm_control and the model's limits if None.
             kinematics: the ArmKinematics for J_a (e.g. one built on the
                 user's plant); one of the robot alone if None. Scalar
                 conversion shares it with the converted copy (its
                 `evaluate` sets its own context, so the copies must not
                 run their updates concurrently from several threads).
+            time_step: the control period h > 0 in s, default 0.01 (the
+                paper's 100 Hz).
         """
 
-        def _construct(self, params=None, kinematics=None, converter=None):
+        def _construct(self, params=None, kinematics=None, time_step=0.01,
+                       converter=None):
             LeafSystem_[T].__init__(self, converter)
             params = checked_instance("params", params,
                                       ArmControllerParameters,
@@ -121,6 +125,7 @@ def ArmCartesianVelocityController_(T):
             kinematics = checked_instance("kinematics", kinematics,
                                           ArmKinematics, ArmKinematics)
             self.params = params = validated_copy(params)
+            self._time_step = positive("time_step", time_step)
             self.kinematics = kinematics
             self.lower = np.array(params.lower or kinematics.lower, float)
             self.upper = np.array(params.upper or kinematics.upper, float)
@@ -134,7 +139,7 @@ def ArmCartesianVelocityController_(T):
                 if params.use_acceleration_limit else None)
             self._solver = TwistSolver(
                 self.lower, self.upper, self.velocity_limits,
-                float(params.time_step), float(params.damping),
+                self._time_step, float(params.damping),
                 float(params.damping_threshold), float(params.margin),
                 self._acceleration_limits)
             self._input = self.DeclareVectorInputPort("arm_velocity",
@@ -144,7 +149,7 @@ def ArmCartesianVelocityController_(T):
             initial[_Q] = HOME_ARM_POSITIONS
             state = self.DeclareDiscreteState(BasicVector_[T](initial))
             self.DeclarePeriodicDiscreteUpdateEvent(
-                params.time_step, 0.0, self._update
+                self._time_step, 0.0, self._update
             )
             prerequisites = {self.discrete_state_ticket(state)}
             for name, size, calc in (
@@ -158,7 +163,7 @@ def ArmCartesianVelocityController_(T):
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.params, other.kinematics,
-                            converter=converter)
+                            other._time_step, converter=converter)
             self.params = other.params
 
         @staticmethod
@@ -186,7 +191,7 @@ def ArmCartesianVelocityController_(T):
                 self._solver.solve_floats(
                     self.kinematics.evaluate(q).J_a, V_a, q_list,
                     previous.tolist()))
-            h = self.params.time_step
+            h = self._time_step
             # The bounds keep q in the band up to rounding; the clip makes
             # the joint limits exact.
             state = [min(max(q_i + h * v, lower), upper)
