@@ -75,8 +75,6 @@ Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
   limits.
 """
 
-from dataclasses import replace
-
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import MatrixGain
@@ -168,8 +166,11 @@ def build_controller(params=None, arm=None):
     """Builds the CDMP-WBC controller Diagram.
 
     Args:
-        params: ControllerParameters (the paper's values if None); the
-            controller keeps a validated copy.
+        params: ControllerParameters (the paper's values if None),
+            checked here (on a copy, which the controller keeps); each
+            stage reads its part when it is built, and the values held
+            once (time_step, capability_band, phri_switch) are handed to
+            every stage that needs them.
         arm: a shared ArmKinematics (a new one if None).
 
     Returns:
@@ -182,7 +183,8 @@ def build_controller(params=None, arm=None):
     """
     params = validated_copy(checked_instance(
         "params", params, ControllerParameters, ControllerParameters))
-    h = params.time_step
+    h, band, switch = (params.time_step, params.capability_band,
+                       params.phri_switch)
     arm = checked_instance("arm", arm, ArmKinematics, ArmKinematics)
     check_arm_limits(params.arm_controller, arm)
     check_within_robot(params.safety)
@@ -190,15 +192,17 @@ def build_controller(params=None, arm=None):
     add = builder.AddNamedSystem
     stages = dict(
         guard=add("guard", _input_guard(params)),
-        capability=add("capability", ArmCapability(params.capability, arm)),
+        capability=add("capability", ArmCapability(
+            params.capability, arm, band=band)),
         wrench=add("wrench", ExternalWrenchEstimator(arm)),
         base_yaw=add("base_yaw", MatrixGain(
             np.array([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]]))),
         whole_body_cdmp=add("whole_body_cdmp", WholeBodyCdmp(
-            params.whole_body_cdmp, time_step=h)),
-        workspace=add("workspace", WorkspaceAdapter(params.workspace, arm)),
+            params.whole_body_cdmp, time_step=h, phri_switch=switch)),
+        workspace=add("workspace", WorkspaceAdapter(
+            params.workspace, arm, band=band)),
         distributor=add("distributor", MotionDistributor(
-            params.distributor, arm)),
+            params.distributor, arm, band=band)),
         base_cdmp=add("base_cdmp", BaseCdmp(params.base_cdmp, time_step=h)),
         base_gate=add("base_gate", StopGate(
             3, limits=params.safety.base_velocity_limits)),
@@ -207,15 +211,16 @@ def build_controller(params=None, arm=None):
         arm_cdmp_gate=add("arm_cdmp_gate", StopGate(6)),
         deviation_gate=add("deviation_gate", StopGate(6)),
         base_filter=add("base_filter", BaseVelocityFilter(
-            replace(params.base_filter, time_step=h))),
+            params.base_filter, time_step=h)),
         base_limiter=add("base_limiter", BaseCommandLimiter(
             params.safety, time_step=h,
             half_sizes=params.base_cdmp.repulsion.half_sizes)),
         compensator=add("compensator", RobustCompensator(
             params.compensator, arm)),
-        arm_cdmp=add("arm_cdmp", ArmCdmp(params.arm_cdmp, time_step=h)),
+        arm_cdmp=add("arm_cdmp", ArmCdmp(
+            params.arm_cdmp, time_step=h, phri_switch=switch)),
         arm_controller=add("arm_controller", ArmCartesianVelocityController(
-            replace(params.arm_controller, time_step=h), arm)),
+            params.arm_controller, arm, time_step=h)),
     )
     s = stages
 
@@ -325,9 +330,8 @@ def _input_guard(params):
         # (cdmp-wb) off (0), and so is the arm's force term of eq.
         # (cdmp-arm) (1), so that neither DMP integrates a wrench.
         vector("phri_switch", 1, (
-            ("phri_switch.whole_body", [params.whole_body_cdmp.S_hri],
-             [0.0]),
-            ("phri_switch.arm", [params.arm_cdmp.S_hri], [1.0])),
+            ("phri_switch.whole_body", [params.phri_switch], [0.0]),
+            ("phri_switch.arm", [params.phri_switch], [1.0])),
             switch=True),
         vector("null_space_gain", 1, (
             ("null_space_gain", [params.distributor.null_space_gain]),),

@@ -1,5 +1,6 @@
-"""The controller's parameters: `ControllerParameters`, the checks that
-its parts agree, and loading from YAML (diagrams/controller.yaml).
+"""The controller's parameters: `ControllerParameters` (each value once,
+handed to the stages by build_controller), the checks that its parts
+agree, and loading from YAML (diagrams/controller.yaml).
 
 `load_controller_parameters` reads a YAML file or string into
 `ControllerParameters` with Drake's `yaml_load_typed`: the document's keys
@@ -30,12 +31,18 @@ from pydrake.common.yaml import yaml_dump, yaml_load_data, yaml_load_typed
 
 from drake_wbc.math import cdmp
 from drake_wbc.math.arm_control import ArmControllerParameters
-from drake_wbc.math.capability import ArmCapabilityParameters
+from drake_wbc.math.capability import (
+    ArmCapabilityParameters,
+    CapabilityBand,
+)
 from drake_wbc.math.compensation import RobustCompensatorParameters
 from drake_wbc.math.distribution import MotionDistributorParameters
-from drake_wbc.math.filtering import BaseFilterParameters
+from drake_wbc.math.filtering import (
+    BaseFilterParameters,
+    check_filter_period,
+)
 from drake_wbc.math.safety import SafetyParameters
-from drake_wbc.math.validation import positive, validate
+from drake_wbc.math.validation import positive, switch, validate
 from drake_wbc.math.workspace import WorkspaceAdapterParameters
 
 
@@ -44,10 +51,20 @@ class ControllerParameters:
     """Every stage's parameters, with the paper's values as defaults.
 
     Attributes:
-        time_step: the control period h in s (the paper runs at 100 Hz);
-            it overrides the time steps inside the stage parameters, and
-            base_filter.omega_f must stay below its Nyquist rate
-            pi / time_step.
+        time_step: the control period h in s (the paper runs at 100 Hz),
+            one for every stage that runs at it (the DMPs, the base
+            filter, the base command's limiter, the arm controller, the
+            input guard); base_filter.omega_f must stay below its Nyquist
+            rate pi / time_step.
+        capability_band: the limitation band C_m^l < C_m < C_m^u of eq.
+            (transition), one for every stage that looks at C_m: alpha
+            (capability), the adaptive weighting factors of the intuitive
+            pHRI mode (workspace) and the switch-off of k_n
+            (distributor). The paper's 0.035 and 0.04.
+        phri_switch: the default pHRI switch S_hri, 0 or 1, of both DMPs
+            that take it (whole_body_cdmp and arm_cdmp, eqs. (cdmp-wb),
+            (cdmp-arm)), while the task's phri_switch input, which drives
+            them together, is not given; 0 (the paper sets 1 for pHRI).
         arm_cdmp: stiffness on every axis by default (S_m = I): force
             control drives the tool towards a surface it has not yet
             touched, so it is the task's choice (the wiping scenario sets
@@ -56,22 +73,24 @@ class ControllerParameters:
             base's velocity and acceleration limits); the arm's limits are
             in arm_controller.
 
-    Besides each part's own checks, the parts must agree: one limitation
-    band C_m^l, C_m^u for every stage that looks at C_m (capability,
-    workspace and distributor .band, eq. (transition)); one default pHRI
-    switch S_hri for both DMPs that take it (whole_body_cdmp and arm_cdmp,
-    eqs. (cdmp-wb), (cdmp-arm)), which the phri_switch input drives
-    together; and, when the controller is built, arm_controller's limits
-    within the arm's own (`build_controller`).
+    Each value is held once, here, and `build_controller` hands it to the
+    stages that need it. Besides each part's own checks, the parts must
+    agree: base_filter within the Nyquist rate of time_step; and, when
+    the controller is built, arm_controller's limits within the arm's own
+    (`build_controller`).
 
     Read from YAML by drake_wbc.controller.parameters.load_controller_parameters
     (diagrams/controller.yaml lists every field). The parameters are
-    read when the controller is built: each stage keeps a validated copy,
-    so changing them afterwards has no effect on a built controller; after
-    assigning fields, drake_wbc.math.validation.validate checks the whole tree.
+    checked where they enter (here, when loaded, and when the controller
+    is built) and each stage reads what it needs from them when it is
+    built, so changing them afterwards has no effect on a built
+    controller; after assigning fields, drake_wbc.math.validation.validate
+    checks the whole tree.
     """
 
     time_step: float = 0.01
+    capability_band: CapabilityBand = field(default_factory=CapabilityBand)
+    phri_switch: float = 0.0
     capability: ArmCapabilityParameters = field(
         default_factory=ArmCapabilityParameters)
     workspace: WorkspaceAdapterParameters = field(
@@ -94,35 +113,14 @@ class ControllerParameters:
 
     def __post_init__(self):
         h = positive("time_step", self.time_step)
+        self.phri_switch = switch("phri_switch", self.phri_switch)
         for item in fields(self):
-            if item.name != "time_step" and not isinstance(
+            if dataclasses.is_dataclass(item.type) and not isinstance(
                     getattr(self, item.name), item.type):
                 raise ValueError(
                     f"{item.name} = {getattr(self, item.name)!r} is not "
                     f"allowed: must be a {item.type.__name__}")
-        omega_f = self.base_filter.omega_f
-        if omega_f >= np.pi / h:
-            raise ValueError(
-                f"time_step = {h!r} s is not allowed with base_filter."
-                f"omega_f = {omega_f!r} rad/s: the filter's cut-off must be "
-                f"below the Nyquist rate pi / time_step = {np.pi / h:.6g} "
-                "rad/s")
-        bands = {name: getattr(self, name).band
-                 for name in ("capability", "workspace", "distributor")}
-        if len({(b.lower, b.upper) for b in bands.values()}) > 1:
-            given = ", ".join(f"{name}.band = ({b.lower!r}, {b.upper!r})"
-                              for name, b in bands.items())
-            raise ValueError(
-                f"{given} are not allowed: one limitation band C_m^l, "
-                "C_m^u of eq. (transition) serves every stage, so the three "
-                "must be equal")
-        switches = (self.whole_body_cdmp.S_hri, self.arm_cdmp.S_hri)
-        if switches[0] != switches[1]:
-            raise ValueError(
-                f"whole_body_cdmp.S_hri = {switches[0]!r} and arm_cdmp.S_hri "
-                f"= {switches[1]!r} are not allowed: the pHRI switch acts on "
-                "both DMPs together (eqs. (cdmp-wb), (cdmp-arm)), so the two "
-                "defaults must be equal")
+        check_filter_period(self.base_filter, h, prefix="base_filter.")
 
 
 def check_arm_limits(params, arm):

@@ -118,7 +118,6 @@ class ArmControllerParameters:
     """Parameters of the arm's Cartesian velocity controller.
 
     Attributes:
-        time_step: control period h in s, > 0 (the paper's 100 Hz).
         damping: largest damping lambda_max >= 0 of the least-squares
             solve; 0 turns damping off (then only the pseudo-inverse's
             zeroing of exactly zero singular values remains). Default
@@ -137,10 +136,11 @@ class ArmControllerParameters:
             every Elfin5 joint).
 
     Vectors are given as any sequence (a list in YAML) and stored as
-    tuples, so that parameters compare with ==.
+    tuples, so that parameters compare with ==. The control period is not
+    a field: it is the controller's one time_step
+    (ControllerParameters.time_step), the stage's `time_step` argument.
     """
 
-    time_step: float = 0.01
     damping: float = DEFAULT_DAMPING
     damping_threshold: float = DEFAULT_DAMPING_THRESHOLD
     margin: float = DEFAULT_JOINT_LIMIT_MARGIN
@@ -151,7 +151,6 @@ class ArmControllerParameters:
     velocity_limits: list[float] | None = None
 
     def __post_init__(self):
-        positive("time_step", self.time_step)
         non_negative("damping", self.damping)
         positive("damping_threshold", self.damping_threshold)
         non_negative("margin", self.margin)

@@ -13,7 +13,7 @@ from drake_wbc.math.arm_control import (
 )
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.scalar_support import through_float_function, value_of
-from drake_wbc.math.validation import as_vector, checked_instance
+from drake_wbc.math.validation import as_vector, checked_instance, positive
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.stages.support import define_stage
 
@@ -118,9 +118,12 @@ def ArmCartesianVelocityController_(T):
                 conversion shares it with the converted copy (its
                 `evaluate` sets its own context, so the copies must not
                 run their updates concurrently from several threads).
+            time_step: the control period h > 0 in s, default 0.01 (the
+                paper's 100 Hz).
         """
 
-        def _construct(self, params=None, kinematics=None, converter=None):
+        def _construct(self, params=None, kinematics=None, time_step=0.01,
+                       converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.params = params = checked_instance(
                 "params", params, ArmControllerParameters,
@@ -132,11 +135,11 @@ def ArmCartesianVelocityController_(T):
             self.velocity_limits = np.array(
                 params.velocity_limits or kinematics.velocity_limits, float
             )
-            self._time_step = float(params.time_step)
+            self._time_step = positive("time_step", time_step)
             self._lower, self._upper = self.lower.tolist(), self.upper.tolist()
             self._limits = twist_limits(
                 self.lower, self.upper, self.velocity_limits,
-                params.time_step, params.damping, params.damping_threshold,
+                self._time_step, params.damping, params.damping_threshold,
                 params.margin,
                 params.acceleration_limit if params.use_acceleration_limit
                 else None)
@@ -149,7 +152,7 @@ def ArmCartesianVelocityController_(T):
             initial[_Q] = HOME_ARM_POSITIONS
             state = self.DeclareDiscreteState(BasicVector_[T](initial))
             self.DeclarePeriodicDiscreteUpdateEvent(
-                params.time_step, 0.0, self._update
+                self._time_step, 0.0, self._update
             )
             prerequisites = {self.discrete_state_ticket(state)}
             for name, size, calc in (
@@ -165,7 +168,7 @@ def ArmCartesianVelocityController_(T):
             # The original's parameters and kinematics, not its arguments:
             # a default (None) would build a second plant.
             Impl._construct(self, other.params, other.kinematics,
-                            converter=converter)
+                            other._time_step, converter=converter)
 
         @staticmethod
         def _state(context):
