@@ -6,7 +6,9 @@ hand on the tool), the task's inputs over time, the duration, the runs to
 compare and what to write. It is loaded with Drake's `yaml_load_typed`
 into the dataclasses below, then every check of the tree runs, so a wrong
 key or value is reported with the file, the field's dotted path and what
-is allowed (drake_wbc.controller.parameters.load_typed)::
+is allowed (drake_wbc.controller.loading.load_typed, which also refuses
+files written to hurt the loader: aliases that multiply, deep nesting,
+duplicate keys, text that is not UTF-8)::
 
     description: the end effector holds still while a person walks by
     experiment: fixed_point
@@ -29,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_wbc.controller import ControllerParameters
-from drake_wbc.controller.parameters import load_typed
+from drake_wbc.controller.loading import load_typed
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.math.cdmp import MovementReplay
 from drake_wbc.math.validation import (
