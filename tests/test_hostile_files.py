@@ -1,6 +1,6 @@
 """The loader against files written to hurt it: aliases that multiply,
-deep nesting, duplicate keys, bytes that are not UTF-8, huge files.
-Each is a ValueError naming the file, the line or the
+deep nesting, duplicate keys, bytes that are not UTF-8, huge files,
+absurd numbers. Each is a ValueError naming the file, the line or the
 field's dotted path and what is allowed, raised in a moment, never a
 traceback from deep in yaml or pydrake, never minutes of CPU."""
 
@@ -193,6 +193,54 @@ def test_long_values_are_shortened_in_messages(tmp_path):
     assert "scene.people[0].times = [0.0, 0.0" in message
     assert "characters) is not allowed: must be strictly increasing" in \
         message
+
+
+ABSURD = [
+    # (scenario text, fragments of the message)
+    ("controller: {whole_body_cdmp: {dmp: {alpha_z: 1e300}}}",
+     ["controller.whole_body_cdmp.dmp.alpha_z = 1e+300", "Nyquist"]),
+    ("controller: {base_cdmp: {dmp: {tau: 1.0e-300}}}",
+     ["controller.base_cdmp.dmp.alpha_z = 25.0", "tau = 1e-300", "Nyquist"]),
+    ("controller: {arm_cdmp: {dmp: {alpha_z: 1e400}}}",
+     ["controller.arm_cdmp.dmp.alpha_z = inf", "finite"]),
+    ("controller: {whole_body_cdmp: {k_hri: 1e300}}",
+     ["controller.whole_body_cdmp.k_hri = 1e+300", "at most 1.0 m/(N s)"]),
+    ("controller: {base_cdmp: {dmp: {num_basis: 100000000}}}",
+     ["controller.base_cdmp.dmp.num_basis = 100000000", "at most 1000"]),
+    ("station: {wrist: {rate: 1e300}}",
+     ["station.wrist.rate = 1e+300 Hz",
+      "at most 1 / station.time_step = 1000 Hz"]),
+    ("station: {lidar: {rate: 1e6}}",
+     ["station.lidar.rate = 1000000.0 Hz", "at most 1 / station.time_step"]),
+    ("station: {lidar: {num_beams: 1000000000}}",
+     ["station.lidar.num_beams = 1000000000", "at most 10000"]),
+    ("station: {time_step: 1.0e-300}",
+     ["station.time_step = 1e-300 s", "at least 1e-05 s (10 us)"]),
+    ("station: {arm: {servo_frequency: 1.0e-300}}",
+     ["station.arm.servo_frequency = 1e-300 Hz", "at least 1.0 Hz"]),
+    ("station: {initial_base_pose: [1e300, 0, 0]}",
+     ["station.initial_base_pose = [1e+300, 0.0, 0.0]", "+-1000 m"]),
+    ("scene: {cylinders: [{name: p, position: [5, 5], height: 1e300}]}",
+     ["scene.cylinders[0].height = 1e+300", "+-1000 m"]),
+    ("scene: {boxes: [{name: b, center: [1e300, 5, 0]}]}",
+     ["scene.boxes[0].center = [1e+300, 5.0, 0.0]", "+-1000 m"]),
+    ("scene: {people: [{name: a, times: [0], waypoints: [[1e300, 3]]}]}",
+     ["scene.people[0].waypoints = [[1e+300, 3.0]]", "+-1000 m"]),
+    ("outputs: {log_period: 1.0e-300}",
+     ["outputs.log_period = 1e-300 s", "at least the station's step"]),
+    ("outputs: {replay_frame_rate: 1e300}",
+     ["outputs.replay_frame_rate = 1e+300 Hz", "at most 1 / "]),
+]
+
+
+@pytest.mark.parametrize("text, fragments", ABSURD)
+def test_absurd_numbers_are_refused_with_a_reason(text, fragments, tmp_path):
+    """Each of these but the infinite one (refused already) was accepted
+    before, and then overflowed the DMP's discretisation, stalled the
+    simulation, aborted Drake's geometry or filled the memory."""
+    message = refused(load_scenario, text + "\n", tmp_path)
+    for fragment in fragments:
+        assert fragment in message, message
 
 
 def test_the_scenarios_of_the_repository_pass_the_screen():

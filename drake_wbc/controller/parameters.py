@@ -110,6 +110,19 @@ class ControllerParameters:
                 f"omega_f = {omega_f!r} rad/s: the filter's cut-off must be "
                 f"below the Nyquist rate pi / time_step = {np.pi / h:.6g} "
                 "rad/s")
+        for name in ("base_cdmp", "whole_body_cdmp", "arm_cdmp"):
+            dmp = getattr(self, name).dmp
+            rate = _fastest_pole(dmp)
+            if not rate < np.pi / h:
+                raise ValueError(
+                    f"{name}.dmp.alpha_z = {dmp.alpha_z!r}, beta_z = "
+                    f"{dmp.resolved_beta_z!r} and tau = {dmp.tau!r} s are not "
+                    f"allowed with time_step = {h!r} s: the transformation "
+                    f"system's fastest pole ({rate:.6g} rad/s) must lie below "
+                    f"the Nyquist rate pi / time_step = {np.pi / h:.6g} "
+                    "rad/s, as the filter's cut-off (a DMP faster than the "
+                    "control period cannot be sampled by it, and its "
+                    "discretisation overflows long before 1e300)")
         bands = {name: getattr(self, name).band
                  for name in ("capability", "workspace", "distributor")}
         if len({(b.lower, b.upper) for b in bands.values()}) > 1:
@@ -126,6 +139,19 @@ class ControllerParameters:
                 f"= {switches[1]!r} are not allowed: the pHRI switch acts on "
                 "both DMPs together (eqs. (cdmp-wb), (cdmp-arm)), so the two "
                 "defaults must be equal")
+
+
+def _fastest_pole(dmp):
+    """The largest |lambda| of the transformation system of eq. (6),
+    tau^2 lambda^2 + alpha_z tau lambda + alpha_z beta_z = 0, rad/s: the
+    DMP's fastest rate (sqrt(alpha_z beta_z) / tau when critically damped
+    or under-damped)."""
+    alpha, beta, tau = dmp.alpha_z, dmp.resolved_beta_z, dmp.tau
+    with np.errstate(over="ignore", invalid="ignore"):
+        discriminant = alpha * alpha - 4.0 * alpha * beta
+        if discriminant > 0.0:
+            return float((alpha + np.sqrt(discriminant)) / (2.0 * tau))
+        return float(np.sqrt(alpha * beta) / tau)
 
 
 def check_arm_limits(params, arm):
