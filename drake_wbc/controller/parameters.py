@@ -13,22 +13,22 @@ what it changes::
     workspace: {mode: intuitive-phri}
 
 `yaml_load_typed` builds the defaults and then assigns the fields it reads
-one by one, without the dataclasses' checks; the loader therefore runs
-every check of the whole tree afterwards (drake_wbc.math.validation.validate).
-Every problem, from the YAML syntax to a value out of range, is raised as
-a ValueError naming the file (if any), the field's dotted path (e.g.
-`arm_cdmp.S_m`), the value and what is allowed.
+one by one, without the dataclasses' checks; the loader
+(drake_wbc.controller.loading.load_typed) therefore runs every check of
+the whole tree afterwards (drake_wbc.math.validation.validate), and
+screens the file beforehand against what could hurt it (size, encoding,
+nesting, aliases, duplicate keys). Every problem, from the YAML syntax to
+a value out of range, is raised as a ValueError naming the file (if any),
+the field's dotted path (e.g. `arm_cdmp.S_m`), the value and what is
+allowed.
 """
 
 import dataclasses
-import typing
 from dataclasses import dataclass, field, fields
-from pathlib import Path
 
 import numpy as np
-import yaml
-from pydrake.common.yaml import yaml_dump, yaml_load_data, yaml_load_typed
 
+from drake_wbc.controller.loading import load_typed
 from drake_wbc.math import cdmp
 from drake_wbc.math.arm_control import ArmControllerParameters
 from drake_wbc.math.capability import (
@@ -42,7 +42,7 @@ from drake_wbc.math.filtering import (
     check_filter_period,
 )
 from drake_wbc.math.safety import SafetyParameters
-from drake_wbc.math.validation import positive, switch, validate
+from drake_wbc.math.validation import positive, switch
 from drake_wbc.math.workspace import WorkspaceAdapterParameters
 
 
@@ -121,6 +121,32 @@ class ControllerParameters:
                     f"{item.name} = {getattr(self, item.name)!r} is not "
                     f"allowed: must be a {item.type.__name__}")
         check_filter_period(self.base_filter, h, prefix="base_filter.")
+        for name in ("base_cdmp", "whole_body_cdmp", "arm_cdmp"):
+            dmp = getattr(self, name).dmp
+            rate = _fastest_pole(dmp)
+            if not rate < np.pi / h:
+                raise ValueError(
+                    f"{name}.dmp.alpha_z = {dmp.alpha_z!r}, beta_z = "
+                    f"{dmp.resolved_beta_z!r} and tau = {dmp.tau!r} s are not "
+                    f"allowed with time_step = {h!r} s: the transformation "
+                    f"system's fastest pole ({rate:.6g} rad/s) must lie below "
+                    f"the Nyquist rate pi / time_step = {np.pi / h:.6g} "
+                    "rad/s, as the filter's cut-off (a DMP faster than the "
+                    "control period cannot be sampled by it, and its "
+                    "discretisation overflows long before 1e300)")
+
+
+def _fastest_pole(dmp):
+    """The largest |lambda| of the transformation system of eq. (6),
+    tau^2 lambda^2 + alpha_z tau lambda + alpha_z beta_z = 0, rad/s: the
+    DMP's fastest rate (sqrt(alpha_z beta_z) / tau when critically damped
+    or under-damped)."""
+    alpha, beta, tau = dmp.alpha_z, dmp.resolved_beta_z, dmp.tau
+    with np.errstate(over="ignore", invalid="ignore"):
+        discriminant = alpha * alpha - 4.0 * alpha * beta
+        if discriminant > 0.0:
+            return float((alpha + np.sqrt(discriminant)) / (2.0 * tau))
+        return float(np.sqrt(alpha * beta) / tau)
 
 
 def check_arm_limits(params, arm):
@@ -162,15 +188,9 @@ def check_arm_limits(params, arm):
             f"{params.acceleration_limit!r} is not allowed: must be at most "
             f"the arm's own {own!r} rad/s^2")
 
-
-_LOADER_ERRORS = (yaml.YAMLError, RuntimeError, TypeError, ValueError,
-                  AssertionError, AttributeError, NotImplementedError)
-"""What yaml_load_typed raises on a document that does not fit the schema
-(an unknown key, a list for a number, text for a number, ...)."""
-
-
 def load_controller_parameters(path=None, text=None):
-    """ControllerParameters from a YAML file or string, validated.
+    """ControllerParameters from a YAML file or string, validated
+    (drake_wbc.controller.loading.load_typed, safe against hostile files).
 
     Args:
         path: a YAML file (str or path-like); or
@@ -187,114 +207,3 @@ def load_controller_parameters(path=None, text=None):
         OSError: if the file cannot be read.
     """
     return load_typed(ControllerParameters, path=path, text=text)
-
-
-def load_typed(schema, path=None, text=None):
-    """An instance of the dataclass `schema` from a YAML file or string,
-    with every check of its tree run (see load_controller_parameters).
-
-    Args:
-        schema: a parameters dataclass (ControllerParameters, a scenario,
-            ...).
-        path: a YAML file (str or path-like); or
-        text: YAML text. Give exactly one.
-
-    Returns:
-        The loaded, validated instance of `schema`.
-
-    Raises:
-        ValueError: naming the file (when loading one), the field's
-            dotted path, its value and what is allowed; for an unknown
-            key, the key's path and the keys allowed there.
-        OSError: if the file cannot be read.
-    """
-    if (path is None) == (text is None):
-        raise ValueError(f"path = {path!r} and text = {text!r} are not "
-                         "allowed: give exactly one of them")
-    source = "" if path is None else f"{path}: "
-    if path is not None:
-        text = Path(path).read_text(encoding="utf-8")
-    try:
-        if yaml_load_data(text) is None:  # empty, or comments only
-            text = "{}"
-        params = yaml_load_typed(schema=schema, data=text)
-    except _LOADER_ERRORS as error:
-        raise ValueError(source + _explained(schema, text, error)) from None
-    try:
-        return validate(params)
-    except ValueError as error:
-        raise ValueError(f"{source}{error}") from None
-
-
-def _explained(schema, text, error):
-    """A message for `error` from yaml_load_typed on `text`, naming the key
-    where it arose when one can be found."""
-    if isinstance(error, yaml.YAMLError):
-        return f"not valid YAML: {error}"
-    document = yaml_load_data(text)
-    found = None
-    if isinstance(document, dict):
-        found = _failing_key(document, schema, "")
-    return found or str(error)
-
-
-def _failing_key(document, schema, prefix):
-    """The first key of the mapping `document` that the dataclass `schema`
-    does not accept, described; None if each key loads on its own.
-
-    Each entry is loaded alone, by yaml_load_typed itself, going down into
-    nested parameters to the innermost key that fails."""
-    hints = {item.name: item.type for item in dataclasses.fields(schema)}
-    for key, value in document.items():
-        name = f"{prefix}{key}"
-        if key not in hints:
-            where = f"in {prefix[:-1]}" if prefix else "at the top level"
-            return (f"unknown key {name!r}; the keys allowed {where} are "
-                    f"{', '.join(hints)}")
-        nested = _dataclass_in(hints[key])
-        if nested is not None and isinstance(value, dict):
-            inner = _failing_key(value, nested, f"{name}.")
-            if inner is not None:
-                return inner
-        item_schema = _list_item_dataclass(hints[key])
-        if item_schema is not None and isinstance(value, list):
-            for i, item in enumerate(value):
-                if isinstance(item, dict):
-                    inner = _failing_key(item, item_schema, f"{name}[{i}].")
-                    if inner is not None:
-                        return inner
-        message = _load_error(schema, {key: value})
-        if message is None:
-            continue
-        if nested is not None and not isinstance(value, dict):
-            fields = ", ".join(item.name
-                               for item in dataclasses.fields(nested))
-            message = (f"must be a mapping of the fields of "
-                       f"{nested.__name__} ({fields})")
-        return f"{name} = {value!r} is not allowed: {message}"
-    return None
-
-
-def _load_error(schema, document):
-    """The message of yaml_load_typed's error on `document`, or None."""
-    try:
-        yaml_load_typed(schema=schema, data=yaml_dump(document))
-    except _LOADER_ERRORS as error:
-        return str(error)
-    return None
-
-
-def _dataclass_in(hint):
-    """The dataclass of a field's type hint (also inside `X | None`), or
-    None."""
-    for kind in (hint, *typing.get_args(hint)):
-        if isinstance(kind, type) and dataclasses.is_dataclass(kind):
-            return kind
-    return None
-
-
-def _list_item_dataclass(hint):
-    """The dataclass of the items of a `list[X]` type hint, or None."""
-    if typing.get_origin(hint) is list:
-        return _dataclass_in(typing.get_args(hint)[0])
-    return None

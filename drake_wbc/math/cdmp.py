@@ -182,9 +182,18 @@ class MovementReplay:
         non_negative("tracking_gain", self.tracking_gain)
 
 
+MAX_K_HRI = 1.0
+"""The largest admittance gain k_hri, m/(N s): k_hri F_ext is a velocity
+of eq. (cdmp-wb), and at 1 m/(N s) a push of 1 N already asks for 1 m/s,
+the base's limit (a larger gain moves the robot at its limits on the
+wrist's noise alone, and overflows the DMP's discretisation near
+1e300)."""
+
+
 @dataclass
 class WholeBodyCdmpParameters:
-    """Eq. (cdmp-wb): admittance gain k_hri >= 0 (m/(N s); paper 0.05)
+    """Eq. (cdmp-wb): admittance gain k_hri in [0, MAX_K_HRI] (m/(N s);
+    paper 0.05)
     and an optional learned movement to play (MovementReplay; None, the
     default, keeps the paper's g = 0 and f = 0). The pHRI switch S_hri is
     an input (its default is ControllerParameters.phri_switch, one for
@@ -195,7 +204,11 @@ class WholeBodyCdmpParameters:
     movement: MovementReplay | None = None
 
     def __post_init__(self):
-        non_negative("k_hri", self.k_hri)
+        if non_negative("k_hri", self.k_hri) > MAX_K_HRI:
+            raise ValueError(
+                f"k_hri = {self.k_hri!r} m/(N s) is not allowed: must be at "
+                f"most {MAX_K_HRI!r} m/(N s) (k_hri F_ext is a velocity: "
+                f"at {MAX_K_HRI!r} a push of 1 N already asks for 1 m/s)")
         _dmp(self.dmp)
         self.movement = checked_instance("movement", self.movement,
                                          MovementReplay, lambda: None)
