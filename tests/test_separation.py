@@ -5,6 +5,7 @@ lost (a worker dragging the robot into a crate)."""
 
 import numpy as np
 import pytest
+from pydrake.autodiffutils import AutoDiffXd, ExtractValue
 
 from drake_wbc.math import repulsion
 from drake_wbc.math.repulsion import (
@@ -13,9 +14,11 @@ from drake_wbc.math.repulsion import (
 )
 from drake_wbc.math.separation import (
     FAR,
+    approach_rows,
     approach_speeds,
     nearest_points,
     separation_scale,
+    separation_state,
 )
 
 HALF = (0.4, 0.3)
@@ -83,30 +86,77 @@ def test_nearest_points_keeps_the_closest_and_pads_far():
     assert separation_scale([1.0, 1.0, 1.0], padded, HALF, 0.1, 0.5) == 1.0
 
 
-def test_the_float_footprint_distance_is_the_any_scalar_formula():
-    """footprint_geometry (the float path of footprint_distance and of the
-    tick) against the any-scalar formulation, on points outside, inside,
-    on the edges and corners and on the axes."""
+def test_the_float_footprint_distance_is_the_autodiff_one():
+    """The footprint distance on float points (the tick's) against the
+    same points as AutoDiffXd, outside, inside, on the edges and corners
+    and on the axes, and footprint_gap against both."""
     rng = np.random.default_rng(8)
     a, b = HALF
     special = np.array([[a, 0.0], [-a, b], [0.0, 0.0], [0.0, -b], [a, -b],
                         [0.1, 0.1], [-0.35, 0.29], [2.0, 0.0], [0.0, -3.0],
                         [a + 1e-300, b]])
-    points = np.vstack([rng.uniform(-1.5, 1.5, (500, 2)),
-                        rng.uniform(-0.45, 0.45, (200, 2)), special])
+    points = np.vstack([rng.uniform(-1.5, 1.5, (300, 2)),
+                        rng.uniform(-0.45, 0.45, (100, 2)), special])
     params = RepulsiveFieldParameters(half_sizes=HALF)
-    d_any, n_any = repulsion._footprint_distance_any(points, params)
+    as_autodiff = np.vectorize(AutoDiffXd, otypes=[object])(points)
+    d_any, n_any = (ExtractValue(np.asarray(v, dtype=object)).reshape(
+        np.shape(v)) for v in footprint_distance(as_autodiff, params))
     d, n = footprint_distance(points, params)
     np.testing.assert_allclose(d, d_any, rtol=1e-14, atol=1e-300)
     np.testing.assert_allclose(n, n_any, rtol=1e-14, atol=1e-15)
     np.testing.assert_allclose(repulsion.footprint_gap(points, HALF), d,
                                rtol=0, atol=0)
-    # All outside (the branch without the inside cases).
-    outside = points[d > 0]
+
+
+def test_the_approach_rows_of_autodiff_points_are_the_float_ones():
+    """approach_rows and separation_state take AutoDiffXd points too (the
+    reference is scalar-generic), with the float values."""
+    rng = np.random.default_rng(9)
+    points = np.vstack([rng.uniform(-1.5, 1.5, (40, 2)),
+                        [[0.1, 0.0], [0.4, 0.3]]])
+    as_autodiff = np.vectorize(AutoDiffXd, otypes=[object])(points)
+
+    def value(array):
+        return ExtractValue(np.asarray(array, dtype=object)).reshape(
+            np.shape(array))
+
+    np.testing.assert_array_equal(value(nearest_points(as_autodiff, HALF)),
+                                  nearest_points(points, HALF))
+    for got, expected in zip(approach_rows(as_autodiff, HALF),
+                             approach_rows(points, HALF), strict=True):
+        np.testing.assert_allclose(value(got), expected, rtol=1e-14,
+                                   atol=1e-15)
+    state = separation_state(as_autodiff, HALF, 0.1, 0.5)
     np.testing.assert_allclose(
-        footprint_distance(outside, params)[1],
-        repulsion._footprint_distance_any(outside, params)[1],
-        rtol=1e-14, atol=1e-15)
+        ExtractValue(np.asarray(state, dtype=object)).ravel(),
+        separation_state(points, HALF, 0.1, 0.5), rtol=1e-14, atol=1e-15)
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda: separation_scale([1.0, 0.0], [[1.0, 0.0]], HALF, 0.1, 0.5),
+     "command"),
+    (lambda: separation_scale([1.0, 0.0, 0.0], [[np.nan, 0.0]], HALF, 0.1,
+                              0.5), "points"),
+    (lambda: separation_scale([1.0, 0.0, 0.0], [[1.0, 0.0, 0.0]], HALF,
+                              0.1, 0.5), "points"),
+    (lambda: separation_scale([1.0, 0.0, 0.0], [[1.0, 0.0]], (0.4, -0.1),
+                              0.1, 0.5), "half_sizes"),
+    (lambda: separation_scale([1.0, 0.0, 0.0], [[1.0, 0.0]], HALF, -0.1,
+                              0.5), "stop_distance"),
+    (lambda: separation_scale([1.0, 0.0, 0.0], [[1.0, 0.0]], HALF, 0.1,
+                              0.0), "stop_time"),
+    (lambda: approach_speeds([1.0, 0.0, np.inf], [[1.0, 0.0]], HALF),
+     "command"),
+])
+def test_bad_arguments_are_named(call, name):
+    with pytest.raises(ValueError, match=name):
+        call()
+
+
+def test_no_points_limit_nothing():
+    assert separation_scale([1.0, 1.0, 1.0], [], HALF, 0.1, 0.5) == 1.0
+    approach, d = approach_speeds([1.0, 0.0, 0.0], np.zeros((0, 2)), HALF)
+    assert approach.shape == d.shape == (0,)
 
 
 @pytest.mark.parametrize("count", [1, 5, 16, 40])
@@ -159,3 +209,39 @@ def test_last_points_recomputes_only_for_new_points():
     nan[0, 0] = np.nan  # NaN equals nothing: computed each time
     last(nan), last(nan)
     assert len(calls) == 5
+
+
+def test_last_points_compares_by_value_as_array_equal():
+    """Whatever the caller changes (the array in place, a copy, a list, a
+    transposed copy), the function runs again exactly when the points
+    differ by value."""
+    calls = []
+
+    def function(points):
+        calls.append(np.array(points))
+        return np.asarray(points, dtype=float).sum(axis=0)
+
+    last = repulsion.LastPoints(function)
+    rng = np.random.default_rng(17)
+    points = rng.normal(size=(30, 2))
+    seen = None
+    for trial in range(200):
+        choice = rng.integers(0, 6)
+        if choice == 0:
+            points = rng.normal(size=(int(rng.integers(0, 40)), 2))
+        elif choice == 1:
+            points[rng.integers(0, len(points) or 1) if len(points) else
+                   slice(0)] += 1.0  # changed in place
+        elif choice == 2:
+            points = points.copy()  # the same values, a new array
+        elif choice == 3:
+            points = points.tolist()  # a list of the same values
+        elif choice == 4:
+            points = np.asarray(points)[:, ::-1].copy()
+        given = points
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        expected_call = seen is None or not np.array_equal(seen, points)
+        before = len(calls)
+        np.testing.assert_array_equal(last(given), points.sum(axis=0))
+        assert (len(calls) > before) == expected_call, trial
+        seen = points.copy()
