@@ -128,6 +128,11 @@ class Reception(NamedTuple):
     run_length: int = 0
     clock_jumps: int = 0
 
+    def __deepcopy__(self, memo):
+        # Never changed in place (only replaced), so the copies that Drake
+        # makes of an abstract state at each update may share it.
+        return self
+
 
 DEFAULT_RULES = ClockRules()
 """The ClockRules of HardwareOptions' defaults."""
@@ -226,6 +231,11 @@ class SenderLock(NamedTuple):
     heard: float = -np.inf
     refused: int = 0
     changes: int = 0
+
+    def __deepcopy__(self, memo):
+        # Never changed in place (only replaced), so the copies that Drake
+        # makes of an abstract state at each update may share it.
+        return self
 
 
 def admit(lock, sender, now, quiet_time):
@@ -433,6 +443,20 @@ class MessageDecoder(LeafSystem):
         state.get_mutable_abstract_state(0).set_value(reception)
 
 
+class Commands(NamedTuple):
+    """What a CommandReceiver keeps: its SenderLock and the Reception of
+    each command channel."""
+
+    lock: SenderLock
+    base: Reception
+    arm: Reception
+
+    def __deepcopy__(self, memo):
+        # Never changed in place (only replaced), so the copies that Drake
+        # makes of an abstract state at each update may share it.
+        return self
+
+
 COMMAND_STATUS = ("base_command_rejected", "arm_command_rejected",
                   "refused", "sender_changes")
 """The entries of CommandReceiver's `status` output."""
@@ -488,7 +512,7 @@ class CommandReceiver(LeafSystem):
         for kind, channel in enumerate(channels):
             lcm.Subscribe(channel, lambda data, kind=kind: self._mailbox.put(
                 (kind, data)))
-        self._state = self.DeclareAbstractState(AbstractValue.Make((
+        self._state = self.DeclareAbstractState(AbstractValue.Make(Commands(
             SenderLock(),
             Reception(None, (np.zeros(3),), -np.inf),
             Reception(None, (self.initial.copy(),), -np.inf))))
@@ -499,7 +523,7 @@ class CommandReceiver(LeafSystem):
         self.DeclarePerStepUnrestrictedUpdateEvent(self._update)
 
     def stored(self, context):
-        """(SenderLock, base Reception, arm Reception) at `context`."""
+        """The Commands at `context`."""
         return context.get_abstract_state(0).get_value()
 
     def _velocity(self, context, output):
@@ -551,7 +575,7 @@ class CommandReceiver(LeafSystem):
                            f"another sender than {lock.sender}, which has "
                            "the command channels")
         state.get_mutable_abstract_state(0).set_value(
-            (lock, *receptions))
+            Commands(lock, *receptions))
 
 
 class FlaggedPublisher(LeafSystem):

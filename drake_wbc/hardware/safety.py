@@ -304,6 +304,11 @@ class GuardState(NamedTuple):
     recovering: tuple = (False,) * len(STATUS_CHANNELS)
     urgent: bool = False
 
+    def __deepcopy__(self, memo):
+        # Never changed in place (only replaced), so the copies that Drake
+        # makes of an abstract state at each update may share it.
+        return self
+
     @classmethod
     def holding(cls, arm_positions):
         """The state at the start: the arm held at `arm_positions`, the
@@ -564,6 +569,21 @@ def _say(event, detail, now, options):
         LOG.info("every stream fresh at t = %.3f s: the commands start", now)
 
 
+class LimiterState(NamedTuple):
+    """What an ArmCommandLimiter keeps: the command the arm gets, its rate,
+    the command received it was taken from, and whether it was limited."""
+
+    command: np.ndarray
+    velocity: np.ndarray
+    taken: np.ndarray
+    limited: bool
+
+    def __deepcopy__(self, memo):
+        # Never changed in place (only replaced), so the copies that Drake
+        # makes of an abstract state at each update may share it.
+        return self
+
+
 class ArmCommandLimiter(LeafSystem):
     """The robot side's own limit on the arm's commands: whatever arrives,
     the arm is commanded within its rate and acceleration limits
@@ -598,10 +618,8 @@ class ArmCommandLimiter(LeafSystem):
         self.limits = limits
         initial = as_vector("initial_positions", initial_positions, 6)
         self._in = self.DeclareVectorInputPort("positions", 6)
-        # (command, its rate, the received command it was taken from,
-        # limited)
         self._state = self.DeclareAbstractState(AbstractValue.Make(
-            (initial.copy(), np.zeros(6), initial.copy(), False)))
+            LimiterState(initial.copy(), np.zeros(6), initial.copy(), False)))
         self.DeclarePeriodicUnrestrictedUpdateEvent(self.period, offset,
                                                     self._update)
         self.DeclareVectorOutputPort("positions", 6, self._positions)
@@ -616,8 +634,8 @@ class ArmCommandLimiter(LeafSystem):
         """Starts the limiter at rest at `positions` in `context`."""
         context = self.GetMyMutableContextFromRoot(context)
         q = as_vector("positions", positions, 6)
-        context.SetAbstractState(self._state,
-                                 (q.copy(), np.zeros(6), q.copy(), False))
+        context.SetAbstractState(self._state, LimiterState(
+            q.copy(), np.zeros(6), q.copy(), False))
 
     def _step(self, context):
         command, velocity, taken, _ = self._stored(context)
@@ -637,4 +655,4 @@ class ArmCommandLimiter(LeafSystem):
     def _update(self, context, state):
         (command, velocity, limited), received = self._step(context)
         state.get_mutable_abstract_state(self._state).set_value(
-            (command, velocity, np.array(received), limited))
+            LimiterState(command, velocity, np.array(received), limited))
