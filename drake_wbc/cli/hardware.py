@@ -184,9 +184,11 @@ def run_deploy(args):
     rate = _realtime_rate(args.realtime_rate)
     path, scenario, options = _scenario_and_options(args)
     variant = _variant(scenario, args.variant)
+    channels = options.channels
     print(f"drake-wbc deploy {path.stem} ({variant.name}) on "
-          f"{options.lcm_url}: waiting for {options.channels.base_state} "
-          f"and {options.channels.arm_status}", flush=True)
+          f"{options.lcm_url}: waiting for {channels.base_state}, "
+          f"{channels.arm_status}, {channels.wrist_wrench} and "
+          f"{channels.obstacle_points}", flush=True)
     with StopRequest() as stop:
         try:
             result = deploy(
