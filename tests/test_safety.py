@@ -22,7 +22,11 @@ from drake_wbc.controller import (
     build_controller,
     load_controller_parameters,
 )
-from drake_wbc.controller.diagram import STATION_INPUTS, TASK_INPUTS
+from drake_wbc.controller.diagram import (
+    HARDWARE_INPUTS,
+    STATION_INPUTS,
+    TASK_INPUTS,
+)
 from drake_wbc.math import command_limits, safety
 from drake_wbc.math.motion_mode import MotionMode
 from drake_wbc.math.safety import STATUS_FIELDS, Reason, SafetyParameters
@@ -178,7 +182,8 @@ def test_invalid_input_stops_holds_and_resumes(injected, k):
                   <= JOINT_ACCELERATION * (1 + 1e-6))
     # The status names the input, the reason, the entry.
     names = rig.controller.stages["guard"].input_names
-    assert sorted(names) == sorted(STATION_INPUTS + TASK_INPUTS)
+    assert sorted(names) == sorted(STATION_INPUTS + TASK_INPUTS
+                                   + HARDWARE_INPUTS)
     expected_input = names.index(injection.port)
     fault = status[i0]
     assert fault[STATUS["invalid"]] == 1.0

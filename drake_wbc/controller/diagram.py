@@ -59,6 +59,9 @@ Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
   also Controller.safety_reason) say why; the stop is logged when it trips
   and when it clears. Obstacle points with a NaN or infinite coordinate
   are dropped (counted in the status), not a fault.
+- Over LCM, the hardware interface's watchdog enters the same way, as
+  `hardware.watchdog_tripped` (HARDWARE_INPUTS): while it stops the
+  robot for a stale stream, the controller is in a safe stop too.
 - The base command is limited to the robot's velocity limits by uniform
   scaling (its direction kept) before the base filter, by the StopGate,
   so that the filter cannot wind up (its state never asks for more than
@@ -118,6 +121,13 @@ TASK_INPUTS = (
 )
 """The task's inputs; all but reference_velocity are optional (the stage's
 parameter is used while the port is not connected)."""
+
+HARDWARE_INPUTS = ("hardware.watchdog_tripped",)
+"""Optional inputs from the LCM hardware interface (drake_wbc.hardware):
+`hardware.watchdog_tripped` is 1 while its watchdog stops the robot (a
+stale stream), and the controller then stops too (a safe stop: its
+integrators do not run on while the robot stands, so it resumes from
+rest). Unconnected (a simulation), it is 0."""
 
 
 class Controller:
@@ -230,7 +240,7 @@ def build_controller(params=None, arm=None):
 
     # Every input enters through the guard, and only its outputs (the
     # inputs' last valid samples) reach the stages.
-    for name in STATION_INPUTS + TASK_INPUTS:
+    for name in STATION_INPUTS + TASK_INPUTS + HARDWARE_INPUTS:
         builder.ExportInput(s["guard"].GetInputPort(name), name)
     # Station measurements.
     connect("guard", "base.state_estimated", "base_yaw", "u0")
@@ -340,6 +350,9 @@ def _input_guard(params):
             ("compensation_switch",
              [params.compensator.compensation_switch]),),
             lower=0.0, upper=1.0),
+        # The hardware's watchdog: any value but 0 is a stop (HARDWARE_INPUTS).
+        vector("hardware.watchdog_tripped", 1, (
+            ("hardware.watchdog_tripped", [0.0]),), lower=0.0, upper=0.0),
     )
     return InputGuard(inputs, points_name="lidar.obstacle_points",
                       time_step=params.time_step, params=params.safety)
