@@ -287,18 +287,237 @@ def test_stepping_into_limits_keeps_every_limit(arm, seed):
         assert q[1] == pytest.approx(arm.lower[1] + margin, abs=1e-12)
 
 
+# --- against the four stages as written ------------------------------
+
+
+def bounds_as_written(q, lower, upper, h, margin, acceleration_limit):
+    """joint_position_velocity_bounds vectorised, as its docstring and
+    braking_rate's state it."""
+    distances = np.maximum(np.stack([upper - margin - q,
+                                     q - lower - margin]), 0.0)
+    rates = distances / h
+    if acceleration_limit is not None:
+        step = acceleration_limit * h
+        D = distances / (step * h)
+        r = 0.5 * (np.sqrt(1.0 + 8.0 * D) - 1.0)
+        m = np.maximum(np.ceil(r) - 1.0, 0.0)
+        f = np.clip(D / (m + 1.0) - 0.5 * m, 0.0, 1.0)
+        rates = np.minimum(rates, (m + f) * step)
+    return -rates[1], rates[0]
+
+
+def twist_as_written(J, V, q, lower, upper, velocity_limit, h, lambda_max,
+                     eps, margin, acceleration_limit, previous):
+    """joint_velocity_for_twist's four stages as its docstrings state them,
+    vectorised: damped least squares by the SVD, the position bounds
+    (braking at the acceleration limit), uniform velocity scaling, uniform
+    scaling of the change, the bounds again."""
+    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    s_min = float(s[-1])
+    lam = 0.0 if s_min >= eps else lambda_max * (1.0 - (s_min / eps) ** 2)
+    den = s**2 + lam**2
+    gains = np.where(den > 0.0, s / np.where(den > 0.0, den, 1.0), 0.0)
+    q_dot = Vt.T @ (gains * (U.T @ V))
+
+    low, high = bounds_as_written(q, lower, upper, h, margin,
+                                  acceleration_limit)
+
+    def uniform(vector, limits):
+        big = np.abs(vector) > limits
+        return (float(np.min(limits[big] / np.abs(vector[big])))
+                if big.any() else 1.0)
+
+    bounded = np.clip(q_dot, low, high)
+    limited = bounded != q_dot
+    scale = uniform(bounded, velocity_limit)
+    q_dot = scale * bounded
+    acceleration_scale = 1.0
+    if acceleration_limit is not None:
+        change = q_dot - previous
+        acceleration_scale = uniform(change, acceleration_limit * h)
+        q_dot = previous + acceleration_scale * change
+        bounded = np.clip(q_dot, low, high)
+        limited |= bounded != q_dot
+        q_dot = bounded
+    return q_dot, scale, acceleration_scale, limited, lam, s_min
+
+
+def twist_cases(arm, count, seed):
+    """(J, V, q, previous): configurations inside, near and beyond the
+    joint limits, near the wrist singularity and rank-deficient J, slow
+    and fast twists, previous rates from rest to beyond the limits."""
+    rng = np.random.default_rng(seed)
+    for trial in range(count):
+        q = rng.uniform(arm.lower - 0.02, arm.upper + 0.02)
+        if trial % 4 == 1:  # next to an edge of the band
+            i = rng.integers(6)
+            edge = (arm.lower[i] if rng.uniform() < 0.5 else arm.upper[i])
+            q[i] = edge + rng.choice([-1.0, 1.0]) * rng.uniform(0.0, 0.3)
+        if trial % 3 == 2:
+            q[4] = rng.uniform(-0.1, 0.1)  # near the wrist singularity
+        J = arm.evaluate(q).J_a
+        if trial % 10 == 0:
+            J = J.copy()
+            J[:, 4] = J[:, 3]  # rank deficient
+        V = rng.normal(0.0, rng.choice([1e-3, 0.05, 0.3, 3.0]), 6)
+        previous = rng.normal(0.0, rng.choice([0.0, 0.3, 3.0]), 6)
+        yield J, V, q, previous
+
+
+def relative_difference(a, b):
+    """max |a - b| over max |b| (b the formula as written)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    return np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300)
+
+
+ROUNDING = 1e-12
+"""The relative difference allowed between two formulations."""
+
+
+@pytest.mark.parametrize("acceleration", [None, 12.56, 1.0])
+@pytest.mark.parametrize("margin", [0.0, 0.05, 0.3])
+def test_the_command_is_the_four_stages_as_written(arm, acceleration,
+                                                   margin):
+    """The damped solve by the normal equations against the SVD's gains:
+    the same command to rounding, every flag and scale the same."""
+    limits = arm.velocity_limits
+    a = None if acceleration is None else np.full(6, acceleration)
+    damped = limited = 0
+    for J, V, q, previous in twist_cases(arm, 150, seed=int(margin * 100)):
+        expected = twist_as_written(
+            J, V, q, arm.lower, arm.upper, limits, H, DEFAULT_DAMPING,
+            DEFAULT_DAMPING_THRESHOLD, margin, a, previous)
+        command = joint_velocity_for_twist(
+            J, V, q, arm.lower, arm.upper, limits, H, margin=margin,
+            acceleration_limit=acceleration, previous_q_dot=previous)
+        assert relative_difference(command.q_dot, expected[0]) < ROUNDING
+        np.testing.assert_array_equal(command.limited_joints, expected[3])
+        assert command.damping == pytest.approx(expected[4], rel=1e-12,
+                                                abs=1e-15)
+        assert command.smallest_singular_value == pytest.approx(
+            expected[5], rel=1e-12, abs=1e-15)
+        for value, written in zip(command[1:3], expected[1:3], strict=True):
+            assert value == pytest.approx(written, rel=1e-12)
+        damped += command.damped
+        limited += command.limited
+    assert damped > 10 and limited > 30  # both kinds were exercised
+
+
+def test_other_joint_counts_as_written():
+    """A (6, 7) Jacobian and a (6, 5) one (a redundant and a deficient
+    arm): the same as the stages as written."""
+    rng = np.random.default_rng(5)
+    for n in (5, 7):
+        lower, upper = -np.full(n, 2.0), np.full(n, 2.5)
+        for _ in range(20):
+            J, V = rng.normal(size=(6, n)), rng.normal(0.0, 0.3, 6)
+            q, previous = rng.uniform(-2.1, 2.6, n), rng.normal(size=n)
+            expected = twist_as_written(J, V, q, lower, upper,
+                                        np.full(n, 1.5), H, 0.05, 0.05,
+                                        0.05, np.full(n, 10.0), previous)
+            command = joint_velocity_for_twist(
+                J, V, q, lower, upper, 1.5, H, acceleration_limit=10.0,
+                previous_q_dot=previous)
+            assert relative_difference(command.q_dot, expected[0]) < (
+                ROUNDING)
+
+
+@pytest.mark.parametrize("acceleration", [None, 12.56, 0.5])
+def test_the_bounds_are_as_written(arm, acceleration):
+    rng = np.random.default_rng(4)
+    a = None if acceleration is None else np.full(6, acceleration)
+    for _ in range(300):
+        q = rng.uniform(arm.lower - 0.1, arm.upper + 0.1)
+        np.testing.assert_allclose(
+            np.stack(joint_position_velocity_bounds(
+                q, arm.lower, arm.upper, H, 0.05, acceleration)),
+            np.stack(bounds_as_written(q, arm.lower, arm.upper, H, 0.05,
+                                       a)), rtol=1e-14, atol=1e-14)
+
+
+def controller_update(system, context, q, previous, V, hold=None):
+    context.SetDiscreteState(np.concatenate([q, previous, [0.0]]))
+    system.GetInputPort("arm_velocity").FixValue(context, V)
+    if hold is not None:
+        system.GetInputPort("hold").FixValue(context, [hold])
+    return system.EvalUniquePeriodicDiscreteUpdate(context).get_vector(
+    ).CopyToVector()
+
+
+def test_controller_update_is_the_stages_as_written(arm):
+    system = ArmCartesianVelocityController(None, arm)
+    context = system.CreateDefaultContext()
+    a = np.full(6, ELFIN5_ACCELERATION_LIMIT)
+    for J, V, q, previous in twist_cases(arm, 120, seed=6):
+        q = np.clip(q, arm.lower, arm.upper)
+        J = arm.evaluate(q).J_a  # the controller's own J_a
+        q_dot, scale, acc_scale, limited, _, _ = twist_as_written(
+            J, V, q, arm.lower, arm.upper, arm.velocity_limits, H,
+            DEFAULT_DAMPING, DEFAULT_DAMPING_THRESHOLD,
+            DEFAULT_JOINT_LIMIT_MARGIN, a, previous)
+        state = controller_update(system, context, q, previous, V)
+        assert relative_difference(state[6:12], q_dot) < ROUNDING
+        expected_q = np.clip(q + H * q_dot, arm.lower, arm.upper)
+        assert relative_difference(state[:6], expected_q) < ROUNDING
+        assert np.all(state[:6] >= arm.lower)
+        assert np.all(state[:6] <= arm.upper)
+        assert state[12] == float(scale < 1.0 or acc_scale < 1.0
+                                  or limited.any())
+
+
+def test_controller_brakes_on_hold_and_on_a_twist_that_is_not_finite(arm):
+    """A hold (or a twist that is not finite) brakes the command to rest
+    within the acceleration limit, along its direction, then holds it;
+    without an acceleration limit it stops at once."""
+    system = ArmCartesianVelocityController(None, arm)
+    context = system.CreateDefaultContext()
+    q0 = 0.5 * (arm.lower + arm.upper) + 0.1
+    previous = np.array([1.5, -1.2, 0.8, 0.3, -0.1, 0.0])
+    step = ELFIN5_ACCELERATION_LIMIT * H
+    for V, hold, flag in (([np.nan, 0, 0, 0, 0, 0], None, 1.0),
+                          ([0, 0, np.inf, 0, 0, 0], 0.0, 1.0),
+                          ([0.1, 0, 0, 0, 0, 0], 1.0, None)):
+        q, rate = q0, previous
+        for _ in range(20):
+            state = controller_update(system, context, q, rate,
+                                      np.array(V, dtype=float), hold)
+            change = state[6:12] - rate
+            assert np.abs(change).max() <= step * (1 + 1e-12)
+            np.testing.assert_allclose(  # along the last direction
+                state[6:12], rate * (1.0 - min(1.0, step / np.abs(
+                    rate).max())) if rate.any() else 0.0, atol=1e-15)
+            np.testing.assert_allclose(state[:6], q + H * state[6:12],
+                                       rtol=1e-15)
+            # Limited while the acceleration limit cuts the braking.
+            assert state[12] == (flag if flag is not None else float(
+                np.abs(rate).max() > step))
+            q, rate = state[:6], state[6:12]
+        np.testing.assert_array_equal(rate, 0.0)  # at rest, 0.12 s later
+        # Braking as a whole took v_max / a (+ a tick): joint i ran
+        # |v_i| (v_max / (2 a) + h) at most.
+        stop_time = np.abs(previous).max() / ELFIN5_ACCELERATION_LIMIT
+        assert np.all(np.abs(q - q0) <= np.abs(previous) * (
+            0.5 * stop_time + H) + 1e-12)
+    at_once = ArmCartesianVelocityController(
+        ArmControllerParameters(use_acceleration_limit=False), arm)
+    state = controller_update(at_once, at_once.CreateDefaultContext(), q0,
+                              previous, np.full(6, 0.1), 1.0)
+    np.testing.assert_array_equal(state, np.r_[q0, np.zeros(6), 0.0])
+
+
 # --- the system -------------------------------------------------------
 
 
-def simulate(params, twist, duration, q0=None):
+def simulate(params, twist, duration, q0=None, time_step=0.01):
     builder = DiagramBuilder()
-    system = builder.AddSystem(ArmCartesianVelocityController(params))
+    system = builder.AddSystem(ArmCartesianVelocityController(
+        params, time_step=time_step))
     source = builder.AddSystem(ConstantVectorSource(twist))
     builder.Connect(source.get_output_port(),
                     system.GetInputPort("arm_velocity"))
     logs = {
         name: LogVectorOutput(system.GetOutputPort(name), builder,
-                              publish_period=params.time_step)
+                              publish_period=time_step)
         for name in ("arm_position_command", "arm_velocity_command",
                      "limited")
     }
@@ -316,9 +535,10 @@ def simulate(params, twist, duration, q0=None):
     return q_cmd, data
 
 
-def end_effector_error(arm, params, speed):
+def end_effector_error(arm, params, speed, time_step=0.01):
     """Error of the commanded end effector after 1 s of [speed, 0, 0]."""
-    q_cmd, _ = simulate(params, [speed, 0, 0, 0, 0, 0], 1.0)
+    q_cmd, _ = simulate(params, [speed, 0, 0, 0, 0, 0], 1.0,
+                        time_step=time_step)
     start, end = arm.evaluate(HOME_ARM_POSITIONS).X_AE, arm.evaluate(q_cmd).X_AE
     displacement = end.translation() - start.translation()
     turn = (start.rotation().inverse() @ end.rotation()).ToAngleAxis().angle()
@@ -344,9 +564,8 @@ def test_constant_twist_moves_the_end_effector(arm, use_acceleration_limit):
 def test_integration_error_is_first_order_in_the_time_step(arm):
     errors = [
         np.linalg.norm(end_effector_error(
-            arm, ArmControllerParameters(time_step=h,
-                                         use_acceleration_limit=False),
-            0.05)[0])
+            arm, ArmControllerParameters(use_acceleration_limit=False),
+            0.05, time_step=h)[0])
         for h in (0.01, 0.005)
     ]
     assert errors[0] / errors[1] == pytest.approx(2.0, rel=0.1)
@@ -365,7 +584,7 @@ def test_spinning_the_wrist_stops_at_the_limit(arm):
     np.testing.assert_allclose(q_cmd[:5], HOME_ARM_POSITIONS[:5], atol=1e-9)
     rates = data["arm_velocity_command"]
     assert np.abs(np.diff(rates, axis=1)).max() <= (
-        ELFIN5_ACCELERATION_LIMIT * params.time_step * (1 + 1e-9))
+        ELFIN5_ACCELERATION_LIMIT * 0.01 * (1 + 1e-9))
     assert data["limited"][0, -1] == 1.0  # still pushed, still limited
     assert data["limited"][0, 50] == 0.0  # cruising at 1 rad/s
 
@@ -414,6 +633,8 @@ def test_model_limits_are_the_defaults(arm):
     np.testing.assert_array_equal(system.lower, arm.lower)
     np.testing.assert_array_equal(system.upper, arm.upper)
     np.testing.assert_array_equal(system.velocity_limits, np.full(6, 1.57))
+    np.testing.assert_array_equal(arm.acceleration_limits,
+                                  np.full(6, ELFIN5_ACCELERATION_LIMIT))
     plant = arm._plant
     for name in ARM_JOINTS:
         joint = plant.GetJointByName(name)
@@ -529,8 +750,6 @@ def test_taylor_approximation_at_a_moving_regular_point(arm, seed):
 
 
 @pytest.mark.parametrize("kwargs, name", [
-    (dict(time_step=0.0), "time_step"),
-    (dict(time_step=-0.01), "time_step"),
     (dict(damping=-0.1), "damping"),
     (dict(damping_threshold=0.0), "damping_threshold"),
     (dict(margin=-0.01), "margin"),
@@ -552,6 +771,9 @@ def test_bad_system_arguments_are_rejected():
         ArmCartesianVelocityController(params=0.01)
     with pytest.raises(ValueError, match="margin"):
         ArmCartesianVelocityController(ArmControllerParameters(margin=2.4))
+    for time_step in (0.0, -0.01):
+        with pytest.raises(ValueError, match=f"time_step = {time_step}"):
+            ArmCartesianVelocityController(time_step=time_step)
     system = ArmCartesianVelocityController()
     with pytest.raises(ValueError, match="q"):
         system.set_arm_position(system.CreateDefaultContext(), np.zeros(5))

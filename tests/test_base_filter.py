@@ -14,6 +14,7 @@ from pydrake.systems.primitives import (
 from drake_wbc.analysis.frequency import linear_system_response
 from drake_wbc.math.filtering import (
     BaseFilterParameters,
+    check_filter_period,
     lowpass_response,
     lowpass_state_space,
     lowpass_zoh_response,
@@ -25,8 +26,8 @@ FREQUENCIES_HZ = np.logspace(-2, 2, 200)
 OMEGA = 2 * np.pi * FREQUENCIES_HZ
 
 
-def linearize(params):
-    system = BaseVelocityFilter(params)
+def linearize(params, time_step):
+    system = BaseVelocityFilter(params, time_step=time_step)
     context = system.CreateDefaultContext()
     system.get_input_port().FixValue(context, np.zeros(3))
     return Linearize(system, context)
@@ -43,8 +44,8 @@ def assert_diagonal_response(response, expected):
 
 @pytest.mark.parametrize("zeta", [0.5, 1.0, 2.0])
 def test_continuous_linearization_matches_eq_filtering(zeta):
-    params = BaseFilterParameters(omega_f=2 * np.pi, zeta=zeta, time_step=0.0)
-    linear = linearize(params)
+    params = BaseFilterParameters(omega_f=2 * np.pi, zeta=zeta)
+    linear = linearize(params, 0.0)
     assert linear.time_period() == 0.0
     assert_diagonal_response(linear_system_response(linear, OMEGA),
                              lowpass_response(params.omega_f, zeta, OMEGA))
@@ -54,9 +55,8 @@ def test_continuous_linearization_matches_eq_filtering(zeta):
 @pytest.mark.parametrize("time_step", [0.01, 0.002])
 def test_discrete_linearization_matches_exact_zoh_equivalent(zeta,
                                                              time_step):
-    params = BaseFilterParameters(omega_f=2 * np.pi, zeta=zeta,
-                                  time_step=time_step)
-    linear = linearize(params)
+    params = BaseFilterParameters(omega_f=2 * np.pi, zeta=zeta)
+    linear = linearize(params, time_step)
     assert linear.time_period() == time_step
     expected = lowpass_zoh_response(params.omega_f, zeta, time_step, OMEGA)
     assert_diagonal_response(linear_system_response(linear, OMEGA), expected)
@@ -76,13 +76,13 @@ def test_zoh_equivalent_tends_to_the_continuous_filter():
 def test_step_response_is_exact_at_the_samples():
     """With zeta = 1 the step response is 1 - (1 + w t) e^(-w t); the
     zero-order-hold discretisation reproduces it exactly at each sample."""
-    params = BaseFilterParameters()
+    params, h = BaseFilterParameters(), 0.01
     builder = DiagramBuilder()
-    system = builder.AddSystem(BaseVelocityFilter(params))
+    system = builder.AddSystem(BaseVelocityFilter(params, time_step=h))
     step = np.array([0.1, -0.05, 0.2])
     source = builder.AddSystem(ConstantVectorSource(step))
     builder.Connect(source.get_output_port(), system.get_input_port())
-    log = builder.AddSystem(VectorLogSink(3, publish_period=params.time_step))
+    log = builder.AddSystem(VectorLogSink(3, publish_period=h))
     builder.Connect(system.get_output_port(), log.get_input_port())
     diagram = builder.Build()
     simulator = Simulator(diagram)
@@ -95,10 +95,12 @@ def test_step_response_is_exact_at_the_samples():
 
 
 def test_scalar_conversion_keeps_parameters():
-    params = BaseFilterParameters(omega_f=3.0, zeta=0.7, time_step=0.005)
-    system = BaseVelocityFilter(params)
+    params = BaseFilterParameters(omega_f=3.0, zeta=0.7)
+    system = BaseVelocityFilter(params, time_step=0.005)
     for converted in (system.ToAutoDiffXd(), system.ToSymbolic()):
         assert converted.params == params
+        assert converted.GetUniquePeriodicDiscreteUpdateAttribute(
+            ).period_sec() == 0.005
         assert converted.get_input_port().get_name() == "velocity"
         assert converted.get_output_port().get_name() == "filtered_velocity"
 
@@ -128,12 +130,34 @@ def test_zero_order_hold_of_a_scalar_lag():
     (dict(omega_f=-1.0), "omega_f"),
     (dict(zeta=0.0), "zeta"),
     (dict(zeta=float("nan")), "zeta"),
-    (dict(time_step=-0.01), "time_step"),
-    (dict(omega_f=400.0, time_step=0.01), "Nyquist"),
 ])
 def test_bad_parameters_are_rejected(kwargs, name):
     with pytest.raises(ValueError, match=name):
         BaseFilterParameters(**kwargs)
+
+
+@pytest.mark.parametrize("params, time_step, fragment", [
+    (BaseFilterParameters(), -0.01, "time_step = -0.01"),
+    (BaseFilterParameters(omega_f=400.0), 0.01,
+     "time_step = 0.01 s is not allowed with omega_f = 400.0 rad/s"),
+    (BaseFilterParameters(omega_f=20.0), 0.2, "Nyquist"),
+    (BaseFilterParameters(enabled=False), 0.0,
+     "time_step = 0 is not allowed with enabled = False"),
+])
+def test_a_bad_time_step_for_the_filter_is_rejected(params, time_step,
+                                                   fragment):
+    """The stage checks its time step against its parameters when it is
+    built (filtering.check_filter_period), with what is allowed."""
+    with pytest.raises(ValueError) as error:
+        BaseVelocityFilter(params, time_step=time_step)
+    assert fragment in str(error.value)
+    assert "not allowed" in str(error.value)
+    with pytest.raises(ValueError, match="base_filter.omega_f|base_filter."
+                       "enabled|time_step = -0.01"):
+        check_filter_period(params, time_step, prefix="base_filter.")
+    # Just below the Nyquist rate is allowed.
+    assert check_filter_period(BaseFilterParameters(omega_f=314.0),
+                               0.01) == 0.01
 
 
 def test_bad_filter_math_arguments_are_rejected():
@@ -146,8 +170,8 @@ def test_bad_filter_math_arguments_are_rejected():
 
 
 def test_bypassed_filter_holds_the_input_for_one_period():
-    params = BaseFilterParameters(enabled=False, time_step=0.01)
-    filt = BaseVelocityFilter(params)
+    params = BaseFilterParameters(enabled=False)
+    filt = BaseVelocityFilter(params, time_step=0.01)
     context = filt.CreateDefaultContext()
     first, second = np.array([0.1, -0.2, 0.3]), np.array([-0.4, 0.5, 0.6])
     filt.get_input_port().FixValue(context, first)
@@ -164,4 +188,5 @@ def test_bypassed_filter_holds_the_input_for_one_period():
 
 def test_bypass_needs_a_control_period():
     with pytest.raises(ValueError, match="enabled = False"):
-        BaseFilterParameters(enabled=False, time_step=0.0)
+        BaseVelocityFilter(BaseFilterParameters(enabled=False),
+                           time_step=0.0)

@@ -36,11 +36,10 @@ def stage_outputs(system, context):
 
 @pytest.fixture(scope="module")
 def capability_stage(arm):
-    params = ArmCapabilityParameters(band=CapabilityBand(0.03, 0.045),
-                                     joint_limit_gain=2e4,
+    params = ArmCapabilityParameters(joint_limit_gain=2e4,
                                      gradient_damping=0.03,
                                      gradient_damping_threshold=0.05)
-    return ArmCapability(params, arm)
+    return ArmCapability(params, arm, band=CapabilityBand(0.03, 0.045))
 
 
 def limit_cases(arm, rng, count):
@@ -66,7 +65,7 @@ def limit_cases(arm, rng, count):
     return cases
 
 
-def in_band(arm, params, joint):
+def in_band(arm, params, band, joint):
     """A configuration with C_m in the band: from home towards the upper
     limit of `joint`, by bisection."""
     home = np.array(HOME_ARM_POSITIONS, dtype=float)
@@ -77,7 +76,7 @@ def in_band(arm, params, joint):
         return capability.capability(arm.evaluate(q).J_a, q, arm.lower,
                                      arm.upper, params.joint_limit_gain), q
 
-    target = 0.5 * (params.band.lower + params.band.upper)
+    target = 0.5 * (band.lower + band.upper)
     low, high = 0.0, 1.0  # C_m(0) above the band, C_m(1) = 0
     for _ in range(40):
         middle = 0.5 * (low + high)
@@ -94,7 +93,7 @@ def test_capability_stage_gives_the_math_layers_values(arm,
     rng = np.random.default_rng(25)
     alphas = set()
     for q in (limit_cases(arm, rng, 30) + [np.array(HOME_ARM_POSITIONS)]
-              + [in_band(arm, p, joint) for joint in (0, 3)]):
+              + [in_band(arm, p, system.band, joint) for joint in (0, 3)]):
         system.get_input_port().FixValue(context, q)
         position, C_m, gradient, alpha = stage_outputs(system, context)
         values = arm.evaluate(q)
@@ -107,8 +106,8 @@ def test_capability_stage_gives_the_math_layers_values(arm,
             p.gradient_damping, p.gradient_damping_threshold)
         np.testing.assert_allclose(gradient, expected_g, rtol=0,
                                    atol=1e-12 * np.abs(expected_g).max())
-        expected_alpha = capability.transition(C_m[0], p.band.upper,
-                                               p.band.lower)
+        expected_alpha = capability.transition(C_m[0], system.band.upper,
+                                               system.band.lower)
         assert alpha[0] == pytest.approx(expected_alpha, abs=1e-15)
         alphas.add(0.0 if alpha[0] == 0.0 else 1.0 if alpha[0] == 1.0
                    else 0.5)
@@ -151,10 +150,10 @@ def test_capability_stage_rejects_non_finite_positions(capability_stage,
 @pytest.fixture(scope="module")
 def adapter(arm):
     params = WorkspaceAdapterParameters(
-        mode="intuitive-phri", band=CapabilityBand(0.02, 0.06),
+        mode="intuitive-phri",
         workspace=LocalWorkspace(extent_lower=0.6, extent_upper=0.8,
                                  deflection_lower=0.3, deflection_upper=0.7))
-    return WorkspaceAdapter(params, arm)
+    return WorkspaceAdapter(params, arm, band=CapabilityBand(0.02, 0.06))
 
 
 def fix_workspace_inputs(system, context, values):
@@ -169,7 +168,7 @@ def test_adapter_gives_the_local_workspace_state(adapter):
     context = adapter.CreateDefaultContext()
     ad_context = converted.CreateDefaultContext()
     R, origin = adapter.R_ba, adapter.arm_base_position
-    params = adapter.params
+    params, band = adapter.params, adapter.band
     rng = np.random.default_rng(28)
     seen = set()
     for case in range(120):
@@ -182,7 +181,7 @@ def test_adapter_gives_the_local_workspace_state(adapter):
         fix_workspace_inputs(adapter, context, values)
         state = workspace.local_workspace_state(
             values[0], values[1], values[2][0], values[3],
-            params.band.upper, params.band.lower, params.workspace, R,
+            band.upper, band.lower, params.workspace, R,
             origin)
         expected = [state.sigma_xy, state.sigma_phi]
         double = np.concatenate(stage_outputs(adapter, context))

@@ -189,10 +189,10 @@ def test_whole_body_velocity_interface():
     rng = np.random.default_rng(12)
     g, C, E, V_ee, F_ext, delta = rng.normal(size=(6, 6))
     y = g + C - E  # on the goal: the end effector at g + C
+    params = WholeBodyCdmpParameters()
     for S_hri in (0.0, 1.0):
-        params = WholeBodyCdmpParameters(S_hri=S_hri)
         y_dot, z_dot, C_dot, E_dot = whole_body_cdmp_derivative(
-            y, np.zeros(6), C, E, g, V_ee, F_ext, delta, params)
+            y, np.zeros(6), C, E, g, V_ee, F_ext, delta, params, S_hri)
         np.testing.assert_allclose(C_dot, V_ee + 0.05 * S_hri * F_ext)
         np.testing.assert_allclose(y_dot, C_dot)
         np.testing.assert_allclose(z_dot, 0.0, atol=1e-12)
@@ -376,13 +376,12 @@ def test_arm_force_loop_reaches_desired_force(S_m):
 def test_arm_force_term_off_in_phri():
     rng = np.random.default_rng(16)
     y, z, C_a, g, V_a, F = rng.normal(size=(6, 6))
-    on = ArmCdmpParameters()
-    off = ArmCdmpParameters(S_hri=1)
+    params = ArmCdmpParameters()
     np.testing.assert_array_equal(
-        arm_cdmp_derivative(y, z, C_a, g, V_a, F, off)[2], V_a)
-    np.testing.assert_array_equal(
-        arm_cdmp_derivative(y, z, C_a, g, V_a, F, on, S_hri=1.0)[2], V_a)
-    C_a_dot = arm_cdmp_derivative(y, z, C_a, g, V_a, F, on)[2]
+        arm_cdmp_derivative(y, z, C_a, g, V_a, F, params, S_hri=1.0)[2],
+        V_a)
+    # S_hri = 0 by default: the force control acts.
+    C_a_dot = arm_cdmp_derivative(y, z, C_a, g, V_a, F, params)[2]
     np.testing.assert_allclose(C_a_dot[0], V_a[0] + 0.01 * (F[0] + 10.0))
     np.testing.assert_allclose(C_a_dot[1:], V_a[1:])
 
@@ -432,10 +431,8 @@ def test_coupled_derivatives_autodiff_gradients():
     (ArmCdmpParameters, "k_f", {"k_f": -0.01}),
     (ArmCdmpParameters, "k_d", {"k_d": -1.0}),
     (ArmCdmpParameters, "F_d", {"F_d": (1.0, 2.0)}),
-    (ArmCdmpParameters, "S_hri", {"S_hri": 0.5}),
     (ArmCdmpParameters, "dmp", {"dmp": 1.0}),
     (WholeBodyCdmpParameters, "k_hri", {"k_hri": -0.05}),
-    (WholeBodyCdmpParameters, "S_hri", {"S_hri": 2}),
     (StiffnessCouplingParameters, "k_p", {"k_p": -1.0}),
     (AdmittanceCouplingParameters, "D_a", {"D_a": 0.0}),
     (AdmittanceCouplingParameters, "D_a", {"D_a": [[1.0, 2.0], [2.0, 1.0]]}),

@@ -271,6 +271,47 @@ def test_bad_time_step_is_rejected():
         ArmCdmp(time_step=-0.01)
 
 
+@pytest.mark.parametrize("stage", [WholeBodyCdmp, ArmCdmp])
+def test_a_bad_default_phri_switch_is_rejected(stage):
+    with pytest.raises(ValueError, match=r"phri_switch = 0\.5 is not "
+                       "allowed: must be 0 or 1"):
+        stage(phri_switch=0.5)
+
+
+@pytest.mark.parametrize("stage", [WholeBodyCdmp, ArmCdmp])
+def test_the_default_phri_switch_acts_while_the_port_is_unconnected(stage):
+    """The constructor's phri_switch is S_hri while the port is neither
+    connected nor fixed: the same update as with the port fixed to it,
+    in the stage and in its scalar-converted copy."""
+    rng = np.random.default_rng(7)
+    x = rng.normal(size=24 if stage is WholeBodyCdmp else 18)
+    names = (("reference_velocity", "wrench", "end_effector_deviation")
+             if stage is WholeBodyCdmp else ("arm_velocity", "wrench"))
+    inputs = {name: rng.normal(size=6) for name in names}
+    for s_hri in (0.0, 1.0):
+        system = stage(phri_switch=s_hri)
+        updates = []
+        for given in (system, system.ToAutoDiffXd()):
+            context = given.CreateDefaultContext()
+            context.SetDiscreteState(x)
+            fix_inputs(given, context, inputs)
+            updates.append(given.EvalUniquePeriodicDiscreteUpdate(
+                context).get_vector().CopyToVector())
+        context = system.CreateDefaultContext()
+        context.SetDiscreteState(x)
+        fix_inputs(system, context, dict(inputs, phri_switch=s_hri))
+        fixed = update_of(system, context)
+        other = stage(phri_switch=1.0 - s_hri)
+        context = other.CreateDefaultContext()
+        context.SetDiscreteState(x)
+        fix_inputs(other, context, inputs)
+        np.testing.assert_array_equal(updates[0], fixed)
+        np.testing.assert_allclose(
+            [u.value() if hasattr(u, "value") else u for u in updates[1]],
+            fixed, rtol=1e-14, atol=1e-14)
+        assert np.abs(update_of(other, context) - fixed).max() > 1e-6
+
+
 def set_state(system, context, x):
     if system._time_step > 0.0:
         context.SetDiscreteState(x)
@@ -294,7 +335,7 @@ def test_whole_body_cdmp_output_and_update_are_its_model(switch):
     T_b and the update the model's exact hold, with the wrench and the
     deviation rotated into the world (eq. (3))."""
     rng = np.random.default_rng(4)
-    system = WholeBodyCdmp(cdmp.WholeBodyCdmpParameters(S_hri=1.0))
+    system = WholeBodyCdmp(phri_switch=1.0)
     for _ in range(5):
         context = system.CreateDefaultContext()
         scale = 10.0 ** rng.uniform(-3, 3)

@@ -15,6 +15,7 @@ from drake_wbc.controller import (
     build_controller,
     load_controller_parameters,
 )
+from drake_wbc.math.capability import CapabilityBand
 from drake_wbc.math.dmp import DmpParameters
 from drake_wbc.math.filtering import BaseFilterParameters
 from drake_wbc.math.motion_mode import MotionMode
@@ -84,7 +85,8 @@ def test_an_empty_document_gives_the_defaults():
 
 
 def test_every_field_type_survives_a_round_trip():
-    params = ControllerParameters(time_step=0.005)
+    params = ControllerParameters(time_step=0.005, phri_switch=1.0)
+    params.capability_band.lower = 0.03
     params.workspace.mode = "intuitive-phri"
     params.workspace.workspace.extent_upper = 0.85
     params.distributor.damping.threshold = 2.0e-4
@@ -119,7 +121,10 @@ def test_a_controller_builds_from_loaded_parameters():
     controller = build_controller(params)
     stages = controller.stages
     assert stages["workspace"].params.mode is MotionMode.INTUITIVE_PHRI
-    assert stages["base_filter"].params.time_step == 0.005
+    for name in ("whole_body_cdmp", "base_cdmp", "base_filter",
+                 "base_limiter", "arm_cdmp", "arm_controller", "guard"):
+        attribute = stages[name].GetUniquePeriodicDiscreteUpdateAttribute()
+        assert attribute.period_sec() == 0.005, name
     np.testing.assert_array_equal(stages["arm_cdmp"].params.S_m,
                                   [0, 1, 1, 1, 1, 1])
     context = controller.diagram.CreateDefaultContext()
@@ -136,8 +141,9 @@ BAD_VALUES = [
      "shape (6,)"),
     ("workspace: {mode: flying}", "workspace.mode = 'flying'",
      "'intuitive-phri'"),
-    ("capability: {band: {lower: 0.05}}", "capability.band.lower = 0.05",
+    ("capability_band: {lower: 0.05}", "capability_band.lower = 0.05",
      "strictly below"),
+    ("phri_switch: 0.5", "phri_switch = 0.5", "0 or 1"),
     ("base_cdmp: {dmp: {num_basis: 0}}", "base_cdmp.dmp.num_basis = 0",
      "1 or greater"),
     ("distributor: {damping: {threshold: 0}}",
@@ -148,10 +154,28 @@ BAD_VALUES = [
     ("base_filter: {zeta: fast}", "base_filter.zeta = 'fast'", "float"),
     ("workspace: {sigma_xy: [0.5]}", "workspace.sigma_xy = [0.5]",
      "float"),
-    ("capability: {band: 0.04}", "capability.band = 0.04",
+    ("capability_band: 0.04", "capability_band = 0.04",
      "mapping of the fields of CapabilityBand"),
     ("arm_cdmp: {S_x: 1}", "unknown key 'arm_cdmp.S_x'", "k_p, k_d"),
-    ("flying: true", "unknown key 'flying'", "time_step, capability"),
+    ("flying: true", "unknown key 'flying'",
+     "time_step, capability_band, phri_switch, capability"),
+    # Each value once: the copies the stages' parameters used to hold are
+    # unknown keys now (ControllerParameters' time_step, capability_band
+    # and phri_switch hold them).
+    ("capability: {band: {lower: 0.035, upper: 0.04}}",
+     "unknown key 'capability.band'", "joint_limit_gain"),
+    ("workspace: {band: {lower: 0.035, upper: 0.04}}",
+     "unknown key 'workspace.band'", "mode, sigma_xy, sigma_phi, workspace"),
+    ("distributor: {band: {lower: 0.03, upper: 0.04}}",
+     "unknown key 'distributor.band'", "null_space_gain"),
+    ("whole_body_cdmp: {S_hri: 1.0}", "unknown key 'whole_body_cdmp.S_hri'",
+     "k_hri, dmp, movement"),
+    ("arm_cdmp: {S_hri: 0.0}", "unknown key 'arm_cdmp.S_hri'",
+     "k_p, k_d, k_f, S_m, F_d, dmp"),
+    ("base_filter: {time_step: 0.01}", "unknown key 'base_filter.time_step'",
+     "omega_f, zeta, enabled"),
+    ("arm_controller: {time_step: 0.01}",
+     "unknown key 'arm_controller.time_step'", "damping"),
 ]
 
 
@@ -212,12 +236,15 @@ def test_the_mode_is_still_given_by_name():
     assert MotionMode("locomotion") is MotionMode.LOCOMOTION
 
 
-def test_stages_keep_a_validated_copy_of_their_parameters():
-    # The base filter reads its parameters when it is built (they were
-    # checked where they were made): a later change does not reach it.
-    params = BaseFilterParameters(time_step=0.005)
-    stage = BaseVelocityFilter(params)
+def test_stages_read_their_parameters_when_built():
+    # The base filter reads its parameters and its time step when it is
+    # built (they were checked where they were made): a later change does
+    # not reach it, nor its scalar-converted copies, which share them.
+    params = BaseFilterParameters()
+    stage = BaseVelocityFilter(params, time_step=0.005)
     assert stage.ToAutoDiffXd().params is stage.params
+    assert stage.ToAutoDiffXd().GetUniquePeriodicDiscreteUpdateAttribute(
+        ).period_sec() == 0.005
 
     def update():
         context = stage.CreateDefaultContext()
@@ -237,6 +264,27 @@ def test_stages_keep_a_validated_copy_of_their_parameters():
     controller = build_controller(controller_params)
     controller_params.distributor.null_space_gain = 0.1
     assert controller.stages["distributor"].params.null_space_gain == 0.0
+
+
+def test_the_controller_hands_each_value_held_once_to_its_stages():
+    """One band, one default S_hri, one control period: build_controller
+    gives each to every stage that needs it, and their scalar-converted
+    copies keep them."""
+    band = CapabilityBand(0.03, 0.045)
+    params = ControllerParameters(capability_band=band, phri_switch=1.0)
+    stages = build_controller(params).stages
+    for name in ("capability", "workspace", "distributor"):
+        for stage in (stages[name], stages[name].ToAutoDiffXd()):
+            assert (stage.band.lower, stage.band.upper) == (0.03, 0.045)
+    for name in ("whole_body_cdmp", "arm_cdmp"):
+        for stage in (stages[name], stages[name].ToAutoDiffXd()):
+            context = stage.CreateDefaultContext()
+            assert stage._switch(context) == 1  # the port is unconnected
+    (switch,) = [spec for spec in stages["guard"].inputs
+                 if spec.name == "phri_switch"]
+    defaults = {output[0]: list(output[1]) for output in switch.outputs}
+    assert defaults == {"phri_switch.whole_body": [1.0],
+                        "phri_switch.arm": [1.0]}
 
 
 def test_the_dmp_basis_follows_its_fields():

@@ -155,7 +155,7 @@ def test_arm_capability_alpha_at_the_band_edges():
         (CapabilityBand(C_m - 0.01, C_m + 0.03), 0.5 * (1 + np.cos(0.25
                                                                   * np.pi))),
     ):
-        system = ArmCapability(ArmCapabilityParameters(band=band), ARM)
+        system = ArmCapability(ArmCapabilityParameters(), ARM, band=band)
         out = evaluate(system, {"arm_position": HOME_ARM_POSITIONS})
         assert out["alpha"][0] == pytest.approx(alpha, abs=1e-12)
     default = evaluate(ArmCapability(ArmCapabilityParameters(), ARM),
@@ -356,6 +356,20 @@ def test_null_space_gain_switches_off_above_the_upper_threshold(smooth):
         context = system.CreateDefaultContext()
         system.GetInputPort("capability").FixValue(context, [C_m])
         assert system.null_space_gain(context) == pytest.approx(0.1 * factor)
+
+
+def test_the_switch_off_follows_the_band_it_is_given():
+    """The band argument (build_controller's capability_band) places the
+    switch-off of k_n, in the stage and in its AutoDiffXd copy."""
+    system = MotionDistributor(MotionDistributorParameters(
+        null_space_gain=0.1), ARM, band=CapabilityBand(0.05, 0.07))
+    for C_m, factor in ((0.04, 1.0), (0.05, 1.0), (0.06, 0.5), (0.07, 0.0)):
+        for stage in (system, system.ToAutoDiffXd()):
+            context = stage.CreateDefaultContext()
+            stage.GetInputPort("capability").FixValue(context, [C_m])
+            gain = stage.null_space_gain(context)
+            gain = gain.value() if hasattr(gain, "value") else gain
+            assert gain == pytest.approx(0.1 * factor, abs=1e-15)
 
 
 def test_distributor_autodiff_matches_finite_differences():
@@ -638,7 +652,10 @@ def test_filtered_base_plus_compensation_reproduces_the_command():
     (lambda: MotionDistributorParameters(smooth_switch_off=1),
      "smooth_switch_off"),
     (lambda: MotionDistributorParameters(damping=0.1), "damping"),
-    (lambda: MotionDistributorParameters(band=(0.03, 0.04)), "band"),
+    (lambda: MotionDistributor(band=(0.03, 0.04)),
+     r"band = \(0.03, 0.04\) is not allowed: must be a CapabilityBand"),
+    (lambda: ArmCapability(band=0.04), "band = 0.04"),
+    (lambda: WorkspaceAdapter(band="paper"), "band = 'paper'"),
     (lambda: RobustCompensatorParameters(compensation_switch=2.0),
      "compensation_switch"),
     (lambda: ArmCapabilityParameters(joint_limit_gain=0.0),
@@ -687,3 +704,5 @@ def test_scalar_conversion_keeps_ports_and_parameters(system, inputs,
                 for i in range(s.num_output_ports())] == outputs
     assert converted.params == system.params
     assert converted.arm is system.arm
+    if hasattr(system, "band"):
+        assert converted.band == system.band

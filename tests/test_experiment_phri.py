@@ -34,7 +34,7 @@ def test_the_paper_values_are_used():
     scenario = load_scenario(find_scenario("phri"))
     c = scenario.controller
     assert c.workspace.mode == "intuitive-phri"
-    assert (c.whole_body_cdmp.S_hri, c.arm_cdmp.S_hri) == (1.0, 1.0)
+    assert c.phri_switch == 1.0
     assert c.whole_body_cdmp.k_hri == 0.05
     band = c.workspace.workspace
     np.testing.assert_allclose(

@@ -77,10 +77,9 @@ def driver(scenario):
 @pytest.mark.parametrize("zeta", [1.0, 0.7, 1.6])
 @pytest.mark.parametrize("time_step", [0.0, H])
 def test_base_filter_matches_eq_filtering(zeta, time_step):
-    params = BaseFilterParameters(omega_f=2 * np.pi, zeta=zeta,
-                                  time_step=time_step)
-    response = linear_system_response(chains.linearize_base_filter(params),
-                                      OMEGA)
+    params = BaseFilterParameters(omega_f=2 * np.pi, zeta=zeta)
+    response = linear_system_response(
+        chains.linearize_base_filter(params, time_step), OMEGA)
     expected = (lowpass_response(params.omega_f, zeta, OMEGA)
                 if time_step == 0.0 else
                 lowpass_zoh_response(params.omega_f, zeta, time_step, OMEGA))
@@ -284,11 +283,11 @@ def _check(measured, predicted):
 def test_base_filter_linearisation_matches_simulation():
     from drake_wbc.stages import BaseVelocityFilter
 
-    params = BaseFilterParameters(time_step=H)
-    measured, omegas = _measured_response(BaseVelocityFilter(params), 3,
-                                          "filtered_velocity", 0)
-    predicted = linear_system_response(chains.linearize_base_filter(params),
-                                       omegas)[:, 0, 0]
+    params = BaseFilterParameters()
+    measured, omegas = _measured_response(
+        BaseVelocityFilter(params, time_step=H), 3, "filtered_velocity", 0)
+    predicted = linear_system_response(
+        chains.linearize_base_filter(params, H), omegas)[:, 0, 0]
     _check(measured, predicted)
 
 

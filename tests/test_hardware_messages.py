@@ -3,6 +3,7 @@ their .lcm files, every message survives a round trip, and what the
 controller must not see (malformed bytes, wrong sizes, NaN, time going
 backwards) is rejected."""
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -12,7 +13,11 @@ import pytest
 
 from drake_wbc.experiments.scenario import find_scenario, load_scenario
 from drake_wbc.hardware import codecs, messages
-from drake_wbc.hardware.options import ChannelNames, HardwareOptions
+from drake_wbc.hardware.options import (
+    ChannelNames,
+    HardwareOptions,
+    WatchdogLimits,
+)
 
 LCMTYPES = Path(messages.__file__).parent / "lcmtypes"
 
@@ -87,40 +92,93 @@ def test_malformed_messages_are_rejected():
             1, [np.nan, 0.0, 0.0]))
 
 
+def _state(utime, value=1.0):
+    return messages.encode_base_state(utime, np.full(6, value))
+
+
+START = codecs.Reception(None, (np.zeros(6),), -np.inf)
+
+
 def test_receive_keeps_the_last_good_message():
     decode = messages.decode_base_state
-    start = codecs.Reception(b"", None, (np.zeros(6),), -np.inf, 0)
-
-    def state(utime, value):
-        return messages.encode_base_state(utime, np.full(6, value))
-
-    r = codecs.receive(start, b"", 0.0, decode)
-    assert r is start  # the subscriber's empty default is no message
-    r = codecs.receive(r, state(100, 1.0), 0.01, decode)
+    r = codecs.receive(START, _state(100), 0.01, decode)
     assert (r.utime, r.received, r.rejected) == (100, 0.01, 0)
     np.testing.assert_array_equal(r.values[0], np.ones(6))
-    # The same bytes again change nothing.
-    assert codecs.receive(r, state(100, 1.0), 0.02, decode) is r
     # A repeat of the time stamp is ignored, not counted, not fresh.
-    repeat = codecs.receive(r, state(100, 5.0), 0.02, decode)
+    repeat = codecs.receive(r, _state(100, 5.0), 0.02, decode)
     assert (repeat.received, repeat.rejected) == (0.01, 0)
     np.testing.assert_array_equal(repeat.values[0], np.ones(6))
     # Time going backwards, NaN, malformed: counted, last good kept.
-    for i, data in enumerate([state(50, 2.0), state(200, np.nan),
-                              state(200, 3.0)[:-1]]):
+    for i, data in enumerate([_state(50, 2.0), _state(200, np.nan),
+                              _state(200, 3.0)[:-1]]):
         r = codecs.receive(r, data, 0.03 + i, decode)
         assert r.rejected == i + 1 and r.utime == 100 and r.received == 0.01
         np.testing.assert_array_equal(r.values[0], np.ones(6))
-    assert "backwards" in codecs.receive(
-        codecs.receive(start, state(9, 0), 0, decode), state(8, 0), 0,
+    assert "behind" in codecs.receive(
+        codecs.receive(START, _state(9), 0, decode), _state(8), 0,
         decode).reason
-    r = codecs.receive(r, state(300, 4.0), 1.0, decode)
+    r = codecs.receive(r, _state(300, 4.0), 1.0, decode)
     assert (r.utime, r.received, r.rejected) == (300, 1.0, 3)
 
 
+def test_a_stamp_ahead_of_the_receivers_clock_is_out_of_sequence():
+    """The sender's stamps may run ahead of the receiver's clock since the
+    last good message by the tolerance, no more: a message stamped 60 s
+    ahead is rejected, and the genuine ones that follow are taken."""
+    decode, rules = messages.decode_base_state, codecs.ClockRules(0.1, 3)
+    r = codecs.receive(START, _state(1_000_000), 1.0, decode, rules)
+    # 0.01 s of the receiver's clock later: up to 0.11 s ahead is fine.
+    ok = codecs.receive(r, _state(1_110_000), 1.01, decode, rules)
+    assert (ok.utime, ok.rejected) == (1_110_000, 0)
+    forged = codecs.receive(r, _state(61_000_000, 9.0), 1.01, decode, rules)
+    assert (forged.utime, forged.rejected) == (1_000_000, 1)
+    assert "ahead of the receiver's clock" in forged.reason
+    genuine = codecs.receive(forged, _state(1_020_000), 1.02, decode, rules)
+    assert (genuine.utime, genuine.received) == (1_020_000, 1.02)
+    np.testing.assert_array_equal(genuine.values[0], np.ones(6))
+
+
+def test_a_jumped_clock_is_taken_after_consistent_messages():
+    """A sender whose clock jumps (back: a restart; forward: a clock
+    step) is rejected until `resync_messages` consecutive messages are in
+    sequence among themselves; the last of them is taken."""
+    decode, rules = messages.decode_base_state, codecs.ClockRules(0.1, 3)
+    for jump in (-50_000_000, +50_000_000):
+        r = codecs.receive(START, _state(60_000_000), 0.0, decode, rules)
+        for k in range(1, 4):
+            utime = 60_000_000 + jump + 10_000 * k
+            r = codecs.receive(r, _state(utime, 2.0), 0.01 * k, decode,
+                               rules)
+            if k < 3:
+                assert (r.utime, r.rejected, r.run_length) == (
+                    60_000_000, k, k)
+        assert (r.utime, r.received, r.rejected, r.clock_jumps) == (
+            utime, 0.03, 2, 1)
+        np.testing.assert_array_equal(r.values[0], np.full(6, 2.0))
+    # A run broken by a message out of sequence with it starts again.
+    r = codecs.receive(START, _state(60_000_000), 0.0, decode, rules)
+    for k, utime in enumerate((5_000, 15_000, 1_000, 11_000, 21_000)):
+        r = codecs.receive(r, _state(utime), 0.01 * (k + 1), decode, rules)
+    assert (r.utime, r.clock_jumps, r.rejected) == (21_000, 1, 4)
+
+
+def test_admit_locks_in_one_sender_until_it_falls_quiet():
+    lock = codecs.SenderLock()
+    lock, obeyed, new = codecs.admit(lock, 7, 0.0, 0.25)
+    assert (lock.sender, obeyed, new) == (7, True, True)
+    lock, obeyed, _ = codecs.admit(lock, 8, 0.2, 0.25)
+    assert (lock.sender, obeyed, lock.refused) == (7, False, 1)
+    lock, obeyed, new = codecs.admit(lock, 7, 0.2, 0.25)
+    assert (obeyed, new, lock.heard) == (True, False, 0.2)
+    lock, obeyed, new = codecs.admit(lock, 8, 0.45, 0.25)
+    assert (obeyed, lock.sender) == (False, 7)  # 0.25 s quiet: not yet
+    lock, obeyed, new = codecs.admit(lock, 8, 0.46, 0.25)
+    assert (lock.sender, obeyed, new, lock.changes) == (8, True, True, 1)
+
+
 def test_options_are_checked():
-    with pytest.raises(ValueError, match="watchdog_limit = -1.0"):
-        HardwareOptions(watchdog_limit=-1.0)
+    with pytest.raises(ValueError, match="base_state = -1.0"):
+        WatchdogLimits(base_state=-1.0)
     with pytest.raises(ValueError, match="lcm_url = 'tcp://x'"):
         HardwareOptions(lcm_url="tcp://x")
     with pytest.raises(ValueError, match="publish_offset = 0.02"):
@@ -129,6 +187,39 @@ def test_options_are_checked():
         ChannelNames(base_command="A", arm_command="A")
     with pytest.raises(ValueError, match="truth = 'has space'"):
         ChannelNames(truth="has space")
+    with pytest.raises(ValueError, match="publish_period = 0.01.*"
+                                         "watchdog_period = 0.003"):
+        HardwareOptions(watchdog_period=0.003)
+    with pytest.raises(ValueError, match="clock_resync_messages = 1"):
+        HardwareOptions(clock_resync_messages=1)
+    with pytest.raises(ValueError,
+                       match=r"obstacle_points = 0.05 s.*\(0.06667 s\)"):
+        WatchdogLimits(obstacle_points=0.05)
+
+
+@pytest.mark.parametrize("field, value, own", [
+    ("base_speed_limit", 100.0, "1.0 m/s"),
+    ("base_yaw_rate_limit", 3.0, "1.0 rad/s"),
+    ("base_acceleration_limit", 1e9, "1.0 m/s^2"),
+    ("base_yaw_acceleration_limit", 2.0, "1.0 rad/s^2"),
+    ("robot_command_timeout", 60.0, "0.25 s"),
+])
+def test_limits_may_only_tighten_the_robots_own(field, value, own):
+    with pytest.raises(ValueError, match=re.escape(
+            f"{field} = {value!r} is not allowed: must be at most the "
+            f"robot's own {own}")):
+        HardwareOptions(**{field: value})
+    tighter = 0.5 * getattr(HardwareOptions(), field)
+    assert getattr(HardwareOptions(**{field: tighter}), field) == tighter
+
+
+@pytest.mark.parametrize("stream", ["base_state", "arm_status",
+                                    "wrist_wrench", "obstacle_points"])
+def test_a_watchdog_limit_cannot_disable_the_watchdog(stream):
+    with pytest.raises(ValueError, match=(
+            rf"hardware.watchdog_limits.{stream} = 1000000.0 is not allowed: "
+            r"must be at most the robot's own command timeout 0.25 s")):
+        load_scenario(text=f"hardware: {{watchdog_limits: {{{stream}: 1e6}}}}")
 
 
 def test_the_hardware_scenario_loads():

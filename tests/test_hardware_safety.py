@@ -1,9 +1,13 @@
 """The hardware interface's safety, with real LCM (memq://) and the test
-playing the robot: the watchdog stops the commands when the status stops
-and lets them resume; bad messages never reach the controller's inputs;
+playing the robot: every stream has its watchdog, and a stale one stops
+what depends on it, within its limit and a millisecond; the commands
+resume only after the streams have been fresh for the recovery time, and
+within the acceleration limits; bad messages never reach the
+controller's inputs, and no time stamp and no flood locks anything out;
 every command sent is within the robot's limits."""
 
 import logging
+import re
 
 import numpy as np
 import pytest
@@ -17,22 +21,27 @@ from drake_wbc.hardware.interface import DIAGNOSTICS, HardwareInterface
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.hardware.safety import (
     Limits,
-    guarded_commands,
-    saturate_arm_command,
+    brake_speed,
+    follow_arm_command,
     saturate_base_velocity,
+    stop_arm,
 )
 from drake_wbc.robot.model import HOME_ARM_POSITIONS
 
 H = 0.01
 BASE_COMMAND = np.array([0.3, -0.1, 0.2])
+WRENCH = np.array([1.0, 2.0, 3.0, 0.1, 0.2, 0.3])
+POINTS = np.array([[1.0, 0.5], [2.0, -0.5]])
+LIDAR_TICKS = 6
+"""The test's LIDAR sends every 6 control periods (16.7 Hz)."""
 
 
 class Bench:
     """The interface in a Diagram, with constant controller commands that
     a test can change, and the test in the robot's place on LCM."""
 
-    def __init__(self):
-        self.options = HardwareOptions(lcm_url="memq://")
+    def __init__(self, **options):
+        self.options = HardwareOptions(lcm_url="memq://", **options)
         self.lcm = DrakeLcm("memq://")
         builder = DiagramBuilder()
         self.hw = HardwareInterface(self.options, self.lcm, HOME_ARM_POSITIONS)
@@ -56,23 +65,43 @@ class Bench:
                            messages.decode_arm_command(data).values[0])))
         self.simulator.Initialize()
         self.tick = 0
+        self.utime_offset = 0
 
     def publish(self, channel, data):
         self.lcm.Publish(getattr(self.options.channels, channel), data)
 
-    def status(self, q=HOME_ARM_POSITIONS):
-        utime = int(round(self.tick * H * 1e6))
-        self.publish("base_state", messages.encode_base_state(
-            utime, [0.0, 0.0, 0.0, 0.1, 0.0, 0.0]))
-        self.publish("arm_status", messages.encode_arm_status(
-            utime, q, np.zeros(6)))
+    def utime(self):
+        return int(round(self.tick * H * 1e6)) + self.utime_offset
 
-    def run(self, ticks, status=True, extra=None):
-        """`ticks` control periods, the robot sending its status at the
+    def status(self, streams=("base_state", "arm_status", "wrist_wrench",
+                              "obstacle_points"), q=HOME_ARM_POSITIONS):
+        """The robot's messages of this period (the LIDAR's every
+        LIDAR_TICKS periods)."""
+        utime = self.utime()
+        if "base_state" in streams:
+            self.publish("base_state", messages.encode_base_state(
+                utime, [0.0, 0.0, 0.0, 0.1, 0.0, 0.0]))
+        if "arm_status" in streams:
+            self.publish("arm_status", messages.encode_arm_status(
+                utime, q, np.zeros(6)))
+        if "wrist_wrench" in streams:
+            self.publish("wrist_wrench", messages.encode_wrench(utime,
+                                                                WRENCH))
+        if "obstacle_points" in streams and self.tick % LIDAR_TICKS == 0:
+            self.publish("obstacle_points", messages.encode_obstacle_points(
+                utime, POINTS))
+
+    def run(self, ticks, status=True, extra=None, phase=0.0):
+        """`ticks` control periods, the robot sending its status (`status`
+        True for all streams, or the streams to send) `phase` s after the
         start of each one (and `extra(bench)` if given)."""
         for _ in range(ticks):
-            if status:
+            if phase:
+                self.simulator.AdvanceTo(self.tick * H + phase)
+            if status is True:
                 self.status()
+            elif status:
+                self.status(status)
             if extra is not None:
                 extra(self)
             self.tick += 1
@@ -86,9 +115,15 @@ class Bench:
         return dict(zip(DIAGNOSTICS, self.output("hardware.diagnostics"),
                         strict=True))
 
-    def set_arm_command(self, q):
-        context = self.arm.GetMyMutableContextFromRoot(self.root)
-        self.arm.get_mutable_source_value(context).SetFromVector(q)
+    def set_command(self, source, value):
+        context = source.GetMyMutableContextFromRoot(self.root)
+        source.get_mutable_source_value(context).SetFromVector(value)
+
+    def commands(self, name, after=-1.0):
+        """(times, values) of the commands sent after `after` s."""
+        rows = [(t, v) for t, v in self.sent[name] if t > after]
+        times, values = zip(*rows, strict=True)
+        return np.array(times), np.array(values)
 
 
 def _rows_equal(rows, value):
@@ -96,51 +131,178 @@ def _rows_equal(rows, value):
     np.testing.assert_allclose(rows, np.broadcast_to(value, rows.shape))
 
 
-def _watchdog_records(caplog, word):
+def _records(caplog, words):
     return [r for r in caplog.records
-            if r.name == "drake_wbc.hardware" and f"watchdog {word}" in
-            r.getMessage()]
+            if r.name == "drake_wbc.hardware" and words in r.getMessage()]
+
+
+def _steps(values):
+    """The largest change of the rows of `values` from one to the next."""
+    return np.max(np.abs(np.diff(values, axis=0)), axis=0)
 
 
 def test_watchdog_stops_the_commands_and_lets_them_resume(caplog):
     caplog.set_level(logging.WARNING, logger="drake_wbc.hardware")
     bench = Bench()
-    limit = bench.options.watchdog_limit
-    offset = bench.options.publish_offset
-    bench.run(20)
+    limit = bench.options.watchdog_limits.base_state
+    recovery = bench.options.watchdog_recovery_time
+    bench.run(60)
     last_status = (bench.tick - 1) * H
-    times, base = map(np.array, zip(*bench.sent["base"], strict=True))
-    _rows_equal(base[times > 0.05], BASE_COMMAND)
+    times, base = bench.commands("base")
+    # The base's command rises from rest within its acceleration limits.
+    assert np.all(_steps(base) <= 1.0 * H + 1e-10)
+    _rows_equal(base[times > 0.45], BASE_COMMAND)
     assert bench.diagnostics()["watchdog_tripped"] == 0.0
     arm_before = bench.sent["arm"][-1][1]
 
     bench.run(10, status=False)  # the robot falls silent for 0.1 s
-    times, base = map(np.array, zip(*bench.sent["base"], strict=True))
+    times, base = bench.commands("base", last_status)
     # Commands sent while the status is not yet too old go on; from the
-    # first check after the limit (a guard tick) the base gets zero.
-    young = (times > last_status) & (times <= last_status + limit)
-    old = times > last_status + limit + H + offset
+    # first check after the limit (1 ms) the base gets zero.
+    young = times <= last_status + limit
+    old = times > last_status + limit + 2 * bench.options.watchdog_period
     assert young.any() and old.any()
     _rows_equal(base[young], BASE_COMMAND)
     np.testing.assert_array_equal(base[old], 0.0)
     for t, q in bench.sent["arm"]:
-        if t > last_status + limit + H + offset:
+        if t > last_status + limit + H:
             np.testing.assert_array_equal(q, arm_before)  # held
     diagnostics = bench.diagnostics()
     assert diagnostics["watchdog_tripped"] == 1.0
     assert diagnostics["watchdog_trips"] == 1.0
     assert diagnostics["base_state_age"] > limit
-    assert len(_watchdog_records(caplog, "tripped")) == 1
+    assert len(_records(caplog, "watchdog tripped")) == 1
 
     resumed = bench.tick * H
-    bench.run(10)
-    times, base = map(np.array, zip(*bench.sent["base"], strict=True))
-    _rows_equal(base[times > resumed + H + offset], BASE_COMMAND)
+    bench.run(100)
+    times, base = bench.commands("base", resumed)
+    # Zero until every stream has been fresh for the recovery time, then
+    # back to the controller's command within the acceleration limits.
+    np.testing.assert_array_equal(base[times < resumed + recovery], 0.0)
+    assert np.all(_steps(base) <= 1.0 * H + 1e-10)
+    _rows_equal(base[times > resumed + recovery + 0.35], BASE_COMMAND)
     diagnostics = bench.diagnostics()
     assert diagnostics["watchdog_tripped"] == 0.0
     assert diagnostics["watchdog_trips"] == 1.0
-    assert len(_watchdog_records(caplog, "cleared")) == 1
-    assert len(_watchdog_records(caplog, "tripped")) == 1
+    assert len(_records(caplog, "watchdog cleared")) == 1
+    assert len(_records(caplog, "watchdog tripped")) == 1
+
+
+def test_the_watchdog_stops_the_base_within_its_limit_and_a_millisecond():
+    """The watchdog's latency, from the last status (received between two
+    control ticks, as a robot's clock is not the controller's) to the
+    first zero base command on the wire: the limit, one check (1 ms) to
+    see it and one to send it. Checked at each control tick, it took up
+    to a control period more."""
+    bench = Bench()
+    limit = bench.options.watchdog_limits.base_state
+    check = bench.options.watchdog_period
+    latencies = []
+    for phase in (0.0005, 0.0035, 0.0065, 0.0095):
+        bench.run(60, phase=phase)
+        last_status = (bench.tick - 1) * H + phase
+        bench.run(8, status=("obstacle_points",))
+        times, base = bench.commands("base", last_status)
+        stopped = times[np.all(base == 0.0, axis=1)]
+        latencies.append(stopped[0] - last_status)
+        assert np.all(np.any(base[times < stopped[0]] != 0.0, axis=1))
+        bench.run(120, phase=phase)  # recover
+    print(f"watchdog latency {np.array(latencies) * 1e3} ms")
+    assert max(latencies) <= limit + 2 * check + 1e-9
+
+
+def test_a_stale_obstacle_stream_stops_the_base_and_not_the_arm(caplog):
+    """No base motion without fresh obstacle points: when the LIDAR
+    stream stops (or freezes), the base stops within its limit, while the
+    arm follows the controller; the base resumes once the points have been
+    fresh again for the recovery time."""
+    caplog.set_level(logging.WARNING, logger="drake_wbc.hardware")
+    bench = Bench()
+    limit = bench.options.watchdog_limits.obstacle_points
+    bench.run(60)
+    last_points = (bench.tick - 1 - (bench.tick - 1) % LIDAR_TICKS) * H
+    target = HOME_ARM_POSITIONS + 0.05
+    bench.set_command(bench.arm, target)
+    bench.run(40, status=("base_state", "arm_status", "wrist_wrench"))
+    times, base = bench.commands("base", last_points)
+    np.testing.assert_array_equal(base[times > last_points + limit + 0.002],
+                                  0.0)
+    assert np.all(base[times < last_points + limit] != 0.0)
+    # The arm went on to its new command.
+    np.testing.assert_allclose(bench.sent["arm"][-1][1], target)
+    diagnostics = bench.diagnostics()
+    assert (diagnostics["base_stopped"], diagnostics["base_stops"]) == (1, 1)
+    assert diagnostics["watchdog_tripped"] == 0.0
+    assert len(_records(caplog, "base stopped")) == 1
+    bench.run(120)
+    times, base = bench.commands("base", bench.tick * H - 0.3)
+    _rows_equal(base[-5:], BASE_COMMAND)
+    assert bench.diagnostics()["base_stopped"] == 0.0
+    assert len(_records(caplog, "base cleared")) == 1
+
+
+def test_a_stale_wrench_stops_everything():
+    """No force control, pHRI or compliance without a fresh wrench: a
+    stale wrist wrench stops the base and the arm as a stale arm status
+    does."""
+    bench = Bench()
+    bench.run(60)
+    target = HOME_ARM_POSITIONS + 0.2
+    bench.set_command(bench.arm, target)
+    bench.run(20, status=("base_state", "arm_status", "obstacle_points"))
+    assert bench.diagnostics()["watchdog_tripped"] == 1.0
+    np.testing.assert_array_equal(bench.sent["base"][-1][1], 0.0)
+    # The arm, on its way to the new command, stopped short of it within
+    # its limits, and holds.
+    times, arm = bench.commands("arm", bench.tick * H - 0.05)
+    _rows_equal(arm, arm[0])
+    assert np.all(arm[0] < target)
+
+
+def test_commands_resume_within_the_acceleration_limits():
+    """After a trip the commands start from what was sent last, not from
+    what the controller asked for meanwhile: the base's within its 1 m/s^2,
+    the joints' within 1.57 rad/s and 12.56 rad/s^2."""
+    bench = Bench()
+    limits = Limits.of_robot(bench.options)
+    bench.run(60)
+    bench.run(10, status=False)
+    target = HOME_ARM_POSITIONS + np.array([0.5, -0.3, 0.2, 0.0, 0.1, -0.4])
+    bench.set_command(bench.arm, target)
+    bench.set_command(bench.base, [0.8, 0.0, -0.5])
+    stopped = bench.tick * H
+    bench.run(150)
+    times, base = bench.commands("base", stopped)
+    assert np.all(_steps(base) <= limits.base_acceleration * H + 1e-10)
+    times, arm = bench.commands("arm", stopped)
+    rate = np.diff(arm, axis=0) / H
+    assert np.all(np.abs(rate) <= limits.joint_speed + 1e-9)
+    assert np.all(np.abs(np.diff(rate, axis=0))
+                  <= limits.joint_acceleration * H + 1e-9)
+    np.testing.assert_allclose(arm[-1], target)  # and it got there
+    np.testing.assert_allclose(base[-1], [0.8, 0.0, -0.5])
+    print(f"largest steps: base {_steps(base)} m/s, joints "
+          f"{np.max(np.abs(np.diff(rate, axis=0)), axis=0) / H} rad/s^2")
+
+
+def test_a_trip_clears_only_after_the_recovery_time():
+    """A status that comes and goes (here one good message every 40 ms)
+    stops the robot once, not at every gap, and the commands resume
+    only once it has been fresh for the recovery time."""
+    bench = Bench()
+    bench.run(60)
+    for _ in range(20):
+        bench.run(1)
+        bench.run(3, status=("obstacle_points",))
+    diagnostics = bench.diagnostics()
+    assert diagnostics["watchdog_trips"] == 1.0
+    assert diagnostics["watchdog_tripped"] == 1.0
+    times, base = bench.commands("base", 0.64)
+    np.testing.assert_array_equal(base, 0.0)
+    bench.run(49)
+    assert bench.diagnostics()["watchdog_tripped"] == 1.0
+    bench.run(3)
+    assert bench.diagnostics()["watchdog_tripped"] == 0.0
 
 
 def test_bad_messages_never_reach_the_controller():
@@ -148,14 +310,9 @@ def test_bad_messages_never_reach_the_controller():
     q_good = HOME_ARM_POSITIONS + 0.01
     bench.run(5, extra=lambda b: b.publish(
         "arm_status", messages.encode_arm_status(
-            int(round(b.tick * H * 1e6)) + 1, q_good, np.zeros(6))))
-    wrench = np.array([1.0, 2.0, 3.0, 0.1, 0.2, 0.3])
-    points = np.array([[1.0, 0.5], [2.0, -0.5]])
-    bench.publish("wrist_wrench", messages.encode_wrench(10, wrench))
-    bench.publish("obstacle_points",
-                  messages.encode_obstacle_points(10, points))
+            b.utime() + 1, q_good, np.zeros(6))))
     bench.run(1, status=False)
-    utime = 10**9
+    utime = bench.utime()
     bad = {
         "arm_status": [
             messages.encode_arm_status(utime, [np.nan] * 6, np.zeros(6)),
@@ -170,7 +327,7 @@ def test_bad_messages_never_reach_the_controller():
             messages.encode_wrench(9, np.ones(6))],
         "obstacle_points": [
             messages.encode_obstacle_points(utime, [[np.nan, 1.0]]),
-            messages.encode_obstacle_points(9, [[3.0, 3.0]])],
+            messages.encode_obstacle_points(-1, [[3.0, 3.0]])],
     }
     for i in range(4):
         def send(b, i=i):
@@ -183,9 +340,9 @@ def test_bad_messages_never_reach_the_controller():
         np.testing.assert_array_equal(
             bench.output("arm.position_measured"), q_good)
         np.testing.assert_array_equal(
-            bench.output("wrist.wrench_measured"), wrench)
+            bench.output("wrist.wrench_measured"), WRENCH)
         np.testing.assert_array_equal(
-            bench.output("lidar.obstacle_points"), points)
+            bench.output("lidar.obstacle_points"), POINTS)
         assert np.all(np.isfinite(bench.output("base.state_estimated")))
     diagnostics = bench.diagnostics()
     for channel, datas in bad.items():
@@ -194,13 +351,77 @@ def test_bad_messages_never_reach_the_controller():
     for _, command in bench.sent["base"] + bench.sent["arm"]:
         assert np.all(np.isfinite(command))
     # A NaN command of the controller is not sent either.
-    bench.run(3)
-    bench.set_arm_command(np.full(6, np.nan))
+    bench.run(60)
+    bench.set_command(bench.arm, np.full(6, np.nan))
     bench.run(3)
     assert bench.diagnostics()["invalid_commands"] >= 1
     for _, command in bench.sent["base"] + bench.sent["arm"]:
         assert np.all(np.isfinite(command))
     np.testing.assert_array_equal(bench.sent["base"][-1][1], 0.0)
+
+
+def test_one_future_stamped_message_locks_nothing_out():
+    """A message stamped a minute ahead (forged, or a sender's clock
+    gone wrong) is rejected; the genuine messages after it are taken and
+    the watchdog never trips. It once locked the controller out until a
+    restart: every genuine message after it went "backwards"."""
+    bench = Bench()
+    bench.run(60)
+    bench.publish("arm_status", messages.encode_arm_status(
+        bench.utime() + 60_000_000, HOME_ARM_POSITIONS + 1.0, np.zeros(6)))
+    bench.publish("base_state", messages.encode_base_state(
+        bench.utime() + 60_000_000, np.ones(6)))
+    bench.run(100)
+    diagnostics = bench.diagnostics()
+    assert diagnostics["watchdog_trips"] == 0.0
+    assert diagnostics["arm_status_rejected"] == 1.0
+    assert diagnostics["arm_status_age"] <= H + 1e-9
+    np.testing.assert_array_equal(bench.output("arm.position_measured"),
+                                  HOME_ARM_POSITIONS)
+
+
+def test_a_sender_clock_that_jumps_is_followed():
+    """The robot's clock jumps back by 50 s (a restart of its driver) and
+    later forward by 20 s (a clock step): the controller follows after
+    three consistent messages each time, without a stop."""
+    bench = Bench()
+    bench.run(60)
+    for jump in (-50_000_000, 20_000_000):
+        bench.utime_offset += jump
+        bench.run(50)
+    diagnostics = bench.diagnostics()
+    assert diagnostics["watchdog_trips"] == 0.0
+    assert diagnostics["base_state_rejected"] == 4.0  # 2 a jump
+    assert diagnostics["base_state_age"] <= H + 1e-9
+    decoder = bench.hw.systems["decoder.base_state"]
+    reception = decoder.reception(decoder.GetMyContextFromRoot(bench.root))
+    assert reception.clock_jumps == 2
+
+
+def test_a_flood_hides_no_genuine_message():
+    """200 garbage messages a control period on every status channel
+    (20,000 a second, after each genuine one): every genuine message is
+    still taken in, so the watchdog never trips; every garbage one is
+    rejected."""
+    bench = Bench()
+    garbage = [b"garbage", messages.encode_base_command(0, np.zeros(3)),
+               messages.encode_arm_status(1, np.zeros(5), np.zeros(5))]
+
+    def flood(b):
+        for channel in ("base_state", "arm_status", "wrist_wrench",
+                        "obstacle_points"):
+            for i in range(200):
+                b.publish(channel, garbage[i % 3])
+
+    bench.run(60)
+    bench.run(50, extra=flood)
+    diagnostics = bench.diagnostics()
+    assert diagnostics["watchdog_trips"] == 0.0
+    assert diagnostics["base_stops"] == 0.0
+    assert diagnostics["base_state_rejected"] == 200 * 50
+    assert diagnostics["arm_status_age"] <= H + 1e-9
+    times, base = bench.commands("base", 0.6)
+    _rows_equal(base, BASE_COMMAND)
 
 
 def test_arm_commands_are_rate_and_position_limited():
@@ -210,16 +431,27 @@ def test_arm_commands_are_rate_and_position_limited():
     target = HOME_ARM_POSITIONS.copy()
     target[0] += 0.5
     target[4] = limits.upper[4] + 1.0
-    bench.set_arm_command(target)
-    bench.run(100)  # 1.41 rad at 1.57 rad/s on joint 5
+    bench.set_command(bench.arm, target)
+    bench.run(150)  # 1.41 rad at 1.57 rad/s on joint 5
     q = np.array([command for _, command in bench.sent["arm"]])
-    step = np.max(np.abs(np.diff(q, axis=0)), axis=0)
-    assert np.all(step <= 1.57 * H + 1e-12)
-    assert step[0] == pytest.approx(1.57 * H)
+    rate = np.diff(q, axis=0) / H
+    assert np.all(np.abs(rate) <= 1.57 + 1e-9)
+    assert np.all(np.abs(np.diff(rate, axis=0)) <= 12.56 * H + 1e-9)
+    assert np.max(np.abs(rate[:, 4])) == pytest.approx(1.57)
     assert q[-1][0] == pytest.approx(target[0])
     assert q[-1][4] == pytest.approx(limits.upper[4])
     assert np.all(q <= limits.upper) and np.all(q >= limits.lower)
     assert bench.diagnostics()["arm_command_saturated"] == 1.0
+
+
+def test_limits_wider_than_the_arms_own_are_refused():
+    for name, value, own in (("joint_speed_limit", 100.0, "1.57 rad/s"),
+                             ("joint_acceleration_limit", 1e6,
+                              "12.56 rad/s^2")):
+        with pytest.raises(ValueError, match=re.escape(
+                f"hardware.{name} = {value!r} is not allowed: must be at "
+                f"most the arm's own {own}")):
+            Limits.of_robot(HardwareOptions(**{name: value}))
 
 
 def test_base_saturation_keeps_the_direction():
@@ -231,27 +463,72 @@ def test_base_saturation_keeps_the_direction():
     assert not changed
 
 
-def test_arm_saturation_closed_form():
-    limits = Limits(1.0, 1.0, np.full(6, 2.0), -np.ones(6), np.ones(6))
-    last = np.zeros(6)
-    command = np.array([0.5, -0.5, 0.01, -0.01, 3.0, 0.0])
-    q, changed = saturate_arm_command(command, last, 0.1, limits)
-    np.testing.assert_allclose(q, [0.2, -0.2, 0.01, -0.01, 0.2, 0.0])
-    assert changed
-    q, _ = saturate_arm_command([5.0] * 6, np.full(6, 0.95), 0.1, limits)
-    np.testing.assert_allclose(q, np.ones(6))
+LIMITS = Limits(1.0, 1.0, np.ones(3), np.full(6, 2.0), np.full(6, 10.0),
+                -np.full(6, 5.0), np.full(6, 5.0))
 
 
-def test_guarded_commands_stop_on_stale_status():
-    limits = Limits(1.0, 1.0, np.full(6, 1.57), -np.ones(6) * 3,
-                    np.ones(6) * 3)
+def test_brake_speed_closed_form():
+    """From brake_speed(d), slowing by a h a period, a joint travels d and
+    stops: d a whole number of staircases (v = m a h) or not."""
+    a, h = 10.0, 0.01
+    for m in (1, 2, 5, 40):
+        d = a * h * h * m * (m + 1) / 2
+        assert brake_speed(d, a, h) == pytest.approx(m * a * h)
+    for d in (0.0, 1e-6, 3e-4, 0.0019, 0.05, 1.234):
+        v = brake_speed(d, a, h)
+        travel = h * sum(max(v - k * a * h, 0.0) for k in range(1000))
+        assert travel == pytest.approx(d, abs=1e-15)
+        assert h * sum(max(v + 1e-9 - k * a * h, 0.0)
+                       for k in range(1000)) > d
+
+
+def test_follow_passes_a_command_within_the_limits_bit_for_bit():
     last = np.full(6, 0.1)
-    result = guarded_commands([0.5, 0, 0], np.zeros(6), last,
-                              [0.0, 0.031], 0.03, 0.01, limits)
-    assert result.tripped
-    np.testing.assert_array_equal(result.base, 0.0)
-    np.testing.assert_array_equal(result.arm, last)
-    result = guarded_commands([0.5, 0, 0], np.zeros(6), last,
-                              [0.0, 0.03], 0.03, 0.01, limits)
-    assert not result.tripped
-    np.testing.assert_array_equal(result.base, [0.5, 0, 0])
+    target = last + 1.5 * 0.01 * np.array([1, -1, 0.5, 0, 1, -0.2])
+    rate = (target - last) / 0.01
+    q, v, limited = follow_arm_command(target, rate, last, rate, 0.01,
+                                       LIMITS)
+    assert q.tobytes() == target.tobytes() and not limited
+
+
+def test_follow_reaches_a_far_target_without_overshoot():
+    """From rest to a target 1 rad away: accelerate at the limit, cruise
+    at the speed limit, brake at the limit and arrive at rest, never
+    past the target."""
+    h, q, v = 0.01, np.zeros(6), np.zeros(6)
+    target = np.array([1.0, -1.0, 0.3, 0.0, 0.02, -0.5])
+    path = [q]
+    for _ in range(200):
+        q, v, _ = follow_arm_command(target, np.zeros(6), q, v, h, LIMITS)
+        path.append(q)
+    path = np.array(path)
+    rate = np.diff(path, axis=0) / h
+    assert np.all(np.abs(rate) <= 2.0 + 1e-12)
+    assert np.all(np.abs(np.diff(rate, axis=0)) <= 10.0 * h + 1e-12)
+    np.testing.assert_array_equal(path[-1], target)
+    for j in range(6):
+        assert np.all(np.abs(path[:, j]) <= np.abs(target[j]) + 1e-9)
+    # 1 rad: 0.2 s up to 2 rad/s, 0.2 s down, 0.3 s cruising: 0.7 s.
+    arrived = np.flatnonzero(np.all(path == target, axis=1))[0]
+    assert arrived * h == pytest.approx(0.7, abs=0.03)
+
+
+def test_follow_catches_a_moving_target_and_then_passes_it():
+    """A target moving at 1 rad/s, 0.2 rad ahead of a joint at rest: the
+    joint catches up and from then on the target passes unchanged."""
+    h, q, v = 0.01, np.zeros(6), np.zeros(6)
+    rate = np.full(6, 1.0)
+    for k in range(100):
+        target = 0.2 + rate * h * k
+        q, v, limited = follow_arm_command(target, rate, q, v, h, LIMITS)
+    assert not limited
+    np.testing.assert_array_equal(q, target)
+
+
+def test_stop_arm_slows_down_at_the_limit():
+    h, q, v = 0.01, np.zeros(6), np.array([2.0, -2.0, 0.05, 0, 1.0, -0.3])
+    for _ in range(25):
+        q, v = stop_arm(q, v, h, LIMITS)
+    np.testing.assert_array_equal(v, 0.0)
+    # Each joint travelled h^2 a m (m - 1) / 2 + ... : about v^2 / (2 a).
+    np.testing.assert_allclose(q[:2], [0.19, -0.19], atol=0.011)

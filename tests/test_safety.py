@@ -9,6 +9,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pytest
 from controller_rig import H, Rig
+from pydrake.autodiffutils import ExtractValue
 from pydrake.systems.framework import (
     InputPortIndex,
     OutputPortIndex,
@@ -21,13 +22,17 @@ from drake_wbc.controller import (
     build_controller,
     load_controller_parameters,
 )
-from drake_wbc.controller.diagram import STATION_INPUTS, TASK_INPUTS
+from drake_wbc.controller.diagram import (
+    HARDWARE_INPUTS,
+    STATION_INPUTS,
+    TASK_INPUTS,
+)
 from drake_wbc.math import command_limits, safety
 from drake_wbc.math.motion_mode import MotionMode
-from drake_wbc.math.safety import Reason, SafetyParameters
+from drake_wbc.math.safety import STATUS_FIELDS, Reason, SafetyParameters
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.stages import BaseCommandLimiter, InputGuard, StopGate
-from drake_wbc.stages.safety import LOGGER, STATUS_FIELDS, GuardedInput
+from drake_wbc.stages.safety import LOGGER, GuardedInput
 
 HOLD = safety.DEFAULT_HOLD_TIME
 V_MAX = np.array(safety.BASE_VELOCITY_LIMITS)
@@ -77,6 +82,11 @@ def vector_injections():
         Injection("lidar.obstacle_points", np.zeros(3), Reason.MALFORMED, -1,
                   "lidar.obstacle_points is malformed"),
     ]
+    # A switch is 0 or 1: the stages would read 0.7 and 3 as 1, -1 as 0.
+    injections += [
+        Injection("phri_switch", (0, bad), Reason.NOT_A_SWITCH, 0,
+                  f"phri_switch[0] = {bad!r} is not a switch: must be 0 or 1")
+        for bad in (0.7, 3.0, -1.0)]
     return injections
 
 
@@ -160,14 +170,20 @@ def test_invalid_input_stops_holds_and_resumes(injected, k):
     assert np.abs(base[i0 - 1]).max() > 1e-3
     np.testing.assert_array_equal(base[i0:i_resume], 0.0)
     assert np.all(status[i0:i_resume, STATUS["stopped"]] == 1.0)
-    # The arm held at the last command before the fault.
-    q_last = q_cmd[i0 - 1]
+    # The arm brakes to rest from its last command, within its
+    # acceleration limit (at most 0.125 s from 1.57 rad/s), and holds.
     assert np.abs(q_cmd[i0 - 1] - q_cmd[i0 - 2]).max() > 1e-6  # was moving
-    np.testing.assert_array_equal(q_cmd[i0:i_resume], np.tile(
-        q_last, (i_resume - i0, 1)))
+    rest = i0 + 14
+    q_last = q_cmd[rest]
+    np.testing.assert_array_equal(q_cmd[rest:i_resume], np.tile(
+        q_last, (i_resume - rest, 1)))
+    rates = np.diff(q_cmd[i0 - 2:rest + 1], axis=0) / H
+    assert np.all(np.abs(np.diff(rates, axis=0)) / H
+                  <= JOINT_ACCELERATION * (1 + 1e-6))
     # The status names the input, the reason, the entry.
     names = rig.controller.stages["guard"].input_names
-    assert sorted(names) == sorted(STATION_INPUTS + TASK_INPUTS)
+    assert sorted(names) == sorted(STATION_INPUTS + TASK_INPUTS
+                                   + HARDWARE_INPUTS)
     expected_input = names.index(injection.port)
     fault = status[i0]
     assert fault[STATUS["invalid"]] == 1.0
@@ -198,6 +214,101 @@ def test_invalid_input_stops_holds_and_resumes(injected, k):
     accelerations = np.diff(np.vstack([np.zeros(6), rates]), axis=0) / H
     assert np.all(np.abs(accelerations) <= JOINT_ACCELERATION * (1 + 1e-6))
     assert np.abs(q[-1] - q_last).max() > 1e-4        # moving again
+
+
+# --- no command jumps, nothing integrated while stopped ----------------
+
+
+def tripped_run(arm, params=None, reference=(0.3, 0.2, 0.0, 0.0, 0.0, 0.3),
+                port="base.state_estimated", phri=0.0, push=None,
+                sample=None):
+    """A brisk motion, then a NaN on `port` for 0.3 s, then valid inputs
+    again for 2 s. `push`: a force (N, sensor frame) added to the wrist
+    reading throughout; `sample(rig)`, called after each tick from the
+    trip on. Returns the rig, the trip's first and the stop's last
+    logged sample."""
+    rig = Rig(arm, params)
+    rig.set("reference_velocity", list(reference))
+    rig.set("phri_switch", [phri])
+    if push is not None:
+        reading = np.array(rig.valid["wrist.wrench_measured"], dtype=float)
+        reading[:3] += push
+        rig.set("wrist.wrench_measured", reading)
+    rig.advance(2.0)
+    bad = np.array(rig.valid[port], dtype=float)
+    bad[0] = np.nan
+    rig.set(port, bad)
+    for k in range(round(2.3 / H)):
+        if k == round(0.3 / H):
+            rig.set(port, rig.valid[port])
+        rig.advance(H)
+        if sample is not None:
+            sample(rig)
+    times, status = rig.log("safety_status")
+    stopped = np.flatnonzero(status[:, STATUS["stopped"]])
+    return rig, stopped[0], stopped[-1]
+
+
+def test_no_command_jumps_through_a_trip(arm):
+    """From the trip on, through the stop and after it clears, every
+    command stays within the acceleration limits, except the base's
+    velocity command going to zero at once when the stop begins (the
+    base's own drive brakes it, the shortest stop it can make). The
+    joints brake within 12.56 rad/s^2 (held at once, they asked for
+    19.9 rad/s^2 here), and both resume from what was last sent, from
+    rest."""
+    rig, first, last = tripped_run(arm)
+    _, base = rig.log("base.velocity_command")
+    _, q_cmd = rig.log("arm.position_command")
+    assert np.abs(base[first - 1]).max() > 0.1         # fast before it
+    np.testing.assert_array_equal(base[first:last + 1], 0.0)
+    steps = np.abs(np.diff(base[first:], axis=0))
+    assert steps.max() <= A_MAX[0] * H + TOL           # largest after it
+    assert steps[last - first:].max() > 1e-3           # moving again
+    rates = np.diff(q_cmd[first - 3:], axis=0) / H
+    assert np.abs(rates[:3]).max() > 0.15              # moving before it
+    accelerations = np.abs(np.diff(rates, axis=0)) / H
+    assert accelerations.max() <= JOINT_ACCELERATION * (1 + 1e-6)
+    assert np.abs(rates[-100:]).max() > 1e-3            # moving again
+
+
+@pytest.mark.parametrize("case", ["admittance", "force-control"])
+def test_the_dmps_do_not_integrate_while_stopped(arm, case):
+    """The DMPs' couplings (the integrated reference and wrench terms C,
+    C_a, the base's C_b and the tracking error E) are held while stopped,
+    though a person keeps pushing and the force error persists (the
+    guard passes the last valid wrench on): after the stop the robot does
+    not make up for what they would have integrated meanwhile."""
+    params = ControllerParameters()
+    if case == "force-control":
+        params.arm_cdmp.S_m = [0.0, 1.0, 1.0, 1.0, 1.0, 1.0]
+    stages = ("whole_body_cdmp", "base_cdmp", "arm_cdmp")
+    parts = {"whole_body_cdmp": slice(12, 24), "base_cdmp": slice(6, 9),
+             "arm_cdmp": slice(12, 18)}
+    records = []
+
+    def sample(rig):
+        status = rig.controller.stages["guard"].GetOutputPort(
+            "safety_status").Eval(rig.controller.stages[
+                "guard"].GetMyContextFromRoot(rig.root_context))
+        records.append((status[STATUS["stopped"]], [
+            rig.controller.stages[name].GetMyContextFromRoot(
+                rig.root_context).get_discrete_state_vector()
+            .CopyToVector()[parts[name]] for name in stages]))
+
+    tripped_run(arm, params, port="reference_velocity",
+                phri=1.0 if case == "admittance" else 0.0,
+                push=[15.0, -10.0, 5.0], sample=sample)
+    held = [states for stopped, states in records if stopped]
+    assert len(held) >= 50
+    moved = 0.0
+    for states in held[1:]:
+        for state, start in zip(states, held[0], strict=True):
+            np.testing.assert_allclose(state, start, rtol=1e-12,
+                                       atol=1e-15)
+    for state, start in zip(records[-1][1], held[0], strict=True):
+        moved = max(moved, np.abs(state - start).max())
+    assert moved > 1e-3  # they do integrate when not stopped
 
 
 def test_a_point_with_nan_is_dropped_not_a_fault(arm):
@@ -247,7 +358,8 @@ def test_velocity_scaling_is_parallel_in_closed_form():
     small = np.array([0.1, 0.2, -0.3]) / 3.0
     result = command_limits.limit_base_velocity(small, small + 0.001, V_MAX,
                                                 A_MAX, H)
-    assert result.command is small and not result.limited
+    np.testing.assert_array_equal(result.command, small)
+    assert not result.limited
     assert command_limits.uniform_scale([2.0, -4.0], [1.0, 1.0]) == 0.25
 
 
@@ -395,6 +507,36 @@ def test_systems_convert_to_autodiff():
     assert guard.ToAutoDiffXd().params == guard.params
 
 
+def test_stop_gate_zeroes_or_scales_as_a_whole():
+    """The gate in closed form, in double and in AutoDiffXd: zeros while
+    stopped; else the value scaled by min(1, min_i limit_i / |v_i|)."""
+    limits = (0.5, 0.4, 0.9)
+    double = StopGate(3, limits)
+    autodiff = double.ToAutoDiffXd()
+    rng = np.random.default_rng(13)
+    contexts = [system.CreateDefaultContext()
+                for system in (double, autodiff)]
+    for _ in range(60):
+        value = rng.normal(size=3) * rng.choice([0.1, 1.0])
+        stop = float(rng.random() < 0.2)
+        expected = 1.0 if stop else min(
+            [1.0] + [lim / abs(v) for v, lim in zip(value, limits,
+                                                     strict=True)
+                     if abs(v) > lim])
+        for system, context in zip((double, autodiff), contexts,
+                                   strict=True):
+            system.GetInputPort("value").FixValue(context, value)
+            system.GetInputPort("stop").FixValue(context, [stop])
+            gated, scale = (
+                np.asarray(ExtractValue(np.asarray(
+                    system.GetOutputPort(name).Eval(context), dtype=object)),
+                    dtype=float).ravel() for name in ("gated", "scale"))
+            assert scale[0] == expected
+            np.testing.assert_array_equal(
+                gated, np.zeros(3) if stop else
+                (value if expected == 1.0 else expected * value))
+
+
 def test_limiter_linearises_to_the_identity_within_limits():
     limiter = BaseCommandLimiter()
     context = limiter.CreateDefaultContext()
@@ -423,6 +565,49 @@ def test_bad_parameters_are_rejected(kwargs, name):
         SafetyParameters(**kwargs)
 
 
+@pytest.mark.parametrize("text, message", [
+    ("safety: {base_velocity_limits: [1e9, 1.0, 1.0]}",
+     r"safety.base_velocity_limits\[0\] = 1000000000.0 is not allowed: "
+     r"must be at most the robot's own 1.0 m/s"),
+    ("safety: {base_acceleration_limits: [1.0, 1.0, 1e9]}",
+     r"safety.base_acceleration_limits\[2\] = 1000000000.0 .* robot's own "
+     r"1.0 rad/s\^2"),
+    ("arm_controller: {acceleration_limit: 1e6}",
+     r"arm_controller.acceleration_limit = 1000000.0 .* arm's own 12.56"),
+    ("arm_controller: {use_acceleration_limit: false}",
+     r"arm_controller.use_acceleration_limit = False is not allowed"),
+    ("safety: {stop_distance: 0.01}",
+     r"safety.stop_distance = 0.01 .* robot's own 0.045 m"),
+    ("safety: {stop_distance: 0.2, stop_time: 0.1}",
+     r"safety.stop_distance = 0.2 .*safety.stop_time = 0.1: .* own 0.445 m"),
+], ids=["base-velocity", "base-acceleration", "arm-acceleration",
+        "arm-acceleration-off", "stop-distance", "stop-time"])
+def test_limits_only_tighten(arm, text, message):
+    """Every safety limit may tighten the robot's own, not widen it: the
+    error names the field, its value and the robot's."""
+    params = load_controller_parameters(text=text)
+    with pytest.raises(ValueError, match=message):
+        build_controller(params, arm)
+
+
+def test_tighter_limits_are_accepted(arm):
+    build_controller(load_controller_parameters(text="""
+safety: {base_velocity_limits: [0.5, 0.5, 0.5],
+         base_acceleration_limits: [0.5, 0.5, 0.5],
+         stop_distance: 0.3, stop_time: 1.0}
+arm_controller: {acceleration_limit: 5.0}
+"""), arm)
+    # The robot's own stop distance in closed form: from 1 m/s, braking
+    # at 1 m/s^2 after the loop's lag of 0.3 s, 0.5 + 0.045 m, less the
+    # 0.5 m the rule's approach takes.
+    assert safety.robot_stop_distance(0.5, V_MAX, A_MAX) == pytest.approx(
+        0.045)
+    assert safety.robot_stop_distance(0.5, [0.2] * 3, A_MAX) == 0.0
+    # Below a lag = 0.3 m/s the lag alone: 0.25 * 0.3 - 0.1 * 0.25.
+    assert safety.robot_stop_distance(0.1, [0.25] * 3, A_MAX) == (
+        pytest.approx(0.05))
+
+
 def test_parameters_load_from_yaml():
     params = load_controller_parameters(
         text="safety: {hold_time: 0.2, base_velocity_limits: [0.5, 0.5, 1]}")
@@ -440,6 +625,12 @@ def test_checks_in_closed_form():
     assert safety.check_vector([0.5, 2.0], 0.0, 1.0)[:2] == (
         Reason.OUT_OF_RANGE, 1)
     assert safety.check_vector([0.0, 1.0], 0.0, 1.0).valid
+    assert safety.check_vector([0.0, 1.0], switch=True).valid
+    for bad in (0.7, 0.5, 3.0, -1.0, 1e-300):
+        assert safety.check_vector([1.0, bad], switch=True) == (
+            Reason.NOT_A_SWITCH, 1, bad)
+    assert safety.check_vector([2.0], 0.0, 1.0, switch=True).reason is (
+        Reason.OUT_OF_RANGE)
     kept, dropped, check = safety.check_points(
         [[1.0, 2.0], [np.nan, 0.0], [3.0, 4.0]])
     np.testing.assert_array_equal(kept, [[1.0, 2.0], [3.0, 4.0]])

@@ -152,3 +152,39 @@ def test_last_points_recomputes_only_for_new_points():
     nan[0, 0] = np.nan  # NaN equals nothing: computed each time
     last(nan), last(nan)
     assert len(calls) == 5
+
+
+def test_last_points_compares_by_value_as_array_equal():
+    """Whatever the caller changes (the array in place, a copy, a list, a
+    transposed copy), the function runs again exactly when the points
+    differ by value."""
+    calls = []
+
+    def function(points):
+        calls.append(np.array(points))
+        return np.asarray(points, dtype=float).sum(axis=0)
+
+    last = repulsion.LastPoints(function)
+    rng = np.random.default_rng(17)
+    points = rng.normal(size=(30, 2))
+    seen = None
+    for trial in range(200):
+        choice = rng.integers(0, 6)
+        if choice == 0:
+            points = rng.normal(size=(int(rng.integers(0, 40)), 2))
+        elif choice == 1:
+            points[rng.integers(0, len(points) or 1) if len(points) else
+                   slice(0)] += 1.0  # changed in place
+        elif choice == 2:
+            points = points.copy()  # the same values, a new array
+        elif choice == 3:
+            points = points.tolist()  # a list of the same values
+        elif choice == 4:
+            points = np.asarray(points)[:, ::-1].copy()
+        given = points
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        expected_call = seen is None or not np.array_equal(seen, points)
+        before = len(calls)
+        np.testing.assert_array_equal(last(given), points.sum(axis=0))
+        assert (len(calls) > before) == expected_call, trial
+        seen = points.copy()

@@ -201,3 +201,62 @@ def test_a_long_run_summarises_the_spread_and_lists_the_failures(serial):
                     if "base's velocity limit" in line]
     assert len(failing_rows) == 1 and failing_rows[0].split()[0] == "7"
     assert len(text.splitlines()) < len(records)
+
+
+@pytest.mark.parametrize("bad, fragment", [
+    (("--cases", "0"), "cases = 0"),
+    (("--cases", "1", "--workers", "0"), "workers = 0"),
+    (("--cases", "1", "--duration", "0"), "duration = 0.0"),
+    (("--cases", "1", "--seed", "-1"), "seed = -1"),
+])
+def test_bad_arguments_leave_the_journal_untouched(tmp_path, bad, fragment):
+    """A mistyped --cases 0 wiped the previous run's journal before the
+    arguments were checked."""
+    journal = stress.Journal(tmp_path, dict(seed=SEED, duration_s=0.3))
+    journal.append(dict(case=0, seed=SEED, error=""))
+    before = journal.path.read_bytes()
+    parser = argparse.ArgumentParser()
+    stress.add_stress_arguments(parser)
+    args = parser.parse_args(["--seed", str(SEED), "--duration", "0.3",
+                              "--output", str(tmp_path), *bad])
+    with pytest.raises(ValueError, match=fragment):
+        stress.run_stress(args)
+    assert journal.path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["stress.jsonl"]
+
+
+def test_resume_reports_and_skips_damaged_journal_lines(tmp_path):
+    """A damaged line crashed --resume (only a line cut short was
+    skipped, silently)."""
+    settings = dict(seed=SEED, duration_s=0.3)
+    journal = stress.Journal(tmp_path, settings)
+    journal.append(dict(case=0, seed=SEED, error="", min_capability=0.05))
+    with journal.path.open("a") as stream:
+        stream.write("[1, 2]\n")                      # JSON, not a record
+        stream.write('{"seed": 11}\n')                # no case number
+        stream.write('{"case": "two"}\n')             # not a number
+        stream.write('{"case": -1}\n')
+        stream.write("\x00\x00garbage\n")             # not JSON
+    with journal.path.open("ab") as stream:
+        stream.write(b'{"case": 3, "note": "caf\xe9"}\n')  # kept, as caf?
+        stream.write(b'{"case": 2, "seed": 11, "error": ""}\n')
+        stream.write(b'{"case": 4, "seed"')            # cut short
+    reported = []
+    resumed = stress.Journal(tmp_path, settings, resume=True,
+                             report=reported.append)
+    assert [r["case"] for r in resumed.records] == [0, 2, 3]
+    assert len(reported) == 6
+    for number, line in zip((3, 4, 5, 6, 7, 10), reported, strict=True):
+        assert f"stress.jsonl line {number} is not a record" in line
+        assert "skipped" in line
+    lines = resumed.path.read_text().splitlines()
+    assert [json.loads(line).get("case") for line in lines] == [
+        None, 0, 2, 3]
+
+
+def test_resume_refuses_a_journal_whose_settings_are_damaged(tmp_path):
+    (tmp_path / "stress.jsonl").write_text('{"settings": [}\n{"case": 0}\n')
+    with pytest.raises(ValueError, match="first line.*is not the settings"):
+        stress.run_stress(_stress_arguments(tmp_path, "--cases", "1",
+                                            "--resume"))
+    assert "settings\": [}" in (tmp_path / "stress.jsonl").read_text()

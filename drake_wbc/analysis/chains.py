@@ -28,7 +28,7 @@ initial configuration, the robot at rest):
 The force responses of the coupled DMPs are in
 drake_wbc.analysis.dmp_force_response.
 """
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder
@@ -119,12 +119,15 @@ def operating_point(params=None, arm_positions=None):
         sigma_phi=float(value("workspace", "sigma_phi")[0]))
 
 
-def linearize_base_filter(params=None):
+def linearize_base_filter(params=None, time_step=0.01):
     """Drake's linearisation of BaseVelocityFilter, eq. (filtering): a
-    LinearSystem from V_b' (3) to V_b^flt (3), continuous or discrete
-    with params.time_step."""
+    LinearSystem from V_b' (3) to V_b^flt (3) of the filter `params`
+    (BaseFilterParameters; the paper's if None), continuous (time_step =
+    0) or discrete at the control period `time_step` (s; 0.01 if not
+    given)."""
     system = BaseVelocityFilter(checked_instance(
-        "params", params, BaseFilterParameters, BaseFilterParameters))
+        "params", params, BaseFilterParameters, BaseFilterParameters),
+        time_step=time_step)
     context = system.CreateDefaultContext()
     system.get_input_port().FixValue(context, np.zeros(3))
     return Linearize(system, context)
@@ -199,9 +202,10 @@ def _build_split(params, point, base_driver, alpha, station):
                          "OperatingPoint or None")
     builder = DiagramBuilder()
     add = builder.AddNamedSystem
-    distributor = add("distributor", MotionDistributor(params.distributor))
+    distributor = add("distributor", MotionDistributor(
+        params.distributor, band=params.capability_band))
     base_filter = add("base_filter", BaseVelocityFilter(
-        replace(params.base_filter, time_step=params.time_step)))
+        params.base_filter, time_step=params.time_step))
     compensator = add("compensator", RobustCompensator(params.compensator))
     alpha = point.alpha if alpha is None else alpha
 

@@ -76,7 +76,7 @@ def linearize_dmp_force(kind, params=None, time_step=None, axis=None):
         S_m[axis] = 1.0 if kind == "stiffness" else 0.0
         system = ArmCdmp(cdmp.ArmCdmpParameters(
             k_p=arm.k_p, k_d=arm.k_d, k_f=arm.k_f, S_m=S_m, F_d=np.zeros(6),
-            S_hri=0.0, dmp=arm.dmp), time_step=h)
+            dmp=arm.dmp), time_step=h)
         switch, others = 0.0, ("arm_velocity", "desired_wrench")
     else:
         raise ValueError(f"kind = {kind!r} is not allowed: must be "

@@ -242,10 +242,10 @@ def _sweep_plots(report, params, point, driver, hertz, omega, h):
         for j, zeta in enumerate(SWEEP_ZETA):
             family = (i, styles[j % len(styles)])
             setting = replace(params.base_filter, omega_f=2 * np.pi * f_hz,
-                              zeta=zeta, time_step=h, enabled=True)
+                              zeta=zeta, enabled=True)
             label = f"f = {f_hz:g} Hz, zeta = {zeta:g}"
             filters.add(label, linear_system_response(
-                chains.linearize_base_filter(setting), omega)[:, 0, 0],
+                chains.linearize_base_filter(setting, h), omega)[:, 0, 0],
                 family=family)
             swept = replace(params, base_filter=setting)
             split.add(label, linear_system_response(chains.linearize_split(
@@ -272,14 +272,14 @@ def compute_bode_report(scenario, points_per_decade=60,
                      time_step=scenario.station.time_step)
     station = SimulatedStation(scenario.station, scenario.scene)
     report = BodeReport()
-    f = replace(params.base_filter, time_step=h, enabled=True)
+    f = replace(params.base_filter, enabled=True)
     plot = BodePlot("base_filter", "base filter, eq. (filtering): "
                     f"omega_f = {f.omega_f:.4g} rad/s, zeta = {f.zeta:g}",
                     hertz, nyquist_hz=0.5 / h)
-    discrete = linear_system_response(chains.linearize_base_filter(f),
+    discrete = linear_system_response(chains.linearize_base_filter(f, h),
                                       omega)[:, 0, 0]
     continuous = linear_system_response(chains.linearize_base_filter(
-        replace(f, time_step=0.0)), omega)[:, 0, 0]
+        f, time_step=0.0), omega)[:, 0, 0]
     plot.add(f"BaseVelocityFilter, h = {h:g} s", discrete)
     plot.add("BaseVelocityFilter, continuous", continuous)
     plot.add("eq. (filtering), ZOH", lowpass_zoh_response(

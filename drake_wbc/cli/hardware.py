@@ -18,6 +18,7 @@ when the scenario has none); --lcm-url overrides the URL.
 
 import json
 import logging
+import math
 import signal
 import sys
 import time
@@ -97,6 +98,16 @@ def _duration(value):
     return value
 
 
+def _realtime_rate(value):
+    """--realtime-rate, checked: a positive finite number (0 would run the
+    Simulator unpaced, as fast as it can; a negative or NaN rate means
+    nothing)."""
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f"--realtime-rate = {value!r} is not allowed: must "
+                         "be a positive finite number (1 is real time)")
+    return value
+
+
 def add_robot_sim_arguments(parser):
     """`drake-wbc robot-sim`'s arguments."""
     _add_common(parser)
@@ -105,7 +116,7 @@ def add_robot_sim_arguments(parser):
         help="simulated time in s (default: until Ctrl-C)")
     parser.add_argument(
         "--realtime-rate", type=float, default=1.0,
-        help="target real-time rate (default: %(default)s)")
+        help="target real-time rate, > 0 (default: %(default)s)")
 
 
 def run_robot_sim(args):
@@ -117,6 +128,7 @@ def run_robot_sim(args):
 
     _log_to_stderr()
     duration = _duration(args.duration)
+    rate = _realtime_rate(args.realtime_rate)
     path, scenario, options = _scenario_and_options(args)
     lcm = DrakeLcm(options.lcm_url)
     robot = RobotSide(scenario, options, lcm)
@@ -124,7 +136,7 @@ def run_robot_sim(args):
     root = simulator.get_mutable_context()
     robot.set_initial_state(root)
     robot.set_time_offset(root, time.time())
-    simulator.set_target_realtime_rate(args.realtime_rate)
+    simulator.set_target_realtime_rate(rate)
     channels = options.channels
     print(f"drake-wbc robot-sim {path.stem} on {options.lcm_url}: sending "
           f"{channels.base_state}, {channels.arm_status}, "
@@ -156,8 +168,8 @@ def add_deploy_arguments(parser):
         help="controller time in s (default: the scenario's)")
     parser.add_argument(
         "--realtime-rate", type=float, default=1.0,
-        help="target real-time rate (default: %(default)s; below 1 only "
-             "against a simulated robot run at the same rate)")
+        help="target real-time rate, > 0 (default: %(default)s; below 1 "
+             "only against a simulated robot run at the same rate)")
 
 
 def run_deploy(args):
@@ -169,16 +181,19 @@ def run_deploy(args):
 
     _log_to_stderr()
     duration = _duration(args.duration)
+    rate = _realtime_rate(args.realtime_rate)
     path, scenario, options = _scenario_and_options(args)
     variant = _variant(scenario, args.variant)
+    channels = options.channels
     print(f"drake-wbc deploy {path.stem} ({variant.name}) on "
-          f"{options.lcm_url}: waiting for {options.channels.base_state} "
-          f"and {options.channels.arm_status}", flush=True)
+          f"{options.lcm_url}: waiting for {channels.base_state}, "
+          f"{channels.arm_status}, {channels.wrist_wrench} and "
+          f"{channels.obstacle_points}", flush=True)
     with StopRequest() as stop:
         try:
             result = deploy(
                 scenario, variant, options, duration=duration, stop=stop,
-                realtime_rate=args.realtime_rate,
+                realtime_rate=rate,
                 on_start=lambda q: print(
                     "deploy: running from the arm at "
                     f"{np.array2string(q, precision=3)} rad (Ctrl-C stops "

@@ -205,6 +205,9 @@ def main(argv=None):
     except ValueError as error:
         print(f"drake-wbc {args.command}: {error}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # Ctrl-C: stop without a traceback
+        print(f"\ndrake-wbc {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -36,20 +36,32 @@ the commands leave from state (filter, limiter's inputs, arm controller):
 no algebraic loop, and no direct feedthrough from any input to a command.
 
 Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
-- Every input enters through the InputGuard: a NaN, an infinite value or
-  a value out of range (k_n < 0, s_c outside [0, 1]) never reaches a stage
-  (the guard passes the last valid sample on) and triggers a safe stop:
-  from that tick on the base command is zero, the arm command is held at
-  its last position command (the arm controller's hold), the reference
-  velocity is replaced by zero and the base filter's input is gated to
-  zero, so that the DMPs and the filter settle at rest. The stop clears
+- Every input enters through the InputGuard: a NaN, an infinite value, a
+  value out of range (k_n < 0, s_c outside [0, 1]) or a pHRI switch other
+  than 0 or 1 never reaches a stage (the guard passes the last valid
+  sample on) and triggers a safe stop. From that tick on the base command
+  is zero (at once: the base's own drive brakes it within its limits, the
+  shortest stop it can make) and the arm command brakes to rest within
+  the joint acceleration limit (the arm controller's hold: a position
+  command held at once would ask the servo for an unbounded
+  deceleration). Nothing integrates meanwhile: the DMPs' couplings are
+  held (the reference is zero, the phri switches turn the whole body's
+  admittance term and the arm's force term off, StopGates zero the
+  base's and the arm's DMP inputs and the tracking error into
+  WholeBodyCdmp), because they are the task's progress, which a reset
+  would lose; the transformation systems and the base filter (its input
+  gated to zero) are stable and come to rest on them. The stop clears
   once every input has been valid for safety.hold_time; the base command
   then restarts from zero within the acceleration limits and the arm from
-  rest at the held position, so no command jumps. The `safety_status`
-  output (systems.safety.STATUS_FIELDS) and `safety_reason` (a sentence;
+  rest at its last command, so no command jumps and none makes up for
+  the stop. The `safety_status`
+  output (drake_wbc.math.safety.STATUS_FIELDS) and `safety_reason` (a sentence;
   also Controller.safety_reason) say why; the stop is logged when it trips
   and when it clears. Obstacle points with a NaN or infinite coordinate
   are dropped (counted in the status), not a fault.
+- Over LCM, the hardware interface's watchdog enters the same way, as
+  `hardware.watchdog_tripped` (HARDWARE_INPUTS): while it stops the
+  robot for a stale stream, the controller is in a safe stop too.
 - The base command is limited to the robot's velocity limits by uniform
   scaling (its direction kept) before the base filter, by the StopGate,
   so that the filter cannot wind up (its state never asks for more than
@@ -66,8 +78,6 @@ Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
   limits.
 """
 
-from dataclasses import replace
-
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import MatrixGain
@@ -76,6 +86,7 @@ from drake_wbc.controller.parameters import (
     ControllerParameters,
     check_arm_limits,
 )
+from drake_wbc.math.safety import check_within_robot
 from drake_wbc.math.validation import checked_instance, validated_copy
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.stages import (
@@ -89,8 +100,8 @@ from drake_wbc.stages import (
     WholeBodyCdmp,
     WorkspaceAdapter,
 )
-from drake_wbc.stages.base_command import BaseCommandLimiter, StopGate
-from drake_wbc.stages.safety import GuardedInput, InputGuard
+from drake_wbc.stages.base_command import BaseCommandLimiter
+from drake_wbc.stages.safety import GuardedInput, InputGuard, StopGate
 from drake_wbc.stages.wrench import ExternalWrenchEstimator
 
 STATION_INPUTS = (
@@ -110,6 +121,13 @@ TASK_INPUTS = (
 )
 """The task's inputs; all but reference_velocity are optional (the stage's
 parameter is used while the port is not connected)."""
+
+HARDWARE_INPUTS = ("hardware.watchdog_tripped",)
+"""Optional inputs from the LCM hardware interface (drake_wbc.hardware):
+`hardware.watchdog_tripped` is 1 while its watchdog stops the robot (a
+stale stream), and the controller then stops too (a safe stop: its
+integrators do not run on while the robot stands, so it resumes from
+rest). Unconnected (a simulation), it is 0."""
 
 
 class Controller:
@@ -158,8 +176,11 @@ def build_controller(params=None, arm=None):
     """Builds the CDMP-WBC controller Diagram.
 
     Args:
-        params: ControllerParameters (the paper's values if None); the
-            controller keeps a validated copy.
+        params: ControllerParameters (the paper's values if None),
+            checked here (on a copy, which the controller keeps); each
+            stage reads its part when it is built, and the values held
+            once (time_step, capability_band, phri_switch) are handed to
+            every stage that needs them.
         arm: a shared ArmKinematics (a new one if None).
 
     Returns:
@@ -172,35 +193,44 @@ def build_controller(params=None, arm=None):
     """
     params = validated_copy(checked_instance(
         "params", params, ControllerParameters, ControllerParameters))
-    h = params.time_step
+    h, band, switch = (params.time_step, params.capability_band,
+                       params.phri_switch)
     arm = checked_instance("arm", arm, ArmKinematics, ArmKinematics)
     check_arm_limits(params.arm_controller, arm)
+    check_within_robot(params.safety)
     builder = DiagramBuilder()
     add = builder.AddNamedSystem
     stages = dict(
         guard=add("guard", _input_guard(params)),
-        capability=add("capability", ArmCapability(params.capability, arm)),
+        capability=add("capability", ArmCapability(
+            params.capability, arm, band=band)),
         wrench=add("wrench", ExternalWrenchEstimator(arm)),
         base_yaw=add("base_yaw", MatrixGain(
             np.array([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]]))),
         whole_body_cdmp=add("whole_body_cdmp", WholeBodyCdmp(
-            params.whole_body_cdmp, time_step=h)),
-        workspace=add("workspace", WorkspaceAdapter(params.workspace, arm)),
+            params.whole_body_cdmp, time_step=h, phri_switch=switch)),
+        workspace=add("workspace", WorkspaceAdapter(
+            params.workspace, arm, band=band)),
         distributor=add("distributor", MotionDistributor(
-            params.distributor, arm)),
+            params.distributor, arm, band=band)),
         base_cdmp=add("base_cdmp", BaseCdmp(params.base_cdmp, time_step=h)),
         base_gate=add("base_gate", StopGate(
             3, limits=params.safety.base_velocity_limits)),
+        # The couplings' inputs held at zero while stopped.
+        base_cdmp_gate=add("base_cdmp_gate", StopGate(3)),
+        arm_cdmp_gate=add("arm_cdmp_gate", StopGate(6)),
+        deviation_gate=add("deviation_gate", StopGate(6)),
         base_filter=add("base_filter", BaseVelocityFilter(
-            replace(params.base_filter, time_step=h))),
+            params.base_filter, time_step=h)),
         base_limiter=add("base_limiter", BaseCommandLimiter(
             params.safety, time_step=h,
             half_sizes=params.base_cdmp.repulsion.half_sizes)),
         compensator=add("compensator", RobustCompensator(
             params.compensator, arm)),
-        arm_cdmp=add("arm_cdmp", ArmCdmp(params.arm_cdmp, time_step=h)),
+        arm_cdmp=add("arm_cdmp", ArmCdmp(
+            params.arm_cdmp, time_step=h, phri_switch=switch)),
         arm_controller=add("arm_controller", ArmCartesianVelocityController(
-            replace(params.arm_controller, time_step=h), arm)),
+            params.arm_controller, arm, time_step=h)),
     )
     s = stages
 
@@ -210,7 +240,7 @@ def build_controller(params=None, arm=None):
 
     # Every input enters through the guard, and only its outputs (the
     # inputs' last valid samples) reach the stages.
-    for name in STATION_INPUTS + TASK_INPUTS:
+    for name in STATION_INPUTS + TASK_INPUTS + HARDWARE_INPUTS:
         builder.ExportInput(s["guard"].GetInputPort(name), name)
     # Station measurements.
     connect("guard", "base.state_estimated", "base_yaw", "u0")
@@ -232,6 +262,8 @@ def build_controller(params=None, arm=None):
     connect("guard", "stop", "base_gate", "stop")
     connect("guard", "stopped", "base_limiter", "stopped")
     connect("guard", "stop", "arm_controller", "hold")
+    for gate in ("base_cdmp_gate", "arm_cdmp_gate", "deviation_gate"):
+        connect("guard", "stop", gate, "stop")
 
     connect("base_yaw", "y0", "whole_body_cdmp", "base_yaw")
     connect("wrench", "external_wrench", "whole_body_cdmp", "wrench")
@@ -244,7 +276,8 @@ def build_controller(params=None, arm=None):
             connect("capability", name, destination, name)
     for name in ("sigma_xy", "sigma_phi"):
         connect("workspace", name, "distributor", name)
-    connect("distributor", "base_velocity", "base_cdmp", "base_velocity")
+    connect("distributor", "base_velocity", "base_cdmp_gate", "value")
+    connect("base_cdmp_gate", "gated", "base_cdmp", "base_velocity")
     connect("base_cdmp", "avoiding_base_velocity", "base_gate", "value")
     connect("base_gate", "gated", "base_filter", "velocity")
     connect("base_filter", "filtered_velocity", "base_limiter", "velocity")
@@ -257,10 +290,13 @@ def build_controller(params=None, arm=None):
             "filtered_base_velocity")
     for name in ("end_effector_position", "capability_gradient", "alpha"):
         connect("capability", name, "compensator", name)
-    connect("compensator", "end_effector_deviation", "whole_body_cdmp",
+    connect("compensator", "end_effector_deviation", "deviation_gate",
+            "value")
+    connect("deviation_gate", "gated", "whole_body_cdmp",
             "end_effector_deviation")
-    connect("compensator", "arm_reference_velocity", "arm_cdmp",
-            "arm_velocity")
+    connect("compensator", "arm_reference_velocity", "arm_cdmp_gate",
+            "value")
+    connect("arm_cdmp_gate", "gated", "arm_cdmp", "arm_velocity")
     connect("arm_cdmp", "arm_velocity_command", "arm_controller",
             "arm_velocity")
 
@@ -300,9 +336,13 @@ def _input_guard(params):
         vector("reference_velocity", 6, zero_when_stopped=True),
         vector("desired_wrench", 6,
                (("desired_wrench", params.arm_cdmp.F_d),)),
+        # A switch, 0 or 1. While stopped: the admittance term of eq.
+        # (cdmp-wb) off (0), and so is the arm's force term of eq.
+        # (cdmp-arm) (1), so that neither DMP integrates a wrench.
         vector("phri_switch", 1, (
-            ("phri_switch.whole_body", [params.whole_body_cdmp.S_hri]),
-            ("phri_switch.arm", [params.arm_cdmp.S_hri]))),
+            ("phri_switch.whole_body", [params.phri_switch], [0.0]),
+            ("phri_switch.arm", [params.phri_switch], [1.0])),
+            switch=True),
         vector("null_space_gain", 1, (
             ("null_space_gain", [params.distributor.null_space_gain]),),
             lower=0.0, upper=inf),
@@ -310,6 +350,9 @@ def _input_guard(params):
             ("compensation_switch",
              [params.compensator.compensation_switch]),),
             lower=0.0, upper=1.0),
+        # The hardware's watchdog: any value but 0 is a stop (HARDWARE_INPUTS).
+        vector("hardware.watchdog_tripped", 1, (
+            ("hardware.watchdog_tripped", [0.0]),), lower=0.0, upper=0.0),
     )
     return InputGuard(inputs, points_name="lidar.obstacle_points",
                       time_step=params.time_step, params=params.safety)

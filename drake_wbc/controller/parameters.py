@@ -1,5 +1,6 @@
-"""The controller's parameters: `ControllerParameters`, the checks that
-its parts agree, and loading from YAML (diagrams/controller.yaml).
+"""The controller's parameters: `ControllerParameters` (each value once,
+handed to the stages by build_controller), the checks that its parts
+agree, and loading from YAML (diagrams/controller.yaml).
 
 `load_controller_parameters` reads a YAML file or string into
 `ControllerParameters` with Drake's `yaml_load_typed`: the document's keys
@@ -12,30 +13,36 @@ what it changes::
     workspace: {mode: intuitive-phri}
 
 `yaml_load_typed` builds the defaults and then assigns the fields it reads
-one by one, without the dataclasses' checks; the loader therefore runs
-every check of the whole tree afterwards (drake_wbc.math.validation.validate).
-Every problem, from the YAML syntax to a value out of range, is raised as
-a ValueError naming the file (if any), the field's dotted path (e.g.
-`arm_cdmp.S_m`), the value and what is allowed.
+one by one, without the dataclasses' checks; the loader
+(drake_wbc.controller.loading.load_typed) therefore runs every check of
+the whole tree afterwards (drake_wbc.math.validation.validate), and
+screens the file beforehand against what could hurt it (size, encoding,
+nesting, aliases, duplicate keys). Every problem, from the YAML syntax to
+a value out of range, is raised as a ValueError naming the file (if any),
+the field's dotted path (e.g. `arm_cdmp.S_m`), the value and what is
+allowed.
 """
 
 import dataclasses
-import typing
 from dataclasses import dataclass, field, fields
-from pathlib import Path
 
 import numpy as np
-import yaml
-from pydrake.common.yaml import yaml_dump, yaml_load_data, yaml_load_typed
 
+from drake_wbc.controller.loading import load_typed
 from drake_wbc.math import cdmp
 from drake_wbc.math.arm_control import ArmControllerParameters
-from drake_wbc.math.capability import ArmCapabilityParameters
+from drake_wbc.math.capability import (
+    ArmCapabilityParameters,
+    CapabilityBand,
+)
 from drake_wbc.math.compensation import RobustCompensatorParameters
 from drake_wbc.math.distribution import MotionDistributorParameters
-from drake_wbc.math.filtering import BaseFilterParameters
+from drake_wbc.math.filtering import (
+    BaseFilterParameters,
+    check_filter_period,
+)
 from drake_wbc.math.safety import SafetyParameters
-from drake_wbc.math.validation import positive, validate
+from drake_wbc.math.validation import positive, switch
 from drake_wbc.math.workspace import WorkspaceAdapterParameters
 
 
@@ -44,10 +51,20 @@ class ControllerParameters:
     """Every stage's parameters, with the paper's values as defaults.
 
     Attributes:
-        time_step: the control period h in s (the paper runs at 100 Hz);
-            it overrides the time steps inside the stage parameters, and
-            base_filter.omega_f must stay below its Nyquist rate
-            pi / time_step.
+        time_step: the control period h in s (the paper runs at 100 Hz),
+            one for every stage that runs at it (the DMPs, the base
+            filter, the base command's limiter, the arm controller, the
+            input guard); base_filter.omega_f must stay below its Nyquist
+            rate pi / time_step.
+        capability_band: the limitation band C_m^l < C_m < C_m^u of eq.
+            (transition), one for every stage that looks at C_m: alpha
+            (capability), the adaptive weighting factors of the intuitive
+            pHRI mode (workspace) and the switch-off of k_n
+            (distributor). The paper's 0.035 and 0.04.
+        phri_switch: the default pHRI switch S_hri, 0 or 1, of both DMPs
+            that take it (whole_body_cdmp and arm_cdmp, eqs. (cdmp-wb),
+            (cdmp-arm)), while the task's phri_switch input, which drives
+            them together, is not given; 0 (the paper sets 1 for pHRI).
         arm_cdmp: stiffness on every axis by default (S_m = I): force
             control drives the tool towards a surface it has not yet
             touched, so it is the task's choice (the wiping scenario sets
@@ -56,22 +73,24 @@ class ControllerParameters:
             base's velocity and acceleration limits); the arm's limits are
             in arm_controller.
 
-    Besides each part's own checks, the parts must agree: one limitation
-    band C_m^l, C_m^u for every stage that looks at C_m (capability,
-    workspace and distributor .band, eq. (transition)); one default pHRI
-    switch S_hri for both DMPs that take it (whole_body_cdmp and arm_cdmp,
-    eqs. (cdmp-wb), (cdmp-arm)), which the phri_switch input drives
-    together; and, when the controller is built, arm_controller's limits
-    within the arm's own (`build_controller`).
+    Each value is held once, here, and `build_controller` hands it to the
+    stages that need it. Besides each part's own checks, the parts must
+    agree: base_filter within the Nyquist rate of time_step; and, when
+    the controller is built, arm_controller's limits within the arm's own
+    (`build_controller`).
 
     Read from YAML by drake_wbc.controller.parameters.load_controller_parameters
     (diagrams/controller.yaml lists every field). The parameters are
-    read when the controller is built: each stage keeps a validated copy,
-    so changing them afterwards has no effect on a built controller; after
-    assigning fields, drake_wbc.math.validation.validate checks the whole tree.
+    checked where they enter (here, when loaded, and when the controller
+    is built) and each stage reads what it needs from them when it is
+    built, so changing them afterwards has no effect on a built
+    controller; after assigning fields, drake_wbc.math.validation.validate
+    checks the whole tree.
     """
 
     time_step: float = 0.01
+    capability_band: CapabilityBand = field(default_factory=CapabilityBand)
+    phri_switch: float = 0.0
     capability: ArmCapabilityParameters = field(
         default_factory=ArmCapabilityParameters)
     workspace: WorkspaceAdapterParameters = field(
@@ -94,40 +113,46 @@ class ControllerParameters:
 
     def __post_init__(self):
         h = positive("time_step", self.time_step)
+        self.phri_switch = switch("phri_switch", self.phri_switch)
         for item in fields(self):
-            if item.name != "time_step" and not isinstance(
+            if dataclasses.is_dataclass(item.type) and not isinstance(
                     getattr(self, item.name), item.type):
                 raise ValueError(
                     f"{item.name} = {getattr(self, item.name)!r} is not "
                     f"allowed: must be a {item.type.__name__}")
-        omega_f = self.base_filter.omega_f
-        if omega_f >= np.pi / h:
-            raise ValueError(
-                f"time_step = {h!r} s is not allowed with base_filter."
-                f"omega_f = {omega_f!r} rad/s: the filter's cut-off must be "
-                f"below the Nyquist rate pi / time_step = {np.pi / h:.6g} "
-                "rad/s")
-        bands = {name: getattr(self, name).band
-                 for name in ("capability", "workspace", "distributor")}
-        if len({(b.lower, b.upper) for b in bands.values()}) > 1:
-            given = ", ".join(f"{name}.band = ({b.lower!r}, {b.upper!r})"
-                              for name, b in bands.items())
-            raise ValueError(
-                f"{given} are not allowed: one limitation band C_m^l, "
-                "C_m^u of eq. (transition) serves every stage, so the three "
-                "must be equal")
-        switches = (self.whole_body_cdmp.S_hri, self.arm_cdmp.S_hri)
-        if switches[0] != switches[1]:
-            raise ValueError(
-                f"whole_body_cdmp.S_hri = {switches[0]!r} and arm_cdmp.S_hri "
-                f"= {switches[1]!r} are not allowed: the pHRI switch acts on "
-                "both DMPs together (eqs. (cdmp-wb), (cdmp-arm)), so the two "
-                "defaults must be equal")
+        check_filter_period(self.base_filter, h, prefix="base_filter.")
+        for name in ("base_cdmp", "whole_body_cdmp", "arm_cdmp"):
+            dmp = getattr(self, name).dmp
+            rate = _fastest_pole(dmp)
+            if not rate < np.pi / h:
+                raise ValueError(
+                    f"{name}.dmp.alpha_z = {dmp.alpha_z!r}, beta_z = "
+                    f"{dmp.resolved_beta_z!r} and tau = {dmp.tau!r} s are not "
+                    f"allowed with time_step = {h!r} s: the transformation "
+                    f"system's fastest pole ({rate:.6g} rad/s) must lie below "
+                    f"the Nyquist rate pi / time_step = {np.pi / h:.6g} "
+                    "rad/s, as the filter's cut-off (a DMP faster than the "
+                    "control period cannot be sampled by it, and its "
+                    "discretisation overflows long before 1e300)")
+
+
+def _fastest_pole(dmp):
+    """The largest |lambda| of the transformation system of eq. (6),
+    tau^2 lambda^2 + alpha_z tau lambda + alpha_z beta_z = 0, rad/s: the
+    DMP's fastest rate (sqrt(alpha_z beta_z) / tau when critically damped
+    or under-damped)."""
+    alpha, beta, tau = dmp.alpha_z, dmp.resolved_beta_z, dmp.tau
+    with np.errstate(over="ignore", invalid="ignore"):
+        discriminant = alpha * alpha - 4.0 * alpha * beta
+        if discriminant > 0.0:
+            return float((alpha + np.sqrt(discriminant)) / (2.0 * tau))
+        return float(np.sqrt(alpha * beta) / tau)
 
 
 def check_arm_limits(params, arm):
-    """Checks that arm_controller's joint and velocity limits lie within
-    the arm's own (the model's), which they may tighten but not widen.
+    """Checks that arm_controller's joint, velocity and acceleration limits
+    lie within the arm's own (the model's), which they may tighten but not
+    widen; the acceleration limit may not be turned off.
 
     Args:
         params: ArmControllerParameters.
@@ -151,17 +176,21 @@ def check_arm_limits(params, arm):
                 f"arm_controller.{name}[{i}] = {float(value[i])!r} is not "
                 f"allowed: must be {allowed} the arm's own "
                 f"{float(own[i])!r}")
-
-
-
-_LOADER_ERRORS = (yaml.YAMLError, RuntimeError, TypeError, ValueError,
-                  AssertionError, AttributeError, NotImplementedError)
-"""What yaml_load_typed raises on a document that does not fit the schema
-(an unknown key, a list for a number, text for a number, ...)."""
-
+    own = float(np.min(arm.acceleration_limits))
+    if not params.use_acceleration_limit:
+        raise ValueError(
+            "arm_controller.use_acceleration_limit = False is not allowed: "
+            f"the arm's own acceleration limit ({own!r} rad/s^2) holds; "
+            "tighten acceleration_limit instead")
+    if params.acceleration_limit > own:
+        raise ValueError(
+            f"arm_controller.acceleration_limit = "
+            f"{params.acceleration_limit!r} is not allowed: must be at most "
+            f"the arm's own {own!r} rad/s^2")
 
 def load_controller_parameters(path=None, text=None):
-    """ControllerParameters from a YAML file or string, validated.
+    """ControllerParameters from a YAML file or string, validated
+    (drake_wbc.controller.loading.load_typed, safe against hostile files).
 
     Args:
         path: a YAML file (str or path-like); or
@@ -178,114 +207,3 @@ def load_controller_parameters(path=None, text=None):
         OSError: if the file cannot be read.
     """
     return load_typed(ControllerParameters, path=path, text=text)
-
-
-def load_typed(schema, path=None, text=None):
-    """An instance of the dataclass `schema` from a YAML file or string,
-    with every check of its tree run (see load_controller_parameters).
-
-    Args:
-        schema: a parameters dataclass (ControllerParameters, a scenario,
-            ...).
-        path: a YAML file (str or path-like); or
-        text: YAML text. Give exactly one.
-
-    Returns:
-        The loaded, validated instance of `schema`.
-
-    Raises:
-        ValueError: naming the file (when loading one), the field's
-            dotted path, its value and what is allowed; for an unknown
-            key, the key's path and the keys allowed there.
-        OSError: if the file cannot be read.
-    """
-    if (path is None) == (text is None):
-        raise ValueError(f"path = {path!r} and text = {text!r} are not "
-                         "allowed: give exactly one of them")
-    source = "" if path is None else f"{path}: "
-    if path is not None:
-        text = Path(path).read_text(encoding="utf-8")
-    try:
-        if yaml_load_data(text) is None:  # empty, or comments only
-            text = "{}"
-        params = yaml_load_typed(schema=schema, data=text)
-    except _LOADER_ERRORS as error:
-        raise ValueError(source + _explained(schema, text, error)) from None
-    try:
-        return validate(params)
-    except ValueError as error:
-        raise ValueError(f"{source}{error}") from None
-
-
-def _explained(schema, text, error):
-    """A message for `error` from yaml_load_typed on `text`, naming the key
-    where it arose when one can be found."""
-    if isinstance(error, yaml.YAMLError):
-        return f"not valid YAML: {error}"
-    document = yaml_load_data(text)
-    found = None
-    if isinstance(document, dict):
-        found = _failing_key(document, schema, "")
-    return found or str(error)
-
-
-def _failing_key(document, schema, prefix):
-    """The first key of the mapping `document` that the dataclass `schema`
-    does not accept, described; None if each key loads on its own.
-
-    Each entry is loaded alone, by yaml_load_typed itself, going down into
-    nested parameters to the innermost key that fails."""
-    hints = {item.name: item.type for item in dataclasses.fields(schema)}
-    for key, value in document.items():
-        name = f"{prefix}{key}"
-        if key not in hints:
-            where = f"in {prefix[:-1]}" if prefix else "at the top level"
-            return (f"unknown key {name!r}; the keys allowed {where} are "
-                    f"{', '.join(hints)}")
-        nested = _dataclass_in(hints[key])
-        if nested is not None and isinstance(value, dict):
-            inner = _failing_key(value, nested, f"{name}.")
-            if inner is not None:
-                return inner
-        item_schema = _list_item_dataclass(hints[key])
-        if item_schema is not None and isinstance(value, list):
-            for i, item in enumerate(value):
-                if isinstance(item, dict):
-                    inner = _failing_key(item, item_schema, f"{name}[{i}].")
-                    if inner is not None:
-                        return inner
-        message = _load_error(schema, {key: value})
-        if message is None:
-            continue
-        if nested is not None and not isinstance(value, dict):
-            fields = ", ".join(item.name
-                               for item in dataclasses.fields(nested))
-            message = (f"must be a mapping of the fields of "
-                       f"{nested.__name__} ({fields})")
-        return f"{name} = {value!r} is not allowed: {message}"
-    return None
-
-
-def _load_error(schema, document):
-    """The message of yaml_load_typed's error on `document`, or None."""
-    try:
-        yaml_load_typed(schema=schema, data=yaml_dump(document))
-    except _LOADER_ERRORS as error:
-        return str(error)
-    return None
-
-
-def _dataclass_in(hint):
-    """The dataclass of a field's type hint (also inside `X | None`), or
-    None."""
-    for kind in (hint, *typing.get_args(hint)):
-        if isinstance(kind, type) and dataclasses.is_dataclass(kind):
-            return kind
-    return None
-
-
-def _list_item_dataclass(hint):
-    """The dataclass of the items of a `list[X]` type hint, or None."""
-    if typing.get_origin(hint) is list:
-        return _dataclass_in(typing.get_args(hint)[0])
-    return None

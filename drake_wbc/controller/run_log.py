@@ -10,7 +10,7 @@ experiments' metrics and figures apply to each.
 import numpy as np
 from pydrake.systems.primitives import LogVectorOutput, Multiplexer
 
-from drake_wbc.stages.safety import STATUS_FIELDS
+from drake_wbc.math.safety import STATUS_FIELDS
 
 SIGNALS = {
     # station: what the robot's sensors report

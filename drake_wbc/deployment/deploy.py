@@ -21,17 +21,18 @@ from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
+from drake_wbc.controller.diagram import HARDWARE_INPUTS
 from drake_wbc.controller.run_log import SIGNALS
 from drake_wbc.controller.task import add_controller
 from drake_wbc.experiments.scenario import Scenario, controller_for
 from drake_wbc.hardware import messages
-from drake_wbc.hardware.codecs import SignalBundleEncoder
+from drake_wbc.hardware.codecs import FORMATS, SignalBundleEncoder
 from drake_wbc.hardware.interface import (
     DIAGNOSTICS,
     HardwareInterface,
     add_publisher,
 )
-from drake_wbc.hardware.options import HardwareOptions
+from drake_wbc.hardware.options import STATUS_CHANNELS, HardwareOptions
 from drake_wbc.math.validation import checked_instance, positive
 
 COMMANDS = ("base.velocity_command", "arm.position_command")
@@ -107,6 +108,10 @@ def add_controller_side(builder, scenario, variant=None, options=None,
     controller, sources = add_controller(
         builder, controller_for(scenario, variant), scenario.task,
         hardware.diagram)
+    # The watchdog's stop stops the controller too (HARDWARE_INPUTS).
+    for name in HARDWARE_INPUTS:
+        builder.Connect(hardware.diagram.GetOutputPort(name),
+                        controller.diagram.GetInputPort(name))
     ports = {name: controller.diagram.GetOutputPort(name)
              for name in SIGNALS
              if name not in COMMANDS
@@ -130,7 +135,9 @@ def add_controller_side(builder, scenario, variant=None, options=None,
 
 
 def wait_for_status(lcm, options, timeout=None, stop=None):
-    """Waits for a good base state and arm status on `lcm`.
+    """Waits for a good message on every status channel on `lcm` (base
+    state, arm status, wrist wrench, obstacle points: the controller
+    depends on each).
 
     Args:
         lcm: a DrakeLcmInterface.
@@ -140,15 +147,17 @@ def wait_for_status(lcm, options, timeout=None, stop=None):
         stop: a callable; waiting ends early when it returns True.
 
     Returns:
-        (base state (6,), arm positions (6,)), or None if stopped.
+        the first value of each channel's message, in the order of
+        STATUS_CHANNELS (base state (6,), arm positions (6,), wrench
+        (6,), points (M, 2)), or None if stopped.
 
     Raises:
         TimeoutError: naming the channels still silent and the URL.
     """
     timeout = options.startup_timeout if timeout is None else positive(
         "timeout", timeout)
-    decoders = {options.channels.base_state: messages.decode_base_state,
-                options.channels.arm_status: messages.decode_arm_status}
+    decoders = {getattr(options.channels, name): FORMATS[name].decode
+                for name in STATUS_CHANNELS}
     received, waiting = {}, [True]
 
     def handler_for(channel):
@@ -176,8 +185,7 @@ def wait_for_status(lcm, options, timeout=None, stop=None):
                 "(or `drake-wbc robot-sim`) running on this LCM URL?")
         lcm.HandleSubscriptions(50)
     waiting[0] = False
-    return (received[options.channels.base_state],
-            received[options.channels.arm_status])
+    return tuple(received[channel] for channel in decoders)
 
 
 def wait_for_next(lcm, channel, timeout):
@@ -193,15 +201,17 @@ def wait_for_next(lcm, channel, timeout):
     return bool(arrived)
 
 
-def send_stop(lcm, options, arm_positions, utime=None):
+def send_stop(lcm, options, arm_positions, sender, utime=None):
     """Sends zero base velocity and `arm_positions` (the arm held) on the
-    command channels, STOP_REPEATS times."""
+    command channels, from `sender`, STOP_REPEATS times."""
     utime = int(time.time() * 1e6) if utime is None else int(utime)
     for i in range(STOP_REPEATS):
         lcm.Publish(options.channels.base_command,
-                    messages.encode_base_command(utime + i, np.zeros(3)))
+                    messages.encode_base_command(utime + i, np.zeros(3),
+                                                 sender))
         lcm.Publish(options.channels.arm_command,
-                    messages.encode_arm_command(utime + i, arm_positions))
+                    messages.encode_arm_command(utime + i, arm_positions,
+                                                sender))
         time.sleep(0.002)
 
 
@@ -236,7 +246,8 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
         lcm: a DrakeLcmInterface (a DrakeLcm of options.lcm_url if None).
         stop: a callable polled every `chunk` s of controller time; True
             ends the run there (the stop commands are then sent at once).
-        realtime_rate: the Simulator's target real-time rate.
+        realtime_rate: the Simulator's target real-time rate, > 0 and
+            finite.
         chunk: s of controller time between polls of `stop`.
         on_start: called with the measured arm positions when the
             controller starts.
@@ -248,6 +259,7 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
                                HardwareOptions, HardwareOptions)
     duration = scenario.duration if duration is None else positive(
         "duration", duration)
+    realtime_rate = positive("realtime_rate", realtime_rate)
     lcm = lcm or DrakeLcm(options.lcm_url)
     builder = DiagramBuilder()
     side = add_controller_side(builder, scenario, variant, options, lcm)
@@ -256,7 +268,7 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
     status = wait_for_status(lcm, options, stop=stop)
     if status is None:
         return None
-    state, arm = status
+    state, arm = status[:2]
     simulator = Simulator(diagram)
     root = simulator.get_mutable_context()
     side.initialize(root, arm, base_velocity=state[3:])
@@ -268,7 +280,9 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
     # Start the clock just after a base state arrives, so that each tick
     # follows the robot's status by a fraction of a period and the
     # commands reach the robot well before it samples them.
-    wait_for_next(lcm, options.channels.base_state, options.watchdog_limit)
+    wait_for_next(lcm, options.channels.base_state,
+                  options.watchdog_limits.base_state)
+    side.hardware.discard_pending()
     started = time.perf_counter()
     try:
         simulator.Initialize()
@@ -284,7 +298,7 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
             held = guard.GetOutputPort("arm_position_command").Eval(
                 guard.GetMyContextFromRoot(root))
     finally:
-        send_stop(lcm, options, held)
+        send_stop(lcm, options, held, side.hardware.sender)
     elapsed = time.perf_counter() - started
     values = side.hardware.diagram.GetOutputPort(
         "hardware.diagnostics").Eval(

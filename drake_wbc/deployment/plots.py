@@ -9,7 +9,8 @@ into the output folder what `drake-wbc run` writes for a simulated run
   log has the signals they need (ground truth comes from a simulated
   robot only; a real robot's log gets the figures below alone);
 - `hardware.png`: the commands as sent, the robot's status and the
-  interface's diagnostics (watchdog, status ages, rejected messages);
+  interface's diagnostics (watchdog stops, stream ages, rejected
+  messages);
 - `summary.json`.
 """
 
@@ -115,11 +116,13 @@ def draw_hardware_figure(log, folder, title=""):
     if "hardware.diagnostics" in log:
         values = log["hardware.diagnostics"]
         column = {name: i for i, name in enumerate(DIAGNOSTICS)}
-        for name in ("base_state_age", "arm_status_age"):
+        for name in ("base_state_age", "arm_status_age", "wrist_wrench_age",
+                     "obstacle_points_age"):
             axes[3].plot(log.time, np.minimum(values[:, column[name]], 1.0),
                          label=name)
         for name in DIAGNOSTICS:
-            if name == "watchdog_tripped" or name.endswith("_rejected"):
+            if name in ("watchdog_tripped", "base_stopped") or name.endswith(
+                    "_rejected"):
                 axes[4].step(log.time, values[:, column[name]], where="post",
                              label=name)
         for axis in axes[3:]:

@@ -21,24 +21,41 @@ its outputs to LCM publishers, each at its rate:
 - the ground truth (`truth.*` of the station, as a signal_bundle_t) every
   `truth_period`, for metrics and plots from a log.
 
-Like the real base, the robot side stops the base when no base command
-came for `robot_command_timeout` (0.25 s); the arm holds its last
-command. Before the first command the base is at rest and the arm holds
-the scenario's initial positions.
+The commands arrive through a CommandReceiver (drake_wbc.hardware.
+codecs), which obeys one sender at a time and judges the time stamps as
+the controller side does, and the arm's through an ArmCommandLimiter
+(drake_wbc.hardware.safety) with the arm model's own joint speed and
+acceleration limits: what drake_wbc/hardware/README.md asks of a real
+robot's driver ("What the robot does itself"). The base's own velocity
+loop (the station's base driver) keeps its speed and acceleration within
+the base's limits. Like the real base, the robot side stops the base
+when no base command came for `robot_command_timeout` (0.25 s); the arm
+holds its last command. Before the first command the base is at rest
+and the arm holds the scenario's initial positions.
 """
 
+from dataclasses import replace
+
+import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.lcm import LcmInterfaceSystem
 
 from drake_wbc.experiments.scenario import Scenario
 from drake_wbc.hardware.codecs import (
-    MessageDecoder,
+    ClockRules,
+    CommandReceiver,
     MessageEncoder,
     SignalBundleEncoder,
 )
-from drake_wbc.hardware.interface import add_publisher, add_subscriber
+from drake_wbc.hardware.interface import add_publisher
 from drake_wbc.hardware.options import HardwareOptions
+from drake_wbc.hardware.safety import (
+    ArmCommandLimiter,
+    Limits,
+    arm_own_limits,
+)
 from drake_wbc.math.validation import checked_instance
+from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.station.simulation import SimulatedStation
 
 TRUTH_SIGNALS = ("truth.end_effector_pose", "truth.end_effector_velocity",
@@ -88,23 +105,28 @@ class RobotSide:
         self.station = SimulatedStation(scenario.station, scenario.scene)
         station = builder.AddNamedSystem("station", self.station.diagram)
 
-        commands = (
-            ("base_command", "base.velocity_command", None,
-             options.robot_command_timeout),
-            ("arm_command", "arm.position_command",
-             [scenario.station.initial_arm_positions], None),
-        )
-        for name, port, defaults, timeout in commands:
-            subscriber = add_subscriber(builder, getattr(channels, name),
-                                        lcm, f"subscriber.{name}")
-            s[f"decoder.{name}"] = decoder = builder.AddNamedSystem(
-                f"decoder.{name}", MessageDecoder(
-                    name, defaults, timeout,
-                    update_period=options.publish_period))
-            builder.Connect(subscriber.get_output_port(),
-                            decoder.GetInputPort("message"))
-            builder.Connect(decoder.get_output_port(0),
-                            station.GetInputPort(port))
+        s["commands"] = receiver = builder.AddNamedSystem(
+            "commands", CommandReceiver(
+                lcm, (channels.base_command, channels.arm_command),
+                scenario.station.initial_arm_positions,
+                options.robot_command_timeout, ClockRules.of(options)))
+        builder.Connect(receiver.GetOutputPort("velocity"),
+                        station.GetInputPort("base.velocity_command"))
+        arm = ArmKinematics()
+        speed, acceleration = arm_own_limits(arm)
+        s["arm_limiter"] = limiter = builder.AddNamedSystem(
+            "arm_limiter", ArmCommandLimiter(
+                options.publish_period,
+                options.publish_offset + 0.5 * options.publish_period,
+                scenario.station.initial_arm_positions,
+                Limits.of_robot(replace(
+                    options, joint_speed_limit=float(np.min(speed)),
+                    joint_acceleration_limit=float(np.min(acceleration))),
+                    arm)))
+        builder.Connect(receiver.GetOutputPort("positions"),
+                        limiter.GetInputPort("positions"))
+        builder.Connect(limiter.GetOutputPort("positions"),
+                        station.GetInputPort("arm.position_command"))
 
         sensor_delay = scenario.station.time_step
         statuses = (
@@ -149,8 +171,10 @@ class RobotSide:
 
     def set_initial_state(self, root_context):
         """The station's initial state (SimulatedStation.
-        set_initial_state)."""
+        set_initial_state), the arm's command limiter at rest there."""
         self.station.set_initial_state(root_context)
+        self.systems["arm_limiter"].set_positions(
+            root_context, self.scenario.station.initial_arm_positions)
 
     def set_time_offset(self, root_context, offset):
         """Stamps every message with 1e6 (t + offset) microseconds."""

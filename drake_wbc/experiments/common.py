@@ -12,9 +12,9 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
 from drake_wbc.math import repulsion
+from drake_wbc.math.safety import STATUS_FIELDS
 from drake_wbc.robot.footprint import FOOTPRINT_HALF_SIZES
 from drake_wbc.robot.model import ArmKinematics
-from drake_wbc.stages.safety import STATUS_FIELDS
 from drake_wbc.station.scene import planar_shapes
 
 BOUNDARY_POINTS_PER_METRE = 200

@@ -134,7 +134,7 @@ def run_metrics(scenario, log):
     distance = person_distances(scenario, log)
     d_th = scenario.controller.base_cdmp.repulsion.d_th
     intervals = approach_intervals(log.time, distance, d_th)
-    band = scenario.controller.capability.band
+    band = scenario.controller.capability_band
     dist = integrated_deviation(log)
     metrics = {"approaches": len(intervals)}
     for k, (start, end) in enumerate(intervals, start=1):
@@ -179,7 +179,7 @@ def draw_figures(scenario, logs, folder):
     import matplotlib.pyplot as plt
 
     paths = []
-    band = scenario.controller.capability.band
+    band = scenario.controller.capability_band
     d_th = scenario.controller.base_cdmp.repulsion.d_th
     for name, log in logs.items():
         t = log.time

@@ -6,7 +6,9 @@ hand on the tool), the task's inputs over time, the duration, the runs to
 compare and what to write. It is loaded with Drake's `yaml_load_typed`
 into the dataclasses below, then every check of the tree runs, so a wrong
 key or value is reported with the file, the field's dotted path and what
-is allowed (drake_wbc.controller.parameters.load_typed)::
+is allowed (drake_wbc.controller.loading.load_typed, which also refuses
+files written to hurt the loader: aliases that multiply, deep nesting,
+duplicate keys, text that is not UTF-8)::
 
     description: the end effector holds still while a person walks by
     experiment: fixed_point
@@ -28,7 +30,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from drake_wbc.controller import ControllerParameters
-from drake_wbc.controller.parameters import load_typed
+from drake_wbc.controller.loading import load_typed
 from drake_wbc.controller.task import TaskInputs
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.math.cdmp import MovementReplay
@@ -131,8 +133,10 @@ class Scenario:
 
     Besides each part's own checks: controller.time_step is a whole
     multiple of station.time_step and equals station.arm.command_period
-    (and hardware.publish_period, with hardware), and no static obstacle
-    overlaps the base's footprint at station.initial_base_pose.
+    (and hardware.publish_period, with hardware), outputs.log_period is
+    at least station.time_step and outputs.replay_frame_rate at most its
+    inverse, and no static obstacle overlaps the base's footprint at
+    station.initial_base_pose.
     """
 
     description: str = ""
@@ -190,6 +194,20 @@ class Scenario:
                 f" s is not allowed with controller.time_step = "
                 f"{self.controller.time_step!r} s: the controller sends its "
                 "commands once a tick, so the two must be equal")
+        step = self.station.time_step
+        if self.outputs.log_period < step:
+            raise ValueError(
+                f"outputs.log_period = {self.outputs.log_period!r} s is not "
+                f"allowed with station.time_step = {step!r} s: must be at "
+                "least the station's step (the logged signals change once a "
+                "step; a shorter period repeats them and fills the memory)")
+        if self.outputs.replay_frame_rate > 1.0 / step:
+            raise ValueError(
+                f"outputs.replay_frame_rate = "
+                f"{self.outputs.replay_frame_rate!r} Hz is not allowed with "
+                f"station.time_step = {step!r} s: must be at most 1 / "
+                f"station.time_step = {1.0 / step:.6g} Hz (the scene moves "
+                "once a step; more frames repeat it and fill the memory)")
         check_start_is_free(self.scene, self.station.initial_base_pose)
 
 

@@ -36,7 +36,7 @@ def interval(scenario, start=None, stop=None):
     if start is None or stop is None:
         marked = teaching_interval(
             scenario.task.phri_switch, scenario.duration,
-            scenario.controller.whole_body_cdmp.S_hri)
+            scenario.controller.phri_switch)
         start = marked[0] if start is None else start
         stop = marked[1] if stop is None else stop
     return float(start), float(stop)

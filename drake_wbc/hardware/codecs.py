@@ -1,11 +1,15 @@
 """Drake systems between LCM bytes and the station's ports.
 
-A `MessageDecoder` sits behind an `LcmSubscriberSystem` that carries the
-message's bytes (messages.RawBytesSerializer) and offers the message's
-values on vector ports named like the station's, keeping the last good
-message; a `MessageEncoder` turns vector ports into bytes for an
-`LcmPublisherSystem`. `SignalBundleEncoder` packs named signals for the
-logs. The pure part, `receive`, decides what a new message changes.
+A `MessageDecoder` subscribes to one channel and offers the values of
+its last good message on vector ports named like the station's; a
+`CommandReceiver` is the robot's side of the two command channels, which
+obey one sender at a time; a `MessageEncoder` turns vector ports into
+bytes for an `LcmPublisherSystem` (or a `FlaggedPublisher`, which sends
+at once when told). `SignalBundleEncoder` packs named signals for the
+logs. The pure part decides what a new message changes: `receive` and
+`take` (the time stamps' sequence, judged by the receiver's clock,
+`ClockRules`) and `admit` (the sender lock). drake_wbc/hardware/README.md
+states these rules as the protocol.
 
 These are plain double LeafSystems, as the station's sensors are: they
 compare bytes and time stamps, carry abstract values, and are no part of
@@ -13,6 +17,7 @@ what the controller linearises.
 """
 
 import logging
+from collections import deque
 from typing import NamedTuple
 
 import numpy as np
@@ -72,57 +77,246 @@ def _format(message_format):
     return FORMATS[message_format]
 
 
-class Reception(NamedTuple):
-    """What a decoder knows of its channel.
+class ClockRules(NamedTuple):
+    """How a receiver judges its sender's time stamps (drake_wbc/hardware/
+    README.md, "Time stamps").
 
     Attributes:
-        seen: the bytes of the last message looked at (good or not).
-        utime: the time stamp of the last good message (None: none yet).
+        tolerance: s: how far a stamp may run ahead of the receiver's
+            clock since the last good message (HardwareOptions.
+            clock_tolerance).
+        resync_messages: how many consecutive out-of-sequence messages,
+            each in sequence with the one before, establish a sender's
+            clock that jumped (HardwareOptions.clock_resync_messages).
+    """
+
+    tolerance: float = 0.1
+    resync_messages: int = 3
+
+    @classmethod
+    def of(cls, options):
+        """The rules of a HardwareOptions."""
+        return cls(options.clock_tolerance, options.clock_resync_messages)
+
+
+class Reception(NamedTuple):
+    """What a receiver knows of one channel.
+
+    Attributes:
+        utime: the time stamp of the last good message (None: none yet,
+            or the sender changed).
         values: the last good message's values (the defaults before).
         received: when the last good message was taken in, s of the
             receiver's clock (-inf: never).
         rejected: how many messages were rejected.
         reason: why the last one was rejected ("" if none was).
+        run_utime, run_received, run_length: the newest message of the
+            run of consecutive out-of-sequence messages that are in
+            sequence among themselves (a sender's clock that may have
+            jumped), and how many there were (0: no run).
+        clock_jumps: how many times the sender's clock was taken to have
+            jumped (a run reached ClockRules.resync_messages).
     """
 
-    seen: bytes
     utime: int | None
     values: tuple
     received: float
-    rejected: int
+    rejected: int = 0
     reason: str = ""
+    run_utime: int = 0
+    run_received: float = -np.inf
+    run_length: int = 0
+    clock_jumps: int = 0
+
+    def __deepcopy__(self, memo):
+        # Never changed in place (only replaced), so the copies that Drake
+        # makes of an abstract state at each update may share it.
+        return self
 
 
-def receive(reception, data, now, decode):
-    """The Reception after the subscriber holds `data` at time `now`.
+DEFAULT_RULES = ClockRules()
+"""The ClockRules of HardwareOptions' defaults."""
 
-    Bytes already seen change nothing. New bytes are rejected (counted,
-    the last good values kept) when `decode` raises MessageError (not the
-    message, wrong size, NaN) or when their time stamp is older than the
-    last good message's; a repeat of the last good time stamp is ignored;
-    anything else is the new last good message, received `now`.
+
+def in_sequence(utime, last_utime, last_received, now, tolerance):
+    """True when a stamp `utime` (microseconds) may follow `last_utime`,
+    received at `last_received` (s of the receiver's clock), at `now`:
+    later than it, and not ahead of it by more than the receiver's clock
+    has advanced since, plus `tolerance` s."""
+    return (last_utime < utime
+            <= last_utime + 1e6 * (now - last_received + tolerance))
+
+
+def receive(reception, data, now, decode, rules=DEFAULT_RULES):
+    """The Reception after the message `data` (bytes) arrived at `now`.
+
+    Bytes that `decode` rejects (MessageError: not the message, wrong
+    size, NaN) are counted and change nothing else; so does a message
+    out of sequence (`take`).
     """
-    if data == reception.seen:
-        return reception
     try:
         decoded = decode(data)
     except messages.MessageError as error:
-        return reception._replace(seen=data, rejected=reception.rejected + 1,
-                                  reason=str(error))
-    if reception.utime is not None and decoded.utime < reception.utime:
-        return reception._replace(
-            seen=data, rejected=reception.rejected + 1,
-            reason=f"utime = {decoded.utime} goes backwards (the last good "
-                   f"message had {reception.utime})")
+        return reject(reception, str(error))
+    return take(reception, decoded, now, rules)
+
+
+def reject(reception, reason):
+    """`reception` with one more message rejected for `reason`."""
+    return reception._replace(rejected=reception.rejected + 1, reason=reason)
+
+
+def take(reception, decoded, now, rules=DEFAULT_RULES):
+    """The Reception after a decoded message arrived at `now`.
+
+    Freshness is the receiver's clock (`received` = `now`); the sender's
+    stamps only order the messages. The first message is taken; a repeat
+    of the last good stamp is ignored (not counted, not fresh); a message
+    in sequence (`in_sequence` with the last good one) is the new last
+    good message. Any other (its stamp behind the last good one, or ahead
+    of the receiver's clock by more than the tolerance) is rejected, but
+    counted in a run: when `rules.resync_messages` consecutive such
+    messages are each in sequence with the one before, the sender's clock
+    has jumped (a restart, a clock step) and the last of them is taken.
+    So no single message, however stamped, locks the genuine ones out for
+    more than that many messages.
+    """
+    if reception.utime is None:
+        return _accepted(reception, decoded, now)
     if decoded.utime == reception.utime:
-        return reception._replace(seen=data)
-    return Reception(data, decoded.utime, decoded.values, float(now),
-                     reception.rejected)
+        return reception
+    if in_sequence(decoded.utime, reception.utime, reception.received, now,
+                   rules.tolerance):
+        return _accepted(reception, decoded, now)
+    length = 1
+    if reception.run_length and in_sequence(
+            decoded.utime, reception.run_utime, reception.run_received, now,
+            rules.tolerance):
+        length = reception.run_length + 1
+    if length >= rules.resync_messages:
+        return _accepted(reception, decoded, now)._replace(
+            clock_jumps=reception.clock_jumps + 1,
+            reason=f"the sender's clock jumped from utime = "
+                   f"{reception.utime} to {decoded.utime}: taken after "
+                   f"{length} consistent messages")
+    seconds = (decoded.utime - reception.utime) * 1e-6
+    how = (f"{-seconds:.6g} s behind it" if seconds <= 0 else
+           f"{seconds - (now - reception.received):.6g} s ahead of the "
+           "receiver's clock")
+    return reject(reception, (
+        f"utime = {decoded.utime} is out of sequence with the last good "
+        f"message's {reception.utime} ({how}); a jumped clock is taken "
+        f"after {rules.resync_messages} consistent messages"))._replace(
+            run_utime=decoded.utime, run_received=float(now),
+            run_length=length)
+
+
+def _accepted(reception, decoded, now):
+    return Reception(decoded.utime, decoded.values, float(now),
+                     reception.rejected, reception.reason,
+                     clock_jumps=reception.clock_jumps)
+
+
+class SenderLock(NamedTuple):
+    """Which sender the robot obeys on its command channels.
+
+    Attributes:
+        sender: its identity (None: nobody yet).
+        heard: when it was last heard, s of the receiver's clock.
+        refused: how many messages of other senders were refused.
+        changes: how many times the lock passed to a new sender.
+    """
+
+    sender: int | None = None
+    heard: float = -np.inf
+    refused: int = 0
+    changes: int = 0
+
+    def __deepcopy__(self, memo):
+        # Never changed in place (only replaced), so the copies that Drake
+        # makes of an abstract state at each update may share it.
+        return self
+
+
+def admit(lock, sender, now, quiet_time):
+    """(the SenderLock after a command of `sender` at `now`, whether it is
+    obeyed, whether the lock passed to it now).
+
+    The first sender heard is locked in; a command of another sender is
+    refused while the locked one has been heard within `quiet_time` s
+    (the robot's command timeout), and takes the lock after that.
+    """
+    if sender == lock.sender:
+        return lock._replace(heard=float(now)), True, False
+    if lock.sender is None or now - lock.heard > quiet_time:
+        return SenderLock(sender, float(now), lock.refused,
+                          lock.changes + (lock.sender is not None)), True, True
+    return lock._replace(refused=lock.refused + 1), False, False
 
 
 def _points_value(points=None):
     return AbstractValue.Make(np.zeros((0, 2)) if points is None
                               else np.asarray(points, dtype=float))
+
+
+class _Mailbox:
+    """The messages an LCM subscription delivered and a receiver has not
+    taken in yet, oldest first, at most QUEUE_LIMIT of them (the oldest
+    are dropped, and counted, beyond that)."""
+
+    def __init__(self):
+        self.items = deque()
+        self.dropped = 0
+
+    def put(self, item):
+        if len(self.items) >= QUEUE_LIMIT:
+            self.items.popleft()
+            self.dropped += 1
+        self.items.append(item)
+
+    def take(self):
+        items, dropped = list(self.items), self.dropped
+        self.items.clear()
+        self.dropped = 0
+        return items, dropped
+
+    def keep_newest(self):
+        """Drops all but the newest message (and forgets the drops)."""
+        while len(self.items) > 1:
+            self.items.popleft()
+        self.dropped = 0
+
+
+QUEUE_LIMIT = 1000
+"""Messages a receiver holds between two simulator steps (10 s of a
+100 Hz stream; a flood beyond that drops the oldest)."""
+
+LOG_INTERVAL = 1.0
+"""s of the receiver's clock between two warnings of one receiver about
+rejected or refused messages (the first is said at once), so that a
+flood of bad messages cannot flood the log as well."""
+
+
+class _Warnings:
+    """A receiver's rate-limited warnings on the drake_wbc.hardware
+    logger: the first of each kind at once, then at most one a
+    LOG_INTERVAL, with the count since."""
+
+    def __init__(self, name):
+        self.name = name
+        self.last = {}
+        self.pending = {}
+
+    def say(self, now, kind, count, reason):
+        if not count:
+            return
+        self.pending[kind] = self.pending.get(kind, 0) + count
+        last = self.last.get(kind)
+        if last is None or now - last >= LOG_INTERVAL:
+            LOG.warning("%s: %d message(s) %s%s: %s", self.name,
+                        self.pending[kind], kind, "" if last is None
+                        else f" in the last {now - last:.3g} s", reason)
+            self.last[kind], self.pending[kind] = now, 0
 
 
 class MessageDecoder(LeafSystem):
@@ -132,40 +326,40 @@ class MessageDecoder(LeafSystem):
 
                         ┌────────────────┐
                         │                ├──► <value ports of the format>
-            message ───►│ MessageDecoder ├──► age
+                        │ MessageDecoder ├──► age
                         │                ├──► rejected
                         └────────────────┘
 
-    - message: abstract, the message's bytes (an LcmSubscriberSystem with
-      messages.RawBytesSerializer).
     - value ports: as the format names them (e.g. `positions`,
       `velocities` of an arm status), the last good message's values;
       the defaults until one arrives.
     - age: (1) s since the last good message was taken in (inf before
-      the first).
+      the first), on the receiver's clock (the context's time).
     - rejected: (1) how many messages were rejected (see `receive`).
 
-    The outputs take in a new message at once (direct feedthrough from
-    the subscriber's state, itself state, so no algebraic loop); a
-    per-step unrestricted update then stores it, so `age` counts from the
-    first simulator step after the message arrived (at most one step
-    late). Each rejection is logged on the `drake_wbc.hardware` logger.
+    It subscribes to `channel` itself and takes in every message
+    delivered, in order, at the simulator step after the delivery (an
+    LcmInterfaceSystem in the same Diagram pumps LCM and wakes the
+    simulator at once): not only the last one of a step, so that a flood
+    of garbage on the channel cannot hide the genuine messages. The
+    outputs are of the state alone. Rejections are logged on the
+    `drake_wbc.hardware` logger, at most once a LOG_INTERVAL.
 
     Args:
         message_format: a MessageFormat or the name of one of FORMATS.
+        lcm: the DrakeLcmInterface to subscribe on (it must outlive the
+            system).
+        channel: the channel's name.
         defaults: the values before the first message (zeros, no points
             if None), one per value port.
         timeout: if given, s: once the last good message is older than
             this, the value ports give `defaults` again (the robot's own
             command timeout); None keeps the last values forever.
-        update_period: None (the default) for the per-step update above;
-            a period in s stores the message periodically instead (fewer
-            updates where the simulator steps often; `age` is then up to
-            one period late).
+        rules: the ClockRules of the sender's time stamps.
     """
 
-    def __init__(self, message_format, defaults=None, timeout=None,
-                 update_period=None):
+    def __init__(self, message_format, lcm, channel, defaults=None,
+                 timeout=None, rules=DEFAULT_RULES):
         super().__init__()
         self.format = message_format = _format(message_format)
         ports = message_format.ports
@@ -182,10 +376,12 @@ class MessageDecoder(LeafSystem):
                 zip(ports, defaults, strict=True)))
         self.timeout = None if timeout is None else non_negative(
             "timeout", timeout)
-        self._message = self.DeclareAbstractInputPort(
-            "message", AbstractValue.Make(b""))
+        self.rules = rules
+        self._mailbox = _Mailbox()
+        self._warnings = _Warnings(f"{message_format.name} on {channel}")
+        lcm.Subscribe(channel, self._mailbox.put)
         self._state = self.DeclareAbstractState(AbstractValue.Make(
-            Reception(b"", None, self.defaults, -np.inf, 0)))
+            Reception(None, self.defaults, -np.inf)))
         for i, (name, size) in enumerate(ports):
             if size is None:
                 self.DeclareAbstractOutputPort(
@@ -197,17 +393,18 @@ class MessageDecoder(LeafSystem):
                         self._values(c)[i]))
         self.DeclareVectorOutputPort("age", 1, self._age)
         self.DeclareVectorOutputPort("rejected", 1, self._rejected)
-        if update_period is None:
-            self.DeclarePerStepUnrestrictedUpdateEvent(self._update)
-        else:
-            self.DeclarePeriodicUnrestrictedUpdateEvent(
-                positive("update_period", update_period), 0.0, self._update)
+        self.DeclarePerStepUnrestrictedUpdateEvent(self._update)
 
     def reception(self, context):
-        """The Reception at `context` (the subscriber's message taken in)."""
-        stored = context.get_abstract_state(0).get_value()
-        return receive(stored, self._message.Eval(context),
-                       context.get_time(), self.format.decode)
+        """The Reception at `context`."""
+        return context.get_abstract_state(0).get_value()
+
+    def discard_pending(self):
+        """Forgets the messages delivered and not yet taken in but the
+        newest: those that came before a run starts (while its program
+        waited for the robot), which the receiver's clock did not see
+        arrive."""
+        self._mailbox.keep_newest()
 
     def _values(self, context):
         reception = self.reception(context)
@@ -224,12 +421,197 @@ class MessageDecoder(LeafSystem):
         output.SetAtIndex(0, self.reception(context).rejected)
 
     def _update(self, context, state):
-        stored = context.get_abstract_state(0).get_value()
-        reception = self.reception(context)
-        if reception.rejected > stored.rejected:
-            LOG.warning("%s: message rejected (%d so far): %s",
-                        self.get_name(), reception.rejected, reception.reason)
+        items, dropped = self._mailbox.take()
+        if not items and not dropped:
+            return
+        now = context.get_time()
+        before = reception = self.reception(context)
+        if dropped:
+            reception = reception._replace(
+                rejected=reception.rejected + dropped,
+                reason=f"{dropped} dropped: more than {QUEUE_LIMIT} "
+                       "messages in one step")
+        for data in items:
+            reception = receive(reception, data, now, self.format.decode,
+                                self.rules)
+        if reception.clock_jumps > before.clock_jumps:
+            LOG.warning("%s at t = %.3f s: %s", self._warnings.name, now,
+                        reception.reason)
+        self._warnings.say(now, "rejected",
+                           reception.rejected - before.rejected,
+                           reception.reason)
         state.get_mutable_abstract_state(0).set_value(reception)
+
+
+class Commands(NamedTuple):
+    """What a CommandReceiver keeps: its SenderLock and the Reception of
+    each command channel."""
+
+    lock: SenderLock
+    base: Reception
+    arm: Reception
+
+    def __deepcopy__(self, memo):
+        # Never changed in place (only replaced), so the copies that Drake
+        # makes of an abstract state at each update may share it.
+        return self
+
+
+COMMAND_STATUS = ("base_command_rejected", "arm_command_rejected",
+                  "refused", "sender_changes")
+"""The entries of CommandReceiver's `status` output."""
+
+
+class CommandReceiver(LeafSystem):
+    """The robot's side of the command channels: the base's and the arm's
+    commands of one sender at a time (drake_wbc/hardware/README.md).
+
+    ::
+
+                         ┌─────────────────┐
+                         │                 ├──► velocity
+                         │ CommandReceiver ├──► positions
+                         │                 ├──► status
+                         └─────────────────┘
+
+    - velocity: (3) the base command of the last good base_command
+      message; zero before the first and once it is older than
+      `timeout` (the robot's own command timeout).
+    - positions: (6) the arm command of the last good arm_command
+      message (`initial_positions` before the first): the arm holds it.
+    - status: (4) COMMAND_STATUS: messages rejected on each channel (not
+      decodable, out of sequence; see `receive`), messages refused
+      (another sender's), and how many times the lock passed to a new
+      sender.
+
+    Both channels obey one sender (`admit`): the first one heard, until
+    it has been quiet on both for `timeout`; its time stamps are judged
+    by `rules` (a new sender starts a new sequence). It subscribes to
+    both channels itself and takes in every message, in order of
+    arrival, at the simulator step after delivery, as MessageDecoder
+    does.
+
+    Args:
+        lcm: the DrakeLcmInterface to subscribe on.
+        channels: (base command channel, arm command channel).
+        initial_positions: (6,) the arm command before the first.
+        timeout: s, the robot's command timeout (and the sender lock's
+            quiet time).
+        rules: the ClockRules.
+    """
+
+    def __init__(self, lcm, channels, initial_positions, timeout,
+                 rules=DEFAULT_RULES):
+        super().__init__()
+        self.timeout = positive("timeout", timeout)
+        self.rules = rules
+        self.initial = as_vector("initial_positions", initial_positions, 6)
+        self._formats = (FORMATS["base_command"], FORMATS["arm_command"])
+        self._mailbox = _Mailbox()
+        self._warnings = _Warnings(f"commands on {', '.join(channels)}")
+        for kind, channel in enumerate(channels):
+            lcm.Subscribe(channel, lambda data, kind=kind: self._mailbox.put(
+                (kind, data)))
+        self._state = self.DeclareAbstractState(AbstractValue.Make(Commands(
+            SenderLock(),
+            Reception(None, (np.zeros(3),), -np.inf),
+            Reception(None, (self.initial.copy(),), -np.inf))))
+        self.DeclareVectorOutputPort("velocity", 3, self._velocity)
+        self.DeclareVectorOutputPort("positions", 6, self._positions)
+        self.DeclareVectorOutputPort("status", len(COMMAND_STATUS),
+                                     self._status)
+        self.DeclarePerStepUnrestrictedUpdateEvent(self._update)
+
+    def stored(self, context):
+        """The Commands at `context`."""
+        return context.get_abstract_state(0).get_value()
+
+    def _velocity(self, context, output):
+        base = self.stored(context)[1]
+        stale = context.get_time() - base.received > self.timeout
+        output.SetFromVector(np.zeros(3) if stale else base.values[0])
+
+    def _positions(self, context, output):
+        output.SetFromVector(self.stored(context)[2].values[0])
+
+    def _status(self, context, output):
+        lock, base, arm = self.stored(context)
+        output.SetFromVector([base.rejected, arm.rejected, lock.refused,
+                              lock.changes])
+
+    def _update(self, context, state):
+        items, dropped = self._mailbox.take()
+        if not items and not dropped:
+            return
+        now = context.get_time()
+        lock, *receptions = self.stored(context)
+        before = (lock, *receptions)
+        for kind, data in items:
+            try:
+                decoded = self._formats[kind].decode(data)
+            except messages.MessageError as error:
+                receptions[kind] = reject(receptions[kind], str(error))
+                continue
+            lock, obeyed, new = admit(lock, decoded.sender, now,
+                                      self.timeout)
+            if not obeyed:
+                continue
+            if new:
+                receptions = [r._replace(utime=None) for r in receptions]
+                LOG.warning("commands at t = %.3f s: obeying sender %d%s",
+                            now, decoded.sender,
+                            "" if before[0].sender is None else
+                            f" (sender {before[0].sender} fell quiet)")
+            receptions[kind] = take(receptions[kind], decoded, now,
+                                    self.rules)
+        if dropped:
+            receptions[1] = receptions[1]._replace(
+                rejected=receptions[1].rejected + dropped)
+        rejected = sum(r.rejected for r in receptions) - sum(
+            r.rejected for r in before[1:])
+        self._warnings.say(now, "rejected", rejected, "; ".join(
+            r.reason for r in receptions if r.reason))
+        self._warnings.say(now, "refused", lock.refused - before[0].refused,
+                           f"another sender than {lock.sender}, which has "
+                           "the command channels")
+        state.get_mutable_abstract_state(0).set_value(
+            Commands(lock, *receptions))
+
+
+class FlaggedPublisher(LeafSystem):
+    """Publishes a message's bytes at once, between the periodic
+    publications, when a flag says so (the command guard's stop).
+
+    ::
+
+                     ┌──────────────────┐
+          message ──►│ FlaggedPublisher │
+          flag ─────►│                  │
+                     └──────────────────┘
+
+    - message: abstract, the bytes (a MessageEncoder's).
+    - flag: (1) >= 0.5: publish at this check.
+
+    Args:
+        lcm: the DrakeLcmInterface.
+        channel: the channel's name.
+        period, offset: when it checks the flag, s.
+    """
+
+    def __init__(self, lcm, channel, period, offset):
+        super().__init__()
+        self._lcm, self.channel = lcm, channel
+        self._message = self.DeclareAbstractInputPort(
+            "message", AbstractValue.Make(b""))
+        self._flag = self.DeclareVectorInputPort("flag", 1)
+        self.DeclarePeriodicPublishEvent(positive("period", period),
+                                         non_negative("offset", offset),
+                                         self._publish)
+
+    def _publish(self, context):
+        if self._flag.Eval(context)[0] >= 0.5:
+            self._lcm.Publish(self.channel, self._message.Eval(context),
+                              context.get_time())
 
 
 class MessageEncoder(LeafSystem):
@@ -250,11 +632,14 @@ class MessageEncoder(LeafSystem):
 
     Args:
         message_format: a MessageFormat or the name of one of FORMATS.
+        sender: the sender's identity, for the command formats (which
+            carry one); None for the others.
     """
 
-    def __init__(self, message_format):
+    def __init__(self, message_format, sender=None):
         super().__init__()
         self.format = message_format = _format(message_format)
+        self.sender = sender
         self._inputs = [
             self.DeclareAbstractInputPort(name, _points_value())
             if size is None else self.DeclareVectorInputPort(name, size)
@@ -270,7 +655,9 @@ class MessageEncoder(LeafSystem):
 
     def _encode(self, context, output):
         values = [port.Eval(context) for port in self._inputs]
-        output.set_value(self.format.encode(_utime(self, context), *values))
+        extra = {} if self.sender is None else {"sender": self.sender}
+        output.set_value(self.format.encode(_utime(self, context), *values,
+                                            **extra))
 
 
 class SignalBundleEncoder(LeafSystem):

@@ -10,50 +10,55 @@
                               │                   ├──► lidar.obstacle_points
                               │                   ├──► hardware.diagnostics
                               │                   ├──► hardware.<command>
+                              │                   ├──► hardware.watchdog_tripped
                               └───────────────────┘
 
 It offers the ports of the simulated station (drake_wbc.station.
 simulation) that the controller reads (drake_wbc.controller.diagram.
 STATION_INPUTS), with the same names, sizes and types, so the controller
-Diagram built for a simulation drives the robot unchanged. Inside, for
-each status channel an LcmSubscriberSystem carries the bytes to a
-MessageDecoder (drake_wbc.hardware.codecs), which keeps the last good
-message; the controller's commands go through the CommandGuard
-(drake_wbc.hardware.safety: watchdog and saturation) to MessageEncoders
-and LcmPublisherSystems; an LcmInterfaceSystem pumps the messages in.
+Diagram built for a simulation drives the robot unchanged. Inside, a
+MessageDecoder (drake_wbc.hardware.codecs) subscribes to each status
+channel and keeps its last good message, judging time stamps by the
+protocol's rules; the controller's commands go through the CommandGuard
+(drake_wbc.hardware.safety: the watchdog of every stream, and the
+limits) to MessageEncoders, which stamp them with the interface's sender
+identity, and LcmPublisherSystems; a FlaggedPublisher sends the base's
+stop at once when the guard finds a stale stream between two ticks; an
+LcmInterfaceSystem pumps the messages in.
 
 `hardware.diagnostics` holds DIAGNOSTICS: the guard's status, the age of
 each status channel's last good message and its count of rejected
 messages. `hardware.base_velocity_command` and `hardware.arm_position_
-command` are the commands as sent (after the watchdog and saturation).
+command` are the commands as sent (after the watchdog and the limits).
+`hardware.watchdog_tripped` (1) is 1 during a full stop of the watchdog:
+the controller's input of that name (drake_wbc.controller.diagram), so
+that the controller stops with the robot.
 
 Timing, with the controller ticking at offset 0 every publish_period h:
 the statuses the robot sent up to a tick are read at that tick (the
 last good message of each channel); the commands computed at tick k are
-checked at k h + publish_offset / 2 and sent at k h + publish_offset.
+checked at k h + publish_offset / 2 and sent at k h + publish_offset;
+the guard checks the streams' ages every watchdog_period (1 ms) from
+there, and a base stop found between two ticks goes out one check later.
 """
 
+import secrets
+
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.lcm import (
-    LcmInterfaceSystem,
-    LcmPublisherSystem,
-    LcmSubscriberSystem,
-)
+from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem
 from pydrake.systems.primitives import Multiplexer
 
-from drake_wbc.hardware.codecs import MessageDecoder, MessageEncoder
+from drake_wbc.hardware.codecs import (
+    ClockRules,
+    FlaggedPublisher,
+    MessageDecoder,
+    MessageEncoder,
+)
 from drake_wbc.hardware.messages import RawBytesSerializer
-from drake_wbc.hardware.options import HardwareOptions
+from drake_wbc.hardware.options import STATUS_CHANNELS, HardwareOptions
 from drake_wbc.hardware.safety import GUARD_STATUS, CommandGuard
 from drake_wbc.math.validation import checked_instance
 from drake_wbc.robot.model import HOME_ARM_POSITIONS
-
-STATUS_CHANNELS = ("base_state", "arm_status", "wrist_wrench",
-                   "obstacle_points")
-"""The channels the interface reads (fields of ChannelNames)."""
-
-WATCHED = ("base_state", "arm_status")
-"""The statuses whose age the watchdog checks."""
 
 DIAGNOSTICS = (GUARD_STATUS
                + tuple(f"{name}_age" for name in STATUS_CHANNELS)
@@ -70,10 +75,10 @@ OUTPUTS = (
 """(decoder, its port, the station's port name) of each output."""
 
 
-def add_subscriber(builder, channel, lcm, name):
-    """An LcmSubscriberSystem of `channel`'s bytes, added as `name`."""
-    return builder.AddNamedSystem(name, LcmSubscriberSystem(
-        channel, RawBytesSerializer(), lcm))
+def new_sender():
+    """A sender identity for the commands: 63 random bits (an int64 > 0),
+    drawn afresh by each controller, so that two never share one."""
+    return secrets.randbits(63)
 
 
 def add_publisher(builder, channel, lcm, name, period, offset=0.0):
@@ -92,6 +97,7 @@ class HardwareInterface:
         systems: dict of its systems by name (`guard`, `decoder.<channel>`,
             `encoder.<channel>`, ...).
         options: the HardwareOptions it was built from.
+        sender: the identity its commands carry.
 
     Args:
         options: HardwareOptions (its defaults if None).
@@ -100,33 +106,32 @@ class HardwareInterface:
         initial_arm_positions: the arm command held until the controller
             sends one (set the robot's measured positions with
             `set_arm_command` before running).
+        sender: the commands' sender identity (`new_sender()` if None).
     """
 
     def __init__(self, options=None, lcm=None,
-                 initial_arm_positions=HOME_ARM_POSITIONS):
+                 initial_arm_positions=HOME_ARM_POSITIONS, sender=None):
         self.options = options = checked_instance(
             "options", options, HardwareOptions, HardwareOptions)
         if lcm is None:
             raise ValueError("lcm = None is not allowed: pass the "
                              "DrakeLcmInterface to talk over, e.g. "
                              "DrakeLcm(options.lcm_url)")
+        self.sender = new_sender() if sender is None else int(sender)
         channels = options.channels
+        rules = ClockRules.of(options)
         builder = DiagramBuilder()
         s = self.systems = {}
-        # The pump first, so that subscribers see its messages at once.
         s["lcm"] = builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
         for name in STATUS_CHANNELS:
-            subscriber = add_subscriber(builder, getattr(channels, name),
-                                        lcm, f"subscriber.{name}")
-            s[f"decoder.{name}"] = decoder = builder.AddNamedSystem(
-                f"decoder.{name}", MessageDecoder(name))
-            builder.Connect(subscriber.get_output_port(),
-                            decoder.GetInputPort("message"))
+            s[f"decoder.{name}"] = builder.AddNamedSystem(
+                f"decoder.{name}", MessageDecoder(
+                    name, lcm, getattr(channels, name), rules=rules))
         s["guard"] = guard = builder.AddNamedSystem("guard", CommandGuard(
-            options, initial_arm_positions, num_statuses=len(WATCHED)))
+            options, initial_arm_positions))
         ages = builder.AddNamedSystem("status_ages",
-                                      Multiplexer([1] * len(WATCHED)))
-        for i, name in enumerate(WATCHED):
+                                      Multiplexer([1] * len(STATUS_CHANNELS)))
+        for i, name in enumerate(STATUS_CHANNELS):
             builder.Connect(s[f"decoder.{name}"].GetOutputPort("age"),
                             ages.get_input_port(i))
         builder.Connect(ages.get_output_port(),
@@ -134,7 +139,7 @@ class HardwareInterface:
         for name, port in (("base_command", "base_velocity_command"),
                            ("arm_command", "arm_position_command")):
             s[f"encoder.{name}"] = encoder = builder.AddNamedSystem(
-                f"encoder.{name}", MessageEncoder(name))
+                f"encoder.{name}", MessageEncoder(name, self.sender))
             builder.Connect(guard.GetOutputPort(port),
                             encoder.get_input_port(0))
             publisher = add_publisher(
@@ -142,6 +147,16 @@ class HardwareInterface:
                 options.publish_period, options.publish_offset)
             builder.Connect(encoder.GetOutputPort("message"),
                             publisher.get_input_port())
+        # A stop found between two control ticks goes out at the next
+        # check (the base's zero; the arm's stop starts at the next tick).
+        s["publisher.stop"] = stop = builder.AddNamedSystem(
+            "publisher.stop", FlaggedPublisher(
+                lcm, channels.base_command, options.watchdog_period,
+                options.guard_offset))
+        builder.Connect(s["encoder.base_command"].GetOutputPort("message"),
+                        stop.GetInputPort("message"))
+        builder.Connect(guard.GetOutputPort("urgent"),
+                        stop.GetInputPort("flag"))
         diagnostics = builder.AddNamedSystem("diagnostics", Multiplexer(
             [len(GUARD_STATUS)] + [1] * (2 * len(STATUS_CHANNELS))))
         builder.Connect(guard.GetOutputPort("status"),
@@ -164,6 +179,8 @@ class HardwareInterface:
                              "hardware.diagnostics")
         for port in ("base_velocity_command", "arm_position_command"):
             builder.ExportOutput(guard.GetOutputPort(port), f"hardware.{port}")
+        builder.ExportOutput(guard.GetOutputPort("tripped"),
+                             "hardware.watchdog_tripped")
         self.diagram = builder.Build()
         self.diagram.set_name("hardware_interface")
 
@@ -171,6 +188,13 @@ class HardwareInterface:
         """Holds the arm at `positions` (the measured ones at the start)
         until the controller's first command; see CommandGuard."""
         self.systems["guard"].set_arm_command(root_context, positions)
+
+    def discard_pending(self):
+        """Forgets what each status channel delivered before the run but
+        its newest message (MessageDecoder.discard_pending): call it just
+        before the Simulator starts."""
+        for name in STATUS_CHANNELS:
+            self.systems[f"decoder.{name}"].discard_pending()
 
     def set_time_offset(self, root_context, offset):
         """Stamps the commands with 1e6 (t + offset) microseconds, t the
@@ -181,6 +205,7 @@ class HardwareInterface:
 
 
 def build_hardware_interface(options=None, lcm=None,
-                             initial_arm_positions=HOME_ARM_POSITIONS):
+                             initial_arm_positions=HOME_ARM_POSITIONS,
+                             sender=None):
     """The HardwareInterface of `options` over `lcm` (see the class)."""
-    return HardwareInterface(options, lcm, initial_arm_positions)
+    return HardwareInterface(options, lcm, initial_arm_positions, sender)

@@ -4,9 +4,11 @@ Each message kind has an `encode_*` function (numbers -> bytes) and a
 `decode_*` function (bytes -> `Decoded`) that checks everything the
 controller relies on and raises `MessageError` otherwise: bytes that are
 not the message (another type's fingerprint, too short or too long), a
-wrong number of joints, a NaN or an infinity. Whether a time stamp goes
-backwards is a matter of the sequence, checked by the decoder systems
-(drake_wbc.hardware.codecs).
+wrong number of joints, a NaN or an infinity. Whether a time stamp is in
+sequence, and whether a command comes from the sender the robot obeys,
+are matters of the sequence, judged by the receivers (drake_wbc.hardware.
+codecs). The commands carry their sender's identity (`sender`, see
+drake_wbc/hardware/README.md).
 
 The types are in lcmtypes/*.lcm (package drake_wbc_lcm, Python generated
 by lcm-gen beside them); the wrist's wrench is Drake's lcmt_force_torque.
@@ -50,10 +52,13 @@ class Decoded(NamedTuple):
         utime: the sender's time stamp, microseconds.
         values: a tuple of numpy arrays, one per output of the message
             kind (e.g. positions and velocities of an arm status).
+        sender: the sender's identity (commands only; None for the
+            robot's messages, which carry none).
     """
 
     utime: int
     values: tuple
+    sender: int | None = None
 
 
 class RawBytesSerializer(SerializerInterface):
@@ -112,10 +117,12 @@ def _utime(t):
     return int(round(float(t)))
 
 
-def encode_base_command(utime, velocity):
-    """base_velocity_command_t bytes for `velocity` [vx, vy, wz] in T_b."""
+def encode_base_command(utime, velocity, sender=0):
+    """base_velocity_command_t bytes for `velocity` [vx, vy, wz] in T_b,
+    from `sender` (an int64)."""
     message = base_velocity_command_t()
     message.utime = _utime(utime)
+    message.sender = int(sender)
     message.vx, message.vy, message.wz = (float(v) for v in velocity)
     return message.encode()
 
@@ -123,7 +130,8 @@ def encode_base_command(utime, velocity):
 def decode_base_command(data):
     """Decoded (velocity (3,)) of base_velocity_command_t bytes."""
     m = _decode(base_velocity_command_t, data)
-    return Decoded(m.utime, (_finite("velocity", [m.vx, m.vy, m.wz]),))
+    return Decoded(m.utime, (_finite("velocity", [m.vx, m.vy, m.wz]),),
+                   m.sender)
 
 
 def encode_base_state(utime, state):
@@ -143,10 +151,12 @@ def decode_base_state(data):
         "state", [m.x, m.y, m.yaw, m.vx, m.vy, m.wz]),))
 
 
-def encode_arm_command(utime, positions):
-    """arm_command_t bytes for joint `positions` (rad)."""
+def encode_arm_command(utime, positions, sender=0):
+    """arm_command_t bytes for joint `positions` (rad), from `sender` (an
+    int64)."""
     message = arm_command_t()
     message.utime = _utime(utime)
+    message.sender = int(sender)
     message.position = [float(q) for q in positions]
     message.num_joints = len(message.position)
     return message.encode()
@@ -155,7 +165,8 @@ def encode_arm_command(utime, positions):
 def decode_arm_command(data):
     """Decoded (positions (6,)) of arm_command_t bytes."""
     m = _decode(arm_command_t, data)
-    return Decoded(m.utime, (_finite("position", m.position, NUM_JOINTS),))
+    return Decoded(m.utime, (_finite("position", m.position, NUM_JOINTS),),
+                   m.sender)
 
 
 def encode_arm_status(utime, positions, velocities):

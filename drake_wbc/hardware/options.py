@@ -3,24 +3,66 @@
     hardware:
       lcm_url: udpm://239.255.76.67:7667?ttl=0
       channels: {base_command: WBC_BASE_COMMAND, arm_status: WBC_ARM_STATUS}
-      watchdog_limit: 0.03
+      watchdog_limits: {obstacle_points: 0.2}
 
-Every field has a default (the channel names of drake_wbc/hardware/
-README.md), so `hardware: {}` chooses LCM with the defaults. The checks
-run in `__post_init__`, as for every parameters dataclass of the library
-(drake_wbc.math.validation).
+Every field has a default (the channel names and rules of drake_wbc/
+hardware/README.md, the protocol), so `hardware: {}` chooses LCM with the
+defaults. The checks run in `__post_init__`, as for every parameters
+dataclass of the library (drake_wbc.math.validation). Limits may only
+tighten the robot's own: the base's speed and acceleration limits are
+checked here against the robot's (drake_wbc.math.safety's
+BASE_VELOCITY_LIMITS and BASE_ACCELERATION_LIMITS), the watchdog limits
+against the robot's own command timeout, and the joint limits against
+the arm model's when the command guard is built
+(drake_wbc.hardware.safety.Limits.of_robot).
 """
 
 import re
 from dataclasses import dataclass, field, fields
 
-from drake_wbc.math.validation import positive
+from drake_wbc.math.safety import BASE_ACCELERATION_LIMITS, BASE_VELOCITY_LIMITS
+from drake_wbc.math.validation import (
+    positive,
+    whole_multiple,
+    whole_number,
+)
 
 CHANNEL_PATTERN = re.compile(r"^[A-Za-z0-9_.\-/]+$")
 """What a channel name may hold: letters, digits and _ . - /."""
 
 URL_SCHEMES = ("udpm://", "memq://", "file://")
 """The LCM providers a URL may name."""
+
+STATUS_CHANNELS = ("base_state", "arm_status", "wrist_wrench",
+                   "obstacle_points")
+"""The channels the robot sends and the controller depends on (fields of
+ChannelNames and of WatchdogLimits), in the order of the command guard's
+`status_ages`."""
+
+ROBOT_STATUS_PERIOD = 0.01
+"""s: the robot's base odometry, arm status and FT-300 wrench come at
+100 Hz (the robot facts)."""
+
+ROBOT_LIDAR_PERIOD = 1.0 / 15.0
+"""s: the TiM571 LIDARs scan at 15 Hz (the robot facts)."""
+
+ROBOT_COMMAND_TIMEOUT = 0.25
+"""s: the robot's own watchdog: its base stops when no command came for
+this long (the robot facts). No limit of the controller's watchdog may
+be longer, or the robot would stop first, and uninformed."""
+
+
+def at_most(name, value, own, unit, what="the robot's own"):
+    """`value` after checking that it is at most `own` (a limit may
+    tighten the robot's, never widen it).
+
+    Raises:
+        ValueError: naming `name`, its value and the robot's value.
+    """
+    if value > own:
+        raise ValueError(f"{name} = {value!r} is not allowed: must be at "
+                         f"most {what} {own!r} {unit}")
+    return value
 
 
 @dataclass
@@ -69,9 +111,54 @@ class ChannelNames:
 
 
 @dataclass
+class WatchdogLimits:
+    """The oldest each stream's last good message may be, s, on the
+    receiver's clock, before the command guard stops what depends on it
+    (drake_wbc.hardware.safety.CommandGuard).
+
+    Attributes:
+        base_state: the base's odometry (100 Hz); stale: full stop.
+        arm_status: the arm's joint state (100 Hz); stale: full stop.
+        wrist_wrench: the FT-300's wrench (100 Hz): it feeds force
+            control, the pHRI term and the compliance of the arm's DMP in
+            every mode; stale: full stop.
+        obstacle_points: the LIDARs' points (15 Hz); stale: the base
+            stops (no base motion without fresh obstacle points), the arm
+            goes on.
+
+    Each is 3 periods of its stream by default; each must be at least one
+    period (ROBOT_STATUS_PERIOD, ROBOT_LIDAR_PERIOD) and at most the
+    robot's own command timeout (ROBOT_COMMAND_TIMEOUT).
+    """
+
+    base_state: float = 0.03
+    arm_status: float = 0.03
+    wrist_wrench: float = 0.03
+    obstacle_points: float = 0.2
+
+    def __post_init__(self):
+        for item in fields(self):
+            value = positive(item.name, getattr(self, item.name))
+            at_most(item.name, value, ROBOT_COMMAND_TIMEOUT, "s",
+                    "the robot's own command timeout")
+            period = (ROBOT_LIDAR_PERIOD if item.name == "obstacle_points"
+                      else ROBOT_STATUS_PERIOD)
+            if value < period:
+                raise ValueError(
+                    f"{item.name} = {value!r} s is not allowed: must be at "
+                    f"least one period of its stream ({period:.4g} s), or "
+                    "every message is late")
+
+    def as_tuple(self):
+        """The limits in the order of STATUS_CHANNELS."""
+        return tuple(getattr(self, name) for name in STATUS_CHANNELS)
+
+
+@dataclass
 class HardwareOptions:
     """The LCM hardware interface (drake_wbc.hardware.interface) and the
-    robot-side program that speaks the same protocol.
+    robot-side program that speaks the same protocol (drake_wbc/hardware/
+    README.md).
 
     Attributes:
         lcm_url: the LCM provider. The default is Drake's: UDP multicast
@@ -81,23 +168,44 @@ class HardwareOptions:
             (the control period, 0.01 s).
         publish_offset: when, after each control tick, the commands go
             out, s, in (0, publish_period): the command guard checks and
-            saturates the controller's new commands at half this offset,
+            limits the controller's new commands at half this offset,
             and the publishers send them at it (2 ms).
-        watchdog_limit: the oldest the base's and the arm's status may
-            be, s, before the commands stop (zero base velocity, arm
-            held); 3 control periods by default.
+        watchdog_limits: WatchdogLimits, the oldest each stream may be.
+        watchdog_period: how often the command guard checks the streams'
+            ages, s (1 ms); a stop found between two command periods goes
+            out at the next check. publish_period must be a whole multiple
+            of it.
+        watchdog_recovery_time: how long every stream behind a stop must
+            have been fresh before the commands resume, s (0.5 s, the
+            controller's safety.hold_time), so that a stream that comes and
+            goes (a flood, a flaky link) does not start and stop the robot
+            at every good message. A stream's first message needs no wait.
         base_speed_limit: the largest planar speed sent to the base, m/s
-            (the base's 1.0 m/s).
+            (the robot's 1.0 m/s).
         base_yaw_rate_limit: the largest yaw rate sent, rad/s (1.0).
+        base_acceleration_limit: the largest change of vx and of vy sent,
+            m/s^2 (the robot's 1.0), scaled as one vector with the yaw's.
+        base_yaw_acceleration_limit: of wz, rad/s^2 (1.0).
         joint_speed_limit: the largest joint speed the arm commands may
             ask for from one command to the next, rad/s (the Elfin5's
             1.57 rad/s).
+        joint_acceleration_limit: the largest change of that speed, rad/s^2
+            (the Elfin5's 12.56 rad/s^2).
+        clock_tolerance: how far a sender's time stamp may run ahead of
+            the receiver's clock since the last good message, s (0.1 s);
+            a stamp further ahead, or one that goes backwards, is out of
+            sequence (see clock_resync_messages).
+        clock_resync_messages: how many consecutive messages, each in
+            sequence with the one before, establish a sender's clock that
+            jumped (forward or back): the last of them is accepted (3).
         status_period: how often the robot side sends the base's and the
             arm's status and the wrist's wrench, s (100 Hz).
         truth_period: how often the simulated robot sends its ground
             truth, and the controller its diagnostics, s.
         robot_command_timeout: the robot side stops the base when no base
-            command came for this long, s (0.25 s, as such bases do).
+            command came for this long, s (0.25 s, as such bases do), and
+            hands the command channels to another sender after its
+            sender has been quiet for this long.
         startup_timeout: how long `drake-wbc deploy` waits for the
             robot's first status before giving up, s.
     """
@@ -106,10 +214,17 @@ class HardwareOptions:
     channels: ChannelNames = field(default_factory=ChannelNames)
     publish_period: float = 0.01
     publish_offset: float = 0.002
-    watchdog_limit: float = 0.03
+    watchdog_limits: WatchdogLimits = field(default_factory=WatchdogLimits)
+    watchdog_period: float = 0.001
+    watchdog_recovery_time: float = 0.5
     base_speed_limit: float = 1.0
     base_yaw_rate_limit: float = 1.0
+    base_acceleration_limit: float = 1.0
+    base_yaw_acceleration_limit: float = 1.0
     joint_speed_limit: float = 1.57
+    joint_acceleration_limit: float = 12.56
+    clock_tolerance: float = 0.1
+    clock_resync_messages: int = 3
     status_period: float = 0.01
     truth_period: float = 0.01
     robot_command_timeout: float = 0.25
@@ -121,22 +236,46 @@ class HardwareOptions:
             raise ValueError(
                 f"lcm_url = {self.lcm_url!r} is not allowed: must start "
                 f"with one of {', '.join(URL_SCHEMES)}")
-        if not isinstance(self.channels, ChannelNames):
-            raise ValueError(f"channels = {self.channels!r} is not allowed: "
-                             "must be a ChannelNames")
+        for name, kind in (("channels", ChannelNames),
+                           ("watchdog_limits", WatchdogLimits)):
+            if not isinstance(getattr(self, name), kind):
+                raise ValueError(f"{name} = {getattr(self, name)!r} is not "
+                                 f"allowed: must be a {kind.__name__}")
         for item in fields(self):
-            if item.name not in ("lcm_url", "channels"):
+            if item.name not in ("lcm_url", "channels", "watchdog_limits",
+                                 "clock_resync_messages"):
                 positive(item.name, getattr(self, item.name))
+        self.clock_resync_messages = whole_number(
+            "clock_resync_messages", self.clock_resync_messages, 2)
         if self.publish_offset >= self.publish_period:
             raise ValueError(
                 f"publish_offset = {self.publish_offset!r} s is not allowed "
                 f"with publish_period = {self.publish_period!r} s: must be "
                 "below it")
-        if self.watchdog_limit < self.status_period:
+        if self.watchdog_period > self.publish_period:
             raise ValueError(
-                f"watchdog_limit = {self.watchdog_limit!r} s is not allowed "
-                f"with status_period = {self.status_period!r} s: must be at "
-                "least one status period, or every status is late")
+                f"watchdog_period = {self.watchdog_period!r} s is not "
+                f"allowed with publish_period = {self.publish_period!r} s: "
+                "must be at most it")
+        whole_multiple("publish_period", self.publish_period,
+                       "watchdog_period", self.watchdog_period)
+        limits = self.watchdog_limits
+        for name in ("base_state", "arm_status", "wrist_wrench"):
+            if getattr(limits, name) < self.status_period:
+                raise ValueError(
+                    f"watchdog_limits.{name} = {getattr(limits, name)!r} s "
+                    f"is not allowed with status_period = "
+                    f"{self.status_period!r} s: must be at least one status "
+                    "period, or every status is late")
+        own = (("base_speed_limit", min(BASE_VELOCITY_LIMITS[:2]), "m/s"),
+               ("base_yaw_rate_limit", BASE_VELOCITY_LIMITS[2], "rad/s"),
+               ("base_acceleration_limit", min(BASE_ACCELERATION_LIMITS[:2]),
+                "m/s^2"),
+               ("base_yaw_acceleration_limit", BASE_ACCELERATION_LIMITS[2],
+                "rad/s^2"),
+               ("robot_command_timeout", ROBOT_COMMAND_TIMEOUT, "s"))
+        for name, value, unit in own:
+            at_most(name, getattr(self, name), value, unit)
 
     @property
     def guard_offset(self):

@@ -1,36 +1,71 @@
-"""The controller side's safety: a watchdog on the robot's status and the
-saturation of every command before it is sent.
+"""What the commands on the wire may be, on both sides of the protocol: the
+controller side's watchdog and command limits, and the robot side's own
+limit on the arm's commands.
 
-Pure functions first (`saturate_base_velocity`, `saturate_arm_command`,
-`guarded_commands`), then `CommandGuard`, the Drake system thin over them
-that sits between the controller's command outputs and the LCM
-publishers inside the hardware interface (drake_wbc.hardware.interface).
+Pure functions first: the limits of the robot (`Limits`), the base's
+command within its speed and acceleration limits
+(`saturate_base_velocity`, `limit_base_command`), the arm's position
+command within its rate and acceleration limits (`follow_arm_command`,
+`stop_arm`), and one check of the command guard (`guard_step`). Then
+the Drake systems thin over them: `CommandGuard`, between the
+controller's command outputs and the LCM publishers inside the hardware
+interface (drake_wbc.hardware.interface), and `ArmCommandLimiter`,
+between the robot side's command receiver and its arm
+(drake_wbc.deployment.robot_side).
+
+The promises (drake_wbc/hardware/README.md): every arm command sent is
+within the joint position limits and within the joint speed and
+acceleration limits of the one before, after a stop too; every base
+command is within the base's speed limits, and within its acceleration
+limits of the one before except a stop, which is zero at once (the
+base's own velocity loop brakes within its limits); a stale stream stops
+what depends on it within its watchdog limit and one watchdog period
+(the stop goes out at the next period, not the next control tick); and
+the commands resume only after every stream behind the stop has been
+fresh for the recovery time.
 """
 
 import logging
+import math
 from typing import NamedTuple
 
 import numpy as np
+from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
-from drake_wbc.hardware.options import HardwareOptions
+from drake_wbc.hardware.options import STATUS_CHANNELS, HardwareOptions
+from drake_wbc.math.command_limits import limit_base_velocity
 from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
-    ordered_limits,
     positive,
 )
-from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.robot.model import ARM_JOINTS, HOME_ARM_POSITIONS, ArmKinematics
 
 LOG = logging.getLogger("drake_wbc.hardware")
 
 AGE_TOLERANCE = 1e-9
 """s: an age equal to the watchdog limit up to rounding is not over it."""
 
-GUARD_STATUS = ("watchdog_tripped", "watchdog_trips",
-                "base_command_saturated", "arm_command_saturated",
-                "invalid_commands")
-"""The entries of CommandGuard's `status` output."""
+ROUNDING = 1e-9
+"""Relative: a command within a limit up to rounding is within it (and
+passes unchanged, bit for bit)."""
+
+FULL_STOP_STREAMS = ("base_state", "arm_status", "wrist_wrench")
+"""The streams whose staleness stops everything: no base motion without
+odometry, no arm motion without the arm's state, and no force control,
+pHRI or compliance (the arm's DMP reads the wrench in every mode, eq.
+(cdmp-arm)) without a fresh wrench. A stale obstacle_points stream stops
+the base alone."""
+
+GUARD_STATUS = ("watchdog_tripped", "watchdog_trips", "base_stopped",
+                "base_stops", "base_command_saturated",
+                "arm_command_saturated", "invalid_commands")
+"""The entries of CommandGuard's `status` output: the full stop (0/1; 1
+also at the start until the streams' first messages) and how many began
+while the commands ran, the base's stop for want of fresh obstacle
+points (0/1, likewise) and how many, a command limited this period (0/1
+each), how many controller commands were not finite."""
 
 
 class Limits(NamedTuple):
@@ -39,27 +74,61 @@ class Limits(NamedTuple):
     Attributes:
         base_speed: the largest planar speed, m/s.
         base_yaw_rate: the largest yaw rate, rad/s.
+        base_acceleration: (3,) the largest change of [vx, vy, wz], m/s^2,
+            m/s^2, rad/s^2.
         joint_speed: (6,) the largest joint speeds, rad/s.
+        joint_acceleration: (6,) the largest joint accelerations, rad/s^2.
         lower, upper: (6,) the joints' position limits, rad.
     """
 
     base_speed: float
     base_yaw_rate: float
+    base_acceleration: np.ndarray
     joint_speed: np.ndarray
+    joint_acceleration: np.ndarray
     lower: np.ndarray
     upper: np.ndarray
 
     @classmethod
     def of_robot(cls, options=None, arm=None):
         """The limits of `options` (HardwareOptions, its defaults if None)
-        and the joint position limits of the robot model (drake_wbc.
-        robot_model; `arm` an ArmKinematics, a new one if None)."""
+        and the joint position limits of the arm model (`arm` an
+        ArmKinematics, a new one if None).
+
+        Raises:
+            ValueError: when the options' joint speed or acceleration limit
+                is beyond the arm model's own (a limit may tighten the
+                robot's, never widen it).
+        """
         options = checked_instance("options", options, HardwareOptions,
                                    HardwareOptions)
         arm = checked_instance("arm", arm, ArmKinematics, ArmKinematics)
+        speed, acceleration = arm_own_limits(arm)
+        for name, own, unit in (("joint_speed_limit", speed, "rad/s"),
+                                ("joint_acceleration_limit", acceleration,
+                                 "rad/s^2")):
+            value = getattr(options, name)
+            if value > np.min(own):
+                raise ValueError(
+                    f"hardware.{name} = {value!r} is not allowed: must be at "
+                    f"most the arm's own {float(np.min(own))!r} {unit}")
         return cls(options.base_speed_limit, options.base_yaw_rate_limit,
-                   np.full(6, options.joint_speed_limit), arm.lower.copy(),
-                   arm.upper.copy())
+                   np.array([options.base_acceleration_limit,
+                             options.base_acceleration_limit,
+                             options.base_yaw_acceleration_limit]),
+                   np.full(6, options.joint_speed_limit),
+                   np.full(6, options.joint_acceleration_limit),
+                   arm.lower.copy(), arm.upper.copy())
+
+
+def arm_own_limits(arm):
+    """(joint speed limits (6,), joint acceleration limits (6,)) of the
+    arm model (`arm` an ArmKinematics): its joints' velocity and
+    acceleration limits (models/elfin5.sdf)."""
+    joints = [arm.plant.GetJointByName(name, arm.model.arm)
+              for name in ARM_JOINTS]
+    return (np.asarray(arm.velocity_limits, dtype=float),
+            np.array([j.acceleration_upper_limits()[0] for j in joints]))
 
 
 def saturate_base_velocity(velocity, speed_limit, yaw_rate_limit):
@@ -69,102 +138,304 @@ def saturate_base_velocity(velocity, speed_limit, yaw_rate_limit):
     Returns:
         (velocity (3,), True if anything was changed).
     """
-    velocity = as_vector("velocity", velocity, 3).copy()
-    speed_limit = positive("speed_limit", speed_limit)
-    yaw_rate_limit = positive("yaw_rate_limit", yaw_rate_limit)
-    speed = np.hypot(velocity[0], velocity[1])
+    return _saturate_base(as_vector("velocity", velocity, 3),
+                          positive("speed_limit", speed_limit),
+                          positive("yaw_rate_limit", yaw_rate_limit))
+
+
+def _saturate_base(velocity, speed_limit, yaw_rate_limit):
+    velocity = np.array(velocity, dtype=float)
+    speed = math.hypot(velocity[0], velocity[1])
     changed = False
-    if speed > speed_limit:
+    if speed > speed_limit * (1.0 + ROUNDING):
         velocity[:2] *= speed_limit / speed
         changed = True
-    if abs(velocity[2]) > yaw_rate_limit:
-        velocity[2] = np.clip(velocity[2], -yaw_rate_limit, yaw_rate_limit)
+    if abs(velocity[2]) > yaw_rate_limit * (1.0 + ROUNDING):
+        velocity[2] = math.copysign(yaw_rate_limit, velocity[2])
         changed = True
     return velocity, changed
 
 
-def saturate_arm_command(command, last, period, limits):
-    """A joint position command moved no faster than the joint speed
-    limits from the `last` command sent, `period` s before, and kept
-    within the joint position limits.
+def limit_base_command(command, last, period, limits):
+    """The base command to send: `command` [vx, vy, wz] within the speed
+    limits (`_saturate_base`), then its change from `last` (the last one
+    sent, `period` s before) scaled as a whole into the acceleration
+    limits (drake_wbc.math.command_limits.limit_base_velocity), so that it
+    keeps its direction. A command within both is sent unchanged.
+
+    Returns:
+        (command (3,), True if a limit changed it).
+    """
+    velocity, changed = _saturate_base(command, limits.base_speed,
+                                       limits.base_yaw_rate)
+    limited = limit_base_velocity(
+        velocity, last, (math.inf,) * 3,
+        limits.base_acceleration * (1.0 + ROUNDING), period)
+    return np.asarray(limited.command, dtype=float), (
+        changed or limited.acceleration_scale < 1.0)
+
+
+def brake_speed(distance, acceleration, period):
+    """The largest speed v at which a joint may move this period and still
+    come to rest within `distance`, slowing by at most `acceleration` *
+    `period` each period of `period` s (elementwise, all >= 0). Braking
+    hardest from v = m a h + f (m whole, 0 <= f < a h), it moves v, v - a h,
+    ..., f for one period each:
+
+        h ((m + 1) f + a h m (m + 1) / 2) = distance,
+
+    so m = floor((sqrt(1 + 8 d / (a h^2)) - 1) / 2) and f follows. From v
+    the next period's brake_speed is at least v - a h, so a joint that
+    keeps to it never has to brake harder than it may, and never passes
+    the point."""
+    step = acceleration * period
+    m = np.floor(0.5 * (np.sqrt(1.0 + 8.0 * distance / (step * period))
+                        - 1.0))
+    f = (distance / period - 0.5 * step * m * (m + 1.0)) / (m + 1.0)
+    return m * step + np.clip(f, 0.0, step)
+
+
+def follow_arm_command(target, target_velocity, last, velocity, period,
+                       limits):
+    """The next arm position command towards `target` within the limits.
+
+    A target within the joint position limits whose step from `last`
+    (the last command sent, moving at `velocity`) is within the joint
+    speed limits, differs from `velocity` and from `target_velocity` by
+    no more than the acceleration limits allow in one period (so that the
+    joint can go on with the target, or stop with it), is sent as it is,
+    bit for bit. Otherwise each joint follows the target (held within the
+    position limits), which moves at `target_velocity`, as fast as the
+    limits allow without overshooting it: relative to the target it
+    moves at `brake_speed` of the distance between them, its
+    speed is at most the speed limit and its change of speed at most the
+    acceleration limit.
 
     Args:
-        command: (6,) the controller's command, rad.
+        target: (6,) the command asked for, rad.
+        target_velocity: (6,) the rate at which the target moves, rad/s
+            (the change of the commands asked for over one period).
         last: (6,) the last command sent, rad.
-        period: s between the two, > 0.
+        velocity: (6,) its rate, rad/s.
+        period: h, s between commands.
         limits: Limits.
 
     Returns:
-        (command (6,), True if anything was changed).
+        (command (6,), its rate (6,), True if the limits changed it).
     """
-    command = as_vector("command", command, 6)
-    last = as_vector("last", last, 6)
-    period = positive("period", period)
-    lower, upper = ordered_limits("limits.lower", limits.lower,
-                                  "limits.upper", limits.upper, 6)
-    step = period * as_vector("limits.joint_speed", limits.joint_speed, 6)
-    result = np.clip(np.clip(command, last - step, last + step), lower, upper)
-    return result, bool(np.any(result != command))
+    speed, accel = limits.joint_speed, limits.joint_acceleration
+    change = accel * period * (1.0 + ROUNDING)
+    step = (target - last) / period
+    if (np.all(np.abs(step) <= speed * (1.0 + ROUNDING))
+            and np.all(np.abs(step - velocity) <= change)
+            and np.all(np.abs(step - target_velocity) <= change)
+            and np.all(target >= limits.lower)
+            and np.all(target <= limits.upper)):
+        return np.array(target, dtype=float), step, False
+    held = np.clip(target, limits.lower, limits.upper)
+    moving = np.where(held == target, target_velocity, 0.0)
+    # How far the target was ahead before it moved this period, and the
+    # speed relative to it that stops on it.
+    ahead = held - last - moving * period
+    distance = np.abs(ahead)
+    closing = np.sign(ahead) * brake_speed(distance, accel, period)
+    wanted = np.clip(moving + closing, velocity - accel * period,
+                     velocity + accel * period)
+    command = np.clip(last + np.clip(wanted, -speed, speed) * period,
+                      limits.lower, limits.upper)
+    return command, (command - last) / period, True
 
 
-class GuardedCommands(NamedTuple):
-    """What CommandGuard sends for one control period.
+def stop_arm(last, velocity, period, limits):
+    """The next arm position command of a stop: each joint slows down from
+    `velocity` at its acceleration limit and holds where it comes to rest
+    (within the position limits).
+
+    Returns:
+        (command (6,), its rate (6,)).
+    """
+    slower = np.sign(velocity) * np.maximum(
+        np.abs(velocity) - limits.joint_acceleration * period, 0.0)
+    command = np.clip(last + slower * period, limits.lower, limits.upper)
+    return command, (command - last) / period
+
+
+class GuardState(NamedTuple):
+    """What the command guard keeps between two checks.
 
     Attributes:
-        base: (3,) base velocity command.
-        arm: (6,) arm position command.
-        tripped: the watchdog stopped the commands.
-        base_saturated, arm_saturated: a command was limited.
-        invalid: the controller's command was not finite (so not sent).
+        base: (3,) the base command to send.
+        arm: (6,) the arm command to send, and arm_velocity (6,) its rate.
+        target: (6,) the controller's arm command at the last command
+            time (the rate at which the target moves follows from it).
+        full_stop: the watchdog stops everything (base zero, the arm
+            stopping within its limits); also at the start, until every
+            stream of FULL_STOP_STREAMS has its first message.
+        base_stop: the base is stopped for want of fresh obstacle points
+            (also until the first ones).
+        started: the commands have run (they wait for every stream's
+            first message at the start; that is no trip).
+        trips, base_stops: how many full stops and base stops began.
+        base_saturated, arm_saturated: a limit changed the command of the
+            last command time.
+        invalid: how many controller commands were not finite.
+        fresh_since: (4,) per stream of STATUS_CHANNELS, since when it has been
+            fresh (nan: stale now).
+        recovering: (4,) per stream, it went stale after being fresh, so
+            it must be fresh for the recovery time before it counts.
+        urgent: a stop began at this check, between two command times:
+            the base's zero goes out at the next check (CommandGuard's
+            `urgent` output).
     """
 
     base: np.ndarray
     arm: np.ndarray
-    tripped: bool
-    base_saturated: bool
-    arm_saturated: bool
-    invalid: bool
+    arm_velocity: np.ndarray
+    target: np.ndarray
+    full_stop: bool = True
+    base_stop: bool = True
+    started: bool = False
+    trips: int = 0
+    base_stops: int = 0
+    base_saturated: bool = False
+    arm_saturated: bool = False
+    invalid: int = 0
+    fresh_since: tuple = (math.nan,) * len(STATUS_CHANNELS)
+    recovering: tuple = (False,) * len(STATUS_CHANNELS)
+    urgent: bool = False
+
+    def __deepcopy__(self, memo):
+        # Never changed in place (only replaced), so the copies that Drake
+        # makes of an abstract state at each update may share it.
+        return self
+
+    @classmethod
+    def holding(cls, arm_positions):
+        """The state at the start: the arm held at `arm_positions`, the
+        base at rest, waiting for every stream."""
+        arm = np.array(arm_positions, dtype=float)
+        return cls(np.zeros(3), arm, np.zeros(6), arm.copy())
 
 
-def guarded_commands(base, arm, last_arm, ages, watchdog_limit, period,
-                     limits):
-    """The commands to send, given the controller's and the status ages.
+class GuardConfig(NamedTuple):
+    """The command guard's fixed settings.
 
-    When a status age exceeds `watchdog_limit`, or a command of the
-    controller is not finite, the base gets zero velocity and the arm
-    keeps `last_arm` (it holds where it was sent last); otherwise both
-    commands are saturated (saturate_base_velocity, saturate_arm_command).
+    Attributes:
+        watchdog_limits: (4,) per stream of STATUS_CHANNELS, s.
+        recovery_time: s.
+        period: the command period, s.
+        limits: Limits.
+    """
+
+    watchdog_limits: tuple
+    recovery_time: float
+    period: float
+    limits: Limits
+
+    @classmethod
+    def of(cls, options, limits=None):
+        """The settings of a HardwareOptions (Limits.of_robot(options) if
+        `limits` is None)."""
+        return cls(options.watchdog_limits.as_tuple(),
+                   options.watchdog_recovery_time, options.publish_period,
+                   limits or Limits.of_robot(options))
+
+
+def guard_step(state, now, ages, base, arm, command_time, config):
+    """One check of the command guard.
+
+    Each stream is fresh while its age is within its watchdog limit; it
+    counts once fresh, or, after it went stale, once fresh for
+    `config.recovery_time`. A stream of FULL_STOP_STREAMS that does not
+    count stops everything; obstacle_points stop the base. A stop that
+    begins between command times zeroes the base at once (`urgent`). At
+    a command time the commands to send are computed: in a full stop
+    (or for a controller command that is not finite) zero base velocity
+    and the arm stopping (`stop_arm`); otherwise the arm following the
+    controller's (`follow_arm_command`) and the base zero in a base stop,
+    else the controller's within the limits (`limit_base_command`), from
+    what was sent last, so nothing jumps when the commands resume.
 
     Args:
-        base: (3,) the controller's base velocity command.
-        arm: (6,) the controller's arm position command.
-        last_arm: (6,) the last arm command sent.
-        ages: the ages of the statuses watched, s (inf: never received).
-        watchdog_limit: s, > 0.
-        period: s between commands.
-        limits: Limits.
+        state: GuardState.
+        now: the check's time, s.
+        ages: (4,) the streams' ages, s (inf: never received).
+        base: (3,) the controller's base command.
+        arm: (6,) the controller's arm command.
+        command_time: whether this check computes the commands to send.
+        config: GuardConfig.
 
     Returns:
-        GuardedCommands.
+        (GuardState, list of (event, detail) for the log: "tripped",
+        "cleared", "base stopped", "base cleared", "started").
     """
-    base = np.asarray(base, dtype=float)
-    arm = np.asarray(arm, dtype=float)
-    last_arm = as_vector("last_arm", last_arm, 6)
-    stale = bool(np.any(np.asarray(ages, dtype=float)
-                        > watchdog_limit + AGE_TOLERANCE))
+    fresh_since, recovering, counts = [], [], []
+    for i, age in enumerate(ages):
+        since, again = state.fresh_since[i], state.recovering[i]
+        if age <= config.watchdog_limits[i] + AGE_TOLERANCE:
+            since = now - age if math.isnan(since) else since
+            counts.append(not again or now - since
+                          >= config.recovery_time - AGE_TOLERANCE)
+        else:
+            again = again or not math.isnan(since)
+            since = math.nan
+            counts.append(False)
+        fresh_since.append(since)
+        recovering.append(again)
+    full = not all(counts[STATUS_CHANNELS.index(n)] for n in FULL_STOP_STREAMS)
+    lidar = STATUS_CHANNELS.index("obstacle_points")
+    base_stop = not counts[lidar]
+    stale = ", ".join(
+        f"{n} (age {a:.3f} s, limit {lim:.3f} s)"
+        for n, a, lim, c in zip(STATUS_CHANNELS, ages, config.watchdog_limits,
+                                counts, strict=True) if not c)
+    events = []
+    tripped = full and not state.full_stop and state.started
+    if tripped:
+        events.append(("tripped", stale))
+    elif state.full_stop and not full:
+        events.append(("cleared" if state.started else "started", ""))
+    base_stopped = base_stop and not state.base_stop and state.started
+    if base_stopped:
+        events.append(("base stopped", stale))
+    elif state.base_stop and not base_stop and recovering[lidar]:
+        events.append(("base cleared", ""))
+    new = state._replace(
+        full_stop=full, base_stop=base_stop,
+        started=state.started or not full,
+        trips=state.trips + tripped,
+        base_stops=state.base_stops + base_stopped,
+        fresh_since=tuple(fresh_since), recovering=tuple(recovering),
+        urgent=False)
+    if not command_time:
+        if (tripped or base_stopped) and np.any(state.base != 0.0):
+            new = new._replace(base=np.zeros(3), urgent=True)
+        return new, events
+    h, limits = config.period, config.limits
     invalid = not (np.all(np.isfinite(base)) and np.all(np.isfinite(arm)))
-    if stale or invalid:
-        return GuardedCommands(np.zeros(3), last_arm.copy(), stale, False,
-                               False, invalid)
-    base, base_saturated = saturate_base_velocity(
-        base, limits.base_speed, limits.base_yaw_rate)
-    arm, arm_saturated = saturate_arm_command(arm, last_arm, period, limits)
-    return GuardedCommands(base, arm, False, base_saturated, arm_saturated,
-                           False)
+    if full or invalid:
+        q, v = stop_arm(state.arm, state.arm_velocity, h, limits)
+        return new._replace(
+            base=np.zeros(3), arm=q, arm_velocity=v,
+            target=state.target if invalid else np.array(arm, dtype=float),
+            base_saturated=False, arm_saturated=False,
+            invalid=state.invalid + invalid), events
+    arm = np.array(arm, dtype=float)
+    q, v, arm_saturated = follow_arm_command(
+        arm, (arm - state.target) / h, state.arm, state.arm_velocity, h,
+        limits)
+    if base_stop:
+        sent, base_saturated = np.zeros(3), False
+    else:
+        sent, base_saturated = limit_base_command(base, state.base, h,
+                                                  limits)
+    return new._replace(base=sent, arm=q, arm_velocity=v, target=arm,
+                        base_saturated=base_saturated,
+                        arm_saturated=arm_saturated), events
 
 
 class CommandGuard(LeafSystem):
-    """The watchdog and the saturation of the commands to the robot.
+    """The watchdog and the limits of the commands to the robot.
 
     ::
 
@@ -172,99 +443,216 @@ class CommandGuard(LeafSystem):
           base_velocity_command ──►│              ├──► base_velocity_command
           arm_position_command ───►│ CommandGuard ├──► arm_position_command
           status_ages ────────────►│              ├──► status
+                                   │              ├──► urgent
+                                   │              ├──► tripped
                                    └──────────────┘
 
     - base_velocity_command: (3) the controller's [vx, vy, wz] in T_b.
     - arm_position_command: (6) the controller's joint positions.
-    - status_ages: (n) the ages of the statuses watched (the base's and
-      the arm's), s.
+    - status_ages: (4) the ages of the streams of STATUS_CHANNELS, s.
     - base_velocity_command, arm_position_command (outputs): what is
-      sent, from state: zero and the last arm command sent while the
-      watchdog is tripped, the saturated commands otherwise
-      (`guarded_commands`).
-    - status: (5) GUARD_STATUS: watchdog tripped (0/1), how many times it
-      tripped, base and arm command saturated (0/1, this period), how
-      many controller commands were not finite.
+      sent, from state (`guard_step`).
+    - status: (7) GUARD_STATUS.
+    - urgent: (1) 1 when a stop began at the last check between two
+      command times: a FlaggedPublisher sends the base's zero at once.
+    - tripped: (1) 1 during a full stop of the watchdog (not while it
+      waits for the streams' first messages): the controller's input
+      `hardware.watchdog_tripped`, so that it stops too and resumes from
+      rest, not from what it integrated while the robot was stopped.
 
-    A periodic discrete update every `options.publish_period` s, at
-    `options.guard_offset` after each control tick (so the controller's
-    commands of that tick are taken), stores what is sent; the LCM
-    publishers send it at `options.publish_offset`. The watchdog says so
-    once on the `drake_wbc.hardware` logger when it trips, and once when
-    the commands resume. A plain double LeafSystem (it branches on ages
-    and limits and is never linearised).
+    A periodic update every `options.watchdog_period` (1 ms) from
+    `options.guard_offset` checks the ages; the one at `guard_offset`
+    after each control tick also takes the controller's commands of that
+    tick and computes what is sent; the LCM publishers send it at
+    `options.publish_offset`. Each stop and each recovery is said once on
+    the `drake_wbc.hardware` logger. A plain double LeafSystem (it
+    branches on ages and limits and is never linearised).
 
     Args:
-        options: HardwareOptions (periods, watchdog limit, base and joint
-            speed limits).
+        options: HardwareOptions (periods, watchdog, limits).
         initial_arm_positions: (6,) the arm command held before the first
             command (the robot's measured positions; `set_arm_command`
             sets it in a context).
-        num_statuses: how many status ages are watched.
         limits: Limits (Limits.of_robot(options) if None).
     """
 
     def __init__(self, options=None, initial_arm_positions=HOME_ARM_POSITIONS,
-                 num_statuses=2, limits=None):
+                 limits=None):
         super().__init__()
-        self.options = checked_instance("options", options, HardwareOptions,
-                                        HardwareOptions)
-        self.limits = limits or Limits.of_robot(self.options)
+        self.options = options = checked_instance(
+            "options", options, HardwareOptions, HardwareOptions)
+        self.config = GuardConfig.of(options, limits)
+        self.limits = self.config.limits
         initial = as_vector("initial_arm_positions", initial_arm_positions, 6)
+        self._checks_per_command = round(options.publish_period
+                                         / options.watchdog_period)
         self._base_in = self.DeclareVectorInputPort("base_velocity_command", 3)
         self._arm_in = self.DeclareVectorInputPort("arm_position_command", 6)
-        self._ages = self.DeclareVectorInputPort("status_ages", num_statuses)
-        # [base (3), arm (6), tripped, trips, base sat., arm sat., invalid]
-        self._state = self.DeclareDiscreteState(
-            np.concatenate([np.zeros(3), initial, np.zeros(5)]))
-        self.DeclarePeriodicDiscreteUpdateEvent(
-            self.options.publish_period, self.options.guard_offset,
-            self._update)
-        ticket = {self.discrete_state_ticket(self._state)}
+        self._ages = self.DeclareVectorInputPort("status_ages",
+                                                 len(STATUS_CHANNELS))
+        self._state = self.DeclareAbstractState(AbstractValue.Make(
+            GuardState.holding(initial)))
+        self.DeclarePeriodicUnrestrictedUpdateEvent(
+            options.watchdog_period, options.guard_offset, self._update)
+        ticket = {self.abstract_state_ticket(self._state)}
         self.DeclareVectorOutputPort(
             "base_velocity_command", 3, lambda c, o: o.SetFromVector(
-                self._stored(c)[:3]), prerequisites_of_calc=ticket)
+                self.stored(c).base), prerequisites_of_calc=ticket)
         self.DeclareVectorOutputPort(
             "arm_position_command", 6, lambda c, o: o.SetFromVector(
-                self._stored(c)[3:9]), prerequisites_of_calc=ticket)
+                self.stored(c).arm), prerequisites_of_calc=ticket)
         self.DeclareVectorOutputPort(
-            "status", len(GUARD_STATUS), lambda c, o: o.SetFromVector(
-                self._stored(c)[9:]), prerequisites_of_calc=ticket)
+            "status", len(GUARD_STATUS), self._status,
+            prerequisites_of_calc=ticket)
+        self.DeclareVectorOutputPort(
+            "urgent", 1, lambda c, o: o.SetAtIndex(
+                0, float(self.stored(c).urgent)),
+            prerequisites_of_calc=ticket)
+        self.DeclareVectorOutputPort(
+            "tripped", 1, lambda c, o: o.SetAtIndex(0, float(
+                self.stored(c).full_stop and self.stored(c).started)),
+            prerequisites_of_calc=ticket)
 
-    def _stored(self, context):
-        return context.get_discrete_state(self._state).CopyToVector()
+    def stored(self, context):
+        """The GuardState at `context`."""
+        return context.get_abstract_state(self._state).get_value()
+
+    def _status(self, context, output):
+        s = self.stored(context)
+        output.SetFromVector([
+            float(s.full_stop), s.trips, float(s.base_stop), s.base_stops,
+            float(s.base_saturated), float(s.arm_saturated), s.invalid])
 
     def set_arm_command(self, context, positions):
-        """Sets the arm command held (and the base command to zero) in
-        `context` (this system's or a root context holding it)."""
+        """Holds the arm at `positions` (and the base at rest) in `context`
+        (this system's or a root context holding it)."""
         context = self.GetMyMutableContextFromRoot(context)
-        x = self._stored(context)
-        x[:3] = 0.0
-        x[3:9] = as_vector("positions", positions, 6)
-        context.SetDiscreteState(self._state, x)
+        context.SetAbstractState(self._state, GuardState.holding(
+            as_vector("positions", positions, 6)))
 
-    def _update(self, context, discrete_state):
-        x = self._stored(context)
+    def _update(self, context, state):
+        now = context.get_time()
+        check = round((now - self.options.guard_offset)
+                      / self.options.watchdog_period)
+        command_time = check % self._checks_per_command == 0
         ages = self._ages.Eval(context)
-        result = guarded_commands(
-            self._base_in.Eval(context), self._arm_in.Eval(context), x[3:9],
-            ages, self.options.watchdog_limit, self.options.publish_period,
-            self.limits)
-        was_tripped = x[9] > 0.5
-        if result.tripped and not was_tripped:
-            LOG.warning(
-                "watchdog tripped at t = %.3f s: status ages %s s (limit "
-                "%.3f s); sending zero base velocity and holding the arm",
-                context.get_time(), np.array2string(ages, precision=3),
-                self.options.watchdog_limit)
-        elif was_tripped and not result.tripped:
-            LOG.warning("watchdog cleared at t = %.3f s: fresh status, the "
-                        "commands resume", context.get_time())
-        if result.invalid:
+        result, events = guard_step(
+            self.stored(context), now, ages, self._base_in.Eval(context),
+            self._arm_in.Eval(context), command_time, self.config)
+        for event, detail in events:
+            _say(event, detail, now, self.options)
+        if command_time and result.invalid > self.stored(context).invalid:
             LOG.warning("the controller's command at t = %.3f s is not "
-                        "finite; not sent", context.get_time())
-        trips = x[10] + (1.0 if result.tripped and not was_tripped else 0.0)
-        discrete_state.set_value(self._state, np.concatenate([
-            result.base, result.arm,
-            [float(result.tripped), trips, float(result.base_saturated),
-             float(result.arm_saturated), x[13] + float(result.invalid)]]))
+                        "finite; not sent", now)
+        state.get_mutable_abstract_state(self._state).set_value(result)
+
+
+def _say(event, detail, now, options):
+    """Logs one of guard_step's events."""
+    recovery = options.watchdog_recovery_time
+    if event == "tripped":
+        LOG.warning("watchdog tripped at t = %.3f s: stale %s; sending zero "
+                    "base velocity and stopping the arm within its limits",
+                    now, detail)
+    elif event == "cleared":
+        LOG.warning("watchdog cleared at t = %.3f s: every stream fresh for "
+                    "%.3g s; the commands resume within the limits", now,
+                    recovery)
+    elif event == "base stopped":
+        LOG.warning("base stopped at t = %.3f s: stale %s; the arm goes on",
+                    now, detail)
+    elif event == "base cleared":
+        LOG.warning("base cleared at t = %.3f s: obstacle points fresh for "
+                    "%.3g s; the base resumes within its limits", now,
+                    recovery)
+    else:
+        LOG.info("every stream fresh at t = %.3f s: the commands start", now)
+
+
+class LimiterState(NamedTuple):
+    """What an ArmCommandLimiter keeps: the command the arm gets, its rate,
+    the command received it was taken from, and whether it was limited."""
+
+    command: np.ndarray
+    velocity: np.ndarray
+    taken: np.ndarray
+    limited: bool
+
+    def __deepcopy__(self, memo):
+        # Never changed in place (only replaced), so the copies that Drake
+        # makes of an abstract state at each update may share it.
+        return self
+
+
+class ArmCommandLimiter(LeafSystem):
+    """The robot side's own limit on the arm's commands: whatever arrives,
+    the arm is commanded within its rate and acceleration limits
+    (`follow_arm_command`), so that no packet, forged or not, moves it at
+    once (drake_wbc/hardware/README.md, "What the robot does itself").
+
+    ::
+
+                          ┌───────────────────┐
+          positions ─────►│ ArmCommandLimiter ├──► positions
+                          │                   ├──► limited
+                          └───────────────────┘
+
+    - positions: (6) the arm command received (CommandReceiver's).
+    - positions (output): the command the arm gets; a new command
+      received is taken at once (one step of `follow_arm_command` from
+      the last stored command); the step is stored by a periodic update
+      in the middle of the command period, and the arm goes on towards
+      the last command, period by period, when no new one comes.
+    - limited: (1) the limits changed the last stored step (0/1).
+
+    Args:
+        period: the command period h, s (HardwareOptions.publish_period).
+        offset: when the step is stored, s (publish_offset + h / 2).
+        initial_positions: (6,) the arm's command at the start.
+        limits: Limits (the arm's own).
+    """
+
+    def __init__(self, period, offset, initial_positions, limits):
+        super().__init__()
+        self.period = positive("period", period)
+        self.limits = limits
+        initial = as_vector("initial_positions", initial_positions, 6)
+        self._in = self.DeclareVectorInputPort("positions", 6)
+        self._state = self.DeclareAbstractState(AbstractValue.Make(
+            LimiterState(initial.copy(), np.zeros(6), initial.copy(), False)))
+        self.DeclarePeriodicUnrestrictedUpdateEvent(self.period, offset,
+                                                    self._update)
+        self.DeclareVectorOutputPort("positions", 6, self._positions)
+        self.DeclareVectorOutputPort(
+            "limited", 1, lambda c, o: o.SetAtIndex(
+                0, float(self._stored(c)[3])))
+
+    def _stored(self, context):
+        return context.get_abstract_state(self._state).get_value()
+
+    def set_positions(self, context, positions):
+        """Starts the limiter at rest at `positions` in `context`."""
+        context = self.GetMyMutableContextFromRoot(context)
+        q = as_vector("positions", positions, 6)
+        context.SetAbstractState(self._state, LimiterState(
+            q.copy(), np.zeros(6), q.copy(), False))
+
+    def _step(self, context):
+        command, velocity, taken, _ = self._stored(context)
+        received = self._in.Eval(context)
+        return follow_arm_command(received, (received - taken) / self.period,
+                                  command, velocity, self.period,
+                                  self.limits), received
+
+    def _positions(self, context, output):
+        command, _, taken, _ = self._stored(context)
+        received = self._in.Eval(context)
+        if np.array_equal(received, taken):
+            output.SetFromVector(command)
+        else:
+            output.SetFromVector(self._step(context)[0][0])
+
+    def _update(self, context, state):
+        (command, velocity, limited), received = self._step(context)
+        state.get_mutable_abstract_state(self._state).set_value(
+            LimiterState(command, velocity, np.array(received), limited))

@@ -34,23 +34,29 @@ singular values of J_a mix both units; for the Elfin5 with its tool they lie
 between about 0.15 and 2 at the home pose and fall to 0 only at a
 singularity (see `DEFAULT_DAMPING_THRESHOLD`).
 
-Here: the parameters, their checks and the checked functions; the result,
-a `JointVelocityCommand`, and the per-tick solver that computes it with its
-limits checked once, `TwistSolver`, are in drake_wbc.math.twist_solver.
-
-Numpy only: the Drake system (drake_wbc.stages.ArmCartesianVelocityController)
-calls this in double and gives the result its derivatives for AutoDiffXd.
+Here: the parameters and their checks; the limits of one controller,
+checked once (`TwistLimits`); the reference body of the controller,
+`joint_velocity_command`, for any scalar type (float, and AutoDiffXd for
+the stage's linearisation), with its parts (`damping_rule`,
+`damped_solve`, `braking_rate`, `joint_position_bounds`); the checked
+functions a user calls (`joint_velocity_for_twist` and its parts); and the
+float kernel of the control tick, `joint_velocity_command_float`
+(drake_wbc.math.kernels), which the Drake system
+(drake_wbc.stages.ArmCartesianVelocityController) runs in double.
 """
 
+import functools
+import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
+from scipy.linalg.lapack import dgesdd as _gesdd
+from scipy.linalg.lapack import dgesv as _gesv
 
-from drake_wbc.math.twist_solver import (
-    TwistSolver,
-    _damped_solve,
-    _PositionBounds,
-)
+from drake_wbc.math import kernels
+from drake_wbc.math.command_limits import uniform_scale
+from drake_wbc.math.scalar_support import solve, value_of
 from drake_wbc.math.validation import (
     as_matrix,
     as_vector,
@@ -112,7 +118,6 @@ class ArmControllerParameters:
     """Parameters of the arm's Cartesian velocity controller.
 
     Attributes:
-        time_step: control period h in s, > 0 (the paper's 100 Hz).
         damping: largest damping lambda_max >= 0 of the least-squares
             solve; 0 turns damping off (then only the pseudo-inverse's
             zeroing of exactly zero singular values remains). Default
@@ -131,10 +136,11 @@ class ArmControllerParameters:
             every Elfin5 joint).
 
     Vectors are given as any sequence (a list in YAML) and stored as
-    tuples, so that parameters compare with ==.
+    tuples, so that parameters compare with ==. The control period is not
+    a field: it is the controller's one time_step
+    (ControllerParameters.time_step), the stage's `time_step` argument.
     """
 
-    time_step: float = 0.01
     damping: float = DEFAULT_DAMPING
     damping_threshold: float = DEFAULT_DAMPING_THRESHOLD
     margin: float = DEFAULT_JOINT_LIMIT_MARGIN
@@ -145,7 +151,6 @@ class ArmControllerParameters:
     velocity_limits: list[float] | None = None
 
     def __post_init__(self):
-        positive("time_step", self.time_step)
         non_negative("damping", self.damping)
         positive("damping_threshold", self.damping_threshold)
         non_negative("margin", self.margin)
@@ -200,6 +205,267 @@ def check_margin(margin, lower, upper):
     return margin
 
 
+class JointVelocityCommand(NamedTuple):
+    """The result of `joint_velocity_command`, with what shaped it.
+
+    Attributes:
+        q_dot: (n,) joint velocity command, rad/s.
+        scale: the uniform factor in (0, 1] of the velocity limit (1 when
+            no joint was too fast).
+        acceleration_scale: the uniform factor in [0, 1] applied to the
+            change from the previous q_dot (1 when within the acceleration
+            limit or without one).
+        limited_joints: (n,) bool, True for each joint whose rate was cut
+            by its position limits.
+        damping: lambda used by the least-squares solve (0 away from
+            singularities).
+        smallest_singular_value: s_min of J_a.
+    """
+
+    q_dot: np.ndarray
+    scale: float
+    acceleration_scale: float
+    limited_joints: np.ndarray
+    damping: float
+    smallest_singular_value: float
+
+    @property
+    def damped(self):
+        """True when the solve was damped (near a singularity)."""
+        return self.damping > 0.0
+
+    @property
+    def limited(self):
+        """True when a limit (position, velocity or acceleration) changed
+        the damped least-squares solution."""
+        return bool(self.scale < 1.0 or self.acceleration_scale < 1.0
+                    or self.limited_joints.any())
+
+
+@dataclass(frozen=True, eq=False)
+class TwistLimits:
+    """The limits and settings of `joint_velocity_command`, checked once by
+    `twist_limits` (a controller builds them when it is built).
+
+    Attributes:
+        lower, upper: (n,) joint limits, rad.
+        velocity: (n,) joint velocity limits, rad/s > 0.
+        time_step: the control period h > 0, s.
+        damping: lambda_max >= 0.
+        damping_threshold: eps > 0.
+        margin: rad >= 0, below half of every joint's range.
+        acceleration: None (no acceleration limit), or (n,) rad/s^2 > 0.
+    """
+
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity: np.ndarray
+    time_step: float
+    damping: float
+    damping_threshold: float
+    margin: float
+    acceleration: np.ndarray | None
+
+    @functools.cached_property
+    def _floats(self):
+        """The limits as the float kernel reads them (lists of floats),
+        computed once."""
+        return _FloatLimits.of(self)
+
+
+def twist_limits(lower, upper, velocity_limit, time_step,
+                 damping=DEFAULT_DAMPING,
+                 damping_threshold=DEFAULT_DAMPING_THRESHOLD,
+                 margin=DEFAULT_JOINT_LIMIT_MARGIN, acceleration_limit=None):
+    """TwistLimits from the arguments of `joint_velocity_for_twist`,
+    checked (see there); a velocity or acceleration limit given as one
+    number holds for every joint.
+
+    Raises:
+        ValueError: naming the argument, its value and what is allowed.
+    """
+    lower, upper = ordered_limits("lower", lower, "upper", upper)
+    n = lower.size
+    if acceleration_limit is not None:
+        acceleration_limit = _positive_vector("acceleration_limit",
+                                              acceleration_limit, n)
+    return TwistLimits(
+        lower=lower, upper=upper,
+        velocity=_positive_vector("velocity_limit", velocity_limit, n),
+        time_step=positive("time_step", time_step),
+        damping=non_negative("damping", damping),
+        damping_threshold=positive("damping_threshold", damping_threshold),
+        margin=check_margin(margin, lower, upper),
+        acceleration=acceleration_limit)
+
+
+# --- the reference: any scalar type ----------------------------------------
+
+
+def damping_rule(s_min, damping, threshold):
+    """The damping lambda of the least-squares solve from s_min (see
+    `singularity_damping`), for any scalar type:
+
+        lambda = lambda_max (1 - (s_min / eps)^2)   for s_min < eps,
+        lambda = 0                                  otherwise.
+    """
+    if s_min >= threshold:
+        return 0.0
+    return damping * (1.0 - (s_min / threshold) ** 2)
+
+
+def smallest_singular_value(J):
+    """s_min of J (m, n), for any scalar type: the value from the SVD of
+    J's value, and for AutoDiffXd the derivative u^T dJ v of a simple
+    singular value (u, v its singular vectors)."""
+    J_value = value_of(J)
+    U, s, Vt = np.linalg.svd(J_value, full_matrices=False)
+    return float(s[-1]) + U[:, -1] @ (J - J_value) @ Vt[-1]
+
+
+def damped_solve(J, V, damping):
+    """The damped least squares of Sec. III-A for a constant lambda, for
+    any scalar type:
+
+        q_dot = J^T (J J^T + lambda^2 I)^-1 V = (J^T J + lambda^2 I)^-1 J^T V,
+
+    solved in the smaller of the two (J^-1 V for a square J without
+    damping). Where that system is exactly singular (no damping and J
+    rank deficient) it is the pseudo-inverse solution J^+ V, a zero
+    singular value getting gain 0 (on the values: J^+ has no derivative
+    there).
+
+    Args:
+        J: (m, n) Jacobian.
+        V: (m,) twist.
+        damping: lambda >= 0.
+
+    Returns:
+        (n,) joint velocity.
+    """
+    rows, n = J.shape
+    square = damping * damping
+    try:
+        if n == rows and square == 0.0:
+            return solve(J, V)
+        if n <= rows:
+            return solve(J.T @ J + np.eye(n) * square, J.T @ V)
+        return J.T @ solve(J @ J.T + np.eye(rows) * square, V)
+    except np.linalg.LinAlgError:
+        U, s, Vt = np.linalg.svd(value_of(J), full_matrices=False)
+        gains = np.divide(1.0, s, out=np.zeros_like(s), where=s > 0.0)
+        return Vt.T @ (gains * (U.T @ value_of(V)))
+
+
+def braking_rate(distance, step, step_h):
+    """The largest rate towards an edge `distance` away (>= 0) from which
+    a joint can still stop at the edge, its rate changing by at most
+    step = a h a period (step_h = step h); any scalar type.
+
+    Braking from rate v = (m + f) a h (m an integer, 0 < f <= 1) at the
+    full deceleration runs through v, v - a h, ..., f a h, then 0, and
+    covers S(v) = a h^2 (m + 1)(f + m / 2). This inverts S: with
+    D = distance / (a h^2), m(m + 1)/2 < D <= (m + 1)(m + 2)/2 and
+    f = D / (m + 1) - m / 2. Since S(v - a h) = S(v) - v h, the bound one
+    period later is exactly a h lower: braking along it never needs more
+    than the acceleration limit, and S(v) >= v h keeps q + v h inside.
+    (m, a whole number, has no derivative.)
+    """
+    D = distance / step_h
+    r = 0.5 * (math.sqrt(1.0 + 8.0 * float(value_of(D))) - 1.0)
+    m = max(float(math.ceil(r)) - 1.0, 0.0)
+    f = min(max(D / (m + 1.0) - 0.5 * m, 0.0), 1.0)
+    return (m + f) * step
+
+
+def joint_position_bounds(q, lower, upper, time_step, margin,
+                          acceleration=None):
+    """The bounds (low, high) on q_dot from the joints' position limits
+    (see `joint_position_velocity_bounds`), for any scalar type: lists of
+    n entries.
+
+    Args:
+        q: (n,) joint angles, rad.
+        lower, upper: (n,) joint limits, rad.
+        time_step: h > 0, s.
+        margin: >= 0, rad.
+        acceleration: None, or (n,) rad/s^2 > 0.
+    """
+    low, high = [], []
+    for i in range(len(q)):
+        step = None if acceleration is None else acceleration[i] * time_step
+        for distance, bounds, sign in (
+                ((upper[i] - margin) - q[i], high, 1.0),
+                (q[i] - lower[i] - margin, low, -1.0)):
+            distance = max(distance, 0.0)
+            rate = distance / time_step
+            if step is not None:
+                rate = min(rate, braking_rate(distance, step,
+                                              step * time_step))
+            bounds.append(sign * rate)
+    return low, high
+
+
+def _clipped(values, low, high):
+    """values clipped to [low, high] entry by entry, and which were cut."""
+    result, cut = [], []
+    for value, lowest, highest in zip(values, low, high, strict=True):
+        clipped = min(max(value, lowest), highest)
+        result.append(clipped)
+        cut.append(bool(clipped != value))
+    return result, cut
+
+
+def joint_velocity_command(J_a, V_a, q, previous, limits):
+    """The joint velocity that realises the arm twist V_a within the
+    limits: the arm's Cartesian velocity controller of Sec. III-A, the
+    reference body (any scalar type; the stages' double path runs
+    `joint_velocity_command_float`).
+
+    The module's four stages: the damped least squares
+    (`damped_solve`) with lambda from `damping_rule`, the joint-limit
+    bounds (`joint_position_bounds`) joint by joint, the uniform scaling
+    to the velocity limits (drake_wbc.math.command_limits.uniform_scale),
+    and with an acceleration limit the uniform scaling of the change from
+    `previous` and the joint-limit bounds once more.
+
+    Args:
+        J_a: (6, n) geometric Jacobian [v; w] of the end effector in T_a
+            at q.
+        V_a: (6,) commanded twist [v_a; w_a] in T_a, m/s and rad/s.
+        q: (n,) joint angles, rad.
+        previous: (n,) the previous command, rad/s (ignored, and may be
+            None, without an acceleration limit).
+        limits: TwistLimits.
+
+    Returns:
+        JointVelocityCommand.
+    """
+    s_min = smallest_singular_value(J_a)
+    lambda_ = damping_rule(s_min, limits.damping, limits.damping_threshold)
+    x = damped_solve(J_a, V_a, lambda_)
+    low, high = joint_position_bounds(q, limits.lower, limits.upper,
+                                      limits.time_step, limits.margin,
+                                      limits.acceleration)
+    bounded, limited = _clipped(list(x), low, high)
+    scale = uniform_scale(bounded, limits.velocity)
+    q_dot = [scale * v for v in bounded]
+    acceleration_scale = 1.0
+    if limits.acceleration is not None:
+        change = [v - p for v, p in zip(q_dot, previous, strict=True)]
+        acceleration_scale = uniform_scale(
+            change, limits.acceleration * limits.time_step)
+        q_dot, cut = _clipped(
+            [p + acceleration_scale * c
+             for p, c in zip(previous, change, strict=True)], low, high)
+        limited = [a or b for a, b in zip(limited, cut, strict=True)]
+    return JointVelocityCommand(np.array(q_dot), scale, acceleration_scale,
+                                np.array(limited), lambda_, s_min)
+
+
+# --- the checked functions a user calls -------------------------------------
+
+
 def singularity_damping(smallest_singular_value, damping=DEFAULT_DAMPING,
                         threshold=DEFAULT_DAMPING_THRESHOLD):
     """The damping lambda of the least-squares solve from s_min:
@@ -220,20 +486,15 @@ def singularity_damping(smallest_singular_value, damping=DEFAULT_DAMPING,
     Returns:
         lambda >= 0 as a float.
     """
-    s_min = non_negative("smallest_singular_value", smallest_singular_value)
-    lambda_max = non_negative("damping", damping)
-    eps = positive("threshold", threshold)
-    if s_min >= eps:
-        return 0.0
-    return float(lambda_max * (1.0 - (s_min / eps) ** 2))
+    return float(damping_rule(
+        non_negative("smallest_singular_value", smallest_singular_value),
+        non_negative("damping", damping), positive("threshold", threshold)))
 
 
 def damped_least_squares(J_a, V_a, damping):
-    """q_dot = J_a^T (J_a J_a^T + lambda^2 I)^-1 V_a with a constant lambda.
-
-    Evaluated through the SVD of J_a; with lambda = 0 it is the
-    pseudo-inverse solution J_a^+ V_a (J_a^-1 V_a for a square regular
-    J_a), a zero singular value then getting gain 0.
+    """q_dot = J_a^T (J_a J_a^T + lambda^2 I)^-1 V_a with a constant lambda
+    (`damped_solve`); with lambda = 0 it is the pseudo-inverse solution
+    J_a^+ V_a (J_a^-1 V_a for a square regular J_a).
 
     Args:
         J_a: (6, n) Jacobian.
@@ -243,11 +504,9 @@ def damped_least_squares(J_a, V_a, damping):
     Returns:
         (n,) joint velocity.
     """
-    J = as_matrix("J_a", J_a, (6, None))
-    V = as_vector("V_a", V_a, 6)
-    lambda_ = non_negative("damping", damping)
-    U, s, Vt = np.linalg.svd(J, full_matrices=False)
-    return _damped_solve(U, s, Vt, V, lambda_)
+    return damped_solve(as_matrix("J_a", J_a, (6, None)),
+                        as_vector("V_a", V_a, 6),
+                        non_negative("damping", damping))
 
 
 def joint_position_velocity_bounds(q, lower, upper, time_step,
@@ -261,9 +520,8 @@ def joint_position_velocity_bounds(q, lower, upper, time_step,
     - without an acceleration limit, high = d_up / h and low = -d_low / h,
       so that q + q_dot h stays in the band;
     - with one, each is further limited to the rate from which the joint
-      can still brake to rest at the edge (see
-      `twist_solver._braking_rate`), which also keeps q + q_dot h in the
-      band.
+      can still brake to rest at the edge (`braking_rate`), which also
+      keeps q + q_dot h in the band.
 
     A joint at or beyond an edge (d <= 0) may not move further out (bound
     0) but is not pushed back; so low <= 0 <= high always, and scaling
@@ -286,11 +544,8 @@ def joint_position_velocity_bounds(q, lower, upper, time_step,
     if acceleration_limit is not None:
         acceleration_limit = _positive_vector(
             "acceleration_limit", acceleration_limit, q.size)
-    bounds = _PositionBounds(lower, upper, h, margin, acceleration_limit)
-    low, high = [], []
-    for i, q_i in enumerate(q.tolist()):
-        low.append(-bounds.rate(i, q_i - bounds.lower[i] - margin))
-        high.append(bounds.rate(i, bounds.upper_band[i] - q_i))
+    low, high = joint_position_bounds(q, lower, upper, h, margin,
+                                      acceleration_limit)
     return np.array(low), np.array(high)
 
 
@@ -299,7 +554,8 @@ def joint_velocity_for_twist(J_a, V_a, q, lower, upper, velocity_limit,
                              damping_threshold=DEFAULT_DAMPING_THRESHOLD,
                              margin=DEFAULT_JOINT_LIMIT_MARGIN,
                              acceleration_limit=None, previous_q_dot=None):
-    """The joint velocity that realises the arm twist V_a, within limits.
+    """The joint velocity that realises the arm twist V_a, within limits:
+    `joint_velocity_command` with its arguments checked.
 
     See the module's docstring for the four stages: damped least squares
     with lambda from `singularity_damping`, joint-limit bounds from
@@ -340,29 +596,233 @@ def joint_velocity_for_twist(J_a, V_a, q, lower, upper, velocity_limit,
     n = J.shape[1]
     V = as_vector("V_a", V_a, 6)
     q = as_vector("q", q, n)
-    lower, upper = ordered_limits("lower", lower, "upper", upper, n)
-    velocity_limit = _positive_vector("velocity_limit", velocity_limit, n)
-    h = positive("time_step", time_step)
-    lambda_max = non_negative("damping", damping)
-    eps = positive("damping_threshold", damping_threshold)
-    margin = check_margin(margin, lower, upper)
+    ordered_limits("lower", lower, "upper", upper, n)
+    limits = twist_limits(lower, upper, velocity_limit, time_step, damping,
+                          damping_threshold, margin, acceleration_limit)
     previous = None
     if acceleration_limit is not None:
-        acceleration_limit = _positive_vector("acceleration_limit",
-                                              acceleration_limit, n)
         previous = (np.zeros(n) if previous_q_dot is None
                     else as_vector("previous_q_dot", previous_q_dot, n))
-    return joint_velocity_for_twist_unchecked(
-        J, V, q, lower, upper, velocity_limit, h, lambda_max, eps, margin,
-        acceleration_limit, previous)
+    return joint_velocity_command(J, V, q, previous, limits)
 
 
-def joint_velocity_for_twist_unchecked(J, V, q, lower, upper,
-                                       velocity_limit, h, lambda_max, eps,
-                                       margin, acceleration_limit, previous):
-    """`joint_velocity_for_twist` without its argument checks: float
-    arrays of the sizes given there, velocity_limit (n,),
-    acceleration_limit None or (n,), previous (n,) when it is not None.
-    A controller that keeps its limits calls a `TwistSolver` instead."""
-    return TwistSolver(lower, upper, velocity_limit, h, lambda_max, eps,
-                       margin, acceleration_limit).solve(J, V, q, previous)
+# --- the float kernel of the control tick -----------------------------------
+
+
+class _FloatLimits(NamedTuple):
+    """TwistLimits as the float kernel reads them: lists of floats, and
+    `clear`, the distance from an edge beyond which a joint's bound
+    cannot cut a rate within its velocity limit."""
+
+    lower: list
+    upper: list
+    upper_band: list
+    velocity: list
+    h: float
+    margin: float
+    damping: float
+    threshold: float
+    step: list | None
+    step_h: list | None
+    clear: list
+
+    @classmethod
+    def of(cls, limits):
+        h, margin = float(limits.time_step), float(limits.margin)
+        velocity = np.asarray(limits.velocity, dtype=float)
+        # Beyond the distance `clear` from an edge a joint's bound is at
+        # least its velocity limit c (with a margin for rounding), so a
+        # rate of at most c towards it is not cut: d / h >= c for
+        # d >= c h and, braking, S(v) <= (v + a h / 2)^2 / (2 a) (the
+        # maximum of a h^2 (m + 1)(f + m / 2) over f at a given v) so
+        # that braking_rate(d) >= c for d >= (c + a h / 2)^2 / (2 a).
+        clear = velocity * h
+        step = step_h = None
+        if limits.acceleration is not None:
+            a = np.asarray(limits.acceleration, dtype=float)
+            step = a * h
+            step_h = step * h
+            clear = np.maximum(clear, (velocity + 0.5 * h * a) ** 2
+                               / (2.0 * a))
+            step, step_h = step.tolist(), step_h.tolist()
+        return cls(
+            lower=limits.lower.tolist(), upper=limits.upper.tolist(),
+            # The band's upper edges, formed as upper - margin - q is.
+            upper_band=(limits.upper - margin).tolist(),
+            velocity=velocity.tolist(), h=h, margin=margin,
+            damping=float(limits.damping),
+            threshold=float(limits.damping_threshold), step=step,
+            step_h=step_h, clear=(clear * (1.0 + 1e-9) + 1e-300).tolist())
+
+
+def _rate_float(limits, i, distance):
+    """The bound on |q_dot_i| towards an edge `distance` away, in floats:
+    min(d / h, braking_rate(d)), d >= 0."""
+    distance = max(distance, 0.0)
+    rate = distance / limits.h
+    if limits.step is not None:
+        D = distance / limits.step_h[i]
+        r = 0.5 * (math.sqrt(1.0 + 8.0 * D) - 1.0)
+        m = max(float(math.ceil(r)) - 1.0, 0.0)
+        f = min(max(D / (m + 1.0) - 0.5 * m, 0.0), 1.0)
+        rate = min(rate, (m + f) * limits.step[i])
+    return rate
+
+
+def _bounded_float(limits, q_dot, q, limited, bounds):
+    """q_dot (list) clipped to the position bounds at q (list), joint by
+    joint; sets limited[i] where it cuts. A joint's bound is computed only
+    on the side it moves towards and only where it may cut (`clear`);
+    `bounds` remembers those computed, by (joint, side)."""
+    result = []
+    for i, (v, q_i) in enumerate(zip(q_dot, q, strict=True)):
+        if v > 0.0:
+            distance = limits.upper_band[i] - q_i
+            if v > limits.velocity[i] or distance < limits.clear[i]:
+                high = bounds.get((i, 1))
+                if high is None:
+                    high = bounds[i, 1] = _rate_float(limits, i, distance)
+                if v > high:
+                    v, limited[i] = high, True
+        elif v < 0.0:
+            distance = q_i - limits.lower[i] - limits.margin
+            if -v > limits.velocity[i] or distance < limits.clear[i]:
+                low = bounds.get((i, 0))
+                if low is None:
+                    low = bounds[i, 0] = -_rate_float(limits, i, distance)
+                if v < low:
+                    v, limited[i] = low, True
+        result.append(v)
+    return result
+
+
+def _least_squares_float(limits, J, V):
+    """(q_dot, lambda, s_min) of the damped least squares, in floats: at a
+    regular point (J square, s_min >= eps) by an LU solve after the
+    singular values alone; otherwise by the thin SVD."""
+    if J.shape[0] == J.shape[1]:
+        _, s, _, info = _gesdd(J.T, compute_uv=0)  # J^T: no copy
+        if info == 0 and s[-1] >= limits.threshold:
+            _, _, x, info = _gesv(J, V)
+            if info == 0:
+                return x, 0.0, float(s[-1])
+    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    s_min = float(s[-1])
+    lambda_ = (0.0 if s_min >= limits.threshold
+               else float(limits.damping
+                          * (1.0 - (s_min / limits.threshold) ** 2)))
+    denominators = s**2 + lambda_**2
+    safe = np.where(denominators > 0.0, denominators, 1.0)
+    gains = np.where(denominators > 0.0, s / safe, 0.0)
+    return Vt.T @ (gains * (U.T @ V)), lambda_, s_min
+
+
+def _scale_to_float(vector, limits):
+    """The largest factor in (0, 1] with |factor * vector_i| <= limits_i,
+    for lists of floats."""
+    scale = 1.0
+    for value, limit in zip(vector, limits, strict=True):
+        size = abs(value)
+        if size > limit:
+            scale = min(scale, limit / size)
+    return scale
+
+
+def _twist_samples(rng):
+    """Random arguments of joint_velocity_command: Jacobians of 5 to 7
+    columns with singular values from regular to exactly zero (damped and
+    undamped solves), joints inside, on and beyond the edges of their
+    bands, slow and fast twists, previous rates from rest to beyond the
+    limits, with and without an acceleration limit; and one case in five
+    with a diagonal J_a whose rates lie just below, at and just above the
+    velocity limits, at distances from the edges just inside and outside
+    the float kernel's `clear` (where it starts computing bounds)."""
+    if rng.uniform() < 0.2:
+        return _boundary_sample(rng)
+    n = int(rng.choice([6, 6, 6, 5, 7]))
+    k = min(n, 6)
+    U = np.linalg.qr(rng.normal(size=(6, 6)))[0][:, :k]
+    W = np.linalg.qr(rng.normal(size=(n, n)))[0][:, :k]
+    s = np.sort(rng.uniform(0.1, 2.5, k))[::-1]
+    kind = rng.integers(4)
+    if kind == 0:
+        s[-1] = rng.uniform(0.0, DEFAULT_DAMPING_THRESHOLD)
+    elif kind == 1:
+        s[-1] = 0.0
+    J = U @ np.diag(s) @ W.T
+    lower = rng.uniform(-3.0, -1.0, n)
+    upper = rng.uniform(1.0, 3.0, n)
+    margin = float(rng.choice([0.0, DEFAULT_JOINT_LIMIT_MARGIN, 0.3]))
+    q = rng.uniform(lower - 0.02, upper + 0.02)
+    for i in rng.choice(n, size=rng.integers(0, 3), replace=False):
+        edge = (lower[i] + margin if rng.uniform() < 0.5
+                else upper[i] - margin)
+        q[i] = edge + rng.choice([-1.0, 0.0, 1.0]) * rng.uniform(0.0, 0.05)
+    h = float(rng.choice([0.01, 0.01, 0.001, 0.1]))
+    acceleration = (None if rng.uniform() < 0.3
+                    else float(rng.choice([12.56, 1.0])))
+    limits = twist_limits(
+        lower, upper, rng.choice([1.57, 0.5]) * rng.uniform(0.8, 1.2, n),
+        h, damping=float(rng.choice([DEFAULT_DAMPING, 0.2])),
+        damping_threshold=float(rng.choice([DEFAULT_DAMPING_THRESHOLD,
+                                            DEFAULT_DAMPING_THRESHOLD,
+                                            10.0])),
+        margin=margin, acceleration_limit=acceleration)
+    V = rng.normal(0.0, rng.choice([1e-3, 0.05, 0.3, 3.0]), 6)
+    previous = (None if acceleration is None else
+                rng.normal(0.0, rng.choice([0.0, 0.3, 3.0]), n))
+    return J, V, q, previous, limits
+
+
+def _boundary_sample(rng):
+    """A sample of `_twist_samples` at the kernel's boundaries: J_a
+    diagonal (regular), so that the rates are V_a / s exactly."""
+    s = rng.uniform(0.1, 2.5, 6)
+    lower, upper = -np.full(6, 2.0), np.full(6, 2.5)
+    h = 0.01
+    acceleration = (None if rng.uniform() < 0.3
+                    else float(rng.choice([12.56, 0.5])))
+    limits = twist_limits(lower, upper, 1.57, h,
+                          margin=DEFAULT_JOINT_LIMIT_MARGIN,
+                          acceleration_limit=acceleration)
+    clear = np.array(limits._floats.clear)
+    distance = clear * rng.choice([0.0, 0.5, 1.0 - 1e-9, 1.0, 1.0 + 1e-9,
+                                   2.0], 6)
+    towards_upper = rng.uniform(size=6) < 0.5
+    q = np.where(towards_upper, upper - limits.margin - distance,
+                 lower + limits.margin + distance)
+    speed = limits.velocity * rng.choice([0.3, 1.0 - 1e-12, 1.0,
+                                          1.0 + 1e-12, 3.0], 6)
+    V = s * np.where(towards_upper, speed, -speed)
+    previous = (None if acceleration is None
+                else V / s * rng.choice([0.0, 1.0], 6))
+    return np.diag(s), V, q, previous, limits
+
+
+@kernels.fast_kernel(joint_velocity_command, sample=_twist_samples)
+def joint_velocity_command_float(J_a, V_a, q, previous, limits):
+    """`joint_velocity_command` in plain floats, for the controller's tick
+    (float arrays; the same result to rounding): the least squares by an
+    LU solve at a regular point, then the limits applied joint by joint in
+    Python floats, a joint's bound computed only where it may cut."""
+    floats = limits._floats
+    x, lambda_, s_min = _least_squares_float(floats, J_a, V_a)
+    q = q.tolist()
+    limited = [False] * len(q)
+    bounds = {}
+    q_dot = _bounded_float(floats, x.tolist(), q, limited, bounds)
+    scale = _scale_to_float(q_dot, floats.velocity)
+    if scale != 1.0:
+        q_dot = [scale * v for v in q_dot]
+    acceleration_scale = 1.0
+    if floats.step is not None:
+        previous = previous.tolist()
+        change = [v - p for v, p in zip(q_dot, previous, strict=True)]
+        acceleration_scale = _scale_to_float(change, floats.step)
+        if acceleration_scale != 1.0:
+            change = [acceleration_scale * c for c in change]
+        q_dot = _bounded_float(
+            floats, [p + c for p, c in zip(previous, change, strict=True)],
+            q, limited, bounds)
+    return JointVelocityCommand(np.array(q_dot), scale, acceleration_scale,
+                                np.array(limited), lambda_, s_min)

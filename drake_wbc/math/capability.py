@@ -35,7 +35,7 @@ How the module is laid out, for each equation:
 
 import functools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
@@ -47,7 +47,6 @@ from drake_wbc.math.validation import (
     as_matrix,
     as_scalar,
     as_vector,
-    checked_instance,
     non_negative,
     ordered_limits,
     positive,
@@ -105,7 +104,9 @@ class CapabilityBand:
     One band serves every stage that looks at C_m: alpha of the robust
     compensation (ArmCapability), the adaptive weighting factors of the
     intuitive pHRI mode (WorkspaceAdapter) and the switch-off of the
-    null-space gain (MotionDistributor).
+    null-space gain (MotionDistributor). It is
+    ControllerParameters.capability_band, which build_controller hands
+    to each of them (their `band` argument).
 
     Attributes:
         lower: C_m^l >= 0 (m^3, like C_m); alpha = 1 at and below it.
@@ -129,31 +130,24 @@ class CapabilityBand:
             )
 
 
-def set_band(params):
-    """Checks `params.band` (a parameters dataclass's field), putting the
-    default CapabilityBand in place of None."""
-    params.band = checked_instance("band", params.band, CapabilityBand,
-                                   CapabilityBand)
-
-
 @dataclass
 class ArmCapabilityParameters:
     """Parameters of the ArmCapability stage: C_m, grad_x C_m and alpha.
 
+    The limitation band of alpha, eq. (transition), is the stage's `band`
+    argument (one CapabilityBand for every stage that looks at C_m).
+
     Attributes:
-        band: the limitation band of alpha, eq. (transition).
         joint_limit_gain: k_j > 0 of the joint-limit penalization P_jnt.
         gradient_damping: lambda_max >= 0 of `capability_gradient`.
         gradient_damping_threshold: eps > 0 of the same.
     """
 
-    band: CapabilityBand = field(default_factory=CapabilityBand)
     joint_limit_gain: float = DEFAULT_JOINT_LIMIT_GAIN
     gradient_damping: float = DEFAULT_MAX_DAMPING
     gradient_damping_threshold: float = DEFAULT_DAMPING_THRESHOLD
 
     def __post_init__(self):
-        set_band(self)
         positive("joint_limit_gain", self.joint_limit_gain)
         non_negative("gradient_damping", self.gradient_damping)
         positive("gradient_damping_threshold",

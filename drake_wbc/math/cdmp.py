@@ -67,12 +67,6 @@ def _dmp(params):
                          "DmpParameters")
 
 
-def _switch(name, value):
-    if value not in (0, 1):
-        raise ValueError(f"{name} = {value!r} is not allowed: must be 0 or 1")
-    return float(value)
-
-
 def _set(obj, name, value):
     """Stores a checked value in `obj`, an array as a read-only copy (so
     that it changes only by assignment, which `validate` checks)."""
@@ -188,21 +182,33 @@ class MovementReplay:
         non_negative("tracking_gain", self.tracking_gain)
 
 
+MAX_K_HRI = 1.0
+"""The largest admittance gain k_hri, m/(N s): k_hri F_ext is a velocity
+of eq. (cdmp-wb), and at 1 m/(N s) a push of 1 N already asks for 1 m/s,
+the base's limit (a larger gain moves the robot at its limits on the
+wrist's noise alone, and overflows the DMP's discretisation near
+1e300)."""
+
+
 @dataclass
 class WholeBodyCdmpParameters:
-    """Eq. (cdmp-wb): admittance gain k_hri >= 0 (m/(N s); paper 0.05),
-    the default pHRI switch S_hri, 0 or 1 (paper: 1 in pHRI), and an
-    optional learned movement to play (MovementReplay; None, the default,
-    keeps the paper's g = 0 and f = 0)."""
+    """Eq. (cdmp-wb): admittance gain k_hri in [0, MAX_K_HRI] (m/(N s);
+    paper 0.05)
+    and an optional learned movement to play (MovementReplay; None, the
+    default, keeps the paper's g = 0 and f = 0). The pHRI switch S_hri is
+    an input (its default is ControllerParameters.phri_switch, one for
+    both DMPs that take it)."""
 
     k_hri: float = 0.05
-    S_hri: float = 0.0
     dmp: DmpParameters = field(default_factory=DmpParameters)
     movement: MovementReplay | None = None
 
     def __post_init__(self):
-        non_negative("k_hri", self.k_hri)
-        _set(self, "S_hri", _switch("S_hri", self.S_hri))
+        if non_negative("k_hri", self.k_hri) > MAX_K_HRI:
+            raise ValueError(
+                f"k_hri = {self.k_hri!r} m/(N s) is not allowed: must be at "
+                f"most {MAX_K_HRI!r} m/(N s) (k_hri F_ext is a velocity: "
+                f"at {MAX_K_HRI!r} a push of 1 N already asks for 1 m/s)")
         _dmp(self.dmp)
         self.movement = checked_instance("movement", self.movement,
                                          MovementReplay, lambda: None)
@@ -235,9 +241,10 @@ class ArmCdmpParameters:
         S_m: (6,) diagonal of the selection matrix S_m, each 0 (force
             control) or 1 (stiffness); default (0, 1, 1, 1, 1, 1).
         F_d: (6,) desired wrench F_d on the tool; default -10 N along x.
-        S_hri: default pHRI switch, 0 or 1.
 
-    S_m and F_d are stored as read-only float arrays.
+    S_m and F_d are stored as read-only float arrays. The pHRI switch
+    S_hri is an input (its default is ControllerParameters.phri_switch,
+    one for both DMPs that take it).
     """
 
     k_p: float = 0.0005
@@ -245,7 +252,6 @@ class ArmCdmpParameters:
     k_f: float = 0.01
     S_m: np.ndarray = (0.0, 1.0, 1.0, 1.0, 1.0, 1.0)
     F_d: np.ndarray = (-10.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    S_hri: float = 0.0
     dmp: DmpParameters = field(default_factory=DmpParameters)
 
     def __post_init__(self):
@@ -253,7 +259,6 @@ class ArmCdmpParameters:
             non_negative(name, getattr(self, name))
         _set(self, "S_m", selection("S_m", self.S_m, 6))
         _set(self, "F_d", as_vector("F_d", self.F_d, 6))
-        _set(self, "S_hri", _switch("S_hri", self.S_hri))
         _dmp(self.dmp)
 
 
@@ -319,7 +324,7 @@ def admittance_coupled_derivative(y, z, C, g, F_e, params, V=0.0,
 
 
 def whole_body_cdmp_derivative(y, z, C, E, g, V_ee, F_ext, delta_V_ee,
-                               params, S_hri=None, forcing=0.0, dmp=None):
+                               params, S_hri=0.0, forcing=0.0, dmp=None):
     """CDMP of the whole body, eq. (cdmp-wb) with the tracking-error term
     of eq. (cdmp-wb-error):
 
@@ -335,15 +340,14 @@ def whole_body_cdmp_derivative(y, z, C, E, g, V_ee, F_ext, delta_V_ee,
 
     State (y, z, C, E), each (d,) (d = 6, twists [v; w]); inputs the
     goal g, the velocity V_ee, the wrench F_ext on the end effector and
-    delta_V_ee, (d,); WholeBodyCdmpParameters; S_hri 0 or 1 (None:
-    params.S_hri); forcing f(s) (default 0); dmp: the DmpParameters of
+    delta_V_ee, (d,); WholeBodyCdmpParameters; S_hri 0 or 1 (default
+    0); forcing f(s) (default 0); dmp: the DmpParameters of
     the transformation system (None: params.dmp; a learned movement's
     gains and tau while it plays). Returns (y_dot, z_dot, C_dot, E_dot);
     y_dot is the velocity V_ee^ref sent to the distributor.
     """
-    S = params.S_hri if S_hri is None else S_hri
     dmp = params.dmp if dmp is None else dmp
-    C_dot = V_ee + (params.k_hri * S) * F_ext
+    C_dot = V_ee + (params.k_hri * S_hri) * F_ext
     y_dot, z_dot = transformation_derivative(
         y + E, z, g + C, None, dmp, forcing,
         coupling_velocity=dmp.tau * C_dot)
@@ -375,7 +379,7 @@ def base_cdmp_derivative(y, z, C, g, V_b, obstacle_points, params,
     return y_dot, z_dot, V_b
 
 
-def arm_cdmp_derivative(y, z_tilde, C_a, g, V_a, F_ext, params, S_hri=None,
+def arm_cdmp_derivative(y, z_tilde, C_a, g, V_a, F_ext, params, S_hri=0.0,
                         forcing=0.0):
     """CDMP of the arm, hybrid stiffness/force control, eq. (cdmp-arm):
 
@@ -391,15 +395,14 @@ def arm_cdmp_derivative(y, z_tilde, C_a, g, V_a, F_ext, params, S_hri=None,
 
     State (y, z~, C_a), each (6,) (T_a, [v; w] axes); inputs the goal
     g, the velocity V_a and the wrench F_ext on the tool, (6,);
-    ArmCdmpParameters; S_hri 0 or 1 (None: params.S_hri); forcing f(s)
+    ArmCdmpParameters; S_hri 0 or 1 (default 0); forcing f(s)
     (default 0). Returns (y_dot, z_tilde_dot, C_a_dot); y_dot is the
     arm's velocity command.
     """
     tau = params.dmp.tau
-    S = params.S_hri if S_hri is None else S_hri
     C_s = params.k_p * params.S_m * F_ext
     C_a_dot = V_a + (params.k_f * (1.0 - params.S_m)) * (
-        F_ext - params.F_d) * (1.0 - S)
+        F_ext - params.F_d) * (1.0 - S_hri)
     y_dot, z_tilde_dot = transformation_derivative(
         y, paper_velocity(z_tilde, C_s, params.k_d, tau), g + C_a, None,
         params.dmp, forcing, coupling_velocity=C_s + tau * C_a_dot)

@@ -4,10 +4,13 @@ The base command is scaled as a whole to the robot's velocity limits, and
 its change from one tick to the next as a whole to the acceleration
 limits, rather than clipped axis by axis, so that a saturated command
 stays parallel to the one the controller meant (the arm's joint rates are
-scaled the same way by drake_wbc.math.arm_control.joint_velocity_for_twist).
-The limits themselves are drake_wbc.math.safety.SafetyParameters'. A command
-has three entries, so the math runs in Python floats, about ten times
-faster than in numpy at this size.
+scaled the same way by drake_wbc.math.arm_control.joint_velocity_command).
+The limits themselves are drake_wbc.math.safety.SafetyParameters'.
+
+One body each, for any scalar type (float, and AutoDiffXd for the stages'
+linearisation): a command has three entries, so the math runs entry by
+entry in Python scalars, which for floats is about ten times faster than
+numpy at this size and needs no separate float kernel.
 """
 
 from typing import NamedTuple
@@ -20,28 +23,24 @@ def uniform_scale(vector, limits):
     every i: scaling by it keeps the vector's direction.
 
     Args:
-        vector: (n,) finite.
+        vector: (n,) finite, any scalar type.
         limits: (n,) > 0.
 
     Returns:
-        s as a float (1.0 when the vector is within its limits).
+        s (1.0 when the vector is within its limits).
     """
-    return _uniform_scale(_floats(vector), _floats(limits))
-
-
-def _floats(values):
-    return values.tolist() if type(values) is np.ndarray else values
-
-
-def _uniform_scale(vector, limits):
-    """`uniform_scale` of two sequences of floats (the tick's path: a
-    few entries, cheaper in Python floats than in numpy)."""
     scale = 1.0
-    for value, limit in zip(vector, limits, strict=True):
+    for value, limit in zip(_entries(vector), _entries(limits), strict=True):
         magnitude = abs(value)
         if magnitude > limit and limit < scale * magnitude:
             scale = limit / magnitude
     return scale
+
+
+def _entries(values):
+    """The entries of a vector as a list (of Python scalars for a float
+    array)."""
+    return values.tolist() if type(values) is np.ndarray else values
 
 
 class LimitedCommand(NamedTuple):
@@ -81,7 +80,7 @@ def limit_base_velocity(desired, previous, velocity_limits,
     towards v and reaches it as fast as the limits allow. With `previous`
     within the velocity limits, `out` is too (the box of limits is convex).
     A desired command within both limits is returned unchanged (the same
-    values, bit for bit).
+    values, bit for bit). Any scalar type.
 
     Args:
         desired: (3,) [vx, vy, wz] in T_b, finite.
@@ -94,23 +93,23 @@ def limit_base_velocity(desired, previous, velocity_limits,
     Returns:
         LimitedCommand.
     """
-    given = desired
-    desired = [float(v) for v in _floats(desired)]
+    desired = _entries(desired)
     if scale < 1.0:
         desired = [scale * v for v in desired]
-    previous = [float(v) for v in _floats(previous)]
-    velocity_scale = _uniform_scale(desired, _floats(velocity_limits))
+    previous = _entries(previous)
+    velocity_scale = uniform_scale(desired, velocity_limits)
     target = (desired if velocity_scale == 1.0
               else [velocity_scale * v for v in desired])
     change = [t - p for t, p in zip(target, previous, strict=True)]
-    acceleration_scale = _uniform_scale(
-        change, [a * time_step for a in _floats(acceleration_limits)])
+    acceleration_scale = uniform_scale(
+        change, [a * time_step for a in _entries(acceleration_limits)])
     if acceleration_scale < 1.0:
-        command = np.array([p + acceleration_scale * c
-                            for p, c in zip(previous, change, strict=True)])
-    elif target is desired and scale >= 1.0:
-        command = np.asarray(given, dtype=float)  # the very same values
+        command = [p + acceleration_scale * c
+                   for p, c in zip(previous, change, strict=True)]
     else:
-        command = np.array(target)
+        command = target
+    command = np.array(command)
+    if command.dtype.kind in "biu":  # whole numbers given
+        command = command.astype(float)
     return LimitedCommand(command, scale * velocity_scale,
                           acceleration_scale)

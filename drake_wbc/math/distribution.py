@@ -92,7 +92,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from drake_wbc.math.capability import CapabilityBand, set_band
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.kinematics import (
     random_rotation,
@@ -549,24 +548,25 @@ class MotionDistributorParameters:
         null_space_gain: k_n >= 0 of eq. (wbccm), used when the
             null_space_gain port is not connected; the paper starts with 0
             and switches to 0.1.
-        band: C_m^l, C_m^u; k_n is off at and above C_m^u.
         smooth_switch_off: True fades k_n out across the band,
             k_n alpha(C_m, C_m^u, C_m^l); False switches it off in one step
             above C_m^u, the paper's words read literally.
         damping: SingularityDamping (never active for our
             robot's J_wb, see the module), or None for
             none; default the values of DEFAULT_DAMPING.
+
+    The band C_m^l, C_m^u (k_n is off at and above C_m^u) is the stage's
+    `band` argument (one CapabilityBand for every stage that looks at
+    C_m).
     """
 
     null_space_gain: float = 0.0
-    band: CapabilityBand = field(default_factory=CapabilityBand)
     smooth_switch_off: bool = True
     damping: SingularityDamping | None = field(
         default_factory=SingularityDamping)
 
     def __post_init__(self):
         non_negative("null_space_gain", self.null_space_gain)
-        set_band(self)
         if not isinstance(self.smooth_switch_off, bool):
             raise ValueError(
                 f"smooth_switch_off = {self.smooth_switch_off!r} is not "

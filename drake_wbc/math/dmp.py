@@ -59,6 +59,10 @@ FINAL_PHASE = 0.01
 """Phase s reached at t = duration with the default alpha_s."""
 
 
+MAX_BASIS = 1000
+"""The most basis functions a DMP may have (20 to 100 are usual)."""
+
+
 @dataclass
 class DmpParameters:
     """Gains, timing and basis of a DMP (eqs. (6), (7)).
@@ -73,7 +77,8 @@ class DmpParameters:
         tau: temporal scaling factor tau > 0, s (default 1).
         duration: movement duration T > 0 at this tau, s (default 1); sets
             the default alpha_s and the span of the basis centres.
-        num_basis: number N >= 1 of basis functions (default 20).
+        num_basis: number N of basis functions, 1 to MAX_BASIS (default
+            20).
 
     Basis (the usual heuristic): centres c_i = exp(-alpha_s t_i / tau) at
     times t_i = i T / (N - 1) spaced evenly over [0, T], i.e. geometrically
@@ -99,6 +104,11 @@ class DmpParameters:
         if isinstance(n, bool) or not isinstance(n, Integral) or n < 1:
             raise ValueError(f"num_basis = {n!r} is not allowed: must be "
                              "an integer, 1 or greater")
+        if n > MAX_BASIS:
+            raise ValueError(
+                f"num_basis = {n!r} is not allowed: must be at most "
+                f"{MAX_BASIS} (the basis is evaluated every tick; 1000 "
+                "functions already resolve a 10 s movement to 10 ms)")
 
     @property
     def resolved_beta_z(self):

@@ -35,39 +35,60 @@ class BaseFilterParameters:
             paper's experiments use 2 pi (1 Hz).
         zeta: damping ratio, > 0; the paper uses 1.0 (critically damped:
             the filtered velocity never overshoots a step).
-        time_step: control period h in s; 0 gives the continuous filter,
-            > 0 its exact zero-order-hold discretisation. omega_f must stay
-            below the Nyquist rate pi / h.
         enabled: False bypasses the filter (the paper's comparison run
             "without trajectory filtering"): the command is then V_b'
             itself, sampled at each tick and held like every discrete
-            command, so the output still leaves from state. Needs
-            time_step > 0.
+            command, so the output still leaves from state.
+
+    The control period h is not a field: it is the controller's one
+    time_step (ControllerParameters.time_step), the stage's `time_step`
+    argument, checked against these fields by `check_filter_period`.
     """
 
     omega_f: float = 2.0 * np.pi
     zeta: float = 1.0
-    time_step: float = 0.01
     enabled: bool = True
 
     def __post_init__(self):
         positive("omega_f", self.omega_f)
         positive("zeta", self.zeta)
-        h = non_negative("time_step", self.time_step)
         if not isinstance(self.enabled, (bool, np.bool_)):
             raise ValueError(f"enabled = {self.enabled!r} is not allowed: "
                              "must be true or false")
-        if not self.enabled and h == 0.0:
-            raise ValueError(
-                "enabled = False is not allowed with time_step = 0: the "
-                "bypassed filter is a one-period hold, which needs a "
-                "control period > 0")
-        if h > 0.0 and self.omega_f >= np.pi / h:
-            raise ValueError(
-                f"omega_f = {self.omega_f!r} rad/s is not allowed with "
-                f"time_step = {h!r} s: must be below the Nyquist rate "
-                f"pi / time_step = {np.pi / h:.6g} rad/s"
-            )
+
+
+def check_filter_period(params, time_step, prefix=""):
+    """Checks that the base filter `params` can run at the control period
+    `time_step`: omega_f below the Nyquist rate pi / h, and h > 0 when the
+    filter is bypassed (a one-period hold).
+
+    Args:
+        params: BaseFilterParameters.
+        time_step: the control period h in s, >= 0; 0 gives the
+            continuous filter, > 0 its exact zero-order-hold
+            discretisation.
+        prefix: how the message names the fields of `params` (e.g.
+            "base_filter." for ControllerParameters.base_filter).
+
+    Returns:
+        time_step, as a float.
+
+    Raises:
+        ValueError: naming time_step, its value, the field it conflicts
+            with and what is allowed.
+    """
+    h = non_negative("time_step", time_step)
+    if not params.enabled and h == 0.0:
+        raise ValueError(
+            f"time_step = 0 is not allowed with {prefix}enabled = False: "
+            "the bypassed filter is a one-period hold, which needs a "
+            "control period > 0")
+    if h > 0.0 and params.omega_f >= np.pi / h:
+        raise ValueError(
+            f"time_step = {h!r} s is not allowed with {prefix}omega_f = "
+            f"{params.omega_f!r} rad/s: the filter's cut-off must be below "
+            f"the Nyquist rate pi / time_step = {np.pi / h:.6g} rad/s")
+    return h
 
 
 def lowpass_state_space(omega_f, zeta):

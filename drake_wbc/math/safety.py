@@ -6,22 +6,29 @@ stand behind. Three mechanisms serve that, and this module holds their math
 (numpy only; the Drake systems in drake_wbc.stages.safety are thin over
 it):
 
-1. Input validity (`check_vector`, `check_points`): every value that enters
-   the controller is checked once a tick. A NaN, an infinite value, or a
-   value outside the range a stage accepts (k_n < 0 in eq. (wbccm), s_c
-   outside [0, 1] in eq. (compensation)) is a fault of that input.
-   Obstacle points are the exception: a row with a NaN or infinite
-   coordinate is dropped and counted, not a fault (see `check_points`).
+1. Input validity (`check_vector`, `check_inputs`, `check_points`): every
+   value that enters the controller is checked once a tick. A NaN, an
+   infinite value, a value outside the range a stage accepts (k_n < 0
+   in eq. (wbccm), s_c outside [0, 1] in eq. (compensation)) or a switch
+   other than 0 or 1 (S_hri) is a fault of that input. Obstacle points
+   are the exception: a row with a NaN or infinite coordinate is dropped
+   and counted, not a fault (see `check_points`). `check_inputs` has a
+   float kernel for the control tick (`check_inputs_float`,
+   drake_wbc.math.kernels).
 2. The safe stop (`next_stop_state`): on a fault the controller stops (zero
-   base velocity, the arm held at its last good position command) and it
-   resumes only after every input has been valid again for `hold_time`.
+   base velocity, the arm braked to rest within its acceleration limit,
+   the DMPs' couplings held; drake_wbc.controller.diagram) and it resumes,
+   from what it last sent, only after every input has been valid again
+   for `hold_time`.
 3. Command limits that keep the direction, in drake_wbc.math.command_limits:
    the base command is scaled as a whole to the robot's velocity limits
    (SafetyParameters, below), and its change from one tick to the next as
    a whole to the acceleration limits.
 
 The robot's limits are those of the robot facts: base 1.0 m/s along x and
-y, 1.0 rad/s in yaw, 1.0 m/s^2 and 1.0 rad/s^2.
+y, 1.0 rad/s in yaw, 1.0 m/s^2 and 1.0 rad/s^2. SafetyParameters may
+tighten them, not widen them (`check_within_robot`, when the controller
+is built).
 """
 
 import math
@@ -31,6 +38,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from drake_wbc.math import kernels
+from drake_wbc.math.scalar_support import value_of
 from drake_wbc.math.validation import non_negative, positive, positive_vector
 
 BASE_AXES = 3
@@ -41,6 +50,11 @@ BASE_VELOCITY_LIMITS = (1.0, 1.0, 1.0)
 
 BASE_ACCELERATION_LIMITS = (1.0, 1.0, 1.0)
 """The base's acceleration limits [vx, vy, wz]: m/s^2, m/s^2, rad/s^2."""
+
+BASE_LAG = 0.3
+"""s: the base's velocity loop lag, the slowest of the facts sheet's 0.1 to
+0.3 s (EST; the station's drivers model 0.2 s), for the robot's own stop
+distance (`robot_stop_distance`)."""
 
 DEFAULT_HOLD_TIME = 0.5
 """Seconds for which every input must be valid again before the controller
@@ -64,6 +78,7 @@ class Reason(IntEnum):
     INFINITE = 2
     OUT_OF_RANGE = 3
     MALFORMED = 4
+    NOT_A_SWITCH = 5
 
 
 class InputCheck(NamedTuple):
@@ -97,10 +112,11 @@ class SafetyParameters:
         hold_time: s > 0 for which every input must be valid again before
             the controller resumes after a safe stop (`DEFAULT_HOLD_TIME`).
         base_velocity_limits: (3,) > 0, the base command's limits
-            [vx, vy, wz] in m/s, m/s, rad/s; the robot's 1.0 each.
+            [vx, vy, wz] in m/s, m/s, rad/s; the robot's 1.0 each, which
+            they may tighten but not widen (`check_within_robot`).
         base_acceleration_limits: (3,) > 0, the limits of the command's
             rate of change [vx, vy, wz] in m/s^2, m/s^2, rad/s^2; the
-            robot's 1.0 each.
+            robot's 1.0 each, likewise.
         stop_distance: m >= 0 that the base keeps from an obstacle point,
             and stop_time: s > 0, the time constant of its approach
             (drake_wbc.math.separation); 0.1 m and 0.5 s by default.
@@ -126,31 +142,186 @@ class SafetyParameters:
                 .tolist()))
 
 
-def check_vector(value, lower=-math.inf, upper=math.inf):
-    """Checks an input vector: every entry finite and in [lower, upper].
+def robot_stop_distance(stop_time, velocity_limits, acceleration_limits,
+                        lag=BASE_LAG):
+    """The shortest stop distance the robot itself allows (m): the
+    distance by which its base may overshoot the separation rule's
+    approach when its command is cut to zero (a safe stop or a trip).
+
+    The rule lets the footprint approach an obstacle point at
+    u = (d - stop_distance) / stop_time at most. Cut to zero at once, the
+    base's velocity loop (a lag `lag` saturated at the acceleration
+    limit a, as drake_wbc.station.driver_dynamics.base_loop_step) covers
+
+        S(u) = u lag                            for u <= a lag,
+        S(u) = u^2 / (2 a) + a lag^2 / 2        otherwise,
+
+    before it is at rest. It stops short of the point for every d when
+    stop_distance >= S(u) - stop_time u for every u the limits allow;
+    S(u) - stop_time u is convex, so the largest is at the fastest u,
+    along an axis: u the larger planar velocity limit, a the smaller
+    planar acceleration limit. With the robot's limits, lag 0.3 s and
+    stop_time 0.5 s: 0.045 m.
+
+    Args:
+        stop_time: s > 0.
+        velocity_limits, acceleration_limits: (3,) [x, y, yaw] > 0.
+        lag: s >= 0.
+
+    Returns:
+        The distance, >= 0.
+    """
+    u = max(velocity_limits[0], velocity_limits[1])
+    a = min(acceleration_limits[0], acceleration_limits[1])
+    stopping = u * lag if u <= a * lag else (
+        u * u / (2.0 * a) + 0.5 * a * lag * lag)
+    return max(stopping - stop_time * u, 0.0)
+
+
+def check_within_robot(params, path="safety"):
+    """Checks that the SafetyParameters `params` only tighten the robot's
+    own limits: the base's velocity and acceleration limits at most
+    BASE_VELOCITY_LIMITS and BASE_ACCELERATION_LIMITS (the robot facts;
+    the station's base drivers have the same), the stop distance at least
+    `robot_stop_distance`. Run when the controller is built.
+
+    Raises:
+        ValueError: naming the field (under `path`), its value and the
+            robot's.
+    """
+    for name, own, unit in (
+            ("base_velocity_limits", BASE_VELOCITY_LIMITS,
+             ("m/s", "m/s", "rad/s")),
+            ("base_acceleration_limits", BASE_ACCELERATION_LIMITS,
+             ("m/s^2", "m/s^2", "rad/s^2"))):
+        for i, (value, limit) in enumerate(zip(getattr(params, name), own,
+                                               strict=True)):
+            if value > limit:
+                raise ValueError(
+                    f"{path}.{name}[{i}] = {value!r} is not allowed: must be "
+                    f"at most the robot's own {limit!r} {unit[i]} (a limit "
+                    "may tighten the robot's, not widen it)")
+    floor = robot_stop_distance(params.stop_time, params.base_velocity_limits,
+                                params.base_acceleration_limits)
+    if params.stop_distance < floor:
+        raise ValueError(
+            f"{path}.stop_distance = {params.stop_distance!r} is not "
+            f"allowed with {path}.stop_time = {params.stop_time!r}: must be "
+            f"at least the robot's own {floor:.4g} m, the distance its base "
+            "needs to stop from the approach the rule allows "
+            "(drake_wbc.math.safety.robot_stop_distance)")
+
+
+def check_vector(value, lower=-math.inf, upper=math.inf, switch=False):
+    """Checks an input vector: every entry finite and in [lower, upper],
+    and with `switch` exactly 0 or 1.
+
+    A switch (S_hri of eqs. (cdmp-wb) and (cdmp-arm): "a pHRI mode
+    switching variable with value of 0 or 1") that is neither is a fault,
+    not rounded: the stages would read 0.7 as 1 and -1 as 0, and a value
+    that is neither says that whatever sends it is not doing what it
+    means to.
 
     Args:
         value: a vector (any sequence of numbers).
         lower, upper: the range allowed for every entry (numbers).
+        switch: whether every entry must be 0 or 1.
 
     Returns:
         InputCheck: VALID, or the reason, index and value of the first bad
-        entry (NaN, then infinite, then out of range, whichever comes
-        first in the vector).
+        entry (NaN, then infinite, then out of range, then not a switch,
+        whichever comes first in the vector).
     """
     vector = np.asarray(value, dtype=float).ravel()
     finite = np.isfinite(vector)
-    in_range = finite & (vector >= lower) & (vector <= upper)
-    if np.all(in_range):
+    allowed = finite & (vector >= lower) & (vector <= upper)
+    if switch:
+        allowed &= (vector == 0.0) | (vector == 1.0)
+    if np.all(allowed):
         return VALID
-    i = int(np.flatnonzero(~in_range)[0])
+    i = int(np.flatnonzero(~allowed)[0])
     if np.isnan(vector[i]):
         reason = Reason.NOT_A_NUMBER
     elif not finite[i]:
         reason = Reason.INFINITE
-    else:
+    elif not lower <= vector[i] <= upper:
         reason = Reason.OUT_OF_RANGE
+    else:
+        reason = Reason.NOT_A_SWITCH
     return InputCheck(reason, i, float(vector[i]))
+
+
+def check_inputs(values, ranges):
+    """Checks every input vector of the controller at once.
+
+    Args:
+        values: a sequence of input vectors (float or AutoDiffXd arrays;
+            their values are checked), None for an input that is not
+            connected.
+        ranges: for each input, None for any finite value, or
+            (lower, upper, switch): the range allowed for every entry and
+            whether each must be 0 or 1 (`check_vector`).
+
+    Returns:
+        A tuple of one InputCheck per input (`check_vector`; VALID for
+        None).
+    """
+    return tuple(
+        VALID if value is None else check_vector(
+            value_of(value), *(bounds or (-math.inf, math.inf, False)))
+        for value, bounds in zip(values, ranges, strict=True))
+
+
+def _input_samples(rng):
+    """Random arguments of check_inputs: up to eight inputs of 1 to 6
+    entries, some not connected, some with a range; valid ones (now and
+    then with entries so large that their sum overflows) and ones with a
+    NaN, an infinity, an entry out of its range or a switch that is
+    neither 0 nor 1."""
+    values, ranges = [], []
+    for _ in range(rng.integers(1, 9)):
+        bounds = [None, (-math.inf, math.inf, False),
+                  (0.0, math.inf, False), (0.0, 1.0, False),
+                  (0.0, 1.0, True)][rng.integers(5)]
+        ranges.append(bounds)
+        if rng.uniform() < 0.15:
+            values.append(None)
+            continue
+        value = rng.uniform(0.05, 0.95, rng.integers(1, 7))
+        if bounds is not None and bounds[2]:
+            value = rng.choice([0.0, 1.0], value.size)
+        if rng.uniform() < 0.05:
+            value[:] = 1e308
+        if rng.uniform() < 0.1:
+            value[rng.integers(value.size)] = rng.choice(
+                [np.nan, np.inf, -np.inf, -3.0, 3.0, 0.7, 0.5])
+        values.append(value)
+    return values, ranges
+
+
+@kernels.fast_kernel(check_inputs, sample=_input_samples)
+def check_inputs_float(values, ranges):
+    """`check_inputs` of float vectors, for the control tick: one test of
+    every entry present and of the ranges, the per-input detail only when
+    one fails."""
+    # A sum of floats is finite only if every term is (a sum that
+    # overflows only sends the values to the detailed checks).
+    total = 0.0
+    for value in values:
+        if value is not None:
+            total += sum(value.tolist())
+    if math.isfinite(total):
+        for value, bounds in zip(values, ranges, strict=True):
+            if bounds is None or value is None:
+                continue
+            lower, upper, switch = bounds
+            if not (lower <= value.min() and value.max() <= upper) or (
+                    switch and not all(v == 0.0 or v == 1.0
+                                       for v in value.tolist())):
+                break
+        else:
+            return (VALID,) * len(values)
+    return check_inputs(values, ranges)
 
 
 def check_points(points):
@@ -166,23 +337,21 @@ def check_points(points):
         points: the (M, 2) array of the obstacle points' port.
 
     Returns:
-        (kept, dropped, check): the (K, 2) float array of the finite rows,
-        the number of rows dropped, and VALID or a MALFORMED InputCheck
-        (then kept is empty).
+        (kept, dropped, check): the (K, 2) float array of the finite rows
+        (`points` itself when it is a float array with none to drop), the
+        number of rows dropped, and VALID or a MALFORMED InputCheck (then
+        kept is empty).
     """
-    if (type(points) is np.ndarray and points.dtype == np.float64
-            and points.ndim == 2 and points.shape[1] == 2
-            and np.isfinite(points).all()):
-        return points, 0, VALID
     try:
         array = np.asarray(points, dtype=float)
     except (TypeError, ValueError):
         array = None
     if array is None or array.ndim != 2 or array.shape[1] != 2:
         return np.zeros((0, 2)), 0, InputCheck(Reason.MALFORMED)
-    rows = np.all(np.isfinite(array), axis=1)
-    if np.all(rows):
+    finite = np.isfinite(array)
+    if finite.all():
         return array, 0, VALID
+    rows = finite.all(axis=1)
     return array[rows], int(np.count_nonzero(~rows)), VALID
 
 
@@ -203,6 +372,8 @@ def describe(name, check, size=None):
         return f"{where} = {check.value!r} is infinite"
     if check.reason is Reason.OUT_OF_RANGE:
         return f"{where} = {check.value!r} is out of the range allowed"
+    if check.reason is Reason.NOT_A_SWITCH:
+        return f"{where} = {check.value!r} is not a switch: must be 0 or 1"
     shape = "(M, 2)" if size is None else f"({size},)"
     return f"{name} is malformed: it must be an array of shape {shape}"
 

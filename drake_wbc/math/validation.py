@@ -11,9 +11,10 @@ The parameter dataclasses check (and normalise) their fields in
 `yaml_load_typed` can fill them field by field
 (drake_wbc.controller.parameters); after
 assigning fields, `validate` runs every check of a parameters tree again.
-A stage keeps a validated copy of the parameters it is constructed with
-(`validated_copy`), so changing a parameters object afterwards has no
-effect on the stages already built from it.
+Parameters are checked where they enter (their dataclasses, at load and
+build time) and a stage reads what it needs from them when it is built,
+without checking them again: changing a parameters object afterwards has
+no effect on the stages already built from it.
 """
 
 import copy
@@ -210,6 +211,18 @@ def selection(name, value, size):
             f"{name} = {_shown(vector)} is not allowed: every entry must "
             f"be 0 or 1 (here {name}[{i}] = {float(vector[i])!r})")
     return vector
+
+
+def switch(name, value):
+    """Returns `value` as the float 0.0 or 1.0 after checking that it is
+    exactly 0 or 1 (a switch such as S_hri of eqs. (cdmp-wb), (cdmp-arm)).
+
+    Raises:
+        ValueError: naming `name` and its value.
+    """
+    if value not in (0, 1):
+        raise ValueError(f"{name} = {value!r} is not allowed: must be 0 or 1")
+    return float(value)
 
 
 def whole_multiple(name, value, period_name, period, tolerance=1e-9):

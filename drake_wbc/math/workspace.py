@@ -79,8 +79,6 @@ from typing import NamedTuple
 import numpy as np
 
 from drake_wbc.math.capability import (
-    CapabilityBand,
-    set_band,
     transition_derivative_float,
     transition_derivative_unchecked,
     transition_float,
@@ -169,14 +167,16 @@ class WorkspaceAdapterParameters:
             paper's trajectory-tracking experiment.
         workspace: the local workspace of the intuitive pHRI mode; the
             paper's d^l = 0.75, d^u = 0.8 m, phi^l = 30, phi^u = 35 deg.
-        band: C_m^l, C_m^u of f_xy and f_phi (intuitive pHRI).
+
+    The band C_m^l, C_m^u of f_xy and f_phi (intuitive pHRI) is the
+    stage's `band` argument (one CapabilityBand for every stage that
+    looks at C_m).
     """
 
     mode: str = MotionMode.LOCO_MANIPULATION
     sigma_xy: float = 0.5
     sigma_phi: float = 0.5
     workspace: LocalWorkspace = field(default_factory=LocalWorkspace)
-    band: CapabilityBand = field(default_factory=CapabilityBand)
 
     def __post_init__(self):
         self.mode = MotionMode.parse(self.mode)
@@ -184,7 +184,6 @@ class WorkspaceAdapterParameters:
         in_closed_range("sigma_phi", self.sigma_phi, 0.0, 1.0)
         self.workspace = checked_instance(
             "workspace", self.workspace, LocalWorkspace, LocalWorkspace)
-        set_band(self)
         if self.mode is MotionMode.LOCO_MANIPULATION:
             fixed_weighting_factors(self.mode, self.sigma_xy, self.sigma_phi)
 

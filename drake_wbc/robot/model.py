@@ -230,6 +230,8 @@ class ArmKinematics:
         self.velocity_limits = np.array(
             [j.velocity_upper_limits()[0] for j in joints]
         )
+        self.acceleration_limits = np.array(
+            [j.acceleration_upper_limits()[0] for j in joints])
         X_BA = self._arm_base.CalcPose(self._context, self._base)
         self.R_ba = X_BA.rotation().matrix()
         # T_a is fixed in T_b (nominal kinematics): p_ee in T_b follows

@@ -12,6 +12,11 @@ build time) and read when a stage is constructed: a stage takes what it
 needs from them then, shares them with its scalar-converted copies
 (stages.support.define_stage), and never checks them again, so changing
 a parameters object afterwards has no effect on the stages built from it.
+The values that the controller holds once for several stages (the control
+period, the C_m band, the default pHRI switch S_hri) are not in the
+stages' dataclasses but constructor arguments (`time_step`, `band`,
+`phri_switch`, with the paper's defaults), which build_controller hands
+down from ControllerParameters.
 """
 
 from drake_wbc.stages.arm_control import (
@@ -21,8 +26,6 @@ from drake_wbc.stages.arm_control import (
 from drake_wbc.stages.base_command import (
     BaseCommandLimiter,
     BaseCommandLimiter_,
-    StopGate,
-    StopGate_,
 )
 from drake_wbc.stages.base_filter import (
     BaseVelocityFilter,
@@ -50,6 +53,8 @@ from drake_wbc.stages.safety import (
     GuardedInput,
     InputGuard,
     InputGuard_,
+    StopGate,
+    StopGate_,
 )
 from drake_wbc.stages.whole_body_cdmp import (
     WholeBodyCdmp,

@@ -4,19 +4,18 @@ commands as a Drake system."""
 import math
 
 import numpy as np
-from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import BasicVector_, LeafSystem_
-from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_wbc.math.arm_control import ArmControllerParameters, check_margin
-from drake_wbc.math.scalar_support import through_float_function, value_of
-from drake_wbc.math.twist_solver import TwistSolver
-from drake_wbc.math.validation import (
-    as_vector,
-    checked_instance,
-    validated_copy,
+from drake_wbc.math.arm_control import (
+    ArmControllerParameters,
+    joint_velocity_command,
+    twist_limits,
 )
+from drake_wbc.math.kernels import body_for
+from drake_wbc.math.scalar_support import through_float_function, value_of
+from drake_wbc.math.validation import as_vector, checked_instance, positive
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.stages.support import define_stage
 
 ARM_JOINT_COUNT = 6
 """The arm's joints (the Elfin5's six)."""
@@ -30,15 +29,14 @@ _LIMITED = 2 * ARM_JOINT_COUNT
 _STATE_SIZE = 2 * ARM_JOINT_COUNT + 1
 
 
-@TemplateSystem.define("ArmCartesianVelocityController_",
-                       T_list=[float, AutoDiffXd])
+@define_stage("ArmCartesianVelocityController_")
 def ArmCartesianVelocityController_(T):
     class Impl(LeafSystem_[T]):
         """The arm's Cartesian velocity controller of Sec. III-A, for a
         position-controlled arm: V_a -> q_dot_a -> q_a by damped least
         squares, joint-limit, velocity and acceleration limits
-        (drake_wbc.math.arm_control.joint_velocity_for_twist), integrated once a
-        control period.
+        (drake_wbc.math.arm_control.joint_velocity_command), integrated
+        once a control period.
 
         ::
 
@@ -50,14 +48,21 @@ def ArmCartesianVelocityController_(T):
 
         - arm_velocity: V_a (6), the arm's Cartesian twist command
           [v_a; w_a] in T_a (m/s, rad/s), at the end effector.
-        - hold (1): optional (no hold while unconnected); >= 0.5 holds the
-          command where it is, at rest (a safe stop, see
-          drake_wbc.stages.safety.InputGuard's `stop`): the update
-          leaves q_cmd unchanged and sets q_dot to 0, so that when the
-          hold ends the arm restarts from the held command, from rest,
-          within the acceleration limit (no jump). A twist that is not
-          finite is held the same way (with `limited` 1.0), never
-          integrated.
+        - hold (1): optional (no hold while unconnected); >= 0.5 brings
+          the command to rest and holds it there (a safe stop, see
+          drake_wbc.stages.safety.InputGuard's `stop`): the update runs
+          as for a zero twist, so q_dot falls to 0 within the
+          acceleration limit, along its direction, and within the joint
+          limits' braking bounds (at 12.56 rad/s^2, at most 0.125 s and
+          0.1 rad from 1.57 rad/s), then q_cmd stays. A position command
+          held at once would ask the arm's servo for an unbounded
+          deceleration; braking never asks for more than the arm can do.
+          When the hold ends the arm restarts from the command it was
+          last sent, from rest, within the acceleration limit: no jump
+          either way. Without an acceleration limit
+          (`use_acceleration_limit` false) the command stops at once. A
+          twist that is not finite is treated the same way (with
+          `limited` 1.0), never integrated.
         - arm_position_command: q_cmd (6, rad), the joint positions for the
           arm's position servo. It is the state: no direct feedthrough.
         - arm_velocity_command: q_dot (6, rad/s) of the last update, the
@@ -74,8 +79,8 @@ def ArmCartesianVelocityController_(T):
 
         One periodic discrete update at the control period h:
 
-            q_dot  = joint_velocity_for_twist(J_a(q_cmd), V_a, q_cmd, ...,
-                                              previous q_dot),
+            q_dot  = joint_velocity_command(J_a(q_cmd), V_a, q_cmd,
+                                            previous q_dot, limits),
             q_cmd <- q_cmd + h q_dot.
 
         J_a is taken at the commanded configuration q_cmd, not at a
@@ -91,17 +96,19 @@ def ArmCartesianVelocityController_(T):
         starts at robot_model.HOME_ARM_POSITIONS at rest; use
         `set_arm_position` to start from the measured arm position.
 
-        Scalar types: double and AutoDiffXd. The update is float math (a
-        double MultibodyPlant for J_a, an SVD), so in AutoDiffXd it runs
-        through scalar_support.through_float_function over the float update
-        map (q_cmd, q_dot, limited, V_a) -> next state: the value is exact
-        and the derivatives come from central differences of that map.
-        `Linearize` at a point away from singularities and limits (where
-        the map is smooth) is therefore accurate to about 1e-9 relative;
-        where a limit is just switching, the derivative is that of one side
-        or an average of both. The system is at equilibrium only with
-        V_a = 0 and at rest, where `Linearize` applies; while it moves,
-        use Drake's `FirstOrderTaylorApproximation` (same A and B).
+        Scalar types: double and AutoDiffXd. The update runs
+        drake_wbc.math.arm_control.joint_velocity_command, the reference
+        body, in AutoDiffXd and its float kernel in double (chosen once,
+        drake_wbc.math.kernels.body_for). J_a comes from a double
+        MultibodyPlant, so in AutoDiffXd it gets its derivatives by central
+        differences (scalar_support.through_float_function); the rest of
+        the update is differentiated exactly. `Linearize` at a point away
+        from singularities and limits (where the map is smooth) is
+        therefore accurate to about 1e-9 relative; where a limit is just
+        switching, the derivative is that of the side taken. The system
+        is at equilibrium only with V_a = 0 and at rest, where `Linearize`
+        applies; while it moves, use Drake's
+        `FirstOrderTaylorApproximation` (same A and B).
 
         Args:
             params: ArmControllerParameters; 100 Hz with the defaults of
@@ -111,32 +118,33 @@ def ArmCartesianVelocityController_(T):
                 conversion shares it with the converted copy (its
                 `evaluate` sets its own context, so the copies must not
                 run their updates concurrently from several threads).
+            time_step: the control period h > 0 in s, default 0.01 (the
+                paper's 100 Hz).
         """
 
-        def _construct(self, params=None, kinematics=None, converter=None):
+        def _construct(self, params=None, kinematics=None, time_step=0.01,
+                       converter=None):
             LeafSystem_[T].__init__(self, converter)
-            params = checked_instance("params", params,
-                                      ArmControllerParameters,
-                                      ArmControllerParameters)
-            kinematics = checked_instance("kinematics", kinematics,
-                                          ArmKinematics, ArmKinematics)
-            self.params = params = validated_copy(params)
-            self.kinematics = kinematics
+            self.params = params = checked_instance(
+                "params", params, ArmControllerParameters,
+                ArmControllerParameters)
+            self.kinematics = kinematics = checked_instance(
+                "kinematics", kinematics, ArmKinematics, ArmKinematics)
             self.lower = np.array(params.lower or kinematics.lower, float)
             self.upper = np.array(params.upper or kinematics.upper, float)
             self.velocity_limits = np.array(
                 params.velocity_limits or kinematics.velocity_limits, float
             )
-            check_margin(params.margin, self.lower, self.upper)
-            # Checked once here, for the unchecked path of each tick.
-            self._acceleration_limits = (
-                np.full(ARM_JOINT_COUNT, float(params.acceleration_limit))
-                if params.use_acceleration_limit else None)
-            self._solver = TwistSolver(
+            self._time_step = positive("time_step", time_step)
+            self._lower, self._upper = self.lower.tolist(), self.upper.tolist()
+            self._limits = twist_limits(
                 self.lower, self.upper, self.velocity_limits,
-                float(params.time_step), float(params.damping),
-                float(params.damping_threshold), float(params.margin),
-                self._acceleration_limits)
+                self._time_step, params.damping, params.damping_threshold,
+                params.margin,
+                params.acceleration_limit if params.use_acceleration_limit
+                else None)
+            self._command = body_for(joint_velocity_command, T)
+            self._no_twist = np.zeros(TWIST_SIZE)
             self._input = self.DeclareVectorInputPort("arm_velocity",
                                                       TWIST_SIZE)
             self._hold = self.DeclareVectorInputPort("hold", 1)
@@ -144,7 +152,7 @@ def ArmCartesianVelocityController_(T):
             initial[_Q] = HOME_ARM_POSITIONS
             state = self.DeclareDiscreteState(BasicVector_[T](initial))
             self.DeclarePeriodicDiscreteUpdateEvent(
-                params.time_step, 0.0, self._update
+                self._time_step, 0.0, self._update
             )
             prerequisites = {self.discrete_state_ticket(state)}
             for name, size, calc in (
@@ -157,61 +165,47 @@ def ArmCartesianVelocityController_(T):
                 )
 
         def _construct_copy(self, other, converter=None):
+            # The original's parameters and kinematics, not its arguments:
+            # a default (None) would build a second plant.
             Impl._construct(self, other.params, other.kinematics,
-                            converter=converter)
-            self.params = other.params
+                            other._time_step, converter=converter)
 
         @staticmethod
         def _state(context):
             return context.get_discrete_state_vector().CopyToVector()
 
-        def float_update(self, state_and_input, hold=False):
-            """The update map in double: [q_cmd, q_dot, limited, V_a] (19)
-            -> the next state [q_cmd, q_dot, limited] (13); with `hold`
-            (or a V_a that is not finite) q_cmd stays, at rest."""
-            z = np.asarray(state_and_input, dtype=float)
-            return self._next_state(z[_Q], z[_Q_DOT], z[_STATE_SIZE:], hold)
+        def _jacobian(self, q):
+            """J_a at q (float): the kinematics run in double."""
+            return self.kinematics.evaluate(q).J_a
 
         def _next_state(self, q, previous, V_a, hold):
-            """float_update on the state's parts and V_a (float arrays)."""
-            # A finite sum has finite terms; else check them one by one.
-            if hold or not (math.isfinite(sum(V_a.tolist()))
-                            or np.isfinite(V_a).all()):
-                state = np.zeros(_STATE_SIZE)
-                state[_Q] = q
-                state[_LIMITED] = 0.0 if hold else 1.0
-                return state
-            q_list = q.tolist()
-            q_dot, scale, acceleration_scale, limited_joints, _, _ = (
-                self._solver.solve_floats(
-                    self.kinematics.evaluate(q).J_a, V_a, q_list,
-                    previous.tolist()))
-            h = self.params.time_step
+            """The next state [q_cmd, q_dot, limited] from the state's
+            parts and V_a (arrays of T); with `hold` (or a V_a that is not
+            finite) the command brakes to rest as for a zero twist."""
+            finite = _all_finite(V_a)
+            if hold or not finite:
+                V_a = self._no_twist
+            command = self._command(
+                through_float_function(self._jacobian, q), V_a, q, previous,
+                self._limits)
+            h = self._time_step
             # The bounds keep q in the band up to rounding; the clip makes
             # the joint limits exact.
+            q_dot = command.q_dot.tolist()
             state = [min(max(q_i + h * v, lower), upper)
                      for q_i, v, lower, upper in zip(
-                         q_list, q_dot, self._solver.lower,
-                         self._solver.upper, strict=True)]
+                         q.tolist(), q_dot, self._lower, self._upper,
+                         strict=True)]
             state += q_dot
-            state.append(1.0 if (scale < 1.0 or acceleration_scale < 1.0
-                                 or any(limited_joints)) else 0.0)
+            state.append(1.0 if command.limited or not finite else 0.0)
             return np.array(state)
 
         def _update(self, context, discrete_state):
-            if T is float:
-                hold = (self._hold.HasValue(context)
-                        and self._hold.Eval(context)[0] >= 0.5)
-                x = self._state(context)
-                discrete_state.set_value(self._next_state(
-                    x[_Q], x[_Q_DOT], self._input.Eval(context), hold))
-                return
             hold = (self._hold.HasValue(context)
-                    and value_of(self._hold.Eval(context))[0] >= 0.5)
-            z = np.concatenate([self._state(context),
-                                self._input.Eval(context)])
-            discrete_state.set_value(through_float_function(
-                lambda x: self.float_update(x, hold=hold), z))
+                    and self._hold.Eval(context)[0] >= 0.5)
+            x = self._state(context)
+            discrete_state.set_value(self._next_state(
+                x[_Q], x[_Q_DOT], self._input.Eval(context), hold))
 
         def _position(self, context, output):
             output.SetFromVector(self._state(context)[_Q])
@@ -237,6 +231,13 @@ def ArmCartesianVelocityController_(T):
             context.SetDiscreteState(state)
 
     return Impl
+
+
+def _all_finite(values):
+    """True when every entry of `values` (any scalar type) is finite."""
+    floats = value_of(values).tolist()
+    # A finite sum has finite terms; else check them one by one.
+    return math.isfinite(sum(floats)) or all(map(math.isfinite, floats))
 
 
 ArmCartesianVelocityController = ArmCartesianVelocityController_[None]

@@ -1,19 +1,22 @@
-"""The base's command at a safe stop and at the robot's limits, as Drake
-systems thin over drake_wbc.math.safety: StopGate (a signal zeroed while
-stopped) and BaseCommandLimiter (the base command within the robot's
-velocity and acceleration limits, its direction kept). InputGuard, which
-decides the stop, is in drake_wbc.stages.safety."""
+"""The base's command at a safe stop and at the robot's limits, as a Drake
+system thin over drake_wbc.math.safety: BaseCommandLimiter (the base
+command within the robot's velocity and acceleration limits, its direction
+kept). InputGuard, which decides the stop, and StopGate are in
+drake_wbc.stages.safety."""
 
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem_, ValueProducer
-from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.math import safety
-from drake_wbc.math.command_limits import limit_base_velocity, uniform_scale
-from drake_wbc.math.repulsion import LastPoints, RepulsiveFieldParameters
+from drake_wbc.math.command_limits import (
+    LimitedCommand,
+    limit_base_velocity,
+)
+from drake_wbc.math.kernels import body_for
+from drake_wbc.math.repulsion import LastPoints
 from drake_wbc.math.safety import SafetyParameters
-from drake_wbc.math.scalar_support import through_float_function, value_of
+from drake_wbc.math.scalar_support import through_float_function
 from drake_wbc.math.separation import (
     NEAREST_POINTS,
     scale_for_rows,
@@ -22,112 +25,41 @@ from drake_wbc.math.separation import (
 from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
+    non_negative,
     positive,
-    positive_vector,
-    validated_copy,
 )
-from drake_wbc.stages.safety import SCALARS, as_scalar_type
+from drake_wbc.stages.support import define_stage
+
+_ALLOWED = safety.BASE_AXES + 3 * NEAREST_POINTS
+"""Where the allowed speeds start in BaseCommandLimiter's state."""
 
 
-@TemplateSystem.define("StopGate_", T_list=SCALARS)
-def StopGate_(T):
-    class Impl(LeafSystem_[T]):
-        """Passes a vector on, within an envelope, or zeros during a safe
-        stop.
+def _limit_base_velocity_any(desired, previous, velocity_limits,
+                             acceleration_limits, time_step, scale=1.0):
+    """drake_wbc.math.command_limits.limit_base_velocity for AutoDiffXd
+    arguments: its body is float-only, so its derivatives are taken by
+    central differences (scalar_support.through_float_function); exact
+    where no limit acts (the identity)."""
 
-        ::
+    def limited(z):
+        result = limit_base_velocity(z[:3], z[3:6], velocity_limits,
+                                     acceleration_limits, time_step,
+                                     scale=z[6])
+        return np.concatenate([result.command, [result.velocity_scale,
+                                                result.acceleration_scale]])
 
-                     ┌──────────┐
-            value ──►│          ├──► gated
-            stop ───►│ StopGate ├──► scale
-                     └──────────┘
-
-        - value: (size) the signal.
-        - stop (1): >= 0.5 during a stop (InputGuard's `stop`).
-        - gated: (size) zeros while stop; otherwise value, scaled as a
-          whole into `limits` when given and exceeded (|gated_i| <=
-          limits_i, direction kept,
-          drake_wbc.math.command_limits.uniform_scale); the
-          very same values when within them.
-        - scale (1): that factor in [0, 1] (1 when within the limits or
-          stopped), for the BaseCommandLimiter's report.
-        Both outputs are direct feedthrough of both inputs.
-
-        Before the base filter of eq. (filtering) it lets the filter's
-        state settle towards rest during a stop (to (1 + omega_f t)
-        exp(-omega_f t) of its value, 18% after the shortest stop of 0.5 s
-        with the paper's omega_f = 2 pi rad/s and zeta = 1), so that the
-        filter restarts from near zero velocity when the stop clears; the
-        BaseCommandLimiter ramps the command from zero from there. With
-        the base's velocity limits as the envelope it is the filter's
-        anti-windup: a critically or over-damped filter (zeta >= 1) has a
-        non-negative impulse response of unit area, continuous or sampled
-        (its step response is monotone), so its state never asks for more
-        than the base can do, however large V_b' grows (e.g. a person
-        walking into the footprint, whose repulsion eq. (cdmp-base) bounds
-        only by RepulsiveFieldParameters.max_force); the arm compensates
-        the part taken away (eq. (compensation)).
-
-        The scale is computed on the values, so in AutoDiffXd the gate is
-        exact where no limit acts (the identity) and treats the scale as
-        a constant where one does.
-
-        Args:
-            size: the signal's size.
-            limits: None (no envelope), or (size,) limits > 0.
-        """
-
-        def _construct(self, size=3, limits=None, converter=None):
-            LeafSystem_[T].__init__(self, converter)
-            self.size = int(size)
-            self.limits = None if limits is None else tuple(
-                positive_vector("limits", limits, self.size).tolist())
-            self._value = self.DeclareVectorInputPort("value", self.size)
-            self._stop = self.DeclareVectorInputPort("stop", 1)
-            self.DeclareVectorOutputPort("gated", self.size, self._output)
-            self.DeclareVectorOutputPort("scale", 1, self._scale_output)
-
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.size, other.limits,
-                            converter=converter)
-
-        def _stopped(self, context):
-            stop = self._stop.Eval(context)[0]
-            return (stop if T is float else stop.value()) >= 0.5
-
-        def _scale(self, value):
-            if self.limits is None:
-                return 1.0
-            return uniform_scale(
-                value if T is float else value_of(value), self.limits)
-
-        def _output(self, context, output):
-            if self._stopped(context):
-                output.SetFromVector(as_scalar_type(T, np.zeros(self.size)))
-                return
-            value = self._value.Eval(context)
-            scale = self._scale(value)
-            output.SetFromVector(value if scale == 1.0 else scale * value)
-
-        def _scale_output(self, context, output):
-            scale = 1.0 if self._stopped(context) else self._scale(
-                self._value.Eval(context))
-            output.SetFromVector(np.array([scale]) if T is float
-                                 else as_scalar_type(T, np.array([scale])))
-
-    return Impl
+    z = through_float_function(limited, np.concatenate(
+        [desired, previous, [scale]]))
+    return LimitedCommand(z[:3], z[3], z[4])
 
 
-StopGate = StopGate_[None]
-"""StopGate_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""
+def _all_finite(vector):
+    """Whether every entry of a float or AutoDiffXd vector is finite
+    (x - x is 0 exactly for a finite x, NaN for NaN and infinities)."""
+    return all(x - x == 0.0 for x in vector.tolist())
 
 
-_ALLOWED = 7 + 3 * NEAREST_POINTS
-"""Where the allowed speeds start in BaseCommandLimiter's float_map
-argument."""
-
-
-@TemplateSystem.define("BaseCommandLimiter_", T_list=SCALARS)
+@define_stage("BaseCommandLimiter_")
 def BaseCommandLimiter_(T):
     class Impl(LeafSystem_[T]):
         """The base velocity command within the robot's limits, or zero in
@@ -151,8 +83,9 @@ def BaseCommandLimiter_(T):
         - obstacle_points: optional (none when unconnected), an (M, 2)
           float array of obstacle points in T_b; the update keeps the
           NEAREST_POINTS nearest the footprint, which limit the next
-          tick's command (drake_wbc.math.separation: the footprint approaches
-          no point faster than max(d - stop_distance, 0) / stop_time).
+          tick's command (drake_wbc.math.separation: the footprint
+          approaches no point faster than max(d - stop_distance, 0) /
+          stop_time, eqs. (approach), (allowed)).
           Read only by the update, so the outputs do not depend on it
           directly.
         - velocity_command: (3)
@@ -182,16 +115,20 @@ def BaseCommandLimiter_(T):
         State, updated once a tick h: the previous command (3), and of
         the NEAREST_POINTS obstacle points nearest the footprint their
         approach rows G (3 NEAREST_POINTS, row by row) and allowed speeds
-        (NEAREST_POINTS), so that the outputs bound G s v <= allowed with
-        a product and a minimum (drake_wbc.math.separation.scale_for_rows).
+        (NEAREST_POINTS), drake_wbc.math.separation.separation_state, so
+        that the outputs bound G s v <= allowed with a product and a
+        minimum (drake_wbc.math.separation.scale_for_rows).
 
-        Scalar types: double and AutoDiffXd; the AutoDiff output is the
-        double one with derivatives by central differences
-        (scalar_support.through_float_function): exact where no limit
-        acts (the identity).
+        Scalar types: double and AutoDiffXd, the same calculation; the
+        double one runs the float kernels of separation_state and
+        scale_for_rows (drake_wbc.math.kernels), the AutoDiffXd one their
+        references, and limit_base_velocity through central differences
+        (its body is float-only): exact where no limit acts (the
+        identity). The obstacle points are float data in both.
 
         Args:
             params: SafetyParameters (the limits); the robot's if None.
+                Read when the stage is built.
             time_step: the control period h > 0, s.
             half_sizes: the footprint's half-sizes (a, b) in m, those of
                 the repulsive field (0.4, 0.3 by default).
@@ -200,12 +137,22 @@ def BaseCommandLimiter_(T):
         def _construct(self, params=None, time_step=0.01,
                        half_sizes=(0.4, 0.3), converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self.params = validated_copy(checked_instance(
-                "params", params, SafetyParameters, SafetyParameters))
+            params = checked_instance("params", params, SafetyParameters,
+                                      SafetyParameters)
             self.time_step = positive("time_step", time_step)
-            self.half_sizes = tuple(RepulsiveFieldParameters(
-                half_sizes=half_sizes).half_sizes)
-            self._separation = LastPoints(self._separation_state)
+            self.half_sizes = tuple(
+                non_negative("half_sizes", a)
+                for a in as_vector("half_sizes", half_sizes, 2))
+            self._velocity_limits = params.base_velocity_limits
+            self._acceleration_limits = params.base_acceleration_limits
+            state_of_points = body_for(separation_state, T)
+            stop_distance, stop_time = params.stop_distance, params.stop_time
+            self._separation = LastPoints(
+                lambda points: state_of_points(points, self.half_sizes,
+                                               stop_distance, stop_time))
+            self._scale = body_for(scale_for_rows, T)
+            self._limit = (limit_base_velocity if T is float
+                           else _limit_base_velocity_any)
             self._velocity = self.DeclareVectorInputPort(
                 "velocity", safety.BASE_AXES)
             self._stopped = self.DeclareVectorInputPort("stopped", 1)
@@ -214,7 +161,7 @@ def BaseCommandLimiter_(T):
                 "obstacle_points", AbstractValue.Make(np.zeros((0, 2))))
             state = self.DeclareDiscreteState(np.concatenate([
                 np.zeros(safety.BASE_AXES),
-                self._separation_state(np.zeros((0, 2)))]))
+                self._separation(np.zeros((0, 2)))]))
             self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0,
                                                     self._update)
             # Not time: the result changes only with the inputs and state.
@@ -232,119 +179,60 @@ def BaseCommandLimiter_(T):
                 "saturation", 3, self._saturation_output,
                 prerequisites_of_calc={*depends, self._envelope.ticket()})
 
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.params, other.time_step,
-                            other.half_sizes, converter=converter)
-            self.params = other.params
-
-        def _separation_state(self, points):
-            """The state's separation part for obstacle points (M, 2):
-            the nearest points' approach rows, then allowed speeds."""
-            return separation_state(
-                points, self.half_sizes, self.params.stop_distance,
-                self.params.stop_time)
-
-        def float_map(self, z):
-            """[desired (3), previous (3), stopped, approach rows (3
-            NEAREST_POINTS), allowed speeds (NEAREST_POINTS)] ->
-            [command (3), limited, velocity scale, acceleration scale],
-            in double (without the envelope's scale)."""
-            return self._float_result(
-                z[:3], z[3:6], z[6], z[7:_ALLOWED].reshape(-1, 3),
-                z[_ALLOWED:])
-
-        def _float_result(self, desired, previous, stopped, rows, allowed):
-            """`float_map` of its parts: the desired command (3,), the
-            previous one (3,), stopped, the approach rows
+        def _limited(self, desired, previous, stopped, rows, allowed):
+            """[command (3), limited, velocity scale, acceleration scale]
+            (without the envelope's scale) from the desired command (3,),
+            the previous one (3,), stopped, the approach rows
             (NEAREST_POINTS, 3) and the allowed speeds (NEAREST_POINTS,)."""
             if stopped >= 0.5:
                 return np.array([0.0, 0.0, 0.0, 0.0, 1.0, 1.0])
-            if not np.isfinite(desired).all():
+            if not _all_finite(desired):
                 return np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
-            params = self.params
-            separation = scale_for_rows(desired, rows, allowed)
-            result = limit_base_velocity(
-                desired, previous, params.base_velocity_limits,
-                params.base_acceleration_limits, self.time_step,
-                scale=separation)
+            result = self._limit(
+                desired, previous, self._velocity_limits,
+                self._acceleration_limits, self.time_step,
+                scale=self._scale(desired, rows, allowed))
             return np.array(result.command.tolist() + [
                 1.0 if result.limited else 0.0, result.velocity_scale,
                 result.acceleration_scale])
 
         def _calc_result(self, context, value):
-            value.set_value(self._evaluate_now(context))
-
-        def _evaluate(self, context):
-            return self._result.Eval(context)
-
-        def _evaluate_now(self, context):
-            if T is float:
-                # The state's parts as views: no copy, no concatenation.
-                state = context.get_discrete_state_vector().value()
-                return self._float_result(
-                    self._velocity.Eval(context), state[:3],
-                    self._stopped.Eval(context)[0],
-                    state[3:_ALLOWED - 4].reshape(-1, 3),
-                    state[_ALLOWED - 4:])
-            state = context.get_discrete_state_vector()
-            state = state.value() if T is float else state.CopyToVector()
-            z = np.concatenate([
+            state = context.get_discrete_state_vector().CopyToVector()
+            value.set_value(self._limited(
                 self._velocity.Eval(context), state[:safety.BASE_AXES],
-                self._stopped.Eval(context), state[safety.BASE_AXES:]])
-            if T is float:
-                return self.float_map(z)
-            return through_float_function(self.float_map, z)
+                self._stopped.Eval(context)[0],
+                state[safety.BASE_AXES:_ALLOWED].reshape(-1, 3),
+                state[_ALLOWED:]))
 
         def _command_output(self, context, output):
-            output.SetFromVector(self._evaluate(context)[:3])
+            output.SetFromVector(self._result.Eval(context)[:3])
 
         def _saturation_output(self, context, output):
-            if T is float:
-                output.SetFromVector(self._float_saturation(context))
-                return
             limited, velocity_scale, acceleration_scale = (
-                self._evaluate(context)[3:])
-            if self._envelope.HasValue(context):
-                envelope = self._envelope.Eval(context)[0]
-                if value_of([envelope])[0] < 1.0:
-                    limited = as_scalar_type(T, np.ones(1))[0]
-                velocity_scale = envelope * velocity_scale
-            output.SetFromVector(np.array(
-                [limited, velocity_scale, acceleration_scale]))
-
-        def _float_saturation(self, context):
-            """The saturation output in double: the same products as the
-            general path's, without its conversions."""
-            result = self._evaluate(context)
-            limited, velocity_scale = result[3], result[4]
+                self._result.Eval(context)[3:])
             if self._envelope.HasValue(context):
                 envelope = self._envelope.Eval(context)[0]
                 if envelope < 1.0:
                     limited = 1.0
                 velocity_scale = envelope * velocity_scale
-            return np.array([limited, velocity_scale, result[5]])
+            output.SetFromVector(np.array(
+                [limited, velocity_scale, acceleration_scale]))
 
         def _update(self, context, discrete_state):
             points = (self._points.Eval(context)
                       if self._points.HasValue(context)
                       else np.zeros((0, 2)))
-            if T is float:
-                # Written in place: no concatenation, no conversion.
-                state = discrete_state.get_mutable_value()
-                state[:safety.BASE_AXES] = self._evaluate(context)[:3]
-                state[safety.BASE_AXES:] = self._separation(points)
-                return
-            discrete_state.set_value(np.concatenate([
-                self._evaluate(context)[:3],
-                as_scalar_type(T, self._separation(points))]))
+            discrete_state.set_value(np.concatenate(
+                [self._result.Eval(context)[:3], self._separation(points)]))
 
         def set_previous(self, context, velocity):
             """Sets the previous command (3,), e.g. the base's measured
             velocity when the controller takes over."""
-            state = context.get_discrete_state_vector().CopyToVector()
-            state[:safety.BASE_AXES] = as_scalar_type(T, as_vector(
-                "velocity", velocity, safety.BASE_AXES))
-            context.SetDiscreteState(state)
+            vector = context.get_mutable_discrete_state_vector()
+            state = vector.CopyToVector()
+            state[:safety.BASE_AXES] = as_vector(
+                "velocity", velocity, safety.BASE_AXES)
+            vector.SetFromVector(state)
 
     return Impl
 

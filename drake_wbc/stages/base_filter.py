@@ -8,6 +8,7 @@ from pydrake.systems.framework import LeafSystem_
 
 from drake_wbc.math.filtering import (
     BaseFilterParameters,
+    check_filter_period,
     lowpass_state_space,
     zero_order_hold,
 )
@@ -47,16 +48,19 @@ def BaseVelocityFilter_(T):
 
         Args:
             params: BaseFilterParameters (checked where they were made);
-                the paper's omega_f = 2 pi rad/s, zeta = 1 at 100 Hz if
-                None. Read here: changing them afterwards does not reach
-                the stage.
+                the paper's omega_f = 2 pi rad/s, zeta = 1 if None. Read
+                here: changing them afterwards does not reach the stage.
+            time_step: the control period h in s, default 0.01 (the
+                paper's 100 Hz); 0 for the continuous filter. omega_f
+                must stay below the Nyquist rate pi / h, and a bypassed
+                filter needs h > 0 (filtering.check_filter_period).
         """
 
-        def _construct(self, params=None, converter=None):
+        def _construct(self, params=None, time_step=0.01, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.params = params = checked_instance(
                 "params", params, BaseFilterParameters, BaseFilterParameters)
-            self._time_step = h = float(params.time_step)
+            self._time_step = h = check_filter_period(params, time_step)
             A, B, C, _ = lowpass_state_space(params.omega_f, params.zeta)
             eye = np.eye(BASE_AXES)
             self._A = np.kron(eye, A)

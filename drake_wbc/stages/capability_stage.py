@@ -9,7 +9,10 @@ import numpy as np
 from pydrake.systems.framework import LeafSystem_
 
 from drake_wbc.math import capability, motion_mode, workspace
-from drake_wbc.math.capability import ArmCapabilityParameters
+from drake_wbc.math.capability import (
+    ArmCapabilityParameters,
+    CapabilityBand,
+)
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.motion_mode import MotionMode
 from drake_wbc.math.scalar_support import through_float_function
@@ -72,24 +75,29 @@ def ArmCapability_(T):
 
         Args:
             params: ArmCapabilityParameters (read here, when the stage is
-                built); the paper's band 0.035 < C_m < 0.04 if None.
+                built); the defaults of drake_wbc.math.capability if None.
             arm: the ArmKinematics to use; a new ArmKinematics() of our
                 robot if None.
+            band: the CapabilityBand C_m^l, C_m^u of alpha (read here);
+                the paper's 0.035 < C_m < 0.04 if None.
         """
 
-        def _construct(self, params=None, arm=None, converter=None):
+        def _construct(self, params=None, arm=None, band=None,
+                       converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.params = checked_instance(
                 "params", params, ArmCapabilityParameters,
                 ArmCapabilityParameters)
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         ArmKinematics)
+            self.band = checked_instance("band", band, CapabilityBand,
+                                         CapabilityBand)
             # What the tick needs, as plain floats (see evaluate).
             p = self.params
             self._limits = (self.arm.lower.tolist(), self.arm.upper.tolist())
             self._constants = (p.joint_limit_gain, p.gradient_damping,
                                p.gradient_damping_threshold)
-            self._band = (p.band.upper, p.band.lower)
+            self._band = (self.band.upper, self.band.lower)
             self._terms = body_for(capability.capability_terms_unchecked,
                                    float)
             self._alpha = body_for(capability.transition_unchecked, float)
@@ -167,15 +175,21 @@ def WorkspaceAdapter_(T):
                 0.5 if None.
             arm: ArmKinematics whose R_ba and arm-base position define
                 T_a; our robot's if None.
+            band: the CapabilityBand C_m^l, C_m^u of f_xy and f_phi
+                (intuitive pHRI; read here); the paper's
+                0.035 < C_m < 0.04 if None.
         """
 
-        def _construct(self, params=None, arm=None, converter=None):
+        def _construct(self, params=None, arm=None, band=None,
+                       converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.params = checked_instance(
                 "params", params, WorkspaceAdapterParameters,
                 WorkspaceAdapterParameters)
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         shared_arm_kinematics)
+            self.band = checked_instance("band", band, CapabilityBand,
+                                         CapabilityBand)
             self.R_ba, self.arm_base_position = arm_mounting(self.arm)
             self._inputs = declare_inputs(self, (
                 ("end_effector_position", 3), ("end_effector_velocity", 6),
@@ -183,7 +197,7 @@ def WorkspaceAdapter_(T):
             p = self.params
             if p.mode is MotionMode.INTUITIVE_PHRI:
                 self._constants = workspace.AdaptiveWorkspace.of(
-                    p.band.upper, p.band.lower, p.workspace, self.R_ba,
+                    self.band.upper, self.band.lower, p.workspace, self.R_ba,
                     self.arm_base_position)
                 self._factors = body_for(
                     workspace.adaptive_weighting_factors_unchecked, T)

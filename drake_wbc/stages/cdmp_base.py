@@ -132,7 +132,7 @@ class CdmpStage:
 
     def _switch(self, context):
         """S_hri from its input port (a value >= 0.5 means 1) or the
-        parameter."""
+        stage's default (its constructor's phri_switch)."""
         value = self._optional(self._phri_port, context, None)
         if value is None:
             return int(self._default_switch)

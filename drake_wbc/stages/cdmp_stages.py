@@ -12,7 +12,7 @@ from pydrake.systems.framework import LeafSystem_, ValueProducer
 
 from drake_wbc.math import cdmp, repulsion
 from drake_wbc.math.kernels import body_for
-from drake_wbc.math.validation import checked_instance
+from drake_wbc.math.validation import checked_instance, switch
 from drake_wbc.stages.cdmp_base import ONE, AffineDynamics, CdmpStage
 from drake_wbc.stages.support import define_stage
 
@@ -133,7 +133,9 @@ def ArmCdmp_(T):
         - wrench: F_ext (6), the wrench on the tool, T_a.
         - desired_wrench: F_d (6), optional (the parameter when
           unconnected).
-        - phri_switch: S_hri (1), optional; 1 turns the force control off.
+        - phri_switch: S_hri (1), optional (the constructor's
+          phri_switch when unconnected; >= 0.5 counts as 1); 1 turns the
+          force control off.
         - arm_velocity_command: y_dot (6), the arm's Cartesian velocity.
 
         Along axes with S_m = 1 the arm yields to F_ext like a spring
@@ -147,27 +149,30 @@ def ArmCdmp_(T):
             params: cdmp.ArmCdmpParameters (checked where they were made;
                 the paper's wiping values if None), read here.
             time_step: control period h (0: continuous), default 0.01 s.
+            phri_switch: the default S_hri, 0 or 1, while the phri_switch
+                port is not connected; default 0.
         """
 
-        def _construct(self, params=None, time_step=0.01, converter=None):
+        def _construct(self, params=None, time_step=0.01, phri_switch=0.0,
+                       converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.params = params = checked_instance(
                 "params", params, cdmp.ArmCdmpParameters,
                 cdmp.ArmCdmpParameters)
             self._dimension = 6
-            self._default_switch = params.S_hri
+            self._default_switch = switch("phri_switch", phri_switch)
             self._default_desired = params.F_d
             base = dict(k_p=params.k_p, k_d=params.k_d, k_f=params.k_f,
                         S_m=params.S_m, dmp=params.dmp)
 
-            def derivative(switch):
+            def derivative(s):
                 def f(x, u):
                     y, z, C_a = np.split(x, 3)
                     with_goal_force = cdmp.ArmCdmpParameters(
-                        **base, F_d=u[12:], S_hri=switch)
+                        **base, F_d=u[12:])
                     return np.concatenate(cdmp.arm_cdmp_derivative(
                         y, z, C_a, np.zeros(6), u[:6], u[6:12],
-                        with_goal_force))
+                        with_goal_force, S_hri=s))
                 return f
 
             self._models = {

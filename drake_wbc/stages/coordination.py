@@ -25,6 +25,7 @@ from drake_wbc.math import (
     distribution,
     kernels,
 )
+from drake_wbc.math.capability import CapabilityBand
 from drake_wbc.math.compensation import (
     PROJECTOR_TOLERANCE,
     RobustCompensatorParameters,
@@ -93,22 +94,27 @@ def MotionDistributor_(T):
         Args:
             params: MotionDistributorParameters; k_n = 0 if None.
             arm: ArmKinematics whose R_ba is used; our robot's if None.
+            band: the CapabilityBand C_m^l, C_m^u of the switch-off of
+                k_n (read here); the paper's 0.035 < C_m < 0.04 if None.
         """
 
-        def _construct(self, params=None, arm=None, converter=None):
+        def _construct(self, params=None, arm=None, band=None,
+                       converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.params = checked_instance(
                 "params", params, MotionDistributorParameters,
                 MotionDistributorParameters)
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         shared_arm_kinematics)
+            self.band = checked_instance("band", band, CapabilityBand,
+                                         CapabilityBand)
             self.R_ba = rotation_matrix("R_ba", self.arm.R_ba)
             # None for the usual mounting ^bR_a = I, the closed form of
             # the float kernel.
             self._R_ba = (None if np.array_equal(self.R_ba, np.eye(3))
                           else self.R_ba)
             self._gain = self.params.null_space_gain
-            self._band = (self.params.band.upper, self.params.band.lower)
+            self._band = (self.band.upper, self.band.lower)
             self._smooth = self.params.smooth_switch_off
             self._damping = self.params.damping
             self._distribute = kernels.body_for(

@@ -1,25 +1,26 @@
-"""The controller's run-time safety as a Drake system, thin over
-drake_wbc.math.safety: InputGuard, every input checked where it enters, and
-the safe stop. The systems that act on the base's command during a stop
-and at the limits are in drake_wbc.stages.base_command."""
+"""The controller's run-time safety as Drake systems, thin over
+drake_wbc.math.safety: InputGuard, every input checked where it enters,
+and the safe stop it decides; StopGate, a signal zeroed during a stop (and
+kept within an envelope). The base command's limits are in
+drake_wbc.stages.base_command."""
 
 import logging
 import math
 from typing import NamedTuple
 
 import numpy as np
-from pydrake.autodiffutils import AutoDiffXd
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem_, ValueProducer
-from pydrake.systems.scalar_conversion import TemplateSystem
 
+from drake_wbc.math.command_limits import uniform_scale
+from drake_wbc.math.kernels import body_for
 from drake_wbc.math.safety import (
     STATUS_FIELDS,
     VALID,
     InputCheck,
     SafetyParameters,
+    check_inputs,
     check_points,
-    check_vector,
     initial_status,
     next_status,
     next_stop_state,
@@ -31,11 +32,9 @@ from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
     positive,
-    validated_copy,
+    positive_vector,
 )
-
-SCALARS = [float, AutoDiffXd]
-"""Double, and AutoDiffXd (ToAutoDiffXd of the whole controller)."""
+from drake_wbc.stages.support import define_stage
 
 LOGGER = logging.getLogger("drake_wbc.math.safety")
 """Where a safe stop is reported, once when it trips and once when it
@@ -51,15 +50,20 @@ class GuardedInput(NamedTuple):
     Attributes:
         name: the input port's name.
         size: its size.
-        outputs: ((output name, default), ...), the guarded copies of the
-            input; a default (a vector of `size`) is what the output
-            carries while the input is not connected, None to require a
-            connection. () means one output named like the input, required.
+        outputs: ((output name, default[, while stopped]), ...), the
+            guarded copies of the input; a default (a vector of `size`) is
+            what the output carries while the input is not connected, None
+            to require a connection; a third entry (a vector of `size`),
+            what it carries during a safe stop instead of the input (e.g.
+            a switch that turns an integrating term off). () means one
+            output named like the input, required.
         lower, upper: the range allowed for every entry.
-        zero_when_stopped: the outputs carry zeros during a safe stop (a
-            reference that must not drive anything while stopped).
+        zero_when_stopped: every output carries zeros during a safe stop
+            (a reference that must not drive anything while stopped).
         initial: the value passed on if the very first sample is invalid
             (zeros if None).
+        switch: every entry must be exactly 0 or 1 (a switch; anything
+            else is a fault, drake_wbc.math.safety.check_vector).
     """
 
     name: str
@@ -69,28 +73,20 @@ class GuardedInput(NamedTuple):
     upper: float = math.inf
     zero_when_stopped: bool = False
     initial: tuple | None = None
-
-
-def as_scalar_type(T, values):
-    """`values` as a float array, or as AutoDiffXd when T is."""
-    array = np.asarray(values)
-    if T is float:
-        return array.astype(float)
-    flat = [v if isinstance(v, AutoDiffXd) else AutoDiffXd(float(v))
-            for v in array.ravel()]
-    return np.array(flat, dtype=object).reshape(array.shape)
+    switch: bool = False
 
 
 class _Assessment(NamedTuple):
     values: list        # the current value of each input, None if unset
-    checks: list        # the InputCheck of each input
+    checks: tuple       # the InputCheck of each input
+    all_valid: bool     # every check valid
     points: np.ndarray  # the usable obstacle points
     dropped: int
     points_check: InputCheck
     after: object       # the StopState after this tick: the decision
 
 
-@TemplateSystem.define("InputGuard_", T_list=SCALARS)
+@define_stage("InputGuard_")
 def InputGuard_(T):
     class Impl(LeafSystem_[T]):
         """Checks every input of the controller where it enters, passes on
@@ -106,12 +102,13 @@ def InputGuard_(T):
                                └────────────┘──► safety_reason (abstract)
 
         - Each GuardedInput's outputs carry the input while it is valid
-          (NaN, infinite or out of range is not), and the last valid
+          (NaN, infinite, out of range or, for a switch, neither 0 nor 1
+          is not), and the last valid
           sample of the whole vector while it is not, so that no stage
           behind it ever integrates an invalid value; with
-          zero_when_stopped they carry zeros during a stop. While an
-          optional input is not connected, its outputs carry their
-          defaults.
+          zero_when_stopped they carry zeros during a stop, and an output
+          given a value while stopped carries that. While an optional
+          input is not connected, its outputs carry their defaults.
         - obstacle_points: the (M, 2) points in T_b less the rows with a NaN
           or infinite coordinate, which are dropped and counted
           (drake_wbc.math.safety.check_points); a malformed array is a fault,
@@ -147,8 +144,9 @@ def InputGuard_(T):
         def _construct(self, inputs, points_name=None, time_step=0.01,
                        params=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self.params = validated_copy(checked_instance(
-                "params", params, SafetyParameters, SafetyParameters))
+            self.params = checked_instance("params", params,
+                                           SafetyParameters,
+                                           SafetyParameters)
             self.time_step = positive("time_step", time_step)
             self.inputs = tuple(GuardedInput(*spec) for spec in inputs)
             self.points_name = points_name
@@ -167,18 +165,18 @@ def InputGuard_(T):
                                               spec.size))
             self._status_start = start
             self._status_part = slice(start, None)
-            self._stopped_part = slice(start + _STATUS["stopped"],
-                                       start + _STATUS["stopped"] + 1)
-            # Built once: which inputs may be left unconnected, which have
-            # a range to check, and the checks when every input is valid.
+            self._stopped = slice(_STATUS["stopped"], _STATUS["stopped"] + 1)
+            # Built once: which inputs may be left unconnected, their
+            # ranges, and which body checks them.
             self._port_optional = tuple(
-                (port, any(default is not None for _, default in spec.outputs))
+                (port, any(entry[1] is not None for entry in spec.outputs))
                 for port, spec in zip(self._ports, self.inputs, strict=True))
-            self._bounded = tuple(
-                (i, float(spec.lower), float(spec.upper))
-                for i, spec in enumerate(self.inputs)
-                if spec.lower > -math.inf or spec.upper < math.inf)
-            self._all_valid = (VALID,) * len(self.inputs)
+            self._ranges = tuple(
+                (float(spec.lower), float(spec.upper), bool(spec.switch))
+                if (spec.lower > -math.inf or spec.upper < math.inf
+                    or spec.switch) else None
+                for spec in self.inputs)
+            self._check_inputs = body_for(check_inputs, T)
             self._points = None
             if points_name:
                 self._points = self.DeclareAbstractInputPort(
@@ -188,6 +186,13 @@ def InputGuard_(T):
             self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0,
                                                     self._update)
             from_state = {self.discrete_state_ticket(state)}
+            self._status_entry = self.DeclareCacheEntry(
+                "the status, in floats",
+                ValueProducer(
+                    allocate=lambda: AbstractValue.Make(np.zeros(0)),
+                    calc=lambda context, value: value.set_value(value_of(
+                        self._state(context)[self._status_part]))),
+                from_state)
             self._assessment = self.DeclareCacheEntry(
                 "the inputs' checks and the stop decision",
                 ValueProducer(allocate=lambda: AbstractValue.Make(object()),
@@ -195,18 +200,23 @@ def InputGuard_(T):
                 {self.all_sources_ticket()})
             for i, spec in enumerate(self.inputs):
                 outputs = spec.outputs or ((spec.name, None),)
-                for name, default in outputs:
+                for name, default, *while_stopped in outputs:
                     if default is not None:
-                        default = as_scalar_type(T, as_vector(
-                            f"{name} default", default, spec.size))
+                        default = as_vector(f"{name} default", default,
+                                            spec.size)
+                    stopped = (np.zeros(spec.size) if spec.zero_when_stopped
+                               else None)
+                    if while_stopped and while_stopped[0] is not None:
+                        stopped = as_vector(f"{name} while stopped",
+                                            while_stopped[0], spec.size)
                     self.DeclareVectorOutputPort(
-                        name, spec.size, self._guarded_calc(i, default))
+                        name, spec.size,
+                        self._guarded_calc(i, default, stopped))
             if points_name:
                 self.DeclareAbstractOutputPort(
                     points_name, lambda: AbstractValue.Make(np.zeros((0, 2))),
                     self._points_output)
-            self._stop_values = tuple(as_scalar_type(T, [value])
-                                      for value in (0.0, 1.0))
+            self._stop_values = (np.zeros(1), np.ones(1))
             self.DeclareVectorOutputPort("stop", 1, self._stop_output)
             self.DeclareVectorOutputPort(
                 "stopped", 1, self._stopped_output,
@@ -218,25 +228,15 @@ def InputGuard_(T):
                 "safety_reason", lambda: AbstractValue.Make(""),
                 self._reason_output, prerequisites_of_calc=from_state)
 
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.inputs, other.points_name,
-                            other.time_step, other.params,
-                            converter=converter)
-            self.params = other.params
-
         # --- evaluation ---------------------------------------------------
 
         def _state(self, context):
             """The state as a new array of T."""
             return context.get_discrete_state_vector().CopyToVector()
 
-        def _status(self, context, part=None):
-            """The status, or `part` of the state, as floats (for double,
-            a view of the state)."""
-            part = part or self._status_part
-            if T is float:
-                return context.get_discrete_state_vector().get_value()[part]
-            return value_of(self._state(context)[part])
+        def _status(self, context):
+            """The status as floats (computed once per state)."""
+            return self._status_entry.Eval(context)
 
         def _calc_assessment(self, context, value):
             value.set_value(self._assessment_of(context))
@@ -245,50 +245,26 @@ def InputGuard_(T):
             values = [None if optional and not port.HasValue(context)
                       else port.Eval(context)
                       for port, optional in self._port_optional]
-            checks = self._checks(values)
+            checks = self._check_inputs(values, self._ranges)
+            # Valid checks are VALID itself: counted by identity first.
+            all_valid = (checks.count(VALID) == len(checks)
+                         or all(check.valid for check in checks))
             if self._points is not None and self._points.HasValue(context):
                 points, dropped, points_check = check_points(
                     self._points.Eval(context))
             else:
                 points, dropped, points_check = np.zeros((0, 2)), 0, VALID
-            invalid = not (points_check.valid and (
-                checks is self._all_valid or all(c.valid for c in checks)))
+            invalid = not (points_check.valid and all_valid)
             after = next_stop_state(stop_state_of(self._status(context)),
                                     invalid, self.time_step,
                                     self.params.hold_time)
-            return _Assessment(values, checks, points, dropped,
+            return _Assessment(values, checks, all_valid, points, dropped,
                                points_check, after)
-
-        def _checks(self, values):
-            """The InputCheck of each value (VALID for None): one test of
-            every entry present and of the ranges, the per-input detail
-            only when one fails."""
-            floats = values if T is float else [
-                None if value is None else value_of(value)
-                for value in values]
-            # A sum of floats is finite only if every term is (a sum that
-            # overflows only sends the values to the detailed checks).
-            total = 0.0
-            for value in floats:
-                if value is not None:
-                    total += sum(value.tolist())
-            valid = math.isfinite(total)
-            for i, lower, upper in self._bounded if valid else ():
-                value = floats[i]
-                if value is not None and not (
-                        lower <= value.min() and value.max() <= upper):
-                    valid = False
-                    break
-            if valid:
-                return self._all_valid
-            return [VALID if value is None else check_vector(
-                value, spec.lower, spec.upper)
-                for spec, value in zip(self.inputs, floats, strict=True)]
 
         def _first_fault(self, assessment):
             """(input index, InputCheck) of the first invalid input, or
             None."""
-            if assessment.checks is not self._all_valid:
+            if not assessment.all_valid:
                 for i, check in enumerate(assessment.checks):
                     if not check.valid:
                         return i, check
@@ -298,14 +274,13 @@ def InputGuard_(T):
 
         # --- outputs ------------------------------------------------------
 
-        def _guarded_calc(self, i, default):
-            spec, part, port = self.inputs[i], self._slices[i], self._ports[i]
-            zeros = as_scalar_type(T, np.zeros(spec.size))
+        def _guarded_calc(self, i, default, while_stopped):
+            part, port = self._slices[i], self._ports[i]
             # An output with a default is its default while its input is
-            # not connected: no need of the assessment then.
-            zero_when_stopped = spec.zero_when_stopped
-            shortcut = default is not None and not zero_when_stopped
-            assessment, all_valid = self._assessment, self._all_valid
+            # not connected: no need of the assessment then (unless a stop
+            # changes it).
+            shortcut = default is not None and while_stopped is None
+            assessment = self._assessment
 
             def calc(context, output):
                 if shortcut and not port.HasValue(context):
@@ -313,11 +288,11 @@ def InputGuard_(T):
                     return
                 a = assessment.Eval(context)
                 value = a.values[i]
-                if zero_when_stopped and a.after.stopped:
-                    value = zeros
+                if while_stopped is not None and a.after.stopped:
+                    value = while_stopped
                 elif value is None:
                     value = default
-                elif not (a.checks is all_valid or a.checks[i].valid):
+                elif not (a.all_valid or a.checks[i].valid):
                     value = self._state(context)[part]
                 output.SetFromVector(value)
 
@@ -331,14 +306,10 @@ def InputGuard_(T):
             output.SetFromVector(self._stop_values[stop])
 
         def _stopped_output(self, context, output):
-            stopped = self._status(context, self._stopped_part)
-            output.SetFromVector(
-                stopped if T is float else as_scalar_type(T, stopped))
+            output.SetFromVector(self._status(context)[self._stopped])
 
         def _status_output(self, context, output):
-            status = self._status(context)
-            output.SetFromVector(
-                status if T is float else as_scalar_type(T, status))
+            output.SetFromVector(self._status(context))
 
         def _reason_output(self, context, output):
             output.set_value(self.reason(context))
@@ -357,25 +328,18 @@ def InputGuard_(T):
         def _update(self, context, discrete_state):
             a = self._assessment.Eval(context)
             start = self._status_start
-            if T is float:
-                # Drake fills `discrete_state` with the state before the
-                # update: only what changes is written, in place.
-                state = discrete_state.get_mutable_value()
-            else:
-                state = self._state(context)
-            old = state[start:] if T is float else value_of(state[start:])
+            state = self._state(context)
+            old = self._status(context)
             was_stopped = old[_STATUS["stopped"]] >= 0.5
-            valid = a.checks is self._all_valid
             for value, part, check in zip(a.values, self._slices, a.checks,
                                           strict=True):
-                if value is not None and (valid or check.valid):
+                if value is not None and (a.all_valid or check.valid):
                     state[part] = value
             new = next_status(old, self._first_fault(a), a.after, a.dropped)
             state[start:] = new
-            if T is not float:
-                discrete_state.set_value(as_scalar_type(T, state))
-            elif a.after.stopped != was_stopped:
-                self._log(context.get_time(), new)
+            discrete_state.set_value(state)
+            if a.after.stopped != was_stopped:
+                self._log(float(value_of(context.get_time())), new)
 
         def _log(self, t, status):
             if status[_STATUS["stopped"]] >= 0.5:
@@ -393,10 +357,102 @@ def InputGuard_(T):
             state = self._state(context)
             state[self._slices[index]] = as_vector(
                 name, value, self.inputs[index].size)
-            context.SetDiscreteState(as_scalar_type(T, state))
+            context.SetDiscreteState(state)
 
     return Impl
 
 
 InputGuard = InputGuard_[None]
 """InputGuard_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""
+
+
+@define_stage("StopGate_")
+def StopGate_(T):
+    class Impl(LeafSystem_[T]):
+        """Passes a vector on, within an envelope, or zeros during a safe
+        stop.
+
+        ::
+
+                     ┌──────────┐
+            value ──►│          ├──► gated
+            stop ───►│ StopGate ├──► scale
+                     └──────────┘
+
+        - value: (size) the signal.
+        - stop (1): >= 0.5 during a stop (InputGuard's `stop`).
+        - gated: (size) zeros while stop; otherwise value, scaled as a
+          whole into `limits` when given and exceeded (|gated_i| <=
+          limits_i, direction kept,
+          drake_wbc.math.command_limits.uniform_scale); the
+          very same values when within them.
+        - scale (1): that factor in [0, 1] (1 when within the limits or
+          stopped), for the BaseCommandLimiter's report.
+        Both outputs are direct feedthrough of both inputs.
+
+        Before the base filter of eq. (filtering) it lets the filter's
+        state settle towards rest during a stop (to (1 + omega_f t)
+        exp(-omega_f t) of its value, 18% after the shortest stop of 0.5 s
+        with the paper's omega_f = 2 pi rad/s and zeta = 1), so that the
+        filter restarts from near zero velocity when the stop clears; the
+        BaseCommandLimiter ramps the command from zero from there. With
+        the base's velocity limits as the envelope it is the filter's
+        anti-windup: a critically or over-damped filter (zeta >= 1) has a
+        non-negative impulse response of unit area, continuous or sampled
+        (its step response is monotone), so its state never asks for more
+        than the base can do, however large V_b' grows (e.g. a person
+        walking into the footprint, whose repulsion eq. (cdmp-base) bounds
+        only by RepulsiveFieldParameters.max_force); the arm compensates
+        the part taken away (eq. (compensation)).
+
+        Without limits it holds an integrating stage while stopped: the
+        controller zeroes the inputs of the DMPs' couplings with it
+        (drake_wbc.controller.diagram), so that they do not integrate
+        during a stop.
+
+        The scale is computed on the values, so in AutoDiffXd the gate is
+        exact where no limit acts (the identity) and treats the scale as
+        a constant where one does.
+
+        Args:
+            size: the signal's size.
+            limits: None (no envelope), or (size,) limits > 0.
+        """
+
+        def _construct(self, size=3, limits=None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.size = int(size)
+            self.limits = None if limits is None else tuple(
+                positive_vector("limits", limits, self.size).tolist())
+            self._zeros = np.zeros(self.size)
+            self._value = self.DeclareVectorInputPort("value", self.size)
+            self._stop = self.DeclareVectorInputPort("stop", 1)
+            self.DeclareVectorOutputPort("gated", self.size, self._output)
+            self.DeclareVectorOutputPort("scale", 1, self._scale_output)
+
+        def _stopped(self, context):
+            return self._stop.Eval(context)[0] >= 0.5
+
+        def _scale(self, value):
+            if self.limits is None:
+                return 1.0
+            return uniform_scale(value_of(value), self.limits)
+
+        def _output(self, context, output):
+            if self._stopped(context):
+                output.SetFromVector(self._zeros)
+                return
+            value = self._value.Eval(context)
+            scale = self._scale(value)
+            output.SetFromVector(value if scale == 1.0 else scale * value)
+
+        def _scale_output(self, context, output):
+            scale = 1.0 if self._stopped(context) else self._scale(
+                self._value.Eval(context))
+            output.SetFromVector(np.array([scale]))
+
+    return Impl
+
+
+StopGate = StopGate_[None]
+"""StopGate_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""

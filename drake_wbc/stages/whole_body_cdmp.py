@@ -40,7 +40,7 @@ from drake_wbc.math.movement import (
     resolve_movement_file,
 )
 from drake_wbc.math.scalar_support import value_of
-from drake_wbc.math.validation import checked_instance
+from drake_wbc.math.validation import checked_instance, switch
 from drake_wbc.stages.cdmp_base import ONE, AffineDynamics, CdmpStage
 from drake_wbc.stages.support import define_stage, shared_arm_kinematics
 
@@ -89,8 +89,8 @@ def WholeBodyCdmp_(T):
           it is integrated (E = int delta_V_ee dt) and enters only the
           state, so this edge closes no algebraic loop.
         - base_yaw: phi_b (1), optional (0 when unconnected).
-        - phri_switch: S_hri (1), optional (the parameter when
-          unconnected; >= 0.5 counts as 1).
+        - phri_switch: S_hri (1), optional (the constructor's
+          phri_switch when unconnected; >= 0.5 counts as 1).
         - end_effector_velocity: V_ee (6), y_dot rotated into T_b by
           eq. (3), for the distributor.
 
@@ -104,24 +104,27 @@ def WholeBodyCdmp_(T):
                 made; paper values if None), read here; its `movement`,
                 if any, is read here too.
             time_step: control period h (0: continuous), default 0.01 s.
+            phri_switch: the default S_hri, 0 or 1, while the phri_switch
+                port is not connected; default 0 (the paper sets 1 for
+                pHRI).
             player: the movement.MovementPlayer to run, or None for that
                 of params.movement.
         """
 
-        def _construct(self, params=None, time_step=0.01, converter=None,
-                       player=None):
+        def _construct(self, params=None, time_step=0.01, phri_switch=0.0,
+                       converter=None, player=None):
             LeafSystem_[T].__init__(self, converter)
             self.params = params = checked_instance(
                 "params", params, cdmp.WholeBodyCdmpParameters,
                 cdmp.WholeBodyCdmpParameters)
             self._dimension = 6
-            self._default_switch = params.S_hri
+            self._default_switch = switch("phri_switch", phri_switch)
             self.player = player or movement_player(params)
             num_inputs = 18 if self.player is None else 30
             self._in_world = body_for(cdmp.twist_in_world, T)
             self._in_base = body_for(cdmp.twist_in_base, T)
 
-            def derivative(switch, playing):
+            def derivative(s_hri, playing):
                 dmp = (self.player.transformation_parameters(params.dmp)
                        if playing else params.dmp)
 
@@ -131,7 +134,7 @@ def WholeBodyCdmp_(T):
                                   else (np.zeros(6), 0.0))
                     return np.concatenate(cdmp.whole_body_cdmp_derivative(
                         y, z, C, E, g, u[:6], u[6:12], u[12:18], params,
-                        S_hri=switch, forcing=forcing, dmp=dmp))
+                        S_hri=s_hri, forcing=forcing, dmp=dmp))
                 return f
 
             if self.player is None:
@@ -176,7 +179,8 @@ def WholeBodyCdmp_(T):
             # The copy shares the original's parameters and its player
             # (which read the movement's file once).
             Impl._construct(self, other.params, other._time_step,
-                            converter=converter, player=other.player)
+                            other._default_switch, converter=converter,
+                            player=other.player)
 
         def _base_yaw(self, context):
             """phi_b from its input port, 0 when unconnected."""
@@ -185,10 +189,10 @@ def WholeBodyCdmp_(T):
 
         def _model_key(self, context, t=None):
             """The model in force at time t (the context's if None)."""
-            switch = self._switch(context)
+            s_hri = self._switch(context)
             if self.player is None:
-                return switch
-            return (switch, self.player.active(
+                return s_hri
+            return (s_hri, self.player.active(
                 _time(context) if t is None else t))
 
         def _inputs(self, context):

@@ -99,6 +99,12 @@ class BaseDriverParameters:
         check_base_time_step(self, "time_step", self.time_step)
 
 
+MIN_SERVO_FREQUENCY = 1.0
+"""The slowest arm servo allowed, Hz (the real arm's is 25 Hz): the servo's
+stiffness grows with the square of its frequency, and below about 0.15 Hz
+it is weaker than gravity on the arm."""
+
+
 @dataclass
 class ArmDriverParameters:
     """The arm's position servo.
@@ -108,7 +114,8 @@ class ArmDriverParameters:
             command, s (the control period, 0.01 s).
         servo_frequency: bandwidth of each joint's PD loop in Hz; with
             the joint's inertia from the mass matrix it sets the gains
-            (25 Hz: a stiff servo, 0.02 to 0.05 s as on the real arm).
+            (25 Hz: a stiff servo, 0.02 to 0.05 s as on the real arm);
+            at least MIN_SERVO_FREQUENCY.
         damping_ratio: of each joint's PD loop (1: critically damped).
         min_inertia: the least joint inertia used to size the gains,
             kg m^2. It stands for the geared drives' reflected inertia,
@@ -130,7 +137,13 @@ class ArmDriverParameters:
 
     def __post_init__(self):
         positive("command_period", self.command_period)
-        positive("servo_frequency", self.servo_frequency)
+        if positive("servo_frequency",
+                    self.servo_frequency) < MIN_SERVO_FREQUENCY:
+            raise ValueError(
+                f"servo_frequency = {self.servo_frequency!r} Hz is not "
+                f"allowed: must be at least {MIN_SERVO_FREQUENCY!r} Hz (a "
+                "position servo; below about 0.15 Hz the joints no longer "
+                "hold the arm against gravity and the plant fails)")
         positive("damping_ratio", self.damping_ratio)
         non_negative("min_inertia", self.min_inertia)
         check_arm_time_step(self, "time_step", self.time_step)

@@ -33,6 +33,9 @@ from drake_wbc.math.validation import (
 )
 from drake_wbc.station.sampling import SampledReading
 
+MAX_BEAMS = 10_000
+"""The most beams a scan may have (the TiM571 has 811)."""
+
 
 @dataclass
 class LidarParameters:
@@ -41,7 +44,8 @@ class LidarParameters:
     Attributes:
         field_of_view: rad, from the first beam to the last, in (0, 2 pi];
             270 degrees.
-        num_beams: beams a scan, >= 1, evenly spread (811: 0.333 degree).
+        num_beams: beams a scan, 1 to MAX_BEAMS, evenly spread (811:
+            0.333 degree).
         min_range: m, >= 0; closer objects give no return (0.05).
         max_range: m, > min_range; farther objects give no return (25).
         rate: scans a second, Hz, > 0 (15).
@@ -63,6 +67,11 @@ class LidarParameters:
             "field_of_view", self.field_of_view, 0.0, 2.0 * np.pi)
         positive("field_of_view", self.field_of_view)
         self.num_beams = whole_number("num_beams", self.num_beams, 1)
+        if self.num_beams > MAX_BEAMS:
+            raise ValueError(
+                f"num_beams = {self.num_beams!r} is not allowed: must be at "
+                f"most {MAX_BEAMS} (0.036 degree over a full turn, finer "
+                "than any planar scanner; each beam is cast every scan)")
         self.min_range = non_negative("min_range", self.min_range)
         self.max_range = positive("max_range", self.max_range)
         if self.max_range <= self.min_range:

@@ -50,6 +50,28 @@ CYLINDER_COLOR = [0.55, 0.57, 0.62, 1.0]  # RGBA, grey
 BOX_COLOR = [0.78, 0.74, 0.66, 1.0]  # beige
 PERSON_COLOR = [0.25, 0.38, 0.62, 1.0]  # blue clothes
 
+SITE_EXTENT = 1000.0
+"""The largest coordinate or size of anything in a scene, m: a scene is
+the robot's surroundings, which its LIDARs see to 25 m; Drake's geometry
+squares sizes and distances, and aborts on a cylinder 1e300 m high."""
+
+
+def within_site(name, value, lengths=None):
+    """`value` (m; a number or a vector) after checking that every entry
+    (or every entry of `lengths`, its parts in m) lies within
+    +-SITE_EXTENT.
+
+    Raises:
+        ValueError: naming `name`, its value and what is allowed.
+    """
+    array = np.asarray(value if lengths is None else lengths, dtype=float)
+    if np.any(np.abs(array) > SITE_EXTENT):
+        raise ValueError(
+            f"{name} = {value!r} is not allowed: every coordinate and size "
+            f"of a scene must lie within +-{SITE_EXTENT:g} m (the site "
+            "around the robot)")
+    return value
+
 
 def _empty(value):
     return isinstance(value, (list, tuple)) and not value
@@ -85,9 +107,10 @@ class CylinderObstacle:
     height: float = 1.0
 
     def __post_init__(self):
-        self.position = as_vector("position", self.position, 2).tolist()
-        positive("radius", self.radius)
-        positive("height", self.height)
+        self.position = within_site("position", as_vector(
+            "position", self.position, 2).tolist())
+        within_site("radius", positive("radius", self.radius))
+        within_site("height", positive("height", self.height))
 
 
 @dataclass
@@ -107,8 +130,9 @@ class BoxObstacle:
     yaw: float = 0.0
 
     def __post_init__(self):
-        self.center = as_vector("center", self.center, 3).tolist()
-        self.size = [positive(f"size[{i}]", s)
+        self.center = within_site("center", as_vector(
+            "center", self.center, 3).tolist())
+        self.size = [within_site(f"size[{i}]", positive(f"size[{i}]", s))
                      for i, s in enumerate(as_vector("size", self.size, 3))]
         as_scalar("yaw", self.yaw)
 
@@ -139,11 +163,11 @@ class WalkingPerson:
     repeat: float = 0.0
 
     def __post_init__(self):
-        positive("radius", self.radius)
-        positive("height", self.height)
+        within_site("radius", positive("radius", self.radius))
+        within_site("height", positive("height", self.height))
         self.times = _times("times", self.times)
-        self.waypoints = as_matrix("waypoints", self.waypoints,
-                                   (len(self.times), 2)).tolist()
+        self.waypoints = within_site("waypoints", as_matrix(
+            "waypoints", self.waypoints, (len(self.times), 2)).tolist())
         span = self.times[-1] - self.times[0]
         if non_negative("repeat", self.repeat) and self.repeat < span:
             raise ValueError(

@@ -83,6 +83,7 @@ from drake_wbc.station.scene import (
     Scene,
     add_static_obstacles,
     planar_shapes,
+    within_site,
 )
 from drake_wbc.station.scene_sources import add_hand, add_people
 from drake_wbc.station.servo_gains import (
@@ -110,6 +111,11 @@ MAX_TIME_STEP = 0.005
 servo's 25 Hz and 25 of the mount's rocking mode (at most 8 Hz), and the
 control period (0.01 s) a whole multiple of it."""
 
+MIN_TIME_STEP = 1e-5
+"""s, the finest plant step allowed (the default is 1 ms): at 10 us a
+simulated second takes 100,000 steps of the plant and its Python systems,
+hours of wall time; a finer step only stalls the run."""
+
 LIDAR_NAMES = ("front_left", "rear_right")
 """The scanners' names in port names, in the order of LIDAR_FRAMES."""
 
@@ -119,8 +125,8 @@ class StationOptions:
     """How the simulated station is built (a scenario's `station:`).
 
     Attributes:
-        time_step: the plant's discrete step in s (at most
-            MAX_TIME_STEP, 5 ms); the drivers run at it too.
+        time_step: the plant's discrete step in s (MIN_TIME_STEP, 10 us,
+            to MAX_TIME_STEP, 5 ms); the drivers run at it too.
         scene_period: s, how often the scripted scene's hand wrench and
             the people's drawn poses are sampled (held in between); a
             whole multiple of time_step (0.01 s, the control period).
@@ -136,7 +142,9 @@ class StationOptions:
 
     The drivers run at `time_step`: base.lag must be at least 10
     time_step, arm.command_period a whole multiple of it and
-    arm.servo_frequency below 1 / (2 time_step).
+    arm.servo_frequency below 1 / (2 time_step); the sensors sample at
+    most once a step (wrist.rate and lidar.rate at most 1 / time_step),
+    and the base starts within the scene's site (scene.SITE_EXTENT).
     """
 
     time_step: float = 0.001
@@ -153,9 +161,10 @@ class StationOptions:
 
     def __post_init__(self):
         h = positive("time_step", self.time_step)
-        if h > MAX_TIME_STEP:
+        if not MIN_TIME_STEP <= h <= MAX_TIME_STEP:
             raise ValueError(f"time_step = {h!r} s is not allowed: must be "
-                             f"at most {MAX_TIME_STEP!r} s (5 ms)")
+                             f"at least {MIN_TIME_STEP!r} s (10 us) and at "
+                             f"most {MAX_TIME_STEP!r} s (5 ms)")
         for name, kind in (("base", BaseDriverParameters),
                            ("arm", ArmDriverParameters),
                            ("wrist", ForceTorqueSensorParameters),
@@ -166,7 +175,17 @@ class StationOptions:
         check_base_time_step(self.base, "time_step", h, prefix="base.")
         check_arm_time_step(self.arm, "time_step", h, prefix="arm.")
         whole_multiple("scene_period", self.scene_period, "time_step", h)
-        as_vector("initial_base_pose", self.initial_base_pose, 3)
+        for name in ("wrist", "lidar"):
+            rate = getattr(self, name).rate
+            if rate > 1.0 / h:
+                raise ValueError(
+                    f"{name}.rate = {rate!r} Hz is not allowed with "
+                    f"time_step = {h!r} s: must be at most 1 / time_step = "
+                    f"{1.0 / h:.6g} Hz (the simulated world changes once a "
+                    "plant step; a faster sensor reads nothing new and "
+                    "stalls the simulation)")
+        pose = as_vector("initial_base_pose", self.initial_base_pose, 3)
+        within_site("initial_base_pose", self.initial_base_pose, pose[:2])
         q = as_vector("initial_arm_positions", self.initial_arm_positions, 6)
         lower, upper = arm_joint_limits()
         bad = np.flatnonzero((q < lower) | (q > upper))

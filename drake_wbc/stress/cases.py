@@ -173,8 +173,7 @@ def random_scenario(seed, index, duration=4.0):
         velocity[5] = rng.uniform(-0.3, 0.3)
         hand_scale = float(rng.choice([0.0, 3.0]))
     else:
-        params.whole_body_cdmp.S_hri = 1.0
-        params.arm_cdmp.S_hri = 1.0
+        params.phri_switch = 1.0
         hand_scale = rng.uniform(2.0, 6.0)
     scenario.task.reference_velocity = _ramped(duration, velocity, 6)
     yaw = rng.uniform(-math.pi, math.pi)

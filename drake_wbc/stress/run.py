@@ -31,22 +31,35 @@ Recorded but not an invariant: the least C_m, the least margin of the
 measured joint positions to their limits, the closest approach of a
 person (people walk where they like).
 
-`run_stress(args)` prints a progress line (cases done / total, failures so
-far; a failing case's broken invariants at once), appends each record to
-`stress.jsonl` in the output folder as it completes (so a long run that is
-stopped keeps what it did, and `--resume` runs only the cases missing from
-it), then prints a summary (every case for a short run; for a long one
-the spread of each column and the failing cases), writes `stress.json`
-and `stress.csv` and returns 0 when every invariant held, 1 otherwise.
+`run_stress(args)` checks its arguments before it touches anything,
+prints a progress line (cases done / total, failures so far; a failing
+case's broken invariants at once), appends each record to `stress.jsonl`
+in the output folder as it completes (so a long run that is stopped
+keeps what it did, and `--resume` runs only the cases missing from it),
+then prints a summary (every case for a short run; for a long one the
+spread of each column and the failing cases), writes `stress.json` and
+`stress.csv` and returns 0 when every invariant held, 1 otherwise.
+
+Stopping a run: the first Ctrl-C (SIGINT) or SIGTERM cancels the cases
+under way (their worker processes are ended; the workers themselves
+ignore Ctrl-C, which a terminal sends to them too), keeps every finished
+case in the journal and returns 130 (128 + SIGINT) or 143 (128 +
+SIGTERM), with one line saying what was kept, no traceback. A second
+signal while it stops kills the workers and exits at once. A worker
+whose parent is gone (killed with SIGKILL) ends itself within a second.
 """
 
+import contextlib
 import csv
 import json
 import math
 import multiprocessing
 import os
+import signal
 import sys
-from concurrent.futures import ProcessPoolExecutor, as_completed
+import threading
+import time
+from multiprocessing import resource_tracker
 from pathlib import Path
 
 from drake_wbc.math.validation import positive, whole_number
@@ -144,9 +157,8 @@ def run_cases(seed, cases, duration=DEFAULT_DURATION, workers=1,
     Raises:
         ValueError: naming a bad argument.
     """
-    seed = whole_number("seed", seed)
-    cases = whole_number("cases", cases, 1)
-    duration = positive("duration", duration)
+    seed, cases, duration, workers = check_arguments(seed, cases, duration,
+                                                     workers)
     on_done = on_done or (lambda record: None)
     kept = {record["case"]: record for record in done
             if record["case"] < cases}
@@ -156,13 +168,26 @@ def run_cases(seed, cases, duration=DEFAULT_DURATION, workers=1,
     elif scheduler is not None:
         records = _on_dask(scheduler, seed, pending, duration, on_done)
     else:
-        if workers is None:
-            workers = os.cpu_count() or 1
-        workers = whole_number("workers", workers, 1)
         records = _in_processes(seed, pending, duration,
                                 min(workers, len(pending)), on_done)
     return sorted([*kept.values(), *records],
                   key=lambda record: record["case"])
+
+
+def check_arguments(seed, cases, duration, workers):
+    """(seed, cases, duration, workers) checked: whole numbers seed >= 0,
+    cases >= 1 and workers >= 1 (None: one per core), duration > 0 s.
+
+    Raises:
+        ValueError: naming the first bad argument, its value and what is
+            allowed.
+    """
+    seed = whole_number("seed", seed)
+    cases = whole_number("cases", cases, 1)
+    duration = positive("duration", duration)
+    if workers is None:
+        workers = os.cpu_count() or 1
+    return seed, cases, duration, whole_number("workers", workers, 1)
 
 
 def _in_processes(seed, indices, duration, workers, on_done):
@@ -173,14 +198,134 @@ def _in_processes(seed, indices, duration, workers, on_done):
             on_done(records[-1])
         return records
     context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers,
-                             mp_context=context) as pool:
-        futures = [pool.submit(run_case, seed, index, duration)
-                   for index in indices]
-        for future in as_completed(futures):
-            records.append(future.result())
-            on_done(records[-1])
+    # A stop while the pool starts its workers would leave them half
+    # started, so it waits until the pool exists; and the workers are
+    # born with SIGINT blocked (a terminal's Ctrl-C reaches them too, and
+    # would interrupt their start-up with a traceback).
+    # Leaving the with block, by the end or by an exception (Stopped),
+    # terminates the workers: a stopped run does not wait for its cases.
+    with signals_held(), _ctrl_c_blocked_at_birth():
+        pool = context.Pool(workers, initializer=_start_worker,
+                            initargs=(os.getpid(),))
+    with pool:
+        jobs = [(seed, index, duration) for index in indices]
+        for record in pool.imap_unordered(_run_job, jobs):
+            records.append(record)
+            on_done(record)
     return records
+
+
+@contextlib.contextmanager
+def _ctrl_c_blocked_at_birth():
+    """Within the block, SIGINT is blocked in this thread, and processes
+    started here inherit the mask: a Ctrl-C does not interrupt their
+    start-up, and _start_worker then ignores it. A SIGINT to this
+    process meanwhile is not lost: another thread takes it, and this
+    one's handler runs on leaving. Only on POSIX (elsewhere it does
+    nothing)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    # Started first: starting the tracker unblocks SIGINT in this thread.
+    resource_tracker.ensure_running()
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+def _run_job(job):
+    """run_case(*job), in a worker process."""
+    return run_case(*job)
+
+
+def _start_worker(parent):
+    """Prepares a worker process: Ctrl-C is the parent's to answer (a
+    terminal sends it to the workers too), SIGTERM ends the worker, and a
+    thread ends it when its parent is gone."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a pending one is dropped
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    threading.Thread(target=_watch_parent, args=(parent,),
+                     daemon=True).start()
+
+
+def _watch_parent(parent, period=0.5):
+    while os.getppid() == parent:
+        time.sleep(period)
+    os._exit(1)
+
+
+class Stopped(BaseException):
+    """A stress run stopped by a signal (SIGINT or SIGTERM); `code` is the
+    exit code, 128 + the signal's number. A BaseException, as
+    KeyboardInterrupt, so that no `except Exception` swallows it."""
+
+    def __init__(self, signum):
+        super().__init__(signal.Signals(signum).name)
+        self.signum, self.code = signum, 128 + signum
+
+
+_SIGNALS = {"held": 0, "pending": None, "received": []}
+"""The state of stopped_by_signals: how deep in signals_held blocks, the
+signal that came while held, the signals received."""
+
+
+@contextlib.contextmanager
+def stopped_by_signals():
+    """Within the block, the first SIGINT or SIGTERM raises Stopped in the
+    main thread (at the end of a `signals_held` block, if it came inside
+    one); a second one, then or after the block (the process is
+    stopping), kills the worker processes and exits the process at once
+    (os._exit, 128 + its number). Outside the main thread (where no
+    signal handler can be set) it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received = []
+    _SIGNALS.update(held=0, pending=None, received=received)
+
+    def handler(signum, frame):
+        if received:
+            _exit_now(128 + signum)
+        received.append(signum)
+        if _SIGNALS["held"]:
+            _SIGNALS["pending"] = signum
+            return
+        raise Stopped(signum)
+
+    previous = {number: signal.signal(number, handler)
+                for number in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        if not received:  # once stopped, a signal exits at once to the end
+            for number, action in previous.items():
+                signal.signal(number, action)
+
+
+@contextlib.contextmanager
+def signals_held():
+    """Within stopped_by_signals, a stop that comes inside this block is
+    raised at its end (the block is not cut in the middle)."""
+    _SIGNALS["held"] += 1
+    try:
+        yield
+    finally:
+        _SIGNALS["held"] -= 1
+    pending = _SIGNALS["pending"]
+    if pending is not None and not _SIGNALS["held"]:
+        _SIGNALS["pending"] = None
+        raise Stopped(pending)
+
+
+def _exit_now(code):
+    for child in multiprocessing.active_children():
+        child.kill()
+    os.write(2, b"\nstress: stopped at once\n")
+    os._exit(code)
 
 
 def _on_dask(scheduler, seed, indices, duration, on_done):
@@ -194,9 +339,13 @@ def _on_dask(scheduler, seed, indices, duration, on_done):
                                  pure=False, key=f"stress-{seed}-{index}")
                    for index in indices]
         records = []
-        for future in dask_completed(futures):
-            records.append(future.result())
-            on_done(records[-1])
+        try:
+            for future in dask_completed(futures):
+                records.append(future.result())
+                on_done(records[-1])
+        except Stopped:
+            client.cancel(futures)
+            raise
         return records
     finally:
         if client is not scheduler:
@@ -223,38 +372,58 @@ class Journal:
         resume: keep the records of a journal already in `folder` whose
             seed and duration match `settings` (`records`); otherwise the
             journal starts afresh.
+        report: called with a line of text for each line of the old
+            journal that is not a record (skipped); by default printed
+            on stderr.
+
+    The journal is rewritten (settings and kept records) into a new file
+    that then replaces the old one, so that a run stopped at any moment
+    leaves a whole journal behind.
     """
 
-    def __init__(self, folder, settings, resume=False):
+    def __init__(self, folder, settings, resume=False, report=None):
         self.path = Path(folder) / "stress.jsonl"
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._report = report or (lambda text: print(text, file=sys.stderr))
         self.records = self._earlier(settings) if resume else []
-        with self.path.open("w", encoding="utf-8") as stream:
+        fresh = self.path.with_name(self.path.name + ".new")
+        with fresh.open("w", encoding="utf-8") as stream:
             stream.write(json.dumps(_json_ready(
                 {"settings": settings})) + "\n")
             for record in self.records:
                 stream.write(json.dumps(_json_ready(record)) + "\n")
+        os.replace(fresh, self.path)
 
     def _earlier(self, settings):
         if not self.path.exists():
             return []
-        lines = self.path.read_text(encoding="utf-8").splitlines()
+        text = self.path.read_bytes().decode("utf-8", errors="replace")
+        lines = text.splitlines()
         if not lines:
             return []
-        earlier = json.loads(lines[0]).get("settings", {})
-        if any(earlier.get(key) != settings[key]
-               for key in ("seed", "duration_s")):
+        try:
+            earlier = json.loads(lines[0])["settings"]
+            earlier = {key: earlier[key] for key in ("seed", "duration_s")}
+        except (ValueError, TypeError, KeyError):
+            raise ValueError(
+                f"--resume is not allowed with {self.path}: its first line, "
+                f"{_clipped(lines[0])}, is not the settings of a run "
+                "(choose another --output, or run without --resume)"
+            ) from None
+        if any(earlier[key] != settings[key] for key in earlier):
             raise ValueError(
                 f"--resume is not allowed with seed {settings['seed']} and "
                 f"duration {settings['duration_s']} s: {self.path} holds a "
-                f"run of seed {earlier.get('seed')} and duration "
-                f"{earlier.get('duration_s')} s (choose another --output)")
+                f"run of seed {earlier['seed']} and duration "
+                f"{earlier['duration_s']} s (choose another --output)")
         records = {}
-        for line in lines[1:]:
-            try:
-                record = _from_json(json.loads(line))
-            except json.JSONDecodeError:
-                continue    # a line cut short when the run was stopped
+        for number, line in enumerate(lines[1:], start=2):
+            record = _record_from_line(line)
+            if record is None:
+                self._report(
+                    f"stress: {self.path} line {number} is not a record "
+                    f"({_clipped(line)}); skipped, its case runs again")
+                continue
             records[record["case"]] = record
         return [records[index] for index in sorted(records)]
 
@@ -262,6 +431,27 @@ class Journal:
         """Appends `record` as one line, flushed to disk at once."""
         with self.path.open("a", encoding="utf-8") as stream:
             stream.write(json.dumps(_json_ready(record)) + "\n")
+
+
+def _record_from_line(line):
+    """The record of one journal line, or None when the line is not one
+    (cut short by a stopped run, or damaged): a JSON object with a whole
+    case number >= 0."""
+    try:
+        record = _from_json(json.loads(line))
+    except ValueError:
+        return None
+    if not isinstance(record, dict):
+        return None
+    case = record.get("case")
+    if isinstance(case, bool) or not isinstance(case, int) or case < 0:
+        return None
+    return record
+
+
+def _clipped(line, limit=60):
+    line = line.strip()
+    return repr(line if len(line) <= limit else line[:limit] + "...")
 
 
 SUMMARY_ROWS = 30
@@ -362,30 +552,57 @@ def write_results(folder, settings, records):
 
 def run_stress(args):
     """Runs `drake-wbc stress` with the parsed `args`; returns the exit
-    code (0: every invariant held; 1: one broke)."""
-    workers = args.workers
+    code (0: every invariant held; 1: one broke; 130 or 143: stopped by
+    SIGINT or SIGTERM, the finished cases kept in the journal).
+
+    Raises:
+        ValueError: naming a bad argument, before anything is written.
+    """
+    seed, cases, duration, workers = check_arguments(
+        args.seed, args.cases, args.duration, args.workers)
     where = (f"on the Dask cluster at {args.scheduler}" if args.scheduler
-             else f"in {workers or os.cpu_count() or 1} worker process(es)")
-    print(f"drake-wbc stress: {args.cases} cases of {args.duration} s, seed "
-          f"{args.seed}, {where}; writing to {args.output}/")
-    settings = dict(seed=args.seed, duration_s=args.duration,
-                    scheduler=args.scheduler, workers=workers)
-    journal = Journal(args.output, settings, resume=args.resume)
-    kept = [r for r in journal.records if r["case"] < args.cases]
-    if kept:
-        print(f"resuming: {len(kept)} case(s) kept from {journal.path}")
-    progress = ProgressLine(args.cases - len(kept))
+             else f"in {workers} worker process(es)")
+    settings = dict(seed=seed, duration_s=duration,
+                    scheduler=args.scheduler, workers=args.workers)
+    journal = None
+    with stopped_by_signals():
+        try:
+            journal = Journal(args.output, settings, resume=args.resume)
+            print(f"drake-wbc stress: {cases} cases of {duration} s, seed "
+                  f"{seed}, {where}; writing to {args.output}/")
+            kept = [r for r in journal.records if r["case"] < cases]
+            if kept:
+                print(f"resuming: {len(kept)} case(s) kept from "
+                      f"{journal.path}")
+            progress = ProgressLine(cases - len(kept))
 
-    def on_done(record):
-        journal.append(record)
-        progress.update(record)
+            def on_done(record):
+                journal.append(record)
+                progress.update(record)
 
-    records = run_cases(args.seed, args.cases, args.duration, workers,
-                        args.scheduler, on_done=on_done, done=kept)
-    print(summary_table(records))
-    json_path, csv_path = write_results(args.output, settings, records)
-    code = exit_code(records)
+            records = run_cases(seed, cases, duration, workers,
+                                args.scheduler, on_done=on_done, done=kept)
+            print(summary_table(records))
+            json_path, csv_path = write_results(args.output, settings,
+                                                records)
+        except Stopped as stop:
+            sys.stdout.flush()
+            print(f"\nstress: stopped by {stop}: {_kept(journal, cases)}",
+                  file=sys.stderr)
+            return stop.code
     failed = sum(bool(violations(r)) for r in records)
     print(f"{failed} of {len(records)} cases broke an invariant; wrote "
           f"{json_path} and {csv_path}")
-    return code
+    return exit_code(records)
+
+
+def _kept(journal, cases):
+    """What a stopped run leaves: the cases finished, in the journal."""
+    if journal is None:
+        return "no case had run; the journal was not touched"
+    lines = journal.path.read_text(encoding="utf-8").splitlines()[1:]
+    done = {record["case"] for record in map(_record_from_line, lines)
+            if record is not None}
+    return (f"{len(done)} of {cases} case(s) finished, kept in "
+            f"{journal.path}; the cases under way were cancelled; "
+            "--resume runs the rest")

@@ -13,16 +13,25 @@ class arm_command_t(object):
     controller every control period).
     """
 
-    __slots__ = ["utime", "num_joints", "position"]
+    __slots__ = ["utime", "sender", "num_joints", "position"]
 
-    __typenames__ = ["int64_t", "int32_t", "double"]
+    __typenames__ = ["int64_t", "int64_t", "int32_t", "double"]
 
-    __dimensions__ = [None, None, ["num_joints"]]
+    __dimensions__ = [None, None, None, ["num_joints"]]
 
     def __init__(self):
         self.utime = 0
         """
         The sender's time stamp, microseconds.
+        LCM Type: int64_t
+        """
+
+        self.sender = 0
+        """
+        The sender's identity: a random number the controller draws when it
+        starts, the same in all its commands (base and arm). The robot obeys
+        one sender at a time and refuses the others (drake_wbc/hardware/
+        README.md, "One sender at a time").
         LCM Type: int64_t
         """
 
@@ -46,7 +55,7 @@ class arm_command_t(object):
         return buf.getvalue()
 
     def _encode_one(self, buf):
-        buf.write(struct.pack(">qi", self.utime, self.num_joints))
+        buf.write(struct.pack(">qqi", self.utime, self.sender, self.num_joints))
         buf.write(struct.pack('>%dd' % self.num_joints, *self.position[:self.num_joints]))
 
     @staticmethod
@@ -62,14 +71,14 @@ class arm_command_t(object):
     @staticmethod
     def _decode_one(buf):
         self = arm_command_t()
-        self.utime, self.num_joints = struct.unpack(">qi", buf.read(12))
+        self.utime, self.sender, self.num_joints = struct.unpack(">qqi", buf.read(20))
         self.position = struct.unpack('>%dd' % self.num_joints, buf.read(self.num_joints * 8))
         return self
 
     @staticmethod
     def _get_hash_recursive(parents):
         if arm_command_t in parents: return 0
-        tmphash = (0x8568391ebb7d3491) & 0xffffffffffffffff
+        tmphash = (0xd013e01ee41e371f) & 0xffffffffffffffff
         tmphash  = (((tmphash<<1)&0xffffffffffffffff) + (tmphash>>63)) & 0xffffffffffffffff
         return tmphash
     _packed_fingerprint = None

@@ -13,16 +13,25 @@ class base_velocity_command_t(object):
     WBC_BASE_COMMAND, sent by the controller every control period).
     """
 
-    __slots__ = ["utime", "vx", "vy", "wz"]
+    __slots__ = ["utime", "sender", "vx", "vy", "wz"]
 
-    __typenames__ = ["int64_t", "double", "double", "double"]
+    __typenames__ = ["int64_t", "int64_t", "double", "double", "double"]
 
-    __dimensions__ = [None, None, None, None]
+    __dimensions__ = [None, None, None, None, None]
 
     def __init__(self):
         self.utime = 0
         """
         The sender's time stamp, microseconds.
+        LCM Type: int64_t
+        """
+
+        self.sender = 0
+        """
+        The sender's identity: a random number the controller draws when it
+        starts, the same in all its commands (base and arm). The robot obeys
+        one sender at a time and refuses the others (drake_wbc/hardware/
+        README.md, "One sender at a time").
         LCM Type: int64_t
         """
 
@@ -48,7 +57,7 @@ class base_velocity_command_t(object):
         return buf.getvalue()
 
     def _encode_one(self, buf):
-        buf.write(struct.pack(">qddd", self.utime, self.vx, self.vy, self.wz))
+        buf.write(struct.pack(">qqddd", self.utime, self.sender, self.vx, self.vy, self.wz))
 
     @staticmethod
     def decode(data: bytes):
@@ -63,13 +72,13 @@ class base_velocity_command_t(object):
     @staticmethod
     def _decode_one(buf):
         self = base_velocity_command_t()
-        self.utime, self.vx, self.vy, self.wz = struct.unpack(">qddd", buf.read(32))
+        self.utime, self.sender, self.vx, self.vy, self.wz = struct.unpack(">qqddd", buf.read(40))
         return self
 
     @staticmethod
     def _get_hash_recursive(parents):
         if base_velocity_command_t in parents: return 0
-        tmphash = (0x3d1195cb30a34bcc) & 0xffffffffffffffff
+        tmphash = (0xb4d441cf1ea93844) & 0xffffffffffffffff
         tmphash  = (((tmphash<<1)&0xffffffffffffffff) + (tmphash>>63)) & 0xffffffffffffffff
         return tmphash
     _packed_fingerprint = None

@@ -1,9 +1,9 @@
-"""InputGuard's double path (views of the state, one finiteness test of
-every entry, the update written in place) against the AutoDiffXd path
-(copies, per-scalar conversions) and against an independent tick-by-tick
-model of what the guard must do, on seeded random inputs with NaN,
-infinite, out-of-range and huge entries, malformed and partly invalid
-obstacle points, and optional inputs left unconnected."""
+"""InputGuard against an independent tick-by-tick model of what it must
+do, in double and in AutoDiffXd (the float kernel of its checks and the
+reference), on seeded random inputs with NaN, infinite, out-of-range and
+huge entries, malformed and partly invalid obstacle points, and optional
+inputs left unconnected; check_points and next_status against their
+definitions."""
 
 import math
 
@@ -23,8 +23,8 @@ from pydrake.systems.framework import (
 from pydrake.systems.primitives import Linearize
 
 from drake_wbc.math import safety
-from drake_wbc.math.safety import Reason, SafetyParameters
-from drake_wbc.stages.safety import STATUS_FIELDS, GuardedInput, InputGuard
+from drake_wbc.math.safety import STATUS_FIELDS, Reason, SafetyParameters
+from drake_wbc.stages.safety import GuardedInput, InputGuard
 
 H = 0.01
 HOLD = 0.05  # five ticks, so that the random runs clear their stops often
@@ -329,7 +329,7 @@ def test_the_last_valid_sample_initially():
         guard.GetOutputPort("reference").Eval(context), np.zeros(4))
 
 
-def test_check_points_fast_and_general_agree():
+def test_check_points_keeps_the_finite_rows():
     rng = np.random.default_rng(4)
     cases = [np.zeros((0, 2)), rng.normal(size=(50, 2)),
              np.full((2, 2), 1e308), np.asfortranarray(rng.normal(

@@ -1,0 +1,164 @@
+"""The BaseCommandLimiter tick by tick: its outputs and update against a
+model built from the public functions (drake_wbc.math.separation's
+references and command_limits.limit_base_velocity), in double and in
+AutoDiffXd, over stops, non-finite commands, envelopes and obstacle
+scans of every kind."""
+
+import numpy as np
+import pytest
+from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue
+from pydrake.common.value import AbstractValue
+
+from drake_wbc.math.command_limits import limit_base_velocity
+from drake_wbc.math.safety import SafetyParameters
+from drake_wbc.math.separation import (
+    NEAREST_POINTS,
+    scale_for_rows,
+    separation_state,
+)
+from drake_wbc.stages import BaseCommandLimiter
+
+HALF_SIZES = (0.4, 0.3)
+H = 0.01
+TOLERANCE = 1e-12
+
+
+def random_points(rng):
+    """A scan around the base, one with points inside the footprint, fewer
+    than NEAREST_POINTS, or none."""
+    kind = rng.choice(["scan", "scan", "inside", "few", "none"])
+    count = int(rng.integers(20, 400))
+    radius = rng.uniform(0.3, 5.0, count)
+    angle = rng.uniform(-np.pi, np.pi, count)
+    points = np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
+    if kind == "inside":
+        points[rng.integers(0, count, 3)] = rng.uniform(-0.3, 0.3, (3, 2))
+    elif kind == "few":
+        points = points[:int(rng.integers(1, NEAREST_POINTS))]
+    elif kind == "none":
+        points = np.zeros((0, 2))
+    return points
+
+
+def random_tick(rng, previous):
+    desired = rng.normal(size=3) * rng.choice([0.05, 0.5, 3.0])
+    if rng.random() < 0.3:  # a small step: often within every limit
+        desired = previous + rng.normal(size=3) * 1e-3
+    if rng.random() < 0.05:
+        desired[rng.integers(0, 3)] = rng.choice([np.nan, np.inf])
+    stopped = 1.0 if rng.random() < 0.1 else 0.0
+    envelope = 1.0 if rng.random() < 0.8 else rng.uniform(0.2, 1.0)
+    return desired, stopped, envelope, random_points(rng)
+
+
+def model_tick(params, previous, separation, desired, stopped, envelope,
+               points):
+    """The limiter's outputs and next state from the public functions."""
+    rows = separation[:3 * NEAREST_POINTS].reshape(-1, 3)
+    allowed = separation[3 * NEAREST_POINTS:]
+    if stopped >= 0.5:
+        command, limited, scales = np.zeros(3), 0.0, [1.0, 1.0]
+    elif not np.isfinite(desired).all():
+        command, limited, scales = np.zeros(3), 1.0, [0.0, 0.0]
+    else:
+        result = limit_base_velocity(
+            desired, previous, params.base_velocity_limits,
+            params.base_acceleration_limits, H,
+            scale=scale_for_rows(desired, rows, allowed))
+        command = result.command
+        limited = 1.0 if result.limited else 0.0
+        scales = [result.velocity_scale, result.acceleration_scale]
+    if envelope < 1.0:
+        limited = 1.0
+    saturation = np.array([limited, envelope * scales[0], scales[1]])
+    following = separation_state(points, HALF_SIZES, params.stop_distance,
+                                 params.stop_time)
+    return command, saturation, np.concatenate([command, following])
+
+
+def values(vector):
+    vector = np.asarray(vector)
+    return ExtractValue(vector).ravel() if vector.dtype == object else vector
+
+
+@pytest.mark.parametrize("scalar", ["double", "autodiff"])
+def test_the_limiter_is_the_model_tick_by_tick(scalar):
+    params = SafetyParameters()
+    system = BaseCommandLimiter(params, H, HALF_SIZES)
+    if scalar == "autodiff":
+        system = system.ToAutoDiffXd()
+    context = system.CreateDefaultContext()
+    rng = np.random.default_rng(3)
+    previous = np.zeros(3)
+    separation = separation_state(np.zeros((0, 2)), HALF_SIZES,
+                                  params.stop_distance, params.stop_time)
+    seen = set()
+    for _ in range(150):
+        desired, stopped, envelope, points = random_tick(rng, previous)
+        system.GetInputPort("velocity").FixValue(context, desired)
+        system.GetInputPort("stopped").FixValue(context, [stopped])
+        system.GetInputPort("envelope_scale").FixValue(context, [envelope])
+        system.GetInputPort("obstacle_points").FixValue(
+            context, AbstractValue.Make(points))
+        command = values(system.GetOutputPort("velocity_command").Eval(
+            context))
+        saturation = values(system.GetOutputPort("saturation").Eval(context))
+        state = system.EvalUniquePeriodicDiscreteUpdate(
+            context).get_vector().CopyToVector()
+        context.SetDiscreteState(state)
+        state = values(state)
+        expected = model_tick(params, previous, separation, desired,
+                              stopped, envelope, points)
+        for got, wanted in zip((command, saturation, state), expected,
+                               strict=True):
+            np.testing.assert_allclose(got, wanted, rtol=0.0,
+                                       atol=TOLERANCE * max(
+                                           1.0, np.abs(wanted).max()))
+        previous, separation = state[:3], state[3:]
+        if stopped < 0.5 and np.isfinite(desired).all():
+            seen.add("passed" if np.array_equal(command, desired)
+                     else "limited")
+        seen.add("stopped" if stopped >= 0.5 else "running")
+    assert seen == {"passed", "limited", "stopped", "running"}
+
+
+def test_the_autodiff_limiter_differentiates_the_separation_scale():
+    """Approaching a wall 0.5 m ahead at v_x = 1 m/s, the point straight
+    ahead allows (0.5 - 0.1) / 0.5 = 0.8 m/s, so the scale is 0.8 / v_x
+    and the command 0.8 / v_x (v_x, v_y, 0): its derivative by v_x is
+    (0, -0.8 v_y / v_x^2) = 0 and by v_y (0, 0.8 / v_x), exactly (the
+    scale's reference in AutoDiffXd; the acceleration limit is out of
+    the way)."""
+    params = SafetyParameters(base_velocity_limits=[2.0, 2.0, 2.0],
+                              base_acceleration_limits=[1e3, 1e3, 1e3])
+    system = BaseCommandLimiter(params, H, HALF_SIZES).ToAutoDiffXd()
+    context = system.CreateDefaultContext()
+    wall = np.array([[0.9, y] for y in np.linspace(-1.0, 1.0, 21)])
+    system.GetInputPort("obstacle_points").FixValue(
+        context, AbstractValue.Make(wall))
+    system.GetInputPort("stopped").FixValue(context, [0.0])
+    system.GetInputPort("velocity").FixValue(context, [0.0, 0.0, 0.0])
+    state = system.EvalUniquePeriodicDiscreteUpdate(
+        context).get_vector().CopyToVector()
+    context.SetDiscreteState(state)
+    vx = 1.0
+    desired = np.array([AutoDiffXd(vx, [1.0, 0.0]),
+                        AutoDiffXd(0.0, [0.0, 1.0]), AutoDiffXd(0.0)],
+                       dtype=object)
+    system.GetInputPort("velocity").FixValue(context, desired)
+    command = system.GetOutputPort("velocity_command").Eval(context)
+    np.testing.assert_allclose(ExtractValue(command).ravel(),
+                               [0.8, 0.0, 0.0], atol=1e-12)
+    gradient = ExtractGradient(command)
+    # d(0.8 v / v_x)/dv: row x [0, 0.8 / v_x], row y [0, 0.8 / v_x].
+    np.testing.assert_allclose(gradient[:2], [[0.0, 0.0], [0.0, 0.8]],
+                               atol=1e-6)
+
+
+def test_bad_arguments_are_named():
+    with pytest.raises(ValueError, match="time_step"):
+        BaseCommandLimiter(time_step=0.0)
+    with pytest.raises(ValueError, match="half_sizes"):
+        BaseCommandLimiter(half_sizes=(0.4, -0.3))
+    with pytest.raises(ValueError, match="params"):
+        BaseCommandLimiter(params={"stop_time": 0.5})

@@ -1,0 +1,144 @@
+"""The robot's side of the protocol protects itself (drake_wbc/hardware/
+README.md): it obeys one sender at a time, judges time stamps as the
+controller does, and limits the arm's commands in rate and acceleration
+itself, so that a forged packet neither jerks the arm nor locks the real
+controller out. The simulated robot (RobotSide) over memq://, with the
+test as the controller and as a second sender."""
+
+import numpy as np
+from pydrake.lcm import DrakeLcm
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+
+from drake_wbc.deployment.robot_side import RobotSide
+from drake_wbc.experiments.scenario import find_scenario, load_scenario
+from drake_wbc.hardware import messages
+from drake_wbc.hardware.codecs import COMMAND_STATUS
+from drake_wbc.hardware.options import HardwareOptions
+
+H = 0.01
+CONTROLLER, OTHER = 1234567, 7654321
+
+
+class Robot:
+    """The simulated robot in a Diagram, the test on its command channels
+    and recording the arm command its arm gets every period."""
+
+    def __init__(self):
+        scenario = load_scenario(find_scenario("hardware"))
+        self.options = HardwareOptions(lcm_url="memq://")
+        self.lcm = DrakeLcm("memq://")
+        builder = DiagramBuilder()
+        self.robot = RobotSide(scenario, self.options, self.lcm)
+        builder.AddSystem(self.robot.diagram)
+        self.diagram = builder.Build()
+        self.simulator = Simulator(self.diagram)
+        self.root = self.simulator.get_mutable_context()
+        self.robot.set_initial_state(self.root)
+        self.simulator.Initialize()
+        self.home = np.array(scenario.station.initial_arm_positions)
+        self.tick = 0
+        self.arm = []  # (t, the arm's command)
+
+    def send(self, positions, sender=CONTROLLER, utime=None, base=None):
+        utime = int(round(self.tick * H * 1e6)) if utime is None else utime
+        channels = self.options.channels
+        self.lcm.Publish(channels.arm_command, messages.encode_arm_command(
+            utime, positions, sender))
+        if base is not None:
+            self.lcm.Publish(channels.base_command,
+                             messages.encode_base_command(utime, base,
+                                                          sender))
+
+    def run(self, ticks, positions=None, extra=None):
+        """`ticks` periods; the controller sends `positions` (if given)
+        2 ms into each, then `extra(robot)`."""
+        for _ in range(ticks):
+            self.simulator.AdvanceTo(self.tick * H + 0.002)
+            if positions is not None:
+                self.send(positions)
+            if extra is not None:
+                extra(self)
+            self.simulator.AdvanceTo(self.tick * H + 0.009)
+            self.arm.append((self.root.get_time(), self.port(
+                "arm_limiter", "positions").copy()))
+            self.tick += 1
+
+    def port(self, system, name):
+        system = self.robot.systems[system]
+        return system.GetOutputPort(name).Eval(
+            system.GetMyContextFromRoot(self.root))
+
+    def status(self):
+        return dict(zip(COMMAND_STATUS, self.port("commands", "status"),
+                        strict=True))
+
+    def rates(self):
+        q = np.array([q for _, q in self.arm])
+        return np.diff(q, axis=0) / H
+
+
+def test_a_forged_packet_neither_jerks_the_arm_nor_locks_it_out():
+    """The controller holds the arm at home; a packet of its own sender's
+    identity (spoofed), stamped a little ahead of its clock, asks for 1 rad
+    on every joint. Once it moved the arm 1 rad at once and, stamped a
+    minute ahead, made the robot ignore its controller for 60 s. Here the
+    arm moves within 1.57 rad/s and 12.56 rad/s^2 and is back under its
+    controller's command within a few periods: the robot takes its
+    controller's clock back after three of its messages (the forged
+    stamp is ahead of theirs), and meanwhile the arm heads for the forged
+    command no faster than its limits allow."""
+    r = Robot()
+    r.run(20, r.home)
+    forged = int(round(r.tick * H * 1e6)) + 50_000  # 0.05 s ahead
+    r.run(1, r.home, extra=lambda b: b.send(b.home + 1.0, utime=forged))
+    # And one a minute ahead: out of sequence, rejected.
+    r.run(1, r.home, extra=lambda b: b.send(b.home + 1.0,
+                                            utime=forged + 60_000_000))
+    r.run(60, r.home)
+    rates = r.rates()
+    assert np.all(np.abs(rates) <= 1.57 + 1e-9)
+    assert np.all(np.abs(np.diff(rates, axis=0)) <= 12.56 * H + 1e-9)
+    q = np.array([q for _, q in r.arm])
+    excursion = np.max(np.abs(q - r.home))
+    print(f"largest excursion {excursion:.4f} rad; status {r.status()}")
+    assert excursion < 0.05
+    np.testing.assert_array_equal(q[-1], r.home)
+    assert r.status()["arm_command_rejected"] >= 1
+
+
+def test_a_second_sender_is_refused_until_the_first_falls_quiet():
+    r = Robot()
+    r.run(20, r.home)
+    # Another controller starts while the first one runs: refused, on
+    # both channels.
+    r.run(30, r.home, extra=lambda b: b.send(b.home + 0.3, OTHER,
+                                             base=[0.5, 0.0, 0.0]))
+    status = r.status()
+    assert status["refused"] == 60
+    assert status["sender_changes"] == 0
+    np.testing.assert_array_equal(r.arm[-1][1], r.home)
+    np.testing.assert_array_equal(r.port("commands", "velocity"), 0.0)
+    # The first one falls quiet: after the robot's command timeout
+    # (0.25 s) the other one takes the channels, and the arm goes to its
+    # command within the arm's limits.
+    r.run(60, extra=lambda b: b.send(b.home + 0.3, OTHER))
+    assert r.status()["sender_changes"] == 1
+    np.testing.assert_allclose(r.arm[-1][1], r.home + 0.3)
+    rates = r.rates()
+    assert np.all(np.abs(rates) <= 1.57 + 1e-9)
+    assert np.all(np.abs(np.diff(rates, axis=0)) <= 12.56 * H + 1e-9)
+    assert np.max(np.abs(rates)) > 1.0
+
+
+def test_commands_within_the_limits_pass_unchanged():
+    """What the controller sends within the arm's limits is what the arm
+    gets, bit for bit (the loopback tests compare whole runs)."""
+    r = Robot()
+    wave = [r.home + 0.2 * (1.0 - np.cos(np.pi * k * H)) for k in
+            range(100)]
+    for q in wave:
+        r.run(1, q)
+    got = np.array([q for _, q in r.arm])
+    np.testing.assert_array_equal(got, np.array(wave))
+    assert r.port("arm_limiter", "limited")[0] == 0.0
