@@ -109,7 +109,8 @@ class RobotSide:
             "commands", CommandReceiver(
                 lcm, (channels.base_command, channels.arm_command),
                 scenario.station.initial_arm_positions,
-                options.robot_command_timeout, ClockRules.of(options)))
+                options.robot_command_timeout, options.sender_release_time,
+                ClockRules.of(options)))
         builder.Connect(receiver.GetOutputPort("velocity"),
                         station.GetInputPort("base.velocity_command"))
         arm = ArmKinematics()

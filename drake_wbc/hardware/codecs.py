@@ -485,7 +485,7 @@ class CommandReceiver(LeafSystem):
       sender.
 
     Both channels obey one sender (`admit`): the first one heard, until
-    it has been quiet on both for `timeout`; its time stamps are judged
+    it has been quiet on both for `release_time`; its time stamps are judged
     by `rules` (a new sender starts a new sequence). It subscribes to
     both channels itself and takes in every message, in order of
     arrival, at the simulator step after delivery, as MessageDecoder
@@ -495,15 +495,17 @@ class CommandReceiver(LeafSystem):
         lcm: the DrakeLcmInterface to subscribe on.
         channels: (base command channel, arm command channel).
         initial_positions: (6,) the arm command before the first.
-        timeout: s, the robot's command timeout (and the sender lock's
-            quiet time).
+        timeout: s, the robot's command timeout.
+        release_time: s, the sender lock's quiet time (at least
+            `timeout`).
         rules: the ClockRules.
     """
 
     def __init__(self, lcm, channels, initial_positions, timeout,
-                 rules=DEFAULT_RULES):
+                 release_time, rules=DEFAULT_RULES):
         super().__init__()
         self.timeout = positive("timeout", timeout)
+        self.release_time = positive("release_time", release_time)
         self.rules = rules
         self.initial = as_vector("initial_positions", initial_positions, 6)
         self._formats = (FORMATS["base_command"], FORMATS["arm_command"])
@@ -553,7 +555,7 @@ class CommandReceiver(LeafSystem):
                 receptions[kind] = reject(receptions[kind], str(error))
                 continue
             lock, obeyed, new = admit(lock, decoded.sender, now,
-                                      self.timeout)
+                                      self.release_time)
             if not obeyed:
                 continue
             if new:
