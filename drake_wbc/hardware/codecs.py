@@ -20,6 +20,7 @@ import logging
 from collections import deque
 from typing import NamedTuple
 
+import lcm as lcm_module
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
@@ -295,6 +296,66 @@ LOG_INTERVAL = 1.0
 """s of the receiver's clock between two warnings of one receiver about
 rejected or refused messages (the first is said at once), so that a
 flood of bad messages cannot flood the log as well."""
+
+
+class QueuedLcm:
+    """Receiving over UDP multicast without losing messages.
+
+    DrakeLcm keeps one message a subscription between two of its polls,
+    the oldest: after a moment without a poll (a busy processor) the
+    receivers would see an old message and miss the newer ones, and a
+    flood of garbage on a channel would hide its genuine messages. This is
+    the lcm package's own LCM on the same URL, each subscription holding
+    up to QUEUE_LIMIT messages; it offers the two methods of DrakeLcm that
+    the receivers use, and an LcmPump in the Diagram polls it.
+
+    Args:
+        url: the LCM URL (udpm://...).
+    """
+
+    def __init__(self, url):
+        self.url = url
+        self._lcm = lcm_module.LCM(url)
+
+    def get_lcm_url(self):
+        return self.url
+
+    def Subscribe(self, channel, handler):  # noqa: N802 (DrakeLcm's name)
+        subscription = self._lcm.subscribe(
+            channel, lambda _, data: handler(data))
+        subscription.set_queue_capacity(QUEUE_LIMIT)
+
+    def HandleSubscriptions(self, timeout_millis):  # noqa: N802
+        """Delivers every message received; returns how many."""
+        count = 0
+        while self._lcm.handle_timeout(timeout_millis if not count
+                                       else 0) > 0:
+            count += 1
+        return count
+
+
+def receiving_bus(lcm):
+    """What the receivers of an LCM connection `lcm` subscribe on: a
+    QueuedLcm of its URL for UDP multicast, `lcm` itself otherwise
+    (DrakeLcm's memq:// delivers every message)."""
+    url = lcm.get_lcm_url() if hasattr(lcm, "get_lcm_url") else ""
+    return QueuedLcm(url) if url.startswith("udpm://") else lcm
+
+
+class LcmPump(LeafSystem):
+    """Polls a QueuedLcm every `period` s (a publish event), so that its
+    messages reach the receivers' mailboxes; the receivers take them in at
+    the next simulator step, at the same time."""
+
+    def __init__(self, bus, period):
+        super().__init__()
+        self._bus = bus
+        self.DeclarePeriodicPublishEvent(positive("period", period), 0.0,
+                                         self._poll)
+        self.DeclareInitializationPublishEvent(self._poll)
+
+    def _poll(self, context):
+        self._bus.HandleSubscriptions(0)
 
 
 class _Warnings:
