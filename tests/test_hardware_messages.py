@@ -192,6 +192,9 @@ def test_options_are_checked():
         HardwareOptions(watchdog_period=0.003)
     with pytest.raises(ValueError, match="clock_resync_messages = 1"):
         HardwareOptions(clock_resync_messages=1)
+    with pytest.raises(ValueError, match="sender_release_time = 0.1 s.*"
+                                         "robot_command_timeout = 0.25"):
+        HardwareOptions(sender_release_time=0.1)
     with pytest.raises(ValueError,
                        match=r"obstacle_points = 0.05 s.*\(0.06667 s\)"):
         WatchdogLimits(obstacle_points=0.05)

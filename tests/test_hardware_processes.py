@@ -4,6 +4,7 @@ so no packet leaves it), logged by the real `lcm-logger`: the run
 reaches its end within the bounds the simulated run meets, Ctrl-C stops
 a deployment cleanly, and `plot` draws the logged run."""
 
+import json
 import os
 import shutil
 import signal
@@ -347,3 +348,80 @@ def test_the_robot_refuses_a_second_sender(frozen, run):
     print(f"joint 1 within {np.max(np.abs(positions[:, 0])):.2e} rad of 0")
     assert np.max(np.abs(positions[:, 0])) < 0.01
     assert run["codes"]["frozen"] == 0, run["outputs"]["frozen"]
+
+
+FLOOD = """
+import json
+import sys
+import time
+
+import numpy as np
+from pydrake.lcm import DrakeLcm
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource
+
+from drake_wbc.hardware import messages
+from drake_wbc.hardware.interface import DIAGNOSTICS, HardwareInterface
+from drake_wbc.hardware.options import HardwareOptions
+from drake_wbc.robot.model import HOME_ARM_POSITIONS as HOME
+
+URL = "udpm://239.255.76.67:7667?ttl=0"
+lcm, robot = DrakeLcm(URL), DrakeLcm(URL)
+builder = DiagramBuilder()
+hw = HardwareInterface(HardwareOptions(lcm_url=URL), lcm, HOME)
+builder.AddSystem(hw.diagram)
+for port, value in (("base.velocity_command", np.zeros(3)),
+                    ("arm.position_command", HOME)):
+    source = builder.AddSystem(ConstantVectorSource(value))
+    builder.Connect(source.get_output_port(), hw.diagram.GetInputPort(port))
+simulator = Simulator(builder.Build())
+root = simulator.get_mutable_context()
+simulator.Initialize()
+garbage = int(sys.argv[1])
+for k in range(100):
+    utime = k * 10_000
+    for data in ([b"garbage"] * garbage
+                 + [messages.encode_base_state(utime, np.zeros(6))]
+                 + [b"garbage"] * garbage):
+        robot.Publish("WBC_BASE_STATE", data)
+    robot.Publish("WBC_ARM_STATUS", messages.encode_arm_status(
+        utime, HOME, np.zeros(6)))
+    robot.Publish("WBC_WRIST_WRENCH", messages.encode_wrench(
+        utime, np.zeros(6)))
+    if k % 6 == 0:
+        robot.Publish("WBC_OBSTACLE_POINTS", messages.encode_obstacle_points(
+            utime, np.zeros((0, 2))))
+    time.sleep(0.002)  # all of it on the wire before the next step
+    simulator.AdvanceTo((k + 1) * 0.01)
+values = hw.diagram.GetOutputPort("hardware.diagnostics").Eval(
+    hw.diagram.GetMyContextFromRoot(root))
+print(json.dumps(dict(zip(DIAGNOSTICS, values.tolist()))))
+"""
+"""The hardware interface over UDP multicast, the script playing the
+robot: 10 garbage messages on WBC_BASE_STATE before and after each
+genuine one, every control period for 1 s; prints the diagnostics."""
+
+
+def test_a_flood_over_udp_hides_no_genuine_message(tmp_path):
+    """Over real UDP multicast DrakeLcm keeps one message a subscription
+    between two polls, the oldest: in a flood the genuine base state was
+    never seen, and the robot never started. The receivers keep every
+    message (QueuedLcm): all garbage is rejected, every genuine message
+    taken."""
+    allowed, reason = _namespaces_allowed()
+    if not allowed:
+        pytest.skip(reason)
+    (tmp_path / "flood.py").write_text(FLOOD)
+    result = subprocess.run(
+        ["unshare", "-n", "sh", "-c",
+         "ip link set lo up; ip route add 224.0.0.0/4 dev lo; "
+         f"{sys.executable} {tmp_path / 'flood.py'} 10"],
+        capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    diagnostics = json.loads(result.stdout.strip().splitlines()[-1])
+    print(diagnostics)
+    assert diagnostics["watchdog_trips"] == 0
+    assert diagnostics["watchdog_tripped"] == 0
+    assert diagnostics["base_state_rejected"] == 2000
+    assert diagnostics["base_state_age"] <= 0.01

@@ -119,9 +119,12 @@ def test_a_second_sender_is_refused_until_the_first_falls_quiet():
     assert status["sender_changes"] == 0
     np.testing.assert_array_equal(r.arm[-1][1], r.home)
     np.testing.assert_array_equal(r.port("commands", "velocity"), 0.0)
-    # The first one falls quiet: after the robot's command timeout
-    # (0.25 s) the other one takes the channels, and the arm goes to its
-    # command within the arm's limits.
+    # The first one falls quiet: after the sender release time (1 s) the
+    # other one takes the channels, and the arm goes to its command within
+    # the arm's limits.
+    r.run(95, extra=lambda b: b.send(b.home + 0.3, OTHER))
+    assert r.status()["sender_changes"] == 0
+    np.testing.assert_array_equal(r.arm[-1][1], r.home)
     r.run(60, extra=lambda b: b.send(b.home + 0.3, OTHER))
     assert r.status()["sender_changes"] == 1
     np.testing.assert_allclose(r.arm[-1][1], r.home + 0.3)

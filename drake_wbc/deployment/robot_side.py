@@ -44,8 +44,10 @@ from drake_wbc.experiments.scenario import Scenario
 from drake_wbc.hardware.codecs import (
     ClockRules,
     CommandReceiver,
+    LcmPump,
     MessageEncoder,
     SignalBundleEncoder,
+    receiving_bus,
 )
 from drake_wbc.hardware.interface import add_publisher
 from drake_wbc.hardware.options import HardwareOptions
@@ -105,11 +107,16 @@ class RobotSide:
         self.station = SimulatedStation(scenario.station, scenario.scene)
         station = builder.AddNamedSystem("station", self.station.diagram)
 
+        bus = receiving_bus(lcm)
+        if bus is not lcm:
+            s["pump"] = builder.AddNamedSystem("pump", LcmPump(
+                bus, options.watchdog_period))
         s["commands"] = receiver = builder.AddNamedSystem(
             "commands", CommandReceiver(
-                lcm, (channels.base_command, channels.arm_command),
+                bus, (channels.base_command, channels.arm_command),
                 scenario.station.initial_arm_positions,
-                options.robot_command_timeout, ClockRules.of(options)))
+                options.robot_command_timeout, options.sender_release_time,
+                ClockRules.of(options)))
         builder.Connect(receiver.GetOutputPort("velocity"),
                         station.GetInputPort("base.velocity_command"))
         arm = ArmKinematics()

@@ -20,6 +20,7 @@ import logging
 from collections import deque
 from typing import NamedTuple
 
+import lcm as lcm_module
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
@@ -297,6 +298,66 @@ rejected or refused messages (the first is said at once), so that a
 flood of bad messages cannot flood the log as well."""
 
 
+class QueuedLcm:
+    """Receiving over UDP multicast without losing messages.
+
+    DrakeLcm keeps one message a subscription between two of its polls,
+    the oldest: after a moment without a poll (a busy processor) the
+    receivers would see an old message and miss the newer ones, and a
+    flood of garbage on a channel would hide its genuine messages. This is
+    the lcm package's own LCM on the same URL, each subscription holding
+    up to QUEUE_LIMIT messages; it offers the two methods of DrakeLcm that
+    the receivers use, and an LcmPump in the Diagram polls it.
+
+    Args:
+        url: the LCM URL (udpm://...).
+    """
+
+    def __init__(self, url):
+        self.url = url
+        self._lcm = lcm_module.LCM(url)
+
+    def get_lcm_url(self):
+        return self.url
+
+    def Subscribe(self, channel, handler):  # noqa: N802 (DrakeLcm's name)
+        subscription = self._lcm.subscribe(
+            channel, lambda _, data: handler(data))
+        subscription.set_queue_capacity(QUEUE_LIMIT)
+
+    def HandleSubscriptions(self, timeout_millis):  # noqa: N802
+        """Delivers every message received; returns how many."""
+        count = 0
+        while self._lcm.handle_timeout(timeout_millis if not count
+                                       else 0) > 0:
+            count += 1
+        return count
+
+
+def receiving_bus(lcm):
+    """What the receivers of an LCM connection `lcm` subscribe on: a
+    QueuedLcm of its URL for UDP multicast, `lcm` itself otherwise
+    (DrakeLcm's memq:// delivers every message)."""
+    url = lcm.get_lcm_url() if hasattr(lcm, "get_lcm_url") else ""
+    return QueuedLcm(url) if url.startswith("udpm://") else lcm
+
+
+class LcmPump(LeafSystem):
+    """Polls a QueuedLcm every `period` s (a publish event), so that its
+    messages reach the receivers' mailboxes; the receivers take them in at
+    the next simulator step, at the same time."""
+
+    def __init__(self, bus, period):
+        super().__init__()
+        self._bus = bus
+        self.DeclarePeriodicPublishEvent(positive("period", period), 0.0,
+                                         self._poll)
+        self.DeclareInitializationPublishEvent(self._poll)
+
+    def _poll(self, context):
+        self._bus.HandleSubscriptions(0)
+
+
 class _Warnings:
     """A receiver's rate-limited warnings on the drake_wbc.hardware
     logger: the first of each kind at once, then at most one a
@@ -485,7 +546,7 @@ class CommandReceiver(LeafSystem):
       sender.
 
     Both channels obey one sender (`admit`): the first one heard, until
-    it has been quiet on both for `timeout`; its time stamps are judged
+    it has been quiet on both for `release_time`; its time stamps are judged
     by `rules` (a new sender starts a new sequence). It subscribes to
     both channels itself and takes in every message, in order of
     arrival, at the simulator step after delivery, as MessageDecoder
@@ -495,15 +556,17 @@ class CommandReceiver(LeafSystem):
         lcm: the DrakeLcmInterface to subscribe on.
         channels: (base command channel, arm command channel).
         initial_positions: (6,) the arm command before the first.
-        timeout: s, the robot's command timeout (and the sender lock's
-            quiet time).
+        timeout: s, the robot's command timeout.
+        release_time: s, the sender lock's quiet time (at least
+            `timeout`).
         rules: the ClockRules.
     """
 
     def __init__(self, lcm, channels, initial_positions, timeout,
-                 rules=DEFAULT_RULES):
+                 release_time, rules=DEFAULT_RULES):
         super().__init__()
         self.timeout = positive("timeout", timeout)
+        self.release_time = positive("release_time", release_time)
         self.rules = rules
         self.initial = as_vector("initial_positions", initial_positions, 6)
         self._formats = (FORMATS["base_command"], FORMATS["arm_command"])
@@ -553,7 +616,7 @@ class CommandReceiver(LeafSystem):
                 receptions[kind] = reject(receptions[kind], str(error))
                 continue
             lock, obeyed, new = admit(lock, decoded.sender, now,
-                                      self.timeout)
+                                      self.release_time)
             if not obeyed:
                 continue
             if new:

@@ -51,8 +51,10 @@ from pydrake.systems.primitives import Multiplexer
 from drake_wbc.hardware.codecs import (
     ClockRules,
     FlaggedPublisher,
+    LcmPump,
     MessageDecoder,
     MessageEncoder,
+    receiving_bus,
 )
 from drake_wbc.hardware.messages import RawBytesSerializer
 from drake_wbc.hardware.options import STATUS_CHANNELS, HardwareOptions
@@ -123,10 +125,14 @@ class HardwareInterface:
         builder = DiagramBuilder()
         s = self.systems = {}
         s["lcm"] = builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
+        self.receiving = bus = receiving_bus(lcm)
+        if bus is not lcm:
+            s["pump"] = builder.AddNamedSystem("pump", LcmPump(
+                bus, options.watchdog_period))
         for name in STATUS_CHANNELS:
             s[f"decoder.{name}"] = builder.AddNamedSystem(
                 f"decoder.{name}", MessageDecoder(
-                    name, lcm, getattr(channels, name), rules=rules))
+                    name, bus, getattr(channels, name), rules=rules))
         s["guard"] = guard = builder.AddNamedSystem("guard", CommandGuard(
             options, initial_arm_positions))
         ages = builder.AddNamedSystem("status_ages",

@@ -203,9 +203,12 @@ class HardwareOptions:
         truth_period: how often the simulated robot sends its ground
             truth, and the controller its diagnostics, s.
         robot_command_timeout: the robot side stops the base when no base
-            command came for this long, s (0.25 s, as such bases do), and
-            hands the command channels to another sender after its
-            sender has been quiet for this long.
+            command came for this long, s (0.25 s, as such bases do).
+        sender_release_time: the robot side hands its command channels
+            to another sender only after the one it obeys has been quiet
+            for this long, s (1.0 s): a controller that misses the
+            processor for a moment is stopped by the command timeout but
+            does not lose the robot to a stray sender meanwhile.
         startup_timeout: how long `drake-wbc deploy` waits for the
             robot's first status before giving up, s.
     """
@@ -228,6 +231,7 @@ class HardwareOptions:
     status_period: float = 0.01
     truth_period: float = 0.01
     robot_command_timeout: float = 0.25
+    sender_release_time: float = 1.0
     startup_timeout: float = 10.0
 
     def __post_init__(self):
@@ -276,6 +280,13 @@ class HardwareOptions:
                ("robot_command_timeout", ROBOT_COMMAND_TIMEOUT, "s"))
         for name, value, unit in own:
             at_most(name, getattr(self, name), value, unit)
+        if self.sender_release_time < self.robot_command_timeout:
+            raise ValueError(
+                f"sender_release_time = {self.sender_release_time!r} s is "
+                "not allowed with robot_command_timeout = "
+                f"{self.robot_command_timeout!r} s: must be at least it, so "
+                "that the base has stopped before another sender may drive "
+                "it")
 
     @property
     def guard_offset(self):
