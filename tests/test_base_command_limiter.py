@@ -152,7 +152,39 @@ def test_the_autodiff_limiter_differentiates_the_separation_scale():
     gradient = ExtractGradient(command)
     # d(0.8 v / v_x)/dv: row x [0, 0.8 / v_x], row y [0, 0.8 / v_x].
     np.testing.assert_allclose(gradient[:2], [[0.0, 0.0], [0.0, 0.8]],
-                               atol=1e-6)
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize("limit", ["velocity", "acceleration"])
+def test_the_autodiff_limiter_differentiates_the_limits_exactly(limit):
+    """A command 3 m/s along x against a 2 m/s limit is scaled by
+    s = 2 / v_x; with an acceleration limit of 50 m/s^2 from rest, by
+    s = a h / v_x = 0.5 / v_x. Either way the command is s (v_x, v_y, 0):
+    its derivative by v_x is 0 along x and by v_y is s along y, exactly
+    (limit_base_velocity is scalar-generic)."""
+    if limit == "velocity":
+        params = SafetyParameters(base_velocity_limits=[2.0, 2.0, 2.0],
+                                  base_acceleration_limits=[1e3, 1e3, 1e3])
+        scale = 2.0 / 3.0
+    else:
+        params = SafetyParameters(base_velocity_limits=[4.0, 4.0, 4.0],
+                                  base_acceleration_limits=[50.0, 50.0, 50.0])
+        scale = 50.0 * H / 3.0
+    system = BaseCommandLimiter(params, H, HALF_SIZES).ToAutoDiffXd()
+    context = system.CreateDefaultContext()
+    system.GetInputPort("obstacle_points").FixValue(
+        context, AbstractValue.Make(np.zeros((0, 2))))
+    system.GetInputPort("stopped").FixValue(context, [0.0])
+    desired = np.array([AutoDiffXd(3.0, [1.0, 0.0]),
+                        AutoDiffXd(0.0, [0.0, 1.0]), AutoDiffXd(0.0)],
+                       dtype=object)
+    system.GetInputPort("velocity").FixValue(context, desired)
+    command = system.GetOutputPort("velocity_command").Eval(context)
+    np.testing.assert_allclose(ExtractValue(command).ravel(),
+                               [3.0 * scale, 0.0, 0.0], rtol=1e-15)
+    np.testing.assert_allclose(ExtractGradient(command),
+                               [[0.0, 0.0], [0.0, scale], [0.0, 0.0]],
+                               atol=1e-15)
 
 
 def test_bad_arguments_are_named():

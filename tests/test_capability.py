@@ -462,8 +462,8 @@ def test_jacobian_derivative_follows_the_cross_product_rules():
 def test_transition_for_autodiff():
     for v in (0.005, 0.012, 0.03, 0.045, 0.08):
         x = InitializeAutoDiff(np.array([v]))[0, 0]
-        alpha = cap.transition_unchecked(x, UPPER, LOWER)
-        slope = cap.transition_derivative_unchecked(x, UPPER, LOWER)
+        alpha = cap.transition_of(x, UPPER, LOWER)
+        slope = cap.transition_derivative_of(x, UPPER, LOWER)
         assert alpha.value() == pytest.approx(cap.transition(v, UPPER,
                                                              LOWER))
         assert alpha.derivatives()[0] == pytest.approx(
@@ -483,7 +483,7 @@ def test_capability_terms_for_autodiff():
             cap.DEFAULT_DAMPING_THRESHOLD)
 
     def terms(x):
-        C_m, g = cap.capability_terms_unchecked(x[:36].reshape(6, 6), x[36:],
+        C_m, g = cap.capability_terms(x[:36].reshape(6, 6), x[36:],
                                                 *args)
         return np.concatenate([[C_m], g])
 

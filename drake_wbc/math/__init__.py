@@ -7,8 +7,20 @@ paper has one scalar-generic reference body here, cited by its label in
 the docstring; where the control tick needs speed, at most one float
 kernel beside it.
 
+Names say which is which, in every module:
+- a reference body checks nothing; it has the equation's plain name
+  (`whole_body_distribution`, `capability_terms`, `twist_in_base`), or
+  that name with `_of` where a checked public function already holds the
+  plain name (`base_jacobian_of` beside `base_jacobian`, `transition_of`
+  beside `transition`);
+- a function a user calls by hand checks its arguments (one thin layer,
+  drake_wbc.math.validation) and calls the reference body;
+- a fast kernel is the reference's name with `_float`, registered with
+  `kernels.fast_kernel`; a stage picks one of the two once, when it is
+  built (`kernels.body_for`).
+
 - validation, scalar_support: argument checks; math for every scalar type.
-- kinematics: J_b of eq. (2), J_wb of eq. (fk), the rotation of eq. (3).
+- kinematics: J_b of eq. (2), J_wb of eq. (fk), the rotations of eq. (3).
 - distribution: the weighted distribution and pseudo-inverse, eqs. (wln),
   (wbsln), (weight-factors), (wbccm).
 - capability: C_m = m P_jnt and its gradient; the transition of eq.

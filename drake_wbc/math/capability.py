@@ -20,8 +20,8 @@ How the module is laid out, for each equation:
 
 - its reference body, scalar-generic (float, or numpy object arrays of
   AutoDiffXd) and unchecked: the formula as written. The tick's bodies are
-  public (`capability_terms_unchecked`, `transition_unchecked`,
-  `transition_derivative_unchecked`), the others private. Where a body
+  public (`capability_terms`, `transition_of`,
+  `transition_derivative_of`), the others private. Where a body
   takes an SVD, which numpy has for floats only, AutoDiffXd goes through
   scalar_support.through_float_function (exact values, derivatives by
   central differences);
@@ -311,7 +311,7 @@ def _capability_gradient(J, q, lower, upper, k_j, damping,
                                                          k_j)))
 
 
-def capability_terms_unchecked(J_a, q, lower, upper, k_j, damping,
+def capability_terms(J_a, q, lower, upper, k_j, damping,
                                damping_threshold):
     """C_m and grad_x C_m together (Sec. IV-A; eqs. (wbccm), (wb_error)):
     the reference body of what the ArmCapability stage gives each tick.
@@ -332,7 +332,7 @@ def capability_terms_unchecked(J_a, q, lower, upper, k_j, damping,
                                  damping_threshold))
 
 
-def transition_unchecked(value, upper, lower):
+def transition_of(value, upper, lower):
     """alpha(C_m, C_m^u, C_m^l) of eq. (transition), the reference body:
 
         alpha = 1                                 for value <= lower,
@@ -356,10 +356,10 @@ def transition_unchecked(value, upper, lower):
     return 0.5 * (1.0 + np.cos(np.pi * (value - lower) / (upper - lower)))
 
 
-def transition_derivative_unchecked(value, upper, lower):
+def transition_derivative_of(value, upper, lower):
     """d alpha / d value of eq. (transition), the reference body:
     -0.5 pi / (upper - lower) sin(pi x) inside the band, 0 outside, with x
-    as in `transition_unchecked` (the same arguments)."""
+    as in `transition_of` (the same arguments)."""
     if value <= lower or value >= upper:
         return _zero_like(value)
     width = upper - lower
@@ -627,7 +627,7 @@ def transition(value, upper, lower):
 
     alpha is continuous with a continuous derivative (0 at both band edges)
     and non-increasing in `value`. The checked form of
-    `transition_unchecked` (which also takes AutoDiffXd).
+    `transition_of` (which also takes AutoDiffXd).
 
     Args:
         value: C_m, a number or an array of numbers (elementwise).
@@ -638,7 +638,7 @@ def transition(value, upper, lower):
         alpha in [0, 1], dimensionless: a float for a scalar `value`, else
         an array of the shape of `value`.
     """
-    return _elementwise(transition_unchecked, value, upper, lower)
+    return _elementwise(transition_of, value, upper, lower)
 
 
 def transition_derivative(value, upper, lower):
@@ -647,7 +647,7 @@ def transition_derivative(value, upper, lower):
         -0.5 pi / (upper - lower) * sin(pi x)  inside the band, else 0,
 
     with x as in `transition`. It vanishes at both band edges, so alpha is
-    C^1 across them. The checked form of `transition_derivative_unchecked`.
+    C^1 across them. The checked form of `transition_derivative_of`.
 
     Args:
         value, upper, lower: as for `transition`.
@@ -656,7 +656,7 @@ def transition_derivative(value, upper, lower):
         d alpha / d value <= 0, in 1 / (units of value): a float for a
         scalar `value`, else an array of the shape of `value`.
     """
-    return _elementwise(transition_derivative_unchecked, value, upper, lower)
+    return _elementwise(transition_derivative_of, value, upper, lower)
 
 
 # ----------------------------------------------------------------------------
@@ -756,7 +756,7 @@ def _manipulability_gradient(J, U, s, Vt):
 
 
 def _capability_terms_sample(rng):
-    """Random arguments of `capability_terms_unchecked`: J_a from chosen
+    """Random arguments of `capability_terms`: J_a from chosen
     singular values (well conditioned, near-singular and singular, the
     damping on and off), n = 6 or 7, joints inside their range, at a
     limit, beyond one, two at limits; as the stage passes them (J_a an
@@ -790,10 +790,10 @@ def _capability_terms_sample(rng):
             eps)
 
 
-@fast_kernel(capability_terms_unchecked, sample=_capability_terms_sample)
+@fast_kernel(capability_terms, sample=_capability_terms_sample)
 def capability_terms_float(J_a, q, lower, upper, k_j, damping,
                            damping_threshold):
-    """`capability_terms_unchecked` for floats, from one SVD of J_a (by
+    """`capability_terms` for floats, from one SVD of J_a (by
     LAPACK's dgesdd) and the gradients in plain floats: the per-tick path
     of the ArmCapability stage. Lists of floats for q, lower and upper are
     the fastest.
@@ -841,9 +841,9 @@ def _transition_sample(rng):
     return value, upper, lower
 
 
-@fast_kernel(transition_unchecked, sample=_transition_sample)
+@fast_kernel(transition_of, sample=_transition_sample)
 def transition_float(value, upper, lower):
-    """`transition_unchecked` for a float value, in plain floats: the
+    """`transition_of` for a float value, in plain floats: the
     per-tick path of the stages that read alpha."""
     if value <= lower:
         return 1.0
@@ -852,9 +852,9 @@ def transition_float(value, upper, lower):
     return 0.5 * (1.0 + math.cos(math.pi * (value - lower) / (upper - lower)))
 
 
-@fast_kernel(transition_derivative_unchecked, sample=_transition_sample)
+@fast_kernel(transition_derivative_of, sample=_transition_sample)
 def transition_derivative_float(value, upper, lower):
-    """`transition_derivative_unchecked` for a float value, in plain
+    """`transition_derivative_of` for a float value, in plain
     floats."""
     if value <= lower or value >= upper:
         return 0.0

@@ -37,18 +37,15 @@ float matrices only, so they accept numpy object arrays of AutoDiffXd;
 their parameters are checked once, in the dataclasses.
 
 The whole-body CDMP runs in the world frame, its twists [v; w] turned
-about the vertical by the base's yaw (eq. (3)): `twist_in_world` and its
-inverse `twist_in_base`, each with one float kernel (the whole-body
-stage's tick, drake_wbc.stages.whole_body_cdmp).
+about the vertical by the base's yaw (eq. (3): drake_wbc.math.kinematics
+`twist_in_base` and its inverse `twist_in_world`).
 """
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from drake_wbc.math.dmp import DmpParameters, transformation_derivative
-from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.repulsion import RepulsiveFieldParameters, repulsive_force
 from drake_wbc.math.validation import (
     as_matrix,
@@ -407,52 +404,3 @@ def arm_cdmp_derivative(y, z_tilde, C_a, g, V_a, F_ext, params, S_hri=0.0,
         y, paper_velocity(z_tilde, C_s, params.k_d, tau), g + C_a, None,
         params.dmp, forcing, coupling_velocity=C_s + tau * C_a_dot)
     return y_dot, z_tilde_dot, C_a_dot
-
-
-def twist_in_world(twist, yaw):
-    """Rz(yaw) [v; w]: a twist (6,) with components in T_b, in the world,
-    for the base's yaw phi_b (the inverse of eq. (3)); float or
-    AutoDiffXd."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    vx, vy, vz, wx, wy, wz = twist
-    return np.array([c * vx - s * vy, s * vx + c * vy, vz,
-                     c * wx - s * wy, s * wx + c * wy, wz])
-
-
-def twist_in_base(twist, yaw):
-    """Rz(-yaw) [v; w] of eq. (3): a twist (6,) with components in the
-    world, in T_b; float or AutoDiffXd."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    vx, vy, vz, wx, wy, wz = twist
-    return np.array([c * vx + s * vy, c * vy - s * vx, vz,
-                     c * wx + s * wy, c * wy - s * wx, wz])
-
-
-def _twist_inputs(rng):
-    """A twist (zero, or of any size) and a yaw (0, a right angle, any
-    turn)."""
-    twist = 10.0 ** rng.uniform(-3, 3) * rng.normal(size=6)
-    if rng.random() < 0.1:
-        twist = np.zeros(6)
-    yaw = float(rng.choice([0.0, np.pi / 2, -np.pi, rng.uniform(-20, 20)]))
-    return twist, yaw
-
-
-@fast_kernel(twist_in_world, sample=_twist_inputs)
-def twist_in_world_float(twist, yaw):
-    """`twist_in_world` of a float array, in plain floats (math.cos), a
-    list."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    vx, vy, vz, wx, wy, wz = twist.tolist()
-    return [c * vx - s * vy, s * vx + c * vy, vz,
-            c * wx - s * wy, s * wx + c * wy, wz]
-
-
-@fast_kernel(twist_in_base, sample=_twist_inputs)
-def twist_in_base_float(twist, yaw):
-    """`twist_in_base` of a float array, in plain floats (math.cos), a
-    list."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    vx, vy, vz, wx, wy, wz = twist.tolist()
-    return [c * vx + s * vy, c * vy - s * vx, vz,
-            c * wx + s * wy, c * wy - s * wx, wz]

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_wbc.math.kernels import fast_kernel
+from drake_wbc.math.kernels import body_for, fast_kernel
 from drake_wbc.math.validation import as_matrix, as_vector
 
 DIMENSIONS = ("x", "y", "z", "yaw")
@@ -126,6 +126,7 @@ class TcpPose:
             arm.plant.CreateDefaultContext(),
             model.base_frame).GetAsMatrix34()
         self._R_BA, self._p_BA = X_BA[:, :3].copy(), X_BA[:, 3].copy()
+        self._in_world = body_for(tcp_pose_in_world, float)
 
     def in_base(self, arm_positions):
         """X_BT (3, 4): the TCP's pose [R_BT | p_BT] in T_b at the arm's
@@ -136,8 +137,8 @@ class TcpPose:
         return X
 
     def __call__(self, base_pose, arm_positions):
-        return np.array(tcp_pose_in_world_float(
-            base_pose, self.in_base(arm_positions)))
+        return np.array(self._in_world(base_pose,
+                                       self.in_base(arm_positions)))
 
 
 def tcp_poses(base_pose, arm_positions, arm):

@@ -24,15 +24,21 @@ by hand check their arguments and call it:
   `whole_body_jacobian`;
 - block-diag(R, R) of eqs. (fk) and (3): `rotate_twist`, checked
   `twist_rotation` (the matrix);
-- ^bR_w V_ee^ref of eq. (3): `world_to_base_twist_of`, checked
-  `world_to_base_twist`.
+- ^bR_w V_ee^ref of eq. (3), ^bR_w = Rz(-phi_b): `twist_in_base`, checked
+  `world_to_base_twist`; its inverse Rz(phi_b), from T_b to the world:
+  `twist_in_world`.
 
-None has a fast kernel of its own: the controller's tick runs them inside
-the kernels of the distribution and of the compensation.
+The two rotations of eq. (3) have a fast float kernel each (the
+whole-body CDMP's tick, drake_wbc.stages.whole_body_cdmp); the others
+have none: the tick runs them inside the kernels of the distribution and
+of the compensation.
 """
+
+import math
 
 import numpy as np
 
+from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.validation import (
     as_matrix,
     as_scalar,
@@ -72,13 +78,53 @@ def whole_body_jacobian_of(J_a, p_ee_in_base, R_ba):
     return np.hstack([arm, base_jacobian_of(p_ee_in_base)])
 
 
-def world_to_base_twist_of(V_ee_ref_world, base_yaw):
-    """^bR_w V_ee^ref of eq. (3), ^bR_w = Rz(-phi_b), for any scalar type
-    (the reference body of `world_to_base_twist`, which documents it)."""
-    c, s = np.cos(base_yaw), np.sin(base_yaw)
-    zero = c * 0.0
-    R_bw = np.array([[c, s, zero], [-s, c, zero], [zero, zero, zero + 1.0]])
-    return rotate_twist(R_bw, V_ee_ref_world)
+def twist_in_world(twist, yaw):
+    """Rz(yaw) [v; w]: a twist (6,) with components in T_b, in the world,
+    for the base's yaw phi_b (the inverse of eq. (3)); float or
+    AutoDiffXd."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    vx, vy, vz, wx, wy, wz = twist
+    return np.array([c * vx - s * vy, s * vx + c * vy, vz,
+                     c * wx - s * wy, s * wx + c * wy, wz])
+
+
+def twist_in_base(twist, yaw):
+    """Rz(-yaw) [v; w] of eq. (3): a twist (6,) with components in the
+    world, in T_b; float or AutoDiffXd."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    vx, vy, vz, wx, wy, wz = twist
+    return np.array([c * vx + s * vy, c * vy - s * vx, vz,
+                     c * wx + s * wy, c * wy - s * wx, wz])
+
+
+def _twist_inputs(rng):
+    """A twist (zero, or of any size) and a yaw (0, a right angle, any
+    turn)."""
+    twist = 10.0 ** rng.uniform(-3, 3) * rng.normal(size=6)
+    if rng.random() < 0.1:
+        twist = np.zeros(6)
+    yaw = float(rng.choice([0.0, np.pi / 2, -np.pi, rng.uniform(-20, 20)]))
+    return twist, yaw
+
+
+@fast_kernel(twist_in_world, sample=_twist_inputs)
+def twist_in_world_float(twist, yaw):
+    """`twist_in_world` of a float array, in plain floats (math.cos), a
+    list."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    vx, vy, vz, wx, wy, wz = twist.tolist()
+    return [c * vx - s * vy, s * vx + c * vy, vz,
+            c * wx - s * wy, s * wx + c * wy, wz]
+
+
+@fast_kernel(twist_in_base, sample=_twist_inputs)
+def twist_in_base_float(twist, yaw):
+    """`twist_in_base` of a float array, in plain floats (math.cos), a
+    list."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    vx, vy, vz, wx, wy, wz = twist.tolist()
+    return [c * vx + s * vy, c * vy - s * vx, vz,
+            c * wx + s * wy, c * wy - s * wx, wz]
 
 
 def random_rotation(rng):
@@ -201,6 +247,6 @@ def world_to_base_twist(V_ee_ref_world, base_yaw):
         ValueError: if V_ee_ref_world is not 6 finite numbers or base_yaw
             is not finite.
     """
-    return world_to_base_twist_of(
+    return twist_in_base(
         as_vector("V_ee_ref_world", V_ee_ref_world, 6),
         as_scalar("base_yaw", base_yaw))

@@ -65,7 +65,7 @@ as deep as the home reach.
 As in drake_wbc.math.capability: the reference bodies are scalar-generic
 (float values or AutoDiffXd scalars in numpy object arrays: only
 elementwise numpy, comparisons and Python branches) and unchecked, private
-but for the tick's `adaptive_weighting_factors_unchecked`; the public
+but for the tick's `adaptive_weighting_factors`; the public
 functions of plain names check their arguments and call them;
 `adaptive_weighting_factors_float` is the float kernel of the tick.
 """
@@ -80,9 +80,9 @@ import numpy as np
 
 from drake_wbc.math.capability import (
     transition_derivative_float,
-    transition_derivative_unchecked,
+    transition_derivative_of,
     transition_float,
-    transition_unchecked,
+    transition_of,
 )
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.motion_mode import MotionMode, fixed_weighting_factors
@@ -286,18 +286,18 @@ def _deflection_gradient(p):
 def _penalties(p, extent, deflection):
     """(P_d, P_phi) = (alpha(d, d^u, d^l), alpha(phi, phi^u, phi^l)), the
     bands (d^l, d^u) and (phi^l, phi^u)."""
-    return (transition_unchecked(_extent(p), extent[1], extent[0]),
-            transition_unchecked(_deflection(p), deflection[1],
+    return (transition_of(_extent(p), extent[1], extent[0]),
+            transition_of(_deflection(p), deflection[1],
                                  deflection[0]))
 
 
 def _penalized(C_m, g, p, extent, deflection):
     """PenalizedCapability (see `penalized_capability`)."""
     d, phi = _extent(p), _deflection(p)
-    P_d = transition_unchecked(d, extent[1], extent[0])
-    P_phi = transition_unchecked(phi, deflection[1], deflection[0])
-    dP_d = transition_derivative_unchecked(d, extent[1], extent[0])
-    dP_phi = transition_derivative_unchecked(phi, deflection[1],
+    P_d = transition_of(d, extent[1], extent[0])
+    P_phi = transition_of(phi, deflection[1], deflection[0])
+    dP_d = transition_derivative_of(d, extent[1], extent[0])
+    dP_phi = transition_derivative_of(phi, deflection[1],
                                              deflection[0])
     gradient_phi = P_phi * g + (C_m * dP_phi) * _deflection_gradient(p)
     gradient_d = P_d * gradient_phi + (C_m * P_phi * dP_d) * (
@@ -309,7 +309,7 @@ def _penalized(C_m, g, p, extent, deflection):
 def _adaptive_factor(C_m_penalized, upper, lower):
     """f = 1 - alpha(C_m^(d,phi), C_m^u, C_m^l) (Sec. IV-C): f_xy from
     C_m^d, f_phi from C_m^phi."""
-    return 1.0 - transition_unchecked(C_m_penalized, upper, lower)
+    return 1.0 - transition_of(C_m_penalized, upper, lower)
 
 
 def _leads(covector, V, sign):
@@ -388,7 +388,7 @@ def _state(p_ee_in_base, V_ee, C_m, grad_C_m, constants):
     )
 
 
-def adaptive_weighting_factors_unchecked(p_ee_in_base, V_ee, C_m, grad_C_m,
+def adaptive_weighting_factors(p_ee_in_base, V_ee, C_m, grad_C_m,
                                          constants):
     """(sigma_xy, sigma_phi) of the intuitive pHRI mode (Sec. IV-C: f_xy,
     f_phi after the deactivation strategy), the reference body of what
@@ -599,7 +599,7 @@ def _random_rotation(rng):
 
 
 def _weighting_sample(rng):
-    """Random arguments of `adaptive_weighting_factors_unchecked`: the end
+    """Random arguments of `adaptive_weighting_factors`: the end
     effector on the arm base's axis, straight ahead, straight behind
     (phi = pi), in the extent band, in the deflection band, or anywhere;
     the twist zero, vertical or any; C_m anywhere or with C_m^d in the
@@ -655,10 +655,10 @@ def _float_leads(covector, V, sign):
     return product * product > DEACTIVATION_TOLERANCE**2 * scale
 
 
-@fast_kernel(adaptive_weighting_factors_unchecked, sample=_weighting_sample)
+@fast_kernel(adaptive_weighting_factors, sample=_weighting_sample)
 def adaptive_weighting_factors_float(p_ee_in_base, V_ee, C_m, grad_C_m,
                                      constants):
-    """`adaptive_weighting_factors_unchecked` for float inputs, in plain
+    """`adaptive_weighting_factors` for float inputs, in plain
     floats: the per-tick path of the WorkspaceAdapter stage in the
     intuitive pHRI mode.
 
@@ -688,7 +688,7 @@ def adaptive_weighting_factors_float(p_ee_in_base, V_ee, C_m, grad_C_m,
         _scalar("C_m", C_m)
         _vector("grad_C_m", grad_C_m, 6)
         return tuple(float(sigma) for sigma in
-                     adaptive_weighting_factors_unchecked(
+                     adaptive_weighting_factors(
                          p, V_ee, C_m, grad_C_m, constants))
     x, y, _ = (c.R_ba.T @ (p - c.origin)).tolist()
     rows = c.R_ab_rows

@@ -10,13 +10,11 @@ from pydrake.systems.framework import LeafSystem_, ValueProducer
 
 from drake_wbc.math import safety
 from drake_wbc.math.command_limits import (
-    LimitedCommand,
     limit_base_velocity,
 )
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.repulsion import LastPoints
 from drake_wbc.math.safety import SafetyParameters
-from drake_wbc.math.scalar_support import through_float_function
 from drake_wbc.math.separation import (
     NEAREST_POINTS,
     scale_for_rows,
@@ -32,25 +30,6 @@ from drake_wbc.stages.support import define_stage
 
 _ALLOWED = safety.BASE_AXES + 3 * NEAREST_POINTS
 """Where the allowed speeds start in BaseCommandLimiter's state."""
-
-
-def _limit_base_velocity_any(desired, previous, velocity_limits,
-                             acceleration_limits, time_step, scale=1.0):
-    """drake_wbc.math.command_limits.limit_base_velocity for AutoDiffXd
-    arguments: its body is float-only, so its derivatives are taken by
-    central differences (scalar_support.through_float_function); exact
-    where no limit acts (the identity)."""
-
-    def limited(z):
-        result = limit_base_velocity(z[:3], z[3:6], velocity_limits,
-                                     acceleration_limits, time_step,
-                                     scale=z[6])
-        return np.concatenate([result.command, [result.velocity_scale,
-                                                result.acceleration_scale]])
-
-    z = through_float_function(limited, np.concatenate(
-        [desired, previous, [scale]]))
-    return LimitedCommand(z[:3], z[3], z[4])
 
 
 def _all_finite(vector):
@@ -122,9 +101,9 @@ def BaseCommandLimiter_(T):
         Scalar types: double and AutoDiffXd, the same calculation; the
         double one runs the float kernels of separation_state and
         scale_for_rows (drake_wbc.math.kernels), the AutoDiffXd one their
-        references, and limit_base_velocity through central differences
-        (its body is float-only): exact where no limit acts (the
-        identity). The obstacle points are float data in both.
+        references; limit_base_velocity is scalar-generic, so the
+        derivatives are exact. The obstacle points are float data in
+        both.
 
         Args:
             params: SafetyParameters (the limits); the robot's if None.
@@ -151,8 +130,6 @@ def BaseCommandLimiter_(T):
                 lambda points: state_of_points(points, self.half_sizes,
                                                stop_distance, stop_time))
             self._scale = body_for(scale_for_rows, T)
-            self._limit = (limit_base_velocity if T is float
-                           else _limit_base_velocity_any)
             self._velocity = self.DeclareVectorInputPort(
                 "velocity", safety.BASE_AXES)
             self._stopped = self.DeclareVectorInputPort("stopped", 1)
@@ -188,7 +165,7 @@ def BaseCommandLimiter_(T):
                 return np.array([0.0, 0.0, 0.0, 0.0, 1.0, 1.0])
             if not _all_finite(desired):
                 return np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
-            result = self._limit(
+            result = limit_base_velocity(
                 desired, previous, self._velocity_limits,
                 self._acceleration_limits, self.time_step,
                 scale=self._scale(desired, rows, allowed))

@@ -67,8 +67,8 @@ def ArmCapability_(T):
 
         The kinematics need a double MultibodyPlant, so the evaluation
         (`evaluate`) is in floats, with the float kernels of
-        capability.capability_terms_unchecked and
-        capability.transition_unchecked; for AutoDiffXd it goes through
+        capability.capability_terms and
+        capability.transition_of; for AutoDiffXd it goes through
         scalar_support.through_float_function: the values are exact and
         the derivatives w.r.t. q_a come from central differences (about
         1e-9 relative).
@@ -98,9 +98,9 @@ def ArmCapability_(T):
             self._constants = (p.joint_limit_gain, p.gradient_damping,
                                p.gradient_damping_threshold)
             self._band = (self.band.upper, self.band.lower)
-            self._terms = body_for(capability.capability_terms_unchecked,
+            self._terms = body_for(capability.capability_terms,
                                    float)
-            self._alpha = body_for(capability.transition_unchecked, float)
+            self._alpha = body_for(capability.transition_of, float)
             self._input = self.DeclareVectorInputPort("arm_position", 6)
             entry = declare_cached_vector(
                 self, "arm kinematics and capability", self._calc,
@@ -159,7 +159,7 @@ def WorkspaceAdapter_(T):
         Locomotion gives (0, 0), manipulation (1, 1), loco-manipulation
         the fixed parameters; these modes read no input (no direct
         feedthrough). The intuitive pHRI mode computes
-        workspace.adaptive_weighting_factors_unchecked (its float kernel
+        workspace.adaptive_weighting_factors (its float kernel
         in double, chosen when the stage is built): f_xy, f_phi from C_m
         penalized by the extent d and deflection phi of the end effector
         w.r.t. the arm's base (defined in drake_wbc.math.workspace), then
@@ -200,7 +200,7 @@ def WorkspaceAdapter_(T):
                     self.band.upper, self.band.lower, p.workspace, self.R_ba,
                     self.arm_base_position)
                 self._factors = body_for(
-                    workspace.adaptive_weighting_factors_unchecked, T)
+                    workspace.adaptive_weighting_factors, T)
                 calc, prerequisites = (self._calc_adaptive,
                                        tickets(self._inputs.values()))
             else:

@@ -121,7 +121,7 @@ def MotionDistributor_(T):
                 distribution.whole_body_distribution, T)
             # eq. (transition): its float kernel in double, chosen once.
             self._transition = kernels.body_for(
-                capability.transition_unchecked, T)
+                capability.transition_of, T)
             self._inputs = declare_inputs(self, (
                 ("end_effector_velocity", 6), ("sigma_xy", 1),
                 ("sigma_phi", 1), ("end_effector_position", 3),

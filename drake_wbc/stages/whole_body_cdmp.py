@@ -21,8 +21,8 @@ time g and f are taken at the middle of each period and held over it (a
 second-order accurate hold of the smooth f).
 
 Like the other CDMP stages, one matrix [A | B | c] per model acts on
-[x; u; 1] each tick; the yaw rotations of eq. (3) are cdmp.twist_in_world
-and cdmp.twist_in_base (their float kernels in double).
+[x; u; 1] each tick; the yaw rotations of eq. (3) are kinematics.twist_in_world
+and kinematics.twist_in_base (their float kernels in double).
 """
 
 import math
@@ -32,8 +32,9 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
 
 from drake_wbc.math import cdmp
-from drake_wbc.math.demonstration import TcpPose, tcp_pose_in_world_float
+from drake_wbc.math.demonstration import TcpPose, tcp_pose_in_world
 from drake_wbc.math.kernels import body_for
+from drake_wbc.math.kinematics import twist_in_base, twist_in_world
 from drake_wbc.math.movement import (
     LearnedMovement,
     MovementPlayer,
@@ -121,8 +122,8 @@ def WholeBodyCdmp_(T):
             self._default_switch = switch("phri_switch", phri_switch)
             self.player = player or movement_player(params)
             num_inputs = 18 if self.player is None else 30
-            self._in_world = body_for(cdmp.twist_in_world, T)
-            self._in_base = body_for(cdmp.twist_in_base, T)
+            self._in_world = body_for(twist_in_world, T)
+            self._in_base = body_for(twist_in_base, T)
 
             def derivative(s_hri, playing):
                 dmp = (self.player.transformation_parameters(params.dmp)
@@ -285,6 +286,7 @@ def MovementTracking_(T):
             LeafSystem_[T].__init__(self, converter)
             self.player = player
             self._pose = TcpPose(arm or shared_arm_kinematics())
+            self._tcp_pose_in_world = body_for(tcp_pose_in_world, float)
             self._base = self.DeclareVectorInputPort(
                 "base.state_estimated", 6)
             self._arm = self.DeclareVectorInputPort("arm.position_measured",
@@ -299,7 +301,7 @@ def MovementTracking_(T):
                 output.SetFromVector(np.zeros(6))
                 return
             base = value_of(self._base.Eval(context))[:3].tolist()
-            pose = tcp_pose_in_world_float(base, self._pose.in_base(
+            pose = self._tcp_pose_in_world(base, self._pose.in_base(
                 value_of(self._arm.Eval(context))))
             x, y, z, yaw = [p - q for p, q in zip(
                 player.reference(t).tolist(), pose, strict=True)]
