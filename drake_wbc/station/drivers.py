@@ -34,7 +34,6 @@ from drake_wbc.math.validation import (
     in_closed_range,
     non_negative,
     positive,
-    validated_copy,
     whole_multiple,
 )
 from drake_wbc.robot.model import HOME_ARM_POSITIONS
@@ -208,9 +207,8 @@ def BaseVelocityDriver_(T):
 
         def _construct(self, params=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            params = checked_instance("params", params, BaseDriverParameters,
-                                      BaseDriverParameters)
-            self.params = validated_copy(params)
+            self.params = params = checked_instance(
+                "params", params, BaseDriverParameters, BaseDriverParameters)
             self._command = self.DeclareVectorInputPort(
                 "velocity_command", 3)
             self._pose = self.DeclareVectorInputPort("base_pose", 3)
@@ -281,9 +279,8 @@ def ArmPositionDriver_(T):
         def _construct(self, params=None,
                        initial_positions=HOME_ARM_POSITIONS, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            params = checked_instance("params", params, ArmDriverParameters,
-                                      ArmDriverParameters)
-            self.params = validated_copy(params)
+            self.params = params = checked_instance(
+                "params", params, ArmDriverParameters, ArmDriverParameters)
             self._initial = as_vector("initial_positions", initial_positions,
                                       6)
             self._command = self.DeclareVectorInputPort(

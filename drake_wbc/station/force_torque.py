@@ -28,7 +28,6 @@ from drake_wbc.math.validation import (
     checked_instance,
     non_negative,
     positive,
-    validated_copy,
     whole_number,
 )
 from drake_wbc.station.sampling import SampledReading
@@ -186,10 +185,9 @@ class WristForceTorqueSensor(SampledReading, LeafSystem):
 
     def __init__(self, params=None):
         super().__init__()
-        params = checked_instance("params", params,
-                                  ForceTorqueSensorParameters,
-                                  ForceTorqueSensorParameters)
-        self.params = validated_copy(params)
+        self.params = checked_instance("params", params,
+                                       ForceTorqueSensorParameters,
+                                       ForceTorqueSensorParameters)
         self._measure = _Measurement(self.params)
         self._wrench = self.DeclareVectorInputPort("wrench", WRENCH_SIZE)
         reading = self._declare_sampling(np.zeros(WRENCH_SIZE),

@@ -28,7 +28,6 @@ from drake_wbc.math.validation import (
     in_closed_range,
     non_negative,
     positive,
-    validated_copy,
     whole_number,
 )
 from drake_wbc.station.sampling import SampledReading
@@ -302,9 +301,8 @@ class PlanarLidar(SampledReading, LeafSystem):
     def __init__(self, params=None, mount=(0.0, 0.0, 0.0), circles=None,
                  boxes=None, moving_radii=()):
         super().__init__()
-        params = checked_instance("params", params, LidarParameters,
-                                  LidarParameters)
-        self.params = validated_copy(params)
+        self.params = checked_instance("params", params, LidarParameters,
+                                       LidarParameters)
         self.mount = as_vector("mount", mount, 3)
         self.circles = shapes_array("circles", circles, 3)
         self.boxes = shapes_array("boxes", boxes, 5)

@@ -39,7 +39,6 @@ from drake_wbc.math.validation import (
     checked_instance,
     non_negative,
     positive,
-    validated_copy,
 )
 
 OBSTACLE_FRICTION = CoulombFriction(0.6, 0.5)  # static, dynamic
@@ -361,7 +360,7 @@ def add_static_obstacles(plant, scene):
 
     Args:
         plant: a MultibodyPlant with a SceneGraph, not yet finalized.
-        scene: a Scene (validated here).
+        scene: a Scene.
 
     Returns:
         dict[str, GeometryId]: each obstacle's collision geometry by name,
@@ -373,7 +372,7 @@ def add_static_obstacles(plant, scene):
     if not plant.geometry_source_is_registered():
         raise ValueError("plant has no SceneGraph, which is not allowed: "
                          "make it with AddMultibodyPlantSceneGraph")
-    scene = validated_copy(scene)
+    scene = checked_instance("scene", scene, Scene, Scene)
     shapes = [(c.name, RigidTransform([*c.position, c.height / 2]),
                Cylinder(c.radius, c.height), CYLINDER_COLOR,
                min(OBSTACLE_RESOLUTION_HINT, c.radius / 2))

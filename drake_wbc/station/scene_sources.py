@@ -16,7 +16,7 @@ from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import ExternallyAppliedSpatialForce
 from pydrake.systems.framework import LeafSystem
 
-from drake_wbc.math.validation import checked_instance, positive, validated_copy
+from drake_wbc.math.validation import checked_instance, positive
 from drake_wbc.station.scene import (
     PERSON_COLOR,
     HandForce,
@@ -55,7 +55,7 @@ class PeopleSource(LeafSystem):
 
     def __init__(self, people, period=0.01):
         super().__init__()
-        self.people = validated_copy(Scene(people=list(people))).people
+        self.people = Scene(people=list(people)).people
         self.period = positive("period", period)
         self._positions_at = Walks(self.people)
         self.source_id = None
@@ -161,8 +161,7 @@ class HandForceSource(LeafSystem):
 
     def __init__(self, plant, model, hand, period=0.01):
         super().__init__()
-        self.hand = validated_copy(
-            checked_instance("hand", hand, HandForce, HandForce))
+        self.hand = checked_instance("hand", hand, HandForce, HandForce)
         self.period = positive("period", period)
         self._body_index = model.tcp_frame.body().index()
         self._p_BoBq_B = (model.tcp_frame.GetFixedPoseInBodyFrame()

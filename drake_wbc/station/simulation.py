@@ -51,6 +51,7 @@ from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
     positive,
+    validated_copy,
     whole_multiple,
 )
 from drake_wbc.robot.model import (
@@ -218,9 +219,11 @@ class SimulatedStation:
     """
 
     def __init__(self, options=None, scene=None):
-        self.options = options = checked_instance(
-            "options", options, StationOptions, StationOptions)
-        self.scene = scene = checked_instance("scene", scene, Scene, Scene)
+        # Checked once, here, for every part below (which keep them).
+        self.options = options = validated_copy(checked_instance(
+            "options", options, StationOptions, StationOptions))
+        self.scene = scene = validated_copy(
+            checked_instance("scene", scene, Scene, Scene))
         h = options.time_step
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(

@@ -27,7 +27,6 @@ from pydrake.systems.primitives import SymbolicVectorSystem
 from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
-    validated_copy,
 )
 from drake_wbc.robot.model import HOME_ARM_POSITIONS
 from drake_wbc.station.driver_dynamics import (
@@ -49,8 +48,8 @@ def _symbolic_numpy():
 def base_loop_system(params=None):
     """The base's velocity loop (`base_loop_step` at params.time_step) as
     a discrete SymbolicVectorSystem. Start it with `base_loop_state`."""
-    params = validated_copy(checked_instance(
-        "params", params, BaseDriverParameters, BaseDriverParameters))
+    params = checked_instance("params", params, BaseDriverParameters,
+                              BaseDriverParameters)
     x = MakeVectorVariable(base_loop_size(params), "x")
     u = MakeVectorVariable(3, "u")
     with _symbolic_numpy():
@@ -91,8 +90,8 @@ def arm_interpolator_system(params=None, initial_positions=None):
     the arm there from t = 0, like ArmPositionDriver's; set another start
     with `arm_interpolator_state`.
     """
-    params = validated_copy(checked_instance(
-        "params", params, ArmDriverParameters, ArmDriverParameters))
+    params = checked_instance("params", params, ArmDriverParameters,
+                              ArmDriverParameters)
     q0 = _initial(initial_positions)
     t = Variable("t")
     state = MakeVectorVariable(13, "s")
