@@ -16,14 +16,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drake_wbc.controller import load_controller_parameters
-from drake_wbc.controller.loading import (
+from drake_wbc.experiments.scenario import load_scenario
+from drake_wbc.math.loading import (
     MAX_ALIASES,
     MAX_BYTES,
     MAX_DEPTH,
     MAX_NODES,
     screen,
 )
-from drake_wbc.experiments.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -1,8 +1,6 @@
 """The CDMP-WBC controller: one Drake Diagram of the stages.
 
 - parameters: ControllerParameters and loading them from YAML.
-- loading: `load_typed`, any parameters dataclass from YAML, every check
-  run, safe against files written to hurt the loader.
 - diagram: `build_controller`, the stages wired as one tick of the paper's
   Fig. "cdmp_wbc".
 - task: the task's inputs over time (Schedule, TaskInputs) and

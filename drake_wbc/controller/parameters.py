@@ -14,7 +14,7 @@ what it changes::
 
 `yaml_load_typed` builds the defaults and then assigns the fields it reads
 one by one, without the dataclasses' checks; the loader
-(drake_wbc.controller.loading.load_typed) therefore runs every check of
+(drake_wbc.math.loading.load_typed) therefore runs every check of
 the whole tree afterwards (drake_wbc.math.validation.validate), and
 screens the file beforehand against what could hurt it (size, encoding,
 nesting, aliases, duplicate keys). Every problem, from the YAML syntax to
@@ -28,7 +28,6 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from drake_wbc.controller.loading import load_typed
 from drake_wbc.math import cdmp
 from drake_wbc.math.arm_control import ArmControllerParameters
 from drake_wbc.math.capability import (
@@ -41,6 +40,7 @@ from drake_wbc.math.filtering import (
     BaseFilterParameters,
     check_filter_period,
 )
+from drake_wbc.math.loading import load_typed
 from drake_wbc.math.safety import SafetyParameters
 from drake_wbc.math.validation import positive, switch
 from drake_wbc.math.workspace import WorkspaceAdapterParameters
@@ -190,7 +190,7 @@ def check_arm_limits(params, arm):
 
 def load_controller_parameters(path=None, text=None):
     """ControllerParameters from a YAML file or string, validated
-    (drake_wbc.controller.loading.load_typed, safe against hostile files).
+    (drake_wbc.math.loading.load_typed, safe against hostile files).
 
     Args:
         path: a YAML file (str or path-like); or

@@ -6,7 +6,7 @@ hand on the tool), the task's inputs over time, the duration, the runs to
 compare and what to write. It is loaded with Drake's `yaml_load_typed`
 into the dataclasses below, then every check of the tree runs, so a wrong
 key or value is reported with the file, the field's dotted path and what
-is allowed (drake_wbc.controller.loading.load_typed, which also refuses
+is allowed (drake_wbc.math.loading.load_typed, which also refuses
 files written to hurt the loader: aliases that multiply, deep nesting,
 duplicate keys, text that is not UTF-8)::
 
@@ -30,10 +30,10 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from drake_wbc.controller import ControllerParameters
-from drake_wbc.controller.loading import load_typed
 from drake_wbc.controller.task import TaskInputs
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.math.cdmp import MovementReplay
+from drake_wbc.math.loading import load_typed
 from drake_wbc.math.validation import (
     boolean,
     checked_instance,

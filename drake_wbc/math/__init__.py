@@ -19,7 +19,9 @@ Names say which is which, in every module:
   `kernels.fast_kernel`; a stage picks one of the two once, when it is
   built (`kernels.body_for`).
 
-- validation, scalar_support: argument checks; math for every scalar type.
+- validation, scalar_support, loading: argument checks; math for every
+  scalar type; parameters dataclasses from YAML, safe against hostile
+  files.
 - kinematics: J_b of eq. (2), J_wb of eq. (fk), the rotations of eq. (3).
 - distribution: the weighted distribution and pseudo-inverse, eqs. (wln),
   (wbsln), (weight-factors), (wbccm).
