@@ -16,7 +16,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantValueSource
 
-from drake_wbc.robot.model import ARM_JOINTS, add_mcr, joint_position_indices
+from drake_wbc.robot.model import add_robot, joint_position_indices
 
 
 def settle_locked_robot(q_a, push_at_tcp_W=None, duration=0.05):
@@ -29,7 +29,7 @@ def settle_locked_robot(q_a, push_at_tcp_W=None, duration=0.05):
     """
     builder = DiagramBuilder()
     plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
-    model = add_mcr(plant)
+    model = add_robot(plant)
     plant.Finalize()
     if push_at_tcp_W is not None:
         applied = ExternallyAppliedSpatialForce()
@@ -46,7 +46,7 @@ def settle_locked_robot(q_a, push_at_tcp_W=None, duration=0.05):
     context = plant.GetMyMutableContextFromRoot(
         simulator.get_mutable_context())
     q = plant.GetPositions(context)
-    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_a
+    q[joint_position_indices(model.arm_joints)] = q_a
     plant.SetPositions(context, q)
     for i in plant.GetJointIndices():
         if plant.get_joint(i).num_velocities() == 1:

@@ -13,6 +13,7 @@ from pydrake.systems.primitives import (
     Linearize,
     LogVectorOutput,
 )
+from shipped_names import ARM_JOINTS
 
 from drake_wbc.math.arm_control import (
     DEFAULT_DAMPING,
@@ -26,7 +27,7 @@ from drake_wbc.math.arm_control import (
     singularity_damping,
 )
 from drake_wbc.math.capability import jacobian_derivative
-from drake_wbc.robot.model import ARM_JOINTS, HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.stages import ArmCartesianVelocityController
 
 H = 0.01

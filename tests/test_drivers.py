@@ -12,13 +12,9 @@ from pydrake.autodiffutils import (
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
+from shipped_names import ARM_JOINTS, BASE_JOINTS, SCOPED
 
-from drake_wbc.robot.model import (
-    ARM_JOINTS,
-    BASE_JOINTS,
-    HOME_ARM_POSITIONS,
-    make_mcr_plant,
-)
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, make_robot_plant
 from drake_wbc.station.driver_dynamics import base_loop_size, base_loop_step
 from drake_wbc.station.drivers import (
     ArmDriverParameters,
@@ -334,25 +330,27 @@ def test_arm_driver_in_autodiff_gives_the_same_desired_state():
 ])
 def test_servo_gains_from_the_mass_matrix(q_a, arm):
     base = BaseDriverParameters(servo_time_constant=0.02)
-    plant, model = make_mcr_plant()
+    plant, model = make_robot_plant()
     context = plant.CreateDefaultContext()
     for name, angle in zip(ARM_JOINTS, q_a, strict=True):
         plant.GetJointByName(name, model.arm).set_angle(context, angle)
     M = plant.CalcMassMatrix(context)
     gains = servo_gains(q_a, base, arm)
-    assert set(gains) == set(BASE_JOINTS) | set(ARM_JOINTS)
+    assert set(gains) == {SCOPED[n] for n in BASE_JOINTS + ARM_JOINTS}
     for name in BASE_JOINTS:
         i = plant.GetJointByName(name, model.base).velocity_start()
-        assert gains[name].p == 0.0
-        assert gains[name].d == pytest.approx(M[i, i] / 0.02, rel=1e-12)
+        assert gains[SCOPED[name]].p == 0.0
+        assert gains[SCOPED[name]].d == pytest.approx(M[i, i] / 0.02,
+                                                      rel=1e-12)
     w = 2.0 * np.pi * arm.servo_frequency
     floored = []
     for name in ARM_JOINTS:
         i = plant.GetJointByName(name, model.arm).velocity_start()
         inertia = max(M[i, i], arm.min_inertia)
         floored.append(M[i, i] < arm.min_inertia)
-        assert gains[name].p == pytest.approx(inertia * w**2, rel=1e-12)
-        assert gains[name].d == pytest.approx(
+        assert gains[SCOPED[name]].p == pytest.approx(inertia * w**2,
+                                                      rel=1e-12)
+        assert gains[SCOPED[name]].d == pytest.approx(
             2.0 * arm.damping_ratio * inertia * w, rel=1e-12)
     # Both branches of max(M_ii, min_inertia) are exercised.
     assert any(floored) and not all(floored)

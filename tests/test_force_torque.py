@@ -13,7 +13,11 @@ from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from drake_wbc.math.validation import validate
-from drake_wbc.robot.model import HOME_ARM_POSITIONS, add_mcr, make_mcr_plant
+from drake_wbc.robot.model import (
+    HOME_ARM_POSITIONS,
+    add_robot,
+    make_robot_plant,
+)
 from drake_wbc.station.force_torque import (
     ForceTorqueSensorParameters,
     WeldWrench,
@@ -201,7 +205,7 @@ def test_weld_wrench_connects_to_the_plant():
     the initial state: the tool's weight."""
     builder = DiagramBuilder()
     plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
-    model = add_mcr(plant)
+    model = add_robot(plant)
     plant.Finalize()
     weld = builder.AddSystem(WeldWrench(
         plant, plant.GetJointByName("ft300_sensing", model.tool)))
@@ -243,11 +247,11 @@ def test_parameters_and_arguments_are_checked():
         measure(np.zeros(5), None, 0)
     with pytest.raises(ValueError, match="tick"):
         measure(np.zeros(6), None, 1.5)
-    plant, model = make_mcr_plant()
+    plant, model = make_robot_plant()
     revolute = plant.GetJointByName("joint1", model.arm)
     with pytest.raises(ValueError, match="weld_joint"):
         WeldWrench(plant, revolute)
-    other, other_model = make_mcr_plant()
+    other, other_model = make_robot_plant()
     with pytest.raises(ValueError, match="weld_joint"):
         WeldWrench(plant, other.GetJointByName("ft300_sensing",
                                                other_model.tool))

@@ -38,6 +38,7 @@ from pydrake.multibody.tree import PdControllerGains
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink
+from shipped_names import ARM_JOINTS, BASE_JOINTS
 
 from drake_wbc.experiments.replay import (
     PATHS_PREFIX,
@@ -46,10 +47,8 @@ from drake_wbc.experiments.replay import (
     write_static_html,
 )
 from drake_wbc.robot.model import (
-    ARM_JOINTS,
-    BASE_JOINTS,
     HOME_ARM_POSITIONS,
-    add_mcr,
+    add_robot,
     joint_position_indices,
 )
 
@@ -82,7 +81,7 @@ def _record_run(page, duration=DURATION):
     plant.set_discrete_contact_approximation(
         plant.get_discrete_contact_approximation().kSap
     )
-    model = add_mcr(plant)
+    model = add_robot(plant)
     for name in BASE_JOINTS:
         # p = 0: a stiff velocity servo on each base joint.
         plant.GetJointActuatorByName(name, model.base).set_controller_gains(
@@ -104,7 +103,7 @@ def _record_run(page, duration=DURATION):
     context = simulator.get_mutable_context()
     plant_context = plant.GetMyMutableContextFromRoot(context)
     q = plant.GetPositions(plant_context)
-    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = (
+    q[joint_position_indices(model.arm_joints)] = (
         HOME_ARM_POSITIONS
     )
     plant.SetPositions(plant_context, q)
@@ -255,7 +254,7 @@ class _Walker(LeafSystem):
 def test_other_scene_graph_sources_are_animated(tmp_path):
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
-    add_mcr(plant)
+    add_robot(plant)
     plant.Finalize()
     walker = builder.AddSystem(_Walker(scene_graph))
     builder.Connect(walker.get_output_port(),
@@ -293,14 +292,14 @@ def test_every_publish_gets_its_own_frame(tmp_path):
 def test_a_minute_of_replay_stays_small(tmp_path):
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
-    model = add_mcr(plant)
+    model = add_robot(plant)
     plant.Finalize()
     recorder = ReplayRecorder.add_to(builder, scene_graph)
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     plant_context = plant.GetMyMutableContextFromRoot(context)
-    base = joint_position_indices(plant, BASE_JOINTS, model.base)
-    arm = joint_position_indices(plant, ARM_JOINTS, model.arm)
+    base = joint_position_indices(model.base_joints)
+    arm = joint_position_indices(model.arm_joints)
     # Every body moves in every frame: the largest animation of the robot.
     for k in range(30 * 60 + 1):
         t = k / 30.0

@@ -15,16 +15,14 @@ from reference_kinematics import (
     ELFIN5_UPPER,
     forward_kinematics,
 )
+from shipped_names import ARM_JOINTS, BASE_JOINTS, MOUNT_JOINTS
 
 from drake_wbc.robot.model import (
-    ARM_JOINTS,
-    BASE_JOINTS,
     HOME_ARM_POSITIONS,
-    MOUNT_JOINTS,
     ArmKinematics,
-    add_mcr,
+    add_robot,
     joint_position_indices,
-    make_mcr_plant,
+    make_robot_plant,
     mount_rocking_modes,
 )
 
@@ -36,13 +34,13 @@ LINK_MASSES = [2.13, 7.96, 3.73, 4.72, 1.47, 2.50, 0.455]
 
 @pytest.fixture(scope="module")
 def robot():
-    return make_mcr_plant()
+    return make_robot_plant()
 
 
 def _arm_context(plant, model, q_a):
     context = plant.CreateDefaultContext()
     q = plant.GetPositions(context)
-    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_a
+    q[joint_position_indices(model.arm_joints)] = q_a
     plant.SetPositions(context, q)
     return context
 
@@ -228,7 +226,7 @@ def _simulate_locked(q_a, initial_mount, base_velocity=0.0, duration=1.5):
     plant.set_discrete_contact_approximation(
         plant.get_discrete_contact_approximation().kSap
     )
-    model = add_mcr(plant)
+    model = add_robot(plant)
     for name in BASE_JOINTS:
         actuator = plant.GetJointActuatorByName(name, model.base)
         actuator.set_controller_gains(PdControllerGains(p=0.0, d=3e4))
@@ -245,8 +243,8 @@ def _simulate_locked(q_a, initial_mount, base_velocity=0.0, duration=1.5):
     context = simulator.get_mutable_context()
     plant_context = plant.GetMyMutableContextFromRoot(context)
     q = plant.GetPositions(plant_context)
-    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_a
-    q[joint_position_indices(plant, MOUNT_JOINTS, model.base)] = initial_mount
+    q[joint_position_indices(model.arm_joints)] = q_a
+    q[joint_position_indices(model.passive_joints)] = initial_mount
     plant.SetPositions(plant_context, q)
     for name in ARM_JOINTS:
         plant.GetJointByName(name, model.arm).Lock(plant_context)
@@ -270,8 +268,8 @@ def test_mount_oscillates_at_modal_frequency_in_simulation(robot):
     times, q, _, sim_plant, sim_model = _simulate_locked(
         HOME_ARM_POSITIONS, initial_mount=[0.0, 0.005]
     )
-    pitch = q[joint_position_indices(sim_plant, ["mount_pitch"],
-                                     sim_model.base)[0]]
+    pitch = q[joint_position_indices(
+        [sim_plant.GetJointByName("mount_pitch", sim_model.base)])[0]]
     frequency = _dominant_frequency(times, pitch)
     pitch_mode = max(expected, key=lambda mode: mode.shape[1])
     assert frequency == pytest.approx(pitch_mode.frequency_hz, rel=0.03)
@@ -303,8 +301,8 @@ def test_base_velocity_step_shakes_end_effector():
     settled = times > 0.1
     # The base reaches the commanded speed; the end effector overshoots it
     # and rings at the mount's mode: a visible shake, as on the real robot.
-    base_velocity = v[joint_position_indices(plant, ["base_x"],
-                                             model.base)[0]]
+    base_velocity = v[joint_position_indices(
+        [plant.GetJointByName("base_x", model.base)])[0]]
     assert base_velocity[-1] == pytest.approx(step, rel=1e-3)
     swing = tcp_velocity[settled].max() - tcp_velocity[settled].min()
     assert swing > 0.3 * step

@@ -20,11 +20,10 @@ from pydrake.systems.framework import DiagramBuilder
 
 from drake_wbc.math.validation import validate
 from drake_wbc.robot.model import (
-    ARM_JOINTS,
     HOME_ARM_POSITIONS,
-    add_mcr,
+    add_robot,
     joint_position_indices,
-    make_mcr_plant,
+    make_robot_plant,
 )
 from drake_wbc.station.scene import (
     BoxObstacle,
@@ -174,7 +173,7 @@ def test_errors_in_direct_construction_name_the_argument():
     with pytest.raises(ValueError, match=re.escape("people[1].name = 'p'")):
         PeopleSource([WalkingPerson(name="p"), WalkingPerson(name="p")])
     with pytest.raises(ValueError, match="hand = 'push'"):
-        HandForceSource(*make_mcr_plant(), hand="push")
+        HandForceSource(*make_robot_plant(), hand="push")
 
 
 def test_planar_shapes_cut_the_obstacles_at_the_scan_height():
@@ -294,7 +293,7 @@ def test_meshcat_draws_the_people_in_a_recording():
 
 
 def test_hand_force_source_outputs():
-    plant, model = make_mcr_plant()
+    plant, model = make_robot_plant()
     hand = HandForce(times=[0.0, 1.0], forces=[[0, 0, 0], [4, -2, 6]],
                      torques=[[0, 0, 0], [1, 0, -3]])
     source = HandForceSource(plant, model, hand)
@@ -334,9 +333,9 @@ def _horizontal_tool():
     """The home pose with joint 5 turned so that the tool points along the
     world's x axis (base at the origin, mount at rest); returns (q_a,
     X_WT), X_WT the tool centre point's pose."""
-    plant, model = make_mcr_plant()
+    plant, model = make_robot_plant()
     context = plant.CreateDefaultContext()
-    indices = joint_position_indices(plant, ARM_JOINTS, model.arm)
+    indices = joint_position_indices(model.arm_joints)
     q_a = HOME_ARM_POSITIONS.copy()
     for _ in range(2):  # joint 5 pitches the tool: exact up to round-off
         q = plant.GetPositions(context)
@@ -357,7 +356,7 @@ def _simulate(q_a, hand, duration, scene=None, free_base_x_damping=None):
     builder = DiagramBuilder()
     plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
     plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
-    model = add_mcr(plant)
+    model = add_robot(plant)
     ids = add_static_obstacles(plant, scene) if scene else {}
     plant.Finalize()
     add_hand(builder, plant, model, hand)
@@ -365,7 +364,7 @@ def _simulate(q_a, hand, duration, scene=None, free_base_x_damping=None):
     context = plant.GetMyMutableContextFromRoot(
         simulator.get_mutable_context())
     q = plant.GetPositions(context)
-    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_a
+    q[joint_position_indices(model.arm_joints)] = q_a
     plant.SetPositions(context, q)
     base_x = plant.GetJointByName("base_x", model.base)
     for i in plant.GetJointIndices():

@@ -9,13 +9,9 @@ from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.tree import ForceElementIndex, RevoluteSpring
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import MatrixGain
+from shipped_names import ARM_JOINTS, BASE_JOINTS, MOUNT_JOINTS, SCOPED
 
-from drake_wbc.robot.model import (
-    ARM_JOINTS,
-    BASE_JOINTS,
-    MOUNT_JOINTS,
-    ArmKinematics,
-)
+from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.station.force_torque import ForceTorqueSensorParameters
 from drake_wbc.station.scene import (
     BoxObstacle,
@@ -201,7 +197,7 @@ def test_initial_state_is_a_static_equilibrium(station, rest):
             restoring = -springs[name] * q
         else:
             q_cmd = rest.q_cmd[ARM_JOINTS.index(name)]
-            restoring = gains[name].p * (q_cmd - q)
+            restoring = gains[SCOPED[name]].p * (q_cmd - q)
         residual = tau_g[joint.velocity_start()] + restoring
         assert abs(residual) < 1e-6, name
 
@@ -220,7 +216,7 @@ def test_every_arm_servo_has_the_servo_frequency(station):
     for name in ARM_JOINTS:
         i = plant.GetJointByName(name).velocity_start()
         assert M[i, i] >= arm.min_inertia - 1e-12, name
-        assert station._gains[name].p / M[i, i] == pytest.approx(
+        assert station._gains[SCOPED[name]].p / M[i, i] == pytest.approx(
             w * w, rel=1e-9), name
 
 

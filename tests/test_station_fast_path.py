@@ -9,7 +9,7 @@ from pydrake.math import RollPitchYaw
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
-from drake_wbc.robot.model import add_mcr
+from drake_wbc.robot.model import add_robot
 from drake_wbc.station.force_torque import (
     ForceTorqueSensorParameters,
     _Measurement,
@@ -114,7 +114,7 @@ def robot():
     builder = DiagramBuilder()
     plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.0),
                                  builder)
-    model = add_mcr(plant)
+    model = add_robot(plant)
     plant.Finalize()
     truth = builder.AddSystem(GroundTruth(plant, model))
     builder.Connect(plant.get_body_poses_output_port(),

@@ -192,7 +192,7 @@ def build_split_diagram(params=None, point=None, base_driver=None,
 
 
 def _build_split(params, point, base_driver, alpha, station):
-    """build_split_diagram's diagram, and the McrModel of its plant (or
+    """build_split_diagram's diagram, and the RobotModel of its plant (or
     None)."""
     params = checked_instance("params", params, ControllerParameters,
                               ControllerParameters)

@@ -17,7 +17,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LinearSystem
 
 from drake_wbc.analysis.period_map import linearize_period_map
-from drake_wbc.robot.model import add_mcr
+from drake_wbc.robot.model import add_robot
 from drake_wbc.station.drivers import BaseVelocityDriver
 from drake_wbc.station.servo_gains import (
     drive_inertias,
@@ -51,7 +51,7 @@ def add_station_plant(builder, station):
     plant = add("plant", MultibodyPlant(h))
     plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
     plant.SetUseSampledOutputPorts(False)
-    model = add_mcr(plant)
+    model = add_robot(plant)
     set_servo_gains(plant, model, servo_gains(
         options.initial_arm_positions, options.base, options.arm))
     set_drive_inertias(plant, model, drive_inertias(

@@ -54,9 +54,6 @@ from drake_wbc.math.validation import (
     whole_number,
 )
 from drake_wbc.robot.model import (
-    ARM_JOINTS,
-    BASE_JOINTS,
-    MOUNT_JOINTS,
     ArmKinematics,
     joint_position_indices,
     joint_velocity_indices,
@@ -244,13 +241,11 @@ class PlantDiffIk:
         self.plant, self.frame = plant, model.tcp_frame
         self.context = plant.CreateDefaultContext()
         nv = plant.num_velocities()
-        self.iq_arm = joint_position_indices(plant, ARM_JOINTS, model.arm)
-        self.iq_base = joint_position_indices(plant, BASE_JOINTS,
-                                              model.base)
-        self.iv_arm = joint_velocity_indices(plant, ARM_JOINTS, model.arm)
-        self.iv_base = joint_velocity_indices(plant, BASE_JOINTS,
-                                              model.base)
-        mount = joint_velocity_indices(plant, MOUNT_JOINTS, model.base)
+        self.iq_arm = joint_position_indices(model.arm_joints)
+        self.iq_base = joint_position_indices(model.base_joints)
+        self.iv_arm = joint_velocity_indices(model.arm_joints)
+        self.iv_base = joint_velocity_indices(model.base_joints)
+        mount = joint_velocity_indices(model.passive_joints)
         limit = np.full(nv, np.inf)
         limit[mount] = 0.0
         self.params = DifferentialInverseKinematicsParameters(

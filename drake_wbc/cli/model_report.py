@@ -16,14 +16,11 @@ from drake_wbc.experiments.replay import quiet_meshcat, write_static_html
 from drake_wbc.math import capability
 from drake_wbc.math.validation import as_vector
 from drake_wbc.robot.model import (
-    ARM_JOINTS,
-    BASE_JOINTS,
     HOME_ARM_POSITIONS,
-    MOUNT_JOINTS,
     ArmKinematics,
-    add_mcr,
+    add_robot,
     joint_position_indices,
-    make_mcr_plant,
+    make_robot_plant,
     mount_rocking_modes,
 )
 
@@ -40,23 +37,23 @@ def describe_robot(q_a=HOME_ARM_POSITIONS, k_j=None):
     """
     q_a = as_vector("q_a", q_a, 6)
     k_j = capability.DEFAULT_JOINT_LIMIT_GAIN if k_j is None else k_j
-    plant, model = make_mcr_plant()
+    plant, model = make_robot_plant()
     context = plant.CreateDefaultContext()
     actuated = {
-        plant.get_joint_actuator(i).joint().name(): plant.get_joint_actuator(
+        plant.get_joint_actuator(i).joint().index(): plant.get_joint_actuator(
             i
         ).effort_limit()
         for i in plant.GetJointActuatorIndices()
     }
     lines = ["Joints (position limits, velocity limit, effort limit):"]
     groups = (
-        ("base", model.base, BASE_JOINTS),
-        ("mount", model.base, MOUNT_JOINTS),
-        ("arm", model.arm, ARM_JOINTS),
+        ("base", model.base_joints),
+        ("mount", model.passive_joints),
+        ("arm", model.arm_joints),
     )
-    for group, instance, names in groups:
-        for name in names:
-            joint = plant.GetJointByName(name, instance)
+    for group, joints in groups:
+        for joint in joints:
+            name = joint.name()
             unit = "m" if joint.type_name() == "prismatic" else "rad"
             low = joint.position_lower_limits()[0]
             high = joint.position_upper_limits()[0]
@@ -66,8 +63,9 @@ def describe_robot(q_a=HOME_ARM_POSITIONS, k_j=None):
                 else f"[{low:+.2f}, {high:+.2f}] {unit}"
             )
             effort = (
-                f"{actuated[name]:6.0f} {'N' if unit == 'm' else 'N m'}"
-                if name in actuated
+                f"{actuated[joint.index()]:6.0f} "
+                f"{'N' if unit == 'm' else 'N m'}"
+                if joint.index() in actuated
                 else "unactuated (spring-damper)"
             )
             speed = f"{joint.velocity_upper_limits()[0]:5.2f} {unit}/s"
@@ -152,7 +150,7 @@ def write_model_page(path, q_a=HOME_ARM_POSITIONS, lidar_range=1.0):
     q_a = as_vector("q_a", q_a, 6)
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
-    model = add_mcr(plant)
+    model = add_robot(plant)
     plant.Finalize()
     frames = (
         model.base_frame,
@@ -171,7 +169,7 @@ def write_model_page(path, q_a=HOME_ARM_POSITIONS, lidar_range=1.0):
     context = diagram.CreateDefaultContext()
     plant_context = plant.GetMyMutableContextFromRoot(context)
     q = plant.GetPositions(plant_context)
-    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_a
+    q[joint_position_indices(model.arm_joints)] = q_a
     plant.SetPositions(plant_context, q)
     vertices, faces = _lidar_fan(lidar_range)
     for frame in model.lidar_frames:

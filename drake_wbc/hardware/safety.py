@@ -40,7 +40,7 @@ from drake_wbc.math.validation import (
     checked_instance,
     positive,
 )
-from drake_wbc.robot.model import ARM_JOINTS, HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 
 LOG = logging.getLogger("drake_wbc.hardware")
 
@@ -122,13 +122,11 @@ class Limits(NamedTuple):
 
 
 def arm_own_limits(arm):
-    """(joint speed limits (6,), joint acceleration limits (6,)) of the
-    arm model (`arm` an ArmKinematics): its joints' velocity and
-    acceleration limits (models/elfin5.sdf)."""
-    joints = [arm.plant.GetJointByName(name, arm.model.arm)
-              for name in ARM_JOINTS]
+    """(joint speed limits (n,), joint acceleration limits (n,)) of the
+    arm (`arm` an ArmKinematics): the robot's own, from its model and
+    description (drake_wbc.robot.model.RobotModel.limits)."""
     return (np.asarray(arm.velocity_limits, dtype=float),
-            np.array([j.acceleration_upper_limits()[0] for j in joints]))
+            np.asarray(arm.acceleration_limits, dtype=float))
 
 
 def saturate_base_velocity(velocity, speed_limit, yaw_rate_limit):

@@ -1,8 +1,11 @@
 """The robot: its Drake model and the kinematics read from it.
 
-- model: the mobile collaborative robot of models/ loaded into a
-  MultibodyPlant (`add_mcr`), and `ArmKinematics`, the arm's nominal
-  kinematics from such a plant.
+- description: the robot as data (`RobotDescription`, one YAML file:
+  its model, joints, frames, limits and home; `load_robot_description`,
+  `shipped_robot`).
+- model: a described robot loaded into a MultibodyPlant and checked
+  against its description (`add_robot`, `RobotModel`), and
+  `ArmKinematics`, the arm's nominal kinematics from such a plant.
 - footprint: the base's footprint and the start-pose check.
 
 May import the math layer and pydrake's multibody parts; never a stage,

@@ -1,28 +1,29 @@
-"""The mobile collaborative robot's model in Drake.
+"""The robot's model in Drake, from its description.
 
-Loads the robot of models/ (omnidirectional base with a flexible arm mount,
-Elfin5 arm, FT-300 wrist sensor, wiping tool, two LIDAR frames) into a
-`MultibodyPlant`, names its parts, and computes the two kinematic quantities
-that the controller needs from the arm's configuration: the arm Jacobian
-J_a and the end-effector position in the base frame (paper, Sec. III-A).
-
-The model files are found through Drake's package map under the package
-name `drake_wbc`, so they load with no network and no other model package::
+Loads a robot described by a `RobotDescription` (drake_wbc.robot.description;
+the shipped one by default: models/mcr.robot.yaml, an Elfin5 on an
+omnidirectional base) into a `MultibodyPlant`, finds its parts, checks
+the description against the model, and computes the two kinematic
+quantities that the controller needs from the arm's configuration: the
+arm Jacobian J_a and the end-effector position in the base frame (paper,
+Sec. III-A)::
 
     plant = MultibodyPlant(time_step=0.001)
-    model = add_mcr(plant)
+    model = add_robot(plant)                 # or add_robot(plant, mine)
     plant.Finalize()
+    arm = ArmKinematics(plant, model)
+
+The shipped model files are found through Drake's package map under the
+package name `drake_wbc`, so they load with no network.
 """
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import (
     LoadModelDirectives,
-    PackageMap,
     Parser,
     ProcessModelDirectives,
 )
@@ -31,77 +32,66 @@ from pydrake.multibody.tree import (
     ForceElementIndex,
     Frame,
     JacobianWrtVariable,
+    Joint,
+    JointIndex,
     ModelInstanceIndex,
     RevoluteSpring,
+    ScopedName,
 )
 
-from drake_wbc.math.validation import as_float_array, as_vector
+from drake_wbc.math.validation import (
+    as_float_array,
+    as_vector,
+    checked_instance,
+)
+from drake_wbc.robot.description import RobotDescription, shipped_robot
 
-PACKAGE_NAME = "drake_wbc"
-"""The package name under which models/ is registered."""
-
-MCR_DIRECTIVES_URL = f"package://{PACKAGE_NAME}/mcr.dmd.yaml"
-"""The model directives that assemble the whole robot."""
-
-BASE_JOINTS = ("base_x", "base_y", "base_yaw")
-"""The base's planar joints: world-fixed x and y, then yaw (actuated)."""
-
-MOUNT_JOINTS = ("mount_roll", "mount_pitch")
-"""The flexible mount's spring-damper joints (unactuated)."""
-
-ARM_JOINTS = tuple(f"joint{i}" for i in range(1, 7))
-"""The Elfin5's joints, base to wrist."""
-
-HOME_ARM_POSITIONS = np.array([0.0, -0.45, 1.0, 0.0, 1.15, 0.0])
-"""The arm's home configuration (rad): elbow up, the tool centre point
-0.54 m ahead of the base's front and 0.66 m above the floor, pointing
-forward and 59 degrees down. Among such poses it has about the largest
-manipulability (0.071; the 99th percentile over the whole joint space is
-0.090) while every joint stays well inside its range."""
-
-LIDAR_FRAMES = ("lidar_front_left", "lidar_rear_right")
-"""The scan frames of the two 2-D LIDARs, at diagonally opposite corners."""
+HOME_ARM_POSITIONS = np.array(shipped_robot().arm.home)
+"""The shipped robot's home configuration (rad), from its description:
+the default start of the simulated station and of the controller."""
 
 
-def models_dir():
-    """Returns the folder that holds the robot's model files.
+class ArmLimits(NamedTuple):
+    """The arm's own limits, (n,) each: the model's, or the description's
+    where tighter.
 
-    A wheel carries models/ inside the package; a source checkout (or an
-    editable install) has it at the repository's top level.
+    Attributes:
+        lower, upper: joint position limits, rad.
+        velocity: joint speed limits, rad/s.
+        acceleration: joint acceleration limits, rad/s^2.
     """
-    here = Path(__file__).resolve().parents[1]  # the package
-    for candidate in (here / "models", here.parent / "models"):
-        if (candidate / "package.xml").is_file():
-            return candidate
-    raise FileNotFoundError(
-        f"the robot model folder was not found next to {here}: expected "
-        "models/package.xml in the package or in the repository"
-    )
 
-
-def register_models(package_map: PackageMap):
-    """Adds models/ to `package_map` as the package `drake_wbc` (once)."""
-    if not package_map.Contains(PACKAGE_NAME):
-        package_map.AddPackageXml(str(models_dir() / "package.xml"))
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
 
 
 @dataclass(frozen=True)
-class McrModel:
-    """The parts of the robot inside a plant, as `add_mcr` returns them.
+class RobotModel:
+    """The parts of a robot inside a plant, as `add_robot` returns them.
 
     Attributes:
-        base: the base's model instance (planar joints, chassis, mount).
-        arm: the Elfin5's model instance.
-        tool: the FT-300 and wiping tool's model instance.
+        description: the RobotDescription it was added from.
+        base, arm, tool: the model instances of the base's joints, of the
+            arm's joints and of the TCP.
         base_frame: T_b, on the floor at the centre of the footprint.
-        arm_base_frame: T_a, the arm's base (on the flexible mount).
+        arm_base_frame: T_a, the arm's base.
         flange_frame: the arm's tool flange.
-        ft_measurement_frame: the FT-300's measurement frame.
-        tcp_frame: the tool centre point at the face of the wiping pad,
-            the end effector of the controller.
-        lidar_frames: the two scan frames, front-left then rear-right.
+        ft_measurement_frame: the wrist sensor's measurement frame.
+        tcp_frame: the tool centre point, the end effector of the
+            controller.
+        lidar_frames: the LIDARs' scan frames, in the description's order.
+        base_joints: the base's planar joints (x, y, yaw).
+        passive_joints: the base's unactuated joints (e.g. a flexible
+            mount).
+        arm_joints: the arm's joints, base to wrist.
+        ft_sensor_joint: the weld on the sensor's measuring surface.
+        home: (n,) the arm's home configuration, rad.
+        limits: the arm's own ArmLimits.
     """
 
+    description: RobotDescription
     base: ModelInstanceIndex
     arm: ModelInstanceIndex
     tool: ModelInstanceIndex
@@ -111,77 +101,248 @@ class McrModel:
     ft_measurement_frame: Frame
     tcp_frame: Frame
     lidar_frames: tuple
+    base_joints: tuple
+    passive_joints: tuple
+    arm_joints: tuple
+    ft_sensor_joint: Joint
+    home: np.ndarray
+    limits: ArmLimits
+
+    @property
+    def num_arm_joints(self):
+        """n, the number of the arm's joints."""
+        return len(self.arm_joints)
 
 
-def add_mcr(plant: MultibodyPlant, parser: Parser = None):
-    """Adds the whole robot to `plant` (not yet finalized).
+def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None):
+    """Adds the robot of `description` to `plant` (not yet finalized) and
+    checks the description against it.
 
     Args:
-        plant: the plant to add to; its scene graph, if registered, receives
-            the geometry.
-        parser: an existing parser of `plant` whose package map is to be used
-            (a new one is made if None).
+        plant: the plant to add to; its scene graph, if registered,
+            receives the geometry.
+        description: a RobotDescription; the shipped robot's if None.
+        parser: an existing parser of `plant` whose package map is to be
+            used (a new one is made if None).
 
     Returns:
-        McrModel: the model instances and the frames the controller uses.
+        RobotModel: the model instances, frames and joints.
+
+    Raises:
+        ValueError: naming the description's field when a joint or frame
+            it names is not in the model, a joint is of the wrong kind, the
+            TCP is not outboard of the arm, the sensor not between the
+            flange and the TCP, or the arm's limits are missing or wider
+            than the model's.
     """
     if plant.is_finalized():
         raise ValueError(
             "plant is finalized, which is not allowed: add the robot before "
             "plant.Finalize()"
         )
+    description = checked_instance("description", description,
+                                   RobotDescription, shipped_robot)
     parser = parser or Parser(plant)
-    register_models(parser.package_map())
-    directives = LoadModelDirectives(
-        parser.package_map().ResolveUrl(MCR_DIRECTIVES_URL)
-    )
-    ProcessModelDirectives(directives, plant, parser)
-    base = plant.GetModelInstanceByName("mcr_base")
-    arm = plant.GetModelInstanceByName("elfin5")
-    tool = plant.GetModelInstanceByName("ft300_wiping_tool")
-    return McrModel(
-        base=base,
-        arm=arm,
-        tool=tool,
-        base_frame=plant.GetFrameByName("base_link", base),
-        arm_base_frame=plant.GetFrameByName("base_link", arm),
-        flange_frame=plant.GetFrameByName("flange", arm),
-        ft_measurement_frame=plant.GetFrameByName("ft300_measurement", tool),
-        tcp_frame=plant.GetFrameByName("tcp", tool),
-        lidar_frames=tuple(
-            plant.GetFrameByName(name, base) for name in LIDAR_FRAMES
-        ),
-    )
+    package_map = parser.package_map()
+    for name, folder in description.model.packages.items():
+        if not package_map.Contains(name):
+            package_map.Add(name, description.resolve(folder))
+    source = description.model
+    if source.directives:
+        url = description.resolve(source.directives)
+        path = package_map.ResolveUrl(url) if "://" in url else url
+        ProcessModelDirectives(LoadModelDirectives(path), plant, parser)
+    else:
+        url = description.resolve(source.file)
+        if "://" in url:
+            parser.AddModelsFromUrl(url)
+        else:
+            parser.AddModels(url)
+    return _robot_model(plant, description)
 
 
-def make_mcr_plant(time_step=0.0):
+def _scoped(plant, field, name, find, kind):
+    """The element `name` ("instance::element") of the plant, by
+    find(element, instance); a ValueError naming `field` if absent."""
+    scoped = ScopedName.Parse(name)
+    instance_name, element = scoped.get_namespace(), scoped.get_element()
+    if not instance_name or not plant.HasModelInstanceNamed(instance_name):
+        instances = [plant.GetModelInstanceName(ModelInstanceIndex(i))
+                     for i in range(plant.num_model_instances())]
+        raise ValueError(
+            f"{field} = {name!r} is not allowed: must be scoped by one of "
+            f"the model's instances {instances}, as instance::{kind}")
+    instance = plant.GetModelInstanceByName(instance_name)
+    try:
+        return find(element, instance)
+    except RuntimeError:
+        raise ValueError(
+            f"{field} = {name!r} is not allowed: the model has no {kind} "
+            f"{element!r} in {instance_name!r}") from None
+
+
+def _parents(plant):
+    """child body index -> (joint, parent body) over every joint."""
+    parents = {}
+    for i in range(plant.num_joints()):
+        joint = plant.get_joint(JointIndex(i))
+        parents[joint.child_body().index()] = joint
+    return parents
+
+
+def _outboard(parents, body, ancestor):
+    """Whether `body` is `ancestor` or lies outboard of it."""
+    index = body.index()
+    while True:
+        if index == ancestor.index():
+            return True
+        joint = parents.get(index)
+        if joint is None:
+            return False
+        index = joint.parent_body().index()
+
+
+def _robot_model(plant, description):
+    """The RobotModel of `description` in `plant`, checked."""
+    def frame(field, name):
+        return _scoped(plant, field, name, plant.GetFrameByName, "frame")
+
+    def joint(field, name, kinds):
+        found = _scoped(plant, field, name, plant.GetJointByName, "joint")
+        if found.type_name() not in kinds:
+            raise ValueError(
+                f"{field} = {name!r} is not allowed: it is a "
+                f"{found.type_name()} joint, must be {' or '.join(kinds)}")
+        return found
+
+    base, arm, tool = (description.base, description.arm, description.tool)
+    base_joints = tuple(
+        joint(f"base.joints[{i}]", name, (kind,)) for i, (name, kind) in
+        enumerate(zip(base.joints, ("prismatic", "prismatic", "revolute"),
+                      strict=True)))
+    passive_joints = tuple(
+        joint(f"base.passive_joints[{i}]", name,
+              ("revolute", "prismatic"))
+        for i, name in enumerate(base.passive_joints))
+    arm_joints = tuple(joint(f"arm.joints[{i}]", name, ("revolute",))
+                       for i, name in enumerate(arm.joints))
+    sensor_joint = joint("tool.ft_sensor_joint", tool.ft_sensor_joint,
+                         ("weld",))
+    frames = dict(
+        base_frame=frame("base.frame", base.frame),
+        arm_base_frame=frame("arm.base_frame", arm.base_frame),
+        flange_frame=frame("arm.flange_frame", arm.flange_frame),
+        ft_measurement_frame=frame("tool.ft_sensor_frame",
+                                   tool.ft_sensor_frame),
+        tcp_frame=frame("tool.tcp_frame", tool.tcp_frame))
+    lidar_frames = tuple(frame(f"lidar_frames[{i}]", name)
+                         for i, name in enumerate(description.lidar_frames))
+    parents = _parents(plant)
+    last = arm_joints[-1].child_body()
+    for i, (a, b) in enumerate(zip(arm_joints[:-1], arm_joints[1:],
+                                   strict=True)):
+        if not _outboard(parents, b.parent_body(), a.child_body()):
+            raise ValueError(
+                f"arm.joints[{i + 1}] = {arm.joints[i + 1]!r} is not allowed:"
+                f" it is not outboard of arm.joints[{i}] = {arm.joints[i]!r}"
+                " (list the joints base to wrist)")
+    flange = frames["flange_frame"].body()
+    sensor = sensor_joint.child_body()
+    tcp = frames["tcp_frame"].body()
+    for field, name, body, ancestor, what in (
+            ("arm.flange_frame", arm.flange_frame, flange, last,
+             "the arm's last joint"),
+            ("tool.ft_sensor_joint", tool.ft_sensor_joint, sensor, flange,
+             "the flange"),
+            ("tool.ft_sensor_frame", tool.ft_sensor_frame,
+             frames["ft_measurement_frame"].body(), flange, "the flange"),
+            ("tool.tcp_frame", tool.tcp_frame, tcp, sensor,
+             "the sensor's measuring side")):
+        if not _outboard(parents, body, ancestor):
+            raise ValueError(f"{field} = {name!r} is not allowed: must be "
+                             f"outboard of {what}")
+    return RobotModel(
+        description=description,
+        base=base_joints[0].model_instance(),
+        arm=arm_joints[0].model_instance(),
+        tool=tcp.model_instance(),
+        lidar_frames=lidar_frames,
+        base_joints=base_joints,
+        passive_joints=passive_joints,
+        arm_joints=arm_joints,
+        ft_sensor_joint=sensor_joint,
+        home=np.array(arm.home),
+        limits=_arm_limits(arm, arm_joints),
+        **frames)
+
+
+def _arm_limits(arm, joints):
+    """The arm's own ArmLimits: the model's, tightened where the
+    description gives tighter ones; a ValueError naming the field for a
+    limit that is missing or wider than the model's, or a home outside."""
+    n = len(joints)
+    model = dict(
+        position_lower=[float(j.position_lower_limits()[0]) for j in joints],
+        position_upper=[float(j.position_upper_limits()[0]) for j in joints],
+        velocity_limits=[float(j.velocity_upper_limits()[0]) for j in joints],
+        acceleration_limits=[float(j.acceleration_upper_limits()[0])
+                             for j in joints])
+    limits = {}
+    for name, own in model.items():
+        given = getattr(arm, name)
+        upper_side = name != "position_lower"
+        values = []
+        for i in range(n):
+            value = own[i] if given is None else given[i]
+            wider = (value > own[i]) if upper_side else (value < own[i])
+            if given is not None and wider:
+                raise ValueError(
+                    f"arm.{name}[{i}] = {value!r} is not allowed: must be "
+                    f"within the model's own {own[i]!r} for "
+                    f"{arm.joints[i]!r} (a limit may only tighten)")
+            if not np.isfinite(value):
+                raise ValueError(
+                    f"arm.{name}[{i}] is missing, which is not allowed: the "
+                    f"model gives {arm.joints[i]!r} none ({value!r}); give "
+                    f"arm.{name} in the description")
+            values.append(float(value))
+        limits[name] = np.array(values)
+    for i, (q, lo, hi) in enumerate(zip(
+            arm.home, limits["position_lower"].tolist(),
+            limits["position_upper"].tolist(), strict=True)):
+        if not lo < q < hi:
+            raise ValueError(
+                f"arm.home[{i}] = {q!r} is not allowed: must be inside "
+                f"{arm.joints[i]!r}'s limits ({lo!r}, {hi!r})")
+    return ArmLimits(limits["position_lower"], limits["position_upper"],
+                     limits["velocity_limits"],
+                     limits["acceleration_limits"])
+
+
+def make_robot_plant(description=None, time_step=0.0):
     """Returns (plant, model): a finalized plant of the robot alone."""
     plant = MultibodyPlant(time_step=time_step)
-    model = add_mcr(plant)
+    model = add_robot(plant, description)
     plant.Finalize()
     return plant, model
 
 
-def joint_position_indices(plant, names, instance):
-    """Returns the indices in q of the one-dof joints `names` of `instance`."""
-    return np.array(
-        [plant.GetJointByName(n, instance).position_start() for n in names]
-    )
+def joint_position_indices(joints):
+    """Returns the indices in q of the one-dof `joints`."""
+    return np.array([j.position_start() for j in joints], dtype=int)
 
 
-def joint_velocity_indices(plant, names, instance):
-    """Returns the indices in v of the one-dof joints `names` of `instance`."""
-    return np.array(
-        [plant.GetJointByName(n, instance).velocity_start() for n in names]
-    )
+def joint_velocity_indices(joints):
+    """Returns the indices in v of the one-dof `joints`."""
+    return np.array([j.velocity_start() for j in joints], dtype=int)
 
 
 class ArmKinematicsValues(NamedTuple):
     """The arm's kinematics at one configuration (see ArmKinematics).
 
     Attributes:
-        J_a: (6, 6) geometric Jacobian of the end effector in T_a, rows
-            [v; w] (the paper's order), columns the arm's joint rates.
+        J_a: (6, n) geometric Jacobian of the end effector in T_a, rows
+            [v; w] (the paper's order), columns the arm's n joint rates.
         p_ee_in_base: (3,) end-effector position in T_b (m).
         X_AE: the end-effector pose in T_a.
     """
@@ -195,26 +356,32 @@ class ArmKinematics:
     """J_a and the end-effector position from the robot model.
 
     The one place where the controller's stages get the arm's kinematics
-    (paper, eq. (fk) and eq. (2)). The flexible mount is not measured on the
-    real robot, so these are the nominal kinematics: mount at rest, base at
-    the origin. T_a is then fixed in T_b and R_ba, the rotation from T_a to
-    T_b, is a constant (the identity for this robot).
+    (paper, eq. (fk) and eq. (2)), for an arm of n >= 6 joints. The base's
+    passive joints (a flexible mount) are not measured on a real robot, so
+    these are the nominal kinematics: passive joints at rest, base at the
+    origin. T_a is then fixed in T_b and R_ba, the rotation from T_a to
+    T_b, is a constant (the identity for the shipped robot).
+
+    Attributes (besides the methods): num_joints n; lower, upper,
+    velocity_limits, acceleration_limits (n,), the arm's own limits
+    (RobotModel.limits); home (n,); R_ba.
 
     Args:
         plant: a finalized plant that contains the robot; a private plant of
-            the robot alone is made if None.
-        model: the McrModel of `plant` (required when `plant` is given).
+            the shipped robot alone is made if None.
+        model: the RobotModel of `plant` (required when `plant` is
+            given).
         end_effector_frame: the frame whose origin is the end effector;
             the tool centre point if None.
     """
 
     def __init__(self, plant=None, model=None, end_effector_frame=None):
         if plant is None:
-            plant, model = make_mcr_plant()
+            plant, model = make_robot_plant()
         elif model is None:
             raise ValueError(
                 "model = None is not allowed when plant is given: pass the "
-                "McrModel that add_mcr returned for that plant"
+                "RobotModel that add_robot returned for that plant"
             )
         self._plant = plant
         self.plant, self.model = plant, model
@@ -222,16 +389,14 @@ class ArmKinematics:
         self._arm_base = model.arm_base_frame
         self._base = model.base_frame
         self._end_effector = end_effector_frame or model.tcp_frame
-        self._q_indices = joint_position_indices(plant, ARM_JOINTS, model.arm)
-        self._v_indices = joint_velocity_indices(plant, ARM_JOINTS, model.arm)
-        joints = [plant.GetJointByName(n, model.arm) for n in ARM_JOINTS]
-        self.lower = np.array([j.position_lower_limits()[0] for j in joints])
-        self.upper = np.array([j.position_upper_limits()[0] for j in joints])
-        self.velocity_limits = np.array(
-            [j.velocity_upper_limits()[0] for j in joints]
-        )
-        self.acceleration_limits = np.array(
-            [j.acceleration_upper_limits()[0] for j in joints])
+        self.num_joints = model.num_arm_joints
+        self._q_indices = joint_position_indices(model.arm_joints)
+        self._v_indices = joint_velocity_indices(model.arm_joints)
+        limits = model.limits
+        self.lower, self.upper = limits.lower.copy(), limits.upper.copy()
+        self.velocity_limits = limits.velocity.copy()
+        self.acceleration_limits = limits.acceleration.copy()
+        self.home = model.home.copy()
         X_BA = self._arm_base.CalcPose(self._context, self._base)
         self.R_ba = X_BA.rotation().matrix()
         # T_a is fixed in T_b (nominal kinematics): p_ee in T_b follows
@@ -250,11 +415,11 @@ class ArmKinematics:
     control tick ask for the same few: measured and commanded)."""
 
     def _set_arm_positions(self, q_a, key=None):
-        """Puts q_a (6,) into the private context; a no-op when it is
+        """Puts q_a (n,) into the private context; a no-op when it is
         already there, which keeps the plant's kinematics cache valid.
         `key`: q_a.tobytes() of a checked q_a, if known."""
         if key is None:
-            q_a = as_float_array("q_a", q_a, (6,))
+            q_a = as_float_array("q_a", q_a, (self.num_joints,))
             key = q_a.tobytes()
         if key != self._q_a_key:
             self._q[self._q_indices] = q_a
@@ -263,16 +428,16 @@ class ArmKinematics:
 
     def frame_pose(self, q_a, frame):
         """Returns the pose X_AF of `frame` (of this plant) in T_a at arm
-        configuration `q_a` (6,)."""
+        configuration `q_a` (n,)."""
         self._set_arm_positions(q_a)
         return frame.CalcPose(self._context, self._arm_base)
 
     def evaluate(self, q_a):
-        """Returns the ArmKinematicsValues at arm configuration `q_a` (6,).
+        """Returns the ArmKinematicsValues at arm configuration `q_a` (n,).
 
         The last few configurations' values are remembered (the same q_a
         gives the same values, as fresh copies)."""
-        q_a = as_float_array("q_a", q_a, (6,))
+        q_a = as_float_array("q_a", q_a, (self.num_joints,))
         key = q_a.tobytes()
         values = self._memo.get(key)
         if values is None:
@@ -296,7 +461,7 @@ class ArmKinematics:
             self._arm_base,
         )
         # Drake orders spatial velocities [w; v]; the paper orders [v; w].
-        J_a = J.take(self._J_a_entries).reshape(6, 6)
+        J_a = J.take(self._J_a_entries).reshape(6, self.num_joints)
         X_AE = self._end_effector.CalcPose(self._context, self._arm_base)
         p_ee_in_base = self._R_BA @ X_AE.translation() + self._p_BA
         return ArmKinematicsValues(J_a, p_ee_in_base, X_AE)
@@ -310,7 +475,7 @@ class MountMode(NamedTuple):
     shape: np.ndarray
 
 
-def mount_rocking_modes(plant, model, q_a=HOME_ARM_POSITIONS):
+def mount_rocking_modes(plant, model, q_a=None):
     """Returns the mount's rocking modes with the arm held at `q_a`.
 
     The base and the arm are held still, so the mount's two joints theta
@@ -321,28 +486,35 @@ def mount_rocking_modes(plant, model, q_a=HOME_ARM_POSITIONS):
     differences of the plant's gravity forces.
 
     Args:
-        plant: a finalized plant of the robot (see make_mcr_plant).
-        model: its McrModel.
-        q_a: the arm configuration (6,), the home pose by default.
+        plant: a finalized plant of the robot (see make_robot_plant).
+        model: its RobotModel, with two passive joints (the mount's roll
+            and pitch).
+        q_a: the arm configuration (n,), the robot's home if None.
 
     Returns:
         list[MountMode]: the modes, lowest frequency first; `shape` is the
         mode's direction in (roll, pitch).
     """
-    q_a = as_vector("q_a", q_a, 6)
+    q_a = as_vector("q_a", model.home if q_a is None else q_a,
+                    model.num_arm_joints)
+    if len(model.passive_joints) != 2:
+        raise ValueError(
+            f"model.passive_joints = {model.description.base.passive_joints}"
+            " is not allowed: the mount's rocking modes need its two joints"
+            " (roll, pitch)")
     context = plant.CreateDefaultContext()
     q = plant.GetPositions(context)
-    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_a
+    q[joint_position_indices(model.arm_joints)] = q_a
     plant.SetPositions(context, q)
-    iq = joint_position_indices(plant, MOUNT_JOINTS, model.base)
-    iv = joint_velocity_indices(plant, MOUNT_JOINTS, model.base)
+    iq = joint_position_indices(model.passive_joints)
+    iv = joint_velocity_indices(model.passive_joints)
     M = plant.CalcMassMatrix(context)[np.ix_(iv, iv)]
     springs = {
         element.joint().name(): element.GetStiffness(context)
         for element in _force_elements(plant)
         if isinstance(element, RevoluteSpring)
     }
-    joints = [plant.GetJointByName(n, model.base) for n in MOUNT_JOINTS]
+    joints = model.passive_joints
     k = np.array([springs.get(j.name(), 0.0) for j in joints])
     C = np.diag([j.default_damping() for j in joints])
     step = 1e-6

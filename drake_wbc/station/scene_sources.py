@@ -154,7 +154,7 @@ class HandForceSource(LeafSystem):
 
     Args:
         plant: the MultibodyPlant that holds the robot.
-        model: the McrModel that add_mcr returned for `plant`.
+        model: the RobotModel that add_robot returned for `plant`.
         hand: a HandForce (validated); None for no hand.
         period: s, > 0, how often the wrench is sampled.
     """

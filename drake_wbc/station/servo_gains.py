@@ -8,14 +8,34 @@ from pydrake.multibody.tree import PdControllerGains
 
 from drake_wbc.math.validation import as_vector
 from drake_wbc.robot.model import (
-    ARM_JOINTS,
-    BASE_JOINTS,
+    joint_position_indices,
     joint_velocity_indices,
-    make_mcr_plant,
+    make_robot_plant,
 )
 
 
-def servo_gains(arm_positions, base, arm):
+def _mass_matrix(description, arm_positions):
+    """(M, model): the robot's mass matrix with the arm at
+    `arm_positions` (n,), everything else at rest, and its RobotModel."""
+    plant, model = make_robot_plant(description)
+    q_a = as_vector("arm_positions", arm_positions, model.num_arm_joints)
+    context = plant.CreateDefaultContext()
+    q = plant.GetPositions(context)
+    q[joint_position_indices(model.arm_joints)] = q_a
+    plant.SetPositions(context, q)
+    return plant.CalcMassMatrix(context), model
+
+
+def _actuators(plant, joints):
+    """The actuator of each of `joints` (one-dof, actuated)."""
+    by_joint = {}
+    for index in plant.GetJointActuatorIndices():
+        actuator = plant.get_joint_actuator(index)
+        by_joint[actuator.joint().index()] = actuator
+    return [by_joint[j.index()] for j in joints]
+
+
+def servo_gains(arm_positions, base, arm, description=None):
     """The PD gains of the base's and the arm's actuators.
 
     The base's joints get a pure velocity servo, p = 0 and d = M_ii /
@@ -26,26 +46,27 @@ def servo_gains(arm_positions, base, arm):
     position does not enter M).
 
     Args:
-        arm_positions: (6,) the arm configuration to size for.
+        arm_positions: (n,) the arm configuration to size for.
         base: BaseDriverParameters.
         arm: ArmDriverParameters.
+        description: the RobotDescription; the shipped robot's if None.
 
     Returns:
-        dict: joint name -> PdControllerGains, for `set_servo_gains`.
+        dict: the joint's scoped name (as the description names it) ->
+        PdControllerGains, for `set_servo_gains`.
     """
-    q_a = as_vector("arm_positions", arm_positions, 6)
-    plant, model = make_mcr_plant()
-    context = plant.CreateDefaultContext()
-    plant.SetPositions(context, model.arm, q_a)
-    M = plant.CalcMassMatrix(context)
+    M, model = _mass_matrix(description, arm_positions)
+    names = model.description
     w = 2.0 * np.pi * arm.servo_frequency
     gains = {}
-    for name, i in zip(BASE_JOINTS, joint_velocity_indices(
-            plant, BASE_JOINTS, model.base), strict=True):
+    for name, i in zip(names.base.joints,
+                       joint_velocity_indices(model.base_joints),
+                       strict=True):
         gains[name] = PdControllerGains(
             p=0.0, d=M[i, i] / base.servo_time_constant)
-    for name, i in zip(ARM_JOINTS, joint_velocity_indices(
-            plant, ARM_JOINTS, model.arm), strict=True):
+    for name, i in zip(names.arm.joints,
+                       joint_velocity_indices(model.arm_joints),
+                       strict=True):
         inertia = max(M[i, i], arm.min_inertia)
         gains[name] = PdControllerGains(
             p=inertia * w * w, d=2.0 * arm.damping_ratio * inertia * w)
@@ -55,14 +76,14 @@ def servo_gains(arm_positions, base, arm):
 def set_servo_gains(plant, model, gains):
     """Gives the robot's actuators in `plant` (not yet finalized) the PD
     gains of `servo_gains`."""
-    for names, instance in ((BASE_JOINTS, model.base),
-                            (ARM_JOINTS, model.arm)):
-        for name in names:
-            plant.GetJointActuatorByName(name, instance).set_controller_gains(
-                gains[name])
+    names = model.description
+    joints = model.base_joints + model.arm_joints
+    for name, actuator in zip(names.base.joints + names.arm.joints,
+                              _actuators(plant, joints), strict=True):
+        actuator.set_controller_gains(gains[name])
 
 
-def drive_inertias(arm_positions, arm):
+def drive_inertias(arm_positions, arm, description=None):
     """The reflected inertia of each arm joint's geared drive, kg m^2:
     min_inertia - M_ii where the joint's own inertia M_ii (the mass
     matrix with the arm at `arm_positions`, as in `servo_gains`) is below
@@ -73,22 +94,20 @@ def drive_inertias(arm_positions, arm):
     joint 6, beyond what a 5 ms plant step resolves).
 
     Returns:
-        dict: arm joint name -> rotor inertia (gear ratio 1).
+        dict: the arm joint's scoped name -> rotor inertia (gear ratio 1).
     """
-    q_a = as_vector("arm_positions", arm_positions, 6)
-    plant, model = make_mcr_plant()
-    context = plant.CreateDefaultContext()
-    plant.SetPositions(context, model.arm, q_a)
-    M = plant.CalcMassMatrix(context)
+    M, model = _mass_matrix(description, arm_positions)
     return {name: max(arm.min_inertia - M[i, i], 0.0)
-            for name, i in zip(ARM_JOINTS, joint_velocity_indices(
-                plant, ARM_JOINTS, model.arm), strict=True)}
+            for name, i in zip(model.description.arm.joints,
+                               joint_velocity_indices(model.arm_joints),
+                               strict=True)}
 
 
 def set_drive_inertias(plant, model, inertias):
     """Gives the arm's actuators in `plant` (not yet finalized) the
     reflected inertias of `drive_inertias`."""
-    for name in ARM_JOINTS:
-        actuator = plant.GetJointActuatorByName(name, model.arm)
+    for name, actuator in zip(model.description.arm.joints,
+                              _actuators(plant, model.arm_joints),
+                              strict=True):
         actuator.set_default_gear_ratio(1.0)
         actuator.set_default_rotor_inertia(inertias[name])

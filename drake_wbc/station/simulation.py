@@ -55,12 +55,8 @@ from drake_wbc.math.validation import (
     whole_multiple,
 )
 from drake_wbc.robot.model import (
-    ARM_JOINTS,
-    BASE_JOINTS,
     HOME_ARM_POSITIONS,
-    LIDAR_FRAMES,
-    MOUNT_JOINTS,
-    add_mcr,
+    add_robot,
     joint_position_indices,
     joint_velocity_indices,
 )
@@ -118,7 +114,8 @@ simulated second takes 100,000 steps of the plant and its Python systems,
 hours of wall time; a finer step only stalls the run."""
 
 LIDAR_NAMES = ("front_left", "rear_right")
-"""The scanners' names in port names, in the order of LIDAR_FRAMES."""
+"""The scanners' names in port names, in the order of the robot's
+lidar_frames."""
 
 
 @dataclass
@@ -213,7 +210,7 @@ class SimulatedStation:
     Attributes:
         diagram: the station Diagram (ports in the module's docstring).
         plant, scene_graph, model: the plant, its SceneGraph and the
-            robot's McrModel.
+            robot's RobotModel.
         systems: dict of the station's other systems by name.
         options, scene: what it was built from.
     """
@@ -230,7 +227,7 @@ class SimulatedStation:
             time_step=h, discrete_contact_approximation="sap",
             contact_model="hydroelastic_with_fallback",
             use_sampled_output_ports=False), builder)
-        model = add_mcr(plant)
+        model = add_robot(plant)
         add_static_obstacles(plant, scene)
         self._gains = servo_gains(options.initial_arm_positions,
                                   options.base, options.arm)
@@ -247,10 +244,10 @@ class SimulatedStation:
             base_state_selection(plant, model)))
         s["odometry"] = add("odometry", odometry_system())
         s["base_pose"] = add("base_pose", MatrixGain(selection_matrix(
-            joint_position_indices(plant, BASE_JOINTS, model.base),
+            joint_position_indices(model.base_joints),
             plant.num_multibody_states())))
         s["mount_angles"] = add("mount_angles", MatrixGain(selection_matrix(
-            joint_position_indices(plant, MOUNT_JOINTS, model.base),
+            joint_position_indices(model.passive_joints),
             plant.num_multibody_states())))
         s["truth"] = add("truth", GroundTruth(plant, model))
         # The drivers, in C++ (drake_wbc.station.symbolic_drivers): they
@@ -263,8 +260,8 @@ class SimulatedStation:
             replace(options.arm, time_step=h),
             options.initial_arm_positions))
         s["arm_state"] = add("arm_state", Demultiplexer([6, 6]))
-        weld = plant.GetJointByName("ft300_sensing", model.tool)
-        s["weld_wrench"] = add("weld_wrench", WeldWrench(plant, weld))
+        s["weld_wrench"] = add("weld_wrench", WeldWrench(
+            plant, model.ft_sensor_joint))
         s["wrist"] = add("wrist", WristForceTorqueSensor(options.wrist))
         s["people"] = add_people(builder, scene_graph, scene.people,
                                  options.scene_period)
@@ -339,10 +336,9 @@ class SimulatedStation:
         radii = [person.radius for person in scene.people]
         s["lidar_points"] = builder.AddNamedSystem(
             "lidar_points", ObstaclePointMerger(len(LIDAR_NAMES)))
-        for i, (name, frame_name) in enumerate(zip(LIDAR_NAMES, LIDAR_FRAMES,
-                                                   strict=True)):
-            X_BL = plant.GetFrameByName(frame_name, model.base).CalcPose(
-                context, model.base_frame)
+        for i, (name, frame) in enumerate(zip(LIDAR_NAMES, model.lidar_frames,
+                                              strict=True)):
+            X_BL = frame.CalcPose(context, model.base_frame)
             yaw = np.arctan2(X_BL.rotation().matrix()[1, 0],
                              X_BL.rotation().matrix()[0, 0])
             circles, boxes = planar_shapes(scene, X_BL.translation()[2])
@@ -367,11 +363,11 @@ class SimulatedStation:
         options, plant, model = self.options, self.plant, self.model
         context = plant.GetMyMutableContextFromRoot(root_context)
         q = plant.GetPositions(context)
-        q[joint_position_indices(plant, BASE_JOINTS, model.base)] = (
+        q[joint_position_indices(model.base_joints)] = (
             options.initial_base_pose)
         q_cmd = np.asarray(options.initial_arm_positions, dtype=float)
-        q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_cmd
-        q[joint_position_indices(plant, MOUNT_JOINTS, model.base)] = 0.0
+        q[joint_position_indices(model.arm_joints)] = q_cmd
+        q[joint_position_indices(model.passive_joints)] = 0.0
         plant.SetPositions(context, q)
         plant.SetVelocities(context, np.zeros(plant.num_velocities()))
         self._settle_under_gravity(context, q_cmd)
@@ -387,18 +383,19 @@ class SimulatedStation:
         the arm's servo balance gravity (fixed-point iteration with each
         joint's own stiffness; gravity's stiffness is far smaller)."""
         plant, model = self.plant, self.model
-        springs = {e.joint().name(): e.default_stiffness()
+        springs = {e.joint().index(): e.default_stiffness()
                    for e in (plant.get_force_element(ForceElementIndex(i))
                              for i in range(plant.num_force_elements()))
                    if isinstance(e, RevoluteSpring)}
         iq = np.concatenate([
-            joint_position_indices(plant, MOUNT_JOINTS, model.base),
-            joint_position_indices(plant, ARM_JOINTS, model.arm)])
+            joint_position_indices(model.passive_joints),
+            joint_position_indices(model.arm_joints)])
         iv = np.concatenate([
-            joint_velocity_indices(plant, MOUNT_JOINTS, model.base),
-            joint_velocity_indices(plant, ARM_JOINTS, model.arm)])
-        stiffness = np.array([springs[n] for n in MOUNT_JOINTS]
-                             + [self._gains[n].p for n in ARM_JOINTS])
+            joint_velocity_indices(model.passive_joints),
+            joint_velocity_indices(model.arm_joints)])
+        stiffness = np.array(
+            [springs[j.index()] for j in model.passive_joints]
+            + [self._gains[n].p for n in model.description.arm.joints])
         target = np.concatenate([np.zeros(2), q_cmd])
         forces = MultibodyForces(plant)
         for _ in range(iterations):

@@ -20,8 +20,6 @@ from pydrake.systems.primitives import SymbolicVectorSystem
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.robot.model import (
-    BASE_JOINTS,
-    MOUNT_JOINTS,
     joint_position_indices,
     joint_velocity_indices,
 )
@@ -60,10 +58,9 @@ def base_state_selection(plant, model):
     rates out of the plant's state [q; v]."""
     nq, nv = plant.num_positions(), plant.num_velocities()
     return np.vstack([
-        selection_matrix(joint_position_indices(plant, BASE_JOINTS,
-                                                model.base), nq + nv),
-        selection_matrix(nq + joint_velocity_indices(plant, BASE_JOINTS,
-                                                     model.base), nq + nv)])
+        selection_matrix(joint_position_indices(model.base_joints), nq + nv),
+        selection_matrix(nq + joint_velocity_indices(model.base_joints),
+                         nq + nv)])
 
 
 @TemplateSystem.define("BaseOdometry_", T_list=[float, AutoDiffXd])
@@ -85,7 +82,7 @@ def BaseOdometry_(T):
 
         Args:
             plant: the finalized plant holding the robot.
-            model: its McrModel.
+            model: its RobotModel.
         """
 
         def _construct(self, plant, model, converter=None):
@@ -93,10 +90,10 @@ def BaseOdometry_(T):
             self._plant, self._model = plant, model
             nq, nv = plant.num_positions(), plant.num_velocities()
             self._select_q = selection_matrix(
-                joint_position_indices(plant, BASE_JOINTS, model.base),
+                joint_position_indices(model.base_joints),
                 nq + nv)
             self._select_v = selection_matrix(
-                nq + joint_velocity_indices(plant, BASE_JOINTS, model.base),
+                nq + joint_velocity_indices(model.base_joints),
                 nq + nv)
             self._state = self.DeclareVectorInputPort("plant_state", nq + nv)
             self.DeclareVectorOutputPort("pose", 3, self._pose)
@@ -143,7 +140,7 @@ class GroundTruth(LeafSystem):
 
     Args:
         plant: the finalized plant holding the robot.
-        model: its McrModel.
+        model: its RobotModel.
     """
 
     def __init__(self, plant, model):
@@ -152,9 +149,8 @@ class GroundTruth(LeafSystem):
         self._tool_index = int(tool.index())
         self._X_tool_tcp = model.tcp_frame.GetFixedPoseInBodyFrame()
         nq, nv = plant.num_positions(), plant.num_velocities()
-        self._base_q = joint_position_indices(plant, BASE_JOINTS, model.base)
-        self._mount_q = joint_position_indices(plant, MOUNT_JOINTS,
-                                               model.base)
+        self._base_q = joint_position_indices(model.base_joints)
+        self._mount_q = joint_position_indices(model.passive_joints)
         self._poses = self.DeclareAbstractInputPort(
             "body_poses", plant.get_body_poses_output_port().Allocate())
         self._velocities = self.DeclareAbstractInputPort(

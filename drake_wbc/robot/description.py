@@ -1,0 +1,367 @@
+"""The robot as data: what the controller and the station need to know of a
+mobile collaborative robot, in one YAML file a user writes for their own.
+
+A `RobotDescription` names the robot's model (Drake model directives, or
+one URDF/SDFormat file, with the packages it refers to), the base's planar
+joints and frame, the arm's joints in order (six or more) and frames, the
+tool centre point and the wrist force/torque sensor, the LIDARs' frames,
+the home configuration and the limits. It is loaded with
+`load_robot_description` (Drake's `yaml_load_typed` behind the project's
+screened loader, drake_wbc.math.loading), so a wrong key or value is an
+error naming its dotted path:
+
+    description = load_robot_description("my_robot.yaml")
+    plant = MultibodyPlant(time_step=0.001)
+    model = add_robot(plant, description)     # drake_wbc.robot.model
+
+What can be checked without the model is checked here, when the
+description is made; what needs the model (every joint and frame exists,
+the TCP is outboard of the arm, the sensor between flange and TCP, the
+limits within the model's) is checked by `add_robot`.
+
+Names of joints and frames are scoped by their model instance, as Drake
+prints them: `elfin5::joint1`, `mcr_base::base_link`. Relative paths are
+relative to the description file's folder.
+
+The shipped robot, an Elfin5 on an omnidirectional base with an FT-300
+and a wiping tool, is `models/mcr.robot.yaml` (`shipped_robot()`).
+"""
+
+import copy
+import dataclasses
+import functools
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from drake_wbc.math.loading import load_typed
+from drake_wbc.math.validation import as_vector, positive, text
+
+MIN_ARM_JOINTS = 6
+"""The controller needs a 6-D task space from the arm alone (pHRI moves
+the tool with the arm only), so the arm has at least six joints."""
+
+SHIPPED_ROBOT_FILE = "mcr.robot.yaml"
+"""The shipped robot's description, in models/."""
+
+
+def models_dir():
+    """Returns the folder that holds the shipped models (models/).
+
+    A wheel carries models/ inside the package; a source checkout (or an
+    editable install) has it at the repository's top level.
+    """
+    here = Path(__file__).resolve().parents[1]  # the package
+    for candidate in (here / "models", here.parent / "models"):
+        if (candidate / "package.xml").is_file():
+            return candidate
+    raise FileNotFoundError(
+        f"the robot model folder was not found next to {here}: expected "
+        "models/package.xml in the package or in the repository"
+    )
+
+
+def _blank(part):
+    """True when every field of the dataclass `part` is at its default:
+    the empty part that Drake's loader starts from before it reads the
+    file (a description has no meaningful defaults, so a blank part is
+    not checked; `RobotDescription` refuses blank parts)."""
+    for f in dataclasses.fields(part):
+        default = (f.default_factory() if f.default_factory
+                   is not dataclasses.MISSING else f.default)
+        value = getattr(part, f.name)
+        if isinstance(default, float) and math.isnan(default):
+            if not (isinstance(value, float) and math.isnan(value)):
+                return False
+        elif value != default:
+            return False
+    return True
+
+
+def _names(name, values, count=None, minimum=0):
+    """`values` as a tuple of non-empty, distinct strings, `count` of them
+    (or at least `minimum`)."""
+    if not isinstance(values, (list, tuple)):
+        raise ValueError(f"{name} = {values!r} is not allowed: must be a "
+                         "list of names")
+    names = tuple(text(f"{name}[{i}]", v) for i, v in enumerate(values))
+    if count is not None and len(names) != count:
+        raise ValueError(f"{name} = {list(names)} is not allowed: must name "
+                         f"exactly {count}")
+    if len(names) < minimum:
+        raise ValueError(f"{name} = {list(names)} is not allowed: must name "
+                         f"at least {minimum}, got {len(names)}")
+    for i, n in enumerate(names):
+        if not n.strip():
+            raise ValueError(f"{name}[{i}] = {n!r} is not allowed: must be "
+                             "a name")
+        if n in names[:i]:
+            raise ValueError(f"{name}[{i}] = {n!r} is not allowed: named "
+                             "twice")
+    return names
+
+
+def _optional_limits(name, values, size, lower=None):
+    """None, or `values` as (size,) finite numbers (each > 0 unless
+    `lower` is given: then paired with it, each above it)."""
+    if values is None:
+        return None
+    vector = as_vector(name, values, size)
+    if lower is None:
+        for i, v in enumerate(vector):
+            positive(f"{name}[{i}]", v)
+    return tuple(float(v) for v in vector)
+
+
+@dataclass
+class ModelSource:
+    """Where the robot's model comes from: exactly one of `directives`
+    (Drake model directives, a .dmd.yaml) and `file` (one URDF or
+    SDFormat file of the whole robot).
+
+    Attributes:
+        directives: a `package://` URL or a path (relative to the
+            description's folder) of model directives.
+        file: a `package://` URL or a path of a URDF or SDFormat file.
+        packages: package name -> folder holding its package.xml
+            (relative paths from the description's folder), for the
+            `package://` URLs of the model.
+    """
+
+    directives: str = ""
+    file: str = ""
+    packages: dict[str, str] = field(default_factory=dict)
+
+    def __post_init__(self):
+        if _blank(self):
+            return
+        text("directives", self.directives)
+        text("file", self.file)
+        if bool(self.directives) == bool(self.file):
+            raise ValueError(
+                f"directives = {self.directives!r} and file = {self.file!r} "
+                "are not allowed: give exactly one of them")
+        if not isinstance(self.packages, dict):
+            raise ValueError(f"packages = {self.packages!r} is not allowed: "
+                             "must map package names to folders")
+        for name, folder in self.packages.items():
+            text(f"packages[{name!r}]", folder)
+
+
+@dataclass
+class BaseDescription:
+    """The omnidirectional base.
+
+    Attributes:
+        frame: T_b, the base frame (on the floor at the centre of the
+            footprint, x forward, z up).
+        joints: its three planar joints, in the order x, y, yaw (two
+            prismatic joints along the world's x and y, one revolute
+            about z), actuated by velocity commands [vx, vy, wz] in T_b.
+        passive_joints: unactuated joints of the base (springs of a
+            suspension or a flexible arm mount), held at rest by the
+            controller's nominal kinematics; none by default.
+        velocity_limits: (3,) > 0, the base's own limits on [vx, vy, wz],
+            m/s, m/s, rad/s; the controller's may only tighten them.
+        acceleration_limits: (3,) > 0, its own limits on their rate of
+            change, m/s^2, m/s^2, rad/s^2.
+        footprint_half_sizes: (2,) > 0, half length and half width of the
+            footprint in T_b, m.
+        height: > 0, the height of the deck, m (a box higher than this may
+            overhang the base).
+        command_timeout: > 0, s, after which the base stops by itself when
+            no command arrives (its own watchdog).
+    """
+
+    frame: str = ""
+    joints: list[str] = field(default_factory=list)
+    passive_joints: list[str] = field(default_factory=list)
+    velocity_limits: list[float] = field(default_factory=list)
+    acceleration_limits: list[float] = field(default_factory=list)
+    footprint_half_sizes: list[float] = field(default_factory=list)
+    height: float = math.nan
+    command_timeout: float = math.nan
+
+    def __post_init__(self):
+        if _blank(self):
+            return
+        self.frame = _names("frame", [self.frame])[0]
+        self.joints = _names("joints", self.joints, count=3)
+        self.passive_joints = _names("passive_joints", self.passive_joints)
+        for i, name in enumerate(self.passive_joints):
+            if name in self.joints:
+                raise ValueError(f"passive_joints[{i}] = {name!r} is not "
+                                 "allowed: it is one of the planar joints")
+        self.velocity_limits = _optional_limits(
+            "velocity_limits", self.velocity_limits, 3)
+        self.acceleration_limits = _optional_limits(
+            "acceleration_limits", self.acceleration_limits, 3)
+        self.footprint_half_sizes = _optional_limits(
+            "footprint_half_sizes", self.footprint_half_sizes, 2)
+        self.height = positive("height", self.height)
+        self.command_timeout = positive("command_timeout",
+                                        self.command_timeout)
+
+
+@dataclass
+class ArmDescription:
+    """The arm: its joints from base to wrist and its frames.
+
+    Attributes:
+        joints: the arm's revolute joints in order, base to wrist, at
+            least MIN_ARM_JOINTS (the controller's joint order: the
+            commands, the status and the logs follow it).
+        base_frame: T_a, the arm's base frame, fixed on the base.
+        flange_frame: the arm's tool flange, outboard of the last joint.
+        home: the home configuration, one angle per joint, rad: where the
+            arm starts and what the capability band is tuned at.
+        position_lower, position_upper: optional tighter joint position
+            limits, rad (the model's by default).
+        velocity_limits: optional tighter joint speed limits, rad/s.
+        acceleration_limits: optional tighter joint acceleration limits,
+            rad/s^2 (the model must have them, or they are given here).
+    """
+
+    joints: list[str] = field(default_factory=list)
+    base_frame: str = ""
+    flange_frame: str = ""
+    home: list[float] = field(default_factory=list)
+    position_lower: list[float] | None = None
+    position_upper: list[float] | None = None
+    velocity_limits: list[float] | None = None
+    acceleration_limits: list[float] | None = None
+
+    def __post_init__(self):
+        if _blank(self):
+            return
+        self.joints = _names("joints", self.joints, minimum=MIN_ARM_JOINTS)
+        n = len(self.joints)
+        self.base_frame = _names("base_frame", [self.base_frame])[0]
+        self.flange_frame = _names("flange_frame", [self.flange_frame])[0]
+        self.home = tuple(float(v) for v in as_vector("home", self.home, n))
+        for name in ("position_lower", "position_upper"):
+            setattr(self, name, _optional_limits(
+                name, getattr(self, name), n, lower=True))
+        if self.position_lower is not None and self.position_upper is not None:
+            for i, (lo, hi) in enumerate(zip(self.position_lower,
+                                             self.position_upper,
+                                             strict=True)):
+                if not lo < hi:
+                    raise ValueError(
+                        f"position_lower[{i}] = {lo!r} is not allowed: must "
+                        f"be below position_upper[{i}] = {hi!r}")
+        for name in ("velocity_limits", "acceleration_limits"):
+            setattr(self, name, _optional_limits(name, getattr(self, name),
+                                                 n))
+
+
+@dataclass
+class ToolDescription:
+    """What the arm carries: the end effector and the wrist sensor.
+
+    Attributes:
+        tcp_frame: T_ee, the tool centre point, outboard of the flange:
+            the end effector of the controller.
+        ft_sensor_frame: the force/torque sensor's measurement frame,
+            between the flange and the TCP.
+        ft_sensor_joint: the weld joint on the sensor's measuring
+            surface, whose reaction the simulated sensor reads: the wrench
+            of everything outboard of it.
+    """
+
+    tcp_frame: str = ""
+    ft_sensor_frame: str = ""
+    ft_sensor_joint: str = ""
+
+    def __post_init__(self):
+        if _blank(self):
+            return
+        for name in ("tcp_frame", "ft_sensor_frame", "ft_sensor_joint"):
+            setattr(self, name, _names(name, [getattr(self, name)])[0])
+
+
+@dataclass
+class RobotDescription:
+    """A mobile collaborative robot as data (see the module).
+
+    Attributes:
+        name: a short name, for reports.
+        model: where its model comes from.
+        base, arm, tool: the parts.
+        lidar_frames: the scan frames of its planar LIDARs (z up, the scan
+            in their x-y plane), on the base.
+        root: the folder that relative paths are relative to; the
+            description file's folder when loaded from a file.
+    """
+
+    name: str = ""
+    model: ModelSource = field(default_factory=ModelSource)
+    base: BaseDescription = field(default_factory=BaseDescription)
+    arm: ArmDescription = field(default_factory=ArmDescription)
+    tool: ToolDescription = field(default_factory=ToolDescription)
+    lidar_frames: list[str] = field(default_factory=list)
+    root: str = ""
+
+    def __post_init__(self):
+        if _blank(self):
+            return
+        for part in ("model", "base", "arm", "tool"):
+            if _blank(getattr(self, part)):
+                raise ValueError(f"{part} is missing, which is not allowed: "
+                                 f"a robot description gives its {part}")
+        self.name = _names("name", [self.name])[0]
+        self.lidar_frames = _names("lidar_frames", self.lidar_frames)
+        text("root", self.root)
+
+    @property
+    def num_arm_joints(self):
+        """The number of the arm's joints."""
+        return len(self.arm.joints)
+
+    def resolve(self, path):
+        """`path` of the description (a `package://` URL is kept as it is)
+        as an absolute path: relative to `root`."""
+        if "://" in path:
+            return path
+        return str((Path(self.root or ".") / path).resolve())
+
+
+def load_robot_description(path=None, text=None, root=None):
+    """A RobotDescription from a YAML file (or text), every field checked.
+
+    Args:
+        path: the description file; or
+        text: its YAML text (then `root` is the folder that its relative
+            paths are relative to, the working folder if None).
+        root: overrides the folder of relative paths.
+
+    Raises:
+        ValueError: naming the file, the field's dotted path (e.g.
+            `arm.joints = [...] is not allowed: must name at least 6`),
+            its value and what is allowed.
+    """
+    description = load_typed(RobotDescription, path=path, text=text)
+    if _blank(description):
+        raise ValueError(f"{path or 'text'}: an empty robot description is "
+                         "not allowed: give its name, model, base, arm and "
+                         "tool")
+    if root is not None:
+        description.root = str(Path(root).resolve())
+    elif not description.root:
+        description.root = str(Path(path).resolve().parent if path is not None
+                               else Path.cwd())
+    elif path is not None:
+        description.root = str((Path(path).resolve().parent
+                                / description.root).resolve())
+    return description
+
+
+@functools.cache
+def _shipped():
+    return load_robot_description(models_dir() / SHIPPED_ROBOT_FILE)
+
+
+def shipped_robot():
+    """The description of the shipped robot (models/mcr.robot.yaml), a
+    fresh copy each call (a caller may change it)."""
+    return copy.deepcopy(_shipped())

@@ -1,0 +1,21 @@
+"""The shipped robot's joint names, read from its description
+(models/mcr.robot.yaml), for the tests that look its joints up in a plant
+by name: unscoped (`joint1`, with the model instance beside) and scoped
+(`elfin5::joint1`, as the description and the servo gains name them)."""
+
+from drake_wbc.robot.description import shipped_robot
+
+ROBOT = shipped_robot()
+
+
+def _element(name):
+    return name.rsplit("::", 1)[-1]
+
+
+ARM_JOINTS = tuple(_element(n) for n in ROBOT.arm.joints)
+BASE_JOINTS = tuple(_element(n) for n in ROBOT.base.joints)
+MOUNT_JOINTS = tuple(_element(n) for n in ROBOT.base.passive_joints)
+LIDAR_FRAMES = tuple(_element(n) for n in ROBOT.lidar_frames)
+SCOPED = {_element(n): n for n in
+          ROBOT.arm.joints + ROBOT.base.joints + ROBOT.base.passive_joints}
+"""Unscoped joint name -> scoped name."""

@@ -1,0 +1,250 @@
+"""The robot as data: the shipped robot's description against its model,
+a robot the project did not model (a URDF written here, with 6 and 7 arm
+joints), and every way a description can be wrong, each an error naming
+the field."""
+
+import textwrap
+
+import numpy as np
+import pytest
+import yaml
+from pydrake.multibody.plant import MultibodyPlant
+
+from drake_wbc.robot.description import (
+    MIN_ARM_JOINTS,
+    load_robot_description,
+    models_dir,
+    shipped_robot,
+)
+from drake_wbc.robot.model import (
+    ArmKinematics,
+    add_robot,
+    joint_position_indices,
+    make_robot_plant,
+)
+
+SHIPPED = models_dir() / "mcr.robot.yaml"
+
+
+def test_the_shipped_description_is_its_model():
+    plant, model = make_robot_plant()
+    description = shipped_robot()
+    assert [f"{plant.GetModelInstanceName(j.model_instance())}::{j.name()}"
+            for j in model.arm_joints] == list(description.arm.joints)
+    assert model.num_arm_joints == 6
+    np.testing.assert_array_equal(model.home, description.arm.home)
+    # No override: the limits are the model file's.
+    for joint, lower, speed in zip(model.arm_joints, model.limits.lower,
+                                   model.limits.velocity, strict=True):
+        assert lower == joint.position_lower_limits()[0]
+        assert speed == joint.velocity_upper_limits()[0]
+    assert [f.name() for f in model.lidar_frames] == [
+        n.split("::")[1] for n in description.lidar_frames]
+
+
+def _shipped_text(**changes):
+    """The shipped description's YAML with `changes` applied: a dotted
+    path -> new value (None deletes the key)."""
+    document = yaml.safe_load(SHIPPED.read_text())
+    for path, value in changes.items():
+        *parents, key = path.split(".")
+        node = document
+        for parent in parents:
+            node = node[parent]
+        if value is None:
+            del node[key]
+        else:
+            node[key] = value
+    return yaml.safe_dump(document)
+
+
+def _add(text):
+    description = load_robot_description(text=text, root=models_dir())
+    plant = MultibodyPlant(time_step=0.0)
+    return add_robot(plant, description)
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"arm.joints": ["elfin5::joint1", "elfin5::joint2"]},
+     r"arm.joints = .* must name at least 6"),
+    ({"arm.home": [0.0] * 5}, r"arm.home"),
+    ({"base.joints": ["mcr_base::base_x", "mcr_base::base_y"]},
+     r"base.joints = .* exactly 3"),
+    ({"base.velocity_limits": [1.0, -1.0, 1.0]},
+     r"base.velocity_limits\[1\] = -1.0"),
+    ({"tool": None}, r"tool is missing"),
+    ({"arm.position_lower": [0.0] * 6, "arm.position_upper": [0.0] * 6},
+     r"arm.position_lower\[0\] = 0.0 is not allowed: must be below"),
+    ({"arm.flange": "elfin5::flange"}, r"arm.flange"),
+])
+def test_a_description_that_does_not_load_names_the_field(changes, message):
+    with pytest.raises(ValueError, match=message):
+        load_robot_description(text=_shipped_text(**changes))
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"arm.joints": [f"elfin5::joint{i}" for i in (1, 2, 3, 4, 5, 7)]},
+     r"arm.joints\[5\] = 'elfin5::joint7' is not allowed: the model has no "
+     r"joint 'joint7'"),
+    ({"arm.joints": [f"elfin5::joint{i}" for i in (1, 2, 4, 3, 5, 6)]},
+     r"arm.joints\[3\] = 'elfin5::joint3' is not allowed: it is not "
+     r"outboard of arm.joints\[2\]"),
+    ({"arm.base_frame": "nowhere::base_link"},
+     r"arm.base_frame = 'nowhere::base_link' is not allowed: must be "
+     r"scoped by one of the model's instances"),
+    ({"base.joints": ["mcr_base::base_x", "mcr_base::base_yaw",
+                      "mcr_base::base_y"]},
+     r"base.joints\[1\] = 'mcr_base::base_yaw' is not allowed: it is a "
+     r"revolute joint, must be prismatic"),
+    ({"tool.tcp_frame": "mcr_base::base_link"},
+     r"tool.tcp_frame = 'mcr_base::base_link' is not allowed: must be "
+     r"outboard of the sensor"),
+    ({"tool.ft_sensor_frame": "elfin5::link3"},
+     r"tool.ft_sensor_frame = 'elfin5::link3' is not allowed: must be "
+     r"outboard of the flange"),
+    ({"arm.velocity_limits": [2.0] + [1.0] * 5},
+     r"arm.velocity_limits\[0\] = 2.0 is not allowed: must be within the "
+     r"model's own 1.57"),
+    ({"arm.position_lower": [-3.5] + [-1.0] * 5,
+      "arm.position_upper": [1.0] * 6},
+     r"arm.position_lower\[0\] = -3.5 is not allowed: must be within the "
+     r"model's own -3.14"),
+    ({"arm.position_lower": [-1.1] * 6, "arm.position_upper": [1.1] * 6},
+     r"arm.home\[4\] = 1.15 is not allowed: must be inside"),
+])
+def test_a_description_that_does_not_fit_its_model_names_the_field(
+        changes, message):
+    with pytest.raises(ValueError, match=message):
+        _add(_shipped_text(**changes))
+
+
+def test_tighter_limits_are_the_robots_own():
+    model = _add(_shipped_text(**{"arm.velocity_limits": [1.0] * 6,
+                                  "arm.acceleration_limits": [5.0] * 6}))
+    np.testing.assert_array_equal(model.limits.velocity, np.ones(6))
+    np.testing.assert_array_equal(model.limits.acceleration, np.full(6, 5.0))
+
+
+# A robot the project did not model: a plain URDF of an omni base (three
+# planar joints) with an arm of n revolute joints, a flange, a sensor and
+# a tool, no acceleration limits (URDF has none).
+
+def _urdf(n, accelerations=True):
+    axes = ["0 0 1", "0 1 0", "0 1 0", "0 0 1", "0 1 0", "0 0 1", "0 1 0"]
+    links = ["<link name='world_x'/>", "<link name='world_y'/>",
+             _link("chassis", 50.0)]
+    joints = [
+        _joint("base_x", "prismatic", "world", "world_x", axis="1 0 0"),
+        _joint("base_y", "prismatic", "world_x", "world_y", axis="0 1 0"),
+        _joint("base_yaw", "revolute", "world_y", "chassis", axis="0 0 1",
+               limits=False)]
+    parent = "chassis"
+    for i in range(n):
+        link = f"link{i + 1}"
+        links.append(_link(link, 2.0))
+        joints.append(_joint(f"j{i + 1}", "revolute", parent, link,
+                             axis=axes[i % len(axes)],
+                             xyz="0 0 0.3" if i else "0.2 0 0.4"))
+        parent = link
+    for name, child, xyz in (("flange", "flange", "0 0 0.1"),
+                             ("sensor", "sensor", "0 0 0.02"),
+                             ("tool", "tool", "0 0 0.05")):
+        links.append(_link(child, 0.3))
+        joints.append(_joint(name, "fixed", parent, child, xyz=xyz))
+        parent = child
+    body = "\n".join(links + joints)
+    return f"<?xml version='1.0'?>\n<robot name='omni_arm'>\n{body}\n</robot>\n"
+
+
+def _link(name, mass):
+    return (f"<link name='{name}'><inertial><mass value='{mass}'/>"
+            f"<inertia ixx='0.01' iyy='0.01' izz='0.01' ixy='0' ixz='0' "
+            f"iyz='0'/></inertial></link>")
+
+
+def _joint(name, kind, parent, child, axis=None, xyz="0 0 0", limits=True):
+    text = (f"<joint name='{name}' type='{kind}'><parent link='{parent}'/>"
+            f"<child link='{child}'/><origin xyz='{xyz}'/>")
+    if axis:
+        text += f"<axis xyz='{axis}'/>"
+    if kind != "fixed" and limits:
+        text += ("<limit lower='-2.5' upper='2.5' effort='100' "
+                 "velocity='2.0'/>")
+    return text + "</joint>"
+
+
+def _description(n, extra=""):
+    joints = ", ".join(f"omni_arm::j{i + 1}" for i in range(n))
+    home = ", ".join(["0.3"] * n)
+    return textwrap.dedent(f"""\
+        name: omni_arm
+        model:
+          file: omni_arm.urdf
+        base:
+          frame: omni_arm::chassis
+          joints: [omni_arm::base_x, omni_arm::base_y, omni_arm::base_yaw]
+          velocity_limits: [0.8, 0.8, 1.0]
+          acceleration_limits: [0.5, 0.5, 0.5]
+          footprint_half_sizes: [0.45, 0.35]
+          height: 0.35
+          command_timeout: 0.2
+        arm:
+          joints: [{joints}]
+          base_frame: omni_arm::chassis
+          flange_frame: omni_arm::flange
+          home: [{home}]
+        {extra}
+        tool:
+          tcp_frame: omni_arm::tool
+          ft_sensor_frame: omni_arm::sensor
+          ft_sensor_joint: omni_arm::sensor
+        """)
+
+
+@pytest.mark.parametrize("n", [6, 7])
+def test_a_urdf_arm_of_n_joints_gives_its_kinematics(tmp_path, n):
+    (tmp_path / "omni_arm.urdf").write_text(_urdf(n))
+    path = tmp_path / "omni_arm.yaml"
+    path.write_text(_description(
+        n, extra=f"  acceleration_limits: [{', '.join(['9.0'] * n)}]"))
+    description = load_robot_description(path)
+    plant, model = make_robot_plant(description)
+    arm = ArmKinematics(plant, model)
+    assert arm.num_joints == n
+    np.testing.assert_array_equal(arm.acceleration_limits, np.full(n, 9.0))
+    np.testing.assert_array_equal(arm.velocity_limits, np.full(n, 2.0))
+    rng = np.random.default_rng(4)
+    q = rng.uniform(-1.0, 1.0, n)
+    values = arm.evaluate(q)
+    assert values.J_a.shape == (6, n)
+    # The linear rows against central differences of the TCP's position.
+    step = 1e-6
+    for i in range(n):
+        dq = np.zeros(n)
+        dq[i] = step
+        difference = (arm.evaluate(q + dq).p_ee_in_base
+                      - arm.evaluate(q - dq).p_ee_in_base) / (2 * step)
+        np.testing.assert_allclose(arm.R_ba @ values.J_a[:3, i], difference,
+                                   atol=1e-8)
+    context = plant.CreateDefaultContext()
+    assert len(joint_position_indices(model.arm_joints)) == n
+    assert plant.GetPositions(context).shape == (3 + n,)
+
+
+def test_a_model_without_acceleration_limits_asks_for_them(tmp_path):
+    (tmp_path / "omni_arm.urdf").write_text(_urdf(6))
+    path = tmp_path / "omni_arm.yaml"
+    path.write_text(_description(6))
+    with pytest.raises(ValueError, match=(
+            r"arm.acceleration_limits\[0\] is missing, which is not "
+            r"allowed: the model gives 'omni_arm::j1' none \(inf\)")):
+        make_robot_plant(load_robot_description(path))
+
+
+def test_fewer_than_six_arm_joints_are_refused(tmp_path):
+    assert MIN_ARM_JOINTS == 6
+    (tmp_path / "omni_arm.urdf").write_text(_urdf(5))
+    path = tmp_path / "omni_arm.yaml"
+    path.write_text(_description(5))
+    with pytest.raises(ValueError, match=r"arm.joints = .* at least 6, got 5"):
+        load_robot_description(path)
