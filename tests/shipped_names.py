@@ -19,3 +19,7 @@ LIDAR_FRAMES = tuple(_element(n) for n in ROBOT.lidar_frames)
 SCOPED = {_element(n): n for n in
           ROBOT.arm.joints + ROBOT.base.joints + ROBOT.base.passive_joints}
 """Unscoped joint name -> scoped name."""
+
+ROBOT_ACCELERATION_LIMIT = 12.56
+"""The Elfin5's joint acceleration limit, rad/s^2 (models/elfin5.sdf), the
+same on every joint: what the arm controller brakes at by default."""

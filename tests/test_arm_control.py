@@ -13,13 +13,12 @@ from pydrake.systems.primitives import (
     Linearize,
     LogVectorOutput,
 )
-from shipped_names import ARM_JOINTS
+from shipped_names import ARM_JOINTS, ROBOT_ACCELERATION_LIMIT
 
 from drake_wbc.math.arm_control import (
     DEFAULT_DAMPING,
     DEFAULT_DAMPING_THRESHOLD,
     DEFAULT_JOINT_LIMIT_MARGIN,
-    ELFIN5_ACCELERATION_LIMIT,
     ArmControllerParameters,
     damped_least_squares,
     joint_position_velocity_bounds,
@@ -448,7 +447,7 @@ def controller_update(system, context, q, previous, V, hold=None):
 def test_controller_update_is_the_stages_as_written(arm):
     system = ArmCartesianVelocityController(None, arm)
     context = system.CreateDefaultContext()
-    a = np.full(6, ELFIN5_ACCELERATION_LIMIT)
+    a = np.full(6, ROBOT_ACCELERATION_LIMIT)
     for J, V, q, previous in twist_cases(arm, 120, seed=6):
         q = np.clip(q, arm.lower, arm.upper)
         J = arm.evaluate(q).J_a  # the controller's own J_a
@@ -474,7 +473,7 @@ def test_controller_brakes_on_hold_and_on_a_twist_that_is_not_finite(arm):
     context = system.CreateDefaultContext()
     q0 = 0.5 * (arm.lower + arm.upper) + 0.1
     previous = np.array([1.5, -1.2, 0.8, 0.3, -0.1, 0.0])
-    step = ELFIN5_ACCELERATION_LIMIT * H
+    step = ROBOT_ACCELERATION_LIMIT * H
     for V, hold, flag in (([np.nan, 0, 0, 0, 0, 0], None, 1.0),
                           ([0, 0, np.inf, 0, 0, 0], 0.0, 1.0),
                           ([0.1, 0, 0, 0, 0, 0], 1.0, None)):
@@ -496,7 +495,7 @@ def test_controller_brakes_on_hold_and_on_a_twist_that_is_not_finite(arm):
         np.testing.assert_array_equal(rate, 0.0)  # at rest, 0.12 s later
         # Braking as a whole took v_max / a (+ a tick): joint i ran
         # |v_i| (v_max / (2 a) + h) at most.
-        stop_time = np.abs(previous).max() / ELFIN5_ACCELERATION_LIMIT
+        stop_time = np.abs(previous).max() / ROBOT_ACCELERATION_LIMIT
         assert np.all(np.abs(q - q0) <= np.abs(previous) * (
             0.5 * stop_time + H) + 1e-12)
     at_once = ArmCartesianVelocityController(
@@ -585,7 +584,7 @@ def test_spinning_the_wrist_stops_at_the_limit(arm):
     np.testing.assert_allclose(q_cmd[:5], HOME_ARM_POSITIONS[:5], atol=1e-9)
     rates = data["arm_velocity_command"]
     assert np.abs(np.diff(rates, axis=1)).max() <= (
-        ELFIN5_ACCELERATION_LIMIT * 0.01 * (1 + 1e-9))
+        ROBOT_ACCELERATION_LIMIT * 0.01 * (1 + 1e-9))
     assert data["limited"][0, -1] == 1.0  # still pushed, still limited
     assert data["limited"][0, 50] == 0.0  # cruising at 1 rad/s
 
@@ -635,12 +634,12 @@ def test_model_limits_are_the_defaults(arm):
     np.testing.assert_array_equal(system.upper, arm.upper)
     np.testing.assert_array_equal(system.velocity_limits, np.full(6, 1.57))
     np.testing.assert_array_equal(arm.acceleration_limits,
-                                  np.full(6, ELFIN5_ACCELERATION_LIMIT))
+                                  np.full(6, ROBOT_ACCELERATION_LIMIT))
     plant = arm._plant
     for name in ARM_JOINTS:
         joint = plant.GetJointByName(name)
         assert joint.acceleration_upper_limits()[0] == (
-            ELFIN5_ACCELERATION_LIMIT)
+            ROBOT_ACCELERATION_LIMIT)
 
 
 def test_autodiff_update_has_the_double_value_and_derivatives(arm):

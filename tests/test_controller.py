@@ -32,7 +32,7 @@ def arm():
 
 
 def test_ports(arm):
-    controller = build_controller(arm=arm)
+    controller = build_controller(robot=arm)
     diagram = controller.diagram
     inputs = {diagram.get_input_port(i).get_name()
               for i in range(diagram.num_input_ports())}
@@ -45,7 +45,7 @@ def test_ports(arm):
 
 
 def test_runs_ten_seconds_against_fixed_measurements(arm):
-    controller = build_controller(arm=arm)
+    controller = build_controller(robot=arm)
     builder = DiagramBuilder()
     diagram = builder.AddSystem(controller.diagram)
     names = ("base.velocity_command", "arm.position_command", "capability",

@@ -329,7 +329,7 @@ def test_a_point_with_nan_is_dropped_not_a_fault(arm):
 
 
 def test_commands_have_no_direct_feedthrough_from_inputs(arm):
-    diagram = build_controller(arm=arm).diagram
+    diagram = build_controller(robot=arm).diagram
     for output in ("base.velocity_command", "arm.position_command",
                    "safety_status"):
         j = diagram.GetOutputPort(output).get_index()
@@ -550,7 +550,7 @@ def test_limiter_linearises_to_the_identity_within_limits():
 
 
 def test_the_controller_converts_to_autodiff(arm):
-    converted = build_controller(arm=arm).diagram.ToAutoDiffXd()
+    converted = build_controller(robot=arm).diagram.ToAutoDiffXd()
     assert converted.HasOutputPort("safety_status")
 
 

@@ -88,7 +88,8 @@ from drake_wbc.controller.parameters import (
 )
 from drake_wbc.math.safety import check_within_robot
 from drake_wbc.math.validation import checked_instance, validated_copy
-from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.robot.description import RobotDescription, shipped_robot
+from drake_wbc.robot.model import ArmKinematics, make_robot_plant
 from drake_wbc.stages import (
     ArmCapability,
     ArmCartesianVelocityController,
@@ -141,13 +142,15 @@ class Controller:
             built from.
     """
 
-    def __init__(self, diagram, stages, params):
+    def __init__(self, diagram, stages, params, arm):
         self.diagram, self.stages, self.params = diagram, stages, params
+        self.arm = arm
 
-    def initialize(self, root_context, arm_position=HOME_ARM_POSITIONS,
+    def initialize(self, root_context, arm_position=None,
                    base_velocity=(0.0, 0.0, 0.0)):
         """Starts the controller's state from the robot's measured state:
-        the arm command at `arm_position`, the base filter at rest at
+        the arm command at `arm_position` (the robot's home if None), the
+        base filter at rest at
         `base_velocity` (T_b) and the base command's limiter from it. The
         DMPs start at rest; the input guard takes `arm_position` as the
         last valid arm measurement."""
@@ -156,6 +159,8 @@ class Controller:
                 root_context)
 
         base_velocity = np.asarray(base_velocity, dtype=float)
+        if arm_position is None:
+            arm_position = self.arm.home
         self.stages["arm_controller"].set_arm_position(
             context_of("arm_controller"), arm_position)
         self.stages["base_filter"].set_velocity(context_of("base_filter"),
@@ -172,7 +177,7 @@ class Controller:
         return guard.reason(guard.GetMyContextFromRoot(root_context))
 
 
-def build_controller(params=None, arm=None):
+def build_controller(params=None, robot=None):
     """Builds the CDMP-WBC controller Diagram.
 
     Args:
@@ -181,7 +186,10 @@ def build_controller(params=None, arm=None):
             stage reads its part when it is built, and the values held
             once (time_step, capability_band, phri_switch) are handed to
             every stage that needs them.
-        arm: a shared ArmKinematics (a new one if None).
+        robot: the robot: a RobotDescription (drake_wbc.robot.description;
+            the shipped robot if None), or the ArmKinematics of one, to
+            share its plant. Every stage's ports are sized by its arm, and
+            the limits are checked against its own.
 
     Returns:
         Controller: the diagram with named ports (STATION_INPUTS,
@@ -195,13 +203,15 @@ def build_controller(params=None, arm=None):
         "params", params, ControllerParameters, ControllerParameters))
     h, band, switch = (params.time_step, params.capability_band,
                        params.phri_switch)
-    arm = checked_instance("arm", arm, ArmKinematics, ArmKinematics)
+    arm = (robot if isinstance(robot, ArmKinematics)
+           else ArmKinematics(*make_robot_plant(checked_instance(
+               "robot", robot, RobotDescription, shipped_robot))))
     check_arm_limits(params.arm_controller, arm)
     check_within_robot(params.safety)
     builder = DiagramBuilder()
     add = builder.AddNamedSystem
     stages = dict(
-        guard=add("guard", _input_guard(params)),
+        guard=add("guard", _input_guard(params, arm)),
         capability=add("capability", ArmCapability(
             params.capability, arm, band=band)),
         wrench=add("wrench", ExternalWrenchEstimator(arm)),
@@ -320,10 +330,10 @@ def build_controller(params=None, arm=None):
         builder.ExportOutput(s[stage].GetOutputPort(port), name)
     diagram = builder.Build()
     diagram.set_name("cdmp_wbc_controller")
-    return Controller(diagram, stages, params)
+    return Controller(diagram, stages, params, arm)
 
 
-def _input_guard(params):
+def _input_guard(params, arm):
     """The InputGuard of every controller input: the task inputs' defaults
     are the stages' parameters (what the stages used while their port was
     not connected), and their ranges those the stages accept."""
@@ -331,7 +341,7 @@ def _input_guard(params):
     vector = GuardedInput
     inputs = (
         vector("base.state_estimated", 6),
-        vector("arm.position_measured", 6, initial=HOME_ARM_POSITIONS),
+        vector("arm.position_measured", arm.num_joints, initial=arm.home),
         vector("wrist.wrench_measured", 6),
         vector("reference_velocity", 6, zero_when_stopped=True),
         vector("desired_wrench", 6,

@@ -169,6 +169,11 @@ def check_arm_limits(params, arm):
         if value is None:
             continue
         value, own = np.asarray(value, dtype=float), np.asarray(own)
+        if value.shape != own.shape:
+            raise ValueError(
+                f"arm_controller.{name} = {list(value)} is not allowed: "
+                f"must give one value for each of the arm's "
+                f"{own.size} joints")
         beyond = value > own if allowed == "at most" else value < own
         if np.any(beyond):
             i = int(np.flatnonzero(beyond)[0])
@@ -182,7 +187,8 @@ def check_arm_limits(params, arm):
             "arm_controller.use_acceleration_limit = False is not allowed: "
             f"the arm's own acceleration limit ({own!r} rad/s^2) holds; "
             "tighten acceleration_limit instead")
-    if params.acceleration_limit > own:
+    if params.acceleration_limit is not None and (
+            params.acceleration_limit > own):
         raise ValueError(
             f"arm_controller.acceleration_limit = "
             f"{params.acceleration_limit!r} is not allowed: must be at most "

@@ -108,11 +108,6 @@ and of the published limits. The capability of movement (and the
 compensation that gives way by it) keeps the arm much further away in
 normal use, from 8 to 12% of a range; this margin is the last line."""
 
-ELFIN5_ACCELERATION_LIMIT = 12.56
-"""The Elfin5's joint acceleration limit, rad/s^2, the same on every
-joint (the robot facts; also in models/elfin5.sdf)."""
-
-
 @dataclass
 class ArmControllerParameters:
     """Parameters of the arm's Cartesian velocity controller.
@@ -128,12 +123,16 @@ class ArmControllerParameters:
             Default `DEFAULT_JOINT_LIMIT_MARGIN`.
         use_acceleration_limit: whether to limit the change of q_dot from
             one step to the next.
-        acceleration_limit: rad/s^2 > 0, the same on every joint; the
-            Elfin5's 12.56 by default.
-        lower, upper: (6,) joint limits in rad, or None for the model's
-            (drake_wbc.robot.model.ArmKinematics().lower / .upper).
-        velocity_limits: (6,) rad/s > 0, or None for the model's (1.57 on
-            every Elfin5 joint).
+        acceleration_limit: rad/s^2 > 0, the same on every joint, or None
+            for the arm's own (ArmKinematics.acceleration_limits, joint
+            by joint).
+        lower, upper: (n,) joint limits in rad, or None for the arm's own
+            (ArmKinematics.lower / .upper).
+        velocity_limits: (n,) rad/s > 0, or None for the arm's own.
+
+    The sizes are checked against the arm when the controller is built
+    (drake_wbc.controller.parameters.check_arm_limits), where a limit
+    beyond the arm's own is refused too.
 
     Vectors are given as any sequence (a list in YAML) and stored as
     tuples, so that parameters compare with ==. The control period is not
@@ -145,7 +144,7 @@ class ArmControllerParameters:
     damping_threshold: float = DEFAULT_DAMPING_THRESHOLD
     margin: float = DEFAULT_JOINT_LIMIT_MARGIN
     use_acceleration_limit: bool = True
-    acceleration_limit: float = ELFIN5_ACCELERATION_LIMIT
+    acceleration_limit: float | None = None
     lower: list[float] | None = None
     upper: list[float] | None = None
     velocity_limits: list[float] | None = None
@@ -154,7 +153,8 @@ class ArmControllerParameters:
         non_negative("damping", self.damping)
         positive("damping_threshold", self.damping_threshold)
         non_negative("margin", self.margin)
-        positive("acceleration_limit", self.acceleration_limit)
+        if self.acceleration_limit is not None:
+            positive("acceleration_limit", self.acceleration_limit)
         if not isinstance(self.use_acceleration_limit, bool):
             raise ValueError(
                 f"use_acceleration_limit = {self.use_acceleration_limit!r} "
@@ -167,13 +167,13 @@ class ArmControllerParameters:
             )
         if self.lower is not None:
             lower, upper = ordered_limits("lower", self.lower, "upper",
-                                          self.upper, 6)
+                                          self.upper)
             check_margin(self.margin, lower, upper)
             self.lower = tuple(lower.tolist())
             self.upper = tuple(upper.tolist())
         if self.velocity_limits is not None:
-            limits = _positive_vector("velocity_limits",
-                                      self.velocity_limits, 6)
+            limits = positive_vector("velocity_limits",
+                                     self.velocity_limits, None)
             self.velocity_limits = tuple(limits.tolist())
 
 

@@ -29,6 +29,7 @@ from pydrake.multibody.parsing import (
 )
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import (
+    BodyIndex,
     ForceElementIndex,
     Frame,
     JacobianWrtVariable,
@@ -200,6 +201,16 @@ def _outboard(parents, body, ancestor):
         if joint is None:
             return False
         index = joint.parent_body().index()
+
+
+def bodies_outboard(plant, body):
+    """`body` and every body outboard of it in `plant` (through any joint,
+    welds included), in the plant's order: e.g. what a wrist sensor
+    carries, outboard of the child body of its measuring weld."""
+    parents = _parents(plant)
+    return [b for b in (plant.get_body(BodyIndex(i))
+                        for i in range(plant.num_bodies()))
+            if _outboard(parents, b, body)]
 
 
 def _robot_model(plant, description):

@@ -14,19 +14,17 @@ from drake_wbc.math.arm_control import (
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.scalar_support import through_float_function, value_of
 from drake_wbc.math.validation import as_vector, checked_instance, positive
-from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.support import define_stage
-
-ARM_JOINT_COUNT = 6
-"""The arm's joints (the Elfin5's six)."""
 
 TWIST_SIZE = 6
 """V_a = [v_a; w_a] in T_a."""
 
-_Q = slice(0, ARM_JOINT_COUNT)
-_Q_DOT = slice(ARM_JOINT_COUNT, 2 * ARM_JOINT_COUNT)
-_LIMITED = 2 * ARM_JOINT_COUNT
-_STATE_SIZE = 2 * ARM_JOINT_COUNT + 1
+
+def own_or(given, own):
+    """A limit of ArmControllerParameters, `given`, or the arm's `own`
+    where it is None."""
+    return own if given is None else given
 
 
 @define_stage("ArmCartesianVelocityController_")
@@ -63,9 +61,9 @@ def ArmCartesianVelocityController_(T):
           (`use_acceleration_limit` false) the command stops at once. A
           twist that is not finite is treated the same way (with
           `limited` 1.0), never integrated.
-        - arm_position_command: q_cmd (6, rad), the joint positions for the
+        - arm_position_command: q_cmd (n, rad), the joint positions for the
           arm's position servo. It is the state: no direct feedthrough.
-        - arm_velocity_command: q_dot (6, rad/s) of the last update, the
+        - arm_velocity_command: q_dot (n, rad/s) of the last update, the
           rate at which q_cmd moves now (diagnostics, or feed-forward for a
           servo that takes one).
         - limited: 1.0 when the last update was cut by a joint's position
@@ -92,8 +90,8 @@ def ArmCartesianVelocityController_(T):
         to the O(h) error of the explicit integration, with no feedback of
         the servo's tracking error or of sensor noise into the IK.
 
-        State: [q_cmd (6), q_dot (6), limited (1)], one discrete group. It
-        starts at robot_model.HOME_ARM_POSITIONS at rest; use
+        State: [q_cmd (n), q_dot (n), limited (1)], one discrete group, n
+        the arm's joints. It starts at the robot's home at rest; use
         `set_arm_position` to start from the measured arm position.
 
         Scalar types: double and AutoDiffXd. The update runs
@@ -130,34 +128,41 @@ def ArmCartesianVelocityController_(T):
                 ArmControllerParameters)
             self.kinematics = kinematics = checked_instance(
                 "kinematics", kinematics, ArmKinematics, ArmKinematics)
-            self.lower = np.array(params.lower or kinematics.lower, float)
-            self.upper = np.array(params.upper or kinematics.upper, float)
+            self.lower = np.array(own_or(params.lower, kinematics.lower),
+                                  float)
+            self.upper = np.array(own_or(params.upper, kinematics.upper),
+                                  float)
             self.velocity_limits = np.array(
-                params.velocity_limits or kinematics.velocity_limits, float
-            )
+                own_or(params.velocity_limits, kinematics.velocity_limits),
+                float)
+            n = self.num_joints = kinematics.num_joints
+            # The state [q_cmd (n), q_dot (n), limited (1)].
+            self._q, self._q_dot = slice(0, n), slice(n, 2 * n)
+            self._limited_entry, self._state_size = 2 * n, 2 * n + 1
             self._time_step = positive("time_step", time_step)
             self._lower, self._upper = self.lower.tolist(), self.upper.tolist()
             self._limits = twist_limits(
                 self.lower, self.upper, self.velocity_limits,
                 self._time_step, params.damping, params.damping_threshold,
                 params.margin,
-                params.acceleration_limit if params.use_acceleration_limit
-                else None)
+                own_or(params.acceleration_limit,
+                       kinematics.acceleration_limits)
+                if params.use_acceleration_limit else None)
             self._command = body_for(joint_velocity_command, T)
             self._no_twist = np.zeros(TWIST_SIZE)
             self._input = self.DeclareVectorInputPort("arm_velocity",
                                                       TWIST_SIZE)
             self._hold = self.DeclareVectorInputPort("hold", 1)
-            initial = np.zeros(_STATE_SIZE)
-            initial[_Q] = HOME_ARM_POSITIONS
+            initial = np.zeros(self._state_size)
+            initial[self._q] = kinematics.home
             state = self.DeclareDiscreteState(BasicVector_[T](initial))
             self.DeclarePeriodicDiscreteUpdateEvent(
                 self._time_step, 0.0, self._update
             )
             prerequisites = {self.discrete_state_ticket(state)}
             for name, size, calc in (
-                ("arm_position_command", ARM_JOINT_COUNT, self._position),
-                ("arm_velocity_command", ARM_JOINT_COUNT, self._velocity),
+                ("arm_position_command", n, self._position),
+                ("arm_velocity_command", n, self._velocity),
                 ("limited", 1, self._limited),
             ):
                 self.DeclareVectorOutputPort(
@@ -205,29 +210,31 @@ def ArmCartesianVelocityController_(T):
                     and self._hold.Eval(context)[0] >= 0.5)
             x = self._state(context)
             discrete_state.set_value(self._next_state(
-                x[_Q], x[_Q_DOT], self._input.Eval(context), hold))
+                x[self._q], x[self._q_dot], self._input.Eval(context),
+                hold))
 
         def _position(self, context, output):
-            output.SetFromVector(self._state(context)[_Q])
+            output.SetFromVector(self._state(context)[self._q])
 
         def _velocity(self, context, output):
-            output.SetFromVector(self._state(context)[_Q_DOT])
+            output.SetFromVector(self._state(context)[self._q_dot])
 
         def _limited(self, context, output):
-            output.SetFromVector(self._state(context)[_LIMITED:])
+            output.SetFromVector(
+                self._state(context)[self._limited_entry:])
 
         def set_arm_position(self, context, q):
-            """Starts the command at `q` (6, rad), at rest: e.g. the
+            """Starts the command at `q` (n, rad), at rest: e.g. the
             measured arm position when the controller takes over, so that
             the servo sees no jump. A joint outside the band
             [lower + margin, upper - margin] is kept where it is and is
             only prevented from moving further out; one outside the joint
             limits [lower, upper] starts on the limit, so that the command
             never leaves them."""
-            q = np.clip(as_vector("q", q, ARM_JOINT_COUNT), self.lower,
+            q = np.clip(as_vector("q", q, self.num_joints), self.lower,
                         self.upper)
-            state = np.zeros(_STATE_SIZE)
-            state[_Q] = q
+            state = np.zeros(self._state_size)
+            state[self._q] = q
             context.SetDiscreteState(state)
 
     return Impl

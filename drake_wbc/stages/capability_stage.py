@@ -53,7 +53,7 @@ def ArmCapability_(T):
                            │               ├──► alpha
                            └───────────────┘
 
-        - arm_position: q_a (6), the measured joint angles (rad).
+        - arm_position: q_a (n), the measured joint angles (rad).
         - end_effector_position: p_ee (3) in T_b (m), for J_b of eq. (2).
         - capability: C_m = m P_jnt (1), the capability of movement.
         - capability_gradient: grad_x C_m (6) w.r.t. the arm's Cartesian
@@ -101,17 +101,18 @@ def ArmCapability_(T):
             self._terms = body_for(capability.capability_terms,
                                    float)
             self._alpha = body_for(capability.transition_of, float)
-            self._input = self.DeclareVectorInputPort("arm_position", 6)
+            self._input = self.DeclareVectorInputPort(
+                "arm_position", self.arm.num_joints)
             entry = declare_cached_vector(
                 self, "arm kinematics and capability", self._calc,
                 {self._input.ticket()})
             declare_slices(self, entry, _CAPABILITY_OUTPUTS)
 
         def evaluate(self, q_a):
-            """[p_ee (3), C_m, grad_x C_m (6), alpha] at float q_a (6,).
+            """[p_ee (3), C_m, grad_x C_m (6), alpha] at float q_a (n,).
 
             One evaluation of the kinematics and one SVD of J_a; q_a is
-            checked (shape (6,), finite) by ArmKinematics.evaluate.
+            checked (shape (n,), finite) by ArmKinematics.evaluate.
             """
             values = self.arm.evaluate(q_a)
             q = np.asarray(q_a, dtype=float).tolist()

@@ -74,15 +74,15 @@ def as_scalar_type(T, values):
 
 @functools.cache
 def shared_arm_kinematics():
-    """One ArmKinematics of our robot, for stages that read only its
-    constants (R_ba, the arm base's position)."""
+    """One ArmKinematics of the shipped robot, for stages built without
+    one that read only its constants (R_ba, the arm base's position)."""
     return ArmKinematics()
 
 
 def arm_mounting(arm):
     """(R_ba, p_a): the rotation ^bR_a and the arm base's origin in T_b
     (m), constants of the nominal kinematics of `arm` (ArmKinematics)."""
-    values = arm.evaluate(np.zeros(6))
+    values = arm.evaluate(np.zeros(arm.num_joints))
     R_ba = np.array(arm.R_ba, dtype=float)
     return R_ba, values.p_ee_in_base - R_ba @ values.X_AE.translation()
 

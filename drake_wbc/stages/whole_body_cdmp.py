@@ -263,7 +263,7 @@ def MovementTracking_(T):
                                    └──────────────────┘
 
         - base.state_estimated: [x, y, yaw, vx, vy, wz] (6), odometry.
-        - arm.position_measured: the arm's joints (6).
+        - arm.position_measured: the arm's joints (n).
         - reference_velocity: V_ee^ref (6) in the world, [v; w]:
           K (p*(t) - p) on x, y, z and yaw (0 on roll and pitch, and
           before the movement's start_time), p* = player.reference(t), p
@@ -279,18 +279,19 @@ def MovementTracking_(T):
 
         Args:
             player: the movement.MovementPlayer of the WholeBodyCdmp.
-            arm: an ArmKinematics (our robot's if None).
+            arm: an ArmKinematics (the shipped robot's if None).
         """
 
         def _construct(self, player, arm=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.player = player
-            self._pose = TcpPose(arm or shared_arm_kinematics())
+            arm = arm or shared_arm_kinematics()
+            self._pose = TcpPose(arm)
             self._tcp_pose_in_world = body_for(tcp_pose_in_world, float)
             self._base = self.DeclareVectorInputPort(
                 "base.state_estimated", 6)
             self._arm = self.DeclareVectorInputPort("arm.position_measured",
-                                                    6)
+                                                    arm.num_joints)
             self.DeclareVectorOutputPort("reference_velocity", 6,
                                          self._output)
 

@@ -7,19 +7,28 @@ from pydrake.systems.framework import LeafSystem_
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.scalar_support import through_float_function
 from drake_wbc.math.wrench import ToolPayload, external_wrench
-from drake_wbc.robot.model import ArmKinematics
+from drake_wbc.robot.model import ArmKinematics, bodies_outboard
 from drake_wbc.stages.support import define_stage
 
 
 def _tool(arm):
-    """(mass, p_M_com): the tool's mass and its centre of mass in the
-    measurement frame M, from the plant's mass properties."""
+    """(mass, p_M_com): the mass of what the sensor carries (the bodies
+    outboard of its measuring weld, model.ft_sensor_joint) and their
+    centre of mass in the measurement frame M, from the plant's mass
+    properties."""
     plant, model = arm.plant, arm.model
-    tool = plant.GetBodyByName("wiping_tool", model.tool)
     context = plant.CreateDefaultContext()
-    X_MB = tool.body_frame().CalcPose(context, model.ft_measurement_frame)
-    return tool.get_mass(context), X_MB.multiply(
-        tool.CalcCenterOfMassInBodyFrame(context))
+    M = model.ft_measurement_frame
+    bodies = bodies_outboard(plant, model.ft_sensor_joint.child_body())
+    if len(bodies) == 1:
+        tool, = bodies
+        X_MB = tool.body_frame().CalcPose(context, M)
+        return tool.get_mass(context), X_MB.multiply(
+            tool.CalcCenterOfMassInBodyFrame(context))
+    masses = np.array([body.get_mass(context) for body in bodies])
+    centres = np.array([body.body_frame().CalcPose(context, M).multiply(
+        body.CalcCenterOfMassInBodyFrame(context)) for body in bodies])
+    return float(masses.sum()), masses @ centres / masses.sum()
 
 
 def tool_weight_reading(arm, q_a):
@@ -31,7 +40,7 @@ def tool_weight_reading(arm, q_a):
 
     Args:
         arm: ArmKinematics.
-        q_a: (6,) the arm's joint positions, rad.
+        q_a: (n,) the arm's joint positions, rad.
     """
     mass, p_M_com = _tool(arm)
     R_AM = arm.frame_pose(
@@ -54,7 +63,7 @@ def ExternalWrenchEstimator_(T):
 
         - wrist_wrench: (6) the reading [f; tau], the wrench the tool
           exerts on the sensor at its measurement frame, in that frame.
-        - arm_position: (6) the measured arm configuration q_a.
+        - arm_position: (n) the measured arm configuration q_a.
         - external_wrench: F_ext (6), the wrench the environment exerts on
           the tool, at the tool centre point, in T_a, with the tool's
           weight removed (drake_wbc.math.wrench.external_wrench).
@@ -91,7 +100,9 @@ def ExternalWrenchEstimator_(T):
                                             self._p_M_com, p_TM)
             self._wrench = body_for(external_wrench, T)
             self._reading = self.DeclareVectorInputPort("wrist_wrench", 6)
-            self._position = self.DeclareVectorInputPort("arm_position", 6)
+            self._joints = self._arm.num_joints
+            self._position = self.DeclareVectorInputPort("arm_position",
+                                                         self._joints)
             self.DeclareVectorOutputPort(
                 "external_wrench", 6,
                 self._output if welded else self._output_with_lever)
@@ -103,15 +114,16 @@ def ExternalWrenchEstimator_(T):
                     :, :3]
 
         def _estimate(self, inputs):
-            """F_ext from the values [q_a; reading] (12,), the lever from
-            the plant (a tool not welded to the sensor)."""
-            q_a, model = inputs[:6], self._arm.model
+            """F_ext from the values [q_a; reading] (n + 6,), the lever
+            from the plant (a tool not welded to the sensor)."""
+            n, model = self._joints, self._arm.model
+            q_a = inputs[:n]
             R_AM = self._rotation(q_a)
             r_TM = (self._arm.frame_pose(q_a, model.ft_measurement_frame)
                     .translation()
                     - self._arm.frame_pose(q_a, model.tcp_frame)
                     .translation())
-            return self._wrench(inputs[6:], R_AM, ToolPayload(
+            return self._wrench(inputs[n:], R_AM, ToolPayload(
                 self._tool_mass, self._p_M_com, R_AM.T @ r_TM))
 
         def _output(self, context, output):

@@ -1,0 +1,79 @@
+"""A robot the project did not model, for the tests of "bring your own
+robot": a plain URDF of an omnidirectional base (three planar joints)
+carrying an arm of n revolute joints, a flange, a wrist sensor and a
+tool, with no acceleration limits (URDF has none), and its description
+(drake_wbc.robot.description)."""
+
+import textwrap
+
+
+def urdf_text(n):
+    axes = ["0 0 1", "0 1 0", "0 1 0", "0 0 1", "0 1 0", "0 0 1", "0 1 0"]
+    links = ["<link name='world_x'/>", "<link name='world_y'/>",
+             _link("chassis", 50.0)]
+    joints = [
+        _joint("base_x", "prismatic", "world", "world_x", axis="1 0 0"),
+        _joint("base_y", "prismatic", "world_x", "world_y", axis="0 1 0"),
+        _joint("base_yaw", "revolute", "world_y", "chassis", axis="0 0 1",
+               limits=False)]
+    parent = "chassis"
+    for i in range(n):
+        link = f"link{i + 1}"
+        links.append(_link(link, 2.0))
+        joints.append(_joint(f"j{i + 1}", "revolute", parent, link,
+                             axis=axes[i % len(axes)],
+                             xyz="0 0 0.3" if i else "0.2 0 0.4"))
+        parent = link
+    for name, child, xyz in (("flange", "flange", "0 0 0.1"),
+                             ("sensor", "sensor", "0 0 0.02"),
+                             ("tool", "tool", "0 0 0.05")):
+        links.append(_link(child, 0.3))
+        joints.append(_joint(name, "fixed", parent, child, xyz=xyz))
+        parent = child
+    body = "\n".join(links + joints)
+    return f"<?xml version='1.0'?>\n<robot name='omni_arm'>\n{body}\n</robot>\n"
+
+
+def _link(name, mass):
+    return (f"<link name='{name}'><inertial><mass value='{mass}'/>"
+            f"<inertia ixx='0.01' iyy='0.01' izz='0.01' ixy='0' ixz='0' "
+            f"iyz='0'/></inertial></link>")
+
+
+def _joint(name, kind, parent, child, axis=None, xyz="0 0 0", limits=True):
+    text = (f"<joint name='{name}' type='{kind}'><parent link='{parent}'/>"
+            f"<child link='{child}'/><origin xyz='{xyz}'/>")
+    if axis:
+        text += f"<axis xyz='{axis}'/>"
+    if kind != "fixed" and limits:
+        text += ("<limit lower='-2.5' upper='2.5' effort='100' "
+                 "velocity='2.0'/>")
+    return text + "</joint>"
+
+
+def description_text(n, extra=""):
+    joints = ", ".join(f"omni_arm::j{i + 1}" for i in range(n))
+    home = ", ".join(["0.3"] * n)
+    return textwrap.dedent(f"""\
+        name: omni_arm
+        model:
+          file: omni_arm.urdf
+        base:
+          frame: omni_arm::chassis
+          joints: [omni_arm::base_x, omni_arm::base_y, omni_arm::base_yaw]
+          velocity_limits: [0.8, 0.8, 1.0]
+          acceleration_limits: [0.5, 0.5, 0.5]
+          footprint_half_sizes: [0.45, 0.35]
+          height: 0.35
+          command_timeout: 0.2
+        arm:
+          joints: [{joints}]
+          base_frame: omni_arm::chassis
+          flange_frame: omni_arm::flange
+          home: [{home}]
+        {extra}
+        tool:
+          tcp_frame: omni_arm::tool
+          ft_sensor_frame: omni_arm::sensor
+          ft_sensor_joint: omni_arm::sensor
+        """)
