@@ -51,9 +51,15 @@ def _joint(name, kind, parent, child, axis=None, xyz="0 0 0", limits=True):
     return text + "</joint>"
 
 
+HOMES = {6: [0.0, 0.8, 1.1, -0.4, -1.2, 0.3],
+         7: [0.0, 0.5, 0.3, -0.2, 1.3, 0.2, 0.0]}
+"""Homes of good manipulability (C_m 0.10 and 0.17, the TCP about 1 m
+ahead and 1 m high), found by a random search over the joints."""
+
+
 def description_text(n, extra=""):
     joints = ", ".join(f"omni_arm::j{i + 1}" for i in range(n))
-    home = ", ".join(["0.3"] * n)
+    home = ", ".join(str(q) for q in HOMES.get(n, [0.3] * n))
     return textwrap.dedent(f"""\
         name: omni_arm
         model:

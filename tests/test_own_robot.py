@@ -1,0 +1,116 @@
+"""A robot the project did not model, closed through the controller: an
+omni base carrying a 6- or 7-joint arm (tests/omni_arm.py), the
+controller built from its description alone, and an ideal robot (the
+joints follow their position command, the base its velocity command) that
+must carry the TCP along the commanded world twist."""
+
+import numpy as np
+import pytest
+from omni_arm import description_text, urdf_text
+from pydrake.common.value import AbstractValue
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
+
+from drake_wbc.controller import ControllerParameters, build_controller
+from drake_wbc.robot.description import load_robot_description
+from drake_wbc.robot.model import ArmKinematics, make_robot_plant
+from drake_wbc.stages.wrench import tool_weight_reading
+
+H = 0.01
+
+
+class IdealBase(LeafSystem):
+    """The base's pose integrated from its velocity command (in T_b), and
+    its state [x, y, yaw, vx, vy, wz] as odometry gives it."""
+
+    def __init__(self):
+        super().__init__()
+        self.command = self.DeclareVectorInputPort("velocity_command", 3)
+        state = self.DeclareDiscreteState(6)
+        self.DeclarePeriodicDiscreteUpdateEvent(H, 0.0, self._update)
+        self.DeclareStateOutputPort("state_estimated", state)
+
+    def _update(self, context, discrete_state):
+        x = context.get_discrete_state_vector().CopyToVector()
+        v = self.command.Eval(context)
+        c, s = np.cos(x[2]), np.sin(x[2])
+        x[:3] += H * np.array([c * v[0] - s * v[1], s * v[0] + c * v[1],
+                               v[2]])
+        x[3:] = v
+        discrete_state.set_value(x)
+
+
+class IdealWrist(LeafSystem):
+    """What the wrist sensor reads with nothing touching the tool, at the
+    arm's measured joints (the tool's weight only)."""
+
+    def __init__(self, arm):
+        super().__init__()
+        self.arm = arm
+        self.q = self.DeclareVectorInputPort("q", arm.num_joints)
+        self.DeclareVectorOutputPort("wrench", BasicVector(6), self._calc)
+
+    def _calc(self, context, output):
+        output.SetFromVector(tool_weight_reading(self.arm,
+                                                 self.q.Eval(context)))
+
+
+@pytest.mark.parametrize("n", [6, 7])
+def test_the_controller_of_a_urdf_robot_tracks_a_world_twist(tmp_path, n):
+    (tmp_path / "omni_arm.urdf").write_text(urdf_text(n))
+    path = tmp_path / "omni_arm.yaml"
+    path.write_text(description_text(
+        n, extra=f"  acceleration_limits: [{', '.join(['9.0'] * n)}]"))
+    arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
+    controller = build_controller(ControllerParameters(), robot=arm)
+    builder = DiagramBuilder()
+    c = builder.AddSystem(controller.diagram)
+    base = builder.AddSystem(IdealBase())
+    wrist = builder.AddSystem(IdealWrist(arm))
+    twist = np.array([0.05, -0.03, 0.02, 0.0, 0.0, 0.0])
+    reference = builder.AddSystem(ConstantVectorSource(twist))
+    points = builder.AddSystem(ConstantValueSource(
+        AbstractValue.Make(np.zeros((0, 2)))))
+    connect = builder.Connect
+    connect(c.GetOutputPort("base.velocity_command"),
+            base.get_input_port())
+    connect(base.get_output_port(), c.GetInputPort("base.state_estimated"))
+    # The ideal arm: the joints are where they were commanded.
+    connect(c.GetOutputPort("arm.position_command"),
+            c.GetInputPort("arm.position_measured"))
+    connect(c.GetOutputPort("arm.position_command"), wrist.get_input_port())
+    connect(wrist.get_output_port(), c.GetInputPort("wrist.wrench_measured"))
+    connect(reference.get_output_port(),
+            c.GetInputPort("reference_velocity"))
+    connect(points.get_output_port(), c.GetInputPort("lidar.obstacle_points"))
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    controller.initialize(context)
+
+    def tcp(context):
+        q = c.GetOutputPort("arm.position_command").Eval(
+            c.GetMyContextFromRoot(context))
+        pose = base.get_output_port().Eval(base.GetMyContextFromRoot(context))
+        p_b = arm.evaluate(q).p_ee_in_base
+        cy, sy = np.cos(pose[2]), np.sin(pose[2])
+        return np.array([pose[0] + cy * p_b[0] - sy * p_b[1],
+                         pose[1] + sy * p_b[0] + cy * p_b[1], p_b[2]])
+
+    start = tcp(context)
+    simulator.AdvanceTo(3.0)
+    q = c.GetOutputPort("arm.position_command").Eval(
+        c.GetMyContextFromRoot(context))
+    assert q.shape == (n,)
+    assert np.all(np.isfinite(q))
+    moved = tcp(context) - start
+    # The DMP follows the reference with a lag of about tau; over 3 s the
+    # TCP has moved most of 3 s of the twist, along its direction.
+    expected = 3.0 * twist[:3]
+    direction = expected / np.linalg.norm(expected)
+    assert moved @ direction > 0.8 * np.linalg.norm(expected)
+    assert np.linalg.norm(moved - (moved @ direction) * direction) < (
+        0.05 * np.linalg.norm(expected))
+    reason = controller.safety_reason(context)
+    assert reason == ""
