@@ -77,9 +77,9 @@ def description_text(n, extra=""):
           base_frame: omni_arm::chassis
           flange_frame: omni_arm::flange
           home: [{home}]
-        {extra}
+        EXTRA
         tool:
           tcp_frame: omni_arm::tool
           ft_sensor_frame: omni_arm::sensor
           ft_sensor_joint: omni_arm::sensor
-        """)
+        """).replace("EXTRA\n", extra + "\n" if extra else "")

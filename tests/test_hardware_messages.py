@@ -48,7 +48,7 @@ def test_generated_python_matches_the_lcm_files(tmp_path):
     ("obstacle_points", (np.array([[1.0, 2.0], [-0.5, 0.25]]),)),
 ])
 def test_round_trip(name, values):
-    kind = codecs.FORMATS[name]
+    kind = codecs.message_formats(6)[name]
     decoded = kind.decode(kind.encode(1234567, *values))
     assert decoded.utime == 1234567
     for got, sent in zip(decoded.values, values, strict=True):
@@ -82,7 +82,7 @@ def test_malformed_messages_are_rejected():
     }
     for case, data in bad.items():
         with pytest.raises(messages.MessageError):
-            messages.decode_arm_status(data)
+            messages.decode_arm_status(data, num_joints=6)
         print(case, "rejected")
     with pytest.raises(messages.MessageError, match="finite"):
         messages.decode_obstacle_points(messages.encode_obstacle_points(
@@ -90,6 +90,24 @@ def test_malformed_messages_are_rejected():
     with pytest.raises(messages.MessageError, match="finite"):
         messages.decode_base_command(messages.encode_base_command(
             1, [np.nan, 0.0, 0.0]))
+
+
+@pytest.mark.parametrize("n", [6, 7])
+def test_the_arm_messages_carry_the_arms_joints(n):
+    """An arm of n joints: its formats take n joints and refuse another
+    count; the decoders without a count take any."""
+    formats = codecs.message_formats(n)
+    q = np.linspace(-1.0, 1.0, n)
+    status = formats["arm_status"].encode(5, q, -q)
+    np.testing.assert_array_equal(formats["arm_status"].decode(
+        status).values[1], -q)
+    assert dict(formats["arm_command"].ports)["positions"] == n
+    other = codecs.message_formats(n + 1)
+    with pytest.raises(messages.MessageError, match=f"must have {n + 1}"):
+        other["arm_status"].decode(status)
+    assert messages.decode_arm_status(status).values[0].size == n
+    with pytest.raises(ValueError, match="num_joints = None"):
+        codecs.MessageEncoder("arm_command")
 
 
 def _state(utime, value=1.0):

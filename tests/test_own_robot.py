@@ -13,6 +13,8 @@ from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 
 from drake_wbc.controller import ControllerParameters, build_controller
+from drake_wbc.hardware.options import HardwareOptions
+from drake_wbc.hardware.safety import CommandGuard, Limits, follow_arm_command
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.robot.model import ArmKinematics, make_robot_plant
 from drake_wbc.stages.wrench import tool_weight_reading
@@ -114,3 +116,46 @@ def test_the_controller_of_a_urdf_robot_tracks_a_world_twist(tmp_path, n):
         0.05 * np.linalg.norm(expected))
     reason = controller.safety_reason(context)
     assert reason == ""
+
+
+def test_the_hardware_guard_holds_the_commands_to_that_arms_own_limits(
+        tmp_path):
+    """The LCM side of the same robot: its arm's 7 joints in the messages
+    and ports, and its own limits, tighter than the shipped Elfin5's, in
+    the command guard: a command the Elfin5 would take is limited, and one
+    within this arm's limits passes bit for bit."""
+    n = 7
+    (tmp_path / "omni_arm.urdf").write_text(urdf_text(n))
+    path = tmp_path / "omni_arm.yaml"
+    path.write_text(description_text(
+        n, extra=(f"  acceleration_limits: [{', '.join(['9.0'] * n)}]\n"
+                  f"  velocity_limits: [{', '.join(['0.5'] * n)}]")))
+    arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
+    limits = Limits.of_robot(HardwareOptions(), arm)
+    np.testing.assert_array_equal(limits.joint_speed, np.full(n, 0.5))
+    np.testing.assert_array_equal(limits.joint_acceleration, np.full(n, 9.0))
+    np.testing.assert_array_equal(limits.upper, np.full(n, 2.5))
+    guard = CommandGuard(HardwareOptions(), arm.home, limits)
+    assert guard.GetInputPort("arm_position_command").size() == n
+    period = HardwareOptions().publish_period
+    last, velocity = arm.home.copy(), np.zeros(n)
+    # 1 rad/s on the first joint: within the Elfin5's 1.57, beyond 0.5.
+    fast = last.copy()
+    fast[0] += 1.0 * period
+    command, rate, changed = follow_arm_command(
+        fast, np.zeros(n), last, velocity, period, limits)
+    assert changed and abs(rate[0]) <= 0.5 * (1 + 1e-9)
+    # Beyond this arm's 2.5 rad (within the Elfin5's 3.14): held at 2.5.
+    far = last.copy()
+    far[1] = 2.9
+    for _ in range(2000):
+        last, velocity, _ = follow_arm_command(far, np.zeros(n), last,
+                                               velocity, period, limits)
+    assert last[1] == pytest.approx(2.5) and last[1] <= 2.5
+    # Within every limit of this arm: sent as it is.
+    slow = arm.home.copy()
+    slow[2] += 0.05 * period  # 5 rad/s^2 from rest, within 9
+    command, _, changed = follow_arm_command(
+        slow, np.zeros(n), arm.home, np.zeros(n), period, limits)
+    assert not changed
+    np.testing.assert_array_equal(command, slow)

@@ -88,8 +88,7 @@ from drake_wbc.controller.parameters import (
 )
 from drake_wbc.math.safety import check_within_robot
 from drake_wbc.math.validation import checked_instance, validated_copy
-from drake_wbc.robot.description import RobotDescription, shipped_robot
-from drake_wbc.robot.model import ArmKinematics, make_robot_plant
+from drake_wbc.robot.model import arm_kinematics
 from drake_wbc.stages import (
     ArmCapability,
     ArmCartesianVelocityController,
@@ -203,9 +202,7 @@ def build_controller(params=None, robot=None):
         "params", params, ControllerParameters, ControllerParameters))
     h, band, switch = (params.time_step, params.capability_band,
                        params.phri_switch)
-    arm = (robot if isinstance(robot, ArmKinematics)
-           else ArmKinematics(*make_robot_plant(checked_instance(
-               "robot", robot, RobotDescription, shipped_robot))))
+    arm = arm_kinematics(robot)
     check_arm_limits(params.arm_controller, arm)
     check_within_robot(params.safety)
     builder = DiagramBuilder()

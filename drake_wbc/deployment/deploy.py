@@ -26,7 +26,7 @@ from drake_wbc.controller.run_log import SIGNALS
 from drake_wbc.controller.task import add_controller
 from drake_wbc.experiments.scenario import Scenario, controller_for
 from drake_wbc.hardware import messages
-from drake_wbc.hardware.codecs import FORMATS, SignalBundleEncoder
+from drake_wbc.hardware.codecs import SignalBundleEncoder, message_formats
 from drake_wbc.hardware.interface import (
     DIAGNOSTICS,
     HardwareInterface,
@@ -134,7 +134,7 @@ def add_controller_side(builder, scenario, variant=None, options=None,
                           variant, options)
 
 
-def wait_for_status(lcm, options, timeout=None, stop=None):
+def wait_for_status(lcm, options, num_joints, timeout=None, stop=None):
     """Waits for a good message on every status channel on `lcm` (base
     state, arm status, wrist wrench, obstacle points: the controller
     depends on each).
@@ -143,12 +143,14 @@ def wait_for_status(lcm, options, timeout=None, stop=None):
         lcm: a DrakeLcmInterface.
         options: HardwareOptions (channels; startup_timeout if `timeout`
             is None).
+        num_joints: the arm's joint count (an arm status of another size
+            is not good).
         timeout: s of wall clock.
         stop: a callable; waiting ends early when it returns True.
 
     Returns:
         the first value of each channel's message, in the order of
-        STATUS_CHANNELS (base state (6,), arm positions (6,), wrench
+        STATUS_CHANNELS (base state (6,), arm positions (n,), wrench
         (6,), points (M, 2)), or None if stopped.
 
     Raises:
@@ -156,7 +158,8 @@ def wait_for_status(lcm, options, timeout=None, stop=None):
     """
     timeout = options.startup_timeout if timeout is None else positive(
         "timeout", timeout)
-    decoders = {getattr(options.channels, name): FORMATS[name].decode
+    formats = message_formats(num_joints)
+    decoders = {getattr(options.channels, name): formats[name].decode
                 for name in STATUS_CHANNELS}
     received, waiting = {}, [True]
 
@@ -265,7 +268,8 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
     side = add_controller_side(builder, scenario, variant, options, lcm)
     diagram = builder.Build()
     diagram.set_name("deployment")
-    status = wait_for_status(lcm, options, stop=stop)
+    status = wait_for_status(lcm, options, side.hardware.arm.num_joints,
+                             stop=stop)
     if status is None:
         return None
     state, arm = status[:2]

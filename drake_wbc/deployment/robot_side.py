@@ -36,7 +36,6 @@ and the arm holds the scenario's initial positions.
 
 from dataclasses import replace
 
-import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.lcm import LcmInterfaceSystem
 
@@ -54,7 +53,6 @@ from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.hardware.safety import (
     ArmCommandLimiter,
     Limits,
-    arm_own_limits,
 )
 from drake_wbc.math.validation import checked_instance
 from drake_wbc.robot.model import ArmKinematics
@@ -120,16 +118,16 @@ class RobotSide:
         builder.Connect(receiver.GetOutputPort("velocity"),
                         station.GetInputPort("base.velocity_command"))
         arm = ArmKinematics()
-        speed, acceleration = arm_own_limits(arm)
         s["arm_limiter"] = limiter = builder.AddNamedSystem(
             "arm_limiter", ArmCommandLimiter(
                 options.publish_period,
                 options.publish_offset + 0.5 * options.publish_period,
                 scenario.station.initial_arm_positions,
+                # The arm's own limits, joint by joint (the robot's
+                # driver does not take the controller side's tighter ones).
                 Limits.of_robot(replace(
-                    options, joint_speed_limit=float(np.min(speed)),
-                    joint_acceleration_limit=float(np.min(acceleration))),
-                    arm)))
+                    options, joint_speed_limit=None,
+                    joint_acceleration_limit=None), arm)))
         builder.Connect(receiver.GetOutputPort("positions"),
                         limiter.GetInputPort("positions"))
         builder.Connect(limiter.GetOutputPort("positions"),
@@ -149,7 +147,8 @@ class RobotSide:
         )
         for name, ports, period, offset in statuses:
             s[f"encoder.{name}"] = encoder = builder.AddNamedSystem(
-                f"encoder.{name}", MessageEncoder(name))
+                f"encoder.{name}", MessageEncoder(
+                    name, num_joints=arm.num_joints))
             for i, port in enumerate(ports):
                 builder.Connect(station.GetOutputPort(port),
                                 encoder.get_input_port(i))

@@ -16,6 +16,7 @@ compare bytes and time stamps, carry abstract values, and are no part of
 what the controller linearises.
 """
 
+import functools
 import logging
 from collections import deque
 from typing import NamedTuple
@@ -49,33 +50,49 @@ class MessageFormat(NamedTuple):
     ports: tuple
 
 
-FORMATS = {f.name: f for f in (
-    MessageFormat("base_command", messages.encode_base_command,
-                  messages.decode_base_command, (("velocity", 3),)),
-    MessageFormat("arm_command", messages.encode_arm_command,
-                  messages.decode_arm_command, (("positions", 6),)),
-    MessageFormat("base_state", messages.encode_base_state,
-                  messages.decode_base_state, (("state", 6),)),
-    MessageFormat("arm_status", messages.encode_arm_status,
-                  messages.decode_arm_status,
-                  (("positions", 6), ("velocities", 6))),
-    MessageFormat("wrist_wrench", messages.encode_wrench,
-                  messages.decode_wrench, (("wrench", 6),)),
-    MessageFormat("obstacle_points", messages.encode_obstacle_points,
-                  messages.decode_obstacle_points, (("points", None),)),
-)}
-"""The message kinds of the protocol, by name."""
+def message_formats(num_joints):
+    """The message kinds of the protocol, by name, for an arm of
+    `num_joints` joints (an arm message of another size is refused)."""
+    n = int(num_joints)
+    if n < 1:
+        raise ValueError(f"num_joints = {num_joints!r} is not allowed: must "
+                         "be a positive whole number")
+    return {f.name: f for f in (
+        MessageFormat("base_command", messages.encode_base_command,
+                      messages.decode_base_command, (("velocity", 3),)),
+        MessageFormat("arm_command", messages.encode_arm_command,
+                      functools.partial(messages.decode_arm_command,
+                                        num_joints=n), (("positions", n),)),
+        MessageFormat("base_state", messages.encode_base_state,
+                      messages.decode_base_state, (("state", 6),)),
+        MessageFormat("arm_status", messages.encode_arm_status,
+                      functools.partial(messages.decode_arm_status,
+                                        num_joints=n),
+                      (("positions", n), ("velocities", n))),
+        MessageFormat("wrist_wrench", messages.encode_wrench,
+                      messages.decode_wrench, (("wrench", 6),)),
+        MessageFormat("obstacle_points", messages.encode_obstacle_points,
+                      messages.decode_obstacle_points, (("points", None),)),
+    )}
 
 
-def _format(message_format):
-    """`message_format`, or the one of FORMATS it names."""
+MESSAGE_KINDS = tuple(message_formats(1))
+"""The names of the protocol's message kinds."""
+
+
+def _format(message_format, num_joints):
+    """`message_format`, or the one of `message_formats(num_joints)` it
+    names."""
     if isinstance(message_format, MessageFormat):
         return message_format
-    if message_format not in FORMATS:
+    if message_format not in MESSAGE_KINDS:
         raise ValueError(f"message_format = {message_format!r} is not "
                          f"allowed: must be a MessageFormat or one of "
-                         f"{', '.join(FORMATS)}")
-    return FORMATS[message_format]
+                         f"{', '.join(MESSAGE_KINDS)}")
+    if num_joints is None and message_format.startswith("arm_"):
+        raise ValueError(f"num_joints = None is not allowed for "
+                         f"{message_format!r}: give the arm's joint count")
+    return message_formats(num_joints or 1)[message_format]
 
 
 class ClockRules(NamedTuple):
@@ -407,7 +424,8 @@ class MessageDecoder(LeafSystem):
     `drake_wbc.hardware` logger, at most once a LOG_INTERVAL.
 
     Args:
-        message_format: a MessageFormat or the name of one of FORMATS.
+        message_format: a MessageFormat or the name of one of
+            MESSAGE_KINDS (an arm's with `num_joints`).
         lcm: the DrakeLcmInterface to subscribe on (it must outlive the
             system).
         channel: the channel's name.
@@ -417,12 +435,13 @@ class MessageDecoder(LeafSystem):
             this, the value ports give `defaults` again (the robot's own
             command timeout); None keeps the last values forever.
         rules: the ClockRules of the sender's time stamps.
+        num_joints: the arm's joint count, for the arm's kinds by name.
     """
 
     def __init__(self, message_format, lcm, channel, defaults=None,
-                 timeout=None, rules=DEFAULT_RULES):
+                 timeout=None, rules=DEFAULT_RULES, num_joints=None):
         super().__init__()
-        self.format = message_format = _format(message_format)
+        self.format = message_format = _format(message_format, num_joints)
         ports = message_format.ports
         if defaults is None:
             defaults = [np.zeros((0, 2)) if size is None else np.zeros(size)
@@ -555,7 +574,8 @@ class CommandReceiver(LeafSystem):
     Args:
         lcm: the DrakeLcmInterface to subscribe on.
         channels: (base command channel, arm command channel).
-        initial_positions: (6,) the arm command before the first.
+        initial_positions: (n,) the arm command before the first (n the
+            arm's joints: commands of another size are refused).
         timeout: s, the robot's command timeout.
         release_time: s, the sender lock's quiet time (at least
             `timeout`).
@@ -568,8 +588,10 @@ class CommandReceiver(LeafSystem):
         self.timeout = positive("timeout", timeout)
         self.release_time = positive("release_time", release_time)
         self.rules = rules
-        self.initial = as_vector("initial_positions", initial_positions, 6)
-        self._formats = (FORMATS["base_command"], FORMATS["arm_command"])
+        self.initial = as_vector("initial_positions", initial_positions)
+        n = self.initial.size
+        formats = message_formats(n)
+        self._formats = (formats["base_command"], formats["arm_command"])
         self._mailbox = _Mailbox()
         self._warnings = _Warnings(f"commands on {', '.join(channels)}")
         for kind, channel in enumerate(channels):
@@ -580,7 +602,7 @@ class CommandReceiver(LeafSystem):
             Reception(None, (np.zeros(3),), -np.inf),
             Reception(None, (self.initial.copy(),), -np.inf))))
         self.DeclareVectorOutputPort("velocity", 3, self._velocity)
-        self.DeclareVectorOutputPort("positions", 6, self._positions)
+        self.DeclareVectorOutputPort("positions", n, self._positions)
         self.DeclareVectorOutputPort("status", len(COMMAND_STATUS),
                                      self._status)
         self.DeclarePerStepUnrestrictedUpdateEvent(self._update)
@@ -694,14 +716,16 @@ class MessageEncoder(LeafSystem):
       clock at the start of a run).
 
     Args:
-        message_format: a MessageFormat or the name of one of FORMATS.
+        message_format: a MessageFormat or the name of one of
+            MESSAGE_KINDS (an arm's with `num_joints`).
         sender: the sender's identity, for the command formats (which
             carry one); None for the others.
+        num_joints: the arm's joint count, for the arm's kinds by name.
     """
 
-    def __init__(self, message_format, sender=None):
+    def __init__(self, message_format, sender=None, num_joints=None):
         super().__init__()
-        self.format = message_format = _format(message_format)
+        self.format = message_format = _format(message_format, num_joints)
         self.sender = sender
         self._inputs = [
             self.DeclareAbstractInputPort(name, _points_value())

@@ -58,9 +58,9 @@ from drake_wbc.hardware.codecs import (
 )
 from drake_wbc.hardware.messages import RawBytesSerializer
 from drake_wbc.hardware.options import STATUS_CHANNELS, HardwareOptions
-from drake_wbc.hardware.safety import GUARD_STATUS, CommandGuard
+from drake_wbc.hardware.safety import GUARD_STATUS, CommandGuard, Limits
 from drake_wbc.math.validation import checked_instance
-from drake_wbc.robot.model import HOME_ARM_POSITIONS
+from drake_wbc.robot.model import arm_kinematics
 
 DIAGNOSTICS = (GUARD_STATUS
                + tuple(f"{name}_age" for name in STATUS_CHANNELS)
@@ -107,12 +107,16 @@ class HardwareInterface:
             lcm_url)); it must outlive the diagram.
         initial_arm_positions: the arm command held until the controller
             sends one (set the robot's measured positions with
-            `set_arm_command` before running).
+            `set_arm_command` before running); the robot's home if None.
         sender: the commands' sender identity (`new_sender()` if None).
+        robot: the robot on the other end: a RobotDescription (the
+            shipped robot if None) or the ArmKinematics of one. Its arm
+            sizes the arm's messages and ports, and its own limits bound
+            the commands (Limits.of_robot).
     """
 
-    def __init__(self, options=None, lcm=None,
-                 initial_arm_positions=HOME_ARM_POSITIONS, sender=None):
+    def __init__(self, options=None, lcm=None, initial_arm_positions=None,
+                 sender=None, robot=None):
         self.options = options = checked_instance(
             "options", options, HardwareOptions, HardwareOptions)
         if lcm is None:
@@ -120,6 +124,10 @@ class HardwareInterface:
                              "DrakeLcmInterface to talk over, e.g. "
                              "DrakeLcm(options.lcm_url)")
         self.sender = new_sender() if sender is None else int(sender)
+        self.arm = arm = arm_kinematics(robot)
+        n = arm.num_joints
+        if initial_arm_positions is None:
+            initial_arm_positions = arm.home
         channels = options.channels
         rules = ClockRules.of(options)
         builder = DiagramBuilder()
@@ -132,9 +140,10 @@ class HardwareInterface:
         for name in STATUS_CHANNELS:
             s[f"decoder.{name}"] = builder.AddNamedSystem(
                 f"decoder.{name}", MessageDecoder(
-                    name, bus, getattr(channels, name), rules=rules))
+                    name, bus, getattr(channels, name), rules=rules,
+                    num_joints=n))
         s["guard"] = guard = builder.AddNamedSystem("guard", CommandGuard(
-            options, initial_arm_positions))
+            options, initial_arm_positions, Limits.of_robot(options, arm)))
         ages = builder.AddNamedSystem("status_ages",
                                       Multiplexer([1] * len(STATUS_CHANNELS)))
         for i, name in enumerate(STATUS_CHANNELS):
@@ -145,7 +154,8 @@ class HardwareInterface:
         for name, port in (("base_command", "base_velocity_command"),
                            ("arm_command", "arm_position_command")):
             s[f"encoder.{name}"] = encoder = builder.AddNamedSystem(
-                f"encoder.{name}", MessageEncoder(name, self.sender))
+                f"encoder.{name}", MessageEncoder(name, self.sender,
+                                                  num_joints=n))
             builder.Connect(guard.GetOutputPort(port),
                             encoder.get_input_port(0))
             publisher = add_publisher(
@@ -211,7 +221,8 @@ class HardwareInterface:
 
 
 def build_hardware_interface(options=None, lcm=None,
-                             initial_arm_positions=HOME_ARM_POSITIONS,
-                             sender=None):
+                             initial_arm_positions=None, sender=None,
+                             robot=None):
     """The HardwareInterface of `options` over `lcm` (see the class)."""
-    return HardwareInterface(options, lcm, initial_arm_positions, sender)
+    return HardwareInterface(options, lcm, initial_arm_positions, sender,
+                             robot)

@@ -37,9 +37,6 @@ from drake_wbc.hardware.lcmtypes.drake_wbc_lcm import (
     signal_bundle_t,
 )
 
-NUM_JOINTS = 6
-"""The arm's joints (Elfin5)."""
-
 
 class MessageError(ValueError):
     """Bytes that are not a usable message."""
@@ -162,10 +159,12 @@ def encode_arm_command(utime, positions, sender=0):
     return message.encode()
 
 
-def decode_arm_command(data):
-    """Decoded (positions (6,)) of arm_command_t bytes."""
+def decode_arm_command(data, num_joints=None):
+    """Decoded (positions (n,)) of arm_command_t bytes; a message for
+    another number of joints than `num_joints` (any if None) is
+    refused."""
     m = _decode(arm_command_t, data)
-    return Decoded(m.utime, (_finite("position", m.position, NUM_JOINTS),),
+    return Decoded(m.utime, (_finite("position", m.position, num_joints),),
                    m.sender)
 
 
@@ -183,11 +182,13 @@ def encode_arm_status(utime, positions, velocities):
     return message.encode()
 
 
-def decode_arm_status(data):
-    """Decoded (positions (6,), velocities (6,)) of arm_status_t bytes."""
+def decode_arm_status(data, num_joints=None):
+    """Decoded (positions (n,), velocities (n,)) of arm_status_t bytes; a
+    message for another number of joints than `num_joints` (any if None)
+    is refused."""
     m = _decode(arm_status_t, data)
-    return Decoded(m.utime, (_finite("position", m.position, NUM_JOINTS),
-                             _finite("velocity", m.velocity, NUM_JOINTS)))
+    return Decoded(m.utime, (_finite("position", m.position, num_joints),
+                             _finite("velocity", m.velocity, num_joints)))
 
 
 def encode_wrench(utime, wrench):

@@ -187,10 +187,13 @@ class HardwareOptions:
             m/s^2 (the robot's 1.0), scaled as one vector with the yaw's.
         base_yaw_acceleration_limit: of wz, rad/s^2 (1.0).
         joint_speed_limit: the largest joint speed the arm commands may
-            ask for from one command to the next, rad/s (the Elfin5's
-            1.57 rad/s).
-        joint_acceleration_limit: the largest change of that speed, rad/s^2
-            (the Elfin5's 12.56 rad/s^2).
+            ask for from one command to the next, rad/s, the same on every
+            joint; None for the arm's own, joint by joint (the robot
+            description's: 1.57 rad/s on the shipped Elfin5).
+        joint_acceleration_limit: the largest change of that speed,
+            rad/s^2; None for the arm's own (12.56 rad/s^2 on the
+            Elfin5). Both may tighten the arm's own, never widen them
+            (checked against the robot, Limits.of_robot).
         clock_tolerance: how far a sender's time stamp may run ahead of
             the receiver's clock since the last good message, s (0.1 s);
             a stamp further ahead, or one that goes backwards, is out of
@@ -224,8 +227,8 @@ class HardwareOptions:
     base_yaw_rate_limit: float = 1.0
     base_acceleration_limit: float = 1.0
     base_yaw_acceleration_limit: float = 1.0
-    joint_speed_limit: float = 1.57
-    joint_acceleration_limit: float = 12.56
+    joint_speed_limit: float | None = None
+    joint_acceleration_limit: float | None = None
     clock_tolerance: float = 0.1
     clock_resync_messages: int = 3
     status_period: float = 0.01
@@ -246,6 +249,9 @@ class HardwareOptions:
                 raise ValueError(f"{name} = {getattr(self, name)!r} is not "
                                  f"allowed: must be a {kind.__name__}")
         for item in fields(self):
+            if item.name in ("joint_speed_limit", "joint_acceleration_limit"
+                             ) and getattr(self, item.name) is None:
+                continue
             if item.name not in ("lcm_url", "channels", "watchdog_limits",
                                  "clock_resync_messages"):
                 positive(item.name, getattr(self, item.name))

@@ -76,9 +76,10 @@ class Limits(NamedTuple):
         base_yaw_rate: the largest yaw rate, rad/s.
         base_acceleration: (3,) the largest change of [vx, vy, wz], m/s^2,
             m/s^2, rad/s^2.
-        joint_speed: (6,) the largest joint speeds, rad/s.
-        joint_acceleration: (6,) the largest joint accelerations, rad/s^2.
-        lower, upper: (6,) the joints' position limits, rad.
+        joint_speed: (n,) the largest joint speeds, rad/s.
+        joint_acceleration: (n,) the largest joint accelerations, rad/s^2.
+        lower, upper: (n,) the joints' position limits, rad (n the arm's
+            joints).
     """
 
     base_speed: float
@@ -92,8 +93,9 @@ class Limits(NamedTuple):
     @classmethod
     def of_robot(cls, options=None, arm=None):
         """The limits of `options` (HardwareOptions, its defaults if None)
-        and the joint position limits of the arm model (`arm` an
-        ArmKinematics, a new one if None).
+        and the joint position limits of the arm (`arm` an ArmKinematics
+        of the robot, the shipped robot's if None): the arm's own limits,
+        whatever arm it is.
 
         Raises:
             ValueError: when the options' joint speed or acceleration limit
@@ -104,20 +106,25 @@ class Limits(NamedTuple):
                                    HardwareOptions)
         arm = checked_instance("arm", arm, ArmKinematics, ArmKinematics)
         speed, acceleration = arm_own_limits(arm)
+        joints = {}
         for name, own, unit in (("joint_speed_limit", speed, "rad/s"),
                                 ("joint_acceleration_limit", acceleration,
                                  "rad/s^2")):
             value = getattr(options, name)
+            if value is None:
+                joints[name] = own.copy()
+                continue
             if value > np.min(own):
                 raise ValueError(
                     f"hardware.{name} = {value!r} is not allowed: must be at "
                     f"most the arm's own {float(np.min(own))!r} {unit}")
+            joints[name] = np.full(arm.num_joints, float(value))
         return cls(options.base_speed_limit, options.base_yaw_rate_limit,
                    np.array([options.base_acceleration_limit,
                              options.base_acceleration_limit,
                              options.base_yaw_acceleration_limit]),
-                   np.full(6, options.joint_speed_limit),
-                   np.full(6, options.joint_acceleration_limit),
+                   joints["joint_speed_limit"],
+                   joints["joint_acceleration_limit"],
                    arm.lower.copy(), arm.upper.copy())
 
 
@@ -210,16 +217,16 @@ def follow_arm_command(target, target_velocity, last, velocity, period,
     acceleration limit.
 
     Args:
-        target: (6,) the command asked for, rad.
-        target_velocity: (6,) the rate at which the target moves, rad/s
+        target: (n,) the command asked for, rad.
+        target_velocity: (n,) the rate at which the target moves, rad/s
             (the change of the commands asked for over one period).
-        last: (6,) the last command sent, rad.
-        velocity: (6,) its rate, rad/s.
+        last: (n,) the last command sent, rad.
+        velocity: (n,) its rate, rad/s.
         period: h, s between commands.
         limits: Limits.
 
     Returns:
-        (command (6,), its rate (6,), True if the limits changed it).
+        (command (n,), its rate (n,), True if the limits changed it).
     """
     speed, accel = limits.joint_speed, limits.joint_acceleration
     change = accel * period * (1.0 + ROUNDING)
@@ -250,7 +257,7 @@ def stop_arm(last, velocity, period, limits):
     (within the position limits).
 
     Returns:
-        (command (6,), its rate (6,)).
+        (command (n,), its rate (n,)).
     """
     slower = np.sign(velocity) * np.maximum(
         np.abs(velocity) - limits.joint_acceleration * period, 0.0)
@@ -263,8 +270,8 @@ class GuardState(NamedTuple):
 
     Attributes:
         base: (3,) the base command to send.
-        arm: (6,) the arm command to send, and arm_velocity (6,) its rate.
-        target: (6,) the controller's arm command at the last command
+        arm: (n,) the arm command to send, and arm_velocity (n,) its rate.
+        target: (n,) the controller's arm command at the last command
             time (the rate at which the target moves follows from it).
         full_stop: the watchdog stops everything (base zero, the arm
             stopping within its limits); also at the start, until every
@@ -312,7 +319,7 @@ class GuardState(NamedTuple):
         """The state at the start: the arm held at `arm_positions`, the
         base at rest, waiting for every stream."""
         arm = np.array(arm_positions, dtype=float)
-        return cls(np.zeros(3), arm, np.zeros(6), arm.copy())
+        return cls(np.zeros(3), arm, np.zeros_like(arm), arm.copy())
 
 
 class GuardConfig(NamedTuple):
@@ -359,7 +366,7 @@ def guard_step(state, now, ages, base, arm, command_time, config):
         now: the check's time, s.
         ages: (4,) the streams' ages, s (inf: never received).
         base: (3,) the controller's base command.
-        arm: (6,) the controller's arm command.
+        arm: (n,) the controller's arm command.
         command_time: whether this check computes the commands to send.
         config: GuardConfig.
 
@@ -446,7 +453,8 @@ class CommandGuard(LeafSystem):
                                    └──────────────┘
 
     - base_velocity_command: (3) the controller's [vx, vy, wz] in T_b.
-    - arm_position_command: (6) the controller's joint positions.
+    - arm_position_command: (n) the controller's joint positions (n the
+      size of the limits).
     - status_ages: (4) the ages of the streams of STATUS_CHANNELS, s.
     - base_velocity_command, arm_position_command (outputs): what is
       sent, from state (`guard_step`).
@@ -468,24 +476,28 @@ class CommandGuard(LeafSystem):
 
     Args:
         options: HardwareOptions (periods, watchdog, limits).
-        initial_arm_positions: (6,) the arm command held before the first
+        initial_arm_positions: (n,) the arm command held before the first
             command (the robot's measured positions; `set_arm_command`
-            sets it in a context).
-        limits: Limits (Limits.of_robot(options) if None).
+            sets it in a context); the robot's home if None.
+        limits: Limits (Limits.of_robot(options), of the shipped robot,
+            if None).
     """
 
-    def __init__(self, options=None, initial_arm_positions=HOME_ARM_POSITIONS,
+    def __init__(self, options=None, initial_arm_positions=None,
                  limits=None):
         super().__init__()
         self.options = options = checked_instance(
             "options", options, HardwareOptions, HardwareOptions)
         self.config = GuardConfig.of(options, limits)
         self.limits = self.config.limits
-        initial = as_vector("initial_arm_positions", initial_arm_positions, 6)
+        self.num_joints = n = self.limits.lower.size
+        initial = as_vector("initial_arm_positions", HOME_ARM_POSITIONS
+                            if initial_arm_positions is None
+                            else initial_arm_positions, n)
         self._checks_per_command = round(options.publish_period
                                          / options.watchdog_period)
         self._base_in = self.DeclareVectorInputPort("base_velocity_command", 3)
-        self._arm_in = self.DeclareVectorInputPort("arm_position_command", 6)
+        self._arm_in = self.DeclareVectorInputPort("arm_position_command", n)
         self._ages = self.DeclareVectorInputPort("status_ages",
                                                  len(STATUS_CHANNELS))
         self._state = self.DeclareAbstractState(AbstractValue.Make(
@@ -497,7 +509,7 @@ class CommandGuard(LeafSystem):
             "base_velocity_command", 3, lambda c, o: o.SetFromVector(
                 self.stored(c).base), prerequisites_of_calc=ticket)
         self.DeclareVectorOutputPort(
-            "arm_position_command", 6, lambda c, o: o.SetFromVector(
+            "arm_position_command", n, lambda c, o: o.SetFromVector(
                 self.stored(c).arm), prerequisites_of_calc=ticket)
         self.DeclareVectorOutputPort(
             "status", len(GUARD_STATUS), self._status,
@@ -526,7 +538,7 @@ class CommandGuard(LeafSystem):
         (this system's or a root context holding it)."""
         context = self.GetMyMutableContextFromRoot(context)
         context.SetAbstractState(self._state, GuardState.holding(
-            as_vector("positions", positions, 6)))
+            as_vector("positions", positions, self.num_joints)))
 
     def _update(self, context, state):
         now = context.get_time()
@@ -595,7 +607,8 @@ class ArmCommandLimiter(LeafSystem):
                           │                   ├──► limited
                           └───────────────────┘
 
-    - positions: (6) the arm command received (CommandReceiver's).
+    - positions: (n) the arm command received (CommandReceiver's), n
+      the size of the limits.
     - positions (output): the command the arm gets; a new command
       received is taken at once (one step of `follow_arm_command` from
       the last stored command); the step is stored by a periodic update
@@ -606,7 +619,7 @@ class ArmCommandLimiter(LeafSystem):
     Args:
         period: the command period h, s (HardwareOptions.publish_period).
         offset: when the step is stored, s (publish_offset + h / 2).
-        initial_positions: (6,) the arm's command at the start.
+        initial_positions: (n,) the arm's command at the start.
         limits: Limits (the arm's own).
     """
 
@@ -614,13 +627,14 @@ class ArmCommandLimiter(LeafSystem):
         super().__init__()
         self.period = positive("period", period)
         self.limits = limits
-        initial = as_vector("initial_positions", initial_positions, 6)
-        self._in = self.DeclareVectorInputPort("positions", 6)
+        self.num_joints = n = limits.lower.size
+        initial = as_vector("initial_positions", initial_positions, n)
+        self._in = self.DeclareVectorInputPort("positions", n)
         self._state = self.DeclareAbstractState(AbstractValue.Make(
-            LimiterState(initial.copy(), np.zeros(6), initial.copy(), False)))
+            LimiterState(initial.copy(), np.zeros(n), initial.copy(), False)))
         self.DeclarePeriodicUnrestrictedUpdateEvent(self.period, offset,
                                                     self._update)
-        self.DeclareVectorOutputPort("positions", 6, self._positions)
+        self.DeclareVectorOutputPort("positions", n, self._positions)
         self.DeclareVectorOutputPort(
             "limited", 1, lambda c, o: o.SetAtIndex(
                 0, float(self._stored(c)[3])))
@@ -631,9 +645,9 @@ class ArmCommandLimiter(LeafSystem):
     def set_positions(self, context, positions):
         """Starts the limiter at rest at `positions` in `context`."""
         context = self.GetMyMutableContextFromRoot(context)
-        q = as_vector("positions", positions, 6)
+        q = as_vector("positions", positions, self.num_joints)
         context.SetAbstractState(self._state, LimiterState(
-            q.copy(), np.zeros(6), q.copy(), False))
+            q.copy(), np.zeros(self.num_joints), q.copy(), False))
 
     def _step(self, context):
         command, velocity, taken, _ = self._stored(context)

@@ -478,6 +478,16 @@ class ArmKinematics:
         return ArmKinematicsValues(J_a, p_ee_in_base, X_AE)
 
 
+def arm_kinematics(robot=None):
+    """The ArmKinematics of `robot`: a RobotDescription (the shipped
+    robot's if None), or an ArmKinematics, returned as it is (to share
+    its plant)."""
+    if isinstance(robot, ArmKinematics):
+        return robot
+    return ArmKinematics(*make_robot_plant(checked_instance(
+        "robot", robot, RobotDescription, shipped_robot)))
+
+
 class MountMode(NamedTuple):
     """One rocking mode of the flexible mount (see mount_rocking_modes)."""
 

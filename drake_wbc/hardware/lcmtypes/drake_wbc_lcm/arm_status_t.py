@@ -28,7 +28,7 @@ class arm_status_t(object):
 
         self.num_joints = 0
         """
-        The number of joints (6 for the Elfin5).
+        The number of the arm's joints (the robot description's).
         LCM Type: int32_t
         """
 
