@@ -7,6 +7,7 @@ import sys
 
 import numpy as np
 import pytest
+from omni_arm import description_text, urdf_text
 
 from drake_wbc.cli.main import main
 from drake_wbc.math import capability
@@ -51,6 +52,25 @@ def test_demo_reports_the_model_and_writes_a_page(tmp_path, capsys):
     for name in (b"elfin5", b"mcr_base", b"ft300_wiping_tool",
                  b"lidar_fields"):
         assert name in scene
+
+
+def test_demo_of_a_robot_of_ones_own_proposes_its_tuning(tmp_path, capsys):
+    (tmp_path / "omni_arm.urdf").write_text(urdf_text(7))
+    path = tmp_path / "omni_arm.yaml"
+    path.write_text(description_text(
+        7, extra=f"  acceleration_limits: [{', '.join(['9.0'] * 7)}]"))
+    assert main(["demo", "--robot", str(path), "--output",
+                 str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    for joint in ("j1", "j7", "base_yaw"):
+        assert joint in out
+    assert "caps P_jnt at 0.60 on this arm's 7 joints" in out
+    assert "proposed capability_band" in out
+    assert (tmp_path / "omni_arm_model.html").is_file()
+    path.write_text(description_text(5))
+    assert main(["demo", "--robot", str(path), "--output",
+                 str(tmp_path)]) == 2
+    assert "arm.joints" in capsys.readouterr().err
 
 
 def test_demo_rejects_a_bad_configuration(tmp_path, capsys):

@@ -4,6 +4,8 @@ controller built from its description alone, and an ideal robot (the
 joints follow their position command, the base its velocity command) that
 must carry the TCP along the commanded world twist."""
 
+import warnings
+
 import numpy as np
 import pytest
 from omni_arm import description_text, urdf_text
@@ -17,6 +19,7 @@ from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.hardware.safety import CommandGuard, Limits, follow_arm_command
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.robot.model import ArmKinematics, make_robot_plant
+from drake_wbc.robot.tuning import RobotTuningWarning, survey_capability
 from drake_wbc.stages.wrench import tool_weight_reading
 
 H = 0.01
@@ -65,7 +68,14 @@ def test_the_controller_of_a_urdf_robot_tracks_a_world_twist(tmp_path, n):
     path.write_text(description_text(
         n, extra=f"  acceleration_limits: [{', '.join(['9.0'] * n)}]"))
     arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
-    controller = build_controller(ControllerParameters(), robot=arm)
+    # The tuning proposed for this arm (drake_wbc.robot.tuning).
+    survey = survey_capability(arm, count=100)
+    params = ControllerParameters()
+    params.capability.joint_limit_gain = survey.k_j
+    params.capability_band = survey.proposed_band()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RobotTuningWarning)
+        controller = build_controller(params, robot=arm)
     builder = DiagramBuilder()
     c = builder.AddSystem(controller.diagram)
     base = builder.AddSystem(IdealBase())

@@ -24,21 +24,53 @@ def _add_demo_arguments(parser):
     parser.add_argument(
         "--q-arm",
         type=float,
-        nargs=6,
+        nargs="+",
         metavar="Q",
-        help="arm configuration in rad (default: the home pose)",
+        help="arm configuration in rad, one a joint (default: the home "
+             "pose)",
     )
+    parser.add_argument(
+        "--robot", type=Path, default=None,
+        help="a robot description YAML file (default: the shipped robot, "
+             "models/mcr.robot.yaml)")
+    parser.add_argument(
+        "--controller", type=Path, default=None,
+        help="controller parameters YAML whose capability band and k_j to "
+             "check on the robot (default: diagrams/controller.yaml's)")
 
 
 def _run_demo(args):
-    from drake_wbc.cli.model_report import describe_robot, write_model_page
-    from drake_wbc.robot.model import HOME_ARM_POSITIONS
+    from drake_wbc.cli.model_report import (
+        describe_robot,
+        describe_tuning,
+        write_model_page,
+    )
+    from drake_wbc.controller import load_controller_parameters
+    from drake_wbc.controller.parameters import ControllerParameters
+    from drake_wbc.robot.description import (
+        load_robot_description,
+        shipped_robot,
+    )
+    from drake_wbc.robot.model import ArmKinematics, make_robot_plant
 
-    q_a = HOME_ARM_POSITIONS if args.q_arm is None else args.q_arm
-    print("drake_wbc robot model: omnidirectional base, flexible mount, "
-          "Elfin5 arm, FT-300, wiping tool\n")
-    print(describe_robot(q_a))
-    page = write_model_page(args.output / "mcr_model.html", q_a)
+    try:
+        description = (shipped_robot() if args.robot is None
+                       else load_robot_description(args.robot))
+        params = (ControllerParameters() if args.controller is None
+                  else load_controller_parameters(args.controller))
+        report = describe_robot(args.q_arm, description=description)
+    except (ValueError, OSError) as error:
+        print(f"drake-wbc demo: {error}", file=sys.stderr)
+        return 2
+    print(f"drake_wbc robot model {description.name!r} "
+          f"({args.robot or 'the shipped robot'})\n")
+    print(report)
+    print()
+    print(describe_tuning(ArmKinematics(*make_robot_plant(description)),
+                          params.capability_band,
+                          params.capability.joint_limit_gain))
+    page = write_model_page(args.output / f"{description.name}_model.html",
+                            args.q_arm, description=description)
     print(f"\nMeshcat page of the model (open it in a browser): {page}")
     return 0
 

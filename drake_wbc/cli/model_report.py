@@ -16,28 +16,40 @@ from drake_wbc.experiments.replay import quiet_meshcat, write_static_html
 from drake_wbc.math import capability
 from drake_wbc.math.validation import as_vector
 from drake_wbc.robot.model import (
-    HOME_ARM_POSITIONS,
     ArmKinematics,
     add_robot,
     joint_position_indices,
     make_robot_plant,
     mount_rocking_modes,
 )
+from drake_wbc.robot.tuning import (
+    BAND_OVER_HOME,
+    check_tuning,
+    mid_range_penalty,
+    survey_capability,
+)
 
 LIDAR_FIELD_OF_VIEW = np.radians(270.0)
 """The SICK TiM571's field of view (the facts sheet)."""
 
 
-def describe_robot(q_a=HOME_ARM_POSITIONS, k_j=None):
-    """Returns a text report of the robot model at arm configuration `q_a`.
+def describe_robot(q_a=None, k_j=None, description=None):
+    """Returns a text report of the robot model at arm configuration `q_a`
+    (its home if None).
 
     Lists every moving joint with its limits and whether it is actuated,
-    the masses, the mount's rocking modes, and the capability of movement
-    (m, P_jnt, C_m and grad_x C_m) at `q_a`.
+    the masses, the mount's rocking modes (with a two-joint mount), and
+    the capability of movement (m, P_jnt, C_m and grad_x C_m) at `q_a`.
+
+    Args:
+        q_a: (n,) the arm's joints, rad.
+        k_j: the joint-limit gain (the default if None).
+        description: the RobotDescription (the shipped robot if None).
     """
-    q_a = as_vector("q_a", q_a, 6)
     k_j = capability.DEFAULT_JOINT_LIMIT_GAIN if k_j is None else k_j
-    plant, model = make_robot_plant()
+    plant, model = make_robot_plant(description)
+    q_a = as_vector("q_a", model.home if q_a is None else q_a,
+                    model.num_arm_joints)
     context = plant.CreateDefaultContext()
     actuated = {
         plant.get_joint_actuator(i).joint().index(): plant.get_joint_actuator(
@@ -80,19 +92,23 @@ def describe_robot(q_a=HOME_ARM_POSITIONS, k_j=None):
             for b in plant.GetBodyIndices(instance)
         )
 
-    lines.append(
-        f"Masses: base {mass(model.base):.1f} kg, arm {mass(model.arm):.2f} "
-        f"kg, sensor and tool {mass(model.tool):.2f} kg"
-    )
-    modes = mount_rocking_modes(plant, model, q_a)
-    lines.append(
-        "Mount rocking modes: "
-        + ", ".join(
-            f"{mode.frequency_hz:.2f} Hz (damping ratio "
-            f"{mode.damping_ratio:.3f})"
-            for mode in modes
+    if len({model.base, model.arm, model.tool}) == 3:
+        lines.append(
+            f"Masses: base {mass(model.base):.1f} kg, arm "
+            f"{mass(model.arm):.2f} kg, sensor and tool "
+            f"{mass(model.tool):.2f} kg")
+    else:
+        lines.append(f"Mass of the robot: {mass(model.arm):.1f} kg")
+    if len(model.passive_joints) == 2:
+        modes = mount_rocking_modes(plant, model, q_a)
+        lines.append(
+            "Mount rocking modes: "
+            + ", ".join(
+                f"{mode.frequency_hz:.2f} Hz (damping ratio "
+                f"{mode.damping_ratio:.3f})"
+                for mode in modes
+            )
         )
-    )
     kinematics = ArmKinematics(plant, model)
     values = kinematics.evaluate(q_a)
     lower, upper = kinematics.lower, kinematics.upper
@@ -115,6 +131,41 @@ def describe_robot(q_a=HOME_ARM_POSITIONS, k_j=None):
     return "\n".join(lines)
 
 
+def describe_tuning(arm, band, k_j, count=2000):
+    """Returns a text report of what the capability band and k_j mean on
+    `arm` (ArmKinematics): C_m at home and over `count` random
+    configurations, with the given k_j and with the one proposed for the
+    arm, the band proposed there (drake_wbc.robot.tuning), and what is
+    wrong with the given tuning."""
+    given = survey_capability(arm, k_j, count)
+    proposed = survey_capability(arm, None, count)
+    band_there = proposed.proposed_band()
+    percentiles = np.percentile(proposed.samples, [50, 90, 99])
+    lines = [
+        f"Tuning for this arm ({arm.num_joints} joints, {count} random "
+        "configurations within its limits):",
+        f"  with k_j = {k_j:g} and the band ({band.lower:g}, "
+        f"{band.upper:g}): C_m at home {given.home:.4g}, "
+        f"{100 * given.fraction_below(band.upper):.1f}% of the "
+        "configurations below the band's top",
+        f"  proposed k_j = {proposed.k_j:.4g} (P_jnt "
+        f"{mid_range_penalty(proposed.k_j, arm.num_joints):.3f} with every "
+        f"joint mid-range): C_m at home {proposed.home:.4g}, median "
+        f"{percentiles[0]:.3g}, 90th percentile {percentiles[1]:.3g}, 99th "
+        f"{percentiles[2]:.3g}",
+        f"  proposed capability_band: ({band_there.lower:.4g}, "
+        f"{band_there.upper:.4g}), at {BAND_OVER_HOME[0]:.2f} and "
+        f"{BAND_OVER_HOME[1]:.2f} of the home's C_m as the paper's band on "
+        f"the shipped arm; "
+        f"{100 * proposed.fraction_below(band_there.upper):.1f}% of the "
+        "configurations lie below it",
+    ]
+    problems = check_tuning(arm, band, k_j)
+    lines += [f"  to change: {problem}" for problem in problems] or [
+        "  the given tuning suits this arm"]
+    return "\n".join(lines)
+
+
 def _lidar_fan(radius, segments=48):
     """Vertices and faces of a flat 270 degree fan about the x axis."""
     angles = np.linspace(-LIDAR_FIELD_OF_VIEW / 2, LIDAR_FIELD_OF_VIEW / 2,
@@ -130,7 +181,7 @@ def _lidar_fan(radius, segments=48):
     return vertices, faces
 
 
-def write_model_page(path, q_a=HOME_ARM_POSITIONS, lidar_range=1.0):
+def write_model_page(path, q_a=None, lidar_range=1.0, description=None):
     """Writes a self-contained HTML page that shows the robot in Meshcat.
 
     The page draws the robot at arm configuration `q_a` (base and mount at
@@ -141,16 +192,18 @@ def write_model_page(path, q_a=HOME_ARM_POSITIONS, lidar_range=1.0):
 
     Args:
         path: the file to write (its folder is created).
-        q_a: the arm configuration (6,) in rad.
+        q_a: the arm configuration (n,) in rad (the home if None).
         lidar_range: the radius of the drawn fields of view, m.
+        description: the RobotDescription (the shipped robot if None).
 
     Returns:
         pathlib.Path: the written file.
     """
-    q_a = as_vector("q_a", q_a, 6)
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
-    model = add_robot(plant)
+    model = add_robot(plant, description)
+    q_a = as_vector("q_a", model.home if q_a is None else q_a,
+                    model.num_arm_joints)
     plant.Finalize()
     frames = (
         model.base_frame,
@@ -159,7 +212,11 @@ def write_model_page(path, q_a=HOME_ARM_POSITIONS, lidar_range=1.0):
         model.ft_measurement_frame,
         *model.lidar_frames,
     )
+    drawn = set()
     for frame in frames:
+        if frame.index() in drawn:  # e.g. T_a on T_b's body frame
+            continue
+        drawn.add(frame.index())
         AddFrameTriadIllustration(
             scene_graph=scene_graph, frame=frame, length=0.12, radius=0.004
         )

@@ -78,6 +78,8 @@ Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
   limits.
 """
 
+import warnings
+
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import MatrixGain
@@ -89,6 +91,7 @@ from drake_wbc.controller.parameters import (
 from drake_wbc.math.safety import check_within_robot
 from drake_wbc.math.validation import checked_instance, validated_copy
 from drake_wbc.robot.model import arm_kinematics
+from drake_wbc.robot.tuning import RobotTuningWarning, check_tuning
 from drake_wbc.stages import (
     ArmCapability,
     ArmCartesianVelocityController,
@@ -188,7 +191,9 @@ def build_controller(params=None, robot=None):
         robot: the robot: a RobotDescription (drake_wbc.robot.description;
             the shipped robot if None), or the ArmKinematics of one, to
             share its plant. Every stage's ports are sized by its arm, and
-            the limits are checked against its own.
+            the limits are checked against its own; a capability band or
+            joint-limit gain that does not suit the arm is warned of
+            (RobotTuningWarning, drake_wbc.robot.tuning.check_tuning).
 
     Returns:
         Controller: the diagram with named ports (STATION_INPUTS,
@@ -204,6 +209,8 @@ def build_controller(params=None, robot=None):
                        params.phri_switch)
     arm = arm_kinematics(robot)
     check_arm_limits(params.arm_controller, arm)
+    for problem in check_tuning(arm, band, params.capability.joint_limit_gain):
+        warnings.warn(problem, RobotTuningWarning, stacklevel=2)
     check_within_robot(params.safety)
     builder = DiagramBuilder()
     add = builder.AddNamedSystem

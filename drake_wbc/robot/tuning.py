@@ -1,0 +1,129 @@
+"""The tuning that depends on the robot: the joint-limit gain k_j of P_jnt
+and the capability band C_m^l < C_m < C_m^u of eq. (transition).
+
+Both were tuned for the shipped Elfin5 (drake_wbc.math.capability,
+DEFAULT_JOINT_LIMIT_GAIN): C_m = m P_jnt has the units of the arm's
+manipulability (m^3 for a 6 x n Jacobian) and P_jnt = 1 - exp(-k_j
+prod_i f_i) scales with 4^-n, so neither carries over to another arm.
+This module says what they mean on a given arm and proposes values that
+mean there what the paper's mean on ours:
+
+- k_j so that P_jnt is MID_RANGE_PENALTY with every joint mid-range
+  (f_i = 1/4): k_j = -ln(1 - MID_RANGE_PENALTY) 4^n, 1.5e4 for six
+  joints (our default) and 6.0e4 for seven (where 1.5e4 caps P_jnt at
+  0.60);
+- the band at the fractions BAND_OVER_HOME of C_m at the arm's home: on
+  our arm the paper's 0.035 to 0.04 sit at 0.54 and 0.62 of the home's
+  0.065 ("close to a constraint", where one joint nears its limit or the
+  elbow or wrist nears a singularity, see DEFAULT_JOINT_LIMIT_GAIN).
+
+`survey_capability` samples the arm's C_m (at home and over random
+configurations within its limits); `check_tuning` says, as sentences,
+what is wrong with a band and a k_j on an arm (empty when nothing is),
+which build_controller warns with and `drake-wbc demo --robot FILE`
+prints beside the proposal.
+"""
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from drake_wbc.math import capability
+from drake_wbc.math.capability import CapabilityBand
+from drake_wbc.math.validation import positive, whole_number
+
+MID_RANGE_PENALTY = 1.0 - math.exp(-capability.DEFAULT_JOINT_LIMIT_GAIN
+                                   / 4.0 ** 6)
+"""P_jnt with every joint mid-range under the default k_j on six joints
+(0.974): what the proposed k_j gives on any arm."""
+
+BAND_OVER_HOME = (0.035 / 0.0649, 0.04 / 0.0649)
+"""The paper's band over C_m at the shipped arm's home (0.0649): (0.54,
+0.62), the fractions of an arm's home C_m where the proposed band sits."""
+
+
+class RobotTuningWarning(UserWarning):
+    """A tuning (band, k_j) that does not suit the robot's arm."""
+
+
+def proposed_joint_limit_gain(num_joints):
+    """k_j that gives P_jnt = MID_RANGE_PENALTY with every one of the
+    `num_joints` joints mid-range: -ln(1 - MID_RANGE_PENALTY) 4^n."""
+    n = whole_number("num_joints", num_joints, 1)
+    return -math.log(1.0 - MID_RANGE_PENALTY) * 4.0 ** n
+
+
+def mid_range_penalty(k_j, num_joints):
+    """P_jnt with every joint mid-range: 1 - exp(-k_j 4^-n)."""
+    return 1.0 - math.exp(-positive("k_j", k_j) / 4.0 ** num_joints)
+
+
+class CapabilitySurvey(NamedTuple):
+    """The arm's C_m, at home and over random configurations.
+
+    Attributes:
+        k_j: the joint-limit gain it was computed with.
+        home: C_m at the arm's home.
+        samples: C_m at uniformly random configurations within the joint
+            limits, sorted.
+    """
+
+    k_j: float
+    home: float
+    samples: np.ndarray
+
+    def fraction_below(self, value):
+        """The fraction of the samples with C_m below `value`."""
+        return float(np.searchsorted(self.samples, value) / self.samples.size)
+
+    def proposed_band(self):
+        """The CapabilityBand at BAND_OVER_HOME of the home's C_m."""
+        return CapabilityBand(BAND_OVER_HOME[0] * self.home,
+                              BAND_OVER_HOME[1] * self.home)
+
+
+def capability_at(arm, q, k_j):
+    """C_m of `arm` (ArmKinematics) at joints `q` with gain `k_j`."""
+    return capability.capability(arm.evaluate(q).J_a, q, arm.lower,
+                                  arm.upper, k_j)
+
+
+def survey_capability(arm, k_j=None, count=2000, seed=0):
+    """C_m of `arm` (an ArmKinematics) at home and at `count` random
+    configurations within its limits (numpy Generator `seed`), with gain
+    `k_j` (the proposed one for the arm if None)."""
+    k_j = (proposed_joint_limit_gain(arm.num_joints) if k_j is None
+           else positive("k_j", k_j))
+    rng = np.random.default_rng(seed)
+    samples = np.sort([capability_at(arm, rng.uniform(arm.lower, arm.upper),
+                                     k_j)
+                       for _ in range(whole_number("count", count, 1))])
+    return CapabilitySurvey(k_j, capability_at(arm, arm.home, k_j), samples)
+
+
+def check_tuning(arm, band, k_j):
+    """What is wrong with the capability `band` (CapabilityBand) and the
+    joint-limit gain `k_j` on `arm` (ArmKinematics), as sentences that say
+    what to change; empty when nothing is. Cheap (one evaluation at home):
+    it checks that the band is not active at the arm's home (alpha > 0
+    there) and that P_jnt can come near 1."""
+    problems = []
+    n = arm.num_joints
+    best = mid_range_penalty(k_j, n)
+    if best < 0.9:
+        problems.append(
+            f"capability.joint_limit_gain = {k_j!r} caps P_jnt at "
+            f"{best:.2f} on this arm's {n} joints (even with every joint "
+            f"mid-range): give about {proposed_joint_limit_gain(n):.3g}")
+    home = capability_at(arm, arm.home, k_j)
+    if home <= band.upper:
+        proposal = CapabilityBand(BAND_OVER_HOME[0] * home,
+                                  BAND_OVER_HOME[1] * home)
+        problems.append(
+            f"capability_band = ({band.lower!r}, {band.upper!r}) is active "
+            f"at the robot's home, where C_m = {home:.4g}: the compensation "
+            "would give way and k_n switch off from the start; give a band "
+            f"below it, e.g. ({proposal.lower:.3g}, {proposal.upper:.3g}) "
+            "(drake-wbc demo --robot FILE surveys the arm)")
+    return problems

@@ -1,0 +1,98 @@
+"""The tuning that depends on the robot (drake_wbc.robot.tuning): k_j and
+the capability band, checked and proposed for the shipped arm and for a
+7-joint arm the project did not model."""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from omni_arm import description_text, urdf_text
+
+from drake_wbc.controller import ControllerParameters, build_controller
+from drake_wbc.math import capability
+from drake_wbc.math.capability import CapabilityBand
+from drake_wbc.robot.description import load_robot_description
+from drake_wbc.robot.model import ArmKinematics, make_robot_plant
+from drake_wbc.robot.tuning import (
+    RobotTuningWarning,
+    capability_at,
+    check_tuning,
+    mid_range_penalty,
+    proposed_joint_limit_gain,
+    survey_capability,
+)
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    return ArmKinematics()
+
+
+@pytest.fixture(scope="module")
+def seven(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("seven")
+    (folder / "omni_arm.urdf").write_text(urdf_text(7))
+    path = folder / "omni_arm.yaml"
+    path.write_text(description_text(
+        7, extra=f"  acceleration_limits: [{', '.join(['9.0'] * 7)}]"))
+    return ArmKinematics(*make_robot_plant(load_robot_description(path)))
+
+
+def test_the_proposed_gain_is_ours_on_six_joints_and_scales_with_4_to_the_n():
+    assert proposed_joint_limit_gain(6) == pytest.approx(
+        capability.DEFAULT_JOINT_LIMIT_GAIN, rel=1e-12)
+    assert proposed_joint_limit_gain(7) == pytest.approx(
+        4.0 * capability.DEFAULT_JOINT_LIMIT_GAIN, rel=1e-12)
+    # With every joint mid-range (each factor 1/4), P_jnt from its formula.
+    q = np.zeros(7)
+    lower, upper = -np.ones(7), np.ones(7)
+    for n, k_j in ((6, 1.5e4), (7, 1.5e4), (7, proposed_joint_limit_gain(7))):
+        assert capability.joint_limit_penalty(
+            q[:n], lower[:n], upper[:n], k_j) == pytest.approx(
+                mid_range_penalty(k_j, n), rel=1e-12)
+    assert mid_range_penalty(1.5e4, 7) == pytest.approx(
+        1.0 - math.exp(-1.5e4 / 4**7))
+    assert mid_range_penalty(1.5e4, 7) < 0.61
+
+
+def test_the_shipped_robot_is_tuned_and_its_proposal_is_the_papers_band(
+        shipped):
+    assert check_tuning(shipped, CapabilityBand(),
+                        capability.DEFAULT_JOINT_LIMIT_GAIN) == []
+    survey = survey_capability(shipped, count=200)
+    band = survey.proposed_band()
+    assert band.lower == pytest.approx(0.035, rel=2e-3)
+    assert band.upper == pytest.approx(0.04, rel=2e-3)
+    assert survey.home == pytest.approx(capability_at(
+        shipped, shipped.home, capability.DEFAULT_JOINT_LIMIT_GAIN))
+    assert 0.0 < survey.fraction_below(band.lower) < 1.0
+
+
+def test_a_band_active_at_home_says_what_to_change(shipped):
+    home = capability_at(shipped, shipped.home,
+                         capability.DEFAULT_JOINT_LIMIT_GAIN)
+    problems = check_tuning(shipped, CapabilityBand(0.06, 0.07),
+                            capability.DEFAULT_JOINT_LIMIT_GAIN)
+    assert len(problems) == 1
+    assert "capability_band = (0.06, 0.07) is active at the robot's home" \
+        in problems[0]
+    assert f"{home:.4g}" in problems[0]
+
+
+def test_a_seven_joint_arm_with_the_six_joint_tuning_is_warned_of(seven):
+    problems = check_tuning(seven, CapabilityBand(),
+                            capability.DEFAULT_JOINT_LIMIT_GAIN)
+    assert any("caps P_jnt at 0.60 on this arm's 7 joints" in p
+               for p in problems)
+    with pytest.warns(RobotTuningWarning, match="caps P_jnt"):
+        build_controller(ControllerParameters(), robot=seven)
+    # Its proposed tuning builds without a word.
+    survey = survey_capability(seven, count=100)
+    params = ControllerParameters()
+    params.capability.joint_limit_gain = survey.k_j
+    params.capability_band = survey.proposed_band()
+    assert check_tuning(seven, params.capability_band, survey.k_j) == []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RobotTuningWarning)
+        build_controller(params, robot=seven)
