@@ -799,3 +799,50 @@ def test_bad_math_arguments_are_rejected(kwargs, name):
     arguments.update(kwargs)
     with pytest.raises(ValueError, match=name):
         joint_velocity_for_twist(**arguments)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_redundant_arm_centres_its_joints_in_its_self_motion(seed):
+    """Seven joints, away from every limit: with or without the joint
+    centring, J q_dot = V_a exactly (to rounding); the centring part lies
+    in J's null space, brings the joints towards their middles (z . N z
+    >= 0 for z the centring rates), and six joints are not touched."""
+    from drake_wbc.math.arm_control import (
+        centring_velocity,
+        joint_velocity_command,
+        twist_limits,
+    )
+    rng = np.random.default_rng(seed)
+    J = rng.normal(size=(6, 7))
+    V = rng.normal(0.0, 0.02, 6)
+    lower, upper = -np.full(7, 3.0), np.full(7, 3.0)
+    q = rng.uniform(-1.0, 1.0, 7)
+    commands = {}
+    for gain in (0.0, 0.5):
+        limits = twist_limits(lower, upper, 10.0, H, margin=0.05,
+                              self_motion_gain=gain)
+        commands[gain] = joint_velocity_command(J, V, q, None, limits)
+        assert not commands[gain].limited
+        np.testing.assert_allclose(J @ commands[gain].q_dot, V, atol=1e-12)
+    centring = commands[0.5].q_dot - commands[0.0].q_dot
+    np.testing.assert_allclose(J @ centring, 0.0, atol=1e-12)
+    z = centring_velocity(q, lower, upper, 0.5)
+    assert z @ centring >= 0.0 and np.linalg.norm(centring) > 1e-3
+    # Integrated with no task (J held), the joints settle where they are
+    # as near the middles as the end effector allows: the component of q
+    # along J's null space decays at k_c / r (0.5 / 3 1/s), the rest stays.
+    null = np.linalg.svd(J)[2][-1]
+    q_t = q.copy()
+    limits = twist_limits(lower, upper, 10.0, H, self_motion_gain=0.5)
+    for _ in range(3000):
+        q_t = q_t + H * joint_velocity_command(J, np.zeros(6), q_t, None,
+                                               limits).q_dot
+    assert abs(null @ q_t) < 0.01 * abs(null @ q)
+    np.testing.assert_allclose(J @ q_t, J @ q, atol=1e-9)
+    # Six joints: nothing to centre in.
+    J6, q6 = J[:, :6], q[:6]
+    plain = joint_velocity_command(J6, V, q6, None, twist_limits(
+        lower[:6], upper[:6], 10.0, H))
+    centred = joint_velocity_command(J6, V, q6, None, twist_limits(
+        lower[:6], upper[:6], 10.0, H, self_motion_gain=0.5))
+    np.testing.assert_array_equal(plain.q_dot, centred.q_dot)

@@ -108,6 +108,14 @@ and of the published limits. The capability of movement (and the
 compensation that gives way by it) keeps the arm much further away in
 normal use, from 8 to 12% of a range; this margin is the last line."""
 
+DEFAULT_SELF_MOTION_GAIN = 0.5
+"""Default gain k_c of the joint centring in a redundant arm's
+self-motion, 1/s: a joint at its limit is driven back at 0.5 rad/s, one
+halfway out at 0.25 rad/s, within the null space of J_a (the end effector
+does not feel it) and then within every limit like the rest of the
+command. Slow against the task (a third of a typical 1.57 rad/s), so that
+it uses the redundancy without competing with the tracking."""
+
 @dataclass
 class ArmControllerParameters:
     """Parameters of the arm's Cartesian velocity controller.
@@ -129,6 +137,10 @@ class ArmControllerParameters:
         lower, upper: (n,) joint limits in rad, or None for the arm's own
             (ArmKinematics.lower / .upper).
         velocity_limits: (n,) rad/s > 0, or None for the arm's own.
+        self_motion_gain: k_c >= 0, 1/s, of the joint centring in the
+            self-motion of an arm of more than six joints (see
+            `joint_velocity_command`); no effect on six. Default
+            `DEFAULT_SELF_MOTION_GAIN`.
 
     The sizes are checked against the arm when the controller is built
     (drake_wbc.controller.parameters.check_arm_limits), where a limit
@@ -145,6 +157,7 @@ class ArmControllerParameters:
     margin: float = DEFAULT_JOINT_LIMIT_MARGIN
     use_acceleration_limit: bool = True
     acceleration_limit: float | None = None
+    self_motion_gain: float = DEFAULT_SELF_MOTION_GAIN
     lower: list[float] | None = None
     upper: list[float] | None = None
     velocity_limits: list[float] | None = None
@@ -153,6 +166,7 @@ class ArmControllerParameters:
         non_negative("damping", self.damping)
         positive("damping_threshold", self.damping_threshold)
         non_negative("margin", self.margin)
+        non_negative("self_motion_gain", self.self_motion_gain)
         if self.acceleration_limit is not None:
             positive("acceleration_limit", self.acceleration_limit)
         if not isinstance(self.use_acceleration_limit, bool):
@@ -255,6 +269,8 @@ class TwistLimits:
         damping_threshold: eps > 0.
         margin: rad >= 0, below half of every joint's range.
         acceleration: None (no acceleration limit), or (n,) rad/s^2 > 0.
+        self_motion_gain: k_c >= 0, 1/s, of the joint centring in the
+            self-motion of a redundant arm (n > 6).
     """
 
     lower: np.ndarray
@@ -265,6 +281,7 @@ class TwistLimits:
     damping_threshold: float
     margin: float
     acceleration: np.ndarray | None
+    self_motion_gain: float = 0.0
 
     @functools.cached_property
     def _floats(self):
@@ -276,7 +293,8 @@ class TwistLimits:
 def twist_limits(lower, upper, velocity_limit, time_step,
                  damping=DEFAULT_DAMPING,
                  damping_threshold=DEFAULT_DAMPING_THRESHOLD,
-                 margin=DEFAULT_JOINT_LIMIT_MARGIN, acceleration_limit=None):
+                 margin=DEFAULT_JOINT_LIMIT_MARGIN, acceleration_limit=None,
+                 self_motion_gain=0.0):
     """TwistLimits from the arguments of `joint_velocity_for_twist`,
     checked (see there); a velocity or acceleration limit given as one
     number holds for every joint.
@@ -296,7 +314,8 @@ def twist_limits(lower, upper, velocity_limit, time_step,
         damping=non_negative("damping", damping),
         damping_threshold=positive("damping_threshold", damping_threshold),
         margin=check_margin(margin, lower, upper),
-        acceleration=acceleration_limit)
+        acceleration=acceleration_limit,
+        self_motion_gain=non_negative("self_motion_gain", self_motion_gain))
 
 
 # --- the reference: any scalar type ----------------------------------------
@@ -416,6 +435,29 @@ def _clipped(values, low, high):
     return result, cut
 
 
+def centring_velocity(q, lower, upper, gain):
+    """The joint centring of a redundant arm's self-motion, any scalar
+    type: z_i = -k_c (q_i - m_i) / r_i, m_i the middle of joint i's range
+    and r_i its half-width, so that a joint at its limit is driven towards
+    the middle at k_c rad/s."""
+    return np.array([-gain * (q_i - 0.5 * (lo + hi)) / (0.5 * (hi - lo))
+                     for q_i, lo, hi in zip(q, lower.tolist(),
+                                            upper.tolist(), strict=True)])
+
+
+def self_motion(J, z, damping):
+    """N z, the part of the joint velocity z in the self-motion of J
+    (6, n), n > 6, that leaves the end effector still, any scalar type:
+
+        N = I - J^T (J J^T + lambda^2 I)^-1 J,
+
+    the projector onto J's null space at lambda = 0 (and its damped
+    counterpart, continuous across singularities, otherwise)."""
+    rows = J.shape[0]
+    return z - J.T @ solve(J @ J.T + np.eye(rows) * (damping * damping),
+                           J @ z)
+
+
 def joint_velocity_command(J_a, V_a, q, previous, limits):
     """The joint velocity that realises the arm twist V_a within the
     limits: the arm's Cartesian velocity controller of Sec. III-A, the
@@ -423,7 +465,11 @@ def joint_velocity_command(J_a, V_a, q, previous, limits):
     `joint_velocity_command_float`).
 
     The module's four stages: the damped least squares
-    (`damped_solve`) with lambda from `damping_rule`, the joint-limit
+    (`damped_solve`) with lambda from `damping_rule` (for an arm of more
+    than six joints plus its self-motion towards the middle of every
+    joint's range, `self_motion` of `centring_velocity`: the secondary
+    objective, which moves the joints without moving the end effector),
+    the joint-limit
     bounds (`joint_position_bounds`) joint by joint, the uniform scaling
     to the velocity limits (drake_wbc.math.command_limits.uniform_scale),
     and with an acceleration limit the uniform scaling of the change from
@@ -444,6 +490,9 @@ def joint_velocity_command(J_a, V_a, q, previous, limits):
     s_min = smallest_singular_value(J_a)
     lambda_ = damping_rule(s_min, limits.damping, limits.damping_threshold)
     x = damped_solve(J_a, V_a, lambda_)
+    if J_a.shape[1] > J_a.shape[0] and limits.self_motion_gain > 0.0:
+        x = x + self_motion(J_a, centring_velocity(
+            q, limits.lower, limits.upper, limits.self_motion_gain), lambda_)
     low, high = joint_position_bounds(q, limits.lower, limits.upper,
                                       limits.time_step, limits.margin,
                                       limits.acceleration)
@@ -625,6 +674,8 @@ class _FloatLimits(NamedTuple):
     step: list | None
     step_h: list | None
     clear: list
+    middle: np.ndarray
+    half: np.ndarray
 
     @classmethod
     def of(cls, limits):
@@ -652,7 +703,9 @@ class _FloatLimits(NamedTuple):
             velocity=velocity.tolist(), h=h, margin=margin,
             damping=float(limits.damping),
             threshold=float(limits.damping_threshold), step=step,
-            step_h=step_h, clear=(clear * (1.0 + 1e-9) + 1e-300).tolist())
+            step_h=step_h, clear=(clear * (1.0 + 1e-9) + 1e-300).tolist(),
+            middle=0.5 * (limits.lower + limits.upper),
+            half=0.5 * (limits.upper - limits.lower))
 
 
 def _rate_float(limits, i, distance):
@@ -767,7 +820,9 @@ def _twist_samples(rng):
         damping_threshold=float(rng.choice([DEFAULT_DAMPING_THRESHOLD,
                                             DEFAULT_DAMPING_THRESHOLD,
                                             10.0])),
-        margin=margin, acceleration_limit=acceleration)
+        margin=margin, acceleration_limit=acceleration,
+        self_motion_gain=float(rng.choice([0.0, DEFAULT_SELF_MOTION_GAIN,
+                                           5.0])))
     V = rng.normal(0.0, rng.choice([1e-3, 0.05, 0.3, 3.0]), 6)
     previous = (None if acceleration is None else
                 rng.normal(0.0, rng.choice([0.0, 0.3, 3.0]), n))
@@ -807,6 +862,11 @@ def joint_velocity_command_float(J_a, V_a, q, previous, limits):
     Python floats, a joint's bound computed only where it may cut."""
     floats = limits._floats
     x, lambda_, s_min = _least_squares_float(floats, J_a, V_a)
+    if J_a.shape[1] > J_a.shape[0] and limits.self_motion_gain > 0.0:
+        z = (-limits.self_motion_gain) * (q - floats.middle) / floats.half
+        rows = J_a.shape[0]
+        x = x + (z - J_a.T @ np.linalg.solve(
+            J_a @ J_a.T + np.eye(rows) * (lambda_ * lambda_), J_a @ z))
     q = q.tolist()
     limited = [False] * len(q)
     bounds = {}

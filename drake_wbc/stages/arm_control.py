@@ -147,7 +147,8 @@ def ArmCartesianVelocityController_(T):
                 params.margin,
                 own_or(params.acceleration_limit,
                        kinematics.acceleration_limits)
-                if params.use_acceleration_limit else None)
+                if params.use_acceleration_limit else None,
+                params.self_motion_gain)
             self._command = body_for(joint_velocity_command, T)
             self._no_twist = np.zeros(TWIST_SIZE)
             self._input = self.DeclareVectorInputPort("arm_velocity",
