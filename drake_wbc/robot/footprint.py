@@ -1,18 +1,20 @@
 """The base's footprint at the start of a run: the footprint in the plane
-(the model's 0.8 x 0.6 m chassis) and the height of the base's deck, and
+and the height of the base's deck (the robot description's), and
 the check that no static obstacle of a scene overlaps the footprint at
 the base's initial pose, which a Scenario (drake_wbc.experiments.scenario)
 runs."""
 
 import numpy as np
 
-FOOTPRINT_HALF_SIZES = (0.4, 0.3)
-"""The base's footprint, half length and half width in m (the model's
-0.8 x 0.6 m chassis)."""
+from drake_wbc.robot.description import shipped_robot
 
-BASE_HEIGHT = 0.3
-"""The height of the base's deck in m: a box whose bottom is higher may
-overhang the base."""
+FOOTPRINT_HALF_SIZES = tuple(shipped_robot().base.footprint_half_sizes)
+"""The shipped base's footprint, half length and half width in m (its
+description's: the model's 0.8 x 0.6 m chassis)."""
+
+BASE_HEIGHT = shipped_robot().base.height
+"""The height of the shipped base's deck in m (its description's): a box
+whose bottom is higher may overhang the base."""
 
 
 def check_start_is_free(scene, base_pose):
