@@ -18,6 +18,7 @@ from drake_wbc.hardware.options import (
     HardwareOptions,
     WatchdogLimits,
 )
+from drake_wbc.hardware.safety import Limits
 
 LCMTYPES = Path(messages.__file__).parent / "lcmtypes"
 
@@ -223,15 +224,29 @@ def test_options_are_checked():
     ("base_yaw_rate_limit", 3.0, "1.0 rad/s"),
     ("base_acceleration_limit", 1e9, "1.0 m/s^2"),
     ("base_yaw_acceleration_limit", 2.0, "1.0 rad/s^2"),
-    ("robot_command_timeout", 60.0, "0.25 s"),
 ])
-def test_limits_may_only_tighten_the_robots_own(field, value, own):
+def test_base_limits_may_only_tighten_the_robots_own(field, value, own):
+    """Checked against the robot's description when the command guard's
+    limits are made (the shipped base's 1.0 each)."""
     with pytest.raises(ValueError, match=re.escape(
-            f"{field} = {value!r} is not allowed: must be at most the "
-            f"robot's own {own}")):
-        HardwareOptions(**{field: value})
-    tighter = 0.5 * getattr(HardwareOptions(), field)
-    assert getattr(HardwareOptions(**{field: tighter}), field) == tighter
+            f"hardware.{field} = {value!r} is not allowed: must be at most "
+            f"the robot's own {own}")):
+        Limits.of_robot(HardwareOptions(**{field: value}))
+    limits = Limits.of_robot(HardwareOptions(**{field: 0.5}))
+    assert 0.5 in (limits.base_speed, limits.base_yaw_rate,
+                   *limits.base_acceleration)
+    own = Limits.of_robot(HardwareOptions())
+    assert (own.base_speed, own.base_yaw_rate) == (1.0, 1.0)
+    np.testing.assert_array_equal(own.base_acceleration, np.ones(3))
+
+
+def test_the_command_timeout_may_only_tighten_the_robots_own():
+    with pytest.raises(ValueError, match=re.escape(
+            "robot_command_timeout = 60.0 is not allowed: must be at most "
+            "the robot's own 0.25 s")):
+        HardwareOptions(robot_command_timeout=60.0)
+    assert HardwareOptions(robot_command_timeout=0.1).robot_command_timeout \
+        == 0.1
 
 
 @pytest.mark.parametrize("stream", ["base_state", "arm_status",

@@ -450,7 +450,7 @@ def test_limits_wider_than_the_arms_own_are_refused():
                               "12.56 rad/s^2")):
         with pytest.raises(ValueError, match=re.escape(
                 f"hardware.{name} = {value!r} is not allowed: must be at "
-                f"most the arm's own {own}")):
+                f"most the robot's own {own}")):
             Limits.of_robot(HardwareOptions(**{name: value}))
 
 

@@ -145,6 +145,12 @@ def test_the_hardware_guard_holds_the_commands_to_that_arms_own_limits(
     np.testing.assert_array_equal(limits.joint_speed, np.full(n, 0.5))
     np.testing.assert_array_equal(limits.joint_acceleration, np.full(n, 9.0))
     np.testing.assert_array_equal(limits.upper, np.full(n, 2.5))
+    # Its base's own limits too (0.8 m/s, 1.0 rad/s, 0.5 m/s^2 and rad/s^2),
+    # and a hardware option wider than them is refused.
+    assert (limits.base_speed, limits.base_yaw_rate) == (0.8, 1.0)
+    np.testing.assert_array_equal(limits.base_acceleration, np.full(3, 0.5))
+    with pytest.raises(ValueError, match="base_speed_limit = 0.9 .* 0.8 m/s"):
+        Limits.of_robot(HardwareOptions(base_speed_limit=0.9), arm)
     guard = CommandGuard(HardwareOptions(), arm.home, limits)
     assert guard.GetInputPort("arm_position_command").size() == n
     period = HardwareOptions().publish_period

@@ -9,23 +9,26 @@ Every field has a default (the channel names and rules of drake_wbc/
 hardware/README.md, the protocol), so `hardware: {}` chooses LCM with the
 defaults. The checks run in `__post_init__`, as for every parameters
 dataclass of the library (drake_wbc.math.validation). Limits may only
-tighten the robot's own: the base's speed and acceleration limits are
-checked here against the robot's (drake_wbc.math.safety's
-BASE_VELOCITY_LIMITS and BASE_ACCELERATION_LIMITS), the watchdog limits
-against the robot's own command timeout, and the joint limits against
-the arm model's when the command guard is built
+tighten the robot's own: the watchdog limits are checked here against
+the robot's own command timeout, and the base's and the joints' speed and
+acceleration limits (None: the robot's own) against the robot's
+description and arm model when the command guard is built
 (drake_wbc.hardware.safety.Limits.of_robot).
 """
 
 import re
 from dataclasses import dataclass, field, fields
 
-from drake_wbc.math.safety import BASE_ACCELERATION_LIMITS, BASE_VELOCITY_LIMITS
 from drake_wbc.math.validation import (
     positive,
     whole_multiple,
     whole_number,
 )
+
+ROBOT_OWN = ("base_speed_limit", "base_yaw_rate_limit",
+             "base_acceleration_limit", "base_yaw_acceleration_limit",
+             "joint_speed_limit", "joint_acceleration_limit")
+"""The limits that default to the robot's own (None)."""
 
 CHANNEL_PATTERN = re.compile(r"^[A-Za-z0-9_.\-/]+$")
 """What a channel name may hold: letters, digits and _ . - /."""
@@ -180,12 +183,18 @@ class HardwareOptions:
             controller's safety.hold_time), so that a stream that comes and
             goes (a flood, a flaky link) does not start and stop the robot
             at every good message. A stream's first message needs no wait.
-        base_speed_limit: the largest planar speed sent to the base, m/s
-            (the robot's 1.0 m/s).
-        base_yaw_rate_limit: the largest yaw rate sent, rad/s (1.0).
+        base_speed_limit: the largest planar speed sent to the base, m/s;
+            None for the robot's own (its description's base
+            velocity_limits: the smaller of vx and vy, 1.0 m/s on the
+            shipped base).
+        base_yaw_rate_limit: the largest yaw rate sent, rad/s; None for
+            the robot's own.
         base_acceleration_limit: the largest change of vx and of vy sent,
-            m/s^2 (the robot's 1.0), scaled as one vector with the yaw's.
-        base_yaw_acceleration_limit: of wz, rad/s^2 (1.0).
+            m/s^2, scaled as one vector with the yaw's; None for the
+            robot's own.
+        base_yaw_acceleration_limit: of wz, rad/s^2; None for the
+            robot's own. Each may tighten the robot's own, never widen it
+            (checked against the robot's description, Limits.of_robot).
         joint_speed_limit: the largest joint speed the arm commands may
             ask for from one command to the next, rad/s, the same on every
             joint; None for the arm's own, joint by joint (the robot
@@ -223,10 +232,10 @@ class HardwareOptions:
     watchdog_limits: WatchdogLimits = field(default_factory=WatchdogLimits)
     watchdog_period: float = 0.001
     watchdog_recovery_time: float = 0.5
-    base_speed_limit: float = 1.0
-    base_yaw_rate_limit: float = 1.0
-    base_acceleration_limit: float = 1.0
-    base_yaw_acceleration_limit: float = 1.0
+    base_speed_limit: float | None = None
+    base_yaw_rate_limit: float | None = None
+    base_acceleration_limit: float | None = None
+    base_yaw_acceleration_limit: float | None = None
     joint_speed_limit: float | None = None
     joint_acceleration_limit: float | None = None
     clock_tolerance: float = 0.1
@@ -249,8 +258,7 @@ class HardwareOptions:
                 raise ValueError(f"{name} = {getattr(self, name)!r} is not "
                                  f"allowed: must be a {kind.__name__}")
         for item in fields(self):
-            if item.name in ("joint_speed_limit", "joint_acceleration_limit"
-                             ) and getattr(self, item.name) is None:
+            if item.name in ROBOT_OWN and getattr(self, item.name) is None:
                 continue
             if item.name not in ("lcm_url", "channels", "watchdog_limits",
                                  "clock_resync_messages"):
@@ -277,15 +285,8 @@ class HardwareOptions:
                     f"is not allowed with status_period = "
                     f"{self.status_period!r} s: must be at least one status "
                     "period, or every status is late")
-        own = (("base_speed_limit", min(BASE_VELOCITY_LIMITS[:2]), "m/s"),
-               ("base_yaw_rate_limit", BASE_VELOCITY_LIMITS[2], "rad/s"),
-               ("base_acceleration_limit", min(BASE_ACCELERATION_LIMITS[:2]),
-                "m/s^2"),
-               ("base_yaw_acceleration_limit", BASE_ACCELERATION_LIMITS[2],
-                "rad/s^2"),
-               ("robot_command_timeout", ROBOT_COMMAND_TIMEOUT, "s"))
-        for name, value, unit in own:
-            at_most(name, getattr(self, name), value, unit)
+        at_most("robot_command_timeout", self.robot_command_timeout,
+                ROBOT_COMMAND_TIMEOUT, "s")
         if self.sender_release_time < self.robot_command_timeout:
             raise ValueError(
                 f"sender_release_time = {self.sender_release_time!r} s is "

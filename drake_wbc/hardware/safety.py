@@ -98,33 +98,41 @@ class Limits(NamedTuple):
         whatever arm it is.
 
         Raises:
-            ValueError: when the options' joint speed or acceleration limit
-                is beyond the arm model's own (a limit may tighten the
-                robot's, never widen it).
+            ValueError: when one of the options' base or joint speed or
+                acceleration limits is beyond the robot's own (a limit may
+                tighten the robot's, never widen it).
         """
         options = checked_instance("options", options, HardwareOptions,
                                    HardwareOptions)
         arm = checked_instance("arm", arm, ArmKinematics, ArmKinematics)
+        base = arm.model.description.base
         speed, acceleration = arm_own_limits(arm)
-        joints = {}
-        for name, own, unit in (("joint_speed_limit", speed, "rad/s"),
-                                ("joint_acceleration_limit", acceleration,
-                                 "rad/s^2")):
-            value = getattr(options, name)
-            if value is None:
-                joints[name] = own.copy()
+        own = {"base_speed_limit": (min(base.velocity_limits[:2]), "m/s"),
+               "base_yaw_rate_limit": (base.velocity_limits[2], "rad/s"),
+               "base_acceleration_limit": (min(base.acceleration_limits[:2]),
+                                           "m/s^2"),
+               "base_yaw_acceleration_limit": (base.acceleration_limits[2],
+                                               "rad/s^2"),
+               "joint_speed_limit": (speed, "rad/s"),
+               "joint_acceleration_limit": (acceleration, "rad/s^2")}
+        value = {}
+        for name, (robots, unit) in own.items():
+            given = getattr(options, name)
+            if given is None:
+                value[name] = robots
                 continue
-            if value > np.min(own):
+            if given > np.min(robots):
                 raise ValueError(
-                    f"hardware.{name} = {value!r} is not allowed: must be at "
-                    f"most the arm's own {float(np.min(own))!r} {unit}")
-            joints[name] = np.full(arm.num_joints, float(value))
-        return cls(options.base_speed_limit, options.base_yaw_rate_limit,
-                   np.array([options.base_acceleration_limit,
-                             options.base_acceleration_limit,
-                             options.base_yaw_acceleration_limit]),
-                   joints["joint_speed_limit"],
-                   joints["joint_acceleration_limit"],
+                    f"hardware.{name} = {given!r} is not allowed: must be at "
+                    f"most the robot's own {float(np.min(robots))!r} {unit}")
+            value[name] = (np.full(arm.num_joints, float(given))
+                           if np.ndim(robots) else float(given))
+        return cls(value["base_speed_limit"], value["base_yaw_rate_limit"],
+                   np.array([value["base_acceleration_limit"],
+                             value["base_acceleration_limit"],
+                             value["base_yaw_acceleration_limit"]]),
+                   np.array(value["joint_speed_limit"], dtype=float),
+                   np.array(value["joint_acceleration_limit"], dtype=float),
                    arm.lower.copy(), arm.upper.copy())
 
 
