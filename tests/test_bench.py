@@ -1,5 +1,7 @@
-"""drake-wbc bench: the quick run writes well-formed tables, and the race
-is fair (every same-problem contender returns the same V_wb)."""
+"""drake-wbc bench: the quick run writes well-formed tables; the race is
+fair (every same-problem contender returns the same V_wb); the tick loop
+does one discrete update a tick, on measurements new every tick, and
+pulls the station's commands."""
 
 import argparse
 import json
@@ -9,6 +11,7 @@ import pytest
 
 from drake_wbc.bench import add_bench_arguments, run_bench
 from drake_wbc.bench import distribution_race as race
+from drake_wbc.bench.commands import FAIRNESS_TOLERANCE
 from drake_wbc.bench.report import GOALS
 from drake_wbc.math import distribution, kinematics
 from drake_wbc.robot.model import ArmKinematics
@@ -32,16 +35,22 @@ def test_quick_bench_writes_well_formed_tables(tmp_path):
     env = results["environment"]
     assert env["packages"]["drake"] and env["packages"]["numpy"]
     assert env["cpu_count"] >= 1 and env["cpu_model"] and env["python"]
-    contenders = results["distribution"]["contenders"]
-    assert {"closed_form", "drake_diffik", "qpsolvers_osqp",
-            "qpsolvers_clarabel"} <= set(contenders)
-    for entry in contenders.values():
-        stats = entry["time_us"]
-        assert stats["n"] == 2
-        assert 0 < stats["p10"] <= stats["median"] <= stats["p90"]
+    race_results = results["distribution"]
+    assert race_results["fair"]
+    solve = race_results["solve"]
+    assert {"closed_form", "daqp", "proxsuite", "quadprog", "drake_diffik",
+            "qpsolvers_osqp", "qpsolvers_clarabel"} <= set(solve)
+    contenders = race_results["with_kinematics"]
+    assert set(contenders) == set(solve) | {"drake_diffik_plant"}
+    for entry in [*solve.values(), *contenders.values(),
+                  race_results["kinematics"], race_results["qp_data"]]:
+        for stats in (entry["time_us"], entry["cpu_us"]):
+            assert stats["n"] == 2
+            assert 0 < stats["p10"] <= stats["median"] <= stats["p90"]
     tick = results["control_tick"]
-    assert tick["tick_us"]["median"] > 0
-    assert tick["framework_floor_us"]["median"] > 0
+    assert tick["tick"]["time_us"]["median"] > 0
+    assert tick["tick"]["cpu_us"]["median"] > 0
+    assert tick["framework_floor"]["time_us"]["median"] > 0
     assert set(tick["stages"]) >= {"capability", "distributor",
                                    "base_cdmp", "arm_controller"}
     assert [e["points"] for e in results["scaling"]["obstacle_points"]] \
@@ -57,13 +66,14 @@ def test_quick_bench_writes_well_formed_tables(tmp_path):
     assert text in printed
     tables = [line for line in text.splitlines() if line.startswith("|")]
     for name in contenders:
-        assert any(line.startswith(f"| {name} |") for line in tables), name
+        assert sum(line.startswith(f"| {name} |") for line in tables) == (
+            2 if name in solve else 1), name
     assert any(line.startswith("| stage capability |") for line in tables)
     assert any(line.startswith("| trajectory_tracking |")
                for line in tables)
     tick_goal = next(line for line in tables
                      if line.startswith("| a full control tick"))
-    median = tick["tick_us"]["median"]
+    median = tick["tick"]["time_us"]["median"]
     assert f"| {median:.0f} us (median) |" in tick_goal
     # Every table's rows have as many cells as its header.
     blocks, block = [], []
@@ -73,7 +83,7 @@ def test_quick_bench_writes_well_formed_tables(tmp_path):
         elif block:
             blocks.append(block)
             block = []
-    assert len(blocks) == 5
+    assert len(blocks) == 7
     for rows in blocks:
         assert len({row.count("|") for row in rows}) == 1, rows[0]
 
@@ -81,19 +91,66 @@ def test_quick_bench_writes_well_formed_tables(tmp_path):
 @pytest.mark.filterwarnings("ignore:The default value of raise_error")
 def test_contenders_agree_without_active_constraints(arm):
     problems = race.make_problems(12, seed=7, arm=arm)
-    same, informative = race.make_contenders(arm)
-    report = race.fairness(problems, same, informative)
-    assert set(report) == set(same) | set(informative)
-    for name in same:
-        assert report[name]["max_abs_difference"] < 1e-6, name
+    given = race.given_data(arm, problems)
+    solvers = race.make_solvers(arm)
+    assert {"daqp", "proxsuite", "quadprog", "drake_diffik"} <= set(solvers)
+    informative = {"drake_diffik_plant": race.PlantDiffIk(arm)}
+    report = race.fairness(problems, solvers, given, informative)
+    assert set(report) == set(solvers) | set(informative)
+    for name in solvers:
+        assert report[name]["max_abs_difference"] < FAIRNESS_TOLERANCE, name
     # The closed form itself satisfies the task: J_wb V_wb = V_ee.
-    solve = same[race.REFERENCE]
+    solve = solvers[race.REFERENCE]
     for problem in problems:
         p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
         J = kinematics.whole_body_jacobian(None, p_ee, arm.R_ba)
-        np.testing.assert_allclose(J @ solve(problem),
+        np.testing.assert_allclose(J @ solve(problem, race.Given(p_ee)),
                                    problem.end_effector_velocity,
                                    atol=1e-12)
+
+
+@pytest.mark.filterwarnings("ignore:The default value of raise_error")
+def test_with_kinematics_is_the_solve_at_the_plant_s_p_ee(arm):
+    """Each contender with its kinematics gives what it gives from the
+    data prepared beforehand, and that data is the checked functions'."""
+    problems = race.make_problems(5, seed=11, arm=arm)
+    given = race.given_data(arm, problems)
+    for problem, data in zip(problems, given, strict=True):
+        p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
+        np.testing.assert_array_equal(data.p_ee, p_ee)
+        np.testing.assert_array_equal(
+            data.J_wb, kinematics.whole_body_jacobian(None, p_ee, arm.R_ba))
+        np.testing.assert_array_equal(np.diag(data.weights),
+                                      distribution.weighting_matrix(
+                                          problem.sigma_xy,
+                                          problem.sigma_phi))
+        np.testing.assert_array_equal(
+            data.null_velocity, distribution.capability_null_velocity(
+                problem.capability_gradient, problem.null_space_gain))
+    for name, solve in race.make_solvers(arm, solvers=()).items():
+        scratch = race.with_kinematics(arm, solve)
+        for problem, data in zip(problems, given, strict=True):
+            np.testing.assert_array_equal(scratch(problem),
+                                          solve(problem, data), name)
+
+
+def test_an_unfair_race_stops_before_timing(arm, monkeypatch):
+    """A contender that solves another problem (V_ee scaled) makes the
+    bench raise instead of timing it."""
+    make_solvers = race.make_solvers
+
+    def with_a_wrong_one(arm, *args, **kwargs):
+        solvers = make_solvers(arm, solvers=())
+        daqp = solvers["daqp"]
+        solvers["daqp"] = lambda problem, given: 1.001 * daqp(problem,
+                                                              given)
+        return solvers
+
+    monkeypatch.setattr(race, "make_solvers", with_a_wrong_one)
+    from drake_wbc.bench.commands import bench_distribution
+
+    with pytest.raises(RuntimeError, match="daqp"):
+        bench_distribution(arm, dict(problems=3, seed=0, repeats=1))
 
 
 @pytest.mark.filterwarnings("ignore:The default value of raise_error")
@@ -110,10 +167,10 @@ def test_scaled_diffik_is_the_weighted_least_norm_problem(arm):
     kkt = np.block([[W, J.T], [J, np.zeros((6, 6))]])
     rhs = np.concatenate([W @ V_n, problem.end_effector_velocity])
     expected = np.linalg.solve(kkt, rhs)[:9]
-    same, _ = race.make_contenders(arm)
-    for name, solve in same.items():
-        np.testing.assert_allclose(solve(problem), expected, atol=1e-7,
-                                   err_msg=name)
+    given = race.given_data(arm, [problem])[0]
+    for name, solve in race.make_solvers(arm).items():
+        np.testing.assert_allclose(solve(problem, given), expected,
+                                   atol=1e-7, err_msg=name)
 
 
 def test_the_hollow_controller_has_the_controller_s_structure(arm):
@@ -173,3 +230,102 @@ def test_every_batch_of_ticks_starts_from_the_initial_state():
     for _ in range(36):
         ticker.advance()  # without the restart: the arm drifts on
     assert np.abs(port.Eval(ticker.context) - first).max() > 1e-2
+
+
+def test_every_tick_does_exactly_one_update():
+    """AdvanceTo((k + 1) h): over 1000 ticks (after restarts too) each
+    does one discrete update; adding h to the context's time, as the
+    bench did, gives some ticks two and others none."""
+    from drake_wbc.bench.control_tick import ControllerTicker
+
+    ticker = ControllerTicker(ArmKinematics(), num_points=20)
+    simulator = ticker.simulator
+
+    def updates_of_each_tick(advance, ticks):
+        counts = []
+        for _ in range(ticks):
+            before = simulator.get_num_discrete_updates()
+            advance()
+            counts.append(simulator.get_num_discrete_updates() - before)
+        return counts
+
+    batch = ticker.ticks(3)
+    batch()
+    batch()
+    assert updates_of_each_tick(ticker.advance, 1000) == [1] * 1000
+    assert ticker.context.get_time() == 1003 * ticker.time_step
+    ticker.restart()
+
+    def by_adding_h():
+        simulator.AdvanceTo(ticker.context.get_time() + ticker.time_step)
+
+    counts = updates_of_each_tick(by_adding_h, 1000)
+    assert sum(counts) == 1000 and set(counts) == {0, 1, 2}
+
+
+def test_the_measurements_are_new_every_tick():
+    """Each tick writes a measurement set that differs from the last in
+    every entry (the arm's joints included), the tool's weight at that
+    configuration on the wrist; no arm configuration comes back within
+    a cycle."""
+    from drake_wbc.bench.control_tick import ControllerTicker
+    from drake_wbc.controller.diagram import STATION_INPUTS
+    from drake_wbc.stages.wrench import tool_weight_reading
+
+    arm = ArmKinematics()
+    ticker = ControllerTicker(arm, num_points=20, measurement_sets=12)
+    guard = ticker.controller.stages["guard"]
+    inner = guard.GetMyContextFromRoot(ticker.context)
+    ports = [guard.GetInputPort(name) for name in STATION_INPUTS]
+
+    def seen():
+        values = [port.Eval(inner) for port in ports]
+        values[-1] = np.array(values[-1])  # the points
+        return values
+
+    ticker.restart()
+    written = []
+    for _ in range(24):
+        ticker.advance()
+        written.append(seen())
+    for before, after in zip(written, written[1:], strict=False):
+        for a, b in zip(before, after, strict=True):
+            assert np.all(a != b)
+    q = [values[1] for values in written]
+    assert len({tuple(x) for x in q[:12]}) == 12
+    np.testing.assert_array_equal(q[12:], q[:12])  # the cycle
+    for values in written:
+        np.testing.assert_allclose(values[2],
+                                   tool_weight_reading(arm, values[1]),
+                                   atol=1e-12)
+
+
+def test_a_tick_pulls_the_station_s_commands():
+    """After a tick, the exported commands are computed already: the
+    ports' cache entries are up to date (pulling them again computes
+    nothing), and without the pull they are not."""
+    from drake_wbc.bench.control_tick import (
+        STATION_COMMANDS,
+        ControllerTicker,
+    )
+
+    ticker = ControllerTicker(ArmKinematics(), num_points=20)
+    diagram = ticker.controller.diagram
+    for name in STATION_COMMANDS:
+        assert diagram.HasOutputPort(name)
+
+    def up_to_date():
+        states = []
+        for name in STATION_COMMANDS:
+            port = diagram.GetOutputPort(name)
+            source, j = diagram.get_output_port_locator(port.get_index())
+            inner = source.GetMyContextFromRoot(ticker.context)
+            entry = source.get_output_port(j).cache_entry()
+            states.append(not entry.is_out_of_date(inner))
+        return states
+
+    ticker.restart()
+    ticker.advance(pull=False)
+    assert not any(up_to_date())
+    ticker.advance()
+    assert all(up_to_date())

@@ -2,10 +2,13 @@
 
     drake-wbc bench [--quick] [--output DIR] [--repeats N]
 
-measures, in one process and interleaved (drake_wbc.bench.timing):
-the closed-form motion distribution against Drake's DiffIK and QPs
-through qpsolvers (bench.distribution_race), one control tick whole and
-per stage (bench.control_tick), the cost against the number of obstacle
+measures, in one process and interleaved (drake_wbc.bench.timing), in
+wall-clock and in the thread's CPU time: the closed-form motion
+distribution against DAQP, ProxQP, quadprog and Drake's DiffIK called
+directly and QPs through qpsolvers, given the same kinematics and with
+it, beside the kinematics alone (bench.distribution_race); one control
+tick whole and per stage (bench.control_tick); the cost against the
+number of obstacle
 points and the control rate, and, each in a child process, every
 scenario's real-time factor and peak memory (bench.scenarios). It prints
 the tables and writes bench.json and bench.md to the output folder.
@@ -29,8 +32,11 @@ QUICK = dict(repeats=5, problems=20, ticks=20, scaling_ticks=10,
              scenarios=("trajectory_tracking",), scenario_duration=1.0)
 """The settings of --quick: a few seconds of each part."""
 
-FAIRNESS_TOLERANCE = 1e-6
-"""Largest allowed difference of V_wb between same-problem contenders."""
+FAIRNESS_TOLERANCE = 1e-8
+"""Largest allowed difference of V_wb between same-problem contenders
+(the race stops before any timing if one differs more): the direct
+solvers agree to about 1e-16 (ProxQP to 1e-12), the qpsolvers back-ends
+with their tightened tolerances to 1e-10."""
 
 OSQP_NOTICE = "The default value of raise_error will change"
 """The start of a notice osqp prints on every solve, silenced."""
@@ -78,32 +84,68 @@ def settings_from(args):
     return settings
 
 
+def _stats(times, name, reference=None):
+    """time_us and cpu_us of contender `name` (timing.interleave's
+    result), and its ratio to `reference` (wall and CPU) if given."""
+    entry = dict(
+        time_us=timing.scaled(timing.summarize(times[name]), 1e6),
+        cpu_us=timing.scaled(timing.summarize(times.cpu[name]), 1e6))
+    if reference is not None:
+        entry["ratio"] = timing.summarize(times[name] / times[reference])
+        entry["cpu_ratio"] = timing.summarize(
+            times.cpu[name] / times.cpu[reference])
+    return entry
+
+
 def bench_distribution(arm, settings):
-    """Part 1: the fairness check, then the interleaved race."""
+    """Part 1: the fairness check (raises if a same-problem contender
+    disagrees), then the interleaved race: the kinematics alone, the QP
+    peers' data preparation alone, every solver given the same p_ee, and
+    every solver with the kinematics first."""
     from drake_wbc.bench import distribution_race as race
 
     problems = race.make_problems(settings["problems"], settings["seed"],
                                   arm)
-    same, informative = race.make_contenders(arm)
-    fairness = race.fairness(problems, same, informative)
-    contenders = {name: race.batch(solve, problems)
-                  for name, solve in {**same, **informative}.items()}
+    given = race.given_data(arm, problems)
+    solvers = race.make_solvers(arm)
+    informative = {"drake_diffik_plant": race.PlantDiffIk(arm)}
+    fairness = race.fairness(problems, solvers, given, informative)
+    unfair = {name: entry["max_abs_difference"]
+              for name, entry in fairness.items()
+              if entry["same_problem"]
+              and not entry["max_abs_difference"] <= FAIRNESS_TOLERANCE}
+    if unfair:
+        raise RuntimeError(
+            f"the race is not fair: {unfair} differ from closed_form's V_wb"
+            f" by more than {FAIRNESS_TOLERANCE:g}")
+    contenders = {
+        "kinematics": race.batch(race.kinematics_of(arm), problems),
+        "qp_data": race.batch(race.qp_data(arm), problems,
+                              [g.p_ee for g in given])}
+    for name, solve in solvers.items():
+        contenders[f"solve:{name}"] = race.batch(solve, problems, given)
+        contenders[f"with_kinematics:{name}"] = race.batch(
+            race.with_kinematics(arm, solve), problems)
+    for name, solve in informative.items():
+        contenders[f"with_kinematics:{name}"] = race.batch(solve, problems)
     times = timing.interleave(contenders, settings["repeats"])
-    reference = times[race.REFERENCE]
-    entries = {}
-    for name, samples in times.items():
-        entries[name] = dict(
-            time_us=timing.scaled(timing.summarize(samples), 1e6),
-            ratio_to_closed_form=timing.summarize(samples / reference),
-            **fairness[name])
-    fair = all(entry["max_abs_difference"] <= FAIRNESS_TOLERANCE
-               for entry in fairness.values() if entry["same_problem"])
+    parts = {"solve": {}, "with_kinematics": {}}
+    for part, entries in parts.items():
+        reference = f"{part}:{race.REFERENCE}"
+        for key in times:
+            if key.startswith(part + ":"):
+                name = key.split(":", 1)[1]
+                entries[name] = dict(_stats(times, key, reference),
+                                     **fairness[name])
     return dict(problems=len(problems), tolerance=FAIRNESS_TOLERANCE,
-                fair=fair, contenders=entries)
+                fair=True, kinematics=_stats(times, "kinematics"),
+                qp_data=_stats(times, "qp_data"), **parts)
 
 
 def bench_tick(arm, settings):
-    """Part 2: the full tick and each stage."""
+    """Part 2: the full tick (new measurements every tick, the station's
+    commands pulled), the same without the pull, the framework floor,
+    and each stage."""
     from drake_wbc.bench.control_tick import ControllerTicker, stage_tickers
     from drake_wbc.bench.framework_floor import FloorTicker
 
@@ -111,7 +153,7 @@ def bench_tick(arm, settings):
     stages = stage_tickers(ticker)
     n = settings["ticks"]
     contenders = {"tick": ticker.ticks(n),
-                  "tick_cached": ticker.ticks(n, refresh=False),
+                  "tick_unpulled": ticker.ticks(n, pull=False),
                   "tick_floor": FloorTicker(ticker).ticks(n)}
     for name, stage in stages.items():
         contenders[f"stage:{name}"] = stage.contender(n)
@@ -119,14 +161,15 @@ def bench_tick(arm, settings):
     times = timing.interleave(contenders, settings["repeats"])
 
     def us(key):
-        return timing.scaled(timing.summarize(times[key]), 1e6)
+        return _stats(times, key)
 
     return dict(
         rate_hz=1.0 / ticker.time_step, obstacle_points=TICK_POINTS,
-        tick_us=us("tick"), tick_cached_us=us("tick_cached"),
-        framework_floor_us=us("tick_floor"),
-        stages={name: dict(tick_us=us(f"stage:{name}"),
-                           inputs_us=us(f"inputs:{name}"))
+        measurement_sets=len(ticker.values),
+        tick=us("tick"), tick_unpulled=us("tick_unpulled"),
+        framework_floor=us("tick_floor"),
+        stages={name: dict(tick=us(f"stage:{name}"),
+                           inputs=us(f"inputs:{name}"))
                 for name in stages})
 
 
@@ -146,10 +189,12 @@ def bench_scaling(arm, settings):
     times = timing.interleave({key: t.ticks(n) for key, t in tickers.items()},
                               settings["repeats"])
     result = {"obstacle_points": [], "control_rate": []}
-    for (kind, points, rate), samples in times.items():
+    for key, samples in times.items():
+        kind, points, rate = key
         stats = timing.scaled(timing.summarize(samples), 1e6)
         result[kind].append(dict(
             points=points, rate_hz=rate, tick_us=stats,
+            cpu_us=timing.scaled(timing.summarize(times.cpu[key]), 1e6),
             ticks_per_second=1e6 / stats["median"],
             load=stats["median"] * 1e-6 * rate))
     return result

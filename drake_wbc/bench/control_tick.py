@@ -1,29 +1,36 @@
-"""One control tick of the controller Diagram, whole and stage by stage.
+"""One control tick of the controller Diagram, whole and stage by stage,
+as the robot sees it.
 
-The controller runs alone in a Simulator (no plant) against fixed
-measurements: the robot at rest at the home pose, the tool's weight on
-the wrist sensor (no external wrench), obstacle points scattered around
-the base, and a constant reference twist. A tick is one AdvanceTo by the
-control period h. Before every tick the station inputs are fixed again,
-alternating between two sets that differ in every entry, as new
-measurements arrive each period on the robot: this invalidates the
-caches that depend on them, so that the stateless stages (ArmCapability,
-the wrench estimator, ...) compute each tick as they do in the closed
-loop instead of once. Each batch of ticks starts from the controller's
-initial state: against fixed measurements the loop is open, and over
-many batches the commanded arm would drift towards its limits and a
-singularity, where a closed loop does not stay.
+The controller runs alone in a Simulator (no plant) against measurements
+that change every tick: the robot near the home pose, each arm joint
+moving on a slow sine of its own (a new arm configuration every tick, so
+that no kinematics memo can hit, as on the robot), the base state and the
+obstacle points (scattered around the base, rotating slowly) changing
+with it, the tool's weight on the wrist sensor at that configuration (no
+external wrench), and a constant reference twist. Tick k writes the
+measurement set k (they cycle after `measurement_sets`, far more than
+any memo holds), advances with AdvanceTo((k + 1) h) (one discrete update
+exactly: adding h to the context's time accumulates rounding, and some
+ticks then do two updates and the next none), and pulls the exported
+commands a station reads (STATION_COMMANDS), after the update as the
+hardware interface does. Each batch of ticks starts from the
+controller's initial state at time 0: against measurements that do not
+follow the commands the loop is open, and over many batches the
+commanded arm would drift towards its limits and a singularity, where a
+closed loop does not stay.
 
-Per stage, each stage gets a context of its own with the state and the
-input values it has in the running diagram; a tick of it is: fix its
-inputs again, evaluate every output, and the periodic discrete update
-when it has state. The cost of fixing the inputs alone is reported next
-to it (the `inputs` column), so that the net cost of the stage is plain.
+Per stage, each stage gets a context of its own with the state it has in
+the running diagram; a tick of it is: fix its inputs to the values they
+had at the next tick of the running diagram (recorded over
+`measurement_sets` ticks, so they too change every tick), evaluate every
+output, and the periodic discrete update when it has state. The cost of
+fixing the inputs alone is reported next to it (the `inputs` column), so
+that the net cost of the stage is plain.
 """
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.analysis import Simulator
+from pydrake.systems.analysis import InitializeParams, Simulator
 from pydrake.systems.framework import PortDataType
 
 from drake_wbc.controller import ControllerParameters, build_controller
@@ -53,13 +60,31 @@ def obstacle_points(count, seed=0):
                             radius * np.sin(angle)])
 
 
-def _measurements(arm, num_points, turn):
-    """The station inputs of ControllerTicker's measurement set `turn`
-    (0 or 1): the second one differs in every entry."""
-    q = HOME_ARM_POSITIONS + 1e-3 * turn
-    c, s = np.cos(1e-3 * turn), np.sin(1e-3 * turn)
+STATION_COMMANDS = ("base.velocity_command", "arm.position_command")
+"""The controller's outputs that a station (simulated or the hardware
+interface) reads every tick."""
+
+RESTART = InitializeParams(suppress_initialization_events=True)
+"""How a batch restarts the Simulator after the context is set back to
+the initial one (time 0; its state is already the initialized one)."""
+
+MEASUREMENT_SETS = 100
+"""Measurement sets a ControllerTicker cycles through (a new one each
+tick; ArmKinematics remembers 4 configurations)."""
+
+
+def measurements(arm, num_points, k, count=MEASUREMENT_SETS):
+    """The station inputs of tick `k` (of `count` in a cycle): every
+    entry of the arm's joints and the base state on a sine of its own
+    with period `count` ticks (amplitudes 0.02 rad and 1e-3), the
+    obstacle points turned by 0.2 rad over the cycle, the tool's weight
+    on the wrist at that arm configuration."""
+    phase = 2.0 * np.pi * k / count + np.arange(6) * (np.pi / 7)
+    q = HOME_ARM_POSITIONS + 0.02 * np.sin(phase)
+    angle = 0.2 * np.sin(2.0 * np.pi * k / count)
+    c, s = np.cos(angle), np.sin(angle)
     return {
-        "base.state_estimated": BASE_STATE + 1e-4 * turn,
+        "base.state_estimated": BASE_STATE + 1e-3 * np.cos(phase),
         "arm.position_measured": q,
         "wrist.wrench_measured": tool_weight_reading(arm, q),
         "lidar.obstacle_points": AbstractValue.Make(
@@ -98,57 +123,77 @@ class Fixed:
 
 
 class ControllerTicker:
-    """The controller Diagram in a Simulator of its own, with fixed inputs.
+    """The controller Diagram in a Simulator of its own, with fixed inputs
+    written again every tick.
 
     Args:
         arm: a shared ArmKinematics.
         time_step: control period h in s (0.01 s: 100 Hz, the paper's).
         num_points: number of obstacle points on lidar.obstacle_points.
+        measurement_sets: how many different measurement sets the ticks
+            cycle through (>= 5, more than the kinematics memo holds).
     """
 
-    def __init__(self, arm, time_step=0.01, num_points=300):
+    def __init__(self, arm, time_step=0.01, num_points=300,
+                 measurement_sets=MEASUREMENT_SETS):
         self.time_step = positive("time_step", time_step)
+        count = whole_number("measurement_sets", measurement_sets,
+                             minimum=ArmKinematics.MEMO_SIZE + 1)
         params = ControllerParameters(time_step=self.time_step)
         self.controller = build_controller(params, arm)
         diagram = self.controller.diagram
         self.simulator = Simulator(diagram)
         self.context = self.simulator.get_mutable_context()
-        self.values = [_measurements(arm, num_points, turn)
-                       for turn in (0, 1)]
+        self.values = [measurements(arm, num_points, k, count)
+                       for k in range(count)]
         self.fixed = [
             Fixed(diagram.GetInputPort(name), self.context,
-                   [values[name] for values in self.values])
+                  [values[name] for values in self.values])
             for name in STATION_INPUTS]
+        self.commands = [diagram.GetOutputPort(name)
+                         for name in STATION_COMMANDS]
         diagram.GetInputPort("reference_velocity").FixValue(
             self.context, REFERENCE_VELOCITY)
         self.controller.initialize(self.context)
         self.simulator.Initialize()
         self._start = self.context.Clone()
+        self.tick_count = 0
 
     def refresh(self):
-        """Writes the station inputs again (new measurements)."""
+        """Writes the station inputs again (the next measurement set)."""
         for fixed in self.fixed:
             fixed.write()
 
-    def advance(self, refresh=True):
-        """One tick from the current state (measurements written again
-        first if `refresh`)."""
+    def restart(self):
+        """Back to the initial state at time 0; the next tick writes the
+        first measurement set."""
+        self.context.SetTimeStateAndParametersFrom(self._start)
+        self.simulator.Initialize(RESTART)
+        self.tick_count = 0
+        for fixed in self.fixed:
+            fixed.restart()
+
+    def advance(self, refresh=True, pull=True):
+        """One tick from the current state: the next measurements written
+        (if `refresh`), AdvanceTo((k + 1) h), the commands pulled (if
+        `pull`)."""
         if refresh:
             self.refresh()
-        self.simulator.AdvanceTo(self.context.get_time() + self.time_step)
+        self.tick_count += 1
+        self.simulator.AdvanceTo(self.tick_count * self.time_step)
+        if pull:
+            for port in self.commands:
+                port.Eval(self.context)
 
-    def ticks(self, count, refresh=True):
+    def ticks(self, count, refresh=True, pull=True):
         """A timing.interleave contender: `count` ticks of the controller
-        from its initial state (measurements fixed again before each if
-        `refresh`)."""
+        from its initial state (see `advance`)."""
         count = whole_number("count", count, minimum=1)
 
         def run():
-            self.context.SetStateAndParametersFrom(self._start)
-            for fixed in self.fixed:
-                fixed.restart()
+            self.restart()
             for _ in range(count):
-                self.advance(refresh)
+                self.advance(refresh, pull)
             return count
 
         return run
@@ -157,29 +202,19 @@ class ControllerTicker:
 class StageTicker:
     """One stage of a running ControllerTicker, in a context of its own.
 
-    Its inputs alternate, as the ticker's measurements do, between the
-    values they had in the running diagram after two successive ticks.
-
     Args:
-        ticker: a ControllerTicker.
+        ticker: a ControllerTicker (after at least one tick, so that every
+            connected input has its running value).
         name: the stage's name (a key of Controller.stages).
+        ports: the stage's connected input ports.
+        values: for each port, the values it had over successive ticks of
+            the running diagram (written in turn, one set a tick).
     """
 
-    def __init__(self, ticker, name):
+    def __init__(self, ticker, name, ports, values):
         stage = ticker.controller.stages[name]
         inner = stage.GetMyContextFromRoot(ticker.context)
         self.stage, self.name = stage, name
-        ports = [stage.get_input_port(i)
-                 for i in range(stage.num_input_ports())]
-        ports = [port for port in ports if port.HasValue(inner)]
-        values = [[] for _ in ports]  # unconnected optional inputs left
-        for _ in range(2):
-            ticker.advance()
-            for port, seen in zip(ports, values, strict=True):
-                seen.append(
-                    np.array(port.Eval(inner))
-                    if port.get_data_type() == PortDataType.kVectorValued
-                    else port.EvalAbstract(inner).Clone())
         self.context = stage.CreateDefaultContext()
         self.context.SetTimeStateAndParametersFrom(inner)
         self.inputs = [Fixed(port, self.context, seen)
@@ -215,12 +250,37 @@ class StageTicker:
         return run
 
 
-def stage_tickers(ticker):
-    """A StageTicker for every stage of `ticker`'s controller, after one
-    tick so that every input has its running value."""
+def _input_value(port, context):
+    if port.get_data_type() == PortDataType.kVectorValued:
+        return np.array(port.Eval(context))
+    return port.EvalAbstract(context).Clone()
+
+
+def stage_tickers(ticker, ticks=None):
+    """A StageTicker for every stage of `ticker`'s controller, with the
+    inputs each stage had over `ticks` successive ticks (the ticker's
+    measurement sets if None) of the running diagram, from its initial
+    state."""
+    ticks = len(ticker.values) if ticks is None else whole_number(
+        "ticks", ticks, minimum=2)
+    ticker.restart()
     ticker.advance()
-    return {name: StageTicker(ticker, name)
-            for name in ticker.controller.stages}
+    stages = ticker.controller.stages
+    ports, values = {}, {}
+    for name, stage in stages.items():
+        inner = stage.GetMyContextFromRoot(ticker.context)
+        ports[name] = [port for port in (stage.get_input_port(i) for i in
+                                         range(stage.num_input_ports()))
+                       if port.HasValue(inner)]  # optional ones left out
+        values[name] = [[] for _ in ports[name]]
+    for _ in range(ticks):
+        ticker.advance()
+        for name, stage in stages.items():
+            inner = stage.GetMyContextFromRoot(ticker.context)
+            for port, seen in zip(ports[name], values[name], strict=True):
+                seen.append(_input_value(port, inner))
+    return {name: StageTicker(ticker, name, ports[name], values[name])
+            for name in stages}
 
 
 def make_ticker(arm=None, **kwargs):

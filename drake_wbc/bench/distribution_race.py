@@ -10,35 +10,58 @@ null-space velocity V_n^0 = k_n [grad_x C_m; 0_3] of eq. (wbccm):
 
 whose solution is eq. (wbsln) with the null-space term,
 V_wb = J^+ V_ee + (I - J^+ J_wb) V_n^0. J_wb = [R_ba, J_b] (eq. (1),
-bottom line) needs p_ee from the MultibodyPlant, so every contender
-starts from the same kinematics (ArmKinematics.evaluate, as the
-controller's ArmCapability does each tick) and its time includes it.
+bottom line) needs p_ee from the MultibodyPlant.
 
-Contenders:
+Two races, each contender a "solver" (problem, given) -> V_wb, `given`
+a Given (p_ee, and J_wb, the diagonal of Q and V_n^0 for the QP peers):
+- the solve: every contender is given the same data, computed
+  beforehand (p_ee for the closed form, which forms the rest itself
+  within its time; J_wb, Q and V_n^0 for the peers, which only arrange
+  them as their solver takes them), so it times the distribution alone;
+- with kinematics: every contender first evaluates the same kinematics
+  (ArmKinematics.evaluate at a new q_a each problem, as the controller's
+  ArmCapability does each tick), then prepares its data (the peers by
+  `qp_data`) and solves.
+`kinematics` (alone) and `qp_data` (the QP peers' data preparation
+alone) are timed beside them: the first is the floor of every contender
+with the same kinematics.
+
+Solvers:
 - closed_form: the controller's own path
   (distribution.whole_body_distribution as MotionDistributor runs it in
-  double: its float kernel, the closed form for R_ba = I).
-- drake_diffik: Drake's DoDifferentialInverseKinematics (a QP solved
-  with OSQP inside Drake) in the scaled input u = Q^-1/2 V_wb, where
-  the weighted problem is its unweighted one: J = J_wb Q^1/2, joint
-  centering gain I and nominal position Q^-1/2 V_n^0 at q = 0.
-- qpsolvers_<solver>: the QP above through qpsolvers (OSQP, Clarabel,
-  ProxQP when installed), P = Q^-1 and q = -Q^-1 V_n^0, equality
-  constraints only, tolerances tightened to 1e-9 so they agree.
-- drake_diffik_plant (informative, not the same problem): Drake's
-  overload that evaluates its own kinematics on the robot's
-  MultibodyPlant, in joint velocities, unweighted; the plant has two
-  more velocities (the flexible mount), held at zero by velocity
+  double: its float kernel, the closed form for R_ba = I, after the
+  per-tick check of the sigmas and k_n).
+- the QP peers, with the same unchecked data preparation as the
+  controller's (`qp_data`: J_wb, the diagonal of Q and V_n^0 by the
+  bodies the stages run in double, kernels.body_for), then
+  P = Q^-1 = diag(1 / w), q = -Q^-1 V_n^0, equality constraints
+  J_wb V_wb = V_ee only:
+  - daqp: DAQP called directly (daqp.solve, the six rows as equalities);
+  - proxsuite: proxsuite's dense ProxQP called directly, initialised
+    once and updated per problem (qp.update, qp.solve);
+  - quadprog: quadprog.solve_qp (Goldfarb-Idnani, dense);
+  - drake_diffik: Drake's DoDifferentialInverseKinematics (a QP solved
+    inside Drake) in the scaled input u = Q^-1/2 V_wb, where the
+    weighted problem is its unweighted one: J = J_wb Q^1/2, joint
+    centering gain I and nominal position Q^-1/2 V_n^0 at q = 0;
+  - qpsolvers_<solver>: the same QP through qpsolvers (OSQP, Clarabel,
+    ProxQP when installed; each pays the wrapper's conversions),
+    tolerances tightened to 1e-9 so they agree.
+- drake_diffik_plant (with kinematics only; informative, not the same
+  problem): Drake's overload that evaluates its own kinematics on the
+  robot's MultibodyPlant, in joint velocities, unweighted; the plant has
+  two more velocities (the flexible mount), held at zero by velocity
   bounds. Drake builds the null-space cost from a non-orthonormal
   basis, so with those bounds its answer is not the 9-DoF least-norm
   one; its difference is reported, not checked.
 
 sigma is drawn inside (0.05, 0.95) so that Q is invertible (the QPs need
 Q^-1); no inequality constraint is present, so all the same-problem
-contenders must agree (fairness).
+contenders must agree (fairness, checked before any timing).
 """
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from pydrake.multibody.inverse_kinematics import (
@@ -125,35 +148,65 @@ def make_problems(count, seed, arm):
     ]
 
 
-def _problem_data(arm, R_ba, problem):
-    """(J_wb, diagonal of Q, V_n^0): the controller's kinematics and
-    weighting at `problem`."""
-    p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
-    J = kinematics.whole_body_jacobian(None, p_ee, R_ba)
-    weights = np.diag(distribution.weighting_matrix(problem.sigma_xy,
-                                                   problem.sigma_phi))
-    V_n = distribution.capability_null_velocity(
-        problem.capability_gradient, problem.null_space_gain)
-    return J, weights, V_n
+def mounting(arm):
+    """^bR_a of `arm` as the controller's distributor takes it: None for
+    the identity (the closed form's case), the matrix otherwise."""
+    R_ba = np.array(arm.R_ba, dtype=float)
+    return None if np.array_equal(R_ba, np.eye(3)) else R_ba
+
+
+def kinematics_of(arm):
+    """The kinematics every contender starts from: p_ee (T_b) at q_a by
+    ArmKinematics.evaluate, as the controller's ArmCapability runs it."""
+
+    def evaluate(problem):
+        return arm.evaluate(problem.arm_position).p_ee_in_base
+
+    return evaluate
+
+
+class Given(NamedTuple):
+    """What a solver is given: p_ee (3, T_b), and for the QP peers
+    J_wb (6, 9), the diagonal w of Q (9,) and V_n^0 (9,) (None for the
+    closed form, which forms them itself)."""
+
+    p_ee: np.ndarray
+    J_wb: np.ndarray | None = None
+    weights: np.ndarray | None = None
+    null_velocity: np.ndarray | None = None
+
+
+def qp_data(arm):
+    """The QP peers' data preparation, unchecked, by the bodies the
+    controller's stages run in double: (problem, p_ee) -> Given with
+    J_wb, the diagonal w of Q and V_n^0."""
+    R_ba = np.array(arm.R_ba, dtype=float)
+    jacobian = kernels.body_for(kinematics.whole_body_jacobian_of, float)
+    weights = kernels.body_for(distribution.weight_factors, float)
+    null = kernels.body_for(distribution.capability_null_velocity_of, float)
+
+    def prepare(problem, p_ee):
+        return Given(p_ee, jacobian(None, p_ee, R_ba),
+                     weights(problem.sigma_xy, problem.sigma_phi),
+                     null(problem.capability_gradient,
+                          problem.null_space_gain))
+
+    return prepare
 
 
 def closed_form(arm):
     """The controller's distribution, as its tick runs it
-    (stages.MotionDistributor): the end effector from the plant
-    (ArmKinematics.evaluate, the same kinematics as every contender's),
-    then eqs. (wbsln)/(wbccm) for J_wb = [R_ba, J_b] by the body
-    MotionDistributor runs in double
+    (stages.MotionDistributor): eqs. (wbsln)/(wbccm) for
+    J_wb = [R_ba, J_b] by the body MotionDistributor runs in double
     (distribution.whole_body_distribution's float kernel: the closed form
     for R_ba = I); the controller checks its parameters once, when it is
     built, and the sigmas and k_n on each tick, as here."""
-    R_ba = np.array(arm.R_ba, dtype=float)
-    R_ba = None if np.array_equal(R_ba, np.eye(3)) else R_ba
+    R_ba = mounting(arm)
     damping = distribution.DEFAULT_DAMPING
     distribute = kernels.body_for(distribution.whole_body_distribution,
                                   float)
 
-    def solve(problem):
-        p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
+    def solve(problem, given):
         sigma_xy, sigma_phi, k_n = (problem.sigma_xy, problem.sigma_phi,
                                     problem.null_space_gain)
         if not (0.0 <= sigma_xy <= 1.0 and 0.0 <= sigma_phi <= 1.0
@@ -161,23 +214,91 @@ def closed_form(arm):
             in_closed_range("sigma_xy", sigma_xy, 0.0, 1.0)
             in_closed_range("sigma_phi", sigma_phi, 0.0, 1.0)
             non_negative("k_n", k_n)
-        return distribute(problem.end_effector_velocity, p_ee, R_ba,
+        return distribute(problem.end_effector_velocity, given.p_ee, R_ba,
                           sigma_xy, sigma_phi, problem.capability_gradient,
                           k_n, damping)
+
+    solve.needs_qp_data = False
+    return solve
+
+
+def daqp_solver(arm):
+    """DAQP called directly: daqp.solve with the six rows of J_wb as
+    equalities (sense 5)."""
+    import daqp
+
+    sense = np.full(6, 5, dtype=np.int32)
+
+    def solve(problem, given):
+        _, J, w, V_n = given
+        inverse = 1.0 / w
+        b = problem.end_effector_velocity
+        x, _, flag, _ = daqp.solve(np.diag(inverse), -inverse * V_n, J, b,
+                                   b, sense)
+        if flag != 1:
+            raise RuntimeError(f"DAQP returned exit flag {flag} on a "
+                               "problem with equalities only")
+        return x
+
+    return solve
+
+
+PROXSUITE_TOLERANCE = 1e-12
+"""ProxQP's eps_abs (eps_rel 0): its default, 1e-5, stops far from the
+others."""
+
+
+def proxsuite_solver(arm):
+    """proxsuite's dense ProxQP called directly, initialised once (here)
+    and updated with each problem's data (qp.update)."""
+    from proxsuite import proxqp
+
+    qp = proxqp.dense.QP(9, 6, 0)
+    qp.settings.eps_abs = PROXSUITE_TOLERANCE
+    qp.settings.eps_rel = 0.0
+    qp.settings.verbose = False
+    qp.init(np.eye(9), np.zeros(9), np.zeros((6, 9)), np.zeros(6), None,
+            None, None)
+
+    def solve(problem, given):
+        _, J, w, V_n = given
+        inverse = 1.0 / w
+        qp.update(H=np.diag(inverse), g=-inverse * V_n, A=J,
+                  b=problem.end_effector_velocity)
+        qp.solve()
+        if qp.results.info.status != proxqp.QPSolverOutput.PROXQP_SOLVED:
+            raise RuntimeError(f"ProxQP returned {qp.results.info.status}"
+                               " on a problem with equalities only")
+        return qp.results.x.copy()
+
+    return solve
+
+
+def quadprog_solver(arm):
+    """quadprog.solve_qp: min 1/2 x^T G x - a^T x s.t. C^T x >= b with
+    the first meq = 6 rows as equalities."""
+    import quadprog
+
+
+    def solve(problem, given):
+        _, J, w, V_n = given
+        inverse = 1.0 / w
+        return quadprog.solve_qp(np.diag(inverse), inverse * V_n,
+                                 np.ascontiguousarray(J.T),
+                                 problem.end_effector_velocity, 6)[0]
 
     return solve
 
 
 def drake_diffik(arm, time_step=0.01):
     """Drake's DoDifferentialInverseKinematics on the scaled problem."""
-    R_ba = np.array(arm.R_ba, dtype=float)
     params = DifferentialInverseKinematicsParameters(9, 9)
     params.set_time_step(time_step)
     params.set_joint_centering_gain(np.eye(9))
     zero = np.zeros(9)
 
-    def solve(problem):
-        J, weights, V_n = _problem_data(arm, R_ba, problem)
+    def solve(problem, given):
+        _, J, weights, V_n = given
         root = np.sqrt(weights)
         params.set_nominal_joint_position(V_n / root)
         result = DoDifferentialInverseKinematics(
@@ -195,7 +316,7 @@ def _check_status(result):
             "a problem without active constraints")
 
 
-def qpsolvers_contender(arm, solver):
+def qpsolvers_solver(arm, solver):
     """The weighted QP through qpsolvers with back-end `solver`."""
     import qpsolvers
     import scipy.sparse
@@ -204,12 +325,11 @@ def qpsolvers_contender(arm, solver):
         raise ValueError(
             f"solver = {solver!r} is not allowed: must be one of the "
             f"installed qpsolvers back-ends {qpsolvers.available_solvers}")
-    R_ba = np.array(arm.R_ba, dtype=float)
     sparse = solver in SPARSE_SOLVERS
     settings = QP_SETTINGS.get(solver, {})
 
-    def solve(problem):
-        J, weights, V_n = _problem_data(arm, R_ba, problem)
+    def solve(problem, given):
+        _, J, weights, V_n = given
         inverse = 1.0 / weights
         if sparse:
             P = scipy.sparse.diags(inverse, format="csc")
@@ -305,38 +425,70 @@ class PlantDiffIk:
                                        wz]])
 
 
-def make_contenders(arm=None, time_step=0.01, solvers=QP_SOLVERS):
-    """The contenders by name: callables problem -> V_wb (9,).
-
-    Returns:
-        (same_problem, informative): two dicts; the first holds
-        closed_form first, then the contenders that must agree with it.
-    """
+def make_solvers(arm=None, time_step=0.01, solvers=QP_SOLVERS):
+    """The solvers of the same problem by name: callables
+    (problem, given) -> V_wb (9,), closed_form first, then the direct
+    peers (DAQP, ProxQP, quadprog, Drake's DiffIK), then the qpsolvers
+    back-ends of `solvers` that are installed."""
     import qpsolvers
 
     arm = arm or ArmKinematics()
     same = {REFERENCE: closed_form(arm),
+            "daqp": daqp_solver(arm),
+            "proxsuite": proxsuite_solver(arm),
+            "quadprog": quadprog_solver(arm),
             "drake_diffik": drake_diffik(arm, time_step)}
     for solver in solvers:
         if solver in qpsolvers.available_solvers:
-            same[f"qpsolvers_{solver}"] = qpsolvers_contender(arm, solver)
-    return same, {"drake_diffik_plant": PlantDiffIk(arm, time_step)}
+            same[f"qpsolvers_{solver}"] = qpsolvers_solver(arm, solver)
+    return same
 
 
-def fairness(problems, same_problem, informative=None):
-    """Largest difference of each contender's V_wb from closed_form's.
+def with_kinematics(arm, solve):
+    """problem -> V_wb: the kinematics of `arm`, the data preparation
+    `solve` needs (`qp_data` unless it has needs_qp_data False), then
+    `solve`."""
+    evaluate = kinematics_of(arm)
+    if getattr(solve, "needs_qp_data", True):
+        prepare = qp_data(arm)
+
+        def solve_from_scratch(problem):
+            return solve(problem, prepare(problem, evaluate(problem)))
+    else:
+        def solve_from_scratch(problem):
+            return solve(problem, Given(evaluate(problem)))
+
+    return solve_from_scratch
+
+
+def given_data(arm, problems):
+    """The Given of every problem (the kinematics and `qp_data`)."""
+    evaluate, prepare = kinematics_of(arm), qp_data(arm)
+    return [prepare(problem, evaluate(problem)) for problem in problems]
+
+
+def fairness(problems, solvers, given, informative=None):
+    """Largest difference of each solver's V_wb from closed_form's.
+
+    Args:
+        problems: the problems.
+        solvers: dict name -> (problem, given) -> V_wb (make_solvers).
+        given: the Given of each problem (given_data).
+        informative: dict name -> PlantDiffIk-like solvers (problem ->
+            V_wb, with `least_norm`), compared with the least-norm answer
+            of their own joint-space problem.
 
     Returns:
-        dict name -> {"max_abs_difference": float, "same_problem": bool};
-        the informative contenders are compared with the least-norm
-        answer of their own joint-space problem.
+        dict name -> {"max_abs_difference": float, "same_problem": bool}.
     """
-    reference = same_problem[REFERENCE]
-    expected = [reference(p) for p in problems]
+    reference = solvers[REFERENCE]
+    expected = [reference(p, g) for p, g in zip(problems, given,
+                                                 strict=True)]
     report = {}
-    for name, solve in same_problem.items():
-        difference = max(float(np.max(np.abs(solve(p) - e)))
-                         for p, e in zip(problems, expected, strict=True))
+    for name, solve in solvers.items():
+        difference = max(float(np.max(np.abs(solve(p, g) - x)))
+                         for p, g, x in zip(problems, given, expected,
+                                            strict=True))
         report[name] = {"max_abs_difference": difference,
                         "same_problem": True}
     for name, solver in (informative or {}).items():
@@ -348,12 +500,21 @@ def fairness(problems, same_problem, informative=None):
     return report
 
 
-def batch(solve, problems):
-    """A contender for timing.interleave: solves every problem once."""
+def batch(solve, problems, given=None):
+    """A contender for timing.interleave: solves every problem once
+    (`solve(problem, given)` when `given` holds one entry per problem;
+    `solve(problem)` otherwise)."""
+    if given is None:
+        def run():
+            for problem in problems:
+                solve(problem)
+            return len(problems)
+    else:
+        pairs = list(zip(problems, given, strict=True))
 
-    def run():
-        for problem in problems:
-            solve(problem)
-        return len(problems)
+        def run():
+            for problem, p in pairs:
+                solve(problem, p)
+            return len(pairs)
 
     return run

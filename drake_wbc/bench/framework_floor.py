@@ -22,11 +22,17 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import (
     DiagramBuilder,
     LeafSystem,
+    OutputPortIndex,
     PortDataType,
     ValueProducer,
 )
 
-from drake_wbc.bench.control_tick import REFERENCE_VELOCITY, Fixed
+from drake_wbc.bench.control_tick import (
+    REFERENCE_VELOCITY,
+    RESTART,
+    STATION_COMMANDS,
+    Fixed,
+)
 from drake_wbc.controller.diagram import STATION_INPUTS
 from drake_wbc.math.validation import whole_number
 
@@ -118,7 +124,8 @@ class HollowStage(LeafSystem):
 
 class FloorTicker:
     """The hollow copy of a ControllerTicker's controller, in a Simulator
-    of its own, against the same alternating measurements.
+    of its own, against the same measurements, ticked as the controller
+    is (AdvanceTo((k + 1) h), the station's commands pulled after each).
 
     Args:
         ticker: a drake_wbc.bench.control_tick.ControllerTicker.
@@ -142,6 +149,10 @@ class FloorTicker:
             name = diagram.get_input_port(i).get_name()
             guard = hollow[id(controller.stages["guard"])]
             builder.ExportInput(guard.GetInputPort(name), name)
+        for i in range(diagram.num_output_ports()):
+            source, j = diagram.get_output_port_locator(OutputPortIndex(i))
+            builder.ExportOutput(hollow[id(source)].get_output_port(j),
+                                 diagram.get_output_port(i).get_name())
         self.diagram = builder.Build()
         self.simulator = Simulator(self.diagram)
         self.context = self.simulator.get_mutable_context()
@@ -149,9 +160,12 @@ class FloorTicker:
             Fixed(self.diagram.GetInputPort(name), self.context,
                   [values[name] for values in ticker.values])
             for name in STATION_INPUTS]
+        self.commands = [self.diagram.GetOutputPort(name)
+                         for name in STATION_COMMANDS]
         self.diagram.GetInputPort("reference_velocity").FixValue(
             self.context, REFERENCE_VELOCITY)
         self.simulator.Initialize()
+        self._start = self.context.Clone()
 
     def ticks(self, count):
         """A timing.interleave contender: `count` ticks, measurements
@@ -160,10 +174,16 @@ class FloorTicker:
         h = self.time_step
 
         def run():
-            for _ in range(count):
+            self.context.SetTimeStateAndParametersFrom(self._start)
+            self.simulator.Initialize(RESTART)
+            for fixed in self.fixed:
+                fixed.restart()
+            for k in range(1, count + 1):
                 for fixed in self.fixed:
                     fixed.write()
-                self.simulator.AdvanceTo(self.context.get_time() + h)
+                self.simulator.AdvanceTo(k * h)
+                for port in self.commands:
+                    port.Eval(self.context)
             return count
 
         return run

@@ -5,8 +5,11 @@ within each repetition every contender runs once, in an order rotated
 from one repetition to the next, so that a burst of load from elsewhere
 on the machine falls on all of them alike rather than on whichever ran
 at that moment. Each contender is a callable that does a batch of work
-and returns how many units (solves, ticks) it did; the figure recorded
-for a repetition is the wall time per unit.
+and returns how many units (solves, ticks) it did; the figures recorded
+for a repetition are the wall time per unit and the CPU time of the
+calling thread per unit (time.thread_time_ns): the second leaves out
+the time the thread waited while another process held the core, so it
+moves less when the machine is shared; the two differ by that wait.
 """
 
 import os
@@ -23,8 +26,15 @@ PERCENTILES = (10, 25, 50, 75, 90)
 """The percentiles that `summarize` reports."""
 
 VERSIONED_PACKAGES = ("drake", "numpy", "scipy", "qpsolvers", "osqp",
-                      "clarabel", "proxsuite")
+                      "clarabel", "proxsuite", "daqp", "quadprog")
 """The packages whose versions go with the figures."""
+
+
+class Timings(dict):
+    """What `interleave` returns: name -> wall-clock seconds per unit,
+    and in `cpu` the thread's CPU seconds per unit."""
+
+    cpu: dict
 
 
 def interleave(contenders, repeats, warmup=1):
@@ -38,8 +48,9 @@ def interleave(contenders, repeats, warmup=1):
             imports and allocations.
 
     Returns:
-        dict name -> (repeats,) array of seconds per unit, one entry per
-        repetition.
+        dict name -> (repeats,) array of wall-clock seconds per unit, one
+        entry per repetition; its attribute `cpu` holds the same for the
+        thread's CPU time (a dict of the same shape).
 
     Raises:
         ValueError: if repeats or warmup is not a whole number in range,
@@ -51,21 +62,24 @@ def interleave(contenders, repeats, warmup=1):
     for _ in range(warmup):
         for name in names:
             contenders[name]()
-    times = {name: np.empty(repeats) for name in names}
-    clock = time.perf_counter
+    times = Timings({name: np.empty(repeats) for name in names})
+    times.cpu = {name: np.empty(repeats) for name in names}
+    clock, cpu_clock = time.perf_counter_ns, time.thread_time_ns
     for r in range(repeats):
         shift = r % len(names)
         for name in names[shift:] + names[:shift]:
-            start = clock()
+            start, cpu_start = clock(), cpu_clock()
             units = contenders[name]()
-            elapsed = clock() - start
+            elapsed, cpu = clock() - start, cpu_clock() - cpu_start
             if not units or units <= 0:
                 raise ValueError(
                     f"contender {name!r} returned units = {units!r}, which "
                     "is not allowed: must return the number of units done "
                     "(> 0)")
-            times[name][r] = elapsed / units
+            times[name][r] = 1e-9 * elapsed / units
+            times.cpu[name][r] = 1e-9 * cpu / units
     return times
+
 
 
 def summarize(samples):
