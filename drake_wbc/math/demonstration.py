@@ -37,7 +37,7 @@ class Demonstration:
         tcp: (N, 4) the TCP's pose [x, y, z, yaw] in the world (m, rad),
             yaw unwrapped.
         base: (N, 3) the base's pose [x, y, yaw] in the world, or None.
-        arm: (N, 6) the arm's joints (rad), or None.
+        arm: (N, n) the arm's joints (rad), or None.
     """
 
     time: np.ndarray
@@ -53,7 +53,7 @@ class Demonstration:
         object.__setattr__(self, "time", time)
         object.__setattr__(self, "tcp", as_matrix("tcp", self.tcp,
                                                   (time.size, 4)))
-        for name, width in (("base", 3), ("arm", 6)):
+        for name, width in (("base", 3), ("arm", None)):
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, as_matrix(
@@ -110,7 +110,7 @@ def tcp_pose_in_world_float(base_pose, X_BT):
 
 class TcpPose:
     """The TCP's pose [x, y, z, yaw] in the world from the base's pose
-    [x, y, yaw] and the arm's joints (6,), through the nominal kinematics
+    [x, y, yaw] and the arm's joints (n,), through the nominal kinematics
     (robot_model.ArmKinematics, the controller's: mount at rest, T_b on
     the floor) and `tcp_pose_in_world`. Call it with (base_pose,
     arm_positions); float only.
@@ -143,11 +143,11 @@ class TcpPose:
 
 def tcp_poses(base_pose, arm_positions, arm):
     """The TCP's pose [x, y, z, yaw] (N, 4) in the world from the base's
-    pose [x, y, yaw] (N, 3) and the arm's joints (N, 6) (TcpPose); yaw
+    pose [x, y, yaw] (N, 3) and the arm's joints (N, n) (TcpPose); yaw
     unwrapped."""
     base_pose = as_matrix("base_pose", base_pose, (None, 3))
     arm_positions = as_matrix("arm_positions", arm_positions,
-                              (base_pose.shape[0], 6))
+                              (base_pose.shape[0], arm.num_joints))
     pose = TcpPose(arm)
     poses = np.array([pose(b, q) for b, q in zip(base_pose, arm_positions,
                                                    strict=True)])
