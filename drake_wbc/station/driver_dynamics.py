@@ -38,11 +38,12 @@ def beyond(value, limit, outside, inside):
 
 def interpolated_command(state, time, period):
     """The arm driver's interpolation (ArmPositionDriver): from the state
-    [q_from (6), q_to (6), t_k] at `time`, (q_d, v_d): q_d moves linearly
+    [q_from (n), q_to (n), t_k] at `time`, (q_d, v_d): q_d moves linearly
     from q_from at t_k to q_to at t_k + period, then holds; v_d is the
     constant rate (q_to - q_from) / period. For double, AutoDiffXd or
     symbolic Expressions."""
-    q_from, q_to, t_k = state[:6], state[6:12], state[12]
+    n = (len(state) - 1) // 2
+    q_from, q_to, t_k = state[:n], state[n:2 * n], state[2 * n]
     rate = (q_to - q_from) / period
     fraction = clip((time - t_k) / period, 0.0, 1.0)
     return q_from + fraction * (q_to - q_from), rate

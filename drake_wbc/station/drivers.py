@@ -261,15 +261,16 @@ def ArmPositionDriver_(T):
             position_command ─►│ ArmPositionDriver ├──► desired_state
                                └───────────────────┘
 
-        - position_command: q_cmd (6), rad.
-        - desired_state: (12) [q_d; v_d] for the plant's desired-state
+        - position_command: q_cmd (n), rad (n: the size of
+          initial_positions).
+        - desired_state: (2 n) [q_d; v_d] for the plant's desired-state
           port of the arm. At each sample t_k (every command_period) the
           driver takes the command; until the next sample q_d moves
           linearly from the previous command to it, with v_d the constant
           rate between them. The command is reached one period after it
           was sampled.
 
-        State [q_from (6), q_to (6), t_k (1)].
+        State [q_from (n), q_to (n), t_k (1)].
 
         Args:
             params: ArmDriverParameters (the defaults if None).
@@ -281,16 +282,16 @@ def ArmPositionDriver_(T):
             LeafSystem_[T].__init__(self, converter)
             self.params = params = checked_instance(
                 "params", params, ArmDriverParameters, ArmDriverParameters)
-            self._initial = as_vector("initial_positions", initial_positions,
-                                      6)
+            self._initial = as_vector("initial_positions", initial_positions)
+            n = self._initial.size
             self._command = self.DeclareVectorInputPort(
-                "position_command", 6)
+                "position_command", n)
             self.DeclareDiscreteState(
                 np.concatenate([self._initial, self._initial, [0.0]]))
             self.DeclarePeriodicDiscreteUpdateEvent(
                 self.params.command_period, 0.0, self._update)
             self.DeclareVectorOutputPort(
-                "desired_state", 12, self._desired_state,
+                "desired_state", 2 * n, self._desired_state,
                 prerequisites_of_calc={self.time_ticket(),
                                        self.xd_ticket()})
 
@@ -314,8 +315,8 @@ def ArmPositionDriver_(T):
             output.SetFromVector(np.concatenate([q_d, v_d]))
 
         def set_positions(self, context, positions):
-            """Holds the arm at `positions` (6,) from the context's time."""
-            q = as_vector("positions", positions, 6)
+            """Holds the arm at `positions` (n,) from the context's time."""
+            q = as_vector("positions", positions, self._initial.size)
             context.SetDiscreteState(
                 np.concatenate([q, q, [context.get_time()]]))
 

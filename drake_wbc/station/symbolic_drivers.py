@@ -85,7 +85,7 @@ def arm_interpolator_system(params=None, initial_positions=None):
     the time; its output [q_d; v_d] follows `interpolated_command` at the
     context's time.
 
-    The positions in its state are relative to `initial_positions` (6,)
+    The positions in its state are relative to `initial_positions` (n,)
     (HOME_ARM_POSITIONS if None), so that its default state, zero, holds
     the arm there from t = 0, like ArmPositionDriver's; set another start
     with `arm_interpolator_state`.
@@ -93,12 +93,13 @@ def arm_interpolator_system(params=None, initial_positions=None):
     params = checked_instance("params", params, ArmDriverParameters,
                               ArmDriverParameters)
     q0 = _initial(initial_positions)
+    n = q0.size
     t = Variable("t")
-    state = MakeVectorVariable(13, "s")
-    command = MakeVectorVariable(6, "q_cmd")
+    state = MakeVectorVariable(2 * n + 1, "s")
+    command = MakeVectorVariable(n, "q_cmd")
     with _symbolic_numpy():
-        absolute = np.concatenate([q0 + state[:6], q0 + state[6:12],
-                                   [state[12]]])
+        absolute = np.concatenate([q0 + state[:n], q0 + state[n:2 * n],
+                                   [state[2 * n]]])
         q_d, v_d = interpolated_command(absolute, t, params.command_period)
         # At a sample, q_d is where the interpolation got to.
         dynamics = np.concatenate([q_d - q0, command - q0, [t]])
@@ -111,11 +112,12 @@ def arm_interpolator_system(params=None, initial_positions=None):
 def _initial(initial_positions):
     if initial_positions is None:
         return np.asarray(HOME_ARM_POSITIONS, dtype=float)
-    return as_vector("initial_positions", initial_positions, 6)
+    return as_vector("initial_positions", initial_positions)
 
 
 def arm_interpolator_state(positions, time, initial_positions=None):
     """The state of `arm_interpolator_system(params, initial_positions)`
-    holding the arm at `positions` (6,) from `time` on."""
-    q = as_vector("positions", positions, 6) - _initial(initial_positions)
+    holding the arm at `positions` (n,) from `time` on."""
+    q0 = _initial(initial_positions)
+    q = as_vector("positions", positions, q0.size) - q0
     return np.concatenate([q, q, [time]])
