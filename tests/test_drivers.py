@@ -457,11 +457,13 @@ def test_symbolic_joint_rates_are_body_to_world_rates(yaw):
         [0.0, 0.0, 0.0, *(rotation_z(yaw) @ v)], atol=1e-15)
 
 
-def test_symbolic_arm_interpolator_follows_the_arm_driver():
+@pytest.mark.parametrize("n", [6, 7])
+def test_symbolic_arm_interpolator_follows_the_arm_driver(n):
     """Both fed the same commands, changing between samples: the same
-    desired state at every plant step and in between."""
+    desired state at every plant step and in between (a 6- and a 7-joint
+    arm)."""
     params = ArmDriverParameters(time_step=0.005)
-    q0 = np.array(HOME_ARM_POSITIONS)
+    q0 = np.resize(np.array(HOME_ARM_POSITIONS), n)
     reference, symbolic = ArmPositionDriver(params, q0), \
         arm_interpolator_system(params, q0)
     simulators = [Simulator(s) for s in (reference, symbolic)]
@@ -469,11 +471,11 @@ def test_symbolic_arm_interpolator_follows_the_arm_driver():
     # The default state holds the initial positions, as the reference's.
     np.testing.assert_array_equal(
         symbolic.get_output_port().Eval(contexts[1]),
-        np.concatenate([q0, np.zeros(6)]))
+        np.concatenate([q0, np.zeros(n)]))
     rng = np.random.default_rng(3)
     for t in np.arange(1, 80) * 0.0025:
         if rng.uniform() < 0.3:
-            q = q0 + rng.uniform(-0.2, 0.2, 6)
+            q = q0 + rng.uniform(-0.2, 0.2, n)
             for system, context in zip((reference, symbolic), contexts,
                                        strict=True):
                 system.get_input_port().FixValue(context, q)
