@@ -218,11 +218,3 @@ class HardwareInterface:
         for name in ("base_command", "arm_command"):
             self.systems[f"encoder.{name}"].set_time_offset(
                 root_context, offset)
-
-
-def build_hardware_interface(options=None, lcm=None,
-                             initial_arm_positions=None, sender=None,
-                             robot=None):
-    """The HardwareInterface of `options` over `lcm` (see the class)."""
-    return HardwareInterface(options, lcm, initial_arm_positions, sender,
-                             robot)

@@ -64,14 +64,6 @@ def define_stage(name, scalars=SCALARS):
     return decorate
 
 
-def as_scalar_type(T, values):
-    """`values` (numbers) as a numpy array of scalar type T (floats, or
-    AutoDiffXd without derivatives)."""
-    array = np.asarray(values, dtype=float)
-    return np.array([T(value) for value in array.ravel().tolist()]).reshape(
-        array.shape)
-
-
 @functools.cache
 def shared_arm_kinematics():
     """One ArmKinematics of the shipped robot, for stages built without
