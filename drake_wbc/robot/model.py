@@ -14,6 +14,7 @@ name `drake_wbc`, so they load with no network and no other model package::
     plant.Finalize()
 """
 
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -36,6 +37,11 @@ from pydrake.multibody.tree import (
 )
 
 from drake_wbc.math.validation import as_float_array, as_vector
+from drake_wbc.robot.suspension import (
+    SUSPENSION_JOINTS,
+    SuspensionGains,
+    suspended_base_sdf,
+)
 
 PACKAGE_NAME = "drake_wbc"
 """The package name under which models/ is registered."""
@@ -113,7 +119,7 @@ class McrModel:
     lidar_frames: tuple
 
 
-def add_mcr(plant: MultibodyPlant, parser: Parser = None):
+def add_mcr(plant: MultibodyPlant, parser: Parser = None, suspension=None):
     """Adds the whole robot to `plant` (not yet finalized).
 
     Args:
@@ -121,6 +127,9 @@ def add_mcr(plant: MultibodyPlant, parser: Parser = None):
             the geometry.
         parser: an existing parser of `plant` whose package map is to be used
             (a new one is made if None).
+        suspension: None (the chassis rigid on its planar joints, as
+            models/ has it) or the SuspensionGains of a suspension under
+            the chassis (drake_wbc.robot.suspension).
 
     Returns:
         McrModel: the model instances and the frames the controller uses.
@@ -135,7 +144,22 @@ def add_mcr(plant: MultibodyPlant, parser: Parser = None):
     directives = LoadModelDirectives(
         parser.package_map().ResolveUrl(MCR_DIRECTIVES_URL)
     )
-    ProcessModelDirectives(directives, plant, parser)
+    if suspension is not None:
+        if not isinstance(suspension, SuspensionGains):
+            raise ValueError(
+                f"suspension = {suspension!r} is not allowed: must be None "
+                "or SuspensionGains (drake_wbc.robot.suspension)")
+        # The base's file with the suspension's joints added, parsed in
+        # its place (the other directives weld to it).
+        first = directives.directives[0].add_model
+        text = Path(parser.package_map().ResolveUrl(first.file)).read_text()
+        with tempfile.TemporaryDirectory() as folder:
+            path = Path(folder) / "mcr_base_suspended.sdf"
+            path.write_text(suspended_base_sdf(text, suspension))
+            first.file = f"file://{path}"
+            ProcessModelDirectives(directives, plant, parser)
+    else:
+        ProcessModelDirectives(directives, plant, parser)
     base = plant.GetModelInstanceByName("mcr_base")
     arm = plant.GetModelInstanceByName("elfin5")
     tool = plant.GetModelInstanceByName("ft300_wiping_tool")
@@ -154,10 +178,11 @@ def add_mcr(plant: MultibodyPlant, parser: Parser = None):
     )
 
 
-def make_mcr_plant(time_step=0.0):
-    """Returns (plant, model): a finalized plant of the robot alone."""
+def make_mcr_plant(time_step=0.0, suspension=None):
+    """Returns (plant, model): a finalized plant of the robot alone (with
+    the suspension of SuspensionGains `suspension`, if any)."""
     plant = MultibodyPlant(time_step=time_step)
-    model = add_mcr(plant)
+    model = add_mcr(plant, suspension=suspension)
     plant.Finalize()
     return plant, model
 
@@ -329,36 +354,38 @@ def mount_rocking_modes(plant, model, q_a=HOME_ARM_POSITIONS):
         list[MountMode]: the modes, lowest frequency first; `shape` is the
         mode's direction in (roll, pitch).
     """
+    return rocking_modes(plant, model, MOUNT_JOINTS, q_a)
+
+
+def suspension_modes(plant, model, q_a=HOME_ARM_POSITIONS):
+    """The suspension's rocking modes (as mount_rocking_modes, with the
+    mount, the base's planar joints and the arm held) of a plant made
+    with a suspension; `shape` is in (roll, pitch)."""
+    return rocking_modes(plant, model, SUSPENSION_JOINTS, q_a)
+
+
+def suspension_block(gains, q_a=HOME_ARM_POSITIONS):
+    """(I, G): the diagonals of the mass matrix's block and of the gravity
+    stiffness d tau_g / d theta (> 0: gravity topples the raised mass) of
+    the suspension's joints, with the arm at `q_a` and the suspension of
+    SuspensionGains `gains`, at rest."""
+    plant, model = make_mcr_plant(suspension=gains)
+    M, _, _, gravity = _compliant_block(plant, model, SUSPENSION_JOINTS,
+                                        as_vector("q_a", q_a, 6))
+    return np.diag(M).copy(), np.diag(gravity).copy()
+
+
+def rocking_modes(plant, model, joints, q_a=HOME_ARM_POSITIONS):
+    """The modes of the spring-damper joints `joints` of the base's model
+    instance (all else held still), lowest frequency first (see
+    mount_rocking_modes)."""
     q_a = as_vector("q_a", q_a, 6)
-    context = plant.CreateDefaultContext()
-    q = plant.GetPositions(context)
-    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_a
-    plant.SetPositions(context, q)
-    iq = joint_position_indices(plant, MOUNT_JOINTS, model.base)
-    iv = joint_velocity_indices(plant, MOUNT_JOINTS, model.base)
-    M = plant.CalcMassMatrix(context)[np.ix_(iv, iv)]
-    springs = {
-        element.joint().name(): element.GetStiffness(context)
-        for element in _force_elements(plant)
-        if isinstance(element, RevoluteSpring)
-    }
-    joints = [plant.GetJointByName(n, model.base) for n in MOUNT_JOINTS]
-    k = np.array([springs.get(j.name(), 0.0) for j in joints])
-    C = np.diag([j.default_damping() for j in joints])
-    step = 1e-6
-    gravity_gradient = np.zeros((2, 2))
-    for col, i in enumerate(iq):
-        tau = []
-        for sign in (1.0, -1.0):
-            shifted = q.copy()
-            shifted[i] += sign * step
-            plant.SetPositions(context, shifted)
-            tau.append(plant.CalcGravityGeneralizedForces(context)[iv])
-        gravity_gradient[:, col] = (tau[0] - tau[1]) / (2 * step)
+    M, k, C, gravity_gradient = _compliant_block(plant, model, joints, q_a)
+    n = len(joints)
     K = np.diag(k) - gravity_gradient
     A = np.block(
         [
-            [np.zeros((2, 2)), np.eye(2)],
+            [np.zeros((n, n)), np.eye(n)],
             [-np.linalg.solve(M, K), -np.linalg.solve(M, C)],
         ]
     )
@@ -367,7 +394,7 @@ def mount_rocking_modes(plant, model, q_a=HOME_ARM_POSITIONS):
     for value, vector in zip(eigenvalues, eigenvectors.T, strict=True):
         if value.imag <= 0:
             continue
-        shape = np.abs(vector[:2])
+        shape = np.abs(vector[:n])
         modes.append(
             MountMode(
                 frequency_hz=abs(value) / (2 * np.pi),
@@ -376,6 +403,38 @@ def mount_rocking_modes(plant, model, q_a=HOME_ARM_POSITIONS):
             )
         )
     return sorted(modes, key=lambda mode: mode.frequency_hz)
+
+
+def _compliant_block(plant, model, joints, q_a):
+    """M (mass matrix block), k (springs), C (joint damping) and the
+    gravity gradient d tau_g / d theta of the base's joints `joints`, at
+    rest with the arm at q_a."""
+    context = plant.CreateDefaultContext()
+    q = plant.GetPositions(context)
+    q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_a
+    plant.SetPositions(context, q)
+    iq = joint_position_indices(plant, joints, model.base)
+    iv = joint_velocity_indices(plant, joints, model.base)
+    M = plant.CalcMassMatrix(context)[np.ix_(iv, iv)]
+    springs = {
+        element.joint().name(): element.GetStiffness(context)
+        for element in _force_elements(plant)
+        if isinstance(element, RevoluteSpring)
+    }
+    bodies = [plant.GetJointByName(n, model.base) for n in joints]
+    k = np.array([springs.get(j.name(), 0.0) for j in bodies])
+    C = np.diag([j.default_damping() for j in bodies])
+    step = 1e-6
+    gravity_gradient = np.zeros((len(joints), len(joints)))
+    for col, i in enumerate(iq):
+        tau = []
+        for sign in (1.0, -1.0):
+            shifted = q.copy()
+            shifted[i] += sign * step
+            plant.SetPositions(context, shifted)
+            tau.append(plant.CalcGravityGeneralizedForces(context)[iv])
+        gravity_gradient[:, col] = (tau[0] - tau[1]) / (2 * step)
+    return M, k, C, gravity_gradient
 
 
 def _force_elements(plant):

@@ -49,16 +49,50 @@ SCALARS = [float, AutoDiffXd]
 """The drivers branch on values (saturation), so no symbolic scalar."""
 
 
+BASE_LOOPS = {
+    # Today's model: a heavy base whose velocity loop is a first-order lag
+    # of 0.1 to 0.3 s (facts sheet, EST; 0.2 s), held to 1 m/s^2.
+    "smooth": {"lag": 0.2, "damping_ratio": None,
+               "acceleration_limits": [1.0, 1.0, 1.0],
+               "servo_time_constant": 0.01},
+    # A stiffly tuned wheel loop (EST): 20 ms lag, as a current-limited
+    # hub motor's speed loop with little filtering reaches, and the
+    # drives' own 5 m/s^2 (the effort limits allow about 6 m/s^2 for the
+    # loaded base, models/mcr_base.sdf), with a 5 ms wheel servo under it.
+    # The plant's step must be at most lag / 10 = 2 ms for it.
+    "jerky": {"lag": 0.02, "damping_ratio": None,
+              "acceleration_limits": [5.0, 5.0, 5.0],
+              "servo_time_constant": 0.005},
+    # A velocity loop with an integrator against the base's inertia and a
+    # little filtering rings (EST): natural frequency 3 Hz (lag = 1 / (2 pi
+    # 3 Hz) = 0.053 s), damping ratio 0.15, the 5 m/s^2 of the drives: the
+    # overshoot of 62 % and the 3 Hz ringing are those of bases that
+    # "shake or even slip" under a rapid command (paper Sec. IV-A); issue
+    # 21's sweep measured the filter helping most there.
+    "ringing": {"lag": 1.0 / (2.0 * np.pi * 3.0), "damping_ratio": 0.15,
+                "acceleration_limits": [5.0, 5.0, 5.0],
+                "servo_time_constant": 0.01},
+}
+"""The named base velocity loops (BaseDriverParameters.loop): the values
+of lag, damping_ratio, acceleration_limits and servo_time_constant each
+gives (EST, see the
+comments)."""
+
+
 @dataclass
 class BaseDriverParameters:
     """The base's velocity loop (facts sheet: EST from comparable bases).
 
     Attributes:
+        loop: None, "smooth", "jerky" or "ringing" (BASE_LOOPS): a named
+            loop gives the fields below that are left None their EST
+            values; None gives them the smooth loop's. A first-order loop
+            (smooth, jerky) takes no damping_ratio.
         lag: time constant of the velocity loop in s (0.1 to 0.3 s on
-            such bases); 0.2 s by default.
+            such bases); 0.2 s by default (None: the loop's).
         velocity_limits: [vx, vy, wz] limits, m/s and rad/s (1.0 each).
         acceleration_limits: [ax, ay, alpha_z] limits, m/s^2 and rad/s^2
-            (1.0 each).
+            (1.0 each by default; None: the loop's).
         damping_ratio: None (the default) for the first-order lag; a
             number in [0.001, 1] makes the loop second order, with natural
             frequency 1 / lag and this damping ratio: a base whose
@@ -67,21 +101,22 @@ class BaseDriverParameters:
             slip", Sec. IV-A).
         servo_time_constant: time constant of the wheel servo that tracks
             the loop's output, s; it sizes the plant's velocity gain and
-            must be well below `lag`.
+            must be below lag / 2 (0.01 s by default; None: the loop's).
         time_step: the driver's update period in s (the plant's step; the
             station sets it), at most lag / 10.
     """
 
-    lag: float = 0.2
+    loop: str | None = None
+    lag: float | None = None
     damping_ratio: float | None = None
     velocity_limits: list[float] = field(
         default_factory=lambda: [1.0, 1.0, 1.0])
-    acceleration_limits: list[float] = field(
-        default_factory=lambda: [1.0, 1.0, 1.0])
-    servo_time_constant: float = 0.01
+    acceleration_limits: list[float] | None = None
+    servo_time_constant: float | None = None
     time_step: float = 0.001
 
     def __post_init__(self):
+        self._fill_from_loop()
         positive("lag", self.lag)
         if self.damping_ratio is not None:
             in_closed_range("damping_ratio", self.damping_ratio, 1e-3, 1.0)
@@ -97,6 +132,27 @@ class BaseDriverParameters:
                 f"lag = {self.lag!r} s: must be below lag / 2, or the "
                 "servo, not the loop, sets the base's bandwidth")
         check_base_time_step(self, "time_step", self.time_step)
+
+    def _fill_from_loop(self):
+        if self.loop is not None and self.loop not in BASE_LOOPS:
+            raise ValueError(
+                f"loop = {self.loop!r} is not allowed: must be None or one "
+                f"of {sorted(BASE_LOOPS)}")
+        preset = BASE_LOOPS[self.loop or "smooth"]
+        if (self.loop is not None and preset["damping_ratio"] is None
+                and self.damping_ratio is not None):
+            raise ValueError(
+                f"damping_ratio = {self.damping_ratio!r} is not allowed with "
+                f"loop = {self.loop!r}: a first-order loop has none (use "
+                "loop: ringing, or no loop, for a second-order one)")
+        if self.lag is None:
+            self.lag = preset["lag"]
+        if self.acceleration_limits is None:
+            self.acceleration_limits = list(preset["acceleration_limits"])
+        if self.servo_time_constant is None:
+            self.servo_time_constant = preset["servo_time_constant"]
+        if self.damping_ratio is None and self.loop is not None:
+            self.damping_ratio = preset["damping_ratio"]
 
 
 MIN_SERVO_FREQUENCY = 1.0

@@ -63,6 +63,11 @@ from drake_wbc.robot.model import (
     joint_position_indices,
     joint_velocity_indices,
 )
+from drake_wbc.robot.suspension import (
+    SUSPENSION_JOINTS,
+    SuspensionParameters,
+    suspension_gains,
+)
 from drake_wbc.station.drivers import (
     ArmDriverParameters,
     BaseDriverParameters,
@@ -130,7 +135,13 @@ class StationOptions:
         scene_period: s, how often the scripted scene's hand wrench and
             the people's drawn poses are sampled (held in between); a
             whole multiple of time_step (0.01 s, the control period).
-        base: the base's velocity loop.
+        base: the base's velocity loop (BaseDriverParameters.loop:
+            smooth, the default, jerky or ringing).
+        suspension: None (the default: the chassis rigid on its wheels) or
+            the suspension's modes between the wheels and the chassis
+            (drake_wbc.robot.suspension: spring-damper joints in roll and
+            pitch, sized to the modes with the arm at
+            initial_arm_positions).
         arm: the arm's position servo.
         wrist: the FT-300 model (noise and quantisation of the real
             sensor by default; ForceTorqueSensorParameters.ideal() for
@@ -150,6 +161,7 @@ class StationOptions:
     time_step: float = 0.001
     scene_period: float = 0.01
     base: BaseDriverParameters = field(default_factory=BaseDriverParameters)
+    suspension: SuspensionParameters | None = None
     arm: ArmDriverParameters = field(default_factory=ArmDriverParameters)
     wrist: ForceTorqueSensorParameters = field(
         default_factory=ForceTorqueSensorParameters)
@@ -171,6 +183,9 @@ class StationOptions:
                            ("lidar", LidarParameters)):
             setattr(self, name, checked_instance(name, getattr(self, name),
                                                  kind, kind))
+        self.suspension = checked_instance(
+            "suspension", self.suspension, SuspensionParameters,
+            lambda: None)
         # The drivers run at the plant's step, whatever their own.
         check_base_time_step(self.base, "time_step", h, prefix="base.")
         check_arm_time_step(self.arm, "time_step", h, prefix="arm.")
@@ -227,7 +242,9 @@ class SimulatedStation:
             time_step=h, discrete_contact_approximation="sap",
             contact_model="hydroelastic_with_fallback",
             use_sampled_output_ports=False), builder)
-        model = add_mcr(plant)
+        model = add_mcr(plant, suspension=None if options.suspension is None
+                        else suspension_gains(options.suspension,
+                                              options.initial_arm_positions))
         add_static_obstacles(plant, scene)
         self._gains = servo_gains(options.initial_arm_positions,
                                   options.base, options.arm)
@@ -368,7 +385,8 @@ class SimulatedStation:
             options.initial_base_pose)
         q_cmd = np.asarray(options.initial_arm_positions, dtype=float)
         q[joint_position_indices(plant, ARM_JOINTS, model.arm)] = q_cmd
-        q[joint_position_indices(plant, MOUNT_JOINTS, model.base)] = 0.0
+        q[joint_position_indices(plant, self._compliant_joints(),
+                                 model.base)] = 0.0
         plant.SetPositions(context, q)
         plant.SetVelocities(context, np.zeros(plant.num_velocities()))
         self._settle_under_gravity(context, q_cmd)
@@ -379,30 +397,40 @@ class SimulatedStation:
             arm_interpolator_state(q_cmd, root_context.get_time(),
                                    options.initial_arm_positions))
 
+    def _compliant_joints(self):
+        """The base's spring-damper joints: the mount's, then the
+        suspension's if the station has one."""
+        if self.options.suspension is None:
+            return MOUNT_JOINTS
+        return MOUNT_JOINTS + SUSPENSION_JOINTS
+
     def _settle_under_gravity(self, context, q_cmd, iterations=30):
-        """Moves the mount's and the arm's joints to where the springs and
-        the arm's servo balance gravity (fixed-point iteration with each
-        joint's own stiffness; gravity's stiffness is far smaller)."""
+        """Moves the mount's (and the suspension's) and the arm's joints to
+        where the springs and the arm's servo balance gravity (fixed-point
+        iteration with each joint's own stiffness; gravity's stiffness is
+        far smaller)."""
         plant, model = self.plant, self.model
         springs = {e.joint().name(): e.default_stiffness()
                    for e in (plant.get_force_element(ForceElementIndex(i))
                              for i in range(plant.num_force_elements()))
                    if isinstance(e, RevoluteSpring)}
+        compliant = self._compliant_joints()
+        n = len(compliant)
         iq = np.concatenate([
-            joint_position_indices(plant, MOUNT_JOINTS, model.base),
+            joint_position_indices(plant, compliant, model.base),
             joint_position_indices(plant, ARM_JOINTS, model.arm)])
         iv = np.concatenate([
-            joint_velocity_indices(plant, MOUNT_JOINTS, model.base),
+            joint_velocity_indices(plant, compliant, model.base),
             joint_velocity_indices(plant, ARM_JOINTS, model.arm)])
-        stiffness = np.array([springs[n] for n in MOUNT_JOINTS]
-                             + [self._gains[n].p for n in ARM_JOINTS])
-        target = np.concatenate([np.zeros(2), q_cmd])
+        stiffness = np.array([springs[name] for name in compliant]
+                             + [self._gains[name].p for name in ARM_JOINTS])
+        target = np.concatenate([np.zeros(n), q_cmd])
         forces = MultibodyForces(plant)
         for _ in range(iterations):
             plant.CalcForceElementsContribution(context, forces)
             tau = plant.CalcGeneralizedForces(context, forces)[iv]
             q = plant.GetPositions(context)
-            servo = np.concatenate([np.zeros(2), -stiffness[2:] * (
-                q[iq[2:]] - target[2:])])
+            servo = np.concatenate([np.zeros(n), -stiffness[n:] * (
+                q[iq[n:]] - target[n:])])
             q[iq] += (tau + servo) / stiffness
             plant.SetPositions(context, q)
