@@ -21,6 +21,7 @@ the same math as C++ SymbolicVectorSystems
 drake_wbc.station.servo_gains.
 """
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -75,8 +76,7 @@ BASE_LOOPS = {
 }
 """The named base velocity loops (BaseDriverParameters.loop): the values
 of lag, damping_ratio, acceleration_limits and servo_time_constant each
-gives (EST, see the
-comments)."""
+gives (EST, see the comments)."""
 
 
 @dataclass
@@ -84,15 +84,17 @@ class BaseDriverParameters:
     """The base's velocity loop (facts sheet: EST from comparable bases).
 
     Attributes:
-        loop: None, "smooth", "jerky" or "ringing" (BASE_LOOPS): a named
-            loop gives the fields below that are left None their EST
-            values; None gives them the smooth loop's. A first-order loop
-            (smooth, jerky) takes no damping_ratio.
+        loop: None (the default: the fields below as given) or a named
+            loop of BASE_LOOPS, "smooth", "jerky" or "ringing", which
+            sets lag, damping_ratio, acceleration_limits and
+            servo_time_constant to its EST values; a field given another
+            value than both the loop's and its own default is an error
+            (leave `loop` out to tune them).
         lag: time constant of the velocity loop in s (0.1 to 0.3 s on
-            such bases); 0.2 s by default (None: the loop's).
+            such bases); 0.2 s by default.
         velocity_limits: [vx, vy, wz] limits, m/s and rad/s (1.0 each).
         acceleration_limits: [ax, ay, alpha_z] limits, m/s^2 and rad/s^2
-            (1.0 each by default; None: the loop's).
+            (1.0 each).
         damping_ratio: None (the default) for the first-order lag; a
             number in [0.001, 1] makes the loop second order, with natural
             frequency 1 / lag and this damping ratio: a base whose
@@ -101,18 +103,19 @@ class BaseDriverParameters:
             slip", Sec. IV-A).
         servo_time_constant: time constant of the wheel servo that tracks
             the loop's output, s; it sizes the plant's velocity gain and
-            must be below lag / 2 (0.01 s by default; None: the loop's).
+            must be below lag / 2.
         time_step: the driver's update period in s (the plant's step; the
             station sets it), at most lag / 10.
     """
 
     loop: str | None = None
-    lag: float | None = None
+    lag: float = 0.2
     damping_ratio: float | None = None
     velocity_limits: list[float] = field(
         default_factory=lambda: [1.0, 1.0, 1.0])
-    acceleration_limits: list[float] | None = None
-    servo_time_constant: float | None = None
+    acceleration_limits: list[float] = field(
+        default_factory=lambda: [1.0, 1.0, 1.0])
+    servo_time_constant: float = 0.01
     time_step: float = 0.001
 
     def __post_init__(self):
@@ -134,25 +137,30 @@ class BaseDriverParameters:
         check_base_time_step(self, "time_step", self.time_step)
 
     def _fill_from_loop(self):
-        if self.loop is not None and self.loop not in BASE_LOOPS:
+        """Sets the named loop's values (see `loop`)."""
+        if self.loop is None:
+            return
+        if self.loop not in BASE_LOOPS:
             raise ValueError(
                 f"loop = {self.loop!r} is not allowed: must be None or one "
                 f"of {sorted(BASE_LOOPS)}")
-        preset = BASE_LOOPS[self.loop or "smooth"]
-        if (self.loop is not None and preset["damping_ratio"] is None
-                and self.damping_ratio is not None):
-            raise ValueError(
-                f"damping_ratio = {self.damping_ratio!r} is not allowed with "
-                f"loop = {self.loop!r}: a first-order loop has none (use "
-                "loop: ringing, or no loop, for a second-order one)")
-        if self.lag is None:
-            self.lag = preset["lag"]
-        if self.acceleration_limits is None:
-            self.acceleration_limits = list(preset["acceleration_limits"])
-        if self.servo_time_constant is None:
-            self.servo_time_constant = preset["servo_time_constant"]
-        if self.damping_ratio is None and self.loop is not None:
-            self.damping_ratio = preset["damping_ratio"]
+        for name, value in BASE_LOOPS[self.loop].items():
+            given = getattr(self, name)
+            if not (_same(given, value) or _same(given, BASE_LOOPS[
+                    "smooth"][name])):
+                raise ValueError(
+                    f"{name} = {given!r} is not allowed with loop = "
+                    f"{self.loop!r}: the loop sets it to {value!r}; leave "
+                    "loop out to set it")
+            setattr(self, name, copy.copy(value))
+
+
+def _same(a, b):
+    """Whether two field values (None, numbers or lists) are equal."""
+    if a is None or b is None:
+        return a is None and b is None
+    return bool(np.array_equal(np.asarray(a, dtype=float),
+                               np.asarray(b, dtype=float)))
 
 
 MIN_SERVO_FREQUENCY = 1.0
