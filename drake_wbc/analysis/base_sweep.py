@@ -185,8 +185,8 @@ def draw_sweep(maps, rows, path, scenario):
     import matplotlib.pyplot as plt
     from matplotlib.colors import LogNorm
 
-    fig, axes = plt.subplots(2, len(maps), figsize=(4.6 * len(maps), 7.6),
-                             squeeze=False)
+    fig, axes = plt.subplots(2, len(maps), figsize=(5.0 * len(maps), 8.0),
+                             squeeze=False, layout="constrained")
     norm = LogNorm(vmin=0.5, vmax=2.0)
     station = scenario.station
     low, high = trajectory_tracking.SHAKING_BAND
@@ -207,9 +207,11 @@ def draw_sweep(maps, rows, path, scenario):
             image = axis.imshow(grid, cmap="RdBu", norm=norm, aspect="auto")
             for i in range(grid.shape[0]):
                 for j in range(grid.shape[1]):
+                    dark = abs(np.log(grid[i, j])) > 0.45
                     axis.text(j, i, f"{grid[i, j]:.2f}\n"
                               f"({measured[i, j]:.2f})", ha="center",
-                              va="center", fontsize=8)
+                              va="center", fontsize=8,
+                              color="white" if dark else "black")
             axis.set_xticks(range(len(sweep_map.x_values)),
                             [str(_shown(v)) for v in sweep_map.x_values])
             axis.set_yticks(range(len(sweep_map.y_values)),
