@@ -134,6 +134,78 @@ def test_second_order_loop_approaches_the_continuous_step_response(zeta):
     np.testing.assert_allclose(errors[0] / errors[1], 2.0, rtol=0.1)
 
 
+@pytest.mark.parametrize("h", [0.002, 0.001])
+def test_jerky_loop_is_the_short_lags_sampled_exponential(h):
+    params = BaseDriverParameters(loop="jerky", time_step=h)
+    assert params.lag == 0.02 and params.damping_ratio is None
+    np.testing.assert_array_equal(params.acceleration_limits, [5.0] * 3)
+    u = np.array([0.05, -0.03, 0.04])
+    gain = 1.0 - np.exp(-h / params.lag)
+    # Its first (largest) step stays under a_max h: no acceleration limit.
+    assert np.all(gain * np.abs(u) < np.array(params.acceleration_limits) * h)
+    steps = int(round(0.2 / h))
+    v = run_loop(params, u, steps)
+    n = np.arange(steps + 1)[:, None]
+    np.testing.assert_allclose(v, u * (1.0 - np.exp(-n * h / params.lag)),
+                               rtol=0.0, atol=1e-13)
+    # Ten times faster than the smooth loop: 95 % of the step in 3 lags.
+    assert np.all(np.abs(v[int(round(0.06 / h))] - 0.95 * u)
+                  < 0.01 * np.abs(u))
+
+
+def test_ringing_loop_is_the_underdamped_second_order_step():
+    h = 0.0005
+    params = BaseDriverParameters(loop="ringing", time_step=h)
+    w, zeta = 1.0 / params.lag, params.damping_ratio
+    assert w / (2 * np.pi) == pytest.approx(3.0) and zeta == 0.15
+    u, duration = np.array([0.05, -0.03, 0.04]), 2.0
+    x = run_loop(params, u, int(round(duration / h)))
+    assert np.all(np.abs(x[:, 3:]) < params.acceleration_limits)
+    t = np.arange(x.shape[0])[:, None] * h
+    error = np.max(np.abs(x[:, :3] - second_order_step(u, w, zeta, t)),
+                   axis=0)
+    np.testing.assert_array_less(error, np.abs(u) * w * h)
+    # Its overshoot (62 %) and its ringing period, 1 / (3 Hz sqrt(1 -
+    # zeta^2)), from the upward crossings of the command.
+    overshoot = np.exp(-zeta * np.pi / np.sqrt(1.0 - zeta**2))
+    np.testing.assert_allclose(np.max(x[:, :3] / u, axis=0), 1.0 + overshoot,
+                               atol=w * h)
+    above = x[:, 0] > u[0]
+    ups = np.flatnonzero(above[1:] & ~above[:-1]) * h
+    np.testing.assert_allclose(np.diff(ups), 2 * np.pi / (
+        w * np.sqrt(1.0 - zeta**2)), rtol=0.01)
+
+
+def test_a_named_loop_sets_its_values_and_refuses_others():
+    smooth = BaseDriverParameters(loop="smooth")
+    assert smooth == BaseDriverParameters(loop="smooth", lag=0.2)
+    assert (smooth.lag, smooth.damping_ratio) == (0.2, None)
+    # A field at its default takes the loop's value, even when written.
+    assert BaseDriverParameters(loop="ringing", lag=0.2).lag == (
+        pytest.approx(1.0 / (6.0 * np.pi)))
+    for fields, name in ((dict(lag=0.1), "lag"),
+                         (dict(damping_ratio=0.3), "damping_ratio"),
+                         (dict(acceleration_limits=[2.0] * 3),
+                          "acceleration_limits")):
+        with pytest.raises(ValueError, match=f"^{name} = .*loop = 'ringing'"):
+            BaseDriverParameters(loop="ringing", **fields)
+    with pytest.raises(ValueError, match="^damping_ratio = 0.3 .*'jerky'"):
+        BaseDriverParameters(loop="jerky", damping_ratio=0.3,
+                             time_step=0.002)
+
+
+def test_a_named_loop_loads_from_a_scenario_file():
+    # The loader fills a default instance field by field: the loop's
+    # values, not the smooth defaults it met first, must come out.
+    from drake_wbc.experiments.scenario import load_scenario
+
+    scenario = load_scenario(text="station: {base: {loop: ringing}}")
+    base = scenario.station.base
+    assert base.lag == pytest.approx(1.0 / (6.0 * np.pi))
+    assert base.damping_ratio == 0.15
+    np.testing.assert_array_equal(base.acceleration_limits, [5.0] * 3)
+
+
 def autodiff_context(system, state, command, pose):
     """A context of the AutoDiffXd `system` whose derivatives are taken
     with respect to [state, command, pose]."""

@@ -89,6 +89,12 @@ def _add_run_arguments(parser):
                         help="simulated time in s (default: the scenario's)")
     parser.add_argument("--no-replay", action="store_true",
                         help="do not write the Meshcat replay pages")
+    parser.add_argument(
+        "--sweep", action="store_true",
+        help="trajectory-tracking scenarios: run the step over small maps "
+             "of base models around the scenario's (velocity loop, "
+             "suspension, acceleration limit) and plot the filter's "
+             "benefit (in <output>/sweep/; a few minutes)")
 
 
 def _run_run(args):
@@ -111,6 +117,17 @@ def _run_run(args):
         raise ValueError(f"--duration = {args.duration!r} is not allowed: "
                          "must be > 0 s")
     output = args.output or Path("out") / path.stem
+    if args.sweep:
+        from drake_wbc.analysis.base_sweep import run_sweep
+
+        scenario = load_scenario(path)
+        if args.duration is not None:
+            scenario.duration = args.duration
+        print(f"drake-wbc run {path.stem} --sweep: writing to "
+              f"{output / 'sweep'}/", flush=True)
+        run_sweep(scenario, output / "sweep",
+                  echo=lambda line: print(line, flush=True))
+        return 0
     print(f"drake-wbc run {path.stem}: writing to {output}/")
     run_scenario(path, output, duration=args.duration,
                  replay=False if args.no_replay else None)

@@ -17,7 +17,9 @@ The shipped model files are found through Drake's package map under the
 package name `drake_wbc`, so they load with no network.
 """
 
-from dataclasses import dataclass
+import tempfile
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -46,6 +48,11 @@ from drake_wbc.math.validation import (
     checked_instance,
 )
 from drake_wbc.robot.description import RobotDescription, shipped_robot
+from drake_wbc.robot.suspension import (
+    SUSPENSION_JOINTS,
+    SuspensionGains,
+    suspended_base_sdf,
+)
 
 HOME_ARM_POSITIONS = np.array(shipped_robot().arm.home)
 """The shipped robot's home configuration (rad), from its description:
@@ -90,6 +97,9 @@ class RobotModel:
         ft_sensor_joint: the weld on the sensor's measuring surface.
         home: (n,) the arm's home configuration, rad.
         limits: the arm's own ArmLimits.
+        suspension_joints: the suspension's joints under the chassis
+            (roll, pitch) when the robot was added with one, else empty
+            (drake_wbc.robot.suspension).
     """
 
     description: RobotDescription
@@ -108,6 +118,7 @@ class RobotModel:
     ft_sensor_joint: Joint
     home: np.ndarray
     limits: ArmLimits
+    suspension_joints: tuple = ()
 
     @property
     def num_arm_joints(self):
@@ -115,7 +126,8 @@ class RobotModel:
         return len(self.arm_joints)
 
 
-def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None):
+def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
+              suspension=None):
     """Adds the robot of `description` to `plant` (not yet finalized) and
     checks the description against it.
 
@@ -125,6 +137,10 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None):
         description: a RobotDescription; the shipped robot's if None.
         parser: an existing parser of `plant` whose package map is to be
             used (a new one is made if None).
+        suspension: None (the chassis rigid on its planar joints, as the
+            model has it) or the SuspensionGains of a suspension under the
+            chassis (drake_wbc.robot.suspension), inserted into the
+            directives' first model, the base (model directives only).
 
     Returns:
         RobotModel: the model instances, frames and joints.
@@ -149,17 +165,42 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None):
         if not package_map.Contains(name):
             package_map.Add(name, description.resolve(folder))
     source = description.model
+    if suspension is not None and not isinstance(suspension,
+                                                 SuspensionGains):
+        raise ValueError(
+            f"suspension = {suspension!r} is not allowed: must be None or "
+            "SuspensionGains (drake_wbc.robot.suspension)")
     if source.directives:
         url = description.resolve(source.directives)
         path = package_map.ResolveUrl(url) if "://" in url else url
-        ProcessModelDirectives(LoadModelDirectives(path), plant, parser)
+        directives = LoadModelDirectives(path)
+        if suspension is None:
+            ProcessModelDirectives(directives, plant, parser)
+        else:
+            # The base's file with the suspension's joints added, parsed
+            # in its place (the other directives weld to it).
+            first = directives.directives[0].add_model
+            text = Path(package_map.ResolveUrl(first.file)).read_text()
+            with tempfile.TemporaryDirectory() as folder:
+                suspended = Path(folder) / "base_suspended.sdf"
+                suspended.write_text(suspended_base_sdf(text, suspension))
+                first.file = f"file://{suspended}"
+                ProcessModelDirectives(directives, plant, parser)
     else:
+        if suspension is not None:
+            raise ValueError(
+                "suspension is not allowed with model.file: a suspension is "
+                "inserted into model directives' base; model it in the file")
         url = description.resolve(source.file)
         if "://" in url:
             parser.AddModelsFromUrl(url)
         else:
             parser.AddModels(url)
-    return _robot_model(plant, description)
+    model = _robot_model(plant, description)
+    if suspension is None:
+        return model
+    return replace(model, suspension_joints=tuple(
+        plant.GetJointByName(name, model.base) for name in SUSPENSION_JOINTS))
 
 
 def _scoped(plant, field, name, find, kind):
@@ -330,10 +371,11 @@ def _arm_limits(arm, joints):
                      limits["acceleration_limits"])
 
 
-def make_robot_plant(description=None, time_step=0.0):
-    """Returns (plant, model): a finalized plant of the robot alone."""
+def make_robot_plant(description=None, time_step=0.0, suspension=None):
+    """Returns (plant, model): a finalized plant of the robot alone (with
+    the suspension of SuspensionGains `suspension`, if any)."""
     plant = MultibodyPlant(time_step=time_step)
-    model = add_robot(plant, description)
+    model = add_robot(plant, description, suspension=suspension)
     plant.Finalize()
     return plant, model
 
@@ -500,8 +542,9 @@ def mount_rocking_modes(plant, model, q_a=None):
     """Returns the mount's rocking modes with the arm held at `q_a`.
 
     The base and the arm are held still, so the mount's two joints theta
-    obey M theta'' + C theta' + K theta = 0 about rest, with M the mount
-    block of the plant's mass matrix, C the joint damping, and
+    (the robot description's passive joints, roll and pitch) obey
+    M theta'' + C theta' + K theta = 0 about rest, with M the mount block
+    of the plant's mass matrix, C the joint damping, and
     K = k I - d tau_g / d theta: the springs less the destabilising gravity
     of the upright mass (an inverted pendulum), the latter by central
     differences of the plant's gravity forces.
@@ -516,42 +559,42 @@ def mount_rocking_modes(plant, model, q_a=None):
         list[MountMode]: the modes, lowest frequency first; `shape` is the
         mode's direction in (roll, pitch).
     """
-    q_a = as_vector("q_a", model.home if q_a is None else q_a,
-                    model.num_arm_joints)
     if len(model.passive_joints) != 2:
         raise ValueError(
             f"model.passive_joints = {model.description.base.passive_joints}"
             " is not allowed: the mount's rocking modes need its two joints"
             " (roll, pitch)")
-    context = plant.CreateDefaultContext()
-    q = plant.GetPositions(context)
-    q[joint_position_indices(model.arm_joints)] = q_a
-    plant.SetPositions(context, q)
-    iq = joint_position_indices(model.passive_joints)
-    iv = joint_velocity_indices(model.passive_joints)
-    M = plant.CalcMassMatrix(context)[np.ix_(iv, iv)]
-    springs = {
-        element.joint().name(): element.GetStiffness(context)
-        for element in _force_elements(plant)
-        if isinstance(element, RevoluteSpring)
-    }
-    joints = model.passive_joints
-    k = np.array([springs.get(j.name(), 0.0) for j in joints])
-    C = np.diag([j.default_damping() for j in joints])
-    step = 1e-6
-    gravity_gradient = np.zeros((2, 2))
-    for col, i in enumerate(iq):
-        tau = []
-        for sign in (1.0, -1.0):
-            shifted = q.copy()
-            shifted[i] += sign * step
-            plant.SetPositions(context, shifted)
-            tau.append(plant.CalcGravityGeneralizedForces(context)[iv])
-        gravity_gradient[:, col] = (tau[0] - tau[1]) / (2 * step)
+    return rocking_modes(plant, model, model.passive_joints, q_a)
+
+
+def suspension_modes(plant, model, q_a=None):
+    """The suspension's rocking modes (as mount_rocking_modes, with the
+    mount, the base's planar joints and the arm held) of a plant made
+    with a suspension; `shape` is in (roll, pitch)."""
+    return rocking_modes(plant, model, model.suspension_joints, q_a)
+
+
+def suspension_block(gains, q_a=None):
+    """(I, G): the diagonals of the mass matrix's block and of the gravity
+    stiffness d tau_g / d theta (> 0: gravity topples the raised mass) of
+    the suspension's joints, with the arm at `q_a` (the home if None) and
+    the suspension of SuspensionGains `gains`, at rest."""
+    plant, model = make_robot_plant(suspension=gains)
+    M, _, _, gravity = _compliant_block(plant, model,
+                                        model.suspension_joints, q_a)
+    return np.diag(M).copy(), np.diag(gravity).copy()
+
+
+def rocking_modes(plant, model, joints, q_a=None):
+    """The modes of the spring-damper `joints` of the base (all else held
+    still, the arm at `q_a`, its home if None), lowest frequency first
+    (see mount_rocking_modes)."""
+    M, k, C, gravity_gradient = _compliant_block(plant, model, joints, q_a)
+    n = len(joints)
     K = np.diag(k) - gravity_gradient
     A = np.block(
         [
-            [np.zeros((2, 2)), np.eye(2)],
+            [np.zeros((n, n)), np.eye(n)],
             [-np.linalg.solve(M, K), -np.linalg.solve(M, C)],
         ]
     )
@@ -560,7 +603,7 @@ def mount_rocking_modes(plant, model, q_a=None):
     for value, vector in zip(eigenvalues, eigenvectors.T, strict=True):
         if value.imag <= 0:
             continue
-        shape = np.abs(vector[:2])
+        shape = np.abs(vector[:n])
         modes.append(
             MountMode(
                 frequency_hz=abs(value) / (2 * np.pi),
@@ -569,6 +612,39 @@ def mount_rocking_modes(plant, model, q_a=None):
             )
         )
     return sorted(modes, key=lambda mode: mode.frequency_hz)
+
+
+def _compliant_block(plant, model, joints, q_a):
+    """M (mass matrix block), k (springs), C (joint damping) and the
+    gravity gradient d tau_g / d theta of the base's `joints`, at rest
+    with the arm at q_a (its home if None)."""
+    q_a = as_vector("q_a", model.home if q_a is None else q_a,
+                    model.num_arm_joints)
+    context = plant.CreateDefaultContext()
+    q = plant.GetPositions(context)
+    q[joint_position_indices(model.arm_joints)] = q_a
+    plant.SetPositions(context, q)
+    iq = joint_position_indices(joints)
+    iv = joint_velocity_indices(joints)
+    M = plant.CalcMassMatrix(context)[np.ix_(iv, iv)]
+    springs = {
+        element.joint().index(): element.GetStiffness(context)
+        for element in _force_elements(plant)
+        if isinstance(element, RevoluteSpring)
+    }
+    k = np.array([springs.get(j.index(), 0.0) for j in joints])
+    C = np.diag([j.default_damping() for j in joints])
+    step = 1e-6
+    gravity_gradient = np.zeros((len(joints), len(joints)))
+    for col, i in enumerate(iq):
+        tau = []
+        for sign in (1.0, -1.0):
+            shifted = q.copy()
+            shifted[i] += sign * step
+            plant.SetPositions(context, shifted)
+            tau.append(plant.CalcGravityGeneralizedForces(context)[iv])
+        gravity_gradient[:, col] = (tau[0] - tau[1]) / (2 * step)
+    return M, k, C, gravity_gradient
 
 
 def _force_elements(plant):

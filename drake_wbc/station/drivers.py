@@ -21,6 +21,7 @@ the same math as C++ SymbolicVectorSystems
 drake_wbc.station.servo_gains.
 """
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -48,11 +49,46 @@ SCALARS = [float, AutoDiffXd]
 """The drivers branch on values (saturation), so no symbolic scalar."""
 
 
+BASE_LOOPS = {
+    # Today's model: a heavy base whose velocity loop is a first-order lag
+    # of 0.1 to 0.3 s (facts sheet, EST; 0.2 s), held to 1 m/s^2.
+    "smooth": {"lag": 0.2, "damping_ratio": None,
+               "acceleration_limits": [1.0, 1.0, 1.0],
+               "servo_time_constant": 0.01},
+    # A stiffly tuned wheel loop (EST): 20 ms lag, as a current-limited
+    # hub motor's speed loop with little filtering reaches, and the
+    # drives' own 5 m/s^2 (the effort limits allow about 6 m/s^2 for the
+    # loaded base, models/mcr_base.sdf), with a 5 ms wheel servo under it.
+    # The plant's step must be at most lag / 10 = 2 ms for it.
+    "jerky": {"lag": 0.02, "damping_ratio": None,
+              "acceleration_limits": [5.0, 5.0, 5.0],
+              "servo_time_constant": 0.005},
+    # A velocity loop with an integrator against the base's inertia and a
+    # little filtering rings (EST): natural frequency 3 Hz (lag = 1 / (2 pi
+    # 3 Hz) = 0.053 s), damping ratio 0.15, the 5 m/s^2 of the drives: the
+    # overshoot of 62 % and the 3 Hz ringing are those of bases that
+    # "shake or even slip" under a rapid command (paper Sec. IV-A); issue
+    # 21's sweep measured the filter helping most there.
+    "ringing": {"lag": 1.0 / (2.0 * np.pi * 3.0), "damping_ratio": 0.15,
+                "acceleration_limits": [5.0, 5.0, 5.0],
+                "servo_time_constant": 0.01},
+}
+"""The named base velocity loops (BaseDriverParameters.loop): the values
+of lag, damping_ratio, acceleration_limits and servo_time_constant each
+gives (EST, see the comments)."""
+
+
 @dataclass
 class BaseDriverParameters:
     """The base's velocity loop (facts sheet: EST from comparable bases).
 
     Attributes:
+        loop: None (the default: the fields below as given) or a named
+            loop of BASE_LOOPS, "smooth", "jerky" or "ringing", which
+            sets lag, damping_ratio, acceleration_limits and
+            servo_time_constant to its EST values; a field given another
+            value than both the loop's and its own default is an error
+            (leave `loop` out to tune them).
         lag: time constant of the velocity loop in s (0.1 to 0.3 s on
             such bases); 0.2 s by default.
         velocity_limits: [vx, vy, wz] limits, m/s and rad/s (1.0 each).
@@ -66,11 +102,12 @@ class BaseDriverParameters:
             slip", Sec. IV-A).
         servo_time_constant: time constant of the wheel servo that tracks
             the loop's output, s; it sizes the plant's velocity gain and
-            must be well below `lag`.
+            must be below lag / 2.
         time_step: the driver's update period in s (the plant's step; the
             station sets it), at most lag / 10.
     """
 
+    loop: str | None = None
     lag: float = 0.2
     damping_ratio: float | None = None
     velocity_limits: list[float] = field(
@@ -81,6 +118,7 @@ class BaseDriverParameters:
     time_step: float = 0.001
 
     def __post_init__(self):
+        self._fill_from_loop()
         positive("lag", self.lag)
         if self.damping_ratio is not None:
             in_closed_range("damping_ratio", self.damping_ratio, 1e-3, 1.0)
@@ -96,6 +134,32 @@ class BaseDriverParameters:
                 f"lag = {self.lag!r} s: must be below lag / 2, or the "
                 "servo, not the loop, sets the base's bandwidth")
         check_base_time_step(self, "time_step", self.time_step)
+
+    def _fill_from_loop(self):
+        """Sets the named loop's values (see `loop`)."""
+        if self.loop is None:
+            return
+        if self.loop not in BASE_LOOPS:
+            raise ValueError(
+                f"loop = {self.loop!r} is not allowed: must be None or one "
+                f"of {sorted(BASE_LOOPS)}")
+        for name, value in BASE_LOOPS[self.loop].items():
+            given = getattr(self, name)
+            if not (_same(given, value) or _same(given, BASE_LOOPS[
+                    "smooth"][name])):
+                raise ValueError(
+                    f"{name} = {given!r} is not allowed with loop = "
+                    f"{self.loop!r}: the loop sets it to {value!r}; leave "
+                    "loop out to set it")
+            setattr(self, name, copy.copy(value))
+
+
+def _same(a, b):
+    """Whether two field values (None, numbers or lists) are equal."""
+    if a is None or b is None:
+        return a is None and b is None
+    return bool(np.array_equal(np.asarray(a, dtype=float),
+                               np.asarray(b, dtype=float)))
 
 
 MIN_SERVO_FREQUENCY = 1.0

@@ -60,6 +60,10 @@ from drake_wbc.robot.model import (
     joint_position_indices,
     joint_velocity_indices,
 )
+from drake_wbc.robot.suspension import (
+    SuspensionParameters,
+    suspension_gains,
+)
 from drake_wbc.station.drivers import (
     ArmDriverParameters,
     BaseDriverParameters,
@@ -128,7 +132,13 @@ class StationOptions:
         scene_period: s, how often the scripted scene's hand wrench and
             the people's drawn poses are sampled (held in between); a
             whole multiple of time_step (0.01 s, the control period).
-        base: the base's velocity loop.
+        base: the base's velocity loop (BaseDriverParameters.loop:
+            smooth, the default, jerky or ringing).
+        suspension: None (the default: the chassis rigid on its wheels) or
+            the suspension's modes between the wheels and the chassis
+            (drake_wbc.robot.suspension: spring-damper joints in roll and
+            pitch, sized to the modes with the arm at
+            initial_arm_positions).
         arm: the arm's position servo.
         wrist: the FT-300 model (noise and quantisation of the real
             sensor by default; ForceTorqueSensorParameters.ideal() for
@@ -148,6 +158,7 @@ class StationOptions:
     time_step: float = 0.001
     scene_period: float = 0.01
     base: BaseDriverParameters = field(default_factory=BaseDriverParameters)
+    suspension: SuspensionParameters | None = None
     arm: ArmDriverParameters = field(default_factory=ArmDriverParameters)
     wrist: ForceTorqueSensorParameters = field(
         default_factory=ForceTorqueSensorParameters)
@@ -169,6 +180,9 @@ class StationOptions:
                            ("lidar", LidarParameters)):
             setattr(self, name, checked_instance(name, getattr(self, name),
                                                  kind, kind))
+        self.suspension = checked_instance(
+            "suspension", self.suspension, SuspensionParameters,
+            lambda: None)
         # The drivers run at the plant's step, whatever their own.
         check_base_time_step(self.base, "time_step", h, prefix="base.")
         check_arm_time_step(self.arm, "time_step", h, prefix="arm.")
@@ -227,7 +241,10 @@ class SimulatedStation:
             time_step=h, discrete_contact_approximation="sap",
             contact_model="hydroelastic_with_fallback",
             use_sampled_output_ports=False), builder)
-        model = add_robot(plant)
+        model = add_robot(
+            plant, suspension=None if options.suspension is None
+            else suspension_gains(options.suspension,
+                                  options.initial_arm_positions))
         add_static_obstacles(plant, scene)
         self._gains = servo_gains(options.initial_arm_positions,
                                   options.base, options.arm)
@@ -367,7 +384,7 @@ class SimulatedStation:
             options.initial_base_pose)
         q_cmd = np.asarray(options.initial_arm_positions, dtype=float)
         q[joint_position_indices(model.arm_joints)] = q_cmd
-        q[joint_position_indices(model.passive_joints)] = 0.0
+        q[joint_position_indices(self._compliant_joints())] = 0.0
         plant.SetPositions(context, q)
         plant.SetVelocities(context, np.zeros(plant.num_velocities()))
         self._settle_under_gravity(context, q_cmd)
@@ -378,31 +395,39 @@ class SimulatedStation:
             arm_interpolator_state(q_cmd, root_context.get_time(),
                                    options.initial_arm_positions))
 
+    def _compliant_joints(self):
+        """The base's spring-damper joints: the passive ones of the robot
+        (the mount's), then the suspension's if the station has one."""
+        return self.model.passive_joints + self.model.suspension_joints
+
     def _settle_under_gravity(self, context, q_cmd, iterations=30):
-        """Moves the mount's and the arm's joints to where the springs and
-        the arm's servo balance gravity (fixed-point iteration with each
-        joint's own stiffness; gravity's stiffness is far smaller)."""
+        """Moves the mount's (and the suspension's) and the arm's joints to
+        where the springs and the arm's servo balance gravity (fixed-point
+        iteration with each joint's own stiffness; gravity's stiffness is
+        far smaller)."""
         plant, model = self.plant, self.model
         springs = {e.joint().index(): e.default_stiffness()
                    for e in (plant.get_force_element(ForceElementIndex(i))
                              for i in range(plant.num_force_elements()))
                    if isinstance(e, RevoluteSpring)}
+        compliant = self._compliant_joints()
+        n = len(compliant)
         iq = np.concatenate([
-            joint_position_indices(model.passive_joints),
+            joint_position_indices(compliant),
             joint_position_indices(model.arm_joints)])
         iv = np.concatenate([
-            joint_velocity_indices(model.passive_joints),
+            joint_velocity_indices(compliant),
             joint_velocity_indices(model.arm_joints)])
         stiffness = np.array(
-            [springs[j.index()] for j in model.passive_joints]
-            + [self._gains[n].p for n in model.description.arm.joints])
-        target = np.concatenate([np.zeros(2), q_cmd])
+            [springs[j.index()] for j in compliant]
+            + [self._gains[name].p for name in model.description.arm.joints])
+        target = np.concatenate([np.zeros(n), q_cmd])
         forces = MultibodyForces(plant)
         for _ in range(iterations):
             plant.CalcForceElementsContribution(context, forces)
             tau = plant.CalcGeneralizedForces(context, forces)[iv]
             q = plant.GetPositions(context)
-            servo = np.concatenate([np.zeros(2), -stiffness[2:] * (
-                q[iq[2:]] - target[2:])])
+            servo = np.concatenate([np.zeros(n), -stiffness[n:] * (
+                q[iq[n:]] - target[n:])])
             q[iq] += (tau + servo) / stiffness
             plant.SetPositions(context, q)

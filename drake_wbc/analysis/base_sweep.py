@@ -1,0 +1,236 @@
+"""Where the base filter helps: the trajectory-tracking step over a grid of
+base models (`drake-wbc run <scenario> --sweep`).
+
+Around a trajectory-tracking scenario's station, three small maps, each
+varying two of the base's properties and keeping the others the
+scenario's:
+
+- `loop`: the velocity loop's lag (1 / natural frequency of a second-order
+  loop) against its damping ratio (a first-order lag in the last row);
+- `compliance`: the suspension's frequency (rigid in the first column)
+  against its damping ratio;
+- `acceleration`: the loop's lag against its acceleration limit.
+
+At each point the scenario runs with and without the filter (its two
+variants, full duration) and the point reports the experiment's ratios
+without / with filter (drake_wbc.experiments.trajectory_tracking), in the
+ground truth and after the paper's measurement processing. The same point
+twice (the scenario's own model is in every map) runs once. The plant's
+step shrinks to lag / 10 where a short lag needs it.
+"""
+
+import copy
+import csv
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from drake_wbc.experiments import trajectory_tracking
+from drake_wbc.experiments.runner import build_closed_loop, simulate
+from drake_wbc.math.validation import validate
+from drake_wbc.robot.suspension import SuspensionParameters
+from drake_wbc.station.drivers import BaseDriverParameters
+
+RINGING_LAG = 1.0 / (2.0 * np.pi * 3.0)
+"""s: the ringing loop's lag (3 Hz natural frequency, BASE_LOOPS)."""
+
+FIRST_ORDER = "first order"
+RIGID = "rigid"
+
+
+@dataclass(frozen=True)
+class SweepMap:
+    """One map: `x_name` over `x_values` (columns) against `y_name` over
+    `y_values` (rows)."""
+
+    name: str
+    x_name: str
+    x_values: tuple
+    y_name: str
+    y_values: tuple
+
+
+MAPS = (
+    SweepMap("loop", "loop lag (s)", (0.2, 0.1, RINGING_LAG),
+             "loop damping ratio", (FIRST_ORDER, 0.7, 0.3, 0.15, 0.1)),
+    SweepMap("compliance", "suspension frequency (Hz)", (RIGID, 3.0, 4.0,
+                                                         6.0),
+             "suspension damping ratio", (0.3, 0.1, 0.05)),
+    SweepMap("acceleration", "loop lag (s)", (0.02, RINGING_LAG, 0.2),
+             "loop acceleration limit (m/s^2)", (1.0, 5.0)),
+)
+"""The maps of the sweep."""
+
+RATIOS = ("oscillation_rms_mount_band_m_s",
+          "oscillation_rms_shaking_band_m_s", "error_rms_total_m_s")
+"""The ratios a point reports (ground truth and `measured.`)."""
+
+STEPS = (0.005, 0.002, 0.001)
+"""s: plant steps the sweep may use (each divides the control period)."""
+
+
+def point_scenario(scenario, sweep_map, x, y):
+    """A copy of `scenario` with the base of map `sweep_map` at (x, y)."""
+    scenario = copy.deepcopy(scenario)
+    station = scenario.station
+    base = station.base
+    lag, zeta = base.lag, base.damping_ratio
+    accel = list(base.acceleration_limits)
+    suspension = station.suspension
+    if sweep_map.name == "loop":
+        lag, zeta = x, None if y == FIRST_ORDER else y
+    elif sweep_map.name == "compliance":
+        suspension = None if x == RIGID else SuspensionParameters(
+            roll_frequency=x, pitch_frequency=x, damping_ratio=y,
+            pivot_height=(suspension or SuspensionParameters()).pivot_height)
+    else:
+        lag, accel = x, [y] * 3
+    step = next(h for h in STEPS if h <= min(station.time_step, lag / 10))
+    station.time_step = step
+    station.suspension = suspension
+    station.base = BaseDriverParameters(
+        lag=lag, damping_ratio=zeta, velocity_limits=base.velocity_limits,
+        acceleration_limits=accel,
+        servo_time_constant=min(base.servo_time_constant, lag / 4),
+        time_step=step)
+    validate(scenario)
+    return scenario
+
+
+def _key(scenario):
+    base, suspension = scenario.station.base, scenario.station.suspension
+    return (base.lag, base.damping_ratio, tuple(base.acceleration_limits),
+            base.servo_time_constant, scenario.station.time_step,
+            None if suspension is None else (
+                suspension.roll_frequency, suspension.pitch_frequency,
+                suspension.damping_ratio, suspension.pivot_height))
+
+
+def point_ratios(scenario):
+    """The ratios (RATIOS, ground truth and `measured.`) of `scenario`
+    run with and without the filter."""
+    logs = {v.name: simulate(build_closed_loop(scenario, v))
+            for v in scenario.variants}
+    metrics = trajectory_tracking.compute_metrics(scenario, logs)
+    prefix = "ratio_unfiltered_to_filtered."
+    return {f"{m}{key}": metrics[f"{prefix}{m}{key}"]
+            for m in ("", "measured.") for key in RATIOS}
+
+
+def run_sweep(scenario, output, maps=MAPS, echo=print):
+    """Runs the sweep around `scenario` (a trajectory-tracking Scenario
+    with `filtered` and `unfiltered` variants) and writes to `output`
+    sweep.csv, sweep.json and sweep.png.
+
+    Returns:
+        list of dict: one per point (map, x, y and the ratios).
+    """
+    if scenario.experiment != "trajectory_tracking" or {
+            v.name for v in scenario.variants} != {"filtered", "unfiltered"}:
+        raise ValueError(
+            f"experiment = {scenario.experiment!r} is not allowed for a "
+            "sweep: must be trajectory_tracking with the variants "
+            "filtered and unfiltered")
+    output = Path(output)
+    output.mkdir(parents=True, exist_ok=True)
+    points = [(m, x, y) for m in maps for y in m.y_values
+              for x in m.x_values]
+    done, rows, start = {}, [], time.monotonic()
+    for i, (sweep_map, x, y) in enumerate(points):
+        point = point_scenario(scenario, sweep_map, x, y)
+        key = _key(point)
+        if key not in done:
+            done[key] = point_ratios(point)
+        ratios = done[key]
+        rows.append({"map": sweep_map.name, "x": _shown(x), "y": _shown(y),
+                     **ratios})
+        if echo is not None:
+            elapsed = time.monotonic() - start
+            left = elapsed / (i + 1) * (len(points) - i - 1)
+            echo(f"[{i + 1:2d}/{len(points)}] {sweep_map.name}: "
+                 f"{sweep_map.x_name} {_shown(x)}, {sweep_map.y_name} "
+                 f"{_shown(y)}: ratio {ratios[_MAIN]:.2f} (measured "
+                 f"{ratios['measured.' + _MAIN]:.2f}), total "
+                 f"{ratios['error_rms_total_m_s']:.2f}  [{elapsed:.0f} s, "
+                 f"about {left:.0f} s left]")
+    with open(output / "sweep.csv", "w", newline="") as stream:
+        writer = csv.DictWriter(stream, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    (output / "sweep.json").write_text(json.dumps(rows, indent=2))
+    draw_sweep(maps, rows, output / "sweep.png", scenario)
+    return rows
+
+
+_MAIN = "oscillation_rms_shaking_band_m_s"
+
+
+def _shown(value):
+    if isinstance(value, str):
+        return value
+    return float(f"{value:.3g}")
+
+
+def draw_sweep(maps, rows, path, scenario):
+    """The maps as coloured grids (log colour scale centred on 1, blue:
+    the filter helps), each cell labelled with the ground truth's ratio
+    and the measured one below it; top row the shaking band (1.5 to 8
+    Hz), bottom row the total error."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm
+
+    fig, axes = plt.subplots(2, len(maps), figsize=(5.0 * len(maps), 8.0),
+                             squeeze=False, layout="constrained")
+    norm = LogNorm(vmin=0.5, vmax=2.0)
+    station = scenario.station
+    low, high = trajectory_tracking.SHAKING_BAND
+    for row, (key, title) in enumerate((
+            (_MAIN, f"{low:g} to {high:g} Hz"),
+            ("error_rms_total_m_s", "total"))):
+        for col, sweep_map in enumerate(maps):
+            axis = axes[row, col]
+            grid = np.full((len(sweep_map.y_values), len(sweep_map.x_values)),
+                           np.nan)
+            measured = grid.copy()
+            for r in rows:
+                if r["map"] != sweep_map.name:
+                    continue
+                i = [_shown(v) for v in sweep_map.y_values].index(r["y"])
+                j = [_shown(v) for v in sweep_map.x_values].index(r["x"])
+                grid[i, j], measured[i, j] = r[key], r[f"measured.{key}"]
+            image = axis.imshow(grid, cmap="RdBu", norm=norm, aspect="auto")
+            for i in range(grid.shape[0]):
+                for j in range(grid.shape[1]):
+                    dark = abs(np.log(grid[i, j])) > 0.45
+                    axis.text(j, i, f"{grid[i, j]:.2f}\n"
+                              f"({measured[i, j]:.2f})", ha="center",
+                              va="center", fontsize=8,
+                              color="white" if dark else "black")
+            axis.set_xticks(range(len(sweep_map.x_values)),
+                            [str(_shown(v)) for v in sweep_map.x_values])
+            axis.set_yticks(range(len(sweep_map.y_values)),
+                            [str(_shown(v)) for v in sweep_map.y_values])
+            axis.set_xlabel(sweep_map.x_name)
+            axis.set_ylabel(sweep_map.y_name)
+            axis.set_title(f"{sweep_map.name}: ratio {title}", fontsize=9)
+    fig.colorbar(image, ax=axes, shrink=0.6,
+                 label="without / with filter (> 1: the filter helps)")
+    susp = station.suspension
+    fig.suptitle(
+        "Base filter's benefit, end effector's velocity error while the "
+        "0.1 m/s step lasts: ground truth (measured as the paper)\n"
+        f"around: loop lag {station.base.lag:.3g} s, damping ratio "
+        f"{station.base.damping_ratio}, acceleration limit "
+        f"{station.base.acceleration_limits[0]:g} m/s^2; suspension "
+        + ("none" if susp is None else
+           f"{susp.pitch_frequency:g} Hz, {susp.damping_ratio:g}"),
+        fontsize=9)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
