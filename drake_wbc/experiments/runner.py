@@ -22,6 +22,7 @@ from drake_wbc.controller.run_log import SIGNALS, SignalLogger
 from drake_wbc.controller.task import add_controller
 from drake_wbc.experiments.scenario import Scenario, Variant, controller_for
 from drake_wbc.math.validation import checked_instance
+from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.station.simulation import SimulatedStation
 
 
@@ -61,11 +62,12 @@ def build_closed_loop(scenario, variant=None, replay=False):
     scenario = checked_instance("scenario", scenario, Scenario, Scenario)
     variant = variant or scenario.variants[0]
     builder = DiagramBuilder()
-    station = SimulatedStation(scenario.station, scenario.scene)
+    station = SimulatedStation(scenario.station, scenario.scene,
+                               scenario.arm_mount)
     builder.AddNamedSystem("station", station.diagram)
     controller, sources = add_controller(
         builder, controller_for(scenario, variant), scenario.task,
-        station.diagram)
+        station.diagram, arm=_controller_arm(scenario))
     ports = {}
     for name in SIGNALS:
         for system in (station.diagram, controller.diagram):
@@ -86,6 +88,14 @@ def build_closed_loop(scenario, variant=None, replay=False):
     diagram.set_name(f"closed_loop_{variant.name}")
     return ClosedLoop(diagram, station, controller, logger, scenario,
                       variant, recorder)
+
+
+def _controller_arm(scenario):
+    """The controller's ArmKinematics of the scenario's robot: None (the
+    controller's own, the shipped robot's) for the shipped mount, else
+    one of the scenario's arm_mount."""
+    mount = scenario.arm_mount
+    return None if mount.is_identity else ArmKinematics(mount=mount)
 
 
 class Progress:

@@ -14,12 +14,14 @@ name `drake_wbc`, so they load with no network and no other model package::
     plant.Finalize()
 """
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-from pydrake.math import RigidTransform
+from pydrake.common.schema import Transform
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.parsing import (
     LoadModelDirectives,
     PackageMap,
@@ -35,7 +37,12 @@ from pydrake.multibody.tree import (
     RevoluteSpring,
 )
 
-from drake_wbc.math.validation import as_float_array, as_vector
+from drake_wbc.math.validation import (
+    as_float_array,
+    as_scalar,
+    as_vector,
+    checked_instance,
+)
 
 PACKAGE_NAME = "drake_wbc"
 """The package name under which models/ is registered."""
@@ -85,6 +92,52 @@ def register_models(package_map: PackageMap):
         package_map.AddPackageXml(str(models_dir() / "package.xml"))
 
 
+ARM_MOUNT_WELD = ("mcr_base::arm_mount", "elfin5::base_link")
+"""The weld (parent, child) of the model directives that mounts the arm
+on the base; `ArmMount` sets its pose."""
+
+
+@dataclass
+class ArmMount:
+    """How the arm is mounted on the base: the rotation ^bR_a of T_a in
+    T_b (paper, eq. (fk)), about the mount point.
+
+    ^bR_a = Rz(yaw) Ry(tilt): the arm turned by `yaw` about the base's
+    vertical, then its column tilted by `tilt` about its own y axis (a
+    positive tilt leans the arm's z axis towards its own +x). The
+    default, no rotation, is the shipped robot (^bR_a = I). The robot
+    description (issue 19) will own this datum; until then it is the one
+    parameter of the mount, given to `add_mcr` (and so to the station and
+    to `ArmKinematics`).
+
+    Attributes:
+        yaw: rad, in [-pi, pi].
+        tilt: rad, in [-pi/2, pi/2] (pi/2: the arm on a wall of the base).
+    """
+
+    yaw: float = 0.0
+    tilt: float = 0.0
+
+    def __post_init__(self):
+        for name, bound in (("yaw", math.pi), ("tilt", 0.5 * math.pi)):
+            value = as_scalar(name, getattr(self, name))
+            if not -bound <= value <= bound:
+                raise ValueError(
+                    f"{name} = {value!r} rad is not allowed: must lie in "
+                    f"[{-bound!r}, {bound!r}] rad")
+            setattr(self, name, float(value))
+
+    @property
+    def is_identity(self):
+        """True for the shipped robot's mount (^bR_a = I)."""
+        return self.yaw == 0.0 and self.tilt == 0.0
+
+    def rotation(self):
+        """^bR_a (3, 3), the rotation of T_a in T_b."""
+        return (RotationMatrix.MakeZRotation(self.yaw)
+                @ RotationMatrix.MakeYRotation(self.tilt)).matrix()
+
+
 @dataclass(frozen=True)
 class McrModel:
     """The parts of the robot inside a plant, as `add_mcr` returns them.
@@ -100,6 +153,7 @@ class McrModel:
         tcp_frame: the tool centre point at the face of the wiping pad,
             the end effector of the controller.
         lidar_frames: the two scan frames, front-left then rear-right.
+        mount: the ArmMount the arm was welded with.
     """
 
     base: ModelInstanceIndex
@@ -111,9 +165,10 @@ class McrModel:
     ft_measurement_frame: Frame
     tcp_frame: Frame
     lidar_frames: tuple
+    mount: ArmMount = field(default_factory=ArmMount)
 
 
-def add_mcr(plant: MultibodyPlant, parser: Parser = None):
+def add_mcr(plant: MultibodyPlant, parser: Parser = None, mount=None):
     """Adds the whole robot to `plant` (not yet finalized).
 
     Args:
@@ -121,6 +176,8 @@ def add_mcr(plant: MultibodyPlant, parser: Parser = None):
             the geometry.
         parser: an existing parser of `plant` whose package map is to be used
             (a new one is made if None).
+        mount: the ArmMount of the arm on the base (the shipped robot's,
+            no rotation, if None): the pose of the weld ARM_MOUNT_WELD.
 
     Returns:
         McrModel: the model instances and the frames the controller uses.
@@ -132,9 +189,16 @@ def add_mcr(plant: MultibodyPlant, parser: Parser = None):
         )
     parser = parser or Parser(plant)
     register_models(parser.package_map())
+    mount = replace(checked_instance("mount", mount, ArmMount, ArmMount))
     directives = LoadModelDirectives(
         parser.package_map().ResolveUrl(MCR_DIRECTIVES_URL)
     )
+    if not mount.is_identity:
+        weld, = [d.add_weld for d in directives.directives
+                 if d.add_weld is not None
+                 and (d.add_weld.parent, d.add_weld.child) == ARM_MOUNT_WELD]
+        weld.X_PC = Transform(RigidTransform(RollPitchYaw(
+            RotationMatrix(mount.rotation())), np.zeros(3)))
     ProcessModelDirectives(directives, plant, parser)
     base = plant.GetModelInstanceByName("mcr_base")
     arm = plant.GetModelInstanceByName("elfin5")
@@ -151,13 +215,15 @@ def add_mcr(plant: MultibodyPlant, parser: Parser = None):
         lidar_frames=tuple(
             plant.GetFrameByName(name, base) for name in LIDAR_FRAMES
         ),
+        mount=mount,
     )
 
 
-def make_mcr_plant(time_step=0.0):
-    """Returns (plant, model): a finalized plant of the robot alone."""
+def make_mcr_plant(time_step=0.0, mount=None):
+    """Returns (plant, model): a finalized plant of the robot alone, its
+    arm mounted by `mount` (an ArmMount; the shipped robot's if None)."""
     plant = MultibodyPlant(time_step=time_step)
-    model = add_mcr(plant)
+    model = add_mcr(plant, mount=mount)
     plant.Finalize()
     return plant, model
 
@@ -198,7 +264,8 @@ class ArmKinematics:
     (paper, eq. (fk) and eq. (2)). The flexible mount is not measured on the
     real robot, so these are the nominal kinematics: mount at rest, base at
     the origin. T_a is then fixed in T_b and R_ba, the rotation from T_a to
-    T_b, is a constant (the identity for this robot).
+    T_b, is a constant, read from the plant: the identity for the shipped
+    robot, model.mount.rotation() for an ArmMount of add_mcr.
 
     Args:
         plant: a finalized plant that contains the robot; a private plant of
@@ -206,15 +273,23 @@ class ArmKinematics:
         model: the McrModel of `plant` (required when `plant` is given).
         end_effector_frame: the frame whose origin is the end effector;
             the tool centre point if None.
+        mount: the ArmMount of the private plant (only when `plant` is
+            None; a given plant carries its own, model.mount).
     """
 
-    def __init__(self, plant=None, model=None, end_effector_frame=None):
+    def __init__(self, plant=None, model=None, end_effector_frame=None,
+                 mount=None):
         if plant is None:
-            plant, model = make_mcr_plant()
+            plant, model = make_mcr_plant(mount=mount)
         elif model is None:
             raise ValueError(
                 "model = None is not allowed when plant is given: pass the "
                 "McrModel that add_mcr returned for that plant"
+            )
+        elif mount is not None:
+            raise ValueError(
+                f"mount = {mount!r} is not allowed when plant is given: the "
+                "plant's arm is mounted already (model.mount)"
             )
         self._plant = plant
         self.plant, self.model = plant, model
@@ -234,6 +309,7 @@ class ArmKinematics:
             [j.acceleration_upper_limits()[0] for j in joints])
         X_BA = self._arm_base.CalcPose(self._context, self._base)
         self.R_ba = X_BA.rotation().matrix()
+        self.mount = model.mount
         # T_a is fixed in T_b (nominal kinematics): p_ee in T_b follows
         # from X_AE, with no third query of the plant.
         self._R_BA, self._p_BA = self.R_ba.copy(), X_BA.translation().copy()

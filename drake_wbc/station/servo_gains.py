@@ -15,7 +15,7 @@ from drake_wbc.robot.model import (
 )
 
 
-def servo_gains(arm_positions, base, arm):
+def servo_gains(arm_positions, base, arm, mount=None):
     """The PD gains of the base's and the arm's actuators.
 
     The base's joints get a pure velocity servo, p = 0 and d = M_ii /
@@ -29,12 +29,13 @@ def servo_gains(arm_positions, base, arm):
         arm_positions: (6,) the arm configuration to size for.
         base: BaseDriverParameters.
         arm: ArmDriverParameters.
+        mount: the robot's ArmMount (the shipped robot's if None).
 
     Returns:
         dict: joint name -> PdControllerGains, for `set_servo_gains`.
     """
     q_a = as_vector("arm_positions", arm_positions, 6)
-    plant, model = make_mcr_plant()
+    plant, model = make_mcr_plant(mount=mount)
     context = plant.CreateDefaultContext()
     plant.SetPositions(context, model.arm, q_a)
     M = plant.CalcMassMatrix(context)
@@ -62,7 +63,7 @@ def set_servo_gains(plant, model, gains):
                 gains[name])
 
 
-def drive_inertias(arm_positions, arm):
+def drive_inertias(arm_positions, arm, mount=None):
     """The reflected inertia of each arm joint's geared drive, kg m^2:
     min_inertia - M_ii where the joint's own inertia M_ii (the mass
     matrix with the arm at `arm_positions`, as in `servo_gains`) is below
@@ -72,11 +73,13 @@ def drive_inertias(arm_positions, arm):
     light wrist joint's loop would be many times faster: 380 Hz for
     joint 6, beyond what a 5 ms plant step resolves).
 
+    `mount`: the robot's ArmMount (the shipped robot's if None).
+
     Returns:
         dict: arm joint name -> rotor inertia (gear ratio 1).
     """
     q_a = as_vector("arm_positions", arm_positions, 6)
-    plant, model = make_mcr_plant()
+    plant, model = make_mcr_plant(mount=mount)
     context = plant.CreateDefaultContext()
     plant.SetPositions(context, model.arm, q_a)
     M = plant.CalcMassMatrix(context)

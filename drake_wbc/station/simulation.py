@@ -59,6 +59,7 @@ from drake_wbc.robot.model import (
     HOME_ARM_POSITIONS,
     LIDAR_FRAMES,
     MOUNT_JOINTS,
+    ArmMount,
     add_mcr,
     joint_position_indices,
     joint_velocity_indices,
@@ -215,25 +216,33 @@ class SimulatedStation:
             robot's McrModel.
         systems: dict of the station's other systems by name.
         options, scene: what it was built from.
+
+    Args:
+        options: StationOptions (defaults if None).
+        scene: the Scene (an empty one if None).
+        mount: the robot's ArmMount (drake_wbc.robot.model), the arm's
+            rotation on the base: the shipped robot's (none) if None. The
+            controller's ArmKinematics must be made with the same one.
     """
 
-    def __init__(self, options=None, scene=None):
+    def __init__(self, options=None, scene=None, mount=None):
         self.options = options = checked_instance(
             "options", options, StationOptions, StationOptions)
         self.scene = scene = checked_instance("scene", scene, Scene, Scene)
+        mount = checked_instance("mount", mount, ArmMount, ArmMount)
         h = options.time_step
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(
             time_step=h, discrete_contact_approximation="sap",
             contact_model="hydroelastic_with_fallback",
             use_sampled_output_ports=False), builder)
-        model = add_mcr(plant)
+        model = add_mcr(plant, mount=mount)
         add_static_obstacles(plant, scene)
         self._gains = servo_gains(options.initial_arm_positions,
-                                  options.base, options.arm)
+                                  options.base, options.arm, mount)
         set_servo_gains(plant, model, self._gains)
         set_drive_inertias(plant, model, drive_inertias(
-            options.initial_arm_positions, options.arm))
+            options.initial_arm_positions, options.arm, mount))
         plant.Finalize()
         self.plant, self.scene_graph, self.model = plant, scene_graph, model
         add = builder.AddNamedSystem
