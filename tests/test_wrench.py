@@ -7,7 +7,7 @@ import pytest
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue
 
 from drake_wbc.math.wrench import STANDARD_GRAVITY, ToolPayload, external_wrench
-from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics, ArmMount
 from drake_wbc.stages.wrench import ExternalWrenchEstimator, tool_weight_reading
 
 
@@ -67,7 +67,7 @@ def test_the_estimate_uses_both_poses_of_the_plant(arm, estimator):
                    else 10.0 ** rng.uniform(-2, 3) * rng.normal(size=6))
         estimator.GetInputPort("arm_position").FixValue(context, q)
         estimator.GetInputPort("wrist_wrench").FixValue(context, reading)
-        actual = estimator.get_output_port().Eval(context)
+        actual = estimator.GetOutputPort("external_wrench").Eval(context)
         size = 10.0 * mass * STANDARD_GRAVITY + np.abs(reading).max()
         np.testing.assert_allclose(actual, wrench_as_written(
             reading, arm.frame_pose(q, model.ft_measurement_frame),
@@ -85,7 +85,7 @@ def test_the_weight_alone_is_removed_at_home(arm, estimator):
     np.testing.assert_allclose(np.linalg.norm(weight[:3]),
                                estimator._tool_mass * STANDARD_GRAVITY)
     estimator.GetInputPort("wrist_wrench").FixValue(context, weight)
-    np.testing.assert_array_equal(estimator.get_output_port().Eval(context),
+    np.testing.assert_array_equal(estimator.GetOutputPort("external_wrench").Eval(context),
                                   np.zeros(6))
 
 
@@ -98,11 +98,12 @@ def test_bad_measurements(arm, estimator):
     reading = np.ones(6)
     reading[2] = np.nan
     estimator.GetInputPort("wrist_wrench").FixValue(context, reading)
-    assert not np.all(np.isfinite(estimator.get_output_port().Eval(context)))
+    assert not np.all(np.isfinite(
+        estimator.GetOutputPort("external_wrench").Eval(context)))
     q[1] = np.nan
     estimator.GetInputPort("arm_position").FixValue(context, q)
     with pytest.raises(Exception, match="q_a"):
-        estimator.get_output_port().Eval(context)
+        estimator.GetOutputPort("external_wrench").Eval(context)
 
 
 def test_autodiff_values_and_the_readings_derivative(arm, estimator):
@@ -121,9 +122,9 @@ def test_autodiff_values_and_the_readings_derivative(arm, estimator):
     converted.GetInputPort("wrist_wrench").FixValue(ad_context, np.array(
         [AutoDiffXd(r, e) for r, e in zip(reading, np.eye(6), strict=True)],
         dtype=object))
-    value = converted.get_output_port().Eval(ad_context)
+    value = converted.GetOutputPort("external_wrench").Eval(ad_context)
     np.testing.assert_allclose(ExtractValue(value).ravel(),
-                               estimator.get_output_port().Eval(context),
+                               estimator.GetOutputPort("external_wrench").Eval(context),
                                rtol=0, atol=1e-12)
     R = arm.frame_pose(q, arm.model.ft_measurement_frame).rotation().matrix()
     p_TM = estimator._payload.sensor_from_tcp
@@ -144,4 +145,75 @@ def test_the_lever_from_the_plant_is_the_welded_one(arm, estimator):
         estimator.GetInputPort("wrist_wrench").FixValue(context, reading)
         np.testing.assert_allclose(
             estimator._estimate(np.r_[q, reading]),
-            estimator.get_output_port().Eval(context), rtol=0, atol=1e-12)
+            estimator.GetOutputPort("external_wrench").Eval(context),
+            rtol=0, atol=1e-12)
+
+
+MOUNTS = {"turned": ArmMount(yaw=0.5 * np.pi),
+          "tilted": ArmMount(yaw=-0.4, tilt=0.35)}
+
+
+@pytest.mark.parametrize("mount", MOUNTS.values(), ids=MOUNTS.keys())
+def test_a_mounted_arm_gives_the_wrench_in_each_dmps_frame(mount):
+    """An arm mounted turned or tilted on the base: the sensor's reading
+    made from the world's gravity and a known force and torque at the tool
+    centre point (the tool in static equilibrium, poses of the mounted
+    plant with T_b at the world's origin), and the estimate gives back
+    that wrench in T_b (external_wrench_in_base) and in T_a
+    (external_wrench, R_ba^T of it)."""
+    arm = ArmKinematics(mount=mount)
+    estimator = ExternalWrenchEstimator(arm)
+    context = estimator.CreateDefaultContext()
+    plant, model = arm.plant, arm.model
+    plant_context = plant.CreateDefaultContext()
+    tool = plant.GetBodyByName("wiping_tool", model.tool)
+    mass = tool.get_mass(plant_context)
+    np.testing.assert_allclose(arm.R_ba, mount.rotation(), atol=1e-15)
+    rng = np.random.default_rng(21)
+    for q in random_configurations(arm, 6, 22):
+        plant.SetPositions(plant_context, model.arm, q)
+        X_WM = model.ft_measurement_frame.CalcPoseInWorld(plant_context)
+        X_WT = model.tcp_frame.CalcPoseInWorld(plant_context)
+        p_W_com = tool.CalcCenterOfMassInBodyFrame(plant_context)
+        p_W_com = tool.body_frame().CalcPoseInWorld(plant_context).multiply(
+            p_W_com)
+        force, torque = 20.0 * rng.normal(size=3), 2.0 * rng.normal(size=3)
+        weight = np.array([0.0, 0.0, -mass * STANDARD_GRAVITY])
+        p_M = X_WM.translation()
+        # What the tool exerts on the sensor: all that acts on the tool,
+        # about M, in M.
+        on_sensor = np.r_[force + weight, torque + np.cross(
+            X_WT.translation() - p_M, force) + np.cross(p_W_com - p_M,
+                                                        weight)]
+        R_WM = X_WM.rotation().matrix()
+        reading = np.r_[R_WM.T @ on_sensor[:3], R_WM.T @ on_sensor[3:]]
+        estimator.GetInputPort("arm_position").FixValue(context, q)
+        estimator.GetInputPort("wrist_wrench").FixValue(context, reading)
+        size = 10.0 * (mass * STANDARD_GRAVITY + np.abs(reading).max())
+        expected = np.r_[force, torque]  # T_b is the world here
+        np.testing.assert_allclose(
+            estimator.GetOutputPort("external_wrench_in_base").Eval(context),
+            expected, rtol=0, atol=1e-12 * size)
+        R_ab = arm.R_ba.T
+        np.testing.assert_allclose(
+            estimator.GetOutputPort("external_wrench").Eval(context),
+            np.r_[R_ab @ force, R_ab @ torque], rtol=0, atol=1e-12 * size)
+        # The tool's weight alone (tool_weight_reading) is no wrench.
+        estimator.GetInputPort("wrist_wrench").FixValue(
+            context, tool_weight_reading(arm, q))
+        np.testing.assert_allclose(
+            estimator.GetOutputPort("external_wrench_in_base").Eval(context),
+            0.0, atol=1e-12 * size)
+
+
+def test_the_shipped_robot_has_one_wrench_in_both_frames(arm, estimator):
+    """R_ba = I: the two outputs are the same vector, to the bit."""
+    context = estimator.CreateDefaultContext()
+    rng = np.random.default_rng(23)
+    for q in random_configurations(arm, 3, 24):
+        estimator.GetInputPort("arm_position").FixValue(context, q)
+        estimator.GetInputPort("wrist_wrench").FixValue(
+            context, rng.normal(size=6))
+        np.testing.assert_array_equal(
+            estimator.GetOutputPort("external_wrench").Eval(context),
+            estimator.GetOutputPort("external_wrench_in_base").Eval(context))

@@ -266,7 +266,10 @@ def build_controller(params=None, arm=None):
         connect("guard", "stop", gate, "stop")
 
     connect("base_yaw", "y0", "whole_body_cdmp", "base_yaw")
-    connect("wrench", "external_wrench", "whole_body_cdmp", "wrench")
+    # F_ext in the frame of each DMP's velocity: T_b for the whole body's
+    # (with V_ee), T_a for the arm's (with V_a).
+    connect("wrench", "external_wrench_in_base", "whole_body_cdmp",
+            "wrench")
     connect("wrench", "external_wrench", "arm_cdmp", "wrench")
     for destination in ("workspace", "distributor"):
         connect("whole_body_cdmp", "end_effector_velocity", destination,

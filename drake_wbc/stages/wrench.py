@@ -1,10 +1,12 @@
 """ExternalWrenchEstimator: the wrist sensor's reading as the external
-wrench F_ext that the coupled DMPs take (drake_wbc.math.wrench)."""
+wrench F_ext that the coupled DMPs take (drake_wbc.math.wrench), in T_b
+for the whole body's and in T_a for the arm's."""
 
 import numpy as np
 from pydrake.systems.framework import LeafSystem_
 
 from drake_wbc.math.kernels import body_for
+from drake_wbc.math.kinematics import rotate_twist
 from drake_wbc.math.scalar_support import through_float_function
 from drake_wbc.math.wrench import ToolPayload, external_wrench
 from drake_wbc.robot.model import ArmKinematics
@@ -22,6 +24,15 @@ def _tool(arm):
         tool.CalcCenterOfMassInBodyFrame(context))
 
 
+def sensor_rotation_in_base(arm, q_a):
+    """R_BM (3, 3), the rotation of the sensor's measurement frame M in
+    T_b at the arm's joints q_a (float): ^bR_a R_AM, nominal kinematics
+    (base level, mount at rest)."""
+    R_AM = arm.frame_pose(
+        q_a, arm.model.ft_measurement_frame).GetAsMatrix34()[:, :3]
+    return R_AM if arm.mount.is_identity else arm.R_ba @ R_AM
+
+
 def tool_weight_reading(arm, q_a):
     """What the wrist sensor reads with nothing touching the tool: the
     tool's weight as [f; tau] at and in the measurement frame M, from the
@@ -34,10 +45,9 @@ def tool_weight_reading(arm, q_a):
         q_a: (6,) the arm's joint positions, rad.
     """
     mass, p_M_com = _tool(arm)
-    R_AM = arm.frame_pose(
-        q_a, arm.model.ft_measurement_frame).GetAsMatrix34()[:, :3]
-    # [w; p_com x w], w = R_AM^T [0, 0, -m g] (drake_wbc.math.wrench).
-    return ToolPayload(mass, p_M_com, np.zeros(3)).weight_map.dot(R_AM[2])
+    R_BM = sensor_rotation_in_base(arm, q_a)
+    # [w; p_com x w], w = R_BM^T [0, 0, -m g] (drake_wbc.math.wrench).
+    return ToolPayload(mass, p_M_com, np.zeros(3)).weight_map.dot(R_BM[2])
 
 
 @define_stage("ExternalWrenchEstimator_")
@@ -48,27 +58,32 @@ def ExternalWrenchEstimator_(T):
         ::
 
                            ┌─────────────────────────┐
-            wrist_wrench ─►│                         │
-            arm_position ─►│ ExternalWrenchEstimator ├──► external_wrench
+            wrist_wrench ─►│                         ├──► external_wrench_
+                           │ ExternalWrenchEstimator │    in_base
+            arm_position ─►│                         ├──► external_wrench
                            └─────────────────────────┘
 
         - wrist_wrench: (6) the reading [f; tau], the wrench the tool
           exerts on the sensor at its measurement frame, in that frame.
         - arm_position: (6) the measured arm configuration q_a.
-        - external_wrench: F_ext (6), the wrench the environment exerts on
-          the tool, at the tool centre point, in T_a, with the tool's
-          weight removed (drake_wbc.math.wrench.external_wrench).
+        - external_wrench_in_base: F_ext (6), the wrench the environment
+          exerts on the tool, at the tool centre point, in T_b, with the
+          tool's weight removed (drake_wbc.math.wrench.external_wrench
+          with L = T_b): the whole-body CDMP's (eq. (cdmp-wb)).
+        - external_wrench: the same F_ext in T_a, R_ba^T times the above:
+          the arm CDMP's (eq. (cdmp-arm)). The same vector for the
+          shipped robot (R_ba = I).
 
         The tool's mass and centre of mass are read from the robot model
         when the stage is built, and so is the tool centre point's
         position from the sensor when the tool is welded to it: then the
-        sensor's rotation R_AM is the one function of q_a, from the double
-        plant (in AutoDiffXd with its derivative by central differences,
-        scalar_support.through_float_function), and F_ext is
-        math.wrench.external_wrench of the reading and R_AM (its float
-        kernel in double). A tool that is not welded to the sensor has its
-        lever from the plant too, and the whole estimate goes through
-        through_float_function.
+        sensor's rotation R_BM = ^bR_a R_AM is the one function of q_a,
+        from the double plant (in AutoDiffXd with its derivative by
+        central differences, scalar_support.through_float_function), and
+        F_ext is math.wrench.external_wrench of the reading and R_BM (its
+        float kernel in double). A tool that is not welded to the sensor
+        has its lever from the plant too, and the whole estimate goes
+        through through_float_function.
 
         Args:
             arm: an ArmKinematics of the robot (a new one if None).
@@ -90,29 +105,41 @@ def ExternalWrenchEstimator_(T):
                 self._payload = ToolPayload(self._tool_mass,
                                             self._p_M_com, p_TM)
             self._wrench = body_for(external_wrench, T)
+            # R_ab = R_ba^T, None for the shipped robot's mount (R_ba = I).
+            self._R_ab = (None if self._arm.mount.is_identity
+                          else self._arm.R_ba.T.copy())
             self._reading = self.DeclareVectorInputPort("wrist_wrench", 6)
             self._position = self.DeclareVectorInputPort("arm_position", 6)
-            self.DeclareVectorOutputPort(
-                "external_wrench", 6,
+            self._in_base = self.DeclareVectorOutputPort(
+                "external_wrench_in_base", 6,
                 self._output if welded else self._output_with_lever)
+            self.DeclareVectorOutputPort(
+                "external_wrench", 6, self._output_in_arm,
+                {self.input_port_ticket(port.get_index())
+                 for port in (self._reading, self._position)})
 
         def _rotation(self, q_a):
-            """R_AM (3, 3) at the arm's joints (float)."""
-            return self._arm.frame_pose(
-                q_a, self._arm.model.ft_measurement_frame).GetAsMatrix34()[
-                    :, :3]
+            """R_BM (3, 3) at the arm's joints (float)."""
+            return sensor_rotation_in_base(self._arm, q_a)
 
         def _estimate(self, inputs):
-            """F_ext from the values [q_a; reading] (12,), the lever from
-            the plant (a tool not welded to the sensor)."""
+            """F_ext in T_b from the values [q_a; reading] (12,), the
+            lever from the plant (a tool not welded to the sensor)."""
             q_a, model = inputs[:6], self._arm.model
-            R_AM = self._rotation(q_a)
+            R_BM = self._rotation(q_a)
             r_TM = (self._arm.frame_pose(q_a, model.ft_measurement_frame)
                     .translation()
                     - self._arm.frame_pose(q_a, model.tcp_frame)
                     .translation())
-            return self._wrench(inputs[6:], R_AM, ToolPayload(
+            R_AM = self._arm.frame_pose(
+                q_a, model.ft_measurement_frame).GetAsMatrix34()[:, :3]
+            return self._wrench(inputs[6:], R_BM, ToolPayload(
                 self._tool_mass, self._p_M_com, R_AM.T @ r_TM))
+
+        def _output_in_arm(self, context, output):
+            in_base = self._in_base.Eval(context)
+            output.SetFromVector(in_base if self._R_ab is None
+                                 else rotate_twist(self._R_ab, in_base))
 
         def _output(self, context, output):
             output.set_value(self._wrench(
