@@ -19,9 +19,14 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_wbc.controller import build_controller
+from drake_wbc.controller.loading import load_typed
 from drake_wbc.controller.parameters import ControllerParameters
 from drake_wbc.experiments.runner import build_closed_loop, simulate
-from drake_wbc.experiments.scenario import OutputOptions, Scenario
+from drake_wbc.experiments.scenario import (
+    OutputOptions,
+    Scenario,
+    controller_arm,
+)
 from drake_wbc.math.capability import CapabilityBand
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics, ArmMount
 from drake_wbc.stages.wrench import tool_weight_reading
@@ -235,3 +240,16 @@ def test_the_scenes_hand_moves_the_simulated_tool_along_its_push(mount):
         assert 0.08 < along < 0.14, (axis, moved)
         assert np.linalg.norm(np.delete(moved, axis)) < 0.3 * along, (
             axis, moved)
+
+
+def test_a_scenario_names_its_arm_mount():
+    """`arm_mount:` in a scenario's YAML, checked where it enters; the
+    controller's kinematics of the scenario carry it."""
+    scenario = load_typed(Scenario, text="arm_mount: {yaw: 1.25, tilt: 0.2}")
+    assert scenario.arm_mount == ArmMount(yaw=1.25, tilt=0.2)
+    np.testing.assert_allclose(controller_arm(scenario).R_ba,
+                               ArmMount(yaw=1.25, tilt=0.2).rotation(),
+                               atol=1e-15)
+    assert controller_arm(load_typed(Scenario, text="{}")) is None
+    with pytest.raises(ValueError, match=r"arm_mount\.tilt = 2\.0"):
+        load_typed(Scenario, text="arm_mount: {tilt: 2.0}")

@@ -179,19 +179,22 @@ def add_controller(builder, params, task, station, arm=None):
                             controller.diagram.GetInputPort(name))
     player = controller.stages["whole_body_cdmp"].player
     if player is not None and player.tracking_gain > 0.0:
-        _add_movement_tracking(builder, controller, sources, station, player)
+        _add_movement_tracking(builder, controller, sources, station, player,
+                               arm)
     return controller, sources
 
 
-def _add_movement_tracking(builder, controller, sources, station, player):
-    """Adds the learned movement's tracking (MovementTracking) to the
-    task's reference velocity (cdmp.MovementReplay.tracking_gain)."""
+def _add_movement_tracking(builder, controller, sources, station, player,
+                           arm=None):
+    """Adds the learned movement's tracking (MovementTracking, with the
+    controller's ArmKinematics `arm`) to the task's reference velocity
+    (cdmp.MovementReplay.tracking_gain)."""
     from pydrake.systems.primitives import Adder
 
     from drake_wbc.stages.whole_body_cdmp import MovementTracking
 
     tracking = builder.AddNamedSystem("task.movement_tracking",
-                                      MovementTracking(player))
+                                      MovementTracking(player, arm))
     for name in ("base.state_estimated", "arm.position_measured"):
         builder.Connect(station.GetOutputPort(name),
                         tracking.GetInputPort(name))

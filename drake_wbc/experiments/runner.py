@@ -20,9 +20,13 @@ from pydrake.systems.framework import DiagramBuilder
 
 from drake_wbc.controller.run_log import SIGNALS, SignalLogger
 from drake_wbc.controller.task import add_controller
-from drake_wbc.experiments.scenario import Scenario, Variant, controller_for
+from drake_wbc.experiments.scenario import (
+    Scenario,
+    Variant,
+    controller_arm,
+    controller_for,
+)
 from drake_wbc.math.validation import checked_instance
-from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.station.simulation import SimulatedStation
 
 
@@ -67,7 +71,7 @@ def build_closed_loop(scenario, variant=None, replay=False):
     builder.AddNamedSystem("station", station.diagram)
     controller, sources = add_controller(
         builder, controller_for(scenario, variant), scenario.task,
-        station.diagram, arm=_controller_arm(scenario))
+        station.diagram, arm=controller_arm(scenario))
     ports = {}
     for name in SIGNALS:
         for system in (station.diagram, controller.diagram):
@@ -88,14 +92,6 @@ def build_closed_loop(scenario, variant=None, replay=False):
     diagram.set_name(f"closed_loop_{variant.name}")
     return ClosedLoop(diagram, station, controller, logger, scenario,
                       variant, recorder)
-
-
-def _controller_arm(scenario):
-    """The controller's ArmKinematics of the scenario's robot: None (the
-    controller's own, the shipped robot's) for the shipped mount, else
-    one of the scenario's arm_mount."""
-    mount = scenario.arm_mount
-    return None if mount.is_identity else ArmKinematics(mount=mount)
 
 
 class Progress:

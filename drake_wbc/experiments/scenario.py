@@ -41,7 +41,7 @@ from drake_wbc.math.validation import (
     text,
 )
 from drake_wbc.robot.footprint import check_start_is_free
-from drake_wbc.robot.model import ArmMount
+from drake_wbc.robot.model import ArmKinematics, ArmMount
 from drake_wbc.station.scene import Scene
 from drake_wbc.station.simulation import StationOptions
 
@@ -228,6 +228,14 @@ def controller_for(scenario, variant):
     if variant.movement is not None:
         params.whole_body_cdmp.movement = variant.movement
     return params
+
+
+def controller_arm(scenario):
+    """The controller's ArmKinematics for `scenario`'s robot: None (the
+    controller's own, the shipped robot's) for the shipped mount, else
+    one made with the scenario's arm_mount."""
+    mount = scenario.arm_mount
+    return None if mount.is_identity else ArmKinematics(mount=mount)
 
 
 _PARTS = dict(controller=ControllerParameters, station=StationOptions,
