@@ -164,6 +164,8 @@ class Controller:
                                                  base_velocity)
         self.stages["guard"].set_last_valid(
             context_of("guard"), "arm.position_measured", arm_position)
+        self.stages["wrench"].set_arm_position(context_of("wrench"),
+                                               arm_position)
 
     def safety_reason(self, root_context):
         """Why the controller is in a safe stop, as a sentence ("" when it
@@ -204,7 +206,8 @@ def build_controller(params=None, arm=None):
         guard=add("guard", _input_guard(params)),
         capability=add("capability", ArmCapability(
             params.capability, arm, band=band)),
-        wrench=add("wrench", ExternalWrenchEstimator(arm)),
+        wrench=add("wrench", ExternalWrenchEstimator(
+            arm, params.wrench, time_step=h)),
         base_yaw=add("base_yaw", MatrixGain(
             np.array([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]]))),
         whole_body_cdmp=add("whole_body_cdmp", WholeBodyCdmp(

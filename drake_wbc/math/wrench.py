@@ -22,6 +22,24 @@ CDMP takes it in T_a (eq. (cdmp-arm), with V_a), R_ba^T F_ext
 (float or AutoDiffXd readings); its float kernel runs the same formula
 as two constant linear maps and a rotation (`ToolPayload.weight_map`,
 `ToolPayload.lever_map`), the control tick's arithmetic.
+
+The tool's own inertia (issue 20). When the tool accelerates, the sensor
+also reads its inertial reaction: Newton-Euler for the tool, with a its
+centre of mass's acceleration and dH the rate of its angular momentum
+about that centre (both in L), gives
+
+    F_ext = reading - [w_a; p_com x w_a] + [0; R_LM^T dH]   (at M, in M),
+    w_a = R_LM^T m (g_L - a),    g_L = [0, 0, -g],
+
+the weight w replaced by the weight in the tool's accelerating frame
+(g_L - a) and the tool's spin added to the torque, then moved to T as
+above; `motion` = [a; dH] of `external_wrench`, None for a tool at rest.
+`tool_motion` is [a; dH] from three consecutive poses of the sensor,
+central differences (second order in the sample period, no phase: they
+stand for the middle sample). A wrist sensor in a velocity loop of
+gain k_hri sees this reaction to the loop's own command; uncompensated,
+k_hri m times the tool's acceleration at the loop's Nyquist rate closes
+a loop of gain above one (the 50 Hz limit cycle of pHRI, issue 20).
 """
 
 from dataclasses import dataclass, field
@@ -29,6 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from drake_wbc.math.kernels import fast_kernel
+from drake_wbc.math.validation import boolean, whole_number
 
 STANDARD_GRAVITY = 9.81
 """m/s^2, along -z of T_b when the base stands level."""
@@ -62,16 +81,26 @@ class ToolPayload:
             (derived).
         lever_map: (6, 6) [f_M; tau_M + p_TM x f_M] = lever_map [f_M;
             tau_M] (derived).
+        moment_map: (6, 3) [w; p_com x w] = moment_map w (derived).
+        inertia: (3, 3) the tool's rotational inertia about its centre of
+            mass, in M's axes, kg m^2 (zero if not given; only `tool_motion`
+            reads it).
     """
 
     mass: float
     com_in_sensor: np.ndarray
     sensor_from_tcp: np.ndarray
+    inertia: np.ndarray = None
     weight_map: np.ndarray = field(init=False, repr=False)
     lever_map: np.ndarray = field(init=False, repr=False)
+    moment_map: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
         identity = np.eye(3)
+        if self.inertia is None:
+            object.__setattr__(self, "inertia", np.zeros((3, 3)))
+        object.__setattr__(self, "moment_map", np.vstack(
+            [identity, _skew(self.com_in_sensor)]))
         object.__setattr__(self, "weight_map", (
             -self.mass * STANDARD_GRAVITY) * np.vstack(
                 [identity, _skew(self.com_in_sensor)]))
@@ -80,7 +109,7 @@ class ToolPayload:
              [_skew(self.sensor_from_tcp), identity]]))
 
 
-def external_wrench(reading, R_LM, payload):
+def external_wrench(reading, R_LM, payload, motion=None):
     """The wrench that the environment exerts on the tool (module
     docstring).
 
@@ -89,16 +118,58 @@ def external_wrench(reading, R_LM, payload):
         R_LM: (3, 3) the rotation of M in L, a frame whose z axis points
             up (the controller's T_b).
         payload: ToolPayload.
+        motion: (6,) [a; dH], the tool's centre-of-mass acceleration
+            (m/s^2) and rate of angular momentum about it (N m), both in L
+            (`tool_motion`), or None for a tool at rest.
 
     Returns:
         (6,) F_ext = [force; torque] on the tool, at T, in L: the force
         convention of drake_wbc.math.cdmp.
     """
-    weight = (-payload.mass * STANDARD_GRAVITY) * np.asarray(R_LM)[2]
+    R_LM = np.asarray(R_LM)
+    if motion is None:
+        weight = (-payload.mass * STANDARD_GRAVITY) * R_LM[2]
+        spin = 0.0
+    else:
+        weight = R_LM.T @ (payload.mass * (np.array(
+            [0.0, 0.0, -STANDARD_GRAVITY]) - motion[:3]))
+        spin = R_LM.T @ motion[3:]
     f_M = reading[:3] - weight
-    tau_M = reading[3:] - _cross(payload.com_in_sensor, weight)
+    tau_M = reading[3:] - _cross(payload.com_in_sensor, weight) + spin
     lever = _cross(payload.sensor_from_tcp, f_M)
     return np.concatenate([R_LM @ f_M, R_LM @ (tau_M + lever)])
+
+
+def _vee_of_rotation(R):
+    """The rotation vector of a small rotation R (3, 3): vee of its skew
+    part, sin(theta) times the axis (relative error theta^2 / 6, 4e-5 at
+    the arm's 1.57 rad/s over 10 ms)."""
+    return 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0],
+                           R[1, 0] - R[0, 1]])
+
+
+def tool_motion(rotations, positions, payload, h):
+    """[a; dH] of the tool at the middle of three samples h apart, by
+    central differences (module docstring), for any scalar type.
+
+    Args:
+        rotations: (3, 3, 3) R_LM at t - h, t, t + h.
+        positions: (3, 3) the tool's centre of mass in L at those times, m.
+        payload: ToolPayload (its inertia about the centre of mass, in M).
+        h: the sample period, s.
+
+    Returns:
+        (6,) [a (m/s^2); dH = I w_dot + w x I w (N m)] at t, in L, I the
+        inertia in L's axes at t.
+    """
+    R0, R1, R2 = rotations
+    p0, p1, p2 = positions
+    a = (p2 - 2.0 * p1 + p0) / (h * h)
+    w_after = _vee_of_rotation(R2 @ R1.T) / h
+    w_before = _vee_of_rotation(R1 @ R0.T) / h
+    w, w_dot = 0.5 * (w_after + w_before), (w_after - w_before) / h
+    inertia = R1 @ payload.inertia @ R1.T
+    return np.concatenate([a, inertia @ w_dot + _cross(w, inertia @ w)])
 
 
 def _wrench_inputs(rng):
@@ -113,17 +184,62 @@ def _wrench_inputs(rng):
     weight = payload.weight_map.dot(R_LM[2])
     reading = (weight if rng.random() < 0.2
                else 10.0 ** rng.uniform(-2, 3) * rng.normal(size=6))
-    return reading, R_LM, payload
+    motion = (None if rng.random() < 0.4
+              else 10.0 ** rng.uniform(-2, 2) * rng.normal(size=6))
+    return reading, R_LM, payload, motion
 
 
 @fast_kernel(external_wrench, sample=_wrench_inputs)
-def external_wrench_float(reading, R_LM, payload):
+def external_wrench_float(reading, R_LM, payload, motion=None):
     """`external_wrench` of a float reading, as two constant linear maps
     and a rotation (the control tick):
 
         [f_M; tau_M + p_TM x f_M] = lever_map (reading - weight_map
-        R_LM[2, :]),   F_ext = diag(R_LM, R_LM) [...].
+        R_LM[2, :]),   F_ext = diag(R_LM, R_LM) [...],
+
+    with a moving tool weight_map R_LM[2, :] replaced by moment_map w_a
+    and R_LM^T dH added to the torque.
     """
-    in_M = payload.lever_map.dot(reading
-                                 - payload.weight_map.dot(R_LM[2]))
+    if motion is None:
+        in_M = payload.lever_map.dot(reading
+                                     - payload.weight_map.dot(R_LM[2]))
+    else:
+        w_a = R_LM.T.dot(payload.mass * (
+            np.array([0.0, 0.0, -STANDARD_GRAVITY]) - motion[:3]))
+        relieved = reading - payload.moment_map.dot(w_a)
+        relieved[3:] += R_LM.T.dot(motion[3:])
+        in_M = payload.lever_map.dot(relieved)
     return in_M.reshape(2, 3).dot(R_LM.T).ravel()
+
+
+@dataclass
+class WrenchEstimatorParameters:
+    """Parameters of ExternalWrenchEstimator (drake_wbc.stages.wrench).
+
+    Attributes:
+        inertia_compensation: also remove the tool's inertial reaction
+            (module docstring), its motion from the measured arm
+            positions: the sensor's poses at three consecutive control
+            ticks through the nominal kinematics, central differences
+            centred on the reading's time. False (the default): the
+            weight alone, as the paper.
+        sensor_delay: control ticks by which the wrench reading the
+            controller receives is older than the arm position it
+            receives with it, 1 or 2: the central difference is centred
+            on the reading's own time, so the compensation has no phase
+            error, and F_ext is that much older (1 in the simulated
+            station, measured: the FT-300's sample of tick k - 1 arrives
+            with the joints of tick k).
+    """
+
+    inertia_compensation: bool = False
+    sensor_delay: int = 1
+
+    def __post_init__(self):
+        self.inertia_compensation = boolean("inertia_compensation",
+                                            self.inertia_compensation)
+        delay = whole_number("sensor_delay", self.sensor_delay, minimum=1)
+        if delay > 2:
+            raise ValueError(f"sensor_delay = {delay!r} is not allowed: "
+                             "must be 1 or 2 control ticks")
+        self.sensor_delay = delay

@@ -8,8 +8,14 @@ from pydrake.systems.framework import LeafSystem_
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.kinematics import rotate_twist
 from drake_wbc.math.scalar_support import through_float_function
-from drake_wbc.math.wrench import ToolPayload, external_wrench
-from drake_wbc.robot.model import ArmKinematics
+from drake_wbc.math.validation import checked_instance, positive
+from drake_wbc.math.wrench import (
+    ToolPayload,
+    WrenchEstimatorParameters,
+    external_wrench,
+    tool_motion,
+)
+from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.stages.support import define_stage
 
 
@@ -22,6 +28,19 @@ def _tool(arm):
     X_MB = tool.body_frame().CalcPose(context, model.ft_measurement_frame)
     return tool.get_mass(context), X_MB.multiply(
         tool.CalcCenterOfMassInBodyFrame(context))
+
+
+def _tool_inertia(arm):
+    """(3, 3) the tool's rotational inertia about its centre of mass, in
+    M's axes, kg m^2, from the plant's mass properties."""
+    plant, model = arm.plant, arm.model
+    tool = plant.GetBodyByName("wiping_tool", model.tool)
+    context = plant.CreateDefaultContext()
+    M_BBo_B = tool.CalcSpatialInertiaInBodyFrame(context)
+    about_com = M_BBo_B.Shift(M_BBo_B.get_com()).CalcRotationalInertia()
+    R_MB = tool.body_frame().CalcPose(
+        context, model.ft_measurement_frame).rotation().matrix()
+    return R_MB @ about_com.CopyToFullMatrix3() @ R_MB.T
 
 
 def sensor_rotation_in_base(arm, q_a):
@@ -74,6 +93,18 @@ def ExternalWrenchEstimator_(T):
           the arm CDMP's (eq. (cdmp-arm)). The same vector for the
           shipped robot (R_ba = I).
 
+        With params.inertia_compensation the tool's inertial reaction is
+        removed too (math.wrench, module docstring): the stage keeps the
+        last three arm positions (state, updated every time_step), and
+        the reading, params.sensor_delay ticks older than arm_position,
+        is taken with the sensor's pose at its own time and the tool's
+        motion of the central differences centred there
+        (math.wrench.tool_motion), so that the acceleration and the
+        reaction it explains are in phase. F_ext is then that reading's,
+        sensor_delay ticks old. The motion is the nominal kinematics'
+        (the base standing, the mount at rest): the mount's rocking and
+        the base's acceleration are not measured and stay in F_ext.
+
         The tool's mass and centre of mass are read from the robot model
         when the stage is built, and so is the tool centre point's
         position from the sensor when the tool is welded to it: then the
@@ -87,11 +118,19 @@ def ExternalWrenchEstimator_(T):
 
         Args:
             arm: an ArmKinematics of the robot (a new one if None).
+            params: WrenchEstimatorParameters (the weight alone if None).
+            time_step: the control period h, s (the arm positions'
+                sample period, with inertia compensation).
         """
 
-        def _construct(self, arm=None, converter=None):
+        def _construct(self, arm=None, params=None, time_step=0.01,
+                       converter=None):
             LeafSystem_[T].__init__(self, converter)
             self._arm = ArmKinematics() if arm is None else arm
+            self.params = checked_instance(
+                "params", params, WrenchEstimatorParameters,
+                WrenchEstimatorParameters)
+            self._h = positive("time_step", time_step)
             plant, model = self._arm.plant, self._arm.model
             self._tool_mass, self._p_M_com = _tool(self._arm)
             sensor, tcp = model.ft_measurement_frame, model.tcp_frame
@@ -110,9 +149,23 @@ def ExternalWrenchEstimator_(T):
                           else self._arm.R_ba.T.copy())
             self._reading = self.DeclareVectorInputPort("wrist_wrench", 6)
             self._position = self.DeclareVectorInputPort("arm_position", 6)
+            moving = self.params.inertia_compensation
+            if moving and not welded:
+                raise ValueError(
+                    "params.inertia_compensation = True is not allowed for "
+                    "a tool not welded to the sensor")
+            if moving:
+                self._payload = ToolPayload(
+                    self._tool_mass, self._p_M_com, p_TM,
+                    inertia=_tool_inertia(self._arm))
+                self._past = self.DeclareDiscreteState(
+                    np.tile(HOME_ARM_POSITIONS, 3))
+                self.DeclarePeriodicDiscreteUpdateEvent(
+                    self._h, 0.0, self._remember)
+            calc = (self._output_moving if moving else
+                    self._output if welded else self._output_with_lever)
             self._in_base = self.DeclareVectorOutputPort(
-                "external_wrench_in_base", 6,
-                self._output if welded else self._output_with_lever)
+                "external_wrench_in_base", 6, calc)
             self.DeclareVectorOutputPort(
                 "external_wrench", 6, self._output_in_arm,
                 {self.input_port_ticket(port.get_index())
@@ -135,6 +188,47 @@ def ExternalWrenchEstimator_(T):
                 q_a, model.ft_measurement_frame).GetAsMatrix34()[:, :3]
             return self._wrench(inputs[6:], R_BM, ToolPayload(
                 self._tool_mass, self._p_M_com, R_AM.T @ r_TM))
+
+        def set_arm_position(self, context, q_a):
+            """Starts the remembered arm positions at q_a (6,), the arm
+            at rest (with inertia compensation; else nothing to do)."""
+            if self.params.inertia_compensation:
+                context.SetDiscreteState(np.tile(
+                    np.asarray(q_a, dtype=float), 3))
+
+        def _remember(self, context, discrete_state):
+            """[q(k); q(k-1); q(k-2)] from q(k) and the state [q(k-1);
+            q(k-2); q(k-3)]."""
+            past = context.get_discrete_state(self._past).CopyToVector()
+            discrete_state.get_mutable_vector(self._past).SetFromVector(
+                np.concatenate([self._position.Eval(context), past[:12]]))
+
+        def _pose_and_motion(self, positions):
+            """[R_BM (9) at the reading's time; motion (6)] from [q(k);
+            q(k-1); q(k-2); q(k-3)] (24,), float."""
+            q = positions.reshape(4, 6)
+            d = self.params.sensor_delay
+            # The three samples around the reading's time k - d, oldest
+            # first.
+            window = q[d - 1:d + 2][::-1]
+            rotations, centres = [], []
+            R_ba = self._arm.R_ba
+            for q_a in window:
+                X_AM = self._arm.frame_pose(
+                    q_a, self._arm.model.ft_measurement_frame)
+                rotations.append(sensor_rotation_in_base(self._arm, q_a))
+                centres.append(R_ba @ X_AM.multiply(self._p_M_com))
+            motion = tool_motion(np.array(rotations), np.array(centres),
+                                 self._payload, self._h)
+            return np.concatenate([rotations[1].ravel(), motion])
+
+        def _output_moving(self, context, output):
+            pose = through_float_function(self._pose_and_motion, np.concatenate(
+                [self._position.Eval(context),
+                 context.get_discrete_state(self._past).CopyToVector()]))
+            output.set_value(self._wrench(
+                self._reading.Eval(context), pose[:9].reshape(3, 3),
+                self._payload, pose[9:]))
 
         def _output_in_arm(self, context, output):
             in_base = self._in_base.Eval(context)
