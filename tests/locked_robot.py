@@ -1,9 +1,10 @@
 """A test fixture: the simulated robot held still, to read its sensing weld.
 
 Every joint is locked with the arm at a given configuration (base at the
-origin, mount at rest, so T_a is parallel to the world), optionally with a
-wrench applied at the tool centre point, and the discrete plant is
-advanced until the weld forces settle.
+origin, mount at rest, so T_b is the world frame, and T_a parallel to it
+for the shipped mount), optionally with a wrench applied at the tool
+centre point, and the discrete plant is advanced until the weld forces
+settle.
 """
 
 import numpy as np
@@ -19,17 +20,19 @@ from pydrake.systems.primitives import ConstantValueSource
 from drake_wbc.robot.model import add_robot, joint_position_indices
 
 
-def settle_locked_robot(q_a, push_at_tcp_W=None, duration=0.05):
+def settle_locked_robot(q_a, push_at_tcp_W=None, duration=0.05,
+                        mount=None):
     """Returns (plant, model, plant_context) after `duration` s at rest.
 
     Args:
         q_a: (6,) arm configuration.
         push_at_tcp_W: a SpatialForce applied to the tool at its tool
             centre point, expressed in the world frame, or None.
+        mount: the robot's ArmMount (the shipped one if None).
     """
     builder = DiagramBuilder()
     plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=1e-3)
-    model = add_robot(plant)
+    model = add_robot(plant, mount=mount)
     plant.Finalize()
     if push_at_tcp_W is not None:
         applied = ExternallyAppliedSpatialForce()

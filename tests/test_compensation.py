@@ -120,19 +120,19 @@ def test_deviation_formulas_of_eq_deviation():
         dV_a_cmp, dV_ee = robust_compensation(dV_b, J_b, R, grad, alpha)
         dV_a_req = required_compensation(dV_b, p, R)
         g = grad / np.linalg.norm(grad)
+        R6 = np.kron(np.eye(2), R)
+        # delta_V_ee is in T_b: the paper's T_a value turned by R_ba.
         np.testing.assert_allclose(
-            dV_ee, -alpha * g * (g @ dV_a_req), rtol=0, atol=1e-12
+            dV_ee, -alpha * R6 @ g * (g @ dV_a_req), rtol=0, atol=1e-12
         )
         np.testing.assert_allclose(
-            dV_ee, dV_a_cmp - dV_a_req, rtol=0, atol=1e-12
+            dV_ee, R6 @ (dV_a_cmp - dV_a_req), rtol=0, atol=1e-12
         )
-        # In T_b, the end effector's remaining deviation is R6 dV_ee.
+        # What the end effector does of the compensated command, eq.
+        # (fk) in T_b: R_ba dV_a^cmp + J_b dV_b, is the deviation.
         arm = np.concatenate([R @ dV_a_cmp[:3], R @ dV_a_cmp[3:]])
-        np.testing.assert_allclose(
-            arm + J_b @ dV_b,
-            np.concatenate([R @ dV_ee[:3], R @ dV_ee[3:]]),
-            rtol=0, atol=1e-12,
-        )
+        np.testing.assert_allclose(arm + J_b @ dV_b, dV_ee, rtol=0,
+                                   atol=1e-12)
 
 
 def test_default_mounting_is_identity():

@@ -19,6 +19,7 @@ from drake_wbc.controller.diagram import (
 from drake_wbc.robot.model import (
     HOME_ARM_POSITIONS,
     ArmKinematics,
+    ArmMount,
 )
 from drake_wbc.stages.wrench import (
     ExternalWrenchEstimator,
@@ -96,7 +97,8 @@ def test_weight_alone_reads_as_no_external_wrench(arm):
         estimator.GetInputPort("wrist_wrench").FixValue(
             context, tool_weight_reading(arm, q))
         np.testing.assert_allclose(
-            estimator.get_output_port().Eval(context), 0.0, atol=1e-12)
+            estimator.GetOutputPort("external_wrench").Eval(context), 0.0,
+            atol=1e-12)
 
 
 def test_estimator_recovers_a_push_on_the_simulated_tool(arm):
@@ -111,12 +113,39 @@ def test_estimator_recovers_a_push_on_the_simulated_tool(arm):
     estimator.GetInputPort("arm_position").FixValue(estimator_context, q_a)
     estimator.GetInputPort("wrist_wrench").FixValue(estimator_context,
                                                     reading)
-    estimate = estimator.get_output_port().Eval(estimator_context)
+    estimate = estimator.GetOutputPort("external_wrench").Eval(
+        estimator_context)
     # Base at the origin and the mount locked at rest: T_a is parallel to
     # the world frame, so the push in T_a is the push in W.
     np.testing.assert_allclose(estimate[:3], push_W.translational(),
                                atol=1e-6)
     np.testing.assert_allclose(estimate[3:], push_W.rotational(), atol=1e-6)
+
+
+@pytest.mark.parametrize("mount", [ArmMount(yaw=0.5 * np.pi),
+                                   ArmMount(yaw=0.3, tilt=-0.4)],
+                         ids=["turned", "tilted"])
+def test_a_mounted_arm_gives_the_push_in_each_dmps_frame(mount):
+    """The push on the simulated tool of an arm mounted turned or tilted
+    on the base: the estimate gives it back in T_b (the world here) for
+    the whole-body CDMP, and in T_a (R_ba^T of it) for the arm's, the
+    tool's weight removed along the real vertical."""
+    push_W = SpatialForce(tau=[0.3, -0.2, 0.1], f=[4.0, -6.0, 9.0])
+    q_a = HOME_ARM_POSITIONS + np.array([0.3, 0.2, -0.1, 0.4, 0.2, 0.5])
+    reading = sensor_reading(*settle_locked_robot(q_a, push_W, mount=mount))
+    arm = ArmKinematics(mount=mount)
+    estimator = ExternalWrenchEstimator(arm)
+    context = estimator.CreateDefaultContext()
+    estimator.GetInputPort("arm_position").FixValue(context, q_a)
+    estimator.GetInputPort("wrist_wrench").FixValue(context, reading)
+    push = np.r_[push_W.translational(), push_W.rotational()]
+    np.testing.assert_allclose(
+        estimator.GetOutputPort("external_wrench_in_base").Eval(context),
+        push, atol=1e-6)
+    R_ab = arm.R_ba.T
+    np.testing.assert_allclose(
+        estimator.GetOutputPort("external_wrench").Eval(context),
+        np.r_[R_ab @ push[:3], R_ab @ push[3:]], atol=1e-6)
 
 
 def test_parameters_are_validated():

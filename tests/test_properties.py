@@ -275,15 +275,17 @@ def test_robust_compensation_never_exceeds_what_wb_error_allows(problem,
     """dV_a^cmp = (I - alpha P_Cm) dV_a^req, eq. (wb_error): never larger
     than the exact compensation; along grad C_m exactly (1 - alpha) of it,
     across it all of it; and dV_ee = dV_a^cmp - dV_a^req (eq.
-    (deviation)) of size alpha |P dV_a^req| at most."""
+    (deviation), turned into T_b by R_ba) of size alpha |P dV_a^req| at
+    most."""
     J_b, R_ba, delta_V_b, gradient = problem
     required, _ = robust_compensation(delta_V_b, J_b, R_ba, gradient, 0.0)
     cmp, deviation = robust_compensation(delta_V_b, J_b, R_ba, gradient,
                                          alpha)
     size = np.linalg.norm(required)
     assert np.linalg.norm(cmp) <= size * (1 + 1e-12) + 1e-300
-    np.testing.assert_allclose(deviation, cmp - required, rtol=0,
-                               atol=1e-12 * size)
+    # dV_ee in T_b: R_ba (dV_a^cmp - dV_a^req).
+    np.testing.assert_allclose(deviation, twist_rotation(R_ba) @ (
+        cmp - required), rtol=0, atol=1e-12 * size)
     assert np.linalg.norm(deviation) <= alpha * size * (1 + 1e-12) + 1e-300
     norm = np.linalg.norm(gradient)
     if norm > 1e-12:

@@ -20,6 +20,7 @@ from shipped_names import ARM_JOINTS, BASE_JOINTS, MOUNT_JOINTS
 from drake_wbc.robot.model import (
     HOME_ARM_POSITIONS,
     ArmKinematics,
+    ArmMount,
     add_robot,
     joint_position_indices,
     make_robot_plant,
@@ -384,3 +385,56 @@ def test_p_ee_from_the_pose_matches_the_plant(memo_arm):
             memo_arm.model.base_frame).ravel()
         p_ee = memo_arm.evaluate(q).p_ee_in_base
         assert np.max(np.abs(p_ee - expected)) < 1e-15
+
+
+def _rz(angle):
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _ry(angle):
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+@pytest.mark.parametrize("yaw, tilt", [(0.5 * np.pi, 0.0), (-0.4, 0.35),
+                                       (np.pi, -0.5 * np.pi)])
+def test_an_arm_mount_turns_the_arm_about_the_mount_point(robot, yaw, tilt):
+    """ArmMount(yaw, tilt): ^bR_a = Rz(yaw) Ry(tilt), read back from the
+    plant by ArmKinematics (R_ba), and every point of the arm turned by it
+    about the arm base's origin, which stays where it was; the arm's own
+    kinematics in T_a are unchanged."""
+    mount = ArmMount(yaw=yaw, tilt=tilt)
+    arm = ArmKinematics(mount=mount)
+    shipped = ArmKinematics(*robot)
+    R = _rz(yaw) @ _ry(tilt)
+    np.testing.assert_allclose(arm.R_ba, R, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(mount.rotation(), R, rtol=0, atol=1e-15)
+    assert arm.mount == mount and arm.model.mount == mount
+    rng = np.random.default_rng(40)
+    origin = shipped.evaluate(np.zeros(6)).p_ee_in_base - (
+        shipped.evaluate(np.zeros(6)).X_AE.translation())
+    for q in rng.uniform(arm.lower, arm.upper, (5, 6)):
+        mounted, plain = arm.evaluate(q), shipped.evaluate(q)
+        np.testing.assert_allclose(mounted.J_a, plain.J_a, atol=1e-12)
+        np.testing.assert_allclose(mounted.p_ee_in_base,
+                                   origin + R @ plain.X_AE.translation(),
+                                   atol=1e-12)
+
+
+def test_the_shipped_mount_is_the_identity(robot):
+    plant, model = robot
+    assert model.mount == ArmMount() and model.mount.is_identity
+    np.testing.assert_array_equal(ArmKinematics(*robot).R_ba, np.eye(3))
+
+
+@pytest.mark.parametrize("field, value", [("yaw", 3.2), ("tilt", -1.6),
+                                          ("yaw", np.nan)])
+def test_a_bad_arm_mount_is_refused_naming_its_field(field, value):
+    with pytest.raises(ValueError, match=field):
+        ArmMount(**{field: value})
+
+
+def test_a_given_plant_carries_its_own_mount(robot):
+    with pytest.raises(ValueError, match="mount"):
+        ArmKinematics(*robot, mount=ArmMount(yaw=1.0))

@@ -92,15 +92,17 @@ def run_diagram(args):
     (Drake's GetGraphvizString) and their SVGs where Graphviz is
     installed. Returns 0."""
     from drake_wbc.controller import build_controller
+    from drake_wbc.experiments.scenario import controller_arm
     from drake_wbc.station.simulation import SimulatedStation
 
     name, scenario, output = _scenario(args, "diagram")
     print(f"drake-wbc diagram {name}: writing to {output}/")
     output.mkdir(parents=True, exist_ok=True)
     diagrams = (
-        ("controller", build_controller(scenario.controller).diagram),
-        ("station", SimulatedStation(scenario.station,
-                                     scenario.scene).diagram),
+        ("controller", build_controller(
+            scenario.controller, controller_arm(scenario)).diagram),
+        ("station", SimulatedStation(scenario.station, scenario.scene,
+                                     scenario.arm_mount).diagram),
     )
     missing = False
     for stem, diagram in diagrams:

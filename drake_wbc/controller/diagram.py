@@ -171,6 +171,8 @@ class Controller:
                                                  base_velocity)
         self.stages["guard"].set_last_valid(
             context_of("guard"), "arm.position_measured", arm_position)
+        self.stages["wrench"].set_arm_position(context_of("wrench"),
+                                               arm_position)
 
     def safety_reason(self, root_context):
         """Why the controller is in a safe stop, as a sentence ("" when it
@@ -218,7 +220,8 @@ def build_controller(params=None, robot=None):
         guard=add("guard", _input_guard(params, arm)),
         capability=add("capability", ArmCapability(
             params.capability, arm, band=band)),
-        wrench=add("wrench", ExternalWrenchEstimator(arm)),
+        wrench=add("wrench", ExternalWrenchEstimator(
+            arm, params.wrench, time_step=h)),
         base_yaw=add("base_yaw", MatrixGain(
             np.array([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]]))),
         whole_body_cdmp=add("whole_body_cdmp", WholeBodyCdmp(
@@ -280,7 +283,10 @@ def build_controller(params=None, robot=None):
         connect("guard", "stop", gate, "stop")
 
     connect("base_yaw", "y0", "whole_body_cdmp", "base_yaw")
-    connect("wrench", "external_wrench", "whole_body_cdmp", "wrench")
+    # F_ext in the frame of each DMP's velocity: T_b for the whole body's
+    # (with V_ee), T_a for the arm's (with V_a).
+    connect("wrench", "external_wrench_in_base", "whole_body_cdmp",
+            "wrench")
     connect("wrench", "external_wrench", "arm_cdmp", "wrench")
     for destination in ("workspace", "distributor"):
         connect("whole_body_cdmp", "end_effector_velocity", destination,

@@ -44,6 +44,7 @@ from drake_wbc.math.loading import load_typed
 from drake_wbc.math.safety import SafetyParameters
 from drake_wbc.math.validation import positive, switch
 from drake_wbc.math.workspace import WorkspaceAdapterParameters
+from drake_wbc.math.wrench import WrenchEstimatorParameters
 
 
 @dataclass
@@ -72,6 +73,9 @@ class ControllerParameters:
         safety: the run-time safety (hold time of the safe stop, the
             base's velocity and acceleration limits); the arm's limits are
             in arm_controller.
+        wrench: the external wrench's estimate (the tool's weight alone,
+            as the paper, by default; its inertial reaction too with
+            wrench.inertia_compensation).
 
     Each value is held once, here, and `build_controller` hands it to the
     stages that need it. Besides each part's own checks, the parts must
@@ -110,6 +114,8 @@ class ControllerParameters:
     arm_controller: ArmControllerParameters = field(
         default_factory=ArmControllerParameters)
     safety: SafetyParameters = field(default_factory=SafetyParameters)
+    wrench: WrenchEstimatorParameters = field(
+        default_factory=WrenchEstimatorParameters)
 
     def __post_init__(self):
         h = positive("time_step", self.time_step)

@@ -141,7 +141,7 @@ def schedule_source(schedule, size):
     return TrajectorySource(trajectory)
 
 
-def add_controller(builder, params, task, station):
+def add_controller(builder, params, task, station, arm=None):
     """Adds the controller built from `params` and the sources of `task`
     to `builder`, and connects the controller to `station` (a Diagram
     already in `builder` with the station's ports: the simulated station
@@ -153,13 +153,15 @@ def add_controller(builder, params, task, station):
             Scenario.controller_for(variant)).
         task: TaskInputs.
         station: the station's Diagram, already added to `builder`.
+        arm: the controller's ArmKinematics (build_controller's default,
+            the shipped robot's, if None): that of the station's robot.
 
     Returns:
         (controller, sources): the drake_wbc.controller.diagram.Controller
         and a dict of the task's sources (TrajectorySources) by input name.
     """
     task = checked_instance("task", task, TaskInputs, TaskInputs)
-    controller = build_controller(params)
+    controller = build_controller(params, arm)
     builder.AddNamedSystem("controller", controller.diagram)
     for name in STATION_INPUTS:
         builder.Connect(station.GetOutputPort(name),
@@ -177,19 +179,22 @@ def add_controller(builder, params, task, station):
                             controller.diagram.GetInputPort(name))
     player = controller.stages["whole_body_cdmp"].player
     if player is not None and player.tracking_gain > 0.0:
-        _add_movement_tracking(builder, controller, sources, station, player)
+        _add_movement_tracking(builder, controller, sources, station, player,
+                               arm)
     return controller, sources
 
 
-def _add_movement_tracking(builder, controller, sources, station, player):
-    """Adds the learned movement's tracking (MovementTracking) to the
-    task's reference velocity (cdmp.MovementReplay.tracking_gain)."""
+def _add_movement_tracking(builder, controller, sources, station, player,
+                           arm=None):
+    """Adds the learned movement's tracking (MovementTracking, with the
+    controller's ArmKinematics `arm`) to the task's reference velocity
+    (cdmp.MovementReplay.tracking_gain)."""
     from pydrake.systems.primitives import Adder
 
     from drake_wbc.stages.whole_body_cdmp import MovementTracking
 
     tracking = builder.AddNamedSystem("task.movement_tracking",
-                                      MovementTracking(player))
+                                      MovementTracking(player, arm))
     for name in ("base.state_estimated", "arm.position_measured"):
         builder.Connect(station.GetOutputPort(name),
                         tracking.GetInputPort(name))

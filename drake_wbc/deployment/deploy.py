@@ -24,7 +24,11 @@ from pydrake.systems.framework import DiagramBuilder
 from drake_wbc.controller.diagram import HARDWARE_INPUTS
 from drake_wbc.controller.run_log import SIGNALS
 from drake_wbc.controller.task import add_controller
-from drake_wbc.experiments.scenario import Scenario, controller_for
+from drake_wbc.experiments.scenario import (
+    Scenario,
+    controller_arm,
+    controller_for,
+)
 from drake_wbc.hardware import messages
 from drake_wbc.hardware.codecs import SignalBundleEncoder, message_formats
 from drake_wbc.hardware.interface import (
@@ -107,7 +111,7 @@ def add_controller_side(builder, scenario, variant=None, options=None,
     builder.AddNamedSystem("hardware", hardware.diagram)
     controller, sources = add_controller(
         builder, controller_for(scenario, variant), scenario.task,
-        hardware.diagram)
+        hardware.diagram, arm=controller_arm(scenario))
     # The watchdog's stop stops the controller too (HARDWARE_INPUTS).
     for name in HARDWARE_INPUTS:
         builder.Connect(hardware.diagram.GetOutputPort(name),

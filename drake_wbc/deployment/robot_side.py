@@ -102,7 +102,8 @@ class RobotSide:
         s = self.systems = {}
         if add_lcm_interface:
             s["lcm"] = builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
-        self.station = SimulatedStation(scenario.station, scenario.scene)
+        self.station = SimulatedStation(scenario.station, scenario.scene,
+                                        scenario.arm_mount)
         station = builder.AddNamedSystem("station", self.station.diagram)
 
         bus = receiving_bus(lcm)

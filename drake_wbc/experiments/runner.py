@@ -20,7 +20,12 @@ from pydrake.systems.framework import DiagramBuilder
 
 from drake_wbc.controller.run_log import SIGNALS, SignalLogger
 from drake_wbc.controller.task import add_controller
-from drake_wbc.experiments.scenario import Scenario, Variant, controller_for
+from drake_wbc.experiments.scenario import (
+    Scenario,
+    Variant,
+    controller_arm,
+    controller_for,
+)
 from drake_wbc.math.validation import checked_instance
 from drake_wbc.station.simulation import SimulatedStation
 
@@ -61,11 +66,12 @@ def build_closed_loop(scenario, variant=None, replay=False):
     scenario = checked_instance("scenario", scenario, Scenario, Scenario)
     variant = variant or scenario.variants[0]
     builder = DiagramBuilder()
-    station = SimulatedStation(scenario.station, scenario.scene)
+    station = SimulatedStation(scenario.station, scenario.scene,
+                               scenario.arm_mount)
     builder.AddNamedSystem("station", station.diagram)
     controller, sources = add_controller(
         builder, controller_for(scenario, variant), scenario.task,
-        station.diagram)
+        station.diagram, arm=controller_arm(scenario))
     ports = {}
     for name in SIGNALS:
         for system in (station.diagram, controller.diagram):

@@ -41,6 +41,7 @@ from drake_wbc.math.validation import (
     text,
 )
 from drake_wbc.robot.footprint import check_start_is_free
+from drake_wbc.robot.model import ArmKinematics, ArmMount
 from drake_wbc.station.scene import Scene
 from drake_wbc.station.simulation import StationOptions
 
@@ -123,6 +124,12 @@ class Scenario:
         duration: simulated time in s.
         controller: the controller's parameters (defaults: the paper's).
         station: how the simulated station is built.
+        arm_mount: the robot's arm mount (drake_wbc.robot.model.ArmMount:
+            the arm's rotation about the base's vertical and its tilt),
+            which the simulated station builds and the controller's
+            kinematics take (R_ba); the shipped robot's (none) by
+            default: it poses the weld of the robot's model directives
+            whose child is the description's arm.base_frame.
         scene: obstacles, people and the hand.
         task: the task inputs over time.
         variants: the runs to compare (one run if a single entry).
@@ -145,6 +152,7 @@ class Scenario:
     controller: ControllerParameters = field(
         default_factory=ControllerParameters)
     station: StationOptions = field(default_factory=StationOptions)
+    arm_mount: ArmMount = field(default_factory=ArmMount)
     scene: Scene = field(default_factory=Scene)
     task: TaskInputs = field(default_factory=TaskInputs)
     variants: list[Variant] = field(default_factory=lambda: [Variant()])
@@ -222,8 +230,17 @@ def controller_for(scenario, variant):
     return params
 
 
+def controller_arm(scenario):
+    """The controller's ArmKinematics for `scenario`'s robot: None (the
+    controller's own, the shipped robot's) for the shipped mount, else
+    one made with the scenario's arm_mount."""
+    mount = scenario.arm_mount
+    return None if mount.is_identity else ArmKinematics(mount=mount)
+
+
 _PARTS = dict(controller=ControllerParameters, station=StationOptions,
-              scene=Scene, task=TaskInputs, outputs=OutputOptions)
+              arm_mount=ArmMount, scene=Scene, task=TaskInputs,
+              outputs=OutputOptions)
 """The nested parameters of a Scenario and their types."""
 
 

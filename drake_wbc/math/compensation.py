@@ -12,18 +12,25 @@ of eq. (deviation).
     delta_V_a^req   = -R_ba^T J_b delta_V_b
     delta_V_a^cmp   = (I - alpha P_Cm) delta_V_a^req        eq. (wb_error)
     V_a^ref         = V_a + delta_V_a^cmp                   eq. (compensation)
-    delta_V_ee      = delta_V_a^cmp - delta_V_a^req
-                    = -alpha P_Cm delta_V_a^req             eq. (deviation)
+    delta_V_ee      = R_ba (delta_V_a^cmp - delta_V_a^req)
+                    = -alpha R_ba P_Cm delta_V_a^req        eq. (deviation)
 
 Twists are [linear; angular] (m/s; rad/s); the arm's are in T_a, the
-base's [vx_b, vy_b, wz_b] in T_b.
+base's [vx_b, vy_b, wz_b] in T_b, and so is delta_V_ee, the deviation of
+the end effector's twist V_ee, which eq. (fk) gives in T_b: with V_a^ref
+and V_b^flt the end effector moves at R_ba (V_a + delta_V_a^cmp) + J_b
+V_b^flt = V_ee + R_ba (delta_V_a^cmp - delta_V_a^req). The paper prints
+eq. (deviation) without R_ba, its robot's ^bR_a = I; the tracking-error
+term of eq. (cdmp-wb-error) integrates delta_V_ee where V_ee lives, in
+T_b (an arm mounted turned or tilted on the base otherwise has its
+deviation commanded back along the wrong axes).
 
 - delta_V_b: `base_deviation_of`, checked `base_deviation`;
 - P_Cm of eq. (wb_error): `project_on_gradient` (P_Cm applied), checked
   `gradient_projector` (the matrix);
-- delta_V_a^req: `required_compensation`, and eqs. (wb_error) and
-  (deviation): `projected_compensation`, both checked
-  `robust_compensation`;
+- delta_V_a^req: `required_compensation`, eq. (wb_error):
+  `projected_compensation`, eq. (deviation) in T_b: `deviation_in_base`,
+  all three checked `robust_compensation`;
 - eq. (compensation) with J_b of eq. (2) at p_ee: `arm_compensation`.
 
 The references are scalar-generic (float, and numpy object arrays of
@@ -108,11 +115,20 @@ def required_compensation(delta_V_b, J_b, R_ba):
 
 def projected_compensation(required, grad, alpha,
                            tolerance=PROJECTOR_TOLERANCE):
-    """(delta_V_a^cmp, delta_V_ee) of eqs. (wb_error) and (deviation) for
-    any scalar type: delta_V_ee = -alpha P_Cm delta_V_a^req and
-    delta_V_a^cmp = delta_V_a^req + delta_V_ee."""
+    """(delta_V_a^cmp, delta_V_a^cmp - delta_V_a^req) of eq. (wb_error)
+    for any scalar type, both in T_a: the difference -alpha P_Cm
+    delta_V_a^req is the deviation of eq. (deviation) before it is
+    turned into T_b (`deviation_in_base`)."""
     deviation = -alpha * project_on_gradient(required, grad, tolerance)
     return np.asarray(required) + deviation, deviation
+
+
+def deviation_in_base(deviation_in_arm, R_ba):
+    """delta_V_ee = R_ba (delta_V_a^cmp - delta_V_a^req) of eq.
+    (deviation) for any scalar type: the end effector's twist deviation
+    in T_b from the compensation's shortfall in T_a (module docstring);
+    R_ba a rotation matrix (3, 3)."""
+    return rotate_twist(R_ba, deviation_in_arm)
 
 
 def arm_compensation(V_a, V_b, V_b_filtered, p_ee_in_base, R_ba, grad_C_m,
@@ -133,14 +149,16 @@ def arm_compensation(V_a, V_b, V_b_filtered, p_ee_in_base, R_ba, grad_C_m,
         tolerance: the norm of grad_C_m at and below which P_Cm = 0.
 
     Returns:
-        (12,) array [V_a^ref (6); delta_V_ee (6)], both in T_a.
+        (12,) array [V_a^ref (6) in T_a; delta_V_ee (6) in T_b].
     """
+    R = np.eye(3) if R_ba is None else R_ba
     required = required_compensation(
         base_deviation_of(V_b_filtered, V_b), base_jacobian_of(p_ee_in_base),
-        np.eye(3) if R_ba is None else R_ba)
+        R)
     cmp, deviation = projected_compensation(required, grad_C_m, alpha,
                                             tolerance)
-    return np.concatenate([np.asarray(V_a) + cmp, deviation])
+    return np.concatenate([np.asarray(V_a) + cmp,
+                           deviation_in_base(deviation, R)])
 
 
 # --- the controller's kernel ------------------------------------------------
@@ -196,8 +214,16 @@ def arm_compensation_float(V_a, V_b, V_b_filtered, p_ee_in_base, R_ba,
                        + g5 * q5) / g_squared
     deviation = [factor * g0, factor * g1, factor * g2, factor * g3,
                  factor * g4, factor * g5]
-    return np.array([v + (d + e) for v, d, e in zip(
-        V_a.tolist(), required, deviation, strict=True)] + deviation)
+    arm = [v + (d + e) for v, d, e in zip(V_a.tolist(), required, deviation,
+                                          strict=True)]
+    if R_ba is None:
+        return np.array(arm + deviation)
+    # delta_V_ee = R_ba (delta_V_a^cmp - delta_V_a^req), in T_b.
+    e0, e1, e2, e3, e4, e5 = deviation
+    return np.array(arm + [
+        r00 * e0 + r01 * e1 + r02 * e2, r10 * e0 + r11 * e1 + r12 * e2,
+        r20 * e0 + r21 * e1 + r22 * e2, r00 * e3 + r01 * e4 + r02 * e5,
+        r10 * e3 + r11 * e4 + r12 * e5, r20 * e3 + r21 * e4 + r22 * e5])
 
 
 # --- the checked functions --------------------------------------------------
@@ -267,14 +293,13 @@ def robust_compensation(delta_V_b, J_b, R_ba, grad_C_m, alpha):
 
         delta_V_a^cmp = (I - alpha P_Cm) delta_V_a^req,     eq. (wb_error)
 
-    and the end-effector tracking deviation that this leaves is
+    and the end-effector tracking deviation that this leaves, in T_b
+    where eq. (fk) gives V_ee (module docstring), is
 
-        delta_V_ee = delta_V_a^cmp - delta_V_a^req
-                   = -alpha P_Cm delta_V_a^req.             eq. (deviation)
+        delta_V_ee = R_ba (delta_V_a^cmp - delta_V_a^req)
+                   = -alpha R_ba P_Cm delta_V_a^req.        eq. (deviation)
 
-    Like the paper, delta_V_ee is in the arm's frame T_a (the frame of
-    the compensation); the deviation of the end-effector twist in T_b is
-    R_ba delta_V_ee, the same vector when ^bR_a = I. alpha = 0 gives the
+    The paper prints it without R_ba (its ^bR_a = I). alpha = 0 gives the
     full compensation (delta_V_ee = 0), alpha = 1 none along the gradient.
 
     Args:
@@ -289,8 +314,9 @@ def robust_compensation(delta_V_b, J_b, R_ba, grad_C_m, alpha):
         alpha: transition value of eq. (transition), in [0, 1].
 
     Returns:
-        (delta_V_a_cmp, delta_V_ee): two (6,) arrays in T_a; the arm's
-        reference twist is V_a + delta_V_a_cmp, eq. (compensation).
+        (delta_V_a_cmp, delta_V_ee): two (6,) arrays, in T_a and in T_b;
+        the arm's reference twist is V_a + delta_V_a_cmp, eq.
+        (compensation).
 
     Raises:
         ValueError: on a bad argument (wrong shape, non-finite entry,
@@ -301,4 +327,6 @@ def robust_compensation(delta_V_b, J_b, R_ba, grad_C_m, alpha):
     R = np.eye(3) if R_ba is None else rotation_matrix("R_ba", R_ba)
     g = as_vector("grad_C_m", grad_C_m, 6)
     a = in_closed_range("alpha", alpha, 0.0, 1.0)
-    return projected_compensation(required_compensation(dV_b, J_b, R), g, a)
+    cmp, deviation = projected_compensation(
+        required_compensation(dV_b, J_b, R), g, a)
+    return cmp, deviation_in_base(deviation, R)

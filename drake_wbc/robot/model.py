@@ -17,13 +17,15 @@ The shipped model files are found through Drake's package map under the
 package name `drake_wbc`, so they load with no network.
 """
 
+import math
 import tempfile
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-from pydrake.math import RigidTransform
+from pydrake.common.schema import Transform
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.parsing import (
     LoadModelDirectives,
     Parser,
@@ -44,6 +46,7 @@ from pydrake.multibody.tree import (
 
 from drake_wbc.math.validation import (
     as_float_array,
+    as_scalar,
     as_vector,
     checked_instance,
 )
@@ -57,6 +60,48 @@ from drake_wbc.robot.suspension import (
 HOME_ARM_POSITIONS = np.array(shipped_robot().arm.home)
 """The shipped robot's home configuration (rad), from its description:
 the default start of the simulated station and of the controller."""
+
+
+@dataclass
+class ArmMount:
+    """How the arm is mounted on the base: the rotation ^bR_a of T_a in
+    T_b (paper, eq. (fk)), about the mount point.
+
+    ^bR_a = Rz(yaw) Ry(tilt): the arm turned by `yaw` about the base's
+    vertical, then its column tilted by `tilt` about its own y axis (a
+    positive tilt leans the arm's z axis towards its own +x). The
+    default, no rotation, is the robot as its model has it. It sets the
+    pose of the weld that mounts the arm in the model directives (the one
+    whose child is the description's arm.base_frame), given to
+    `add_robot` (and so to the station and to `ArmKinematics`): a scenario
+    turns or tilts the arm of a described robot without another model.
+
+    Attributes:
+        yaw: rad, in [-pi, pi].
+        tilt: rad, in [-pi/2, pi/2] (pi/2: the arm on a wall of the base).
+    """
+
+    yaw: float = 0.0
+    tilt: float = 0.0
+
+    def __post_init__(self):
+        for name, bound in (("yaw", math.pi), ("tilt", 0.5 * math.pi)):
+            value = as_scalar(name, getattr(self, name))
+            if not -bound <= value <= bound:
+                raise ValueError(
+                    f"{name} = {value!r} rad is not allowed: must lie in "
+                    f"[{-bound!r}, {bound!r}] rad")
+            setattr(self, name, float(value))
+
+    @property
+    def is_identity(self):
+        """True for the shipped robot's mount (^bR_a = I)."""
+        return self.yaw == 0.0 and self.tilt == 0.0
+
+    def rotation(self):
+        """^bR_a (3, 3), the rotation of T_a in T_b."""
+        return (RotationMatrix.MakeZRotation(self.yaw)
+                @ RotationMatrix.MakeYRotation(self.tilt)).matrix()
 
 
 class ArmLimits(NamedTuple):
@@ -100,6 +145,7 @@ class RobotModel:
         suspension_joints: the suspension's joints under the chassis
             (roll, pitch) when the robot was added with one, else empty
             (drake_wbc.robot.suspension).
+        mount: the ArmMount the arm was welded with.
     """
 
     description: RobotDescription
@@ -119,6 +165,7 @@ class RobotModel:
     home: np.ndarray
     limits: ArmLimits
     suspension_joints: tuple = ()
+    mount: ArmMount = field(default_factory=ArmMount)
 
     @property
     def num_arm_joints(self):
@@ -127,7 +174,7 @@ class RobotModel:
 
 
 def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
-              suspension=None):
+              suspension=None, mount=None):
     """Adds the robot of `description` to `plant` (not yet finalized) and
     checks the description against it.
 
@@ -141,6 +188,9 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
             model has it) or the SuspensionGains of a suspension under the
             chassis (drake_wbc.robot.suspension), inserted into the
             directives' first model, the base (model directives only).
+        mount: the ArmMount of the arm on the base (None: as the model
+            has it): the pose of the directives' weld whose child is
+            arm.base_frame (model directives only).
 
     Returns:
         RobotModel: the model instances, frames and joints.
@@ -170,10 +220,15 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
         raise ValueError(
             f"suspension = {suspension!r} is not allowed: must be None or "
             "SuspensionGains (drake_wbc.robot.suspension)")
+    mount = replace(checked_instance("mount", mount, ArmMount, ArmMount))
     if source.directives:
         url = description.resolve(source.directives)
         path = package_map.ResolveUrl(url) if "://" in url else url
         directives = LoadModelDirectives(path)
+        if not mount.is_identity:
+            _mount_weld(directives, description).X_PC = Transform(
+                RigidTransform(RollPitchYaw(RotationMatrix(
+                    mount.rotation())), np.zeros(3)))
         if suspension is None:
             ProcessModelDirectives(directives, plant, parser)
         else:
@@ -187,20 +242,36 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
                 first.file = f"file://{suspended}"
                 ProcessModelDirectives(directives, plant, parser)
     else:
-        if suspension is not None:
-            raise ValueError(
-                "suspension is not allowed with model.file: a suspension is "
-                "inserted into model directives' base; model it in the file")
+        for name, value in (("suspension", suspension),
+                            ("mount", None if mount.is_identity else mount)):
+            if value is not None:
+                raise ValueError(
+                    f"{name} = {value!r} is not allowed with model.file: it "
+                    "changes model directives; model it in the file")
         url = description.resolve(source.file)
         if "://" in url:
             parser.AddModelsFromUrl(url)
         else:
             parser.AddModels(url)
-    model = _robot_model(plant, description)
+    model = replace(_robot_model(plant, description), mount=mount)
     if suspension is None:
         return model
     return replace(model, suspension_joints=tuple(
         plant.GetJointByName(name, model.base) for name in SUSPENSION_JOINTS))
+
+
+def _mount_weld(directives, description):
+    """The add_weld of `directives` whose child is the description's
+    arm.base_frame (the weld an ArmMount poses)."""
+    welds = [d.add_weld for d in directives.directives
+             if d.add_weld is not None
+             and d.add_weld.child == description.arm.base_frame]
+    if len(welds) != 1:
+        raise ValueError(
+            f"mount is not allowed: the model directives must weld "
+            f"arm.base_frame = {description.arm.base_frame!r} exactly once "
+            f"(found {len(welds)})")
+    return welds[0]
 
 
 def _scoped(plant, field, name, find, kind):
@@ -301,7 +372,7 @@ def _robot_model(plant, description):
     flange = frames["flange_frame"].body()
     sensor = sensor_joint.child_body()
     tcp = frames["tcp_frame"].body()
-    for field, name, body, ancestor, what in (
+    for where, name, body, ancestor, what in (
             ("arm.flange_frame", arm.flange_frame, flange, last,
              "the arm's last joint"),
             ("tool.ft_sensor_joint", tool.ft_sensor_joint, sensor, flange,
@@ -311,7 +382,7 @@ def _robot_model(plant, description):
             ("tool.tcp_frame", tool.tcp_frame, tcp, sensor,
              "the sensor's measuring side")):
         if not _outboard(parents, body, ancestor):
-            raise ValueError(f"{field} = {name!r} is not allowed: must be "
+            raise ValueError(f"{where} = {name!r} is not allowed: must be "
                              f"outboard of {what}")
     return RobotModel(
         description=description,
@@ -371,11 +442,14 @@ def _arm_limits(arm, joints):
                      limits["acceleration_limits"])
 
 
-def make_robot_plant(description=None, time_step=0.0, suspension=None):
+def make_robot_plant(description=None, time_step=0.0, suspension=None,
+                     mount=None):
     """Returns (plant, model): a finalized plant of the robot alone (with
-    the suspension of SuspensionGains `suspension`, if any)."""
+    the suspension of SuspensionGains `suspension` and the arm mounted by
+    the ArmMount `mount`, if any)."""
     plant = MultibodyPlant(time_step=time_step)
-    model = add_robot(plant, description, suspension=suspension)
+    model = add_robot(plant, description, suspension=suspension,
+                      mount=mount)
     plant.Finalize()
     return plant, model
 
@@ -426,15 +500,23 @@ class ArmKinematics:
             given).
         end_effector_frame: the frame whose origin is the end effector;
             the tool centre point if None.
+        mount: the ArmMount of the private plant (only when `plant` is
+            None; a given plant carries its own, model.mount).
     """
 
-    def __init__(self, plant=None, model=None, end_effector_frame=None):
+    def __init__(self, plant=None, model=None, end_effector_frame=None,
+                 mount=None):
         if plant is None:
-            plant, model = make_robot_plant()
+            plant, model = make_robot_plant(mount=mount)
         elif model is None:
             raise ValueError(
                 "model = None is not allowed when plant is given: pass the "
                 "RobotModel that add_robot returned for that plant"
+            )
+        elif mount is not None:
+            raise ValueError(
+                f"mount = {mount!r} is not allowed when plant is given: the "
+                "plant's arm is mounted already (model.mount)"
             )
         self._plant = plant
         self.plant, self.model = plant, model
@@ -452,6 +534,7 @@ class ArmKinematics:
         self.home = model.home.copy()
         X_BA = self._arm_base.CalcPose(self._context, self._base)
         self.R_ba = X_BA.rotation().matrix()
+        self.mount = model.mount
         # T_a is fixed in T_b (nominal kinematics): p_ee in T_b follows
         # from X_AE, with no third query of the plant.
         self._R_BA, self._p_BA = self.R_ba.copy(), X_BA.translation().copy()

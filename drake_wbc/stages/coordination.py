@@ -180,9 +180,11 @@ def RobustCompensator_(T):
             delta_V_a^req = -R_ba^T J_b delta_V_b,
             delta_V_a^cmp = (I - s_c alpha P_Cm) delta_V_a^req,
             V_a^ref       = V_a + delta_V_a^cmp,
-            delta_V_ee    = -s_c alpha P_Cm delta_V_a^req,
+            delta_V_ee    = -s_c alpha R_ba P_Cm delta_V_a^req,
 
-        P_Cm the projector onto grad_x C_m.
+        P_Cm the projector onto grad_x C_m; delta_V_ee turned into T_b
+        by R_ba (compensation.deviation_in_base), the frame of V_ee that
+        WholeBodyCdmp integrates it in.
 
         ::
 
@@ -207,8 +209,10 @@ def RobustCompensator_(T):
           parameter's value when not connected (nor fixed). s_c = 0 means
           alpha = 0, the exact compensation.
         - arm_reference_velocity: V_a^ref (6, T_a).
-        - end_effector_deviation: delta_V_ee (6), in T_a like the paper
-          (the same in T_b for our robot, R_ba = I).
+        - end_effector_deviation: delta_V_ee (6), the end effector's
+          twist deviation of eq. (deviation), in T_b (the paper's T_a
+          value turned by R_ba; the same for the shipped robot, R_ba =
+          I).
 
         With s_c alpha = 0 the arm reference and the filtered base give the
         commanded twist exactly: J_wb [V_a^ref; V_b^flt] = J_wb [V_a; V_b].
@@ -227,7 +231,11 @@ def RobustCompensator_(T):
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         shared_arm_kinematics)
             self.R_ba = rotation_matrix("R_ba", self.arm.R_ba)
-            self._R_ba = tuple(tuple(row) for row in self.R_ba.tolist())
+            # None for the usual mounting ^bR_a = I (no rotation to do),
+            # else its rows, as the float kernel takes them.
+            self._R_ba = (None if np.array_equal(self.R_ba, np.eye(3))
+                          else tuple(tuple(row)
+                                     for row in self.R_ba.tolist()))
             self._switch = self.params.compensation_switch
             self._compensate = kernels.body_for(
                 compensation.arm_compensation, T)

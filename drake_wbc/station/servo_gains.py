@@ -14,10 +14,11 @@ from drake_wbc.robot.model import (
 )
 
 
-def _mass_matrix(description, arm_positions):
+def _mass_matrix(description, arm_positions, mount):
     """(M, model): the robot's mass matrix with the arm at
-    `arm_positions` (n,), everything else at rest, and its RobotModel."""
-    plant, model = make_robot_plant(description)
+    `arm_positions` (n,) and mounted by the ArmMount `mount`, everything
+    else at rest, and its RobotModel."""
+    plant, model = make_robot_plant(description, mount=mount)
     q_a = as_vector("arm_positions", arm_positions, model.num_arm_joints)
     context = plant.CreateDefaultContext()
     q = plant.GetPositions(context)
@@ -35,7 +36,7 @@ def _actuators(plant, joints):
     return [by_joint[j.index()] for j in joints]
 
 
-def servo_gains(arm_positions, base, arm, description=None):
+def servo_gains(arm_positions, base, arm, description=None, mount=None):
     """The PD gains of the base's and the arm's actuators.
 
     The base's joints get a pure velocity servo, p = 0 and d = M_ii /
@@ -50,12 +51,13 @@ def servo_gains(arm_positions, base, arm, description=None):
         base: BaseDriverParameters.
         arm: ArmDriverParameters.
         description: the RobotDescription; the shipped robot's if None.
+        mount: the robot's ArmMount (as its model has it if None).
 
     Returns:
         dict: the joint's scoped name (as the description names it) ->
         PdControllerGains, for `set_servo_gains`.
     """
-    M, model = _mass_matrix(description, arm_positions)
+    M, model = _mass_matrix(description, arm_positions, mount)
     names = model.description
     w = 2.0 * np.pi * arm.servo_frequency
     gains = {}
@@ -83,7 +85,7 @@ def set_servo_gains(plant, model, gains):
         actuator.set_controller_gains(gains[name])
 
 
-def drive_inertias(arm_positions, arm, description=None):
+def drive_inertias(arm_positions, arm, description=None, mount=None):
     """The reflected inertia of each arm joint's geared drive, kg m^2:
     min_inertia - M_ii where the joint's own inertia M_ii (the mass
     matrix with the arm at `arm_positions`, as in `servo_gains`) is below
@@ -93,10 +95,12 @@ def drive_inertias(arm_positions, arm, description=None):
     light wrist joint's loop would be many times faster: 380 Hz for
     joint 6, beyond what a 5 ms plant step resolves).
 
+    `description`, `mount`: as for `servo_gains`.
+
     Returns:
         dict: the arm joint's scoped name -> rotor inertia (gear ratio 1).
     """
-    M, model = _mass_matrix(description, arm_positions)
+    M, model = _mass_matrix(description, arm_positions, mount)
     return {name: max(arm.min_inertia - M[i, i], 0.0)
             for name, i in zip(model.description.arm.joints,
                                joint_velocity_indices(model.arm_joints),

@@ -56,6 +56,7 @@ from drake_wbc.math.validation import (
 )
 from drake_wbc.robot.model import (
     HOME_ARM_POSITIONS,
+    ArmMount,
     add_robot,
     joint_position_indices,
     joint_velocity_indices,
@@ -227,14 +228,22 @@ class SimulatedStation:
             robot's RobotModel.
         systems: dict of the station's other systems by name.
         options, scene: what it was built from.
+
+    Args:
+        options: StationOptions (defaults if None).
+        scene: the Scene (an empty one if None).
+        mount: the robot's ArmMount (drake_wbc.robot.model), the arm's
+            rotation on the base: the shipped robot's (none) if None. The
+            controller's ArmKinematics must be made with the same one.
     """
 
-    def __init__(self, options=None, scene=None):
+    def __init__(self, options=None, scene=None, mount=None):
         # Checked once, here, for every part below (which keep them).
         self.options = options = validated_copy(checked_instance(
             "options", options, StationOptions, StationOptions))
         self.scene = scene = validated_copy(
             checked_instance("scene", scene, Scene, Scene))
+        mount = checked_instance("mount", mount, ArmMount, ArmMount)
         h = options.time_step
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(
@@ -244,13 +253,14 @@ class SimulatedStation:
         model = add_robot(
             plant, suspension=None if options.suspension is None
             else suspension_gains(options.suspension,
-                                  options.initial_arm_positions))
+                                  options.initial_arm_positions),
+            mount=mount)
         add_static_obstacles(plant, scene)
         self._gains = servo_gains(options.initial_arm_positions,
-                                  options.base, options.arm)
+                                  options.base, options.arm, mount=mount)
         set_servo_gains(plant, model, self._gains)
         set_drive_inertias(plant, model, drive_inertias(
-            options.initial_arm_positions, options.arm))
+            options.initial_arm_positions, options.arm, mount=mount))
         plant.Finalize()
         self.plant, self.scene_graph, self.model = plant, scene_graph, model
         add = builder.AddNamedSystem
