@@ -163,8 +163,11 @@ def test_the_run_reaches_its_end_within_the_simulated_bounds(run):
     print(f"late mean V_ee x {np.mean(v):.4f} m/s; {metrics}")
     assert np.mean(v) == pytest.approx(0.1, abs=0.01)
     # The error in the base's band: 5.2 mm/s in the in-process simulation
-    # of this scenario; the two unsynchronised clocks may add some.
-    assert metrics["run.error_rms_base_band_m_s"] < 2 * 0.0052
+    # of this scenario; the two unsynchronised clocks add some, the more
+    # the busier the machine (10.8 mm/s seen with the load at 7 on two
+    # cores, on this code and on the code before it alike), while a
+    # controller that does not track the step is off by the step's 0.1 m/s.
+    assert metrics["run.error_rms_base_band_m_s"] < 3 * 0.0052
     # And on the base's command: the filter of eq. (filtering) rises no
     # faster than omega_f / e per unit step; here, as sent, message by
     # message.
