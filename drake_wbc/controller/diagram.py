@@ -166,10 +166,13 @@ class Controller:
             context_of("guard"), "arm.position_measured", arm_position)
 
     def safety_reason(self, root_context):
-        """Why the controller is in a safe stop, as a sentence ("" when it
-        is not)."""
-        guard = self.stages["guard"]
-        return guard.reason(guard.GetMyContextFromRoot(root_context))
+        """Why the controller is in a safe stop, or the base in a
+        protective stop (an obstacle point inside its footprint), as a
+        sentence ("" when neither)."""
+        reasons = [stage.reason(stage.GetMyContextFromRoot(root_context))
+                   for stage in (self.stages["guard"],
+                                 self.stages["base_limiter"])]
+        return "; ".join(reason for reason in reasons if reason)
 
 
 def build_controller(params=None, arm=None):
@@ -189,6 +192,7 @@ def build_controller(params=None, arm=None):
         and the diagnostics capability, alpha, sigma_xy, sigma_phi,
         end_effector_deviation, base_velocity, filtered_base_velocity,
         arm_velocity_command, arm_limited, base_saturation,
+        base_protective_stop,
         safety_status, safety_reason).
     """
     params = validated_copy(checked_instance(
@@ -284,6 +288,7 @@ def build_controller(params=None, arm=None):
     connect("base_gate", "scale", "base_limiter", "envelope_scale")
     connect("guard", "lidar.obstacle_points", "base_limiter",
             "obstacle_points")
+    connect("guard", "base.state_estimated", "base_limiter", "base_state")
     connect("distributor", "arm_velocity", "compensator", "arm_velocity")
     connect("distributor", "base_velocity", "compensator", "base_velocity")
     connect("base_limiter", "velocity_command", "compensator",
@@ -313,6 +318,7 @@ def build_controller(params=None, arm=None):
         ("arm_cdmp", "arm_velocity_command", "arm_velocity_command"),
         ("arm_controller", "limited", "arm_limited"),
         ("base_limiter", "saturation", "base_saturation"),
+        ("base_limiter", "protective_stop", "base_protective_stop"),
         ("guard", "safety_status", "safety_status"),
         ("guard", "safety_reason", "safety_reason"),
     )

@@ -4,6 +4,8 @@ command within the robot's velocity and acceleration limits, its direction
 kept). InputGuard, which decides the stop, and StopGate are in
 drake_wbc.stages.safety."""
 
+import logging
+
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem_, ValueProducer
@@ -14,11 +16,21 @@ from drake_wbc.math.command_limits import (
     limit_base_velocity,
 )
 from drake_wbc.math.kernels import body_for
+from drake_wbc.math.people import (
+    MAX_TRACKS,
+    NEVER,
+    TRACKER_SIZE,
+    initial_tracker,
+    people_scan,
+)
 from drake_wbc.math.repulsion import LastPoints
-from drake_wbc.math.safety import SafetyParameters
-from drake_wbc.math.scalar_support import through_float_function
+from drake_wbc.math.safety import BASE_LAG, SafetyParameters
+from drake_wbc.math.scalar_support import through_float_function, value_of
 from drake_wbc.math.separation import (
+    FAR,
     NEAREST_POINTS,
+    people_rows,
+    protective_timing,
     scale_for_rows,
     separation_state,
 )
@@ -32,6 +44,28 @@ from drake_wbc.stages.support import define_stage
 
 _ALLOWED = safety.BASE_AXES + 3 * NEAREST_POINTS
 """Where the allowed speeds start in BaseCommandLimiter's state."""
+
+_PEOPLE = _ALLOWED + NEAREST_POINTS
+"""Where the moving people's approach rows (3 MAX_TRACKS) start."""
+
+_PEOPLE_ALLOWED = _PEOPLE + 3 * MAX_TRACKS
+"""Where their allowed approach speeds (MAX_TRACKS) start."""
+
+_PROTECTIVE = _PEOPLE_ALLOWED + MAX_TRACKS
+"""The protective stop's state: [stopped, the last tick's time with a
+point on or inside the footprint, whether the last scan had one]."""
+
+_SCAN = _PROTECTIVE + 3
+"""The last scan's signature: [points, sum of x, sum of y]."""
+
+_TRACKER = _SCAN + 3
+"""Where the people tracker's state (TRACKER_SIZE) starts."""
+
+_SIZE = _TRACKER + TRACKER_SIZE
+
+LOGGER = logging.getLogger("drake_wbc.math.safety")
+"""The safety stages' logger: a protective stop is logged when it trips
+and when it clears."""
 
 
 def _limit_base_velocity_any(desired, previous, velocity_limits,
@@ -159,9 +193,13 @@ def BaseCommandLimiter_(T):
             self._envelope = self.DeclareVectorInputPort("envelope_scale", 1)
             self._points = self.DeclareAbstractInputPort(
                 "obstacle_points", AbstractValue.Make(np.zeros((0, 2))))
-            state = self.DeclareDiscreteState(np.concatenate([
-                np.zeros(safety.BASE_AXES),
-                self._separation(np.zeros((0, 2)))]))
+            self._base_state = self.DeclareVectorInputPort("base_state", 6)
+            self._people = params.people
+            self._timing = protective_timing(
+                params.people, self.time_step, self._acceleration_limits,
+                BASE_LAG)
+            self._hold_time = params.hold_time
+            state = self.DeclareDiscreteState(self._initial_state())
             self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0,
                                                     self._update)
             # Not time: the result changes only with the inputs and state.
@@ -178,31 +216,62 @@ def BaseCommandLimiter_(T):
             self.DeclareVectorOutputPort(
                 "saturation", 3, self._saturation_output,
                 prerequisites_of_calc={*depends, self._envelope.ticket()})
+            self.DeclareVectorOutputPort(
+                "protective_stop", 1, self._protective_output,
+                prerequisites_of_calc={self.discrete_state_ticket(state)})
 
-        def _limited(self, desired, previous, stopped, rows, allowed):
+        def _initial_state(self):
+            """No command, no points, no people, no stop."""
+            people = np.concatenate([np.zeros(3 * MAX_TRACKS),
+                                     np.full(MAX_TRACKS, FAR)])
+            return np.concatenate([
+                np.zeros(safety.BASE_AXES),
+                self._separation(np.zeros((0, 2))), people,
+                [0.0, NEVER, 0.0], [0.0, 0.0, 0.0], initial_tracker()])
+
+        def _limited(self, desired, previous, stopped, rows, allowed,
+                     people=None):
             """[command (3), limited, velocity scale, acceleration scale]
             (without the envelope's scale) from the desired command (3,),
             the previous one (3,), stopped, the approach rows
-            (NEAREST_POINTS, 3) and the allowed speeds (NEAREST_POINTS,)."""
+            (NEAREST_POINTS, 3) and the allowed speeds (NEAREST_POINTS,),
+            and `people`: None, or the people's rows (MAX_TRACKS, 3),
+            their allowed speeds (MAX_TRACKS,) and the protective stop."""
             if stopped >= 0.5:
                 return np.array([0.0, 0.0, 0.0, 0.0, 1.0, 1.0])
             if not _all_finite(desired):
                 return np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
+            scale = self._scale(desired, rows, allowed)
+            if people is not None:
+                person_rows, person_allowed, protective = people
+                if protective >= 0.5:
+                    # A protective stop: to zero within the acceleration
+                    # limits.
+                    scale = 0.0
+                elif person_allowed[0] != FAR:
+                    person_scale = self._scale(desired, person_rows,
+                                               person_allowed)
+                    if person_scale < scale:
+                        scale = person_scale
             result = self._limit(
                 desired, previous, self._velocity_limits,
-                self._acceleration_limits, self.time_step,
-                scale=self._scale(desired, rows, allowed))
+                self._acceleration_limits, self.time_step, scale=scale)
             return np.array(result.command.tolist() + [
                 1.0 if result.limited else 0.0, result.velocity_scale,
                 result.acceleration_scale])
 
         def _calc_result(self, context, value):
             state = context.get_discrete_state_vector().CopyToVector()
+            people = None
+            if state[_PROTECTIVE] >= 0.5 or state[_PEOPLE_ALLOWED] != FAR:
+                people = (state[_PEOPLE:_PEOPLE_ALLOWED].reshape(-1, 3),
+                          state[_PEOPLE_ALLOWED:_PROTECTIVE],
+                          state[_PROTECTIVE])
             value.set_value(self._limited(
                 self._velocity.Eval(context), state[:safety.BASE_AXES],
                 self._stopped.Eval(context)[0],
                 state[safety.BASE_AXES:_ALLOWED].reshape(-1, 3),
-                state[_ALLOWED:]))
+                state[_ALLOWED:_PEOPLE], people))
 
         def _command_output(self, context, output):
             output.SetFromVector(self._result.Eval(context)[:3])
@@ -218,12 +287,77 @@ def BaseCommandLimiter_(T):
             output.SetFromVector(np.array(
                 [limited, velocity_scale, acceleration_scale]))
 
+        def _protective_output(self, context, output):
+            output.SetAtIndex(0, context.get_discrete_state_vector()
+                              .GetAtIndex(_PROTECTIVE))
+
         def _update(self, context, discrete_state):
             points = (self._points.Eval(context)
                       if self._points.HasValue(context)
                       else np.zeros((0, 2)))
-            discrete_state.set_value(np.concatenate(
-                [self._result.Eval(context)[:3], self._separation(points)]))
+            old = context.get_discrete_state_vector().CopyToVector()
+            state = np.concatenate([self._result.Eval(context)[:3],
+                                    self._separation(points),
+                                    old[_PEOPLE:]])
+            self._track(context, points, state)
+            discrete_state.set_value(state)
+
+        def _track(self, context, points, state):
+            """The people's part of the state (in place), from a scan
+            when the points changed (their signature, which a new scan
+            changes: a scan equal to the last one leaves the tracks as
+            they are), and the protective stop at every tick."""
+            time = float(value_of(context.get_time()))
+            points = np.asarray(points, dtype=float).reshape(-1, 2)
+            signature = np.concatenate([[len(points)], points.sum(axis=0)])
+            old = value_of(state[_SCAN:_TRACKER])
+            last_inside = float(value_of(state[_PROTECTIVE + 1]))
+            if (signature != old).any():
+                base = (value_of(self._base_state.Eval(context))
+                        if self._base_state.HasValue(context)
+                        else np.zeros(6))
+                tracker, people, inside = people_scan(
+                    value_of(state[_TRACKER:]), points, base, time,
+                    self.half_sizes, self._people)
+                nearest = [p[1] for p in people]
+                velocities = [p[2] for p in people]
+                rows, allowed = people_rows(
+                    nearest, velocities, self.half_sizes, self._people,
+                    self._timing, MAX_TRACKS)
+                state[_PEOPLE:_PEOPLE_ALLOWED] = rows.ravel()
+                state[_PEOPLE_ALLOWED:_PROTECTIVE] = allowed
+                state[_SCAN:_TRACKER] = signature
+                state[_TRACKER:] = tracker
+                state[_PROTECTIVE + 2] = 1.0 if inside else 0.0
+            if value_of(state[_PROTECTIVE + 2]) >= 0.5:
+                last_inside = time
+                state[_PROTECTIVE + 1] = time
+            stopped = time - last_inside < self._hold_time - 1e-9
+            was = float(value_of(state[_PROTECTIVE])) >= 0.5
+            state[_PROTECTIVE] = 1.0 if stopped else 0.0
+            if stopped and not was:
+                LOGGER.warning("protective stop at t = %.3f s: %s", time,
+                               self._reason(True))
+            elif was and not stopped:
+                LOGGER.warning(
+                    "protective stop cleared at t = %.3f s: no obstacle "
+                    "point on or inside the base's footprint for %g s, "
+                    "resuming",
+                    time, self._hold_time)
+
+        def _reason(self, stopped):
+            if not stopped:
+                return ""
+            return ("protective stop: an obstacle point is on or inside "
+                    "the base's footprint; the base brakes to rest within "
+                    "its acceleration limits and resumes "
+                    f"{self._hold_time:g} s after the point has gone")
+
+        def reason(self, context):
+            """Why the base is in a protective stop, as a sentence (""
+            when it is not)."""
+            return self._reason(context.get_discrete_state_vector()
+                                .GetAtIndex(_PROTECTIVE) >= 0.5)
 
         def set_previous(self, context, velocity):
             """Sets the previous command (3,), e.g. the base's measured
