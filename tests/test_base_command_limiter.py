@@ -10,13 +10,13 @@ from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue
 from pydrake.common.value import AbstractValue
 
 from drake_wbc.math.command_limits import limit_base_velocity
+from drake_wbc.math.repulsion import footprint_gap
 from drake_wbc.math.safety import SafetyParameters
 from drake_wbc.math.separation import (
     NEAREST_POINTS,
     scale_for_rows,
     separation_state,
 )
-from drake_wbc.math.repulsion import footprint_gap
 from drake_wbc.stages import BaseCommandLimiter
 from drake_wbc.stages.base_command import (
     _PEOPLE,

@@ -7,10 +7,11 @@ base's odometry, so that a static shape stays still while the base moves:
 
 1. Clusters (`scan_clusters`): the scan's points in their order (beam by
    beam, scanner after scanner), split where two consecutive points are
-   farther apart than `cluster_gap`. A cluster within `tracked_range` of
-   the footprint, no larger than `max_cluster_size` (a person, a
-   pillar, a crate; not a wall) and of MIN_CLUSTER_POINTS or more is a
-   candidate, represented by its centroid.
+   farther apart than `cluster_gap`. A cluster of MIN_CLUSTER_POINTS or
+   more, no larger than `max_cluster_size` from its first point to its
+   last (a person, a pillar, a crate; not a wall) and whose centroid is
+   within `tracked_range` of the footprint is a candidate, represented
+   by its centroid.
 2. Association (`track_scan`): each live track's position is predicted
    over the time since the last scan; the pairs (track, candidate) are
    taken nearest first, each at most once, within `gate`. A candidate
@@ -100,26 +101,39 @@ def scan_clusters(points, gap, max_size):
     Args:
         points: (M, 2) float points, in scan order.
         gap: m, the largest step within a cluster.
-        max_size: m, the largest bounding-box diagonal of a candidate.
+        max_size: m, the largest size of a candidate: the distance from
+            its first point to its last (a person's width as a scanner
+            sees it; a wall's length).
 
     Returns:
         (starts, ends, centroids): the candidates' index ranges
         [start, end) into `points` and their centroids (K, 2).
     """
     points = np.asarray(points, dtype=float).reshape(-1, 2)
-    if len(points) == 0:
-        empty = np.zeros(0, dtype=int)
+    empty = np.zeros(0, dtype=int)
+    if len(points) < MIN_CLUSTER_POINTS:
         return empty, empty, np.zeros((0, 2))
-    step = np.hypot(*np.diff(points, axis=0).T)
-    starts = np.concatenate([[0], (step > gap).nonzero()[0] + 1])
-    ends = np.concatenate([starts[1:], [len(points)]])
-    low = np.minimum.reduceat(points, starts, axis=0)
-    high = np.maximum.reduceat(points, starts, axis=0)
-    small = ((np.hypot(*(high - low).T) <= max_size)
-             & (ends - starts >= MIN_CLUSTER_POINTS))
-    sums = np.add.reduceat(points, starts, axis=0)
-    counts = (ends - starts)[:, None]
-    return starts[small], ends[small], sums[small] / counts[small]
+    step = np.diff(points, axis=0)
+    step *= step
+    breaks = ((step[:, 0] + step[:, 1]) > gap * gap).nonzero()[0] + 1
+    starts = np.empty(len(breaks) + 1, dtype=int)
+    starts[0] = 0
+    starts[1:] = breaks
+    ends = np.empty_like(starts)
+    ends[:-1] = breaks
+    ends[-1] = len(points)
+    enough = (ends - starts >= MIN_CLUSTER_POINTS).nonzero()[0]
+    if not len(enough):
+        return empty, empty, np.zeros((0, 2))
+    starts, ends = starts[enough], ends[enough]
+    chord = points[ends - 1] - points[starts]
+    small = (chord * chord).sum(axis=1) <= max_size * max_size
+    starts, ends = starts[small], ends[small]
+    # Sums by cumulative sums: one pass for every cluster.
+    total = np.zeros((len(points) + 1, 2))
+    np.cumsum(points, axis=0, out=total[1:])
+    centroids = (total[ends] - total[starts]) / (ends - starts)[:, None]
+    return starts, ends, centroids
 
 
 def track_scan(state, centroids, time, params, base=(0.0,) * 6):
@@ -242,15 +256,19 @@ def people_scan(state, points, base, time, half_sizes, params):
         inside whether a point is on or inside the footprint.
     """
     points = np.asarray(points, dtype=float).reshape(-1, 2)
-    gap = footprint_gap(points, half_sizes)
-    inside = bool(len(gap)) and bool(gap.min() <= 0.0)
-    near = gap <= params.tracked_range
-    if not near.all():
-        # In scan order; a far stretch dropped joins its neighbours into
-        # one cluster only if they are within cluster_gap anyway.
-        points, gap = points[near], gap[near]
+    a, b = half_sizes
+    inside = bool(((np.abs(points[:, 0]) <= a)
+                   & (np.abs(points[:, 1]) <= b)).any())
     starts, ends, centroids = scan_clusters(points, params.cluster_gap,
                                             params.max_cluster_size)
+    if len(centroids):
+        near = footprint_gap(centroids, half_sizes) <= params.tracked_range
+        starts, ends, centroids = starts[near], ends[near], centroids[near]
+    if not len(centroids) and not (tracks_of(state)[:, _SCANS] > 0).any():
+        # Nothing to track (the usual scan of a static scene).
+        new = np.array(state, dtype=float)
+        new[-1] = time
+        return new, [], inside
     base = np.asarray(base, dtype=float)
     pose = base[:3]
     world = to_world(centroids, pose) if len(centroids) else centroids
@@ -264,8 +282,9 @@ def people_scan(state, points, base, time, half_sizes, params):
             slot = int(match[k])
             if slot not in moving:
                 continue
-            cluster = slice(starts[k], ends[k])
-            nearest = points[cluster][int(np.argmin(gap[cluster]))]
+            cluster = points[starts[k]:ends[k]]
+            nearest = cluster[int(np.argmin(footprint_gap(cluster,
+                                                          half_sizes)))]
             vx, vy = tracks[slot, _VX], tracks[slot, _VY]
             people.append((slot, nearest.copy(),
                            np.array([c * vx + s * vy, -s * vx + c * vy])))

@@ -428,9 +428,9 @@ class PeopleSeparationParameters:
         cluster_gap: m > 0, the largest step between consecutive points
             of one cluster (0.2 m: a person's legs; more than the 0.017 m
             beam spacing at 3 m).
-        max_cluster_size: m > 0, the largest extent (bounding box's
-            diagonal) of a cluster that may be a person (0.8 m; walls and
-            long edges are not tracked and keep the static rule).
+        max_cluster_size: m > 0, the largest size of a cluster that may
+            be a person, from its first point to its last (0.8 m; walls
+            and long edges are not tracked and keep the static rule).
         gate: m > 0, the farthest a cluster may be from a track's
             prediction to continue it (0.5 m: 2 m/s over a scan plus a
             person's width).

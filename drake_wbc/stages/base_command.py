@@ -199,6 +199,8 @@ def BaseCommandLimiter_(T):
                 params.people, self.time_step, self._acceleration_limits,
                 BASE_LAG)
             self._hold_time = params.hold_time
+            # (points, signature) of the last read-only scan seen.
+            self._last_scan = None
             state = self.DeclareDiscreteState(self._initial_state())
             self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0,
                                                     self._update)
@@ -308,10 +310,21 @@ def BaseCommandLimiter_(T):
             changes: a scan equal to the last one leaves the tracks as
             they are), and the protective stop at every tick."""
             time = float(value_of(context.get_time()))
-            points = np.asarray(points, dtype=float).reshape(-1, 2)
-            signature = np.concatenate([[len(points)], points.sum(axis=0)])
             old = value_of(state[_SCAN:_TRACKER])
             last_inside = float(value_of(state[_PROTECTIVE + 1]))
+            memo = self._last_scan
+            if (memo is not None and points is memo[0]
+                    and (old == memo[1]).all()):
+                # The very read-only array of the scan this state has
+                # seen (a LIDAR's output between scans): no sum needed.
+                signature = old
+            else:
+                points = np.asarray(points, dtype=float).reshape(-1, 2)
+                signature = np.concatenate([[len(points)],
+                                            points.sum(axis=0)])
+                if isinstance(points, np.ndarray) and \
+                        not points.flags.writeable:
+                    self._last_scan = (points, signature)
             if (signature != old).any():
                 base = (value_of(self._base_state.Eval(context))
                         if self._base_state.HasValue(context)
