@@ -49,7 +49,7 @@ LIDAR = LidarParameters()
 
 def test_the_protective_separation_is_its_closed_form():
     """S_p = v_h (T_r + T_s) + v_r T_r + S_s + C + Z_d + Z_r with
-    T_s = tau + v_r / a and S_s = v_r tau + v_r^2 / (2 a), term by term
+    T_s = 3 tau + v_r / a and S_s = v_r tau + v_r^2 / (2 a), term by term
     at the defaults: T_r = 1/15 + 0.02 + 0.01 s, tau = 0.3 s, a = 1."""
     people = PeopleSeparationParameters()
     timing = protective_timing(people, H, (1.0, 1.0, 1.0), BASE_LAG)
@@ -58,17 +58,17 @@ def test_the_protective_separation_is_its_closed_form():
     margin = 0.2 + 0.05 + 0.02
     assert people.margin == pytest.approx(margin)
     for v_r, v_h in ((0.0, 1.6), (0.5, 1.6), (1.0, 2.0), (0.3, 0.0)):
-        t_s = 0.3 + v_r / 1.0
+        t_s = 0.9 + v_r / 1.0
         s_s = v_r * 0.3 + v_r ** 2 / 2.0
         expected = v_h * (t_r + t_s) + v_r * t_r + s_s + margin
         assert protective_separation(v_r, v_h, timing, margin) == \
             pytest.approx(expected, rel=1e-14)
-    # The figures of the README: 0.90 m from a base at rest, 3.40 m from
+    # The figures of the README: 1.87 m from a base at rest, 4.36 m from
     # one at full speed, for a person at 1.6 m/s.
     assert protective_separation(0.0, 1.6, timing, margin) == \
-        pytest.approx(0.9047, abs=1e-4)
+        pytest.approx(1.8647, abs=1e-4)
     assert protective_separation(1.0, 1.6, timing, margin) == \
-        pytest.approx(3.4013, abs=1e-4)
+        pytest.approx(4.3613, abs=1e-4)
 
 
 def test_the_protective_speed_is_the_inverse_of_the_separation():

@@ -370,6 +370,11 @@ NEAR_DISTANCE = 0.5
 HUMAN_SPEED."""
 
 
+SETTLING = 3.0
+"""The base's velocity lag tau settles in SETTLING tau (to 5%): its
+stopping time in eq. (protective)."""
+
+
 @dataclass
 class PeopleSeparationParameters:
     """Speed and separation from tracked moving people (ISO/TS 15066's
@@ -436,7 +441,8 @@ class PeopleSeparationParameters:
             person's width).
         tracked_range: m > 0, the farthest from the footprint a cluster
             is tracked (6 m: beyond the largest separation at full
-            speed, 3.4 m with the defaults, plus the tracking's start).
+            speed, 4.36 m with the defaults, plus the tracking's start:
+            0.5 m of travel).
         alpha, beta: the alpha-beta filter's gains of position and
             velocity, in (0, 1] and (0, 2) (0.5 and 0.3); its
             velocity starts from the finite difference of the first two
@@ -531,13 +537,17 @@ def protective_separation(robot_speed, human_speed, timing, margin):
 
         S_p = S_h + S_r + S_s + C + Z_d + Z_r,
         S_h = v_h (T_r + T_s),  S_r = v_r T_r,
-        T_s = tau + v_r / a,    S_s = v_r tau + v_r^2 / (2 a),
+        T_s = SETTLING tau + v_r / a,  S_s = v_r tau + v_r^2 / (2 a),
 
-    the base's stop modelled as its lag tau (coasting) then braking at a:
-    a bound of the lagged, saturated loop's own stop (the distance
-    u^2 / (2 a) + a tau^2 / 2 of drake_wbc.math.safety.robot_stop_distance
-    is at most v_r tau + v_r^2 / (2 a) for v_r >= a tau / 2, and u tau
-    below).
+    the base's stop distance modelled as its lag tau (coasting) then
+    braking at a: a bound of the lagged, saturated loop's own stop (the
+    distance u^2 / (2 a) + a tau^2 / 2 of
+    drake_wbc.math.safety.robot_stop_distance is at most
+    v_r tau + v_r^2 / (2 a) for v_r >= a tau / 2, and u tau below). Its
+    stopping time, which the person walks on for, is the braking's v_r / a
+    and the lag's settling: a first-order lag never quite ends, and
+    SETTLING tau (3 tau: down to 5%, under 1 cm/s from the 0.2 m/s a lag
+    of 0.2 s holds at 1 m/s^2) is when the base is at rest.
 
     Args:
         robot_speed: v_r >= 0, the base's approach speed, m/s.
@@ -548,7 +558,7 @@ def protective_separation(robot_speed, human_speed, timing, margin):
     Float or AutoDiffXd arguments alike.
     """
     reaction, lag, a = timing
-    stopping_time = lag + robot_speed / a
+    stopping_time = SETTLING * lag + robot_speed / a
     return (human_speed * (reaction + stopping_time)
             + robot_speed * reaction
             + robot_speed * lag + robot_speed * robot_speed / (2.0 * a)
@@ -560,10 +570,11 @@ def protective_speeds(d, human_speed, timing, margin):
     separations d that keep d >= S_p(v_r), eq. (protective) solved for
     v_r: S_p is a quadratic
 
-        v_r^2 / (2 a) + B v_r + v_h (T_r + tau) + margin - d = 0,
+        v_r^2 / (2 a) + B v_r + v_h (T_r + SETTLING tau) + margin - d = 0,
         B = v_h / a + T_r + tau,
 
-    so v_r = a (sqrt(B^2 + 2 K / a) - B), K = d - margin - v_h (T_r + tau),
+    so v_r = a (sqrt(B^2 + 2 K / a) - B),
+    K = d - margin - v_h (T_r + SETTLING tau),
     and 0 where K <= 0 (the person closer than the base's stop from rest).
 
     Args:
@@ -576,7 +587,7 @@ def protective_speeds(d, human_speed, timing, margin):
     d = np.asarray(d)
     v_h = np.asarray(human_speed)
     b = v_h / a + reaction + lag
-    k = d - margin - v_h * (reaction + lag)
+    k = d - margin - v_h * (reaction + SETTLING * lag)
     k = np.where(value_of(k) > 0.0, k, 0.0 * k)
     return a * (np.sqrt(b * b + 2.0 * k / a) - b)
 
@@ -616,6 +627,8 @@ def people_rows(nearest, velocities, half_sizes, people, timing, count):
     """
     rows = np.zeros((count, 3))
     allowed = np.full(count, FAR)
+    if not len(nearest):
+        return rows, allowed
     nearest = np.asarray(nearest, dtype=float).reshape(-1, 2)[:count]
     if len(nearest):
         g, d = approach_rows(nearest, half_sizes)

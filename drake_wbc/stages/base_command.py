@@ -199,8 +199,8 @@ def BaseCommandLimiter_(T):
                 params.people, self.time_step, self._acceleration_limits,
                 BASE_LAG)
             self._hold_time = params.hold_time
-            # (points, signature) of the last read-only scan seen.
-            self._last_scan = None
+            # The signature of the points last summed (`_track`).
+            self._signature = None
             state = self.DeclareDiscreteState(self._initial_state())
             self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0,
                                                     self._update)
@@ -301,62 +301,68 @@ def BaseCommandLimiter_(T):
             state = np.concatenate([self._result.Eval(context)[:3],
                                     self._separation(points),
                                     old[_PEOPLE:]])
-            self._track(context, points, state)
+            self._track(context, points, state, self._separation.changed)
             discrete_state.set_value(state)
 
-        def _track(self, context, points, state):
-            """The people's part of the state (in place), from a scan
-            when the points changed (their signature, which a new scan
-            changes: a scan equal to the last one leaves the tracks as
-            they are), and the protective stop at every tick."""
-            time = float(value_of(context.get_time()))
-            old = value_of(state[_SCAN:_TRACKER])
-            last_inside = float(value_of(state[_PROTECTIVE + 1]))
-            memo = self._last_scan
-            if (memo is not None and points is memo[0]
-                    and (old == memo[1]).all()):
-                # The very read-only array of the scan this state has
-                # seen (a LIDAR's output between scans): no sum needed.
-                signature = old
-            else:
+        def _track(self, context, points, state, changed):
+            """The people's part of the state (in place): from a scan when
+            the points changed, and the protective stop at every tick.
+
+            A scan is new when its signature [points, sum of x, sum of y]
+            differs from the one in the state (a scan equal to the last
+            one leaves the tracks as they are). The signature is summed
+            only when the separation's LastPoints saw new points or the
+            state's is not the one summed last (another context)."""
+            signature = self._signature
+            if changed or signature is None or (
+                    state[_SCAN:_TRACKER] != signature).any():
                 points = np.asarray(points, dtype=float).reshape(-1, 2)
                 signature = np.concatenate([[len(points)],
                                             points.sum(axis=0)])
-                if isinstance(points, np.ndarray) and \
-                        not points.flags.writeable:
-                    self._last_scan = (points, signature)
-            if (signature != old).any():
-                base = (value_of(self._base_state.Eval(context))
-                        if self._base_state.HasValue(context)
-                        else np.zeros(6))
-                tracker, people, inside = people_scan(
-                    value_of(state[_TRACKER:]), points, base, time,
-                    self.half_sizes, self._people)
-                nearest = [p[1] for p in people]
-                velocities = [p[2] for p in people]
-                rows, allowed = people_rows(
-                    nearest, velocities, self.half_sizes, self._people,
-                    self._timing, MAX_TRACKS)
-                state[_PEOPLE:_PEOPLE_ALLOWED] = rows.ravel()
-                state[_PEOPLE_ALLOWED:_PROTECTIVE] = allowed
-                state[_SCAN:_TRACKER] = signature
-                state[_TRACKER:] = tracker
-                state[_PROTECTIVE + 2] = 1.0 if inside else 0.0
-            if value_of(state[_PROTECTIVE + 2]) >= 0.5:
+                self._signature = signature
+                if (value_of(state[_SCAN:_TRACKER]) != signature).any():
+                    self._scan(context, points, state, signature)
+            time = context.get_time()
+            time = time if isinstance(time, float) else time.value()
+            flags = state[_PROTECTIVE:_SCAN]
+            if flags.dtype == object:
+                flags = value_of(flags)
+            was, last_inside, inside = flags[0] >= 0.5, flags[1], flags[2]
+            if inside >= 0.5:
                 last_inside = time
                 state[_PROTECTIVE + 1] = time
             stopped = time - last_inside < self._hold_time - 1e-9
-            was = float(value_of(state[_PROTECTIVE])) >= 0.5
+            if stopped == was:
+                return
             state[_PROTECTIVE] = 1.0 if stopped else 0.0
-            if stopped and not was:
+            if stopped:
                 LOGGER.warning("protective stop at t = %.3f s: %s", time,
                                self._reason(True))
-            elif was and not stopped:
+            else:
                 LOGGER.warning(
                     "protective stop cleared at t = %.3f s: no obstacle "
                     "point on or inside the base's footprint for %g s, "
-                    "resuming",
-                    time, self._hold_time)
+                    "resuming", time, self._hold_time)
+
+        def _scan(self, context, points, state, signature):
+            """The tracking of a new scan (float, drake_wbc.math.people)
+            and the people's rows and allowed speeds of eq.
+            (protective), into the state (in place)."""
+            base = (value_of(self._base_state.Eval(context))
+                    if self._base_state.HasValue(context)
+                    else np.zeros(6))
+            tracker, people, inside = people_scan(
+                value_of(state[_TRACKER:]), points, base,
+                float(value_of(context.get_time())), self.half_sizes,
+                self._people)
+            rows, allowed = people_rows(
+                [p[1] for p in people], [p[2] for p in people],
+                self.half_sizes, self._people, self._timing, MAX_TRACKS)
+            state[_PEOPLE:_PEOPLE_ALLOWED] = rows.ravel()
+            state[_PEOPLE_ALLOWED:_PROTECTIVE] = allowed
+            state[_PROTECTIVE + 2] = 1.0 if inside else 0.0
+            state[_SCAN:_TRACKER] = signature
+            state[_TRACKER:] = tracker
 
         def _reason(self, stopped):
             if not stopped:
