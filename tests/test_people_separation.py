@@ -422,3 +422,19 @@ def test_a_point_inside_the_footprint_is_a_protective_stop(caplog):
     assert limiter.reason(context) == ""
     assert "protective stop at t = 0.100 s" in caplog.text
     assert "protective stop cleared at t = 0.690 s" in caplog.text
+
+
+def test_the_scan_period_is_at_least_the_lidars():
+    from drake_wbc.experiments.scenario import load_scenario
+
+    text = """
+controller:
+  safety:
+    people:
+      scan_period: 0.05
+"""
+    with pytest.raises(ValueError, match=(
+            r"controller.safety.people.scan_period = 0.05 s is not allowed "
+            r"with station.lidar.rate = 15.0 Hz")):
+        load_scenario(text=text)
+    load_scenario(text=text.replace("0.05", "0.1"))

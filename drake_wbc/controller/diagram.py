@@ -69,8 +69,13 @@ Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
   BaseCommandLimiter, reported on `base_saturation`, which also slows it
   as a whole so that the footprint never approaches an obstacle point
   faster than it can stop short of it (drake_wbc.math.separation: the
-  repulsive field alone is a coupling that a steady push overcomes); the
-  compensator sees
+  repulsive field alone is a coupling that a steady push overcomes),
+  keeps ISO/TS 15066's protective separation from the obstacle points
+  that move (people, tracked between scans in the odometry's world: the
+  limiter reads base.state_estimated too), and brakes the base to rest
+  within its acceleration limits while a point is on or inside the
+  footprint (a protective stop, on `base_protective_stop` and in
+  Controller.safety_reason); the compensator sees
   the command actually sent, so the arm makes up for what the limits take
   from the base (eq. (compensation)). The arm's joint rates are scaled
   uniformly to their limits by the arm controller (reported on

@@ -1,7 +1,9 @@
 """The base's command at a safe stop and at the robot's limits, as a Drake
-system thin over drake_wbc.math.safety: BaseCommandLimiter (the base
-command within the robot's velocity and acceleration limits, its direction
-kept). InputGuard, which decides the stop, and StopGate are in
+system thin over drake_wbc.math.safety, drake_wbc.math.separation and
+drake_wbc.math.people: BaseCommandLimiter (the base command within the
+robot's velocity and acceleration limits, its direction kept, the
+separation from obstacles and moving people, the protective stop).
+InputGuard, which decides the stop, and StopGate are in
 drake_wbc.stages.safety."""
 
 import logging
@@ -104,8 +106,9 @@ def BaseCommandLimiter_(T):
                               ┌────────────────────┐
             velocity ────────►│                    ├──► velocity_command
             stopped ─────────►│ BaseCommandLimiter ├──► saturation
-            envelope_scale ──►│                    │
+            envelope_scale ──►│                    ├──► protective_stop
             obstacle_points ─►│                    │
+            base_state ──────►│                    │
                               └────────────────────┘
 
         - velocity: (3) the desired command [vx, vy, wz] in T_b (the base
@@ -121,7 +124,24 @@ def BaseCommandLimiter_(T):
           approaches no point faster than max(d - stop_distance, 0) /
           stop_time, eqs. (approach), (allowed)).
           Read only by the update, so the outputs do not depend on it
-          directly.
+          directly. The points are also tracked between scans
+          (drake_wbc.math.people, in the odometry's world): the approach
+          to each cluster that moves (a person) is bounded so that the
+          separation stays at least ISO/TS 15066's protective separation
+          distance S_p (drake_wbc.math.separation, eq. (protective); the
+          command scaled as a whole by the smaller of the two scales),
+          and a point on or inside the footprint is a protective stop.
+        - base_state: optional, [x, y, yaw, vx, vy, wz] (6), the base's
+          odometry (the pose in its world, the twist in T_b), for the
+          tracking; read only by the update. Unconnected: at rest at the
+          origin.
+        - protective_stop (1): 1.0 while the base is in a protective
+          stop: a point of the last scan on or inside the footprint, or
+          one there within the last hold_time s (SafetyParameters). The
+          command then brakes to zero within the acceleration limits
+          (scale 0, reported on `saturation` as a separation limit), and
+          the stop is logged when it trips and clears (LOGGER, as the
+          InputGuard's); `reason` says why.
         - velocity_command: (3)
           drake_wbc.math.command_limits.limit_base_velocity of the desired
           command from the previous tick's command: scaled as a
@@ -151,7 +171,15 @@ def BaseCommandLimiter_(T):
         approach rows G (3 NEAREST_POINTS, row by row) and allowed speeds
         (NEAREST_POINTS), drake_wbc.math.separation.separation_state, so
         that the outputs bound G s v <= allowed with a product and a
-        minimum (drake_wbc.math.separation.scale_for_rows).
+        minimum (drake_wbc.math.separation.scale_for_rows); then the
+        moving people's rows (3 MAX_TRACKS) and allowed speeds
+        (MAX_TRACKS, FAR where none), the protective stop [stopped, the
+        last time a point was inside, whether the last scan had one], the
+        last scan's signature [points, sum of x, sum of y] and the
+        tracker's state (drake_wbc.math.people.TRACKER_SIZE). The
+        tracking is float-only and runs once a scan (when the signature
+        changes: at 15 Hz, not every tick); without a moving person or a
+        point inside, the command is exactly that of the static rule.
 
         Scalar types: double and AutoDiffXd, the same calculation; the
         double one runs the float kernels of separation_state and
