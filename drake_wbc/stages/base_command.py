@@ -58,12 +58,23 @@ _PROTECTIVE = _PEOPLE_ALLOWED + MAX_TRACKS
 point on or inside the footprint, whether the last scan had one]."""
 
 _SCAN = _PROTECTIVE + 3
-"""The last scan's signature: [points, sum of x, sum of y]."""
+"""The last scan's signature (`_signature_of`)."""
 
-_TRACKER = _SCAN + 3
+_TRACKER = _SCAN + 7
 """Where the people tracker's state (TRACKER_SIZE) starts."""
 
 _SIZE = _TRACKER + TRACKER_SIZE
+
+def _signature_of(points):
+    """A scan's signature: [points, its first, middle and last point] (0
+    for none): a new scan of a base or a scene that moves changes them
+    (a scan of a static scene from a base at rest is the same scan)."""
+    count = len(points)
+    if not count:
+        return np.zeros(7)
+    return np.array([count, *points[0], *points[count // 2],
+                     *points[count - 1]], dtype=float)
+
 
 LOGGER = logging.getLogger("drake_wbc.math.safety")
 """The safety stages' logger: a protective stop is logged when it trips
@@ -175,7 +186,8 @@ def BaseCommandLimiter_(T):
         moving people's rows (3 MAX_TRACKS) and allowed speeds
         (MAX_TRACKS, FAR where none), the protective stop [stopped, the
         last time a point was inside, whether the last scan had one], the
-        last scan's signature [points, sum of x, sum of y] and the
+        last scan's signature (7: its size, first, middle and last point)
+        and the
         tracker's state (drake_wbc.math.people.TRACKER_SIZE). The
         tracking is float-only and runs once a scan (when the signature
         changes: at 15 Hz, not every tick); without a moving person or a
@@ -257,7 +269,7 @@ def BaseCommandLimiter_(T):
             return np.concatenate([
                 np.zeros(safety.BASE_AXES),
                 self._separation(np.zeros((0, 2))), people,
-                [0.0, NEVER, 0.0], [0.0, 0.0, 0.0], initial_tracker()])
+                [0.0, NEVER, 0.0], np.zeros(7), initial_tracker()])
 
         def _limited(self, desired, previous, stopped, rows, allowed,
                      people=None):
@@ -336,17 +348,16 @@ def BaseCommandLimiter_(T):
             """The people's part of the state (in place): from a scan when
             the points changed, and the protective stop at every tick.
 
-            A scan is new when its signature [points, sum of x, sum of y]
-            differs from the one in the state (a scan equal to the last
-            one leaves the tracks as they are). The signature is summed
-            only when the separation's LastPoints saw new points or the
-            state's is not the one summed last (another context)."""
+            A scan is new when its signature (`_signature_of`) differs
+            from the one in the state (a scan equal to the last one
+            leaves the tracks as they are). It is taken only when the
+            separation's LastPoints saw new points or the state's is not
+            the one taken last (another context)."""
             signature = self._signature
             if changed or signature is None or (
                     state[_SCAN:_TRACKER] != signature).any():
                 points = np.asarray(points, dtype=float).reshape(-1, 2)
-                signature = np.concatenate([[len(points)],
-                                            points.sum(axis=0)])
+                signature = _signature_of(points)
                 self._signature = signature
                 if (value_of(state[_SCAN:_TRACKER]) != signature).any():
                     self._scan(context, points, state, signature)
