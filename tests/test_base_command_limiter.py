@@ -10,6 +10,7 @@ from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue
 from pydrake.common.value import AbstractValue
 
 from drake_wbc.math.command_limits import limit_base_velocity
+from drake_wbc.math.repulsion import footprint_gap
 from drake_wbc.math.safety import SafetyParameters
 from drake_wbc.math.separation import (
     NEAREST_POINTS,
@@ -17,6 +18,11 @@ from drake_wbc.math.separation import (
     separation_state,
 )
 from drake_wbc.stages import BaseCommandLimiter
+from drake_wbc.stages.base_command import (
+    _PEOPLE,
+    _PEOPLE_ALLOWED,
+    _PROTECTIVE,
+)
 
 HALF_SIZES = (0.4, 0.3)
 H = 0.01
@@ -52,8 +58,11 @@ def random_tick(rng, previous):
 
 
 def model_tick(params, previous, separation, desired, stopped, envelope,
-               points):
-    """The limiter's outputs and next state from the public functions."""
+               points, people=None):
+    """The limiter's outputs and next static state (the command and the
+    separation state of eq. (allowed)) from the public functions;
+    `people`: the people's rows (MAX_TRACKS, 3), allowed speeds and
+    protective stop the limiter holds, or None."""
     rows = separation[:3 * NEAREST_POINTS].reshape(-1, 3)
     allowed = separation[3 * NEAREST_POINTS:]
     if stopped >= 0.5:
@@ -61,10 +70,14 @@ def model_tick(params, previous, separation, desired, stopped, envelope,
     elif not np.isfinite(desired).all():
         command, limited, scales = np.zeros(3), 1.0, [0.0, 0.0]
     else:
+        scale = scale_for_rows(desired, rows, allowed)
+        if people is not None:
+            scale = min(scale, scale_for_rows(desired, people[0], people[1]))
+            if people[2] >= 0.5:
+                scale = 0.0
         result = limit_base_velocity(
             desired, previous, params.base_velocity_limits,
-            params.base_acceleration_limits, H,
-            scale=scale_for_rows(desired, rows, allowed))
+            params.base_acceleration_limits, H, scale=scale)
         command = result.command
         limited = 1.0 if result.limited else 0.0
         scales = [result.velocity_scale, result.acceleration_scale]
@@ -83,7 +96,9 @@ def values(vector):
 
 @pytest.mark.parametrize("scalar", ["double", "autodiff"])
 def test_the_limiter_is_the_model_tick_by_tick(scalar):
-    params = SafetyParameters()
+    # A short hold, so that protective stops (a scan in five has points
+    # inside the footprint) clear within the run.
+    params = SafetyParameters(hold_time=0.02)
     system = BaseCommandLimiter(params, H, HALF_SIZES)
     if scalar == "autodiff":
         system = system.ToAutoDiffXd()
@@ -93,7 +108,9 @@ def test_the_limiter_is_the_model_tick_by_tick(scalar):
     separation = separation_state(np.zeros((0, 2)), HALF_SIZES,
                                   params.stop_distance, params.stop_time)
     seen = set()
-    for _ in range(150):
+    people, last_inside = None, -1e9
+    for tick in range(150):
+        context.SetTime(tick * H)
         desired, stopped, envelope, points = random_tick(rng, previous)
         system.GetInputPort("velocity").FixValue(context, desired)
         system.GetInputPort("stopped").FixValue(context, [stopped])
@@ -108,18 +125,28 @@ def test_the_limiter_is_the_model_tick_by_tick(scalar):
         context.SetDiscreteState(state)
         state = values(state)
         expected = model_tick(params, previous, separation, desired,
-                              stopped, envelope, points)
-        for got, wanted in zip((command, saturation, state), expected,
-                               strict=True):
+                              stopped, envelope, points, people)
+        # The protective stop: from a point on or inside the footprint,
+        # for hold_time after the last such scan.
+        if len(points) and footprint_gap(points, HALF_SIZES).min() <= 0.0:
+            last_inside = tick * H
+        assert state[_PROTECTIVE] == (
+            1.0 if tick * H - last_inside < params.hold_time - 1e-9 else 0.0)
+        seen.add(f"protective {state[_PROTECTIVE]}")
+        for got, wanted in zip((command, saturation, state[:_PEOPLE]),
+                               expected, strict=True):
             np.testing.assert_allclose(got, wanted, rtol=0.0,
                                        atol=TOLERANCE * max(
                                            1.0, np.abs(wanted).max()))
-        previous, separation = state[:3], state[3:]
+        previous, separation = state[:3], state[3:_PEOPLE]
+        people = (state[_PEOPLE:_PEOPLE_ALLOWED].reshape(-1, 3),
+                  state[_PEOPLE_ALLOWED:_PROTECTIVE], state[_PROTECTIVE])
         if stopped < 0.5 and np.isfinite(desired).all():
             seen.add("passed" if np.array_equal(command, desired)
                      else "limited")
         seen.add("stopped" if stopped >= 0.5 else "running")
-    assert seen == {"passed", "limited", "stopped", "running"}
+    assert seen == {"passed", "limited", "stopped", "running",
+                    "protective 0.0", "protective 1.0"}
 
 
 def test_the_autodiff_limiter_differentiates_the_separation_scale():

@@ -69,8 +69,13 @@ Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
   BaseCommandLimiter, reported on `base_saturation`, which also slows it
   as a whole so that the footprint never approaches an obstacle point
   faster than it can stop short of it (drake_wbc.math.separation: the
-  repulsive field alone is a coupling that a steady push overcomes); the
-  compensator sees
+  repulsive field alone is a coupling that a steady push overcomes),
+  keeps ISO/TS 15066's protective separation from the obstacle points
+  that move (people, tracked between scans in the odometry's world: the
+  limiter reads base.state_estimated too), and brakes the base to rest
+  within its acceleration limits while a point is on or inside the
+  footprint (a protective stop, on `base_protective_stop` and in
+  Controller.safety_reason); the compensator sees
   the command actually sent, so the arm makes up for what the limits take
   from the base (eq. (compensation)). The arm's joint rates are scaled
   uniformly to their limits by the arm controller (reported on
@@ -175,10 +180,13 @@ class Controller:
                                                arm_position)
 
     def safety_reason(self, root_context):
-        """Why the controller is in a safe stop, as a sentence ("" when it
-        is not)."""
-        guard = self.stages["guard"]
-        return guard.reason(guard.GetMyContextFromRoot(root_context))
+        """Why the controller is in a safe stop, or the base in a
+        protective stop (an obstacle point inside its footprint), as a
+        sentence ("" when neither)."""
+        reasons = [stage.reason(stage.GetMyContextFromRoot(root_context))
+                   for stage in (self.stages["guard"],
+                                 self.stages["base_limiter"])]
+        return "; ".join(reason for reason in reasons if reason)
 
 
 def build_controller(params=None, robot=None):
@@ -203,6 +211,7 @@ def build_controller(params=None, robot=None):
         and the diagnostics capability, alpha, sigma_xy, sigma_phi,
         end_effector_deviation, base_velocity, filtered_base_velocity,
         arm_velocity_command, arm_limited, base_saturation,
+        base_protective_stop,
         safety_status, safety_reason).
     """
     params = validated_copy(checked_instance(
@@ -304,6 +313,7 @@ def build_controller(params=None, robot=None):
     connect("base_gate", "scale", "base_limiter", "envelope_scale")
     connect("guard", "lidar.obstacle_points", "base_limiter",
             "obstacle_points")
+    connect("guard", "base.state_estimated", "base_limiter", "base_state")
     connect("distributor", "arm_velocity", "compensator", "arm_velocity")
     connect("distributor", "base_velocity", "compensator", "base_velocity")
     connect("base_limiter", "velocity_command", "compensator",
@@ -333,6 +343,7 @@ def build_controller(params=None, robot=None):
         ("arm_cdmp", "arm_velocity_command", "arm_velocity_command"),
         ("arm_controller", "limited", "arm_limited"),
         ("base_limiter", "saturation", "base_saturation"),
+        ("base_limiter", "protective_stop", "base_protective_stop"),
         ("guard", "safety_status", "safety_status"),
         ("guard", "safety_reason", "safety_reason"),
     )

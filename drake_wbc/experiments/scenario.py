@@ -202,6 +202,15 @@ class Scenario:
                 f" s is not allowed with controller.time_step = "
                 f"{self.controller.time_step!r} s: the controller sends its "
                 "commands once a tick, so the two must be equal")
+        scan = self.controller.safety.people.scan_period
+        lidar = 1.0 / self.station.lidar.rate
+        if scan < lidar - 1e-12:
+            raise ValueError(
+                f"controller.safety.people.scan_period = {scan!r} s is not "
+                f"allowed with station.lidar.rate = "
+                f"{self.station.lidar.rate!r} Hz: must be at least the "
+                f"LIDARs' period {lidar:.6g} s (a person is seen up to a "
+                "scan late; a shorter period shrinks the separation kept)")
         step = self.station.time_step
         if self.outputs.log_period < step:
             raise ValueError(

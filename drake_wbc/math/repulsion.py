@@ -276,10 +276,14 @@ class LastPoints:
         self._function = function
         self._points = None
         self._result = None
+        self.changed = True
+        """Whether the last call's points differed from the call's
+        before (or it was the first)."""
 
     def __call__(self, points):
         """function(points), a fresh copy."""
-        if not self._same(points):
+        self.changed = not self._same(points)
+        if self.changed:
             self._result = np.asarray(self._function(points))
             self._points = np.array(points, dtype=float)
         return self._result.copy()

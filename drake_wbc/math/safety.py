@@ -32,7 +32,7 @@ is built).
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import NamedTuple
 
@@ -40,6 +40,7 @@ import numpy as np
 
 from drake_wbc.math import kernels
 from drake_wbc.math.scalar_support import value_of
+from drake_wbc.math.separation import PeopleSeparationParameters
 from drake_wbc.math.validation import non_negative, positive, positive_vector
 
 BASE_AXES = 3
@@ -119,7 +120,12 @@ class SafetyParameters:
             robot's 1.0 each, likewise.
         stop_distance: m >= 0 that the base keeps from an obstacle point,
             and stop_time: s > 0, the time constant of its approach
-            (drake_wbc.math.separation); 0.1 m and 0.5 s by default.
+            (drake_wbc.math.separation); 0.1 m and 0.5 s by default:
+            the rule of every obstacle point that is not a moving person.
+        people: the separation from moving people, ISO/TS 15066's
+            protective separation distance
+            (drake_wbc.math.separation.PeopleSeparationParameters; its
+            human speeds at least ISO 13855's).
 
     The arm's limits (joint positions, 1.57 rad/s, 12.56 rad/s^2) are those
     of ArmControllerParameters. Vectors are given as any sequence (a list
@@ -131,11 +137,16 @@ class SafetyParameters:
     base_acceleration_limits: list[float] = BASE_ACCELERATION_LIMITS
     stop_distance: float = 0.1
     stop_time: float = 0.5
+    people: PeopleSeparationParameters = field(
+        default_factory=PeopleSeparationParameters)
 
     def __post_init__(self):
         positive("hold_time", self.hold_time)
         non_negative("stop_distance", self.stop_distance)
         positive("stop_time", self.stop_time)
+        if not isinstance(self.people, PeopleSeparationParameters):
+            raise ValueError(f"people = {self.people!r} is not allowed: "
+                             "must be a PeopleSeparationParameters")
         for name in ("base_velocity_limits", "base_acceleration_limits"):
             setattr(self, name, tuple(
                 positive_vector(name, getattr(self, name), BASE_AXES)

@@ -38,6 +38,8 @@ by hand.
 """
 
 import math
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -52,8 +54,10 @@ from drake_wbc.math.scalar_support import value_of
 from drake_wbc.math.validation import (
     as_matrix,
     as_vector,
+    in_closed_range,
     non_negative,
     positive,
+    whole_number,
 )
 
 NEAREST_POINTS = 16
@@ -349,3 +353,289 @@ def scale_for_rows_float(command, rows, allowed):
             if scale is None or ratio < scale:
                 scale = ratio
     return 1.0 if scale is None else min(max(scale, 0.0), 1.0)
+
+
+# --- the protective separation distance of ISO/TS 15066 (moving people) ---
+
+HUMAN_SPEED = 1.6
+"""m/s: ISO 13855's approach speed of a walking person (K = 1600 mm/s),
+for a separation beyond NEAR_DISTANCE."""
+
+HUMAN_SPEED_NEAR = 2.0
+"""m/s: ISO 13855's approach speed within NEAR_DISTANCE (K = 2000 mm/s for
+S <= 500 mm)."""
+
+NEAR_DISTANCE = 0.5
+"""m: where ISO 13855's approach speed changes from HUMAN_SPEED_NEAR to
+HUMAN_SPEED."""
+
+
+SETTLING = 3.0
+"""The base's velocity lag tau settles in SETTLING tau (to 5%): its
+stopping time in eq. (protective)."""
+
+
+@dataclass
+class PeopleSeparationParameters:
+    """Speed and separation from tracked moving people (ISO/TS 15066's
+    speed and separation monitoring; drake_wbc.math.people tracks them).
+
+    The times and distances of the protective separation distance,
+    eq. (protective): the human's approach speed (ISO 13855's values,
+    which may be raised, not lowered), the sensor's latency (the scan
+    period, a point up to one scan old, plus the processing) and the
+    margins C, Z_d and Z_r. The base's own reaction and stopping come from
+    its limits (`ProtectiveTiming`).
+
+    Attributes:
+        human_speed: m/s >= HUMAN_SPEED (1.6), a person's approach speed
+            beyond near_distance.
+        human_speed_near: m/s >= HUMAN_SPEED_NEAR (2.0), within it.
+        near_distance: m >= NEAR_DISTANCE (0.5).
+        scan_period: s > 0, the LIDARs' scan period (1 / 15 Hz): a
+            person is seen up to one scan late. At least the LIDARs'
+            (checked where the scenario is built).
+        processing_time: s >= 0, from the end of a scan to the points at
+            the controller (the driver's and the tracking's share):
+            0.02 s, the TiM571's output delay is under 10 ms and the
+            tracking runs in the tick that receives the scan.
+        intrusion: C, m >= 0: how far a body part may reach towards the
+            base beyond the points the LIDAR sees. The LIDARs cut the
+            scene at the legs; a walking person's hands and torso lead
+            the legs by about a forearm: 0.2 m (ISO 13855's reach-over
+            allowances for a 2-D field are 0.85 m and more, but they
+            guard a fixed hazard against a reach into it; here what is
+            seen is the person's whole outline at knee height, and what
+            it misses is the arm's swing ahead of it).
+        sensor_uncertainty: Z_d, m >= 0: the LIDAR's range error and the
+            beams' spacing at the range where a person is tracked: the
+            TiM571's systematic error is +-60 mm, 0.05 m is its typical
+            value plus 0.33 degree at 3 m (0.017 m).
+        robot_uncertainty: Z_r, m >= 0: the base's position uncertainty
+            over a stop (odometry, the footprint's tolerance): 0.02 m.
+        min_speed: m/s in (0, 0.5], the filtered speed above which a
+            tracked cluster is a moving person (0.5 m/s: a slow walk;
+            above the apparent motion of a static shape's visible part as
+            the base drives by at full speed, e.g. the piece of a wall at
+            the edge of a scanner's field of view, which slides along the
+            wall with the base: up to 0.45 m/s at 1 m/s). It may be
+            lowered, not raised. A person walking slower keeps the static
+            rule (what a standing person has too).
+        moving_scans: scans, >= 1, in a row with the speed above
+            min_speed before the cluster counts as moving (3: 0.2 s at
+            15 Hz; one jump of a box's visible side is not a walk).
+        min_travel: m >= 0, how far from where its track started a
+            cluster must be to count as moving (0.5 m: more than the
+            shift of a crate's centroid as its visible sides change; at
+            1.6 m/s a walker covers it in 0.3 s).
+        moving_hold: s >= 0 for which a person who stopped still counts
+            as moving (1.0 s).
+        cluster_gap: m > 0, the largest step between consecutive points
+            of one cluster (0.2 m: a person's legs; more than the 0.017 m
+            beam spacing at 3 m).
+        max_cluster_size: m > 0, the largest size of a cluster that may
+            be a person, from its first point to its last (0.8 m; walls
+            and long edges are not tracked and keep the static rule).
+        gate: m > 0, the farthest a cluster may be from a track's
+            prediction to continue it (0.5 m: 2 m/s over a scan plus a
+            person's width).
+        tracked_range: m > 0, the farthest from the footprint a cluster
+            is tracked (6 m: beyond the largest separation at full
+            speed, 4.36 m with the defaults, plus the tracking's start:
+            0.5 m of travel).
+        alpha, beta: the alpha-beta filter's gains of position and
+            velocity, in (0, 1] and (0, 2) (0.5 and 0.3); its
+            velocity starts from the finite difference of the first two
+            scans.
+    """
+
+    human_speed: float = HUMAN_SPEED
+    human_speed_near: float = HUMAN_SPEED_NEAR
+    near_distance: float = NEAR_DISTANCE
+    scan_period: float = 1.0 / 15.0
+    processing_time: float = 0.02
+    intrusion: float = 0.2
+    sensor_uncertainty: float = 0.05
+    robot_uncertainty: float = 0.02
+    min_speed: float = 0.5
+    moving_scans: int = 3
+    min_travel: float = 0.5
+    moving_hold: float = 1.0
+    cluster_gap: float = 0.2
+    max_cluster_size: float = 0.8
+    gate: float = 0.5
+    tracked_range: float = 6.0
+    alpha: float = 0.5
+    beta: float = 0.3
+
+    def __post_init__(self):
+        for name, floor in (("human_speed", HUMAN_SPEED),
+                            ("human_speed_near", HUMAN_SPEED_NEAR),
+                            ("near_distance", NEAR_DISTANCE)):
+            value = positive(name, getattr(self, name))
+            if value < floor:
+                raise ValueError(
+                    f"{name} = {value!r} is not allowed: must be at least "
+                    f"ISO 13855's {floor!r} (a limit may be tightened, not "
+                    "widened)")
+        if not 0.0 < positive("min_speed", self.min_speed) <= 0.5:
+            raise ValueError(
+                f"min_speed = {self.min_speed!r} is not allowed: must be in "
+                "(0, 0.5] m/s (a person walking slowly is still tracked; "
+                "it may be lowered, not raised)")
+        for name in ("scan_period", "cluster_gap",
+                     "max_cluster_size", "gate", "tracked_range"):
+            positive(name, getattr(self, name))
+        for name in ("processing_time", "intrusion", "sensor_uncertainty",
+                     "robot_uncertainty", "moving_hold", "min_travel"):
+            non_negative(name, getattr(self, name))
+        self.moving_scans = whole_number("moving_scans", self.moving_scans,
+                                         1)
+        self.alpha = in_closed_range("alpha", self.alpha, 0.0, 1.0)
+        positive("alpha", self.alpha)
+        if not 0.0 < positive("beta", self.beta) < 2.0:
+            raise ValueError(f"beta = {self.beta!r} is not allowed: must "
+                             "be in (0, 2) (a stable alpha-beta filter)")
+
+    @property
+    def margin(self):
+        """C + Z_d + Z_r, m."""
+        return self.intrusion + self.sensor_uncertainty + \
+            self.robot_uncertainty
+
+
+class ProtectiveTiming(NamedTuple):
+    """The base's side of eq. (protective).
+
+    Attributes:
+        reaction_time: T_r, s: from a person's step to the base's command
+            reacting: the scan period, the processing time and one
+            control period (the limiter's state is the tick's).
+        lag: tau, s: the base's velocity loop lag (its drive starts to
+            brake within it).
+        deceleration: a, m/s^2 > 0: the base's braking (the smaller
+            planar acceleration limit).
+    """
+
+    reaction_time: float
+    lag: float
+    deceleration: float
+
+
+def protective_timing(people, time_step, acceleration_limits, lag):
+    """ProtectiveTiming from the PeopleSeparationParameters `people`, the
+    control period, the base's acceleration limits [x, y, yaw] and its
+    velocity loop lag (drake_wbc.math.safety.BASE_LAG)."""
+    return ProtectiveTiming(
+        people.scan_period + people.processing_time + time_step, lag,
+        min(acceleration_limits[0], acceleration_limits[1]))
+
+
+def protective_separation(robot_speed, human_speed, timing, margin):
+    """The protective separation distance of ISO/TS 15066 (5.5.4.2),
+    eq. (protective) (this module's label; the paper has none):
+
+        S_p = S_h + S_r + S_s + C + Z_d + Z_r,
+        S_h = v_h (T_r + T_s),  S_r = v_r T_r,
+        T_s = SETTLING tau + v_r / a,  S_s = v_r tau + v_r^2 / (2 a),
+
+    the base's stop distance modelled as its lag tau (coasting) then
+    braking at a: a bound of the lagged, saturated loop's own stop (the
+    distance u^2 / (2 a) + a tau^2 / 2 of
+    drake_wbc.math.safety.robot_stop_distance is at most
+    v_r tau + v_r^2 / (2 a) for v_r >= a tau / 2, and u tau below). Its
+    stopping time, which the person walks on for, is the braking's v_r / a
+    and the lag's settling: a first-order lag never quite ends, and
+    SETTLING tau (3 tau: down to 5%, under 1 cm/s from the 0.2 m/s a lag
+    of 0.2 s holds at 1 m/s^2) is when the base is at rest.
+
+    Args:
+        robot_speed: v_r >= 0, the base's approach speed, m/s.
+        human_speed: v_h >= 0, the person's, m/s.
+        timing: ProtectiveTiming.
+        margin: C + Z_d + Z_r, m.
+
+    Float or AutoDiffXd arguments alike.
+    """
+    reaction, lag, a = timing
+    stopping_time = SETTLING * lag + robot_speed / a
+    return (human_speed * (reaction + stopping_time)
+            + robot_speed * reaction
+            + robot_speed * lag + robot_speed * robot_speed / (2.0 * a)
+            + margin)
+
+
+def protective_speeds(d, human_speed, timing, margin):
+    """The largest approach speeds v_r >= 0 of the base to people at the
+    separations d that keep d >= S_p(v_r), eq. (protective) solved for
+    v_r: S_p is a quadratic
+
+        v_r^2 / (2 a) + B v_r + v_h (T_r + SETTLING tau) + margin - d = 0,
+        B = v_h / a + T_r + tau,
+
+    so v_r = a (sqrt(B^2 + 2 K / a) - B),
+    K = d - margin - v_h (T_r + SETTLING tau),
+    and 0 where K <= 0 (the person closer than the base's stop from rest).
+
+    Args:
+        d: (M,) separations, m (float or AutoDiffXd object array).
+        human_speed: (M,) the people's approach speeds, m/s.
+        timing: ProtectiveTiming.
+        margin: C + Z_d + Z_r, m.
+    """
+    reaction, lag, a = timing
+    d = np.asarray(d)
+    v_h = np.asarray(human_speed)
+    b = v_h / a + reaction + lag
+    k = d - margin - v_h * (reaction + SETTLING * lag)
+    k = np.where(value_of(k) > 0.0, k, 0.0 * k)
+    return a * (np.sqrt(b * b + 2.0 * k / a) - b)
+
+
+def iso_human_speed(d, people):
+    """ISO 13855's approach speed (m/s) at the separations d (M,):
+    human_speed_near within near_distance, human_speed beyond."""
+    return np.where(value_of(np.asarray(d)) <= people.near_distance,
+                    people.human_speed_near, people.human_speed)
+
+
+def people_rows(nearest, velocities, half_sizes, people, timing, count):
+    """The approach rows (count, 3) and allowed approach speeds (count,)
+    of moving people: for each, the `approach_rows` of its point nearest
+    the footprint and the largest approach speed that keeps the
+    separation at least S_p, eq. (protective) (`protective_speeds`), the
+    rest padded with rows that never limit (zero rows, FAR allowed).
+
+    The person's approach speed is ISO 13855's (`iso_human_speed`), or its
+    measured speed towards the footprint where that is faster. A person
+    walking away or along uses ISO's speed too, not the measured one: the
+    measurement is a few scans old and a person turns round within a
+    step, well inside the reaction and stopping time of the base. The
+    rows bound only the base's approach: moving away from or along a
+    person is never limited, whatever the separation.
+
+    Args:
+        nearest: (P, 2) the people's nearest points in T_b, P <= count.
+        velocities: (P, 2) their velocities in T_b (the world's, rotated).
+        half_sizes: the footprint's half-sizes (a, b), m.
+        people: PeopleSeparationParameters.
+        timing: ProtectiveTiming.
+        count: rows kept.
+
+    Returns:
+        ((count, 3) rows, (count,) allowed speeds), float.
+    """
+    rows = np.zeros((count, 3))
+    allowed = np.full(count, FAR)
+    if not len(nearest):
+        return rows, allowed
+    nearest = np.asarray(nearest, dtype=float).reshape(-1, 2)[:count]
+    if len(nearest):
+        g, d = approach_rows(nearest, half_sizes)
+        velocities = np.asarray(velocities, dtype=float).reshape(-1, 2)
+        closing = -(velocities[:len(nearest)] * g[:, :2]).sum(axis=1)
+        speed = np.maximum(iso_human_speed(d, people), closing)
+        rows[:len(g)] = g
+        allowed[:len(g)] = protective_speeds(d, speed, timing,
+                                             people.margin)
+    return rows, allowed

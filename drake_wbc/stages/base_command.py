@@ -1,8 +1,12 @@
 """The base's command at a safe stop and at the robot's limits, as a Drake
-system thin over drake_wbc.math.safety: BaseCommandLimiter (the base
-command within the robot's velocity and acceleration limits, its direction
-kept). InputGuard, which decides the stop, and StopGate are in
+system thin over drake_wbc.math.safety, drake_wbc.math.separation and
+drake_wbc.math.people: BaseCommandLimiter (the base command within the
+robot's velocity and acceleration limits, its direction kept, the
+separation from obstacles and moving people, the protective stop).
+InputGuard, which decides the stop, and StopGate are in
 drake_wbc.stages.safety."""
+
+import logging
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -13,10 +17,21 @@ from drake_wbc.math.command_limits import (
     limit_base_velocity,
 )
 from drake_wbc.math.kernels import body_for
+from drake_wbc.math.people import (
+    MAX_TRACKS,
+    NEVER,
+    TRACKER_SIZE,
+    initial_tracker,
+    people_scan,
+)
 from drake_wbc.math.repulsion import LastPoints
-from drake_wbc.math.safety import SafetyParameters
+from drake_wbc.math.safety import BASE_LAG, SafetyParameters
+from drake_wbc.math.scalar_support import value_of
 from drake_wbc.math.separation import (
+    FAR,
     NEAREST_POINTS,
+    people_rows,
+    protective_timing,
     scale_for_rows,
     separation_state,
 )
@@ -30,6 +45,39 @@ from drake_wbc.stages.support import define_stage
 
 _ALLOWED = safety.BASE_AXES + 3 * NEAREST_POINTS
 """Where the allowed speeds start in BaseCommandLimiter's state."""
+
+_PEOPLE = _ALLOWED + NEAREST_POINTS
+"""Where the moving people's approach rows (3 MAX_TRACKS) start."""
+
+_PEOPLE_ALLOWED = _PEOPLE + 3 * MAX_TRACKS
+"""Where their allowed approach speeds (MAX_TRACKS) start."""
+
+_PROTECTIVE = _PEOPLE_ALLOWED + MAX_TRACKS
+"""The protective stop's state: [stopped, the last tick's time with a
+point on or inside the footprint, whether the last scan had one]."""
+
+_SCAN = _PROTECTIVE + 3
+"""The last scan's signature (`_signature_of`)."""
+
+_TRACKER = _SCAN + 7
+"""Where the people tracker's state (TRACKER_SIZE) starts."""
+
+_SIZE = _TRACKER + TRACKER_SIZE
+
+def _signature_of(points):
+    """A scan's signature: [points, its first, middle and last point] (0
+    for none): a new scan of a base or a scene that moves changes them
+    (a scan of a static scene from a base at rest is the same scan)."""
+    count = len(points)
+    if not count:
+        return np.zeros(7)
+    return np.array([count, *points[0], *points[count // 2],
+                     *points[count - 1]], dtype=float)
+
+
+LOGGER = logging.getLogger("drake_wbc.math.safety")
+"""The safety stages' logger: a protective stop is logged when it trips
+and when it clears."""
 
 
 def _all_finite(vector):
@@ -49,8 +97,9 @@ def BaseCommandLimiter_(T):
                               ┌────────────────────┐
             velocity ────────►│                    ├──► velocity_command
             stopped ─────────►│ BaseCommandLimiter ├──► saturation
-            envelope_scale ──►│                    │
+            envelope_scale ──►│                    ├──► protective_stop
             obstacle_points ─►│                    │
+            base_state ──────►│                    │
                               └────────────────────┘
 
         - velocity: (3) the desired command [vx, vy, wz] in T_b (the base
@@ -66,7 +115,24 @@ def BaseCommandLimiter_(T):
           approaches no point faster than max(d - stop_distance, 0) /
           stop_time, eqs. (approach), (allowed)).
           Read only by the update, so the outputs do not depend on it
-          directly.
+          directly. The points are also tracked between scans
+          (drake_wbc.math.people, in the odometry's world): the approach
+          to each cluster that moves (a person) is bounded so that the
+          separation stays at least ISO/TS 15066's protective separation
+          distance S_p (drake_wbc.math.separation, eq. (protective); the
+          command scaled as a whole by the smaller of the two scales),
+          and a point on or inside the footprint is a protective stop.
+        - base_state: optional, [x, y, yaw, vx, vy, wz] (6), the base's
+          odometry (the pose in its world, the twist in T_b), for the
+          tracking; read only by the update. Unconnected: at rest at the
+          origin.
+        - protective_stop (1): 1.0 while the base is in a protective
+          stop: a point of the last scan on or inside the footprint, or
+          one there within the last hold_time s (SafetyParameters). The
+          command then brakes to zero within the acceleration limits
+          (scale 0, reported on `saturation` as a separation limit), and
+          the stop is logged when it trips and clears (LOGGER, as the
+          InputGuard's); `reason` says why.
         - velocity_command: (3)
           drake_wbc.math.command_limits.limit_base_velocity of the desired
           command from the previous tick's command: scaled as a
@@ -96,7 +162,16 @@ def BaseCommandLimiter_(T):
         approach rows G (3 NEAREST_POINTS, row by row) and allowed speeds
         (NEAREST_POINTS), drake_wbc.math.separation.separation_state, so
         that the outputs bound G s v <= allowed with a product and a
-        minimum (drake_wbc.math.separation.scale_for_rows).
+        minimum (drake_wbc.math.separation.scale_for_rows); then the
+        moving people's rows (3 MAX_TRACKS) and allowed speeds
+        (MAX_TRACKS, FAR where none), the protective stop [stopped, the
+        last time a point was inside, whether the last scan had one], the
+        last scan's signature (7: its size, first, middle and last point)
+        and the
+        tracker's state (drake_wbc.math.people.TRACKER_SIZE). The
+        tracking is float-only and runs once a scan (when the signature
+        changes: at 15 Hz, not every tick); without a moving person or a
+        point inside, the command is exactly that of the static rule.
 
         Scalar types: double and AutoDiffXd, the same calculation; the
         double one runs the float kernels of separation_state and
@@ -136,9 +211,15 @@ def BaseCommandLimiter_(T):
             self._envelope = self.DeclareVectorInputPort("envelope_scale", 1)
             self._points = self.DeclareAbstractInputPort(
                 "obstacle_points", AbstractValue.Make(np.zeros((0, 2))))
-            state = self.DeclareDiscreteState(np.concatenate([
-                np.zeros(safety.BASE_AXES),
-                self._separation(np.zeros((0, 2)))]))
+            self._base_state = self.DeclareVectorInputPort("base_state", 6)
+            self._people = params.people
+            self._timing = protective_timing(
+                params.people, self.time_step, self._acceleration_limits,
+                BASE_LAG)
+            self._hold_time = params.hold_time
+            # The signature of the points last summed (`_track`).
+            self._signature = None
+            state = self.DeclareDiscreteState(self._initial_state())
             self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0,
                                                     self._update)
             # Not time: the result changes only with the inputs and state.
@@ -155,31 +236,62 @@ def BaseCommandLimiter_(T):
             self.DeclareVectorOutputPort(
                 "saturation", 3, self._saturation_output,
                 prerequisites_of_calc={*depends, self._envelope.ticket()})
+            self.DeclareVectorOutputPort(
+                "protective_stop", 1, self._protective_output,
+                prerequisites_of_calc={self.discrete_state_ticket(state)})
 
-        def _limited(self, desired, previous, stopped, rows, allowed):
+        def _initial_state(self):
+            """No command, no points, no people, no stop."""
+            people = np.concatenate([np.zeros(3 * MAX_TRACKS),
+                                     np.full(MAX_TRACKS, FAR)])
+            return np.concatenate([
+                np.zeros(safety.BASE_AXES),
+                self._separation(np.zeros((0, 2))), people,
+                [0.0, NEVER, 0.0], np.zeros(7), initial_tracker()])
+
+        def _limited(self, desired, previous, stopped, rows, allowed,
+                     people=None):
             """[command (3), limited, velocity scale, acceleration scale]
             (without the envelope's scale) from the desired command (3,),
             the previous one (3,), stopped, the approach rows
-            (NEAREST_POINTS, 3) and the allowed speeds (NEAREST_POINTS,)."""
+            (NEAREST_POINTS, 3) and the allowed speeds (NEAREST_POINTS,),
+            and `people`: None, or the people's rows (MAX_TRACKS, 3),
+            their allowed speeds (MAX_TRACKS,) and the protective stop."""
             if stopped >= 0.5:
                 return np.array([0.0, 0.0, 0.0, 0.0, 1.0, 1.0])
             if not _all_finite(desired):
                 return np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
+            scale = self._scale(desired, rows, allowed)
+            if people is not None:
+                person_rows, person_allowed, protective = people
+                if protective >= 0.5:
+                    # A protective stop: to zero within the acceleration
+                    # limits.
+                    scale = 0.0
+                elif person_allowed[0] != FAR:
+                    person_scale = self._scale(desired, person_rows,
+                                               person_allowed)
+                    if person_scale < scale:
+                        scale = person_scale
             result = limit_base_velocity(
                 desired, previous, self._velocity_limits,
-                self._acceleration_limits, self.time_step,
-                scale=self._scale(desired, rows, allowed))
+                self._acceleration_limits, self.time_step, scale=scale)
             return np.array(result.command.tolist() + [
                 1.0 if result.limited else 0.0, result.velocity_scale,
                 result.acceleration_scale])
 
         def _calc_result(self, context, value):
             state = context.get_discrete_state_vector().CopyToVector()
+            people = None
+            if state[_PROTECTIVE] >= 0.5 or state[_PEOPLE_ALLOWED] != FAR:
+                people = (state[_PEOPLE:_PEOPLE_ALLOWED].reshape(-1, 3),
+                          state[_PEOPLE_ALLOWED:_PROTECTIVE],
+                          state[_PROTECTIVE])
             value.set_value(self._limited(
                 self._velocity.Eval(context), state[:safety.BASE_AXES],
                 self._stopped.Eval(context)[0],
                 state[safety.BASE_AXES:_ALLOWED].reshape(-1, 3),
-                state[_ALLOWED:]))
+                state[_ALLOWED:_PEOPLE], people))
 
         def _command_output(self, context, output):
             output.SetFromVector(self._result.Eval(context)[:3])
@@ -195,12 +307,93 @@ def BaseCommandLimiter_(T):
             output.SetFromVector(np.array(
                 [limited, velocity_scale, acceleration_scale]))
 
+        def _protective_output(self, context, output):
+            output.SetAtIndex(0, context.get_discrete_state_vector()
+                              .GetAtIndex(_PROTECTIVE))
+
         def _update(self, context, discrete_state):
             points = (self._points.Eval(context)
                       if self._points.HasValue(context)
                       else np.zeros((0, 2)))
-            discrete_state.set_value(np.concatenate(
-                [self._result.Eval(context)[:3], self._separation(points)]))
+            old = context.get_discrete_state_vector().CopyToVector()
+            state = np.concatenate([self._result.Eval(context)[:3],
+                                    self._separation(points),
+                                    old[_PEOPLE:]])
+            self._track(context, points, state, self._separation.changed)
+            discrete_state.set_value(state)
+
+        def _track(self, context, points, state, changed):
+            """The people's part of the state (in place): from a scan when
+            the points changed, and the protective stop at every tick.
+
+            A scan is new when its signature (`_signature_of`) differs
+            from the one in the state (a scan equal to the last one
+            leaves the tracks as they are). It is taken only when the
+            separation's LastPoints saw new points or the state's is not
+            the one taken last (another context)."""
+            signature = self._signature
+            if changed or signature is None or (
+                    state[_SCAN:_TRACKER] != signature).any():
+                points = np.asarray(points, dtype=float).reshape(-1, 2)
+                signature = _signature_of(points)
+                self._signature = signature
+                if (value_of(state[_SCAN:_TRACKER]) != signature).any():
+                    self._scan(context, points, state, signature)
+            time = context.get_time()
+            time = time if isinstance(time, float) else time.value()
+            flags = state[_PROTECTIVE:_SCAN]
+            if flags.dtype == object:
+                flags = value_of(flags)
+            was, last_inside, inside = flags[0] >= 0.5, flags[1], flags[2]
+            if inside >= 0.5:
+                last_inside = time
+                state[_PROTECTIVE + 1] = time
+            stopped = time - last_inside < self._hold_time - 1e-9
+            if stopped == was:
+                return
+            state[_PROTECTIVE] = 1.0 if stopped else 0.0
+            if stopped:
+                LOGGER.warning("protective stop at t = %.3f s: %s", time,
+                               self._reason(True))
+            else:
+                LOGGER.warning(
+                    "protective stop cleared at t = %.3f s: no obstacle "
+                    "point on or inside the base's footprint for %g s, "
+                    "resuming", time, self._hold_time)
+
+        def _scan(self, context, points, state, signature):
+            """The tracking of a new scan (float, drake_wbc.math.people)
+            and the people's rows and allowed speeds of eq.
+            (protective), into the state (in place)."""
+            base = (value_of(self._base_state.Eval(context))
+                    if self._base_state.HasValue(context)
+                    else np.zeros(6))
+            tracker, people, inside = people_scan(
+                value_of(state[_TRACKER:]), points, base,
+                float(value_of(context.get_time())), self.half_sizes,
+                self._people)
+            rows, allowed = people_rows(
+                [p[1] for p in people], [p[2] for p in people],
+                self.half_sizes, self._people, self._timing, MAX_TRACKS)
+            state[_PEOPLE:_PEOPLE_ALLOWED] = rows.ravel()
+            state[_PEOPLE_ALLOWED:_PROTECTIVE] = allowed
+            state[_PROTECTIVE + 2] = 1.0 if inside else 0.0
+            state[_SCAN:_TRACKER] = signature
+            state[_TRACKER:] = tracker
+
+        def _reason(self, stopped):
+            if not stopped:
+                return ""
+            return ("protective stop: an obstacle point is on or inside "
+                    "the base's footprint; the base brakes to rest within "
+                    "its acceleration limits and resumes "
+                    f"{self._hold_time:g} s after the point has gone")
+
+        def reason(self, context):
+            """Why the base is in a protective stop, as a sentence (""
+            when it is not)."""
+            return self._reason(context.get_discrete_state_vector()
+                                .GetAtIndex(_PROTECTIVE) >= 0.5)
 
         def set_previous(self, context, velocity):
             """Sets the previous command (3,), e.g. the base's measured

@@ -1,0 +1,440 @@
+"""Speed and separation from moving people (ISO/TS 15066): the protective
+separation distance against its closed form, the tracker's velocity
+against finite differences of the truth, and the base command limiter on
+an ideal robot (its velocity is its command) scanned at 15 Hz: a person
+walking head-on at 1.6 m/s and one stepping in ahead of the base at full
+speed, one crossing behind and one walking away (neither may halt the
+base), and the protective stop of a point inside the footprint."""
+
+import math
+
+import numpy as np
+import pytest
+from pydrake.common.value import AbstractValue
+
+from drake_wbc.math import people as tracking
+from drake_wbc.math.repulsion import footprint_gap
+from drake_wbc.math.safety import (
+    BASE_LAG,
+    SafetyParameters,
+    check_within_robot,
+)
+from drake_wbc.math.separation import (
+    HUMAN_SPEED,
+    HUMAN_SPEED_NEAR,
+    PeopleSeparationParameters,
+    ProtectiveTiming,
+    people_rows,
+    protective_separation,
+    protective_speeds,
+    protective_timing,
+)
+from drake_wbc.stages import BaseCommandLimiter
+from drake_wbc.station.lidar import LidarParameters, scan, scan_points
+
+HALF = (0.4, 0.3)
+H = 0.01
+SCAN_TICKS = 7
+SCAN = SCAN_TICKS * H
+"""The scan period of the ideal runs: every 7th tick, 0.07 s (15 Hz is
+0.067 s; the tracker's tests use the same period)."""
+MOUNTS = ((0.4, 0.3, math.pi / 4), (-0.4, -0.3, -3 * math.pi / 4))
+"""Two scanners on opposite corners of the footprint, as on the robot."""
+
+LIDAR = LidarParameters()
+
+
+# --- eq. (protective) -------------------------------------------------------
+
+
+def test_the_protective_separation_is_its_closed_form():
+    """S_p = v_h (T_r + T_s) + v_r T_r + S_s + C + Z_d + Z_r with
+    T_s = 3 tau + v_r / a and S_s = v_r tau + v_r^2 / (2 a), term by term
+    at the defaults: T_r = 1/15 + 0.02 + 0.01 s, tau = 0.3 s, a = 1."""
+    people = PeopleSeparationParameters()
+    timing = protective_timing(people, H, (1.0, 1.0, 1.0), BASE_LAG)
+    t_r = 1.0 / 15.0 + 0.02 + 0.01
+    assert timing == pytest.approx(ProtectiveTiming(t_r, 0.3, 1.0))
+    margin = 0.2 + 0.05 + 0.02
+    assert people.margin == pytest.approx(margin)
+    for v_r, v_h in ((0.0, 1.6), (0.5, 1.6), (1.0, 2.0), (0.3, 0.0)):
+        t_s = 0.9 + v_r / 1.0
+        s_s = v_r * 0.3 + v_r ** 2 / 2.0
+        expected = v_h * (t_r + t_s) + v_r * t_r + s_s + margin
+        assert protective_separation(v_r, v_h, timing, margin) == \
+            pytest.approx(expected, rel=1e-14)
+    # The figures of the README: 1.87 m from a base at rest, 4.36 m from
+    # one at full speed, for a person at 1.6 m/s.
+    assert protective_separation(0.0, 1.6, timing, margin) == \
+        pytest.approx(1.8647, abs=1e-4)
+    assert protective_separation(1.0, 1.6, timing, margin) == \
+        pytest.approx(4.3613, abs=1e-4)
+
+
+def test_the_protective_speed_is_the_inverse_of_the_separation():
+    timing = ProtectiveTiming(0.1, 0.25, 0.8)
+    margin = 0.3
+    d = np.linspace(0.0, 5.0, 101)
+    for v_h in (1.6, 2.0, 2.7):
+        v = protective_speeds(d, np.full(d.size, v_h), timing, margin)
+        rest = protective_separation(0.0, v_h, timing, margin)
+        assert np.all(v[d <= rest] == 0.0)
+        beyond = d > rest
+        assert np.all(v[beyond] > 0.0)
+        np.testing.assert_allclose(
+            protective_separation(v[beyond], v_h, timing, margin),
+            d[beyond], rtol=1e-12)
+        assert np.all(np.diff(v) >= 0.0)
+
+
+def test_the_protective_speed_differentiates_in_autodiff():
+    from pydrake.autodiffutils import AutoDiffXd
+
+    timing = ProtectiveTiming(0.1, 0.3, 1.0)
+    d, eps = 2.0, 1e-6
+    v = protective_speeds(np.array([AutoDiffXd(d, [1.0])]),
+                          np.array([1.6]), timing, 0.27)[0]
+    ahead, behind = (protective_speeds(np.array([x]), np.array([1.6]),
+                                       timing, 0.27)[0]
+                     for x in (d + eps, d - eps))
+    assert v.value() == pytest.approx(ahead / 2 + behind / 2, abs=1e-9)
+    assert v.derivatives()[0] == pytest.approx(
+        (ahead - behind) / (2 * eps), rel=1e-6)
+
+
+def test_people_rows_use_iso_speed_at_least():
+    """An approaching person faster than ISO's speed uses the measured
+    speed; slower, or walking away, ISO's (2.0 m/s within 0.5 m)."""
+    people = PeopleSeparationParameters()
+    timing = protective_timing(people, H, (1.0, 1.0, 1.0), BASE_LAG)
+    nearest = [[2.4, 0.0], [2.4, 0.0], [2.4, 0.0], [0.7, 0.0]]
+    velocities = [[-3.0, 0.0], [-1.0, 0.0], [1.5, 0.0], [0.0, 0.0]]
+    rows, allowed = people_rows(nearest, velocities, HALF, people, timing, 6)
+    np.testing.assert_array_equal(rows[0], [1.0, 0.0, 0.0])
+    d = np.array([2.0, 2.0, 2.0, 0.3])
+    speeds = np.array([3.0, HUMAN_SPEED, HUMAN_SPEED, HUMAN_SPEED_NEAR])
+    np.testing.assert_allclose(allowed[:4], protective_speeds(
+        d, speeds, timing, people.margin), rtol=1e-14)
+    assert allowed[0] < allowed[1] == allowed[2]
+    assert np.all(rows[4:] == 0.0)
+
+
+def test_human_speeds_cannot_be_set_below_iso():
+    for name, value in (("human_speed", 1.2), ("human_speed_near", 1.9),
+                        ("near_distance", 0.3)):
+        with pytest.raises(ValueError, match=f"{name} = {value}.*ISO 13855"):
+            PeopleSeparationParameters(**{name: value})
+    with pytest.raises(ValueError, match="people.human_speed = 1.0"):
+        from drake_wbc.math.validation import validate
+
+        params = SafetyParameters()
+        params.people.human_speed = 1.0
+        validate(params)
+    for name in ("intrusion", "processing_time"):
+        with pytest.raises(ValueError, match=name):
+            PeopleSeparationParameters(**{name: -0.1})
+    check_within_robot(SafetyParameters())
+
+
+# --- the tracker ------------------------------------------------------------
+
+
+def scan_of(pose, circles, boxes=None):
+    """The points (T_b) both scanners see from the base at `pose`."""
+    return np.concatenate([
+        scan_points(scan(pose, mount, LIDAR, circles, boxes, 0),
+                    LIDAR.beam_angles, mount) for mount in MOUNTS])
+
+
+def odometry(pose, world_twist):
+    """[x, y, yaw, vx, vy, wz] with the twist in T_b, of a base at `pose`
+    moving at `world_twist` (world frame)."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    vx, vy, wz = world_twist
+    return np.array([*pose, c * vx + s * vy, -s * vx + c * vy, wz])
+
+
+def test_the_tracker_measures_a_walker_and_not_a_pillar():
+    """A person (r = 0.25 m) walking at a constant velocity past a pillar
+    while the base drives and turns: the tracked velocity is the finite
+    difference of the true positions within 0.15 m/s (10%; a cluster's
+    centroid is that of the arc a scanner sees, which turns with the
+    view) from the third scan on, in the world and in T_b, and the
+    pillar's track stays still (static)."""
+    params = PeopleSeparationParameters()
+    state = tracking.initial_tracker()
+    velocity = np.array([-1.2, 0.9])
+    start = np.array([3.5, -1.5])
+    pillar = [1.5, 1.2, 0.15]
+    base_velocity = np.array([0.4, 0.0, 0.1])
+    walker = None
+    for k in range(12):
+        t = k * SCAN
+        pose = base_velocity * t
+        person = start + velocity * t
+        points = scan_of(pose, [[*person, 0.25], pillar])
+        state, found, inside = tracking.people_scan(
+            state, points, odometry(pose, base_velocity), t, HALF, params)
+        assert not inside
+        tracks = tracking.tracks_of(state)
+        live = tracks[tracks[:, 4] > 0]
+        near_person = np.hypot(*(live[:, :2] - person).T) < 0.4
+        near_pillar = np.hypot(*(live[:, :2] - pillar[:2]).T) < 0.3
+        if k >= 2:
+            truth = (person - (start + velocity * (t - SCAN))) / SCAN
+            walker = live[near_person]
+            assert len(walker) >= 1
+            for track in walker:
+                np.testing.assert_allclose(track[2:4], truth, atol=0.15)
+            for track in live[near_pillar]:
+                assert np.hypot(*track[2:4]) < 0.1
+        if k >= 5:
+            # Moving once it has walked min_travel (0.5 m: 5 scans at
+            # 1.5 m/s); its velocity in T_b.
+            assert found
+            c, s = np.cos(pose[2]), np.sin(pose[2])
+            in_base = np.array([c * velocity[0] + s * velocity[1],
+                                -s * velocity[0] + c * velocity[1]])
+            for _, nearest, v in found:
+                np.testing.assert_allclose(v, in_base, atol=0.15)
+                assert footprint_gap(nearest[None], HALF)[0] > 0.0
+            assert not np.any(near_pillar & (
+                tracks[tracks[:, 4] > 0][:, 7] > -1.0))
+    assert walker is not None
+
+
+def test_walls_and_crates_are_not_people():
+    """A drive at full speed along a wall and past a crate seen from
+    changing sides, and a turn on the spot: no track is ever moving."""
+    params = PeopleSeparationParameters()
+    state = tracking.initial_tracker()
+    boxes = [[3.0, 1.2, 4.0, 0.05, 0.0], [2.0, -0.9, 0.2, 0.2, 0.4]]
+    for k in range(60):
+        t = k * SCAN
+        pose = np.array([1.0 * t, 0.0, 0.15 * math.sin(t)])
+        twist = np.array([1.0, 0.0, 0.15 * math.cos(t)])
+        state, found, _ = tracking.people_scan(
+            state, scan_of(pose, None, boxes), odometry(pose, twist), t,
+            HALF, params)
+        assert found == []
+    # Turning on the spot at full rate beside a wall and a table: the
+    # pieces at the edges of the scanners' fields turn with the base.
+    state = tracking.initial_tracker()
+    boxes = [[0.0, 1.5, 3.0, 0.05, 0.0], [1.2, -0.2, 0.3, 0.5, 0.0]]
+    for k in range(120):
+        t = k * SCAN
+        pose = np.array([0.0, 0.0, 1.0 * t])
+        state, found, _ = tracking.people_scan(
+            state, scan_of(pose, None, boxes),
+            odometry(pose, [0.0, 0.0, 1.0]), t, HALF, params)
+        assert found == []
+
+
+# --- the limiter on an ideal robot ------------------------------------------
+
+
+def ideal_run(person, duration, desired=(1.0, 0.0, 0.0), v0=0.0,
+              radius=0.25):
+    """The limiter driving an ideal base (its velocity is the command,
+    from the origin facing +x) with the desired command `desired`, a
+    person at person(t) (world), scanned at 15 Hz by both scanners.
+
+    Returns:
+        times, commands (N, 3), the footprint's gap to the person's circle
+        (N,), the protective stop (N,), and the limiter.
+    """
+    limiter = BaseCommandLimiter(SafetyParameters(), H, HALF)
+    context = limiter.CreateDefaultContext()
+    limiter.set_previous(context, [v0, 0.0, 0.0])
+    limiter.GetInputPort("velocity").FixValue(context, np.asarray(desired))
+    limiter.GetInputPort("stopped").FixValue(context, [0.0])
+    pose, velocity = np.zeros(3), np.array([v0, 0.0, 0.0])
+    points = np.zeros((0, 2))
+    times, commands, gaps, stops = [], [], [], []
+    for k in range(int(round(duration / H))):
+        t = k * H
+        context.SetTime(t)
+        centre = np.asarray(person(t), dtype=float)
+        if k % SCAN_TICKS == 0:
+            points = scan_of(pose, [[*centre, radius]])
+        state_port = limiter.GetInputPort("base_state")
+        state_port.FixValue(context, np.concatenate([pose, velocity]))
+        limiter.GetInputPort("obstacle_points").FixValue(
+            context, AbstractValue.Make(points))
+        command = limiter.GetOutputPort("velocity_command").Eval(
+            context).copy()
+        context.SetDiscreteState(limiter.EvalUniquePeriodicDiscreteUpdate(
+            context).get_vector().CopyToVector())
+        # The ideal base: the command, integrated over the tick.
+        velocity = command
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        pose = pose + H * np.array([c * command[0] - s * command[1],
+                                    s * command[0] + c * command[1],
+                                    command[2]])
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        relative = centre - pose[:2]
+        in_base = np.array([c * relative[0] + s * relative[1],
+                            -s * relative[0] + c * relative[1]])
+        times.append(t)
+        commands.append(command)
+        gaps.append(footprint_gap(in_base[None], HALF)[0] - radius)
+        stops.append(limiter.GetOutputPort("protective_stop").Eval(
+            context)[0])
+    return (np.array(times), np.array(commands), np.array(gaps),
+            np.array(stops), limiter)
+
+
+def walker(start, end, t0, t1):
+    start, end = np.asarray(start, float), np.asarray(end, float)
+
+    def at(t):
+        f = min(max((t - t0) / (t1 - t0), 0.0), 1.0)
+        return start + f * (end - start)
+
+    return at
+
+
+def test_a_person_walking_head_on_meets_a_base_at_rest():
+    """The base drives forward at full speed (1 m/s desired) towards a
+    person walking head-on at 1.6 m/s from 8 m: the base is at rest
+    before the person reaches the footprint, and stays so."""
+    person = walker([9.0, 0.0], [-3.0, 0.0], 0.0, 12.0 / 1.6)
+    t, command, gap, stop, _ = ideal_run(person, 6.0)
+    contact = np.flatnonzero(gap <= 0.0)
+    assert len(contact), "the person reaches the base"
+    first = contact[0]
+    at_rest = np.flatnonzero(np.all(command == 0.0, axis=1))
+    assert len(at_rest) and at_rest[0] < first
+    # Once at rest before contact, it never approaches again.
+    assert np.all(command[at_rest[0]:first + 1, 0] <= 1e-12)
+    # The separation when the base came to rest: at least the base's
+    # stop from rest against a person at 1.6 m/s, less what it can close
+    # in one scan (the protective separation is kept at the scans).
+    assert gap[at_rest[0]] > 0.5
+    # Inside the footprint: a protective stop.
+    assert stop[contact[-1]] == 1.0 or gap[-1] > 0.0
+    print(f"head-on: at rest {t[first] - t[at_rest[0]]:.2f} s before "
+          f"contact, {gap[at_rest[0]]:.2f} m from the person; top speed "
+          f"{command[:, 0].max():.2f} m/s")
+
+
+def test_a_person_stepping_in_ahead_of_the_base_at_full_speed():
+    """A person walks in from the side at 1.6 m/s and stops with 0.25 m
+    between the base's front and its body if the base had kept its 1 m/s.
+    Tracked as moving from the side, the person slows the base before it
+    steps in; the base is at rest before contact."""
+    # Base front at 0.4 + t; at t = 1 s: 1.4, the person's edge at 1.65.
+    person = walker([1.9, 1.6], [1.9, 0.0], 0.0, 1.0)
+    t, command, gap, stop, _ = ideal_run(person, 3.0, v0=1.0)
+    speed = command[:, 0]
+    assert gap.min() > 0.0, "no contact"
+    assert speed[-1] == 0.0
+    print(f"step-in: closest {gap.min():.3f} m, at rest at "
+          f"{t[np.flatnonzero(speed == 0.0)[0]]:.2f} s")
+
+
+def test_a_person_stepping_in_unseen_is_met_at_the_slowest_speed_allowed():
+    """A person appears 0.25 m ahead of the base at full speed (stepping
+    out from behind cover: the first scan that sees them): no stop can
+    avoid the contact (the base needs 0.5 m to stop from 1 m/s at
+    1 m/s^2). The base brakes at its acceleration limit from the first
+    scan that sees the person, and meets them at the speed of that
+    braking after one scan period and a tick:
+    v^2 = v0^2 - 2 a (g0 - v0 T), and a protective stop follows."""
+    appear = 0.5
+    radius = 0.25
+    front = 0.4 + 1.0 * appear
+    hidden = np.array([50.0, 50.0])
+
+    def person(t):
+        return hidden if t < appear else np.array([front + 0.25 + radius,
+                                                   0.0])
+
+    t, command, gap, stop, _ = ideal_run(person, 2.0, v0=1.0)
+    seen = np.flatnonzero(t >= appear)[0]
+    contact = np.flatnonzero((gap <= 0.0) & (t >= appear))[0]
+    # The first scan at or after `appear`, and a tick for the state.
+    first_scan = math.ceil(appear / SCAN - 1e-9) * SCAN  # 0.56 s
+    reaction = first_scan - appear + H
+    g0 = 0.25 - reaction * 1.0
+    bound = math.sqrt(max(1.0 - 2.0 * 1.0 * g0, 0.0))
+    speed_at_contact = command[contact - 1, 0]
+    assert speed_at_contact <= bound + 0.011  # one tick of braking
+    # Braking at the limit from the first scan on (no slower is allowed).
+    braking = np.diff(command[seen:contact, 0]) / H
+    assert braking.min() >= -1.0 - 1e-9
+    assert stop[contact + 1:].max() == 1.0
+    assert command[-1, 0] == 0.0
+    print(f"step-in unseen: contact at {speed_at_contact:.3f} m/s "
+          f"(limits allow {bound:.3f})")
+
+
+def test_a_person_crossing_behind_or_walking_away_does_not_halt_the_base():
+    """A person crossing 0.6 m behind the base at 1 m/s, and one walking
+    away ahead of it at 1.2 m/s from 1.5 m: the base keeps moving (the
+    crossing does not limit it at all; the one ahead is followed at a
+    distance)."""
+    crossing = walker([-1.6, 2.5], [-1.6, -2.5], 0.0, 5.0)
+    t, command, gap, _, _ = ideal_run(crossing, 3.0, desired=(0.3, 0, 0),
+                                      v0=0.3)
+    np.testing.assert_array_equal(command[:, 0], 0.3)
+    ahead = walker([2.4, 0.0], [9.4, 0.0], 0.0, 7.0 / 1.2)
+    t, command, gap, _, _ = ideal_run(ahead, 5.0, desired=(0.8, 0, 0),
+                                      v0=0.0)
+    assert command[t > 1.0, 0].min() > 0.1
+    assert gap.min() > 0.9
+
+
+def test_a_point_inside_the_footprint_is_a_protective_stop(caplog):
+    """A static point inside the footprint (nothing can be in it but a
+    person or what the base has struck) stops the base within its
+    acceleration limit, reported on `protective_stop` and by `reason`,
+    and the base resumes hold_time after it has gone."""
+    limiter = BaseCommandLimiter(SafetyParameters(), H, HALF)
+    context = limiter.CreateDefaultContext()
+    limiter.set_previous(context, [0.5, 0.0, 0.0])
+    limiter.GetInputPort("velocity").FixValue(context, [0.5, 0.0, 0.0])
+    limiter.GetInputPort("stopped").FixValue(context, [0.0])
+    far = np.array([[5.0, 5.0], [5.0, 5.1]])
+    inside = np.array([[0.1, -0.5], [0.1, 0.0], [5.0, 5.0]])
+    speeds, stops = [], []
+    for k in range(150):
+        context.SetTime(k * H)
+        points = inside if 10 <= k < 20 else far
+        limiter.GetInputPort("obstacle_points").FixValue(
+            context, AbstractValue.Make(points))
+        speeds.append(limiter.GetOutputPort("velocity_command").Eval(
+            context)[0])
+        context.SetDiscreteState(limiter.EvalUniquePeriodicDiscreteUpdate(
+            context).get_vector().CopyToVector())
+        stops.append(limiter.GetOutputPort("protective_stop").Eval(
+            context)[0])
+        if k == 15:
+            assert "protective stop" in limiter.reason(context)
+    speeds, stops = np.array(speeds), np.array(stops)
+    assert stops[10] == 1.0 and stops[9] == 0.0
+    # Braking at the acceleration limit (1 m/s^2), to rest.
+    np.testing.assert_allclose(np.diff(speeds[10:61]), -H, atol=1e-12)
+    assert speeds[61:70].max() == 0.0
+    # Cleared hold_time (0.5 s) after the last scan with the point.
+    assert stops[68] == 1.0 and stops[69] == 0.0
+    assert speeds[-1] > 0.0
+    assert limiter.reason(context) == ""
+    assert "protective stop at t = 0.100 s" in caplog.text
+    assert "protective stop cleared at t = 0.690 s" in caplog.text
+
+
+def test_the_scan_period_is_at_least_the_lidars():
+    from drake_wbc.experiments.scenario import load_scenario
+
+    text = """
+controller:
+  safety:
+    people:
+      scan_period: 0.05
+"""
+    with pytest.raises(ValueError, match=(
+            r"controller.safety.people.scan_period = 0.05 s is not allowed "
+            r"with station.lidar.rate = 15.0 Hz")):
+        load_scenario(text=text)
+    load_scenario(text=text.replace("0.05", "0.1"))
