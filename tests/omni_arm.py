@@ -83,3 +83,18 @@ def description_text(n, extra=""):
           ft_sensor_frame: omni_arm::sensor
           ft_sensor_joint: omni_arm::sensor
         """).replace("EXTRA\n", extra + "\n" if extra else "")
+
+
+def write_omni_arm(folder, n, accelerations=True, extra=""):
+    """Writes the URDF and the description of an n-joint omni arm into
+    `folder`; returns the description's path. With `accelerations` the
+    description gives the arm's acceleration limits (9 rad/s^2, which the
+    URDF cannot); `extra` adds lines under `arm:`."""
+    lines = [f"  acceleration_limits: [{', '.join(['9.0'] * n)}]"] \
+        if accelerations else []
+    if extra:
+        lines.append(extra)
+    (folder / "omni_arm.urdf").write_text(urdf_text(n))
+    path = folder / "omni_arm.yaml"
+    path.write_text(description_text(n, extra="\n".join(lines)))
+    return path

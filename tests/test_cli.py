@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 import pytest
-from omni_arm import description_text, urdf_text
+from omni_arm import write_omni_arm
 
 from drake_wbc.cli.main import main
 from drake_wbc.math import capability
@@ -55,10 +55,7 @@ def test_demo_reports_the_model_and_writes_a_page(tmp_path, capsys):
 
 
 def test_demo_of_a_robot_of_ones_own_proposes_its_tuning(tmp_path, capsys):
-    (tmp_path / "omni_arm.urdf").write_text(urdf_text(7))
-    path = tmp_path / "omni_arm.yaml"
-    path.write_text(description_text(
-        7, extra=f"  acceleration_limits: [{', '.join(['9.0'] * 7)}]"))
+    path = write_omni_arm(tmp_path, 7)
     assert main(["demo", "--robot", str(path), "--output",
                  str(tmp_path)]) == 0
     out = capsys.readouterr().out
@@ -67,7 +64,7 @@ def test_demo_of_a_robot_of_ones_own_proposes_its_tuning(tmp_path, capsys):
     assert "caps P_jnt at 0.60 on this arm's 7 joints" in out
     assert "proposed capability_band" in out
     assert (tmp_path / "omni_arm_model.html").is_file()
-    path.write_text(description_text(5))
+    path = write_omni_arm(tmp_path, 5, accelerations=False)
     assert main(["demo", "--robot", str(path), "--output",
                  str(tmp_path)]) == 2
     assert "arm.joints" in capsys.readouterr().err

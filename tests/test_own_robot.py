@@ -8,7 +8,7 @@ import warnings
 
 import numpy as np
 import pytest
-from omni_arm import description_text, urdf_text
+from omni_arm import write_omni_arm
 from pydrake.common.value import AbstractValue
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
@@ -63,10 +63,7 @@ class IdealWrist(LeafSystem):
 
 @pytest.mark.parametrize("n", [6, 7])
 def test_the_controller_of_a_urdf_robot_tracks_a_world_twist(tmp_path, n):
-    (tmp_path / "omni_arm.urdf").write_text(urdf_text(n))
-    path = tmp_path / "omni_arm.yaml"
-    path.write_text(description_text(
-        n, extra=f"  acceleration_limits: [{', '.join(['9.0'] * n)}]"))
+    path = write_omni_arm(tmp_path, n)
     arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
     # The tuning proposed for this arm (drake_wbc.robot.tuning).
     survey = survey_capability(arm, count=100)
@@ -135,11 +132,8 @@ def test_the_hardware_guard_holds_the_commands_to_that_arms_own_limits(
     the command guard: a command the Elfin5 would take is limited, and one
     within this arm's limits passes bit for bit."""
     n = 7
-    (tmp_path / "omni_arm.urdf").write_text(urdf_text(n))
-    path = tmp_path / "omni_arm.yaml"
-    path.write_text(description_text(
-        n, extra=(f"  acceleration_limits: [{', '.join(['9.0'] * n)}]\n"
-                  f"  velocity_limits: [{', '.join(['0.5'] * n)}]")))
+    path = write_omni_arm(
+        tmp_path, n, extra=f"  velocity_limits: [{', '.join(['0.5'] * n)}]")
     arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
     limits = Limits.of_robot(HardwareOptions(), arm)
     np.testing.assert_array_equal(limits.joint_speed, np.full(n, 0.5))

@@ -6,7 +6,7 @@ the field."""
 import numpy as np
 import pytest
 import yaml
-from omni_arm import description_text, urdf_text
+from omni_arm import write_omni_arm
 from pydrake.multibody.plant import MultibodyPlant
 
 from drake_wbc.robot.description import (
@@ -126,10 +126,7 @@ def test_tighter_limits_are_the_robots_own():
 
 @pytest.mark.parametrize("n", [6, 7])
 def test_a_urdf_arm_of_n_joints_gives_its_kinematics(tmp_path, n):
-    (tmp_path / "omni_arm.urdf").write_text(urdf_text(n))
-    path = tmp_path / "omni_arm.yaml"
-    path.write_text(description_text(
-        n, extra=f"  acceleration_limits: [{', '.join(['9.0'] * n)}]"))
+    path = write_omni_arm(tmp_path, n)
     description = load_robot_description(path)
     plant, model = make_robot_plant(description)
     arm = ArmKinematics(plant, model)
@@ -155,9 +152,7 @@ def test_a_urdf_arm_of_n_joints_gives_its_kinematics(tmp_path, n):
 
 
 def test_a_model_without_acceleration_limits_asks_for_them(tmp_path):
-    (tmp_path / "omni_arm.urdf").write_text(urdf_text(6))
-    path = tmp_path / "omni_arm.yaml"
-    path.write_text(description_text(6))
+    path = write_omni_arm(tmp_path, 6, accelerations=False)
     with pytest.raises(ValueError, match=(
             r"arm.acceleration_limits\[0\] is missing, which is not "
             r"allowed: the model gives 'omni_arm::j1' none \(inf\)")):
@@ -166,8 +161,6 @@ def test_a_model_without_acceleration_limits_asks_for_them(tmp_path):
 
 def test_fewer_than_six_arm_joints_are_refused(tmp_path):
     assert MIN_ARM_JOINTS == 6
-    (tmp_path / "omni_arm.urdf").write_text(urdf_text(5))
-    path = tmp_path / "omni_arm.yaml"
-    path.write_text(description_text(5))
+    path = write_omni_arm(tmp_path, 5, accelerations=False)
     with pytest.raises(ValueError, match=r"arm.joints = .* at least 6, got 5"):
         load_robot_description(path)

@@ -7,7 +7,7 @@ import warnings
 
 import numpy as np
 import pytest
-from omni_arm import description_text, urdf_text
+from omni_arm import write_omni_arm
 
 from drake_wbc.controller import ControllerParameters, build_controller
 from drake_wbc.math import capability
@@ -32,10 +32,7 @@ def shipped():
 @pytest.fixture(scope="module")
 def seven(tmp_path_factory):
     folder = tmp_path_factory.mktemp("seven")
-    (folder / "omni_arm.urdf").write_text(urdf_text(7))
-    path = folder / "omni_arm.yaml"
-    path.write_text(description_text(
-        7, extra=f"  acceleration_limits: [{', '.join(['9.0'] * 7)}]"))
+    path = write_omni_arm(folder, 7)
     return ArmKinematics(*make_robot_plant(load_robot_description(path)))
 
 
