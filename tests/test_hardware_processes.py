@@ -317,10 +317,12 @@ def test_the_watchdog_stops_the_base_on_the_wire_within_its_limit(frozen,
     print(f"watchdog latency: {latency * 1e3:.1f} ms on the controller's "
           f"clock, {on_the_wire * 1e3:.1f} ms on the wire")
     assert limit < latency <= limit + 0.002 + 1e-6
-    # The logger stamps both messages on arrival; a status that reaches it
-    # up to a millisecond after the controller (a busy machine: 49.95 ms
-    # seen) shortens the span on its clock.
-    assert on_the_wire > limit - 0.001
+    # The logger stamps both messages on arrival, in a third process: on a
+    # busy machine the statuses reach it late, bunched (49.95 and 25.0 ms
+    # seen at load 2 to 7, with 51.0 ms on the controller's clock), so its
+    # clock shows only that the stop is not grossly early; the controller's
+    # clock above is the exact check.
+    assert on_the_wire > 0.5 * limit
     assert "watchdog tripped" in run["outputs"]["frozen"]
     assert "watchdog cleared" in run["outputs"]["frozen"]
 
