@@ -4,17 +4,23 @@ controller built from its description alone, and an ideal robot (the
 joints follow their position command, the base its velocity command) that
 must carry the TCP along the commanded world twist."""
 
+import textwrap
 import warnings
 
 import numpy as np
 import pytest
 from omni_arm import write_omni_arm
 from pydrake.common.value import AbstractValue
+from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 
 from drake_wbc.controller import ControllerParameters, build_controller
+from drake_wbc.deployment.deploy import add_controller_side
+from drake_wbc.experiments.runner import build_closed_loop
+from drake_wbc.experiments.scenario import load_scenario
+from drake_wbc.hardware import messages
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.hardware.safety import CommandGuard, Limits, follow_arm_command
 from drake_wbc.robot.description import load_robot_description
@@ -169,3 +175,92 @@ def test_the_hardware_guard_holds_the_commands_to_that_arms_own_limits(
         slow, np.zeros(n), arm.home, np.zeros(n), period, limits)
     assert not changed
     np.testing.assert_array_equal(command, slow)
+
+
+def test_the_same_controller_deploys_over_lcm_to_that_robot(tmp_path):
+    """The controller side of `drake-wbc deploy` for a scenario that names
+    the 7-joint robot (`robot:`), over real LCM messages (memq://), with
+    the test in the robot's place: it sends 7-joint statuses (the arm
+    where it was last commanded, the base at its command) and the
+    controller answers with 7-joint commands, within that arm's own
+    limits, that move the tool along the task's world twist."""
+    n = 7
+    robot = write_omni_arm(tmp_path, n)
+    scenario_file = tmp_path / "scenario.yaml"
+    scenario_file.write_text(textwrap.dedent(f"""\
+        description: the omni arm deployed
+        duration: 2.0
+        robot: {robot.name}
+        controller:
+          capability:
+            joint_limit_gain: 6.0e4
+          capability_band: {{lower: 0.18, upper: 0.21}}
+        task:
+          reference_velocity:
+            times: [0.0]
+            values: [[0.05, 0.0, 0.02, 0.0, 0.0, 0.0]]
+        hardware:
+          lcm_url: memq://
+        """))
+    scenario = load_scenario(scenario_file)
+    assert scenario.robot == str(robot.resolve())
+    with pytest.raises(ValueError, match="simulated station runs the "
+                                         "shipped robot only"):
+        build_closed_loop(scenario)
+    lcm = DrakeLcm("memq://")
+    builder = DiagramBuilder()
+    side = add_controller_side(builder, scenario, lcm=lcm)
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    root = simulator.get_mutable_context()
+    arm = side.hardware.arm
+    assert arm.num_joints == n
+    channels = side.options.channels
+    sent = {"arm": [], "base": []}
+    lcm.Subscribe(channels.arm_command, lambda data: sent["arm"].append(
+        messages.decode_arm_command(data).values[0]))
+    lcm.Subscribe(channels.base_command, lambda data: sent["base"].append(
+        messages.decode_base_command(data).values[0]))
+    q, base = arm.home.copy(), np.zeros(6)
+    side.initialize(root, q)
+    simulator.Initialize()
+    h = scenario.controller.time_step
+    start = None
+    for k in range(150):
+        utime = int(round(k * h * 1e6))
+        lcm.Publish(channels.base_state,
+                    messages.encode_base_state(utime, base))
+        lcm.Publish(channels.arm_status,
+                    messages.encode_arm_status(utime, q, np.zeros(n)))
+        lcm.Publish(channels.wrist_wrench, messages.encode_wrench(
+            utime, tool_weight_reading(arm, q)))
+        if k % 6 == 0:
+            lcm.Publish(channels.obstacle_points,
+                        messages.encode_obstacle_points(utime,
+                                                        np.zeros((0, 2))))
+        simulator.AdvanceTo((k + 1) * h)
+        if sent["arm"]:
+            q = sent["arm"][-1]
+            assert q.shape == (n,)
+        if sent["base"]:
+            v = sent["base"][-1]
+            c, s = np.cos(base[2]), np.sin(base[2])
+            base = base + h * np.array([c * v[0] - s * v[1],
+                                        s * v[0] + c * v[1], v[2], 0, 0, 0])
+            base[3:] = v
+        if start is None and k == 20:
+            start = (q.copy(), base.copy())
+    commands = np.array(sent["arm"])
+    assert len(commands) > 100
+    assert np.all(commands >= arm.lower) and np.all(commands <= arm.upper)
+    rates = np.abs(np.diff(commands, axis=0)) / h
+    assert np.all(rates <= arm.velocity_limits * (1 + 1e-9))
+    # The tool moved along the world twist (x and z) over the run.
+    def tool(q_a, pose):
+        p = arm.evaluate(q_a).p_ee_in_base
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        return np.array([pose[0] + c * p[0] - s * p[1],
+                         pose[1] + s * p[0] + c * p[1], p[2]])
+    moved = tool(q, base) - tool(*start)
+    assert moved[0] > 0.02 and moved[2] > 0.008
+    assert abs(moved[1]) < 0.3 * moved[0]

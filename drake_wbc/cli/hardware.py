@@ -75,6 +75,11 @@ def _scenario_and_options(args):
 
     path = find_scenario(args.scenario)
     scenario = load_scenario(path)
+    robot = getattr(args, "robot", None)
+    if robot is not None:
+        from drake_wbc.robot.description import load_robot_description
+        load_robot_description(robot)  # its errors name the file and field
+        scenario.robot = str(Path(robot).resolve())
     options = scenario.hardware or HardwareOptions()
     if args.lcm_url is not None:
         options = validate(replace(options, lcm_url=args.lcm_url))
@@ -170,6 +175,11 @@ def add_deploy_arguments(parser):
         "--realtime-rate", type=float, default=1.0,
         help="target real-time rate, > 0 (default: %(default)s; below 1 "
              "only against a simulated robot run at the same rate)")
+    parser.add_argument(
+        "--robot", type=Path, default=None,
+        help="the robot's description YAML (default: the scenario's "
+             "robot, or the shipped one): its arm's joints size the "
+             "messages, its own limits bound the commands")
 
 
 def run_deploy(args):

@@ -106,12 +106,16 @@ def add_controller_side(builder, scenario, variant=None, options=None,
             f"hardware.publish_period = {options.publish_period!r} s is not "
             f"allowed with controller.time_step = {h!r} s: the commands go "
             "out once a control period, so they must be equal")
-    hardware = HardwareInterface(options, lcm,
-                                 scenario.station.initial_arm_positions)
+    arm = controller_arm(scenario)
+    # Until the robot's first status: the shipped robot's scenario start,
+    # or another robot's home.
+    hardware = HardwareInterface(
+        options, lcm, None if scenario.robot
+        else scenario.station.initial_arm_positions, robot=arm)
     builder.AddNamedSystem("hardware", hardware.diagram)
     controller, sources = add_controller(
         builder, controller_for(scenario, variant), scenario.task,
-        hardware.diagram, arm=controller_arm(scenario))
+        hardware.diagram, arm=hardware.arm)
     # The watchdog's stop stops the controller too (HARDWARE_INPUTS).
     for name in HARDWARE_INPUTS:
         builder.Connect(hardware.diagram.GetOutputPort(name),

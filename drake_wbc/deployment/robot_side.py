@@ -39,7 +39,7 @@ from dataclasses import replace
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.lcm import LcmInterfaceSystem
 
-from drake_wbc.experiments.scenario import Scenario
+from drake_wbc.experiments.scenario import Scenario, check_simulated_robot
 from drake_wbc.hardware.codecs import (
     ClockRules,
     CommandReceiver,
@@ -102,6 +102,7 @@ class RobotSide:
         s = self.systems = {}
         if add_lcm_interface:
             s["lcm"] = builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
+        check_simulated_robot(scenario)
         self.station = SimulatedStation(scenario.station, scenario.scene,
                                         scenario.arm_mount)
         station = builder.AddNamedSystem("station", self.station.diagram)

@@ -23,6 +23,7 @@ from drake_wbc.controller.task import add_controller
 from drake_wbc.experiments.scenario import (
     Scenario,
     Variant,
+    check_simulated_robot,
     controller_arm,
     controller_for,
 )
@@ -65,6 +66,7 @@ def build_closed_loop(scenario, variant=None, replay=False):
     """
     scenario = checked_instance("scenario", scenario, Scenario, Scenario)
     variant = variant or scenario.variants[0]
+    check_simulated_robot(scenario)
     builder = DiagramBuilder()
     station = SimulatedStation(scenario.station, scenario.scene,
                                scenario.arm_mount)

@@ -40,8 +40,9 @@ from drake_wbc.math.validation import (
     positive,
     text,
 )
+from drake_wbc.robot.description import load_robot_description, shipped_robot
 from drake_wbc.robot.footprint import check_start_is_free
-from drake_wbc.robot.model import ArmKinematics, ArmMount
+from drake_wbc.robot.model import ArmKinematics, ArmMount, make_robot_plant
 from drake_wbc.station.scene import Scene
 from drake_wbc.station.simulation import StationOptions
 
@@ -124,6 +125,10 @@ class Scenario:
         duration: simulated time in s.
         controller: the controller's parameters (defaults: the paper's).
         station: how the simulated station is built.
+        robot: the robot's description file (drake_wbc.robot.description;
+            relative to the scenario's folder), or "" for the shipped
+            robot. The controller and the LCM interface take it (`drake-wbc
+            deploy`); the simulated station runs the shipped robot only.
         arm_mount: the robot's arm mount (drake_wbc.robot.model.ArmMount:
             the arm's rotation about the base's vertical and its tilt),
             which the simulated station builds and the controller's
@@ -153,6 +158,7 @@ class Scenario:
         default_factory=ControllerParameters)
     station: StationOptions = field(default_factory=StationOptions)
     arm_mount: ArmMount = field(default_factory=ArmMount)
+    robot: str = ""
     scene: Scene = field(default_factory=Scene)
     task: TaskInputs = field(default_factory=TaskInputs)
     variants: list[Variant] = field(default_factory=lambda: [Variant()])
@@ -161,6 +167,7 @@ class Scenario:
 
     def __post_init__(self):
         text("description", self.description)
+        text("robot", self.robot)
         for item in fields(self):
             kind = _PARTS.get(item.name)
             if kind is not None:
@@ -239,12 +246,34 @@ def controller_for(scenario, variant):
     return params
 
 
+def scenario_robot(scenario):
+    """The RobotDescription of `scenario`'s robot (its `robot` file, the
+    shipped robot if "")."""
+    if not scenario.robot:
+        return shipped_robot()
+    return load_robot_description(scenario.robot)
+
+
 def controller_arm(scenario):
     """The controller's ArmKinematics for `scenario`'s robot: None (the
-    controller's own, the shipped robot's) for the shipped mount, else
-    one made with the scenario's arm_mount."""
+    controller's own, the shipped robot's) for the shipped robot on the
+    shipped mount, else one of its robot with its arm_mount."""
     mount = scenario.arm_mount
-    return None if mount.is_identity else ArmKinematics(mount=mount)
+    if mount.is_identity and not scenario.robot:
+        return None
+    return ArmKinematics(*make_robot_plant(scenario_robot(scenario),
+                                           mount=mount))
+
+
+def check_simulated_robot(scenario):
+    """Raises a ValueError when `scenario` names a robot of its own for a
+    simulation: the simulated station runs the shipped robot only."""
+    if scenario.robot:
+        raise ValueError(
+            f"robot = {scenario.robot!r} is not allowed for a simulation: "
+            "the simulated station runs the shipped robot only so far; "
+            "deploy the controller to your robot over LCM (drake-wbc "
+            "deploy), or leave robot empty")
 
 
 _PARTS = dict(controller=ControllerParameters, station=StationOptions,
@@ -295,4 +324,16 @@ def load_scenario(path=None, text=None):
         ValueError: naming the file, the field's dotted path (e.g.
             `scene.people[0].radius`), its value and what is allowed.
     """
-    return load_typed(Scenario, path=path, text=text)
+    scenario = load_typed(Scenario, path=path, text=text)
+    if scenario.robot and path is not None:
+        # Relative to the scenario's folder, and checked here, where it
+        # enters.
+        scenario.robot = str((Path(path).resolve().parent
+                              / scenario.robot).resolve())
+    if scenario.robot:
+        try:
+            load_robot_description(scenario.robot)
+        except (OSError, ValueError) as error:
+            raise ValueError(f"{path or 'text'}: robot = "
+                             f"{scenario.robot!r}: {error}") from None
+    return scenario
