@@ -1,7 +1,8 @@
 """A robot the project did not model, for the tests of "bring your own
 robot": a plain URDF of an omnidirectional base (three planar joints)
 carrying an arm of n revolute joints, a flange, a wrist sensor and a
-tool, with no acceleration limits (URDF has none), and its description
+tool, every joint driven through a transmission, with no acceleration
+limits (URDF has none), and its description
 (drake_wbc.robot.description)."""
 
 import textwrap
@@ -30,7 +31,16 @@ def urdf_text(n):
         links.append(_link(child, 0.3))
         joints.append(_joint(name, "fixed", parent, child, xyz=xyz))
         parent = child
-    body = "\n".join(links + joints)
+    actuated = ["base_x", "base_y", "base_yaw"] + [f"j{i + 1}"
+                                                   for i in range(n)]
+    transmissions = [
+        f"<transmission name='{name}_drive'><type>"
+        "transmission_interface/SimpleTransmission</type>"
+        f"<joint name='{name}'><hardwareInterface>EffortJointInterface"
+        f"</hardwareInterface></joint><actuator name='{name}_motor'>"
+        "<mechanicalReduction>1</mechanicalReduction></actuator>"
+        "</transmission>" for name in actuated]
+    body = "\n".join(links + joints + transmissions)
     return f"<?xml version='1.0'?>\n<robot name='omni_arm'>\n{body}\n</robot>\n"
 
 

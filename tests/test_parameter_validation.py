@@ -25,6 +25,7 @@ drake_wbc.math.validation.validate runs the checks of a whole tree again):
 """
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -183,8 +184,8 @@ CASES = [
      ["max_range = 0.01", "min_range = 0.05"]),
     (LidarParameters, dict(seed=True), ["seed = True"]),
     (StationOptions, dict(time_step=0.006), ["time_step = 0.006", "5 ms"]),
-    (StationOptions, dict(initial_arm_positions=[0, 0, 3.0, 0, 0, 0]),
-     ["initial_arm_positions[2] = 3.0", "[-2.61, 2.61]"]),
+    (StationOptions, dict(initial_arm_positions=[0, 0, np.nan, 0, 0, 0]),
+     ["initial_arm_positions", "nan"]),
     (StationOptions, dict(initial_base_pose=[0.0, 0.0]),
      ["initial_base_pose has shape (2,)"]),
     (StationOptions, dict(base="fast"), ["base = 'fast'"]),
@@ -417,3 +418,16 @@ def test_the_arm_controller_may_not_widen_the_arms_limits(overrides,
     with pytest.raises(ValueError) as error:
         build_controller(params)
     assert fragment in str(error.value)
+
+
+def test_the_arms_start_is_checked_against_the_robot_of_the_station():
+    """StationOptions does not know the robot; the station checks the
+    start against the arm it builds (a scenario, where it is loaded)."""
+    from drake_wbc.station.simulation import SimulatedStation
+    with pytest.raises(ValueError, match=re.escape(
+            "station.initial_arm_positions[2] = 3.0 rad is not allowed: "
+            "must lie within the joint's limits [-2.61, 2.61] rad")):
+        SimulatedStation(StationOptions(
+            initial_arm_positions=[0, 0, 3.0, 0, 0, 0]))
+    with pytest.raises(ValueError, match="has 6 joints, give one value"):
+        SimulatedStation(StationOptions(initial_arm_positions=[0.0] * 7))

@@ -39,7 +39,7 @@ from dataclasses import replace
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.lcm import LcmInterfaceSystem
 
-from drake_wbc.experiments.scenario import Scenario, check_simulated_robot
+from drake_wbc.experiments.scenario import Scenario, scenario_robot
 from drake_wbc.hardware.codecs import (
     ClockRules,
     CommandReceiver,
@@ -102,9 +102,9 @@ class RobotSide:
         s = self.systems = {}
         if add_lcm_interface:
             s["lcm"] = builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
-        check_simulated_robot(scenario)
         self.station = SimulatedStation(scenario.station, scenario.scene,
-                                        scenario.arm_mount)
+                                        scenario.arm_mount,
+                                        scenario_robot(scenario))
         station = builder.AddNamedSystem("station", self.station.diagram)
 
         bus = receiving_bus(lcm)
@@ -119,7 +119,8 @@ class RobotSide:
                 ClockRules.of(options)))
         builder.Connect(receiver.GetOutputPort("velocity"),
                         station.GetInputPort("base.velocity_command"))
-        arm = ArmKinematics()
+        # The station's robot: its arm's own limits bound the commands.
+        arm = ArmKinematics(self.station.plant, self.station.model)
         s["arm_limiter"] = limiter = builder.AddNamedSystem(
             "arm_limiter", ArmCommandLimiter(
                 options.publish_period,

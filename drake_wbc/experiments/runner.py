@@ -23,9 +23,9 @@ from drake_wbc.controller.task import add_controller
 from drake_wbc.experiments.scenario import (
     Scenario,
     Variant,
-    check_simulated_robot,
     controller_arm,
     controller_for,
+    scenario_robot,
 )
 from drake_wbc.math.validation import checked_instance
 from drake_wbc.station.simulation import SimulatedStation
@@ -66,10 +66,9 @@ def build_closed_loop(scenario, variant=None, replay=False):
     """
     scenario = checked_instance("scenario", scenario, Scenario, Scenario)
     variant = variant or scenario.variants[0]
-    check_simulated_robot(scenario)
     builder = DiagramBuilder()
     station = SimulatedStation(scenario.station, scenario.scene,
-                               scenario.arm_mount)
+                               scenario.arm_mount, scenario_robot(scenario))
     builder.AddNamedSystem("station", station.diagram)
     controller, sources = add_controller(
         builder, controller_for(scenario, variant), scenario.task,

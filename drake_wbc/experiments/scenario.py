@@ -44,7 +44,11 @@ from drake_wbc.robot.description import load_robot_description, shipped_robot
 from drake_wbc.robot.footprint import check_start_is_free
 from drake_wbc.robot.model import ArmKinematics, ArmMount, make_robot_plant
 from drake_wbc.station.scene import Scene
-from drake_wbc.station.simulation import StationOptions
+from drake_wbc.station.simulation import (
+    StationOptions,
+    arm_joint_limits,
+    check_arm_start,
+)
 
 EXPERIMENTS = ("generic", "trajectory_tracking", "fixed_point",
                "line_tracking", "wiping", "phri", "teach", "repeat")
@@ -127,8 +131,9 @@ class Scenario:
         station: how the simulated station is built.
         robot: the robot's description file (drake_wbc.robot.description;
             relative to the scenario's folder), or "" for the shipped
-            robot. The controller and the LCM interface take it (`drake-wbc
-            deploy`); the simulated station runs the shipped robot only.
+            robot. The controller, the simulated station and the LCM
+            interface take it; station.initial_arm_positions must then
+            give the start of its arm.
         arm_mount: the robot's arm mount (drake_wbc.robot.model.ArmMount:
             the arm's rotation about the base's vertical and its tilt),
             which the simulated station builds and the controller's
@@ -233,6 +238,8 @@ class Scenario:
                 f"station.time_step = {1.0 / step:.6g} Hz (the scene moves "
                 "once a step; more frames repeat it and fill the memory)")
         check_start_is_free(self.scene, self.station.initial_base_pose)
+        if not self.robot:  # another robot's: where its file is loaded
+            check_arm_start_of(self)
 
 
 def controller_for(scenario, variant):
@@ -265,15 +272,16 @@ def controller_arm(scenario):
                                            mount=mount))
 
 
-def check_simulated_robot(scenario):
-    """Raises a ValueError when `scenario` names a robot of its own for a
-    simulation: the simulated station runs the shipped robot only."""
+def check_arm_start_of(scenario):
+    """Checks station.initial_arm_positions against the scenario's robot
+    (one value a joint, within its limits)."""
     if scenario.robot:
-        raise ValueError(
-            f"robot = {scenario.robot!r} is not allowed for a simulation: "
-            "the simulated station runs the shipped robot only so far; "
-            "deploy the controller to your robot over LCM (drake-wbc "
-            "deploy), or leave robot empty")
+        arm = ArmKinematics(*make_robot_plant(scenario_robot(scenario)))
+        lower, upper = arm.lower, arm.upper
+    else:
+        lower, upper = arm_joint_limits()
+    check_arm_start(scenario.station.initial_arm_positions, lower, upper,
+                    "station.initial_arm_positions")
 
 
 _PARTS = dict(controller=ControllerParameters, station=StationOptions,
@@ -336,4 +344,8 @@ def load_scenario(path=None, text=None):
         except (OSError, ValueError) as error:
             raise ValueError(f"{path or 'text'}: robot = "
                              f"{scenario.robot!r}: {error}") from None
+        try:
+            check_arm_start_of(scenario)
+        except ValueError as error:
+            raise ValueError(f"{path or 'text'}: {error}") from None
     return scenario

@@ -38,6 +38,7 @@ import functools
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from pydrake.common.value import AbstractValue
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import (
     ForceElementIndex,
@@ -45,7 +46,13 @@ from pydrake.multibody.tree import (
     RevoluteSpring,
 )
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import Demultiplexer, MatrixGain, Multiplexer
+from pydrake.systems.primitives import (
+    ConstantValueSource,
+    ConstantVectorSource,
+    Demultiplexer,
+    MatrixGain,
+    Multiplexer,
+)
 
 from drake_wbc.math.validation import (
     as_vector,
@@ -54,6 +61,7 @@ from drake_wbc.math.validation import (
     validated_copy,
     whole_multiple,
 )
+from drake_wbc.robot.description import RobotDescription, shipped_robot
 from drake_wbc.robot.model import (
     HOME_ARM_POSITIONS,
     ArmMount,
@@ -118,9 +126,11 @@ MIN_TIME_STEP = 1e-5
 simulated second takes 100,000 steps of the plant and its Python systems,
 hours of wall time; a finer step only stalls the run."""
 
-LIDAR_NAMES = ("front_left", "rear_right")
-"""The scanners' names in port names, in the order of the robot's
-lidar_frames."""
+def lidar_name(frame):
+    """A scanner's name in port names: its frame's name without a leading
+    `lidar_` (`lidar_front_left` -> `front_left`)."""
+    name = frame.name()
+    return name[len("lidar_"):] if name.startswith("lidar_") else name
 
 
 @dataclass
@@ -147,7 +157,9 @@ class StationOptions:
         lidar: the TiM571 model of both scanners.
         initial_base_pose: [x, y, yaw] of T_b in the world at the start.
         initial_arm_positions: the arm's configuration at the start (rad),
-            within the joints' limits.
+            one a joint, within the joints' limits (checked against the
+            robot when the station is built: `check_arm_start`); the
+            shipped robot's home by default.
 
     The drivers run at `time_step`: base.lag must be at least 10
     time_step, arm.command_period a whole multiple of it and
@@ -199,20 +211,31 @@ class StationOptions:
                     "stalls the simulation)")
         pose = as_vector("initial_base_pose", self.initial_base_pose, 3)
         within_site("initial_base_pose", self.initial_base_pose, pose[:2])
-        q = as_vector("initial_arm_positions", self.initial_arm_positions, 6)
-        lower, upper = arm_joint_limits()
-        bad = np.flatnonzero((q < lower) | (q > upper))
-        if bad.size:
-            i = int(bad[0])
-            raise ValueError(
-                f"initial_arm_positions[{i}] = {float(q[i])!r} rad is not "
-                f"allowed: must lie within the joint's limits "
-                f"[{float(lower[i])!r}, {float(upper[i])!r}] rad")
+        as_vector("initial_arm_positions", self.initial_arm_positions)
+
+
+def check_arm_start(positions, lower, upper, path="initial_arm_positions"):
+    """Checks the arm's start `positions` against the robot's joints:
+    one value a joint, each within [lower, upper] (rad); a ValueError
+    naming `path` otherwise."""
+    q = as_vector(path, positions)
+    if q.size != len(lower):
+        raise ValueError(
+            f"{path} = {q.tolist()} is not allowed: the robot's arm has "
+            f"{len(lower)} joints, give one value for each")
+    bad = np.flatnonzero((q < lower) | (q > upper))
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"{path}[{i}] = {float(q[i])!r} rad is not allowed: must lie "
+            f"within the joint's limits [{float(lower[i])!r}, "
+            f"{float(upper[i])!r}] rad")
 
 
 @functools.cache
 def arm_joint_limits():
-    """(lower, upper): the arm's joint limits in rad, from the model."""
+    """(lower, upper): the shipped arm's joint limits in rad, from the
+    model."""
     from drake_wbc.robot.model import ArmKinematics
 
     arm = ArmKinematics()
@@ -237,13 +260,15 @@ class SimulatedStation:
             controller's ArmKinematics must be made with the same one.
     """
 
-    def __init__(self, options=None, scene=None, mount=None):
+    def __init__(self, options=None, scene=None, mount=None, robot=None):
         # Checked once, here, for every part below (which keep them).
         self.options = options = validated_copy(checked_instance(
             "options", options, StationOptions, StationOptions))
         self.scene = scene = validated_copy(
             checked_instance("scene", scene, Scene, Scene))
         mount = checked_instance("mount", mount, ArmMount, ArmMount)
+        robot = checked_instance("robot", robot, RobotDescription,
+                                 shipped_robot)
         h = options.time_step
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(
@@ -251,18 +276,22 @@ class SimulatedStation:
             contact_model="hydroelastic_with_fallback",
             use_sampled_output_ports=False), builder)
         model = add_robot(
-            plant, suspension=None if options.suspension is None
+            plant, robot, suspension=None if options.suspension is None
             else suspension_gains(options.suspension,
                                   options.initial_arm_positions),
             mount=mount)
+        check_arm_start(options.initial_arm_positions, model.limits.lower,
+                        model.limits.upper, "station.initial_arm_positions")
         add_static_obstacles(plant, scene)
         self._gains = servo_gains(options.initial_arm_positions,
-                                  options.base, options.arm, mount=mount)
+                                  options.base, options.arm, robot,
+                                  mount=mount)
         set_servo_gains(plant, model, self._gains)
         set_drive_inertias(plant, model, drive_inertias(
-            options.initial_arm_positions, options.arm, mount=mount))
+            options.initial_arm_positions, options.arm, robot, mount=mount))
         plant.Finalize()
         self.plant, self.scene_graph, self.model = plant, scene_graph, model
+        self.lidar_names = tuple(lidar_name(f) for f in model.lidar_frames)
         add = builder.AddNamedSystem
         s = self.systems = {}
         # The odometry and the parts of the state read at every plant step
@@ -273,9 +302,11 @@ class SimulatedStation:
         s["base_pose"] = add("base_pose", MatrixGain(selection_matrix(
             joint_position_indices(model.base_joints),
             plant.num_multibody_states())))
+        # The passive joints' angles (the mount's); none: an empty signal.
         s["mount_angles"] = add("mount_angles", MatrixGain(selection_matrix(
             joint_position_indices(model.passive_joints),
-            plant.num_multibody_states())))
+            plant.num_multibody_states())) if model.passive_joints
+            else ConstantVectorSource(np.zeros(0)))
         s["truth"] = add("truth", GroundTruth(plant, model))
         # The drivers, in C++ (drake_wbc.station.symbolic_drivers): they
         # run at every plant step.
@@ -286,7 +317,8 @@ class SimulatedStation:
         s["arm_driver"] = add("arm_driver", arm_interpolator_system(
             replace(options.arm, time_step=h),
             options.initial_arm_positions))
-        s["arm_state"] = add("arm_state", Demultiplexer([6, 6]))
+        n = model.num_arm_joints
+        s["arm_state"] = add("arm_state", Demultiplexer([n, n]))
         s["weld_wrench"] = add("weld_wrench", WeldWrench(
             plant, model.ft_sensor_joint))
         s["wrist"] = add("wrist", WristForceTorqueSensor(options.wrist))
@@ -301,7 +333,8 @@ class SimulatedStation:
                 s["odometry"].get_input_port())
         connect(state, s["truth"].GetInputPort("plant_state"))
         connect(state, s["base_pose"].get_input_port())
-        connect(state, s["mount_angles"].get_input_port())
+        if model.passive_joints:
+            connect(state, s["mount_angles"].get_input_port())
         connect(plant.get_body_poses_output_port(),
                 s["truth"].GetInputPort("body_poses"))
         connect(plant.get_body_spatial_velocities_output_port(),
@@ -312,12 +345,17 @@ class SimulatedStation:
                 s["base_rates_input"].get_input_port(1))
         connect(s["base_rates_input"].get_output_port(),
                 s["base_rates"].get_input_port())
-        connect(s["base_rates"].get_output_port(),
-                plant.get_desired_state_input_port(model.base))
-        connect(s["arm_driver"].get_output_port(),
-                plant.get_desired_state_input_port(model.arm))
-        connect(plant.get_state_output_port(model.arm),
-                s["arm_state"].get_input_port())
+        if model.base != model.arm:
+            connect(s["base_rates"].get_output_port(),
+                    plant.get_desired_state_input_port(model.base))
+            connect(s["arm_driver"].get_output_port(),
+                    plant.get_desired_state_input_port(model.arm))
+            connect(plant.get_state_output_port(model.arm),
+                    s["arm_state"].get_input_port())
+        else:
+            # One model instance for base and arm (one URDF): its desired
+            # state, in the order of its actuators, from both drivers'.
+            self._add_shared_drives(builder, n)
         connect(plant.get_reaction_forces_output_port(),
                 s["weld_wrench"].GetInputPort("reaction_forces"))
         connect(s["weld_wrench"].GetOutputPort("wrench"),
@@ -335,10 +373,10 @@ class SimulatedStation:
             (s["arm_state"].get_output_port(1), "arm.velocity_estimated"),
             (s["wrist"].GetOutputPort("wrench_measured"),
              "wrist.wrench_measured"),
-            (s["lidar_points"].GetOutputPort("points"),
+            (self._points,
              "lidar.obstacle_points"),
             *((s[f"lidar_{n}"].GetOutputPort("ranges"),
-               f"lidar.{n}.ranges") for n in LIDAR_NAMES),
+               f"lidar.{n}.ranges") for n in self.lidar_names),
             *((s["truth"].GetOutputPort(n), f"truth.{n}") for n in (
                 "end_effector_pose", "end_effector_velocity")),
             (s["base_pose"].get_output_port(), "truth.base_pose"),
@@ -355,15 +393,69 @@ class SimulatedStation:
         self.diagram = builder.Build()
         self.diagram.set_name("simulated_station")
 
+    def _add_shared_drives(self, builder, n):
+        """Feeds the desired state of a model instance that holds the
+        base's and the arm's joints (base [q (3); v (3)] and arm [q (n);
+        v (n)], permuted to the instance's actuators), and reads the arm's
+        state from the plant's."""
+        plant, model, s = self.plant, self.model, self.systems
+        drives = {j.index(): i for i, j in enumerate(model.base_joints)}
+        drives.update({j.index(): 6 + i
+                       for i, j in enumerate(model.arm_joints)})
+        order = [plant.get_joint_actuator(a).joint().index()
+                 for a in plant.GetJointActuatorIndices(model.base)]
+        if sorted(order) != sorted(drives):
+            raise ValueError(
+                "robot is not allowed: its base and arm share a model "
+                "instance whose actuated joints are not exactly the base's "
+                "and the arm's joints")
+        width = 6 + 2 * n
+        permutation = np.zeros((2 * len(order), width))
+        for row, joint in enumerate(order):
+            q_column = drives[joint]
+            v_column = q_column + (3 if q_column < 6 else n)
+            permutation[row, q_column] = 1.0
+            permutation[len(order) + row, v_column] = 1.0
+        s["drives"] = builder.AddNamedSystem("drives", Multiplexer([6, 2 * n]))
+        s["desired_state"] = builder.AddNamedSystem(
+            "desired_state", MatrixGain(permutation))
+        builder.Connect(s["base_rates"].get_output_port(),
+                        s["drives"].get_input_port(0))
+        builder.Connect(s["arm_driver"].get_output_port(),
+                        s["drives"].get_input_port(1))
+        builder.Connect(s["drives"].get_output_port(),
+                        s["desired_state"].get_input_port())
+        builder.Connect(s["desired_state"].get_output_port(),
+                        plant.get_desired_state_input_port(model.base))
+        nq = plant.num_positions()
+        s["arm_joints"] = builder.AddNamedSystem("arm_joints", MatrixGain(
+            selection_matrix(np.concatenate([
+                joint_position_indices(model.arm_joints),
+                nq + joint_velocity_indices(model.arm_joints)]),
+                plant.num_multibody_states())))
+        builder.Connect(plant.get_state_output_port(),
+                        s["arm_joints"].get_input_port())
+        builder.Connect(s["arm_joints"].get_output_port(),
+                        s["arm_state"].get_input_port())
+
     def _add_lidars(self, builder, scene):
-        """The two scanners, each seeing the static obstacles at its height
-        and the people, and the merger of their points."""
+        """The robot's scanners (its description's lidar_frames), each
+        seeing the static obstacles at its height and the people, and the
+        merger of their points."""
         plant, model, s = self.plant, self.model, self.systems
         context = plant.CreateDefaultContext()
         radii = [person.radius for person in scene.people]
+        if not self.lidar_names:  # a robot without scanners sees nothing
+            s["lidar_points"] = builder.AddNamedSystem(
+                "lidar_points", ConstantValueSource(
+                    AbstractValue.Make(np.zeros((0, 2)))))
+            self._points = s["lidar_points"].get_output_port()
+            return
         s["lidar_points"] = builder.AddNamedSystem(
-            "lidar_points", ObstaclePointMerger(len(LIDAR_NAMES)))
-        for i, (name, frame) in enumerate(zip(LIDAR_NAMES, model.lidar_frames,
+            "lidar_points", ObstaclePointMerger(len(self.lidar_names)))
+        self._points = s["lidar_points"].GetOutputPort("points")
+        for i, (name, frame) in enumerate(zip(self.lidar_names,
+                                              model.lidar_frames,
                                               strict=True)):
             X_BL = frame.CalcPose(context, model.base_frame)
             yaw = np.arctan2(X_BL.rotation().matrix()[1, 0],
