@@ -101,13 +101,13 @@ def _names(name, values, count=None, minimum=0):
     return names
 
 
-def _optional_limits(name, values, size, lower=None):
-    """None, or `values` as (size,) finite numbers (each > 0 unless
-    `lower` is given: then paired with it, each above it)."""
-    if values is None:
+def _limits(name, values, size, signed=False, optional=False):
+    """`values` as (size,) finite numbers, each > 0 unless `signed` (joint
+    positions); None stays None where `optional`."""
+    if values is None and optional:
         return None
     vector = as_vector(name, values, size)
-    if lower is None:
+    if not signed:
         for i, v in enumerate(vector):
             positive(f"{name}[{i}]", v)
     return tuple(float(v) for v in vector)
@@ -192,11 +192,11 @@ class BaseDescription:
             if name in self.joints:
                 raise ValueError(f"passive_joints[{i}] = {name!r} is not "
                                  "allowed: it is one of the planar joints")
-        self.velocity_limits = _optional_limits(
+        self.velocity_limits = _limits(
             "velocity_limits", self.velocity_limits, 3)
-        self.acceleration_limits = _optional_limits(
+        self.acceleration_limits = _limits(
             "acceleration_limits", self.acceleration_limits, 3)
-        self.footprint_half_sizes = _optional_limits(
+        self.footprint_half_sizes = _limits(
             "footprint_half_sizes", self.footprint_half_sizes, 2)
         self.height = positive("height", self.height)
         self.command_timeout = positive("command_timeout",
@@ -240,8 +240,8 @@ class ArmDescription:
         self.flange_frame = _names("flange_frame", [self.flange_frame])[0]
         self.home = tuple(float(v) for v in as_vector("home", self.home, n))
         for name in ("position_lower", "position_upper"):
-            setattr(self, name, _optional_limits(
-                name, getattr(self, name), n, lower=True))
+            setattr(self, name, _limits(
+                name, getattr(self, name), n, signed=True, optional=True))
         if self.position_lower is not None and self.position_upper is not None:
             for i, (lo, hi) in enumerate(zip(self.position_lower,
                                              self.position_upper,
@@ -251,8 +251,8 @@ class ArmDescription:
                         f"position_lower[{i}] = {lo!r} is not allowed: must "
                         f"be below position_upper[{i}] = {hi!r}")
         for name in ("velocity_limits", "acceleration_limits"):
-            setattr(self, name, _optional_limits(name, getattr(self, name),
-                                                 n))
+            setattr(self, name, _limits(name, getattr(self, name), n,
+                                        optional=True))
 
 
 @dataclass
