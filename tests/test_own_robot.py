@@ -18,14 +18,23 @@ from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 
 from drake_wbc.controller import ControllerParameters, build_controller
 from drake_wbc.deployment.deploy import add_controller_side
-from drake_wbc.experiments.runner import build_closed_loop
-from drake_wbc.experiments.scenario import load_scenario
+from drake_wbc.experiments.runner import build_closed_loop, simulate
+from drake_wbc.experiments.scenario import (
+    controller_arm,
+    find_scenario,
+    load_scenario,
+    scenario_robot,
+)
 from drake_wbc.hardware import messages
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.hardware.safety import CommandGuard, Limits, follow_arm_command
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.robot.model import ArmKinematics, make_robot_plant
-from drake_wbc.robot.tuning import RobotTuningWarning, survey_capability
+from drake_wbc.robot.tuning import (
+    RobotTuningWarning,
+    check_tuning,
+    survey_capability,
+)
 from drake_wbc.stages.wrench import tool_weight_reading
 
 H = 0.01
@@ -308,3 +317,29 @@ def test_the_simulated_station_runs_that_robot(tmp_path):
     assert 0.6 * 0.02 < moved[2] < 1.4 * 0.02
     assert abs(moved[1]) < 0.01
     assert loop.controller.safety_reason(root) == ""
+
+
+def test_the_second_shipped_robot_tracks_the_papers_step():
+    """The second shipped robot (models/lbr_omni.robot.yaml: a 7-joint
+    LBR-class arm on a larger omni base, its own sensor and probe) in its
+    trajectory-tracking scenario, 2.2 s of it: the tool takes up the
+    0.1 m/s step (in the ground truth, once settled) with every command
+    within that robot's limits, and the tuning its demo proposes."""
+    scenario = load_scenario(find_scenario("trajectory_tracking_lbr"))
+    scenario.duration = 2.2
+    robot = scenario_robot(scenario)
+    assert robot.name == "lbr_omni" and len(robot.arm.joints) == 7
+    arm = controller_arm(scenario)
+    assert check_tuning(arm, scenario.controller.capability_band,
+                        scenario.controller.capability.joint_limit_gain) == []
+    loop = build_closed_loop(scenario, scenario.variants[0])
+    log = simulate(loop, scenario.duration)
+    v = log["truth.end_effector_velocity"]
+    settled = (log.time > 1.8) & (log.time < 2.2)
+    assert np.mean(v[settled, 0]) == pytest.approx(0.1, abs=0.01)
+    assert np.max(np.abs(v[settled, 1])) < 0.01
+    q = log["arm.position_command"]
+    assert q.shape[1] == 7
+    assert np.all(q >= arm.lower) and np.all(q <= arm.upper)
+    speed = np.linalg.norm(log["base.velocity_command"][:, :2], axis=1)
+    assert np.max(speed) <= 0.8 + 1e-9

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
+from drake_wbc.experiments.scenario import controller_arm
 from drake_wbc.math import repulsion
 from drake_wbc.math.safety import STATUS_FIELDS
 from drake_wbc.robot.footprint import FOOTPRINT_HALF_SIZES
@@ -100,7 +101,7 @@ def obstacle_distances(scene, base_pose, people_positions=None,
 
 def run_metrics(scenario, log):
     """The metrics every run reports (see the module's docstring)."""
-    arm = ArmKinematics()
+    arm = controller_arm(scenario) or ArmKinematics()  # the run's robot
     q = log["arm.position_measured"]
     margin = np.minimum(q - arm.lower, arm.upper - q)
     command = log["arm.position_command"]

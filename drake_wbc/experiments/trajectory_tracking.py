@@ -132,7 +132,8 @@ def compute_metrics(scenario, logs):
     for name, log in logs.items():
         mask = window(log, start, end)
         error = velocity_error(log)
-        mount = log["truth.mount_angles"]
+        # A robot without a flexible mount logs no mount angles.
+        mount = log.signals.get("truth.mount_angles")
         for key, value in error_metrics(log.time, error, mask).items():
             metrics[f"{name}.{key}"] = value
         for key, value in error_metrics(log.time, measured_error(log),
@@ -141,8 +142,9 @@ def compute_metrics(scenario, logs):
         settled = window(log, start + SETTLING, end)
         metrics[f"{name}.peak_error_after_step_m_s"] = float(np.max(np.abs(
             error[settled])))
-        metrics[f"{name}.mount_rocking_peak_rad"] = float(np.max(np.abs(
-            mount[mask] - mount[mask][0])))
+        if mount is not None and mount.size:
+            metrics[f"{name}.mount_rocking_peak_rad"] = float(np.max(
+                np.abs(mount[mask] - mount[mask][0])))
     if {"filtered", "unfiltered"} <= logs.keys():
         for key in (*RATIO_KEYS, *(f"measured.{k}" for k in RATIO_KEYS)):
             metrics[f"ratio_unfiltered_to_filtered.{key}"] = (
