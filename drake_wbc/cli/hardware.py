@@ -77,9 +77,8 @@ def _scenario_and_options(args):
     scenario = load_scenario(path)
     robot = getattr(args, "robot", None)
     if robot is not None:
-        from drake_wbc.robot.description import load_robot_description
-        load_robot_description(robot)  # its errors name the file and field
-        scenario.robot = str(Path(robot).resolve())
+        from drake_wbc.experiments.scenario import with_robot
+        scenario = with_robot(scenario, robot)
     options = scenario.hardware or HardwareOptions()
     if args.lcm_url is not None:
         options = validate(replace(options, lcm_url=args.lcm_url))

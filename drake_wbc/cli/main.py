@@ -90,6 +90,10 @@ def _add_run_arguments(parser):
     parser.add_argument("--no-replay", action="store_true",
                         help="do not write the Meshcat replay pages")
     parser.add_argument(
+        "--robot", type=Path, default=None,
+        help="run the scenario on the robot of this description YAML "
+             "(default: the scenario's robot, or the shipped one)")
+    parser.add_argument(
         "--sweep", action="store_true",
         help="trajectory-tracking scenarios: run the step over small maps "
              "of base models around the scenario's (velocity loop, "
@@ -129,7 +133,11 @@ def _run_run(args):
                   echo=lambda line: print(line, flush=True))
         return 0
     print(f"drake-wbc run {path.stem}: writing to {output}/")
-    run_scenario(path, output, duration=args.duration,
+    scenario = path
+    if args.robot is not None:
+        from drake_wbc.experiments.scenario import with_robot
+        scenario = with_robot(load_scenario(path), args.robot)
+    run_scenario(scenario, output, name=path.stem, duration=args.duration,
                  replay=False if args.no_replay else None)
     return 0
 

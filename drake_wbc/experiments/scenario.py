@@ -272,6 +272,31 @@ def controller_arm(scenario):
                                            mount=mount))
 
 
+def with_robot(scenario, robot_file, echo=print):
+    """A copy of `scenario` on the robot of the description `robot_file`
+    (a command line's --robot): its arm starts at the robot's home when
+    the scenario's start does not fit that arm (said through `echo`),
+    and the start is checked against it.
+
+    Raises:
+        ValueError: naming the file and the field of a description that
+            does not load, or a start outside the robot's limits.
+    """
+    robot_file = Path(robot_file).resolve()
+    description = load_robot_description(robot_file)
+    scenario = copy.deepcopy(scenario)
+    scenario.robot = str(robot_file)
+    start = scenario.station.initial_arm_positions
+    if len(start) != len(description.arm.joints):
+        scenario.station.initial_arm_positions = list(description.arm.home)
+        if echo is not None:
+            echo(f"the arm starts at {description.name}'s home "
+                 f"{list(description.arm.home)} (the scenario's start is "
+                 f"for {len(start)} joints)")
+    check_arm_start_of(scenario)
+    return scenario
+
+
 def check_arm_start_of(scenario):
     """Checks station.initial_arm_positions against the scenario's robot
     (one value a joint, within its limits)."""
