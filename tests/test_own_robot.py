@@ -4,12 +4,12 @@ controller built from its description alone, and an ideal robot (the
 joints follow their position command, the base its velocity command) that
 must carry the TCP along the commanded world twist."""
 
-import textwrap
+import re
 import warnings
 
 import numpy as np
 import pytest
-from omni_arm import HOMES, write_omni_arm
+from omni_arm import SAFETY, write_omni_arm, write_scenario
 from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
@@ -24,10 +24,12 @@ from drake_wbc.experiments.scenario import (
     find_scenario,
     load_scenario,
     scenario_robot,
+    with_robot,
 )
 from drake_wbc.hardware import messages
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.hardware.safety import CommandGuard, Limits, follow_arm_command
+from drake_wbc.math.safety import SafetyParameters
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.robot.model import ArmKinematics, make_robot_plant
 from drake_wbc.robot.tuning import (
@@ -82,7 +84,7 @@ def test_the_controller_of_a_urdf_robot_tracks_a_world_twist(tmp_path, n):
     arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
     # The tuning proposed for this arm (drake_wbc.robot.tuning).
     survey = survey_capability(arm, count=100)
-    params = ControllerParameters()
+    params = ControllerParameters(safety=SafetyParameters(**SAFETY))
     params.capability.joint_limit_gain = survey.k_j
     params.capability_band = survey.proposed_band()
     with warnings.catch_warnings():
@@ -195,24 +197,8 @@ def test_the_same_controller_deploys_over_lcm_to_that_robot(tmp_path):
     limits, that move the tool along the task's world twist."""
     n = 7
     robot = write_omni_arm(tmp_path, n)
-    scenario_file = tmp_path / "scenario.yaml"
-    scenario_file.write_text(textwrap.dedent(f"""\
-        description: the omni arm deployed
-        duration: 2.0
-        robot: {robot.name}
-        station:
-          initial_arm_positions: {HOMES[n]}
-        controller:
-          capability:
-            joint_limit_gain: 6.0e4
-          capability_band: {{lower: 0.18, upper: 0.21}}
-        task:
-          reference_velocity:
-            times: [0.0]
-            values: [[0.05, 0.0, 0.02, 0.0, 0.0, 0.0]]
-        hardware:
-          lcm_url: memq://
-        """))
+    scenario_file = write_scenario(tmp_path, robot, 2.0,
+                                   extra="hardware:\n  lcm_url: memq://\n")
     scenario = load_scenario(scenario_file)
     assert scenario.robot == str(robot.resolve())
     lcm = DrakeLcm("memq://")
@@ -281,21 +267,7 @@ def test_the_simulated_station_runs_that_robot(tmp_path):
     loop runs, and the true tool follows the world twist."""
     n = 7
     robot = write_omni_arm(tmp_path, n)
-    scenario_file = tmp_path / "scenario.yaml"
-    scenario_file.write_text(textwrap.dedent(f"""\
-        duration: 1.5
-        robot: {robot.name}
-        station:
-          initial_arm_positions: {HOMES[n]}
-        controller:
-          capability:
-            joint_limit_gain: 6.0e4
-          capability_band: {{lower: 0.18, upper: 0.21}}
-        task:
-          reference_velocity:
-            times: [0.0]
-            values: [[0.05, 0.0, 0.02, 0.0, 0.0, 0.0]]
-        """))
+    scenario_file = write_scenario(tmp_path, robot, 1.5)
     scenario = load_scenario(scenario_file)
     loop = build_closed_loop(scenario)
     assert loop.station.model.num_arm_joints == n
@@ -343,3 +315,19 @@ def test_the_second_shipped_robot_tracks_the_papers_step():
     assert np.all(q >= arm.lower) and np.all(q <= arm.upper)
     speed = np.linalg.norm(log["base.velocity_command"][:, :2], axis=1)
     assert np.max(speed) <= 0.8 + 1e-9
+
+
+def test_the_controllers_base_limits_may_only_tighten_that_robots_own():
+    """On the second shipped robot (0.8 m/s, 0.5 m/s^2), the controller's
+    default base limits (the shipped base's 1 m/s) are refused when it is
+    built, naming the field and that robot's own value; `--robot` on a
+    scenario for the shipped robot therefore says what to tighten."""
+    scenario = load_scenario(find_scenario("trajectory_tracking"))
+    on_lbr = with_robot(scenario, find_scenario(
+        "trajectory_tracking_lbr").parent.parent / "models" /
+        "lbr_omni.robot.yaml", echo=None)
+    assert len(on_lbr.station.initial_arm_positions) == 7
+    with pytest.raises(ValueError, match=re.escape(
+            "safety.base_velocity_limits[0] = 1.0 is not allowed: must be "
+            "at most the robot's own 0.8 m/s")):
+        build_controller(on_lbr.controller, robot=controller_arm(on_lbr))

@@ -222,7 +222,9 @@ def build_controller(params=None, robot=None):
     check_arm_limits(params.arm_controller, arm)
     for problem in check_tuning(arm, band, params.capability.joint_limit_gain):
         warnings.warn(problem, RobotTuningWarning, stacklevel=2)
-    check_within_robot(params.safety)
+    base = arm.model.description.base
+    check_within_robot(params.safety, velocity_limits=base.velocity_limits,
+                       acceleration_limits=base.acceleration_limits)
     builder = DiagramBuilder()
     add = builder.AddNamedSystem
     stages = dict(

@@ -189,21 +189,24 @@ def robot_stop_distance(stop_time, velocity_limits, acceleration_limits,
     return max(stopping - stop_time * u, 0.0)
 
 
-def check_within_robot(params, path="safety"):
+def check_within_robot(params, path="safety",
+                       velocity_limits=BASE_VELOCITY_LIMITS,
+                       acceleration_limits=BASE_ACCELERATION_LIMITS):
     """Checks that the SafetyParameters `params` only tighten the robot's
     own limits: the base's velocity and acceleration limits at most
-    BASE_VELOCITY_LIMITS and BASE_ACCELERATION_LIMITS (the robot facts;
-    the station's base drivers have the same), the stop distance at least
-    `robot_stop_distance`. Run when the controller is built.
+    `velocity_limits` and `acceleration_limits` (the robot's own, from its
+    description when the controller is built; the shipped base's,
+    BASE_VELOCITY_LIMITS and BASE_ACCELERATION_LIMITS, by default), the
+    stop distance at least `robot_stop_distance`.
 
     Raises:
         ValueError: naming the field (under `path`), its value and the
             robot's.
     """
     for name, own, unit in (
-            ("base_velocity_limits", BASE_VELOCITY_LIMITS,
+            ("base_velocity_limits", velocity_limits,
              ("m/s", "m/s", "rad/s")),
-            ("base_acceleration_limits", BASE_ACCELERATION_LIMITS,
+            ("base_acceleration_limits", acceleration_limits,
              ("m/s^2", "m/s^2", "rad/s^2"))):
         for i, (value, limit) in enumerate(zip(getattr(params, name), own,
                                                strict=True)):
