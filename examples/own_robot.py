@@ -5,9 +5,8 @@ tuning survey. Run it from anywhere: python examples/own_robot.py"""
 from pathlib import Path
 
 import numpy as np
-from pydrake.systems.analysis import Simulator
 
-from drake_wbc.experiments.runner import build_closed_loop
+from drake_wbc.experiments.runner import build_closed_loop, start_simulator
 from drake_wbc.experiments.scenario import load_scenario
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.robot.model import ArmKinematics, make_robot_plant
@@ -30,12 +29,8 @@ print("tuning:", check_tuning(arm, scenario.controller.capability_band,
                               scenario.controller.capability.joint_limit_gain)
       or "suits the arm")
 loop = build_closed_loop(scenario)
-simulator = Simulator(loop.diagram)
+simulator = start_simulator(loop)
 root = simulator.get_mutable_context()
-loop.station.set_initial_state(root)
-loop.controller.initialize(
-    root, arm_position=scenario.station.initial_arm_positions)
-simulator.Initialize()
 pose = loop.station.diagram.GetOutputPort("truth.end_effector_pose")
 context = loop.station.diagram.GetMyContextFromRoot(root)
 start = pose.Eval(context)[:3].copy()

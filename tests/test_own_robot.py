@@ -18,7 +18,11 @@ from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 
 from drake_wbc.controller import ControllerParameters, build_controller
 from drake_wbc.deployment.deploy import add_controller_side
-from drake_wbc.experiments.runner import build_closed_loop, simulate
+from drake_wbc.experiments.runner import (
+    build_closed_loop,
+    simulate,
+    start_simulator,
+)
 from drake_wbc.experiments.scenario import (
     controller_arm,
     find_scenario,
@@ -271,12 +275,8 @@ def test_the_simulated_station_runs_that_robot(tmp_path):
     scenario = load_scenario(scenario_file)
     loop = build_closed_loop(scenario)
     assert loop.station.model.num_arm_joints == n
-    simulator = Simulator(loop.diagram)
+    simulator = start_simulator(loop)
     root = simulator.get_mutable_context()
-    loop.station.set_initial_state(root)
-    loop.controller.initialize(
-        root, arm_position=scenario.station.initial_arm_positions)
-    simulator.Initialize()
     pose = loop.station.diagram.GetOutputPort("truth.end_effector_pose")
     station_context = loop.station.diagram.GetMyContextFromRoot(root)
     simulator.AdvanceTo(0.5)

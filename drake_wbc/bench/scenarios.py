@@ -23,9 +23,8 @@ from drake_wbc.math.validation import positive, whole_number
 def _run_in_child(path, duration, chunk):
     """The body of the child process; returns a plain dict."""
     started = time.perf_counter()
-    from pydrake.systems.analysis import Simulator
 
-    from drake_wbc.experiments.runner import build_closed_loop
+    from drake_wbc.experiments.runner import build_closed_loop, start_simulator
     from drake_wbc.experiments.scenario import load_scenario
 
     imported = time.perf_counter()
@@ -33,12 +32,7 @@ def _run_in_child(path, duration, chunk):
     duration = scenario.duration if duration is None else min(
         duration, scenario.duration)
     loop = build_closed_loop(scenario, scenario.variants[0])
-    simulator = Simulator(loop.diagram)
-    root = simulator.get_mutable_context()
-    loop.station.set_initial_state(root)
-    loop.controller.initialize(
-        root, arm_position=scenario.station.initial_arm_positions)
-    simulator.Initialize()
+    simulator = start_simulator(loop)
     built = time.perf_counter()
     factors, t = [], 0.0
     while t < duration - 1e-12:

@@ -122,6 +122,19 @@ class Progress:
         return rtf
 
 
+def start_simulator(loop):
+    """A Simulator of the ClosedLoop `loop`, initialized at its start: the
+    station's initial state (at rest, in static equilibrium) and the
+    controller started from the scenario's arm positions."""
+    simulator = Simulator(loop.diagram)
+    root = simulator.get_mutable_context()
+    loop.station.set_initial_state(root)
+    loop.controller.initialize(
+        root, arm_position=loop.scenario.station.initial_arm_positions)
+    simulator.Initialize()
+    return simulator
+
+
 def simulate(loop, duration=None, progress=False):
     """Runs a ClosedLoop from its initial state for `duration` s (the
     scenario's if None).
@@ -130,12 +143,8 @@ def simulate(loop, duration=None, progress=False):
         RunLog: the logged signals.
     """
     duration = loop.scenario.duration if duration is None else duration
-    simulator = Simulator(loop.diagram)
+    simulator = start_simulator(loop)
     root = simulator.get_mutable_context()
-    loop.station.set_initial_state(root)
-    loop.controller.initialize(
-        root, arm_position=loop.scenario.station.initial_arm_positions)
-    simulator.Initialize()
     meter = Progress(loop.variant.label or loop.variant.name, duration) \
         if progress else None
     chunk = max(duration / 200.0, loop.scenario.controller.time_step)
