@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import drake_wbc.math
-from drake_wbc.math import kernels
+from drake_wbc.math import compiled, kernels
 from drake_wbc.math.scalar_support import value_of
 
 for _module in pkgutil.iter_modules(drake_wbc.math.__path__):
@@ -63,3 +63,39 @@ def test_an_equation_has_at_most_one_kernel():
         kernels.fast_kernel(reference, sample=lambda rng: ())(lambda x: x)
     assert kernels.body_for(reference, float) is not reference
     assert kernels.body_for(reference, object) is reference
+
+
+def _compiled_functions():
+    """Every compiled function (drake_wbc.math.compiled) of the math
+    layer's modules."""
+    found = []
+    for info in pkgutil.iter_modules(drake_wbc.math.__path__):
+        module = importlib.import_module(f"drake_wbc.math.{info.name}")
+        found += [value for value in vars(module).values()
+                  if compiled.is_compiled(value)]
+    return found
+
+
+def test_no_tick_compiles_once_the_kernels_are_warm():
+    for kernel in kernels.registered_kernels():
+        kernels.warm(kernel)
+    functions = _compiled_functions()
+    signatures = [len(f.signatures) for f in functions]
+    rng = np.random.default_rng(7)
+    for kernel in kernels.registered_kernels():
+        for _ in range(20):
+            kernel.fast(*kernel.sample(rng))
+    assert [len(f.signatures) for f in functions] == signatures, (
+        "a kernel compiled again after warming: its inputs' types differ "
+        "between its sample and later calls")
+
+
+def test_a_compiled_function_computes_as_numpy_does():
+    @compiled.compiled
+    def ratio(a, b):
+        return a / b
+
+    assert compiled.is_compiled(ratio)
+    assert ratio(1.0, 0.0) == np.inf
+    assert np.isnan(ratio(0.0, 0.0))
+    assert not compiled.is_compiled(lambda x: x)

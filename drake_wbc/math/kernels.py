@@ -21,10 +21,16 @@ on the scalar type.
 
 tests/test_kernels.py holds every registered kernel equal to its
 reference on random inputs drawn by the kernel's own `sample`.
+
+A kernel whose loops are compiled (drake_wbc.math.compiled) compiles on
+its first call; `body_for` makes that call, once per process, on the
+kernel's own sample, so that a stage's first tick runs machine code.
 """
 
 from collections.abc import Callable
 from dataclasses import dataclass
+
+import numpy as np
 
 
 @dataclass(frozen=True)
@@ -45,6 +51,7 @@ class Kernel:
 
 
 _KERNELS: dict[Callable, Kernel] = {}
+_WARM: set[Callable] = set()
 
 
 def fast_kernel(reference, sample):
@@ -68,11 +75,21 @@ def fast_kernel(reference, sample):
 def body_for(reference, T):
     """The body a stage of scalar type `T` runs for `reference`, chosen
     once when the stage is built: its fast kernel for float, if it has
-    one; the reference otherwise."""
+    one (called once on its sample first, see the module); the reference
+    otherwise."""
     kernel = _KERNELS.get(reference)
     if T is float and kernel is not None:
+        warm(kernel)
         return kernel.fast
     return reference
+
+
+def warm(kernel):
+    """Calls `kernel.fast` once on its own sample, the first time only, so
+    that whatever it compiles is compiled before a tick needs it."""
+    if kernel.fast not in _WARM:
+        kernel.fast(*kernel.sample(np.random.default_rng(0)))
+        _WARM.add(kernel.fast)
 
 
 def registered_kernels():
