@@ -52,8 +52,10 @@ the previous tick's factors and sides and of this tick's inputs):
   as soon as the motion leads out); entering needs v_h, so that noise
   smaller than v_h cannot give the motion back to the arm. A test with a
   zero covector (on the axis, or phi at y = 0) cannot lead back and counts
-  as leading out. With v_h = 0, from the side "not deactivated", the side
-  is the paper's rule exactly.
+  as leading out. With v_h = 0 the side is the paper's rule but where no
+  test leads back and one lies within the roundoff guard (a twist at rest,
+  or exactly along the boundary), where the side is kept; from the side
+  "not deactivated" it is the paper's rule exactly.
 - A rate limit on sigma: sigma_k = sigma_{k-1} + clip(target_k -
   sigma_{k-1}, -Delta, Delta) with Delta = `max_rate` h, so sigma changes
   by at most max_rate h per tick (0.1 with the defaults at 100 Hz, 0 to 1
@@ -66,9 +68,9 @@ the previous tick's factors and sides and of this tick's inputs):
   locks at the boundary.
 
 With v_h = 0 and max_rate h >= 1 the factors are those of the paper's
-rule (from the start state, the side "not deactivated"); the paper's
-experiment with the defaults (v_h = 0.02 m/s, max_rate = 10 /s) is in
-the README.
+rule but for the side kept at rest (one tick from the start state,
+WEIGHTING_START, exactly those); the paper's experiment with the
+defaults (v_h = 0.02 m/s, max_rate = 10 /s) is in the README.
 
 Definitions used here (the paper names d and phi but does not define them;
 p = [x, y, z] is the end effector's position in the arm's base frame T_a):
@@ -227,7 +229,8 @@ class WorkspaceAdapterParameters:
             (f_xy = 0) and no push, the commanded twist's speed back
             stays within it but for one tick (0.021 m/s), and each
             deliberate pull back exceeds it within 0.1 s of its start;
-            0 for the paper's rule.
+            0 for the paper's rule (but at rest, where the side is
+            kept).
         max_rate: the largest change of sigma_xy and sigma_phi per
             second, 1/s, > 0, finite (intuitive pHRI): sigma changes by
             at most max_rate * time_step per tick. Ours, 10 /s (0.1 a
