@@ -152,7 +152,8 @@ def adapter(arm):
     params = WorkspaceAdapterParameters(
         mode="intuitive-phri",
         workspace=LocalWorkspace(extent_lower=0.6, extent_upper=0.8,
-                                 deflection_lower=0.3, deflection_upper=0.7))
+                                 deflection_lower=0.3, deflection_upper=0.7),
+        deactivation_speed=0.0, max_rate=100.0)  # the paper's rule
     return WorkspaceAdapter(params, arm, band=CapabilityBand(0.02, 0.06))
 
 

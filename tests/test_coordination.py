@@ -202,7 +202,11 @@ def phri_inputs(p_a, V_a=None, C_m=0.06, g=None):
     }
 
 
-PHRI = WorkspaceAdapterParameters(mode="intuitive-phri")
+PHRI = WorkspaceAdapterParameters(mode="intuitive-phri",
+                                  deactivation_speed=0.0, max_rate=100.0)
+"""The paper's rule, applied at the instant: no hysteresis, and a step of
+max_rate h = 1 a tick is no rate limit (tests/test_weighting_smoothing.py
+holds the stage's defaults)."""
 
 
 def sigmas(system, inputs):

@@ -76,7 +76,10 @@ class OperatingPoint:
         capability: C_m; capability_gradient: grad_x C_m (6, T_a).
         alpha: alpha of eq. (transition).
         sigma_xy, sigma_phi: the weighting factors of eq.
-            (weight-factors) at rest (V_ee = 0).
+            (weight-factors) at rest (V_ee = 0), in the intuitive pHRI
+            mode one tick from the WorkspaceAdapter's start state
+            (workspace.WEIGHTING_START: f itself inside the workspace,
+            at most max_rate * time_step below 1 outside it).
     """
 
     arm_positions: np.ndarray

@@ -238,7 +238,7 @@ def build_controller(params=None, robot=None):
         whole_body_cdmp=add("whole_body_cdmp", WholeBodyCdmp(
             params.whole_body_cdmp, time_step=h, phri_switch=switch)),
         workspace=add("workspace", WorkspaceAdapter(
-            params.workspace, arm, band=band)),
+            params.workspace, arm, band=band, time_step=h)),
         distributor=add("distributor", MotionDistributor(
             params.distributor, arm, band=band)),
         base_cdmp=add("base_cdmp", BaseCdmp(params.base_cdmp, time_step=h)),

@@ -28,6 +28,50 @@ leads back:
     sigma = 1    if grad_x C_m^(d,phi) . V_ee > 0  or  d_dot (phi_dot) < 0,
     sigma = f    otherwise
 
+Applied tick by tick, that rule is discontinuous: where f = 0 (outside the
+workspace) a twist that turns from leading out to leading back, by a hair,
+throws sigma from 0 to 1 and back, and the sensor's noise at rest (the hand
+has let go at the boundary) does so at the control rate (417 jumps of
+sigma_xy in the 53 s `phri` run). The paper speaks of a smooth transition.
+The weighting factors of the stage are therefore the rule above with
+hysteresis and a rate limit (`adaptive_weighting_factors`, a function of
+the previous tick's factors and sides and of this tick's inputs):
+
+- Hysteresis on which side of the rule one is ("deactivated", sigma's
+  target 1, or not, target f), per factor. Each test of the rule is read
+  as a speed: s = c . V / |c|, the commanded twist's component along the
+  test's covector c (grad_x C_m^(d,phi), or -grad d and -grad phi, whose
+  products with the linear part of V_a are -d_dot and -phi_dot; for phi
+  the tangential speed d phi_dot). The deactivation sets in when a test
+  leads back faster than `deactivation_speed` v_h (s > v_h), and ends only
+  when every test leads out (s < 0); in between (0 <= s <= v_h for some
+  test, a motion at rest or along the boundary among them) the side of
+  the last tick is kept. The band is one-sided on purpose: leaving needs
+  no speed, so that a slow push outwards never keeps the arm alone in
+  charge beyond the boundary (the base takes over outside the workspace
+  as soon as the motion leads out); entering needs v_h, so that noise
+  smaller than v_h cannot give the motion back to the arm. A test with a
+  zero covector (on the axis, or phi at y = 0) cannot lead back and counts
+  as leading out. With v_h = 0 the side is the paper's rule but where no
+  test leads back and one lies within the roundoff guard (a twist at rest,
+  or exactly along the boundary), where the side is kept; from the side
+  "not deactivated" it is the paper's rule exactly.
+- A rate limit on sigma: sigma_k = sigma_{k-1} + clip(target_k -
+  sigma_{k-1}, -Delta, Delta) with Delta = `max_rate` h, so sigma changes
+  by at most max_rate h per tick (0.1 with the defaults at 100 Hz, 0 to 1
+  in 0.1 s, half the base's own 0.2 s lag). The arm then carries its
+  share for at most 1 / max_rate after the boundary is crossed: at a
+  hand's 0.2 m/s at most 0.2 / (2 max_rate) = 1 cm further out than the
+  paper's rule would let it (5 /s let the tool of `phri` reach 13 mm
+  further in stage B and C_m the band, 0.037); and when the motion leads
+  back the arm takes it over within 1 / max_rate, so the robot never
+  locks at the boundary.
+
+With v_h = 0 and max_rate h >= 1 the factors are those of the paper's
+rule but for the side kept at rest (one tick from the start state,
+WEIGHTING_START, exactly those); the paper's experiment with the
+defaults (v_h = 0.02 m/s, max_rate = 10 /s) is in the README.
+
 Definitions used here (the paper names d and phi but does not define them;
 p = [x, y, z] is the end effector's position in the arm's base frame T_a):
 
@@ -92,6 +136,7 @@ from drake_wbc.math.validation import (
     checked_instance,
     in_closed_range,
     non_negative,
+    positive,
     rotation_matrix,
 )
 
@@ -103,6 +148,13 @@ DEACTIVATION_TOLERANCE = 1e-9
 """The deactivation's tests count only beyond this cosine between the
 commanded motion and the gradient (or the direction of growing d or phi):
 a guard against rounding, not a dead band one could feel."""
+
+WEIGHTING_START = (1.0, 1.0, 0.0, 0.0)
+"""The state of the weighting factors before the first tick:
+(sigma_xy, sigma_phi, deactivated_xy, deactivated_phi) = the arm's
+factors (the robot starts with its tool in the workspace, as at home) and
+no deactivation; from a tool outside it sigma falls to f within
+1 / max_rate at the start."""
 
 
 def _ordered(lower_name, lower, upper_name, upper):
@@ -167,6 +219,23 @@ class WorkspaceAdapterParameters:
             paper's trajectory-tracking experiment.
         workspace: the local workspace of the intuitive pHRI mode; the
             paper's d^l = 0.75, d^u = 0.8 m, phi^l = 30, phi^u = 35 deg.
+        deactivation_speed: v_h in m/s (rad/s where the gradient's test
+            reads an angular part of V_ee), >= 0, finite: the hysteresis
+            of the deactivation strategy (intuitive pHRI; see the
+            module): the motion must lead back faster than this for
+            sigma's target to become 1, and the side is kept until every
+            test leads out. Ours, 0.02 m/s (a hand's 0.4 N at k_hri =
+            0.05): in the 53 s `phri` run, with the tool outside
+            (f_xy = 0) and no push, the commanded twist's speed back
+            stays within it but for one tick (0.021 m/s), and each
+            deliberate pull back exceeds it within 0.1 s of its start;
+            0 for the paper's rule (but at rest, where the side is
+            kept).
+        max_rate: the largest change of sigma_xy and sigma_phi per
+            second, 1/s, > 0, finite (intuitive pHRI): sigma changes by
+            at most max_rate * time_step per tick. Ours, 10 /s (0.1 a
+            tick at 100 Hz, 0 to 1 in 0.1 s, half the base's own lag); at
+            1 / time_step or more the paper's unlimited rule.
 
     The band C_m^l, C_m^u of f_xy and f_phi (intuitive pHRI) is the
     stage's `band` argument (one CapabilityBand for every stage that
@@ -177,6 +246,8 @@ class WorkspaceAdapterParameters:
     sigma_xy: float = 0.5
     sigma_phi: float = 0.5
     workspace: LocalWorkspace = field(default_factory=LocalWorkspace)
+    deactivation_speed: float = 0.02
+    max_rate: float = 10.0
 
     def __post_init__(self):
         self.mode = MotionMode.parse(self.mode)
@@ -184,6 +255,9 @@ class WorkspaceAdapterParameters:
         in_closed_range("sigma_phi", self.sigma_phi, 0.0, 1.0)
         self.workspace = checked_instance(
             "workspace", self.workspace, LocalWorkspace, LocalWorkspace)
+        self.deactivation_speed = non_negative("deactivation_speed",
+                                               self.deactivation_speed)
+        self.max_rate = positive("max_rate", self.max_rate)
         if self.mode is MotionMode.LOCO_MANIPULATION:
             fixed_weighting_factors(self.mode, self.sigma_xy, self.sigma_phi)
 
@@ -199,6 +273,9 @@ class AdaptiveWorkspace(NamedTuple):
         R_ab_rows: ^aR_b = R_ba^T as three rows of three floats.
         R_ba: (3, 3) ^bR_a.
         origin: (3,) origin of T_a in T_b (m).
+        deactivation_speed: v_h >= 0, the hysteresis of the deactivation.
+        max_step: the largest change of sigma in one tick, max_rate h
+            (inf: no limit).
     """
 
     capability_upper: float
@@ -208,14 +285,18 @@ class AdaptiveWorkspace(NamedTuple):
     R_ab_rows: tuple
     R_ba: np.ndarray
     origin: np.ndarray
+    deactivation_speed: float = 0.0
+    max_step: float = math.inf
 
     @classmethod
     def of(cls, capability_upper, capability_lower, workspace, R_ba,
-           arm_base_in_base):
+           arm_base_in_base, deactivation_speed=0.0, max_step=math.inf):
         """The constants from parameters that were checked where they
         entered, nothing checked again: the band C_m^u > C_m^l (a
         CapabilityBand's), a LocalWorkspace, the rotation ^bR_a (3, 3) and
-        the origin of T_a in T_b (3,) (the arm's mounting)."""
+        the origin of T_a in T_b (3,) (the arm's mounting); the
+        hysteresis v_h and the largest step of sigma a tick (the paper's
+        rule by default: none and no limit)."""
         R = np.asarray(R_ba, dtype=float)
         return cls(
             capability_upper=float(capability_upper),
@@ -227,6 +308,8 @@ class AdaptiveWorkspace(NamedTuple):
             R_ab_rows=tuple(tuple(row) for row in R.T.tolist()),
             R_ba=R,
             origin=np.asarray(arm_base_in_base, dtype=float),
+            deactivation_speed=float(deactivation_speed),
+            max_step=float(max_step),
         )
 
 
@@ -312,20 +395,53 @@ def _adaptive_factor(C_m_penalized, upper, lower):
     return 1.0 - transition_of(C_m_penalized, upper, lower)
 
 
-def _leads(covector, V, sign):
-    """True if covector . V has the given sign, beyond the roundoff guard:
-    (c . V)^2 > tol^2 |c|^2 |V|^2 (a cosine above DEACTIVATION_TOLERANCE),
-    squared so that no square root of an AutoDiffXd 0 is taken."""
+def _lead(covector, V, speed):
+    """1 if the motion V leads back by the test of covector c faster than
+    `speed` (c . V > speed |c|), -1 if it leads out (c . V < 0), 0 in
+    between; both beyond the roundoff guard (c . V)^2 > tol^2 |c|^2 |V|^2
+    (a cosine above DEACTIVATION_TOLERANCE), and all squared so that no
+    square root of an AutoDiffXd 0 is taken. A zero covector cannot lead
+    back: -1."""
+    norm_squared = np.dot(covector, covector)
+    if norm_squared == 0.0:
+        return -1
     product = np.dot(covector, V)
-    if not sign * product > 0.0:
-        return False
-    scale = np.dot(covector, covector) * np.dot(V, V)
-    return product * product > DEACTIVATION_TOLERANCE**2 * scale
+    square = product * product
+    guard = DEACTIVATION_TOLERANCE**2 * norm_squared * np.dot(V, V)
+    if product > 0.0 and square > guard + speed * speed * norm_squared:
+        return 1
+    if product < 0.0 and square > guard:
+        return -1
+    return 0
+
+
+def _side(previous, gradient, V_a, direction, speed):
+    """The side of the deactivation strategy with hysteresis (see the
+    module): 1 (deactivated) if a test leads back faster than `speed`, 0
+    if both lead out, else `previous`; of the scalar type of `previous`'s
+    arithmetic (1 and 0 as `previous * 0 + 1`, `previous * 0`)."""
+    leads = (_lead(gradient, V_a, speed),
+             _lead(-direction[:3], V_a[:3], speed))
+    if 1 in leads:
+        return _zero_like(previous) + 1.0
+    if leads == (-1, -1):
+        return _zero_like(previous)
+    return previous
+
+
+def _limited(previous, target, max_step):
+    """previous + clip(target - previous, -max_step, max_step)."""
+    change = target - previous
+    if change > max_step:
+        return previous + max_step
+    if change < -max_step:
+        return previous - max_step
+    return target
 
 
 def _deactivated(factor, gradient, V_a, direction):
     """The deactivation strategy (see `deactivated`)."""
-    if _leads(gradient, V_a, 1.0) or _leads(direction[:3], V_a[:3], -1.0):
+    if _side(0.0, gradient, V_a, direction, 0.0) == 1.0:
         return _zero_like(factor) + 1.0
     return factor
 
@@ -355,10 +471,13 @@ class LocalWorkspaceState(NamedTuple):
     f_phi: object
     sigma_xy: object
     sigma_phi: object
+    deactivated_xy: object
+    deactivated_phi: object
 
 
-def _state(p_ee_in_base, V_ee, C_m, grad_C_m, constants):
-    """LocalWorkspaceState (see `local_workspace_state`)."""
+def _state(previous, p_ee_in_base, V_ee, C_m, grad_C_m, constants):
+    """LocalWorkspaceState (see `local_workspace_state`); `previous` the
+    last tick's (sigma_xy, sigma_phi, deactivated_xy, deactivated_phi)."""
     c = constants
     R = c.R_ba
     p = R.T @ (p_ee_in_base - c.origin)
@@ -372,6 +491,12 @@ def _state(p_ee_in_base, V_ee, C_m, grad_C_m, constants):
     upper, lower = c.capability_upper, c.capability_lower
     f_xy = _adaptive_factor(penalized.C_m_d, upper, lower)
     f_phi = _adaptive_factor(penalized.C_m_phi, upper, lower)
+    speed = c.deactivation_speed
+    side_xy = _side(previous[2], penalized.gradient_d, V_a, grad_d, speed)
+    side_phi = _side(previous[3], penalized.gradient_phi, V_a, grad_phi,
+                     speed)
+    target_xy = _zero_like(f_xy) + 1.0 if side_xy == 1.0 else f_xy
+    target_phi = _zero_like(f_phi) + 1.0 if side_phi == 1.0 else f_phi
     return LocalWorkspaceState(
         d=_extent(p),
         phi=_deflection(p),
@@ -382,20 +507,26 @@ def _state(p_ee_in_base, V_ee, C_m, grad_C_m, constants):
         capability=penalized,
         f_xy=f_xy,
         f_phi=f_phi,
-        sigma_xy=_deactivated(f_xy, penalized.gradient_d, V_a, grad_d),
-        sigma_phi=_deactivated(f_phi, penalized.gradient_phi, V_a,
-                               grad_phi),
+        sigma_xy=_limited(previous[0], target_xy, c.max_step),
+        sigma_phi=_limited(previous[1], target_phi, c.max_step),
+        deactivated_xy=side_xy,
+        deactivated_phi=side_phi,
     )
 
 
-def adaptive_weighting_factors(p_ee_in_base, V_ee, C_m, grad_C_m,
-                                         constants):
-    """(sigma_xy, sigma_phi) of the intuitive pHRI mode (Sec. IV-C: f_xy,
-    f_phi after the deactivation strategy), the reference body of what
-    the WorkspaceAdapter stage gives each tick: `local_workspace_state`'s
-    factors, for any scalar type, with nothing checked.
+def adaptive_weighting_factors(previous, p_ee_in_base, V_ee, C_m, grad_C_m,
+                               constants):
+    """One tick of the weighting factors of the intuitive pHRI mode (Sec.
+    IV-C, "Local Workspace" and "Deactivation Strategy": f_xy, f_phi after
+    the deactivation strategy, with its hysteresis and sigma's rate limit,
+    see the module), the reference body of the WorkspaceAdapter stage's
+    discrete update and outputs: `local_workspace_state`'s factors and
+    sides, for any scalar type, with nothing checked.
 
     Args:
+        previous: (4,) the last tick's (sigma_xy, sigma_phi,
+            deactivated_xy, deactivated_phi), the sides 0 or 1
+            (WEIGHTING_START before the first).
         p_ee_in_base: (3,) end-effector position in T_b (m).
         V_ee: (6,) commanded end-effector twist [v; w] in T_b.
         C_m: capability of movement, a scalar.
@@ -403,10 +534,12 @@ def adaptive_weighting_factors(p_ee_in_base, V_ee, C_m, grad_C_m,
         constants: AdaptiveWorkspace.
 
     Returns:
-        (sigma_xy, sigma_phi), of the scalar type of the inputs.
+        (sigma_xy, sigma_phi, deactivated_xy, deactivated_phi), this
+        tick's state, of the scalar type of the inputs.
     """
-    state = _state(p_ee_in_base, V_ee, C_m, grad_C_m, constants)
-    return state.sigma_xy, state.sigma_phi
+    state = _state(previous, p_ee_in_base, V_ee, C_m, grad_C_m, constants)
+    return (state.sigma_xy, state.sigma_phi, state.deactivated_xy,
+            state.deactivated_phi)
 
 
 # ----------------------------------------------------------------------------
@@ -556,9 +689,13 @@ def deactivated(factor, gradient, V_a, direction):
 
 def local_workspace_state(p_ee_in_base, V_ee, C_m, grad_C_m,
                           capability_upper, capability_lower,
-                          workspace=None, R_ba=None, arm_base_in_base=None):
+                          workspace=None, R_ba=None, arm_base_in_base=None,
+                          previous=None, deactivation_speed=0.0,
+                          max_step=math.inf):
     """The weighting factors of the intuitive pHRI mode (Sec. IV-C), with
-    every quantity on the way.
+    every quantity on the way; one tick from `previous`. With the defaults
+    (from WEIGHTING_START, no hysteresis, no rate limit) sigma is the
+    paper's deactivation strategy applied at this instant alone.
 
     Args:
         p_ee_in_base: (3,) end-effector position in T_b (m).
@@ -570,10 +707,17 @@ def local_workspace_state(p_ee_in_base, V_ee, C_m, grad_C_m,
         workspace: LocalWorkspace; the paper's if None.
         R_ba: (3, 3) ^bR_a, or None for the identity.
         arm_base_in_base: (3,) origin of T_a in T_b (m), or None for 0.
+        previous: (4,) the last tick's (sigma_xy, sigma_phi,
+            deactivated_xy, deactivated_phi), sigmas in [0, 1] and sides
+            0 or 1; WEIGHTING_START if None.
+        deactivation_speed: v_h >= 0 (m/s), the hysteresis (module).
+        max_step: > 0, the largest change of sigma in this tick (inf:
+            none).
 
     Returns:
         LocalWorkspaceState; sigma_xy and sigma_phi are the weighting
-        factors, after the deactivation strategy.
+        factors, after the deactivation strategy, and deactivated_xy,
+        deactivated_phi its sides (1.0 or 0.0).
     """
     lower, upper = _ordered("capability_lower", capability_lower,
                             "capability_upper", capability_upper)
@@ -582,10 +726,37 @@ def local_workspace_state(p_ee_in_base, V_ee, C_m, grad_C_m,
     R = np.eye(3) if R_ba is None else rotation_matrix("R_ba", R_ba)
     origin = (np.zeros(3) if arm_base_in_base is None
               else as_vector("arm_base_in_base", arm_base_in_base, 3))
-    return _state(_vector("p_ee_in_base", p_ee_in_base, 3),
+    return _state(_previous(previous),
+                  _vector("p_ee_in_base", p_ee_in_base, 3),
                   _vector("V_ee", V_ee, 6), _scalar("C_m", C_m),
                   _vector("grad_C_m", grad_C_m, 6),
-                  AdaptiveWorkspace.of(upper, lower, ws, R, origin))
+                  AdaptiveWorkspace.of(
+                      upper, lower, ws, R, origin,
+                      non_negative("deactivation_speed", deactivation_speed),
+                      _max_step(max_step)))
+
+
+def _previous(previous):
+    """`previous` (4,) checked: sigmas in [0, 1], sides 0 or 1."""
+    if previous is None:
+        return np.array(WEIGHTING_START)
+    state = _vector("previous", previous, 4)
+    if state.dtype != object:
+        for i in (0, 1):
+            in_closed_range(f"previous[{i}]", state[i], 0.0, 1.0)
+        for i in (2, 3):
+            if state[i] not in (0.0, 1.0):
+                raise ValueError(
+                    f"previous[{i}] = {float(state[i])!r} is not allowed: "
+                    "a side of the deactivation must be 0 or 1")
+    return state
+
+
+def _max_step(max_step):
+    """`max_step` checked: > 0, inf allowed (no limit)."""
+    if max_step == math.inf:
+        return max_step
+    return positive("max_step", max_step)
 
 
 # ----------------------------------------------------------------------------
@@ -603,7 +774,10 @@ def _weighting_sample(rng):
     effector on the arm base's axis, straight ahead, straight behind
     (phi = pi), in the extent band, in the deflection band, or anywhere;
     the twist zero, vertical or any; C_m anywhere or with C_m^d in the
-    band of the factors (the ramp); the mounting the identity or any."""
+    band of the factors (the ramp); the mounting the identity or any; the
+    previous state any (the sides 0 or 1), the hysteresis none or up to
+    0.1 m/s, the rate limit none or 0.001 to 0.5 a tick, and the twist's
+    size from 1e-3 to 1, so that its speeds fall on both sides of v_h."""
     upper = rng.uniform(0.03, 0.07)
     lower = upper - rng.uniform(0.002, 0.02)
     ws = LocalWorkspace(extent_lower=rng.uniform(0.5, 0.75),
@@ -612,7 +786,12 @@ def _weighting_sample(rng):
                         deflection_upper=np.radians(rng.uniform(31, 60)))
     R = np.eye(3) if rng.uniform() < 0.5 else _random_rotation(rng)
     origin = rng.normal(size=3) * 0.3
-    constants = AdaptiveWorkspace.of(upper, lower, ws, R, origin)
+    constants = AdaptiveWorkspace.of(
+        upper, lower, ws, R, origin,
+        0.0 if rng.uniform() < 0.3 else rng.uniform(0.0, 0.1),
+        math.inf if rng.uniform() < 0.3 else rng.uniform(0.001, 0.5))
+    previous = np.array([rng.uniform(), rng.uniform(),
+                         float(rng.integers(2)), float(rng.integers(2))])
     radius, azimuth = rng.uniform(0.0, 1.0), rng.uniform(-np.pi, np.pi)
     shape = rng.integers(6)
     if shape == 1:
@@ -628,7 +807,7 @@ def _weighting_sample(rng):
                                                     ws.deflection_upper)
     p_a = np.array([radius * np.cos(azimuth), radius * np.sin(azimuth),
                     rng.normal() * 0.3])
-    V = rng.normal(size=6)
+    V = rng.normal(size=6) * 10.0 ** rng.uniform(-3.0, 0.0)
     twist = rng.integers(3)
     if twist == 1:
         V[:] = 0.0
@@ -642,22 +821,46 @@ def _weighting_sample(rng):
                                 constants.deflection)
         if P_d * P_phi > 0.0:
             C_m = rng.uniform(lower, upper) / (P_d * P_phi)
-    return p, V, C_m, rng.normal(size=6) * 0.1, constants
+    return previous, p, V, C_m, rng.normal(size=6) * 0.1, constants
 
 
-def _float_leads(covector, V, sign):
-    """`_leads` for sequences of floats of one length."""
+def _float_lead(covector, V, speed):
+    """`_lead` for sequences of floats of one length."""
+    norm_squared = sum(map(operator.mul, covector, covector))
+    if norm_squared == 0.0:
+        return -1
     product = sum(map(operator.mul, covector, V))
-    if not sign * product > 0.0:
-        return False
-    scale = (sum(map(operator.mul, covector, covector))
+    square = product * product
+    guard = (DEACTIVATION_TOLERANCE**2 * norm_squared
              * sum(map(operator.mul, V, V)))
-    return product * product > DEACTIVATION_TOLERANCE**2 * scale
+    if product > 0.0 and square > guard + speed * speed * norm_squared:
+        return 1
+    if product < 0.0 and square > guard:
+        return -1
+    return 0
+
+
+def _float_factor(previous_sigma, previous_side, factor, leads, max_step):
+    """(sigma, side) of one factor from its tests' leads (`_side`,
+    `_limited`), in floats."""
+    if 1 in leads:
+        side = 1.0
+    elif leads == (-1, -1):
+        side = 0.0
+    else:
+        side = previous_side
+    target = 1.0 if side == 1.0 else factor
+    change = target - previous_sigma
+    if change > max_step:
+        return previous_sigma + max_step, side
+    if change < -max_step:
+        return previous_sigma - max_step, side
+    return target, side
 
 
 @fast_kernel(adaptive_weighting_factors, sample=_weighting_sample)
-def adaptive_weighting_factors_float(p_ee_in_base, V_ee, C_m, grad_C_m,
-                                     constants):
+def adaptive_weighting_factors_float(previous, p_ee_in_base, V_ee, C_m,
+                                     grad_C_m, constants):
     """`adaptive_weighting_factors` for float inputs, in plain
     floats: the per-tick path of the WorkspaceAdapter stage in the
     intuitive pHRI mode.
@@ -666,16 +869,19 @@ def adaptive_weighting_factors_float(p_ee_in_base, V_ee, C_m, grad_C_m,
     (the float kernels of eq. (transition) and its derivative), to
     rounding; the dot products of the deactivation tests are summed in
     another order, which can only matter within the tests' roundoff
-    guard. The position in T_a comes from the same numpy product as in
-    the reference: the sign of its y coordinate decides, at phi = pi,
-    which way phi grows, which the deactivation's rate test reads.
+    guard (or at the hysteresis' threshold v_h, to rounding). The position
+    in T_a comes from the same numpy product as in the reference: the
+    sign of its y coordinate decides, at phi = pi, which way phi grows,
+    which the deactivation's rate test reads.
 
     An input that is not finite raises a ValueError that names it.
 
     Returns:
-        (sigma_xy, sigma_phi), floats in [0, 1].
+        (sigma_xy, sigma_phi, deactivated_xy, deactivated_phi), floats,
+        the sigmas in [0, 1] and the sides 0 or 1.
     """
     c = constants
+    previous = np.asarray(previous, dtype=float).tolist()
     p = np.asarray(p_ee_in_base, dtype=float)
     V_ee = np.asarray(V_ee, dtype=float).tolist()
     grad_C_m = np.asarray(grad_C_m, dtype=float).tolist()
@@ -689,7 +895,7 @@ def adaptive_weighting_factors_float(p_ee_in_base, V_ee, C_m, grad_C_m,
         _vector("grad_C_m", grad_C_m, 6)
         return tuple(float(sigma) for sigma in
                      adaptive_weighting_factors(
-                         p, V_ee, C_m, grad_C_m, constants))
+                         previous, p, V_ee, C_m, grad_C_m, constants))
     x, y, _ = (c.R_ba.T @ (p - c.origin)).tolist()
     rows = c.R_ab_rows
     V_a = [r[0] * V_ee[k] + r[1] * V_ee[k + 1] + r[2] * V_ee[k + 2]
@@ -725,12 +931,16 @@ def adaptive_weighting_factors_float(p_ee_in_base, V_ee, C_m, grad_C_m,
     upper, lower = c.capability_upper, c.capability_lower
     f_xy = 1.0 - transition_float(C_m * P_d * P_phi, upper, lower)
     f_phi = 1.0 - transition_float(C_m * P_phi, upper, lower)
-    # The deactivation strategy (deactivated).
-    linear = V_a[:3]
-    sigma_xy = (1.0 if _float_leads(gradient_d, V_a, 1.0)
-                or _float_leads((grad_d_x, grad_d_y, 0.0), linear, -1.0)
-                else f_xy)
-    sigma_phi = (1.0 if _float_leads(gradient_phi, V_a, 1.0)
-                 or _float_leads((grad_phi_x, grad_phi_y, 0.0), linear, -1.0)
-                 else f_phi)
-    return sigma_xy, sigma_phi
+    # The deactivation strategy with hysteresis, and the rate limit.
+    linear, speed = V_a[:3], c.deactivation_speed
+    sigma_xy, side_xy = _float_factor(
+        previous[0], previous[2], f_xy,
+        (_float_lead(gradient_d, V_a, speed),
+         _float_lead((-grad_d_x, -grad_d_y, -0.0), linear, speed)),
+        c.max_step)
+    sigma_phi, side_phi = _float_factor(
+        previous[1], previous[3], f_phi,
+        (_float_lead(gradient_phi, V_a, speed),
+         _float_lead((-grad_phi_x, -grad_phi_y, -0.0), linear, speed)),
+        c.max_step)
+    return sigma_xy, sigma_phi, side_xy, side_phi

@@ -16,7 +16,7 @@ from drake_wbc.math.capability import (
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.motion_mode import MotionMode
 from drake_wbc.math.scalar_support import through_float_function
-from drake_wbc.math.validation import checked_instance
+from drake_wbc.math.validation import checked_instance, positive
 from drake_wbc.math.workspace import WorkspaceAdapterParameters
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.support import (
@@ -159,16 +159,25 @@ def WorkspaceAdapter_(T):
 
         Locomotion gives (0, 0), manipulation (1, 1), loco-manipulation
         the fixed parameters; these modes read no input (no direct
-        feedthrough). The intuitive pHRI mode computes
+        feedthrough) and have no state. The intuitive pHRI mode computes
         workspace.adaptive_weighting_factors (its float kernel
         in double, chosen when the stage is built): f_xy, f_phi from C_m
         penalized by the extent d and deflection phi of the end effector
         w.r.t. the arm's base (defined in drake_wbc.math.workspace), then
-        sigma = 1 if the commanded twist, carried by the arm alone, would
-        raise C_m^(d,phi) or lead back (d_dot, phi_dot < 0), else f (both
-        tests beyond a roundoff guard, workspace.DEACTIVATION_TOLERANCE).
-        sigma is then discontinuous where the deactivation switches, as in
-        the paper.
+        the deactivation strategy: sigma's target is 1 if the commanded
+        twist, carried by the arm alone, would raise C_m^(d,phi) or lead
+        back (d_dot, phi_dot < 0), else f, with hysteresis (the
+        deactivation sets in above params.deactivation_speed and ends
+        when every test leads out), and sigma follows its target at no
+        more than params.max_rate per second. Its discrete state is the
+        last tick's (sigma_xy, sigma_phi, deactivated_xy,
+        deactivated_phi), from workspace.WEIGHTING_START, updated once a
+        period (time_step, offset 0, the controller's one periodic
+        group, so that `Linearize` applies) with the very vector the
+        outputs give: the outputs are this tick's factors from the state
+        and the inputs (direct feedthrough, as the paper's rule), so the
+        stages that read them at a tick see the factors of that tick.
+        sigma changes by at most params.max_rate * time_step per tick.
 
         Args:
             params: WorkspaceAdapterParameters (read here, when the stage
@@ -179,10 +188,14 @@ def WorkspaceAdapter_(T):
             band: the CapabilityBand C_m^l, C_m^u of f_xy and f_phi
                 (intuitive pHRI; read here); the paper's
                 0.035 < C_m < 0.04 if None.
+            time_step: the control period h in s (> 0), the period of
+                the intuitive pHRI mode's update and the time of
+                params.max_rate; 0.01 (the paper's 100 Hz) by default.
+                Not read in the fixed modes.
         """
 
         def _construct(self, params=None, arm=None, band=None,
-                       converter=None):
+                       time_step=0.01, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.params = checked_instance(
                 "params", params, WorkspaceAdapterParameters,
@@ -197,20 +210,27 @@ def WorkspaceAdapter_(T):
                 ("capability", 1), ("capability_gradient", 6)))
             p = self.params
             if p.mode is MotionMode.INTUITIVE_PHRI:
+                h = positive("time_step", time_step)
                 self._constants = workspace.AdaptiveWorkspace.of(
                     self.band.upper, self.band.lower, p.workspace, self.R_ba,
-                    self.arm_base_position)
+                    self.arm_base_position, p.deactivation_speed,
+                    p.max_rate * h)
                 self._factors = body_for(
                     workspace.adaptive_weighting_factors, T)
-                calc, prerequisites = (self._calc_adaptive,
-                                       tickets(self._inputs.values()))
+                state = self.DeclareDiscreteState(
+                    np.array(workspace.WEIGHTING_START))
+                self.DeclarePeriodicDiscreteUpdateEvent(h, 0.0, self._update)
+                calc, prerequisites = (
+                    self._calc_adaptive,
+                    tickets(self._inputs.values())
+                    | {self.discrete_state_ticket(state)})
             else:
                 self._fixed = np.array(motion_mode.fixed_weighting_factors(
                     p.mode, p.sigma_xy, p.sigma_phi))
                 calc, prerequisites = (self._calc_fixed,
                                        {self.nothing_ticket()})
-            entry = declare_cached_vector(self, "weighting factors", calc,
-                                          prerequisites)
+            self._entry = entry = declare_cached_vector(
+                self, "weighting factors", calc, prerequisites)
             declare_slices(self, entry, (("sigma_xy", slice(0, 1)),
                                          ("sigma_phi", slice(1, 2))))
 
@@ -220,8 +240,12 @@ def WorkspaceAdapter_(T):
         def _calc_adaptive(self, context):
             position, velocity, C_m, gradient = (
                 port.Eval(context) for port in self._inputs.values())
-            return np.array(self._factors(position, velocity, C_m[0],
-                                          gradient, self._constants))
+            previous = context.get_discrete_state_vector().CopyToVector()
+            return np.array(self._factors(previous, position, velocity,
+                                          C_m[0], gradient, self._constants))
+
+        def _update(self, context, discrete_state):
+            discrete_state.set_value(self._entry.Eval(context))
 
     return Impl
 
