@@ -41,7 +41,12 @@ from drake_wbc.math.filtering import (
     check_filter_period,
 )
 from drake_wbc.math.loading import load_typed
-from drake_wbc.math.safety import SafetyParameters
+from drake_wbc.math.safety import (
+    DEFAULT_STOP_DISTANCE,
+    SafetyParameters,
+    check_within_robot,
+    robot_stop_distance,
+)
 from drake_wbc.math.validation import positive, switch
 from drake_wbc.math.workspace import WorkspaceAdapterParameters
 from drake_wbc.math.wrench import WrenchEstimatorParameters
@@ -199,6 +204,66 @@ def check_arm_limits(params, arm):
             f"arm_controller.acceleration_limit = "
             f"{params.acceleration_limit!r} is not allowed: must be at most "
             f"the arm's own {own!r} rad/s^2")
+
+def for_robot(params, base):
+    """The ControllerParameters the controller runs on a robot: `params`
+    with the robot's own values where they give none (None), each given
+    one checked to tighten the robot's own, never to widen it.
+
+    - safety.base_velocity_limits and base_acceleration_limits: the
+      base's own where None; a given one at most the base's
+      (drake_wbc.math.safety.check_within_robot).
+    - safety.stop_distance: DEFAULT_STOP_DISTANCE, or the distance the
+      base needs to stop with these limits if longer
+      (drake_wbc.math.safety.robot_stop_distance), where None; a given
+      one at least that distance.
+    - base_cdmp.repulsion.half_sizes, the footprint the repulsive field
+      and the separation keep clear: the base's own where None; a given
+      one at least the base's along each axis (a footprint smaller than
+      the base would let its corners reach what the field keeps off).
+
+    Args:
+        params: ControllerParameters.
+        base: the robot's BaseDescription
+            (drake_wbc.robot.description: its velocity_limits,
+            acceleration_limits and footprint_half_sizes).
+
+    Returns:
+        A copy of `params` with no None among these fields.
+
+    Raises:
+        ValueError: naming the field, its value and the robot's own.
+    """
+    safety, repulsion = params.safety, params.base_cdmp.repulsion
+    check_within_robot(safety, velocity_limits=base.velocity_limits,
+                       acceleration_limits=base.acceleration_limits)
+    own = tuple(float(a) for a in base.footprint_half_sizes)
+    if repulsion.half_sizes is not None:
+        for i, (value, limit) in enumerate(zip(repulsion.half_sizes, own,
+                                               strict=True)):
+            if value < limit:
+                raise ValueError(
+                    f"base_cdmp.repulsion.half_sizes[{i}] = {value!r} is not "
+                    f"allowed: must be at least the robot's own {limit!r} m "
+                    "(a footprint may grow the robot's, not shrink it)")
+    velocity = safety.base_velocity_limits or tuple(
+        float(v) for v in base.velocity_limits)
+    acceleration = safety.base_acceleration_limits or tuple(
+        float(a) for a in base.acceleration_limits)
+    stop_distance = safety.stop_distance
+    if stop_distance is None:
+        stop_distance = max(DEFAULT_STOP_DISTANCE, robot_stop_distance(
+            safety.stop_time, velocity, acceleration))
+    return dataclasses.replace(
+        params,
+        safety=dataclasses.replace(
+            safety, base_velocity_limits=velocity,
+            base_acceleration_limits=acceleration,
+            stop_distance=stop_distance),
+        base_cdmp=dataclasses.replace(
+            params.base_cdmp, repulsion=dataclasses.replace(
+                repulsion, half_sizes=repulsion.half_sizes or own)))
+
 
 def load_controller_parameters(path=None, text=None):
     """ControllerParameters from a YAML file or string, validated

@@ -47,6 +47,7 @@ from drake_wbc.experiments.common import (
     obstacle_distances,
     save_figure,
 )
+from drake_wbc.experiments.scenario import footprint_of
 
 APPROACH_GAP = 0.5
 """Approaches less than this many seconds apart are merged (s)."""
@@ -99,6 +100,7 @@ def person_distances(scenario, log):
     without people), from ground truth."""
     people_only = replace(scenario.scene, cylinders=[], boxes=[])
     return obstacle_distances(people_only, log["truth.base_pose"],
+                              footprint_of(scenario),
                               log.signals.get("truth.people_positions"))
 
 

@@ -34,6 +34,7 @@ from drake_wbc.experiments.common import (
     obstacle_distances,
     save_figure,
 )
+from drake_wbc.experiments.scenario import footprint_of
 from drake_wbc.math import movement as mv
 from drake_wbc.math.demonstration import tcp_poses
 from drake_wbc.robot.model import ArmKinematics
@@ -99,7 +100,7 @@ def run_metrics(scenario, name, log):
     demo_speed = _speed(u, demo.tcp[:, :3])
     people = log.signals.get("truth.people_positions")
     distance = obstacle_distances(scenario.scene, log["truth.base_pose"],
-                                  people)
+                                  footprint_of(scenario), people)
     return {
         "path_rms_m": float(np.sqrt(np.mean(np.sum(error[:, :3]**2,
                                                    axis=1)))),
