@@ -27,6 +27,7 @@ from drake_wbc.experiments.runner import (
 )
 from drake_wbc.experiments.scenario import (
     controller_arm,
+    controller_for,
     find_scenario,
     load_scenario,
     scenario_robot,
@@ -300,14 +301,18 @@ def test_the_second_shipped_robot_tracks_the_papers_step():
     LBR-class arm on a larger omni base, its own sensor and probe) in its
     trajectory-tracking scenario, 2.2 s of it: the tool takes up the
     0.1 m/s step (in the ground truth, once settled) with every command
-    within that robot's limits, and the tuning its demo proposes."""
+    within that robot's limits, and the tuning its demo proposes (in its
+    description, which the scenario leaves to it)."""
     scenario = load_scenario(find_scenario("trajectory_tracking_lbr"))
     scenario.duration = 2.2
     robot = scenario_robot(scenario)
     assert robot.name == "lbr_omni" and len(robot.arm.joints) == 7
     arm = controller_arm(scenario)
-    assert check_tuning(arm, scenario.controller.capability_band,
-                        scenario.controller.capability.joint_limit_gain) == []
+    assert scenario.controller.capability_band is None
+    params = controller_for(scenario)
+    assert params.capability_band == robot.tuning.capability_band
+    assert check_tuning(arm, params.capability_band,
+                        params.capability.joint_limit_gain) == []
     loop = build_closed_loop(scenario, scenario.variants[0])
     log = simulate(loop, scenario.duration)
     v = log["truth.end_effector_velocity"]
@@ -335,7 +340,7 @@ def test_the_controllers_base_defaults_are_that_robots_own():
     on_lbr = with_robot(scenario, lbr_file, echo=None)
     base = load_robot_description(lbr_file).base
     assert len(on_lbr.station.initial_arm_positions) == 7
-    params = for_robot(on_lbr.controller, base)
+    params = for_robot(on_lbr.controller, load_robot_description(lbr_file))
     assert params.safety.base_velocity_limits == tuple(base.velocity_limits)
     assert params.safety.base_acceleration_limits == tuple(
         base.acceleration_limits)

@@ -46,7 +46,7 @@ def _run_demo(args):
         write_model_page,
     )
     from drake_wbc.controller import load_controller_parameters
-    from drake_wbc.controller.parameters import ControllerParameters
+    from drake_wbc.controller.parameters import ControllerParameters, for_robot
     from drake_wbc.robot.description import (
         load_robot_description,
         shipped_robot,
@@ -56,8 +56,9 @@ def _run_demo(args):
     try:
         description = (shipped_robot() if args.robot is None
                        else load_robot_description(args.robot))
-        params = (ControllerParameters() if args.controller is None
-                  else load_controller_parameters(args.controller))
+        params = for_robot(
+            ControllerParameters() if args.controller is None
+            else load_controller_parameters(args.controller), description)
         report = describe_robot(args.q_arm, description=description)
     except (ValueError, OSError) as error:
         print(f"drake-wbc demo: {error}", file=sys.stderr)

@@ -216,13 +216,13 @@ def build_controller(params=None, robot=None):
     """
     params = validated_copy(checked_instance(
         "params", params, ControllerParameters, ControllerParameters))
+    arm = arm_kinematics(robot)
+    params = for_robot(params, arm.model.description)
     h, band, switch = (params.time_step, params.capability_band,
                        params.phri_switch)
-    arm = arm_kinematics(robot)
     check_arm_limits(params.arm_controller, arm)
     for problem in check_tuning(arm, band, params.capability.joint_limit_gain):
         warnings.warn(problem, RobotTuningWarning, stacklevel=2)
-    params = for_robot(params, arm.model.description.base)
     builder = DiagramBuilder()
     add = builder.AddNamedSystem
     stages = dict(

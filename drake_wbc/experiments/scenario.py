@@ -249,7 +249,7 @@ def controller_for(scenario, variant=None):
     drake_wbc.controller.parameters.for_robot) with the `variant`'s base
     filter switch and learned movement (None: scenario.controller's)."""
     params = for_robot(copy.deepcopy(scenario.controller),
-                       scenario_robot(scenario).base)
+                       scenario_robot(scenario))
     if variant is not None:
         params.base_filter.enabled = variant.base_filter
         if variant.movement is not None:
