@@ -196,3 +196,46 @@ def test_the_controllers_tuning_is_the_robots():
     untuned = load_robot_description(text=_shipped_text(tuning=None))
     assert untuned.tuning.joint_limit_gain == DEFAULT_JOINT_LIMIT_GAIN
     assert untuned.tuning.capability_band == CapabilityBand()
+
+
+def _lbr_on_library_base(folder, arm_url):
+    """A description of the second robot's arm (at `arm_url`) on the
+    library's omni base, named as a user would: the base and the probe as
+    package://drake_wbc/... without mapping that package."""
+    (folder / "robot.dmd.yaml").write_text(f"""\
+directives:
+- add_model: {{name: omni_base_b, file: package://drake_wbc/omni_base_b.sdf}}
+- add_model: {{name: lbr7, file: {arm_url}}}
+- add_weld: {{parent: omni_base_b::arm_mount, child: lbr7::base_link}}
+- add_model: {{name: ft_probe_tool, file: package://drake_wbc/ft_probe_tool.sdf}}
+- add_weld: {{parent: lbr7::flange, child: ft_probe_tool::ft_sensor}}
+""")
+    document = yaml.safe_load(
+        (models_dir() / "lbr_omni.robot.yaml").read_text())
+    document["model"] = {"directives": "robot.dmd.yaml"}
+    return document
+
+
+def test_a_user_arm_goes_on_the_librarys_base_without_a_path(tmp_path):
+    document = _lbr_on_library_base(tmp_path,
+                                    "package://drake_wbc/lbr7.sdf")
+    path = tmp_path / "robot.yaml"
+    path.write_text(yaml.safe_dump(document))
+    arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
+    assert arm.num_joints == 7
+
+
+def test_a_descriptions_package_wins_over_one_drake_knows(tmp_path):
+    """`drake_models` is a package Drake knows and would download (a
+    vendor's URDF refers to its meshes through it); a description that
+    maps it to a folder of its own gets that folder, offline."""
+    (tmp_path / "drake_models").mkdir()
+    (tmp_path / "drake_models" / "arm.sdf").write_text(
+        (models_dir() / "lbr7.sdf").read_text())
+    document = _lbr_on_library_base(tmp_path,
+                                    "package://drake_models/arm.sdf")
+    document["model"]["packages"] = {"drake_models": "drake_models"}
+    path = tmp_path / "robot.yaml"
+    path.write_text(yaml.safe_dump(document))
+    arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
+    assert arm.num_joints == 7
