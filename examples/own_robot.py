@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_wbc.experiments.runner import build_closed_loop, start_simulator
-from drake_wbc.experiments.scenario import load_scenario
+from drake_wbc.experiments.scenario import controller_for, load_scenario
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.robot.model import ArmKinematics, make_robot_plant
 from drake_wbc.robot.tuning import check_tuning, survey_capability
@@ -25,8 +25,9 @@ print(f"{robot.name}: {arm.num_joints} arm joints; C_m at home "
 
 # The scenario on it, in the simulated station.
 scenario = load_scenario(HERE / "own_robot.yaml")
-print("tuning:", check_tuning(arm, scenario.controller.capability_band,
-                              scenario.controller.capability.joint_limit_gain)
+params = controller_for(scenario)  # the robot's tuning and limits filled in
+print("tuning:", check_tuning(arm, params.capability_band,
+                              params.capability.joint_limit_gain)
       or "suits the arm")
 loop = build_closed_loop(scenario)
 simulator = start_simulator(loop)

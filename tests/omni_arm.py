@@ -110,16 +110,11 @@ def write_omni_arm(folder, n, accelerations=True, extra=""):
     return path
 
 
-SAFETY = dict(base_velocity_limits=[0.8, 0.8, 1.0],
-              base_acceleration_limits=[0.5, 0.5, 0.5], stop_distance=0.3)
-"""The controller's safety limits for this robot: its base's own (a
-limit may only tighten them), and a stop distance at least what braking
-at 0.5 m/s^2 needs (0.2625 m at stop_time 0.5 s)."""
-
 def write_scenario(folder, robot, duration, extra=""):
     """Writes a scenario on the 7-joint omni arm of the description
     `robot` (in `folder`): the arm at its home, the tuning the demo
-    proposes, SAFETY, the world twist [0.05, 0, 0.02] m/s; `extra` adds
+    proposes (the base's limits, footprint and stop distance its own, by
+    default), the world twist [0.05, 0, 0.02] m/s; `extra` adds
     top-level lines. Returns its path."""
     path = folder / "scenario.yaml"
     path.write_text(textwrap.dedent(f"""\
@@ -132,10 +127,6 @@ def write_scenario(folder, robot, duration, extra=""):
           capability:
             joint_limit_gain: 6.0e4
           capability_band: {{lower: 0.18, upper: 0.21}}
-          safety:
-            base_velocity_limits: {SAFETY["base_velocity_limits"]}
-            base_acceleration_limits: {SAFETY["base_acceleration_limits"]}
-            stop_distance: {SAFETY["stop_distance"]}
         task:
           reference_velocity:
             times: [0.0]

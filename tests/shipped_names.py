@@ -23,3 +23,16 @@ SCOPED = {_element(n): n for n in
 ROBOT_ACCELERATION_LIMIT = 12.56
 """The Elfin5's joint acceleration limit, rad/s^2 (models/elfin5.sdf), the
 same on every joint: what the arm controller brakes at by default."""
+
+BASE_VELOCITY_LIMITS = tuple(ROBOT.base.velocity_limits)
+"""The shipped base's own velocity limits [vx, vy, wz]."""
+BASE_ACCELERATION_LIMITS = tuple(ROBOT.base.acceleration_limits)
+"""The shipped base's own acceleration limits [vx, vy, wz]."""
+FOOTPRINT = tuple(ROBOT.base.footprint_half_sizes)
+"""The shipped base's footprint half sizes (a, b), m."""
+BASE_LIMITS = dict(base_velocity_limits=BASE_VELOCITY_LIMITS,
+                   base_acceleration_limits=BASE_ACCELERATION_LIMITS,
+                   stop_distance=0.1)
+"""SafetyParameters' keywords for the shipped base's own limits and stop
+distance (what build_controller fills in; a stage built alone is given
+them)."""

@@ -5,12 +5,19 @@ import argparse
 import contextlib
 import csv
 import io
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from drake_wbc.analysis.bode import read_csv
 from drake_wbc.cli import analysis as commands
+from drake_wbc.cli.robot_option import on_robot
+from drake_wbc.experiments.scenario import (
+    controller_arm,
+    find_scenario,
+    load_scenario,
+)
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 PLOTS = ("base_filter", "split_ideal", "split_base_loop", "base_plant",
@@ -134,3 +141,35 @@ def test_diagram_writes_dot_and_says_when_graphviz_is_missing(
         assert not (folder / f"{stem}.svg").exists()
     assert "Graphviz's `dot` program is not on PATH" in text
     assert commands.render_svg(folder / "controller.dot") is None
+
+
+def test_the_chains_are_linearised_on_the_scenarios_robot():
+    """`bode --robot` on the second shipped robot: the operating point is
+    its 7-joint arm at home with its own tuning (C_m with its k_j 6e4),
+    and the ideal split of the end effector's command still sums to one
+    through that arm's stages."""
+    from pydrake.systems.primitives import Linearize
+
+    from drake_wbc.analysis import chains
+    from drake_wbc.robot.tuning import capability_at
+
+    lbr = (Path(__file__).resolve().parents[1] / "models"
+           / "lbr_omni.robot.yaml")
+    args = _parse(commands.add_bode_arguments,
+                  ["trajectory_tracking", "--robot", str(lbr)])
+    scenario = on_robot(load_scenario(find_scenario(args.scenario)), args,
+                        echo=None)
+    arm = controller_arm(scenario)
+    assert arm.num_joints == 7
+    point = chains.operating_point(scenario.controller,
+                                   scenario.station.initial_arm_positions,
+                                   arm)
+    np.testing.assert_array_equal(point.arm_positions, arm.home)
+    assert point.capability == pytest.approx(
+        capability_at(arm, arm.home, 6.0e4), rel=1e-12)
+    split = chains.build_split_diagram(scenario.controller, point)
+    context = split.CreateDefaultContext()
+    split.get_input_port().FixValue(context, np.zeros(6))
+    linear = Linearize(split, context)
+    np.testing.assert_allclose(linear.D()[12:18], np.eye(6), atol=1e-12)
+    np.testing.assert_allclose(linear.C()[12:18], 0.0, atol=1e-12)

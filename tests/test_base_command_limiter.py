@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue
 from pydrake.common.value import AbstractValue
+from shipped_names import BASE_LIMITS
 
 from drake_wbc.math.command_limits import limit_base_velocity
 from drake_wbc.math.repulsion import footprint_gap
@@ -98,7 +99,7 @@ def values(vector):
 def test_the_limiter_is_the_model_tick_by_tick(scalar):
     # A short hold, so that protective stops (a scan in five has points
     # inside the footprint) clear within the run.
-    params = SafetyParameters(hold_time=0.02)
+    params = SafetyParameters(**BASE_LIMITS, hold_time=0.02)
     system = BaseCommandLimiter(params, H, HALF_SIZES)
     if scalar == "autodiff":
         system = system.ToAutoDiffXd()
@@ -157,7 +158,8 @@ def test_the_autodiff_limiter_differentiates_the_separation_scale():
     scale's reference in AutoDiffXd; the acceleration limit is out of
     the way)."""
     params = SafetyParameters(base_velocity_limits=[2.0, 2.0, 2.0],
-                              base_acceleration_limits=[1e3, 1e3, 1e3])
+                              base_acceleration_limits=[1e3, 1e3, 1e3],
+                              stop_distance=0.1)
     system = BaseCommandLimiter(params, H, HALF_SIZES).ToAutoDiffXd()
     context = system.CreateDefaultContext()
     wall = np.array([[0.9, y] for y in np.linspace(-1.0, 1.0, 21)])
@@ -191,11 +193,13 @@ def test_the_autodiff_limiter_differentiates_the_limits_exactly(limit):
     (limit_base_velocity is scalar-generic)."""
     if limit == "velocity":
         params = SafetyParameters(base_velocity_limits=[2.0, 2.0, 2.0],
-                                  base_acceleration_limits=[1e3, 1e3, 1e3])
+                                  base_acceleration_limits=[1e3, 1e3, 1e3],
+                                  stop_distance=0.1)
         scale = 2.0 / 3.0
     else:
         params = SafetyParameters(base_velocity_limits=[4.0, 4.0, 4.0],
-                                  base_acceleration_limits=[50.0, 50.0, 50.0])
+                                  base_acceleration_limits=[50.0, 50.0, 50.0],
+                                  stop_distance=0.1)
         scale = 50.0 * H / 3.0
     system = BaseCommandLimiter(params, H, HALF_SIZES).ToAutoDiffXd()
     context = system.CreateDefaultContext()

@@ -5,6 +5,7 @@ states, the repulsive field against U_rep, and AutoDiff gradients."""
 import numpy as np
 import pytest
 from reference_kinematics import central_differences
+from shipped_names import FOOTPRINT
 from test_dmp import check_autodiff
 
 from drake_wbc.math.cdmp import (
@@ -221,7 +222,7 @@ def test_whole_body_commands_back_the_accumulated_deviation():
 # Repulsive field and base CDMP, eq. (cdmp-base)
 # ----------------------------------------------------------------------------
 
-FIELD = RepulsiveFieldParameters()
+FIELD = RepulsiveFieldParameters(half_sizes=FOOTPRINT)
 
 
 def reference_distance(p, half_sizes=(0.4, 0.3)):
@@ -301,7 +302,7 @@ def test_a_non_finite_point_makes_the_force_nan(force):
 
 
 def test_base_cdmp_avoids_and_passes_velocity():
-    params = BaseCdmpParameters()
+    params = BaseCdmpParameters(repulsion=FIELD)
     g, C, V_b = np.array([1.0, 2.0, 0.3]), np.zeros(3), np.array([
         0.3, 0.1, 0.2])
     y_dot, z_dot, C_dot = base_cdmp_derivative(g, np.zeros(3), C, g, V_b,
@@ -413,7 +414,7 @@ def test_coupled_derivatives_autodiff_gradients():
         lambda y, z, C, g, V, F, S: arm_cdmp_derivative(
             y, z, C, g, V, F, arm, S_hri=S[0]),
         [*v[:6], np.array([0.0])])
-    base = BaseCdmpParameters(dmp=dmp)
+    base = BaseCdmpParameters(repulsion=FIELD, dmp=dmp)
     points = np.array([[0.6, 0.1], [-0.3, 0.45], [0.55, -0.5], [0.1, 0.05],
                        [2.0, 0.0], [-0.5, -0.42]])
     check_autodiff(

@@ -1,12 +1,15 @@
 """The coupled-DMP stages against the paper's equations, through their ports,
 and Drake's linearisation of them against eqs. (lp-admit) and (tf-admit)."""
 
+from functools import partial
+
 import numpy as np
 import pytest
 from pydrake.common.value import AbstractValue
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Linearize, VectorLogSink
+from shipped_names import FOOTPRINT
 
 from drake_wbc.analysis.frequency import linear_system_response
 from drake_wbc.math import cdmp, repulsion
@@ -15,6 +18,10 @@ from drake_wbc.stages.cdmp_stages import ArmCdmp, BaseCdmp
 from drake_wbc.stages.whole_body_cdmp import WholeBodyCdmp
 
 OMEGA = 2 * np.pi * np.logspace(-2, 2, 120)
+
+BASE = cdmp.BaseCdmpParameters(repulsion=repulsion.RepulsiveFieldParameters(
+    half_sizes=FOOTPRINT))
+"""The base CDMP's parameters on the shipped base's footprint."""
 
 
 def fix_inputs(system, context, values):
@@ -115,7 +122,8 @@ def test_base_cdmp_avoids_and_returns():
     """An obstacle 0.2 m ahead of the footprint pushes the base back; once
     it is gone the base returns onto its commanded path."""
     params = cdmp.BaseCdmpParameters(
-        repulsion=repulsion.RepulsiveFieldParameters(k_obs=1.0))
+        repulsion=repulsion.RepulsiveFieldParameters(half_sizes=FOOTPRINT,
+                                                     k_obs=1.0))
     system = BaseCdmp(params)
     context = system.CreateDefaultContext()
     fix_inputs(system, context, dict(base_velocity=[0.1, 0.0, 0.0],
@@ -258,7 +266,7 @@ def test_phri_switch_turns_the_force_control_off():
 
 @pytest.mark.parametrize(("stage", "params"), [
     (WholeBodyCdmp, cdmp.WholeBodyCdmpParameters),
-    (BaseCdmp, cdmp.BaseCdmpParameters), (ArmCdmp, cdmp.ArmCdmpParameters)])
+    (BaseCdmp, lambda: BASE), (ArmCdmp, cdmp.ArmCdmpParameters)])
 def test_scalar_conversion(stage, params):
     system = stage(params(), time_step=0.005)
     converted = system.ToAutoDiffXd()
@@ -382,7 +390,7 @@ def test_base_cdmp_shares_one_force_and_result_a_tick():
     """The output computes the repulsive force and the shared result once;
     the update finds both up to date (computes neither again); the force
     is the repulsive field's with no yaw part, and a copy."""
-    system = BaseCdmp()
+    system = BaseCdmp(BASE)
     context = system.CreateDefaultContext()
     fix_inputs(system, context, dict(base_velocity=[0.1, 0.0, 0.0]))
     points = np.array([[0.6, 0.1], [-0.2, 0.5]])
@@ -407,7 +415,7 @@ def test_base_cdmp_shares_one_force_and_result_a_tick():
 
 
 def test_base_cdmp_without_points_feels_no_force():
-    system = BaseCdmp()
+    system = BaseCdmp(BASE)
     context = system.CreateDefaultContext()
     fix_inputs(system, context, dict(base_velocity=[0.1, 0.2, 0.3]))
     np.testing.assert_array_equal(system.repulsive_force(context),
@@ -422,7 +430,7 @@ def test_non_finite_inputs_stay_non_finite(value):
     the checks downstream still see it)."""
     rng = np.random.default_rng(6)
     for make, port, size in ((ArmCdmp, "wrench", 6),
-                             (BaseCdmp, "base_velocity", 3),
+                             (partial(BaseCdmp, BASE), "base_velocity", 3),
                              (WholeBodyCdmp, "wrench", 6),
                              (WholeBodyCdmp, "reference_velocity", 6)):
         system = make()
@@ -472,7 +480,8 @@ def autodiff_copy_values(system, rng, time=1.2):
                 ad_context).get_vector().CopyToVector()])
 
 
-@pytest.mark.parametrize("stage", [ArmCdmp, BaseCdmp, WholeBodyCdmp])
+@pytest.mark.parametrize("stage", [ArmCdmp, partial(BaseCdmp, BASE),
+                                   WholeBodyCdmp])
 def test_autodiff_copies_compute_the_same_values(stage):
     rng = np.random.default_rng(7)
     output, update, ad_output, ad_update = autodiff_copy_values(stage(), rng)

@@ -4,12 +4,13 @@ import base64
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 from omni_arm import write_omni_arm
 
-from drake_wbc.cli.main import main
+from drake_wbc.cli.main import main, make_parser
 from drake_wbc.math import capability
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 
@@ -122,3 +123,12 @@ def test_run_writes_logs_figures_replay_and_summary(tmp_path, capsys):
         assert (tmp_path / name).is_file(), name
     header = (tmp_path / "log_filtered.csv").read_text().splitlines()[0]
     assert header.startswith("time,") and "capability.C_m" in header
+
+
+@pytest.mark.parametrize("argv", [
+    ["run", "fixed_point"], ["robot-sim", "hardware"], ["deploy", "hardware"],
+    ["teach", "teach"], ["replay", "movement.yaml"], ["bode"], ["diagram"],
+    ["demo"]])
+def test_every_command_that_runs_a_scenario_takes_a_robot(argv):
+    args = make_parser().parse_args(argv + ["--robot", "my_robot.yaml"])
+    assert args.robot == Path("my_robot.yaml")

@@ -86,7 +86,8 @@ def test_an_empty_document_gives_the_defaults():
 
 def test_every_field_type_survives_a_round_trip():
     params = ControllerParameters(time_step=0.005, phri_switch=1.0)
-    params.capability_band.lower = 0.03
+    params.capability_band = CapabilityBand(0.03, 0.04)
+    params.capability.joint_limit_gain = 2.0e4
     params.workspace.mode = "intuitive-phri"
     params.workspace.workspace.extent_upper = 0.85
     params.distributor.damping.threshold = 2.0e-4

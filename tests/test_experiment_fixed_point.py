@@ -13,6 +13,7 @@ from drake_wbc.controller.task import Schedule
 from drake_wbc.experiments import experiment_module, fixed_point
 from drake_wbc.experiments.runner import build_closed_loop, simulate
 from drake_wbc.experiments.scenario import (
+    controller_for,
     find_scenario,
     load_scenario,
 )
@@ -68,7 +69,7 @@ def metrics(scenario, log):
 def test_scenario_is_the_papers_setting(scenario):
     assert experiment_module(scenario.experiment) is fixed_point
     assert scenario.controller.base_cdmp.repulsion.d_th == 0.5
-    band = scenario.controller.capability_band
+    band = controller_for(scenario).capability_band
     assert (band.lower, band.upper) == (0.035, 0.04)
     assert not np.any(scenario.task.reference_velocity.values)
     times = np.array([0.0, 21.0, 22.0, 23.0, 35.0, 36.0])

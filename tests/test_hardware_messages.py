@@ -3,6 +3,7 @@ their .lcm files, every message survives a round trip, and what the
 controller must not see (malformed bytes, wrong sizes, NaN, time going
 backwards) is rejected."""
 
+import copy
 import re
 import subprocess
 import sys
@@ -17,8 +18,10 @@ from drake_wbc.hardware.options import (
     ChannelNames,
     HardwareOptions,
     WatchdogLimits,
+    command_timeout_of,
 )
 from drake_wbc.hardware.safety import Limits
+from drake_wbc.robot.description import shipped_robot
 
 LCMTYPES = Path(messages.__file__).parent / "lcmtypes"
 
@@ -211,9 +214,6 @@ def test_options_are_checked():
         HardwareOptions(watchdog_period=0.003)
     with pytest.raises(ValueError, match="clock_resync_messages = 1"):
         HardwareOptions(clock_resync_messages=1)
-    with pytest.raises(ValueError, match="sender_release_time = 0.1 s.*"
-                                         "robot_command_timeout = 0.25"):
-        HardwareOptions(sender_release_time=0.1)
     with pytest.raises(ValueError,
                        match=r"obstacle_points = 0.05 s.*\(0.06667 s\)"):
         WatchdogLimits(obstacle_points=0.05)
@@ -241,12 +241,29 @@ def test_base_limits_may_only_tighten_the_robots_own(field, value, own):
 
 
 def test_the_command_timeout_may_only_tighten_the_robots_own():
+    """Checked against the robot's description (the shipped base's own
+    0.25 s) when the command guard's limits are made, and its default."""
+    base = shipped_robot().base
     with pytest.raises(ValueError, match=re.escape(
             "robot_command_timeout = 60.0 is not allowed: must be at most "
             "the robot's own 0.25 s")):
-        HardwareOptions(robot_command_timeout=60.0)
-    assert HardwareOptions(robot_command_timeout=0.1).robot_command_timeout \
-        == 0.1
+        Limits.of_robot(HardwareOptions(robot_command_timeout=60.0,
+                                        sender_release_time=60.0))
+    assert command_timeout_of(HardwareOptions(), base) == 0.25
+    assert command_timeout_of(HardwareOptions(robot_command_timeout=0.1),
+                              base) == 0.1
+    slower = copy.deepcopy(base)
+    slower.command_timeout = 0.5
+    assert command_timeout_of(HardwareOptions(), slower) == 0.5
+    with pytest.raises(ValueError, match="sender_release_time = 0.1 s.*"
+                                         "robot_command_timeout = 0.25"):
+        command_timeout_of(HardwareOptions(sender_release_time=0.1), base)
+    with pytest.raises(ValueError, match=re.escape(
+            "watchdog_limits.obstacle_points = 0.2 is not allowed: must be "
+            "at most the robot's own command timeout 0.15 s")):
+        quick = copy.deepcopy(base)
+        quick.command_timeout = 0.15
+        command_timeout_of(HardwareOptions(sender_release_time=1.0), quick)
 
 
 @pytest.mark.parametrize("stream", ["base_state", "arm_status",

@@ -4,12 +4,13 @@ controller built from its description alone, and an ideal robot (the
 joints follow their position command, the base its velocity command) that
 must carry the TCP along the commanded world twist."""
 
+import copy
 import re
 import warnings
 
 import numpy as np
 import pytest
-from omni_arm import SAFETY, write_omni_arm, write_scenario
+from omni_arm import write_omni_arm, write_scenario
 from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
@@ -17,6 +18,7 @@ from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 
 from drake_wbc.controller import ControllerParameters, build_controller
+from drake_wbc.controller.parameters import for_robot
 from drake_wbc.deployment.deploy import add_controller_side
 from drake_wbc.experiments.runner import (
     build_closed_loop,
@@ -25,6 +27,7 @@ from drake_wbc.experiments.runner import (
 )
 from drake_wbc.experiments.scenario import (
     controller_arm,
+    controller_for,
     find_scenario,
     load_scenario,
     scenario_robot,
@@ -33,8 +36,9 @@ from drake_wbc.experiments.scenario import (
 from drake_wbc.hardware import messages
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.hardware.safety import CommandGuard, Limits, follow_arm_command
-from drake_wbc.math.safety import SafetyParameters
-from drake_wbc.robot.description import load_robot_description
+from drake_wbc.math.safety import robot_stop_distance
+from drake_wbc.robot.description import load_robot_description, shipped_robot
+from drake_wbc.robot.footprint import check_start_is_free
 from drake_wbc.robot.model import ArmKinematics, make_robot_plant
 from drake_wbc.robot.tuning import (
     RobotTuningWarning,
@@ -42,6 +46,7 @@ from drake_wbc.robot.tuning import (
     survey_capability,
 )
 from drake_wbc.stages.wrench import tool_weight_reading
+from drake_wbc.station.scene import CylinderObstacle, Scene
 
 H = 0.01
 
@@ -88,7 +93,7 @@ def test_the_controller_of_a_urdf_robot_tracks_a_world_twist(tmp_path, n):
     arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
     # The tuning proposed for this arm (drake_wbc.robot.tuning).
     survey = survey_capability(arm, count=100)
-    params = ControllerParameters(safety=SafetyParameters(**SAFETY))
+    params = ControllerParameters()
     params.capability.joint_limit_gain = survey.k_j
     params.capability_band = survey.proposed_band()
     with warnings.catch_warnings():
@@ -296,14 +301,18 @@ def test_the_second_shipped_robot_tracks_the_papers_step():
     LBR-class arm on a larger omni base, its own sensor and probe) in its
     trajectory-tracking scenario, 2.2 s of it: the tool takes up the
     0.1 m/s step (in the ground truth, once settled) with every command
-    within that robot's limits, and the tuning its demo proposes."""
+    within that robot's limits, and the tuning its demo proposes (in its
+    description, which the scenario leaves to it)."""
     scenario = load_scenario(find_scenario("trajectory_tracking_lbr"))
     scenario.duration = 2.2
     robot = scenario_robot(scenario)
     assert robot.name == "lbr_omni" and len(robot.arm.joints) == 7
     arm = controller_arm(scenario)
-    assert check_tuning(arm, scenario.controller.capability_band,
-                        scenario.controller.capability.joint_limit_gain) == []
+    assert scenario.controller.capability_band is None
+    params = controller_for(scenario)
+    assert params.capability_band == robot.tuning.capability_band
+    assert check_tuning(arm, params.capability_band,
+                        params.capability.joint_limit_gain) == []
     loop = build_closed_loop(scenario, scenario.variants[0])
     log = simulate(loop, scenario.duration)
     v = log["truth.end_effector_velocity"]
@@ -317,17 +326,66 @@ def test_the_second_shipped_robot_tracks_the_papers_step():
     assert np.max(speed) <= 0.8 + 1e-9
 
 
-def test_the_controllers_base_limits_may_only_tighten_that_robots_own():
-    """On the second shipped robot (0.8 m/s, 0.5 m/s^2), the controller's
-    default base limits (the shipped base's 1 m/s) are refused when it is
-    built, naming the field and that robot's own value; `--robot` on a
-    scenario for the shipped robot therefore says what to tighten."""
+def test_the_controllers_base_defaults_are_that_robots_own():
+    """On the second shipped robot (0.8 m/s, 0.5 m/s^2, a 0.9 x 0.7 m
+    footprint), a scenario for the shipped robot gets that robot's base
+    limits, footprint and the stop distance its braking needs (0.2625 m
+    at stop_time 0.5 s, above the 0.1 m default) when the controller is
+    built, not the shipped base's; a limit wider than its own, a
+    footprint smaller than its own or a shorter stop distance is refused,
+    naming the field and that robot's own value."""
     scenario = load_scenario(find_scenario("trajectory_tracking"))
-    on_lbr = with_robot(scenario, find_scenario(
-        "trajectory_tracking_lbr").parent.parent / "models" /
-        "lbr_omni.robot.yaml", echo=None)
+    lbr_file = (find_scenario("trajectory_tracking_lbr").parent.parent
+                / "models" / "lbr_omni.robot.yaml")
+    on_lbr = with_robot(scenario, lbr_file, echo=None)
+    base = load_robot_description(lbr_file).base
     assert len(on_lbr.station.initial_arm_positions) == 7
+    params = for_robot(on_lbr.controller, load_robot_description(lbr_file))
+    assert params.safety.base_velocity_limits == tuple(base.velocity_limits)
+    assert params.safety.base_acceleration_limits == tuple(
+        base.acceleration_limits)
+    assert params.base_cdmp.repulsion.half_sizes == tuple(
+        base.footprint_half_sizes)
+    assert params.safety.stop_distance == pytest.approx(robot_stop_distance(
+        0.5, base.velocity_limits, base.acceleration_limits))
+    assert params.safety.stop_distance > 0.1
+    controller = build_controller(on_lbr.controller,
+                                  robot=controller_arm(on_lbr))
+    limiter = controller.stages["base_limiter"]
+    assert limiter.half_sizes == tuple(base.footprint_half_sizes)
+    wider = copy.deepcopy(on_lbr.controller)
+    wider.safety.base_velocity_limits = (1.0, 1.0, 1.0)
     with pytest.raises(ValueError, match=re.escape(
             "safety.base_velocity_limits[0] = 1.0 is not allowed: must be "
             "at most the robot's own 0.8 m/s")):
-        build_controller(on_lbr.controller, robot=controller_arm(on_lbr))
+        build_controller(wider, robot=controller_arm(on_lbr))
+    smaller = copy.deepcopy(on_lbr.controller)
+    smaller.base_cdmp.repulsion.half_sizes = (0.4, 0.3)
+    a = base.footprint_half_sizes[0]
+    with pytest.raises(ValueError, match=re.escape(
+            f"base_cdmp.repulsion.half_sizes[0] = 0.4 is not allowed: must "
+            f"be at least the robot's own {a!r} m")):
+        build_controller(smaller, robot=controller_arm(on_lbr))
+    shorter = copy.deepcopy(on_lbr.controller)
+    shorter.safety.stop_distance = 0.1
+    with pytest.raises(ValueError, match="safety.stop_distance = 0.1"):
+        build_controller(shorter, robot=controller_arm(on_lbr))
+
+
+def test_the_start_is_checked_against_the_robots_footprint():
+    """A post of radius 0.25 m whose axis stands 0.7 m ahead of the
+    base's centre is clear of the shipped 0.8 m long base (0.3 m from its
+    front) and overlaps a 1.0 m long one (0.2 m): the start check uses
+    the robot's footprint."""
+
+    shipped = shipped_robot().base
+    longer = copy.deepcopy(shipped)
+    longer.footprint_half_sizes = (0.5, 0.3)
+    scene = Scene(cylinders=[CylinderObstacle(
+        name="post", position=[0.7, 0.0], radius=0.25, height=1.0)])
+    check_start_is_free(scene, [0.0, 0.0, 0.0], shipped)
+    with pytest.raises(ValueError, match=re.escape(
+            "scene.cylinders[0] ('post') is not allowed with "
+            "station.initial_base_pose = [0.0, 0.0, 0.0]: it overlaps the "
+            "base's 1.0 x 0.6 m footprint")):
+        check_start_is_free(scene, [0.0, 0.0, 0.0], longer)

@@ -11,6 +11,11 @@ import math
 import numpy as np
 import pytest
 from pydrake.common.value import AbstractValue
+from shipped_names import (
+    BASE_ACCELERATION_LIMITS,
+    BASE_LIMITS,
+    BASE_VELOCITY_LIMITS,
+)
 
 from drake_wbc.math import people as tracking
 from drake_wbc.math.repulsion import footprint_gap
@@ -127,13 +132,14 @@ def test_human_speeds_cannot_be_set_below_iso():
     with pytest.raises(ValueError, match="people.human_speed = 1.0"):
         from drake_wbc.math.validation import validate
 
-        params = SafetyParameters()
+        params = SafetyParameters(**BASE_LIMITS)
         params.people.human_speed = 1.0
         validate(params)
     for name in ("intrusion", "processing_time"):
         with pytest.raises(ValueError, match=name):
             PeopleSeparationParameters(**{name: -0.1})
-    check_within_robot(SafetyParameters())
+    check_within_robot(SafetyParameters(), BASE_VELOCITY_LIMITS,
+                       BASE_ACCELERATION_LIMITS)
 
 
 # --- the tracker ------------------------------------------------------------
@@ -243,7 +249,7 @@ def ideal_run(person, duration, desired=(1.0, 0.0, 0.0), v0=0.0,
         times, commands (N, 3), the footprint's gap to the person's circle
         (N,), the protective stop (N,), and the limiter.
     """
-    limiter = BaseCommandLimiter(SafetyParameters(), H, HALF)
+    limiter = BaseCommandLimiter(SafetyParameters(**BASE_LIMITS), H, HALF)
     context = limiter.CreateDefaultContext()
     limiter.set_previous(context, [v0, 0.0, 0.0])
     limiter.GetInputPort("velocity").FixValue(context, np.asarray(desired))
@@ -390,7 +396,7 @@ def test_a_point_inside_the_footprint_is_a_protective_stop(caplog):
     person or what the base has struck) stops the base within its
     acceleration limit, reported on `protective_stop` and by `reason`,
     and the base resumes hold_time after it has gone."""
-    limiter = BaseCommandLimiter(SafetyParameters(), H, HALF)
+    limiter = BaseCommandLimiter(SafetyParameters(**BASE_LIMITS), H, HALF)
     context = limiter.CreateDefaultContext()
     limiter.set_previous(context, [0.5, 0.0, 0.0])
     limiter.GetInputPort("velocity").FixValue(context, [0.5, 0.0, 0.0])

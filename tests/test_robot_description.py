@@ -75,6 +75,11 @@ def _add(text):
     ({"arm.position_lower": [0.0] * 6, "arm.position_upper": [0.0] * 6},
      r"arm.position_lower\[0\] = 0.0 is not allowed: must be below"),
     ({"arm.flange": "elfin5::flange"}, r"arm.flange"),
+    ({"tuning.joint_limit_gain": -1.0},
+     r"tuning.joint_limit_gain = -1.0 is not allowed"),
+    ({"tuning.capability_band": {"lower": 0.04, "upper": 0.035}},
+     r"tuning.capability_band.lower = 0.04 and "
+     r"tuning.capability_band.upper = 0.035 are not allowed"),
 ])
 def test_a_description_that_does_not_load_names_the_field(changes, message):
     with pytest.raises(ValueError, match=message):
@@ -164,3 +169,73 @@ def test_fewer_than_six_arm_joints_are_refused(tmp_path):
     path = write_omni_arm(tmp_path, 5, accelerations=False)
     with pytest.raises(ValueError, match=r"arm.joints = .* at least 6, got 5"):
         load_robot_description(path)
+
+
+def test_the_controllers_tuning_is_the_robots():
+    """A description's tuning is what the capability stage uses on its arm
+    where the parameters give none: on the second shipped robot k_j 6e4
+    and its band (C_m from the stage equals capability_at with k_j 6e4;
+    alpha is 0 at home, above the band); a description without tuning
+    gets the paper's."""
+    from drake_wbc.math.capability import (
+        DEFAULT_JOINT_LIMIT_GAIN,
+        CapabilityBand,
+    )
+    from drake_wbc.robot.tuning import capability_at
+    from drake_wbc.stages import ArmCapability
+
+    lbr = load_robot_description(models_dir() / "lbr_omni.robot.yaml")
+    assert lbr.tuning.joint_limit_gain == 6.0e4
+    arm = ArmKinematics(*make_robot_plant(lbr))
+    stage = ArmCapability(arm=arm)
+    assert stage.band == lbr.tuning.capability_band
+    values = stage.evaluate(arm.home)
+    assert values[3] == pytest.approx(capability_at(arm, arm.home, 6.0e4),
+                                      rel=1e-12)
+    assert values[3] > lbr.tuning.capability_band.upper and values[10] == 0
+    untuned = load_robot_description(text=_shipped_text(tuning=None))
+    assert untuned.tuning.joint_limit_gain == DEFAULT_JOINT_LIMIT_GAIN
+    assert untuned.tuning.capability_band == CapabilityBand()
+
+
+def _lbr_on_library_base(folder, arm_url):
+    """A description of the second robot's arm (at `arm_url`) on the
+    library's omni base, named as a user would: the base and the probe as
+    package://drake_wbc/... without mapping that package."""
+    (folder / "robot.dmd.yaml").write_text(f"""\
+directives:
+- add_model: {{name: omni_base_b, file: package://drake_wbc/omni_base_b.sdf}}
+- add_model: {{name: lbr7, file: {arm_url}}}
+- add_weld: {{parent: omni_base_b::arm_mount, child: lbr7::base_link}}
+- add_model: {{name: ft_probe_tool, file: package://drake_wbc/ft_probe_tool.sdf}}
+- add_weld: {{parent: lbr7::flange, child: ft_probe_tool::ft_sensor}}
+""")
+    document = yaml.safe_load(
+        (models_dir() / "lbr_omni.robot.yaml").read_text())
+    document["model"] = {"directives": "robot.dmd.yaml"}
+    return document
+
+
+def test_a_user_arm_goes_on_the_librarys_base_without_a_path(tmp_path):
+    document = _lbr_on_library_base(tmp_path,
+                                    "package://drake_wbc/lbr7.sdf")
+    path = tmp_path / "robot.yaml"
+    path.write_text(yaml.safe_dump(document))
+    arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
+    assert arm.num_joints == 7
+
+
+def test_a_descriptions_package_wins_over_one_drake_knows(tmp_path):
+    """`drake_models` is a package Drake knows and would download (a
+    vendor's URDF refers to its meshes through it); a description that
+    maps it to a folder of its own gets that folder, offline."""
+    (tmp_path / "drake_models").mkdir()
+    (tmp_path / "drake_models" / "arm.sdf").write_text(
+        (models_dir() / "lbr7.sdf").read_text())
+    document = _lbr_on_library_base(tmp_path,
+                                    "package://drake_models/arm.sdf")
+    document["model"]["packages"] = {"drake_models": "drake_models"}
+    path = tmp_path / "robot.yaml"
+    path.write_text(yaml.safe_dump(document))
+    arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
+    assert arm.num_joints == 7

@@ -7,12 +7,11 @@ import warnings
 
 import numpy as np
 import pytest
-from omni_arm import SAFETY, write_omni_arm
+from omni_arm import write_omni_arm
 
 from drake_wbc.controller import ControllerParameters, build_controller
 from drake_wbc.math import capability
 from drake_wbc.math.capability import CapabilityBand
-from drake_wbc.math.safety import SafetyParameters
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.robot.model import ArmKinematics, make_robot_plant
 from drake_wbc.robot.tuning import (
@@ -84,11 +83,10 @@ def test_a_seven_joint_arm_with_the_six_joint_tuning_is_warned_of(seven):
     assert any("caps P_jnt at 0.60 on this arm's 7 joints" in p
                for p in problems)
     with pytest.warns(RobotTuningWarning, match="caps P_jnt"):
-        build_controller(ControllerParameters(
-            safety=SafetyParameters(**SAFETY)), robot=seven)
+        build_controller(ControllerParameters(), robot=seven)
     # Its proposed tuning builds without a word.
     survey = survey_capability(seven, count=100)
-    params = ControllerParameters(safety=SafetyParameters(**SAFETY))
+    params = ControllerParameters()
     params.capability.joint_limit_gain = survey.k_j
     params.capability_band = survey.proposed_band()
     assert check_tuning(seven, params.capability_band, survey.k_j) == []

@@ -16,6 +16,12 @@ from pydrake.systems.framework import (
     PortDataType,
 )
 from pydrake.systems.primitives import Linearize
+from shipped_names import (
+    BASE_ACCELERATION_LIMITS,
+    BASE_LIMITS,
+    BASE_VELOCITY_LIMITS,
+    FOOTPRINT,
+)
 
 from drake_wbc.controller import (
     ControllerParameters,
@@ -35,8 +41,8 @@ from drake_wbc.stages import BaseCommandLimiter, InputGuard, StopGate
 from drake_wbc.stages.safety import LOGGER, GuardedInput
 
 HOLD = safety.DEFAULT_HOLD_TIME
-V_MAX = np.array(safety.BASE_VELOCITY_LIMITS)
-A_MAX = np.array(safety.BASE_ACCELERATION_LIMITS)
+V_MAX = np.array(BASE_VELOCITY_LIMITS)
+A_MAX = np.array(BASE_ACCELERATION_LIMITS)
 JOINT_SPEED = 1.57
 JOINT_ACCELERATION = 12.56
 TOL = 1e-9
@@ -495,7 +501,8 @@ def test_obstacle_inside_the_footprint(arm):
 def test_systems_convert_to_autodiff():
     guard = InputGuard([GuardedInput("u", 2, (("u", [1.0, 2.0]),))],
                        points_name="points")
-    for system in (guard, StopGate(3), BaseCommandLimiter()):
+    for system in (guard, StopGate(3), BaseCommandLimiter(
+            SafetyParameters(**BASE_LIMITS), half_sizes=FOOTPRINT)):
         converted = system.ToAutoDiffXd()
         context = converted.CreateDefaultContext()
         for i in range(converted.num_input_ports()):
@@ -540,7 +547,8 @@ def test_stop_gate_zeroes_or_scales_as_a_whole():
 
 
 def test_limiter_linearises_to_the_identity_within_limits():
-    limiter = BaseCommandLimiter()
+    limiter = BaseCommandLimiter(SafetyParameters(**BASE_LIMITS),
+                                 half_sizes=FOOTPRINT)
     context = limiter.CreateDefaultContext()
     limiter.set_previous(context, [0.2, -0.1, 0.05])
     limiter.GetInputPort("velocity").FixValue(context, [0.2, -0.1, 0.05])

@@ -11,10 +11,16 @@ import pytest
 from drake_wbc.cli import teach as teach_commands
 from drake_wbc.experiments import repeat, teach
 from drake_wbc.experiments.runner import build_closed_loop, simulate
-from drake_wbc.experiments.scenario import find_scenario, load_scenario
+from drake_wbc.experiments.scenario import (
+    controller_arm,
+    find_scenario,
+    load_scenario,
+    with_robot,
+)
 from drake_wbc.math import movement as mv
 from drake_wbc.math.demonstration import demonstration_from_log
 from drake_wbc.robot.model import ArmKinematics
+from drake_wbc.robot.tuning import RobotTuningWarning
 
 REPLAY_DURATION = 9.0
 """s: start time 0.5 s, the movement's 6 s, 2.5 s to come to rest."""
@@ -140,3 +146,27 @@ def test_the_replay_command_runs_and_writes_its_outputs(tmp_path, capsys):
     assert any(name.endswith(".png") for name in summary["files"])
     for name in summary["files"]:
         assert (tmp_path / name).stat().st_size > 0
+
+
+def test_teach_and_repeat_use_the_scenarios_robot():
+    """On the second shipped robot (a 7-joint arm), the demonstration and
+    the replay's TCP come from that arm's joints through its own
+    kinematics, and agree with the simulated truth (a second of each)."""
+    lbr = find_scenario("trajectory_tracking_lbr").parent.parent / "models" \
+        / "lbr_omni.robot.yaml"
+    for name in ("teach", "repeat"):
+        scenario = with_robot(load_scenario(find_scenario(name)), lbr,
+                              echo=None)
+        variant = scenario.variants[0]
+        with pytest.warns(RobotTuningWarning):
+            log = simulate(build_closed_loop(scenario, variant),
+                           duration=1.0)
+        assert log["arm.position_measured"].shape[1] == 7
+        truth = log["truth.end_effector_pose"][:, :3]
+        if name == "teach":
+            demo = demonstration_from_log(log, 0.0, 1.0,
+                                          controller_arm(scenario))
+            np.testing.assert_allclose(demo.tcp[:, :3], truth, atol=0.01)
+        else:
+            *_, tcp = repeat.replay_comparison(scenario, variant.name, log)
+            np.testing.assert_allclose(tcp[:, :3], truth, atol=0.01)

@@ -3,19 +3,21 @@
 input, hence its state (eq. (filtering), zeta >= 1), within the base's
 velocity limits, however many obstacle points crowd the footprint."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from controller_rig import Rig
 from pydrake.systems.framework import InputPortIndex, OutputPortIndex
 from pydrake.systems.primitives import Linearize
+from shipped_names import BASE_VELOCITY_LIMITS, FOOTPRINT
 
 from drake_wbc.controller import ControllerParameters
-from drake_wbc.math import safety
 from drake_wbc.math.repulsion import RepulsiveFieldParameters, repulsive_force
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
 from drake_wbc.stages import StopGate
 
-V_MAX = np.array(safety.BASE_VELOCITY_LIMITS)
+V_MAX = np.array(BASE_VELOCITY_LIMITS)
 TOL = 1e-9
 
 
@@ -29,24 +31,26 @@ def crowd(count=40, seed=3):
 def test_the_field_is_bounded_in_norm_with_its_direction_kept():
     points = crowd()
     unbounded = repulsive_force(points, RepulsiveFieldParameters(
-        max_force=1e12))
+        half_sizes=FOOTPRINT, max_force=1e12))
     assert np.linalg.norm(unbounded) > 1000.0  # the paper's field
     for bound in (80.0, 5.0):
         force = repulsive_force(points, RepulsiveFieldParameters(
-            max_force=bound))
+            half_sizes=FOOTPRINT, max_force=bound))
         assert np.linalg.norm(force) == pytest.approx(bound, rel=1e-12)
         np.testing.assert_allclose(
             force / bound, unbounded / np.linalg.norm(unbounded),
             rtol=1e-12)
     weak = np.array([[0.8, 0.0]])  # 0.4 m from the footprint, |f| = 0.0313
     np.testing.assert_array_equal(
-        repulsive_force(weak, RepulsiveFieldParameters()),
-        repulsive_force(weak, RepulsiveFieldParameters(max_force=1e12)))
+        repulsive_force(weak, RepulsiveFieldParameters(
+            half_sizes=FOOTPRINT)),
+        repulsive_force(weak, RepulsiveFieldParameters(
+            half_sizes=FOOTPRINT, max_force=1e12)))
 
 
 def test_max_force_is_validated():
     with pytest.raises(ValueError, match="max_force = 0"):
-        RepulsiveFieldParameters(max_force=0.0)
+        RepulsiveFieldParameters(half_sizes=FOOTPRINT, max_force=0.0)
 
 
 def gate_output(gate, value, stop=0.0):
@@ -117,7 +121,8 @@ def test_a_crowd_at_the_footprint_cannot_wind_up_the_filter(arm, max_force):
     assert np.all(np.abs(filtered) <= V_MAX + TOL)
     assert np.all(np.abs(command) <= V_MAX + TOL)
     # Pushed along the field, away from the corner (backwards and left).
-    push = repulsive_force(crowd(), params.base_cdmp.repulsion)
+    push = repulsive_force(crowd(), replace(params.base_cdmp.repulsion,
+                                            half_sizes=FOOTPRINT))
     assert push[0] < 0.0 and push[1] > 0.0
     assert filtered[-1, :2] @ push / np.linalg.norm(push) > 0.05
     if max_force == 80.0:

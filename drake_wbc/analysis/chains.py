@@ -50,7 +50,7 @@ from drake_wbc.controller import ControllerParameters, build_controller
 from drake_wbc.math import kinematics
 from drake_wbc.math.filtering import BaseFilterParameters
 from drake_wbc.math.validation import as_vector, checked_instance
-from drake_wbc.robot.model import HOME_ARM_POSITIONS
+from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages import (
     BaseVelocityFilter,
     MotionDistributor,
@@ -71,7 +71,8 @@ class OperatingPoint:
     the controller's ArmCapability and WorkspaceAdapter make of it.
 
     Attributes:
-        arm_positions: q_a (6), rad.
+        arm: the controller's ArmKinematics (its robot's arm).
+        arm_positions: q_a (n), rad.
         end_effector_position: p_ee (3) in T_b, m.
         capability: C_m; capability_gradient: grad_x C_m (6, T_a).
         alpha: alpha of eq. (transition).
@@ -82,6 +83,7 @@ class OperatingPoint:
             at most max_rate * time_step below 1 outside it).
     """
 
+    arm: ArmKinematics
     arm_positions: np.ndarray
     end_effector_position: np.ndarray
     capability: float
@@ -91,15 +93,19 @@ class OperatingPoint:
     sigma_phi: float
 
 
-def operating_point(params=None, arm_positions=None):
+def operating_point(params=None, arm_positions=None, arm=None):
     """The OperatingPoint of a controller with `params` (the paper's if
-    None) with the arm at `arm_positions` (the home pose if None), from
-    the controller's own stages."""
+    None) on `arm` (an ArmKinematics; the shipped robot's if None) with
+    the arm at `arm_positions` (its home if None), from the controller's
+    own stages."""
+    arm = checked_instance("arm", arm, ArmKinematics, ArmKinematics)
     controller = build_controller(checked_instance(
-        "params", params, ControllerParameters, ControllerParameters))
+        "params", params, ControllerParameters, ControllerParameters),
+        robot=arm)
     context = controller.diagram.CreateDefaultContext()
-    q_a = as_vector("arm_positions", HOME_ARM_POSITIONS
-                    if arm_positions is None else arm_positions, 6)
+    q_a = as_vector("arm_positions", arm.home
+                    if arm_positions is None else arm_positions,
+                    arm.num_joints)
     diagram = controller.diagram
     diagram.GetInputPort("arm.position_measured").FixValue(context, q_a)
     for name in ("reference_velocity", "wrist.wrench_measured"):
@@ -113,6 +119,7 @@ def operating_point(params=None, arm_positions=None):
             system.GetMyContextFromRoot(context))
 
     return OperatingPoint(
+        arm=arm,
         arm_positions=q_a,
         end_effector_position=value("capability", "end_effector_position"),
         capability=float(value("capability", "capability")[0]),
@@ -206,10 +213,11 @@ def _build_split(params, point, base_driver, alpha, station):
     builder = DiagramBuilder()
     add = builder.AddNamedSystem
     distributor = add("distributor", MotionDistributor(
-        params.distributor, band=params.capability_band))
+        params.distributor, point.arm, band=params.capability_band))
     base_filter = add("base_filter", BaseVelocityFilter(
         params.base_filter, time_step=params.time_step))
-    compensator = add("compensator", RobustCompensator(params.compensator))
+    compensator = add("compensator", RobustCompensator(params.compensator,
+                                                       point.arm))
     alpha = point.alpha if alpha is None else alpha
 
     def constant(name, value, destination, port):

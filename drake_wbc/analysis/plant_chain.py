@@ -51,17 +51,20 @@ def add_station_plant(builder, station):
     plant = add("plant", MultibodyPlant(h))
     plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
     plant.SetUseSampledOutputPorts(False)
-    model = add_robot(plant)
+    robot, mount = station.model.description, station.model.mount
+    model = add_robot(plant, robot, mount=mount)
     set_servo_gains(plant, model, servo_gains(
-        options.initial_arm_positions, options.base, options.arm))
+        options.initial_arm_positions, options.base, options.arm, robot,
+        mount=mount))
     set_drive_inertias(plant, model, drive_inertias(
-        options.initial_arm_positions, options.arm))
+        options.initial_arm_positions, options.arm, robot, mount=mount))
     plant.Finalize()
     driver = add("base_driver", BaseVelocityDriver(
         replace(options.base, time_step=h)))
     odometry = add("odometry", BaseOdometry(plant, model))
     hold = add("arm_hold", ConstantVectorSource(np.concatenate(
-        [options.initial_arm_positions, np.zeros(6)])))
+        [options.initial_arm_positions,
+         np.zeros(len(options.initial_arm_positions))])))
     builder.Connect(plant.get_state_output_port(),
                     odometry.GetInputPort("plant_state"))
     builder.Connect(odometry.GetOutputPort("pose"),

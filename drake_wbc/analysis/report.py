@@ -44,6 +44,7 @@ from drake_wbc.analysis.frequency import (
     linear_system_response,
     stability_margins,
 )
+from drake_wbc.experiments.scenario import controller_arm, scenario_robot
 from drake_wbc.math import distribution, kinematics
 from drake_wbc.math.filtering import (
     lowpass_response,
@@ -267,10 +268,12 @@ def compute_bode_report(scenario, points_per_decade=60,
     hertz, omega = frequency_grid(0.01, min(100.0, 0.5 / h),
                                   points_per_decade)
     point = chains.operating_point(params,
-                                   scenario.station.initial_arm_positions)
+                                   scenario.station.initial_arm_positions,
+                                   controller_arm(scenario))
     driver = replace(scenario.station.base,
                      time_step=scenario.station.time_step)
-    station = SimulatedStation(scenario.station, scenario.scene)
+    station = SimulatedStation(scenario.station, scenario.scene,
+                               scenario.arm_mount, scenario_robot(scenario))
     report = BodeReport()
     f = replace(params.base_filter, enabled=True)
     plot = BodePlot("base_filter", "base filter, eq. (filtering): "

@@ -9,6 +9,8 @@ import shutil
 import subprocess
 from pathlib import Path
 
+from drake_wbc.cli.robot_option import add_robot_argument, on_robot
+
 BODE_HELP = ("write the frequency responses of a scenario's filter chain "
              "and coupled DMPs: Bode plots (PNG), data (CSV) and a table of "
              "bandwidths, peaks and margins")
@@ -27,6 +29,7 @@ def _add_scenario_arguments(parser, command):
     parser.add_argument(
         "--output", type=Path, default=None,
         help=f"output folder (default: out/{command}/<scenario>)")
+    add_robot_argument(parser, f"{command} of the scenario's controller")
 
 
 def _scenario(args, command):
@@ -39,7 +42,7 @@ def _scenario(args, command):
 
     path = find_scenario(args.scenario or DEFAULT_SCENARIO)
     output = args.output or Path("out") / command / path.stem
-    return path.stem, load_scenario(path), Path(output)
+    return path.stem, on_robot(load_scenario(path), args), Path(output)
 
 
 def add_bode_arguments(parser):

@@ -25,6 +25,8 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+from drake_wbc.cli.robot_option import add_robot_argument, on_robot
+
 INTERRUPTED = 130
 """The exit code after a stop by SIGINT or SIGTERM."""
 
@@ -75,10 +77,7 @@ def _scenario_and_options(args):
 
     path = find_scenario(args.scenario)
     scenario = load_scenario(path)
-    robot = getattr(args, "robot", None)
-    if robot is not None:
-        from drake_wbc.experiments.scenario import with_robot
-        scenario = with_robot(scenario, robot)
+    scenario = on_robot(scenario, args)
     options = scenario.hardware or HardwareOptions()
     if args.lcm_url is not None:
         options = validate(replace(options, lcm_url=args.lcm_url))
@@ -93,6 +92,9 @@ def _add_common(parser):
         "--lcm-url", default=None,
         help="the LCM URL (default: the scenario's, or "
              "udpm://239.255.76.67:7667?ttl=0)")
+    add_robot_argument(
+        parser, "run", ": its arm's joints size the messages, its own "
+                       "limits bound the commands")
 
 
 def _duration(value):
@@ -174,11 +176,6 @@ def add_deploy_arguments(parser):
         "--realtime-rate", type=float, default=1.0,
         help="target real-time rate, > 0 (default: %(default)s; below 1 "
              "only against a simulated robot run at the same rate)")
-    parser.add_argument(
-        "--robot", type=Path, default=None,
-        help="the robot's description YAML (default: the scenario's "
-             "robot, or the shipped one): its arm's joints size the "
-             "messages, its own limits bound the commands")
 
 
 def run_deploy(args):

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from drake_wbc.cli import analysis
 from drake_wbc.cli.hardware import PROGRAMS
+from drake_wbc.cli.robot_option import add_robot_argument, on_robot
 
 
 def _add_demo_arguments(parser):
@@ -46,7 +47,7 @@ def _run_demo(args):
         write_model_page,
     )
     from drake_wbc.controller import load_controller_parameters
-    from drake_wbc.controller.parameters import ControllerParameters
+    from drake_wbc.controller.parameters import ControllerParameters, for_robot
     from drake_wbc.robot.description import (
         load_robot_description,
         shipped_robot,
@@ -56,8 +57,9 @@ def _run_demo(args):
     try:
         description = (shipped_robot() if args.robot is None
                        else load_robot_description(args.robot))
-        params = (ControllerParameters() if args.controller is None
-                  else load_controller_parameters(args.controller))
+        params = for_robot(
+            ControllerParameters() if args.controller is None
+            else load_controller_parameters(args.controller), description)
         report = describe_robot(args.q_arm, description=description)
     except (ValueError, OSError) as error:
         print(f"drake-wbc demo: {error}", file=sys.stderr)
@@ -89,10 +91,7 @@ def _add_run_arguments(parser):
                         help="simulated time in s (default: the scenario's)")
     parser.add_argument("--no-replay", action="store_true",
                         help="do not write the Meshcat replay pages")
-    parser.add_argument(
-        "--robot", type=Path, default=None,
-        help="run the scenario on the robot of this description YAML "
-             "(default: the scenario's robot, or the shipped one)")
+    add_robot_argument(parser)
     parser.add_argument(
         "--sweep", action="store_true",
         help="trajectory-tracking scenarios: run the step over small maps "
@@ -124,7 +123,7 @@ def _run_run(args):
     if args.sweep:
         from drake_wbc.analysis.base_sweep import run_sweep
 
-        scenario = load_scenario(path)
+        scenario = on_robot(load_scenario(path), args)
         if args.duration is not None:
             scenario.duration = args.duration
         print(f"drake-wbc run {path.stem} --sweep: writing to "
@@ -133,10 +132,8 @@ def _run_run(args):
                   echo=lambda line: print(line, flush=True))
         return 0
     print(f"drake-wbc run {path.stem}: writing to {output}/")
-    scenario = path
-    if args.robot is not None:
-        from drake_wbc.experiments.scenario import with_robot
-        scenario = with_robot(load_scenario(path), args.robot)
+    scenario = path if args.robot is None else on_robot(load_scenario(path),
+                                                        args)
     run_scenario(scenario, output, name=path.stem, duration=args.duration,
                  replay=False if args.no_replay else None)
     return 0

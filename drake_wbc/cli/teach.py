@@ -23,6 +23,8 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from drake_wbc.cli.robot_option import add_robot_argument, on_robot
+
 
 def add_teach_arguments(parser):
     """The arguments of `drake-wbc teach`."""
@@ -47,6 +49,7 @@ def add_teach_arguments(parser):
     parser.add_argument("--movement", type=Path, default=None,
                         help="the movement file to write (default: "
                              "<output>/movement.yaml)")
+    add_robot_argument(parser, "teach")
 
 
 def run_teach(args, argv=None, echo=print):
@@ -61,7 +64,7 @@ def run_teach(args, argv=None, echo=print):
     from drake_wbc.experiments.scenario import find_scenario, load_scenario
 
     path = find_scenario(args.scenario)
-    scenario = load_scenario(path)
+    scenario = on_robot(load_scenario(path), args, echo)
     output = args.output or Path("out") / f"teach_{path.stem}"
     output.mkdir(parents=True, exist_ok=True)
     if args.log is not None:
@@ -128,6 +131,7 @@ def add_replay_arguments(parser):
                         help="output folder (default: out/replay)")
     parser.add_argument("--replay", action="store_true",
                         help="also write the Meshcat replay page")
+    add_robot_argument(parser, "play the movement")
 
 
 def replay_scenario(args):
@@ -143,7 +147,7 @@ def replay_scenario(args):
     from drake_wbc.math.validation import validate
     from drake_wbc.station.scene import CylinderObstacle
 
-    scenario = load_scenario(find_scenario(args.scenario))
+    scenario = on_robot(load_scenario(find_scenario(args.scenario)), args)
     file = resolve_movement_file(args.movement).resolve()
     movement = LearnedMovement.load(file)
     base = (scenario.variants[0].movement

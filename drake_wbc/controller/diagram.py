@@ -92,8 +92,8 @@ from pydrake.systems.primitives import MatrixGain
 from drake_wbc.controller.parameters import (
     ControllerParameters,
     check_arm_limits,
+    for_robot,
 )
-from drake_wbc.math.safety import check_within_robot
 from drake_wbc.math.validation import checked_instance, validated_copy
 from drake_wbc.robot.model import arm_kinematics
 from drake_wbc.robot.tuning import RobotTuningWarning, check_tuning
@@ -216,15 +216,13 @@ def build_controller(params=None, robot=None):
     """
     params = validated_copy(checked_instance(
         "params", params, ControllerParameters, ControllerParameters))
+    arm = arm_kinematics(robot)
+    params = for_robot(params, arm.model.description)
     h, band, switch = (params.time_step, params.capability_band,
                        params.phri_switch)
-    arm = arm_kinematics(robot)
     check_arm_limits(params.arm_controller, arm)
     for problem in check_tuning(arm, band, params.capability.joint_limit_gain):
         warnings.warn(problem, RobotTuningWarning, stacklevel=2)
-    base = arm.model.description.base
-    check_within_robot(params.safety, velocity_limits=base.velocity_limits,
-                       acceleration_limits=base.acceleration_limits)
     builder = DiagramBuilder()
     add = builder.AddNamedSystem
     stages = dict(

@@ -41,7 +41,12 @@ from drake_wbc.math.filtering import (
     check_filter_period,
 )
 from drake_wbc.math.loading import load_typed
-from drake_wbc.math.safety import SafetyParameters
+from drake_wbc.math.safety import (
+    DEFAULT_STOP_DISTANCE,
+    SafetyParameters,
+    check_within_robot,
+    robot_stop_distance,
+)
 from drake_wbc.math.validation import positive, switch
 from drake_wbc.math.workspace import WorkspaceAdapterParameters
 from drake_wbc.math.wrench import WrenchEstimatorParameters
@@ -61,7 +66,10 @@ class ControllerParameters:
             (transition), one for every stage that looks at C_m: alpha
             (capability), the adaptive weighting factors of the intuitive
             pHRI mode (workspace) and the switch-off of k_n
-            (distributor). The paper's 0.035 and 0.04.
+            (distributor). None (the default): the robot's, its
+            description's tuning (the paper's 0.035 and 0.04 for the
+            shipped Elfin5), filled in when the controller is built
+            (`for_robot`).
         phri_switch: the default pHRI switch S_hri, 0 or 1, of both DMPs
             that take it (whole_body_cdmp and arm_cdmp, eqs. (cdmp-wb),
             (cdmp-arm)), while the task's phri_switch input, which drives
@@ -93,7 +101,7 @@ class ControllerParameters:
     """
 
     time_step: float = 0.01
-    capability_band: CapabilityBand = field(default_factory=CapabilityBand)
+    capability_band: CapabilityBand | None = None
     phri_switch: float = 0.0
     capability: ArmCapabilityParameters = field(
         default_factory=ArmCapabilityParameters)
@@ -199,6 +207,75 @@ def check_arm_limits(params, arm):
             f"arm_controller.acceleration_limit = "
             f"{params.acceleration_limit!r} is not allowed: must be at most "
             f"the arm's own {own!r} rad/s^2")
+
+def for_robot(params, robot):
+    """The ControllerParameters the controller runs on a robot: `params`
+    with the robot's own values where they give none (None), each given
+    one checked to tighten the robot's own, never to widen it.
+
+    - safety.base_velocity_limits and base_acceleration_limits: the
+      base's own where None; a given one at most the base's
+      (drake_wbc.math.safety.check_within_robot).
+    - safety.stop_distance: DEFAULT_STOP_DISTANCE, or the distance the
+      base needs to stop with these limits if longer
+      (drake_wbc.math.safety.robot_stop_distance), where None; a given
+      one at least that distance.
+    - capability_band and capability.joint_limit_gain: the robot's
+      tuning (its description's RobotTuning, the paper's where it gives
+      none) where None.
+    - base_cdmp.repulsion.half_sizes, the footprint the repulsive field
+      and the separation keep clear: the base's own where None; a given
+      one at least the base's along each axis (a footprint smaller than
+      the base would let its corners reach what the field keeps off).
+
+    Args:
+        params: ControllerParameters.
+        robot: the robot's RobotDescription (drake_wbc.robot.description:
+            its base's velocity_limits, acceleration_limits and
+            footprint_half_sizes, and its tuning).
+
+    Returns:
+        A copy of `params` with no None among these fields.
+
+    Raises:
+        ValueError: naming the field, its value and the robot's own.
+    """
+    base, tuning = robot.base, robot.tuning
+    safety, repulsion = params.safety, params.base_cdmp.repulsion
+    check_within_robot(safety, velocity_limits=base.velocity_limits,
+                       acceleration_limits=base.acceleration_limits)
+    own = tuple(float(a) for a in base.footprint_half_sizes)
+    if repulsion.half_sizes is not None:
+        for i, (value, limit) in enumerate(zip(repulsion.half_sizes, own,
+                                               strict=True)):
+            if value < limit:
+                raise ValueError(
+                    f"base_cdmp.repulsion.half_sizes[{i}] = {value!r} is not "
+                    f"allowed: must be at least the robot's own {limit!r} m "
+                    "(a footprint may grow the robot's, not shrink it)")
+    velocity = safety.base_velocity_limits or tuple(
+        float(v) for v in base.velocity_limits)
+    acceleration = safety.base_acceleration_limits or tuple(
+        float(a) for a in base.acceleration_limits)
+    stop_distance = safety.stop_distance
+    if stop_distance is None:
+        stop_distance = max(DEFAULT_STOP_DISTANCE, robot_stop_distance(
+            safety.stop_time, velocity, acceleration))
+    k_j = params.capability.joint_limit_gain
+    return dataclasses.replace(
+        params,
+        capability_band=params.capability_band or tuning.capability_band,
+        capability=dataclasses.replace(
+            params.capability,
+            joint_limit_gain=tuning.joint_limit_gain if k_j is None else k_j),
+        safety=dataclasses.replace(
+            safety, base_velocity_limits=velocity,
+            base_acceleration_limits=acceleration,
+            stop_distance=stop_distance),
+        base_cdmp=dataclasses.replace(
+            params.base_cdmp, repulsion=dataclasses.replace(
+                repulsion, half_sizes=repulsion.half_sizes or own)))
+
 
 def load_controller_parameters(path=None, text=None):
     """ControllerParameters from a YAML file or string, validated

@@ -29,7 +29,8 @@ acceleration limits: what drake_wbc/hardware/README.md asks of a real
 robot's driver ("What the robot does itself"). The base's own velocity
 loop (the station's base driver) keeps its speed and acceleration within
 the base's limits. Like the real base, the robot side stops the base
-when no base command came for `robot_command_timeout` (0.25 s); the arm
+when no base command came for `robot_command_timeout` (the robot's own
+by default, 0.25 s for the shipped base); the arm
 holds its last command. Before the first command the base is at rest
 and the arm holds the scenario's initial positions.
 """
@@ -49,7 +50,7 @@ from drake_wbc.hardware.codecs import (
     receiving_bus,
 )
 from drake_wbc.hardware.interface import add_publisher
-from drake_wbc.hardware.options import HardwareOptions
+from drake_wbc.hardware.options import HardwareOptions, command_timeout_of
 from drake_wbc.hardware.safety import (
     ArmCommandLimiter,
     Limits,
@@ -115,7 +116,9 @@ class RobotSide:
             "commands", CommandReceiver(
                 bus, (channels.base_command, channels.arm_command),
                 scenario.station.initial_arm_positions,
-                options.robot_command_timeout, options.sender_release_time,
+                command_timeout_of(options, self.station.model.description
+                                   .base),
+                options.sender_release_time,
                 ClockRules.of(options)))
         builder.Connect(receiver.GetOutputPort("velocity"),
                         station.GetInputPort("base.velocity_command"))

@@ -11,10 +11,9 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
-from drake_wbc.experiments.scenario import controller_arm
+from drake_wbc.experiments.scenario import controller_arm, footprint_of
 from drake_wbc.math import repulsion
 from drake_wbc.math.safety import STATUS_FIELDS
-from drake_wbc.robot.footprint import FOOTPRINT_HALF_SIZES
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.station.scene import planar_shapes
 
@@ -54,7 +53,7 @@ def _box_outline(box):
     return np.concatenate(points) @ np.array([[c, s], [-s, c]]) + [cx, cy]
 
 
-def obstacle_distances(scene, base_pose, people_positions=None,
+def obstacle_distances(scene, base_pose, footprint, people_positions=None,
                        height=0.2):
     """The distance from the base's footprint to the nearest obstacle or
     person at each sample, from ground truth.
@@ -62,6 +61,8 @@ def obstacle_distances(scene, base_pose, people_positions=None,
     Args:
         scene: the scenario's Scene.
         base_pose: (N, 3) [x, y, yaw] of T_b in the world.
+        footprint: the base's half sizes (a, b) in m (the robot's,
+            drake_wbc.experiments.scenario.footprint_of).
         people_positions: (N, 2P) the people's positions, or None.
         height: the height at which static obstacles count (the LIDARs'
             scan plane).
@@ -69,7 +70,7 @@ def obstacle_distances(scene, base_pose, people_positions=None,
     Returns:
         (N,) distances in m (inf where there is nothing).
     """
-    params = repulsion.RepulsiveFieldParameters(half_sizes=FOOTPRINT_HALF_SIZES)
+    params = repulsion.RepulsiveFieldParameters(half_sizes=footprint)
     circles, boxes = planar_shapes(scene, height)
     radii = [person.radius for person in scene.people]
     outline = (np.concatenate([_box_outline(b) for b in boxes])
@@ -109,7 +110,7 @@ def run_metrics(scenario, log):
     arm_speed = np.abs(np.diff(command, axis=0)) / dt
     people = log.signals.get("truth.people_positions")
     distance = obstacle_distances(scenario.scene, log["truth.base_pose"],
-                                  people)
+                                  footprint_of(scenario), people)
     finite = all(np.all(np.isfinite(v)) for v in log.signals.values())
     return {
         "duration_s": float(log.time[-1]),
@@ -172,7 +173,7 @@ def draw_figures(scenario, logs, folder):
         axes[2].plot(log.time, log["capability"][:, 0])
         axes[2].set_ylabel("$C_m$")
         axes[3].plot(log.time, obstacle_distances(
-            scenario.scene, log["truth.base_pose"],
+            scenario.scene, log["truth.base_pose"], footprint_of(scenario),
             log.signals.get("truth.people_positions")))
         axes[3].set_ylabel("obstacle (m)")
         paths.append(save_figure(fig, folder, f"overview_{name}"))

@@ -47,6 +47,7 @@ from drake_wbc.experiments.common import (
     obstacle_distances,
     save_figure,
 )
+from drake_wbc.experiments.scenario import controller_for, footprint_of
 
 APPROACH_GAP = 0.5
 """Approaches less than this many seconds apart are merged (s)."""
@@ -99,6 +100,7 @@ def person_distances(scenario, log):
     without people), from ground truth."""
     people_only = replace(scenario.scene, cylinders=[], boxes=[])
     return obstacle_distances(people_only, log["truth.base_pose"],
+                              footprint_of(scenario),
                               log.signals.get("truth.people_positions"))
 
 
@@ -134,7 +136,7 @@ def run_metrics(scenario, log):
     distance = person_distances(scenario, log)
     d_th = scenario.controller.base_cdmp.repulsion.d_th
     intervals = approach_intervals(log.time, distance, d_th)
-    band = scenario.controller.capability_band
+    band = controller_for(scenario).capability_band
     dist = integrated_deviation(log)
     metrics = {"approaches": len(intervals)}
     for k, (start, end) in enumerate(intervals, start=1):
@@ -179,7 +181,7 @@ def draw_figures(scenario, logs, folder):
     import matplotlib.pyplot as plt
 
     paths = []
-    band = scenario.controller.capability_band
+    band = controller_for(scenario).capability_band
     d_th = scenario.controller.base_cdmp.repulsion.d_th
     for name, log in logs.items():
         t = log.time

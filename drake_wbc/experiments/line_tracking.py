@@ -36,6 +36,7 @@ from drake_wbc.experiments.common import (
     obstacle_distances,
     save_figure,
 )
+from drake_wbc.experiments.scenario import footprint_of
 
 ARROW_PERIOD = 1.0
 """Seconds between the position-velocity arrows of the x-y plot."""
@@ -84,9 +85,10 @@ def _scene_objects(scene):
     return objects
 
 
-def _closest(scene, log, is_person):
+def _closest(scene, log, is_person, footprint):
     people = log.signals.get("truth.people_positions") if is_person else None
-    distance = obstacle_distances(scene, log["truth.base_pose"], people)
+    distance = obstacle_distances(scene, log["truth.base_pose"], footprint,
+                                  people)
     value = float(np.min(distance))
     return value if np.isfinite(value) else None
 
@@ -100,7 +102,7 @@ def run_metrics(scenario, log):
     ee_peak = float(np.max(np.abs(ee_lat)))
     base_peak = float(np.max(np.abs(base_lat)))
     height = log["truth.end_effector_pose"][:, 2]
-    scene = scenario.scene
+    scene, footprint = scenario.scene, footprint_of(scenario)
     metrics = {
         "ee_lateral_rms_m": ee_rms,
         "ee_lateral_peak_m": ee_peak,
@@ -113,13 +115,13 @@ def run_metrics(scenario, log):
         "ee_travel_m": float(ee_along[-1]),
         "base_travel_m": float(base_along[-1]),
         "min_static_obstacle_distance_m": _closest(
-            replace(scene, people=[]), log, False),
+            replace(scene, people=[]), log, False, footprint),
         "min_person_distance_m": _closest(
-            replace(scene, cylinders=[], boxes=[]), log, True),
+            replace(scene, cylinders=[], boxes=[]), log, True, footprint),
     }
     for name, alone, is_person in _scene_objects(scene):
-        metrics[f"closest_approach_{name}_m"] = _closest(alone, log,
-                                                         is_person)
+        metrics[f"closest_approach_{name}_m"] = _closest(
+            alone, log, is_person, footprint)
     return metrics
 
 
@@ -151,8 +153,8 @@ def _draw_scene(axis, scenario, log):
         path = people[:, 2 * i:2 * i + 2]
         alone = replace(scenario.scene, cylinders=[], boxes=[],
                         people=[person])
-        k = int(np.argmin(obstacle_distances(alone, log["truth.base_pose"],
-                                             path)))
+        k = int(np.argmin(obstacle_distances(
+            alone, log["truth.base_pose"], footprint_of(scenario), path)))
         axis.plot(path[:, 0], path[:, 1], ":", color="tab:blue", lw=1)
         axis.add_patch(Circle(path[k], person.radius, color="tab:blue",
                               alpha=0.35))
@@ -160,12 +162,10 @@ def _draw_scene(axis, scenario, log):
                       ha="center", va="center", fontsize=7)
 
 
-def _draw_footprints(axis, log):
+def _draw_footprints(axis, log, footprint):
     from matplotlib.patches import Polygon
 
-    from drake_wbc.robot.footprint import FOOTPRINT_HALF_SIZES
-
-    a, b = FOOTPRINT_HALF_SIZES
+    a, b = footprint
     corners = np.array([[a, b], [-a, b], [-a, -b], [a, -b]])
     step = max(1, int(round(FOOTPRINT_PERIOD / np.median(np.diff(
         log.time)))))
@@ -203,7 +203,7 @@ def draw_figures(scenario, logs, folder):
         fig.suptitle(f"{scenario.description} ({name})", fontsize=10)
         ee = log["truth.end_effector_pose"][:, :2]
         base = log["truth.base_pose"][:, :2]
-        _draw_footprints(top, log)
+        _draw_footprints(top, log, footprint_of(scenario))
         _draw_scene(top, scenario, log)
         top.plot(base[:, 0], base[:, 1], color="tab:orange", label="base")
         top.plot(ee[:, 0], ee[:, 1], color="tab:green", label="end effector")

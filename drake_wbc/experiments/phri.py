@@ -45,6 +45,7 @@ from drake_wbc.experiments.common import (
     obstacle_distances,
     save_figure,
 )
+from drake_wbc.experiments.scenario import footprint_of
 from drake_wbc.math import workspace
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.station.scene import Scene
@@ -191,7 +192,8 @@ def static_distance(scenario, log):
     """(N,) distance from the footprint to the nearest static obstacle."""
     static = Scene(cylinders=list(scenario.scene.cylinders),
                    boxes=list(scenario.scene.boxes))
-    return obstacle_distances(static, log["truth.base_pose"])
+    return obstacle_distances(static, log["truth.base_pose"],
+                              footprint_of(scenario))
 
 
 def compute_metrics(scenario, logs):
@@ -278,7 +280,7 @@ def draw_figures(scenario, logs, folder):
                 box.size[:2]) / 2
             axis.add_patch(Polygon(_rotate(np.full(4, box.yaw), half)
                                    + box.center[:2], color="0.7"))
-        a, b = scenario.controller.base_cdmp.repulsion.half_sizes
+        a, b = footprint_of(scenario)
         corners = np.array([[a, b], [-a, b], [-a, -b], [a, -b]])
         for stage, start, _ in windows:
             k = np.searchsorted(t, start)

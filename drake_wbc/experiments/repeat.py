@@ -34,6 +34,7 @@ from drake_wbc.experiments.common import (
     obstacle_distances,
     save_figure,
 )
+from drake_wbc.experiments.scenario import controller_arm, footprint_of
 from drake_wbc.math import movement as mv
 from drake_wbc.math.demonstration import tcp_poses
 from drake_wbc.robot.model import ArmKinematics
@@ -66,7 +67,8 @@ def replay_comparison(scenario, name, log):
     demo = movement.demonstrations[0]
     u = (demo.time - demo.time[0]) / demo.duration
     tcp = tcp_poses(log["base.state_estimated"][:, :3],
-                    log["arm.position_measured"], ArmKinematics())
+                    log["arm.position_measured"],
+                    controller_arm(scenario) or ArmKinematics())
     # The same turn of the yaw as the demonstration's.
     tcp[:, 3] += 2 * np.pi * np.round((demo.tcp[0, 3] - tcp[0, 3])
                                       / (2 * np.pi))
@@ -99,7 +101,7 @@ def run_metrics(scenario, name, log):
     demo_speed = _speed(u, demo.tcp[:, :3])
     people = log.signals.get("truth.people_positions")
     distance = obstacle_distances(scenario.scene, log["truth.base_pose"],
-                                  people)
+                                  footprint_of(scenario), people)
     return {
         "path_rms_m": float(np.sqrt(np.mean(np.sum(error[:, :3]**2,
                                                    axis=1)))),

@@ -30,8 +30,9 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from drake_wbc.controller import ControllerParameters
+from drake_wbc.controller.parameters import for_robot
 from drake_wbc.controller.task import TaskInputs
-from drake_wbc.hardware.options import HardwareOptions
+from drake_wbc.hardware.options import HardwareOptions, command_timeout_of
 from drake_wbc.math.cdmp import MovementReplay
 from drake_wbc.math.loading import load_typed
 from drake_wbc.math.validation import (
@@ -237,20 +238,29 @@ class Scenario:
                 f"station.time_step = {step!r} s: must be at most 1 / "
                 f"station.time_step = {1.0 / step:.6g} Hz (the scene moves "
                 "once a step; more frames repeat it and fill the memory)")
-        check_start_is_free(self.scene, self.station.initial_base_pose)
         if not self.robot:  # another robot's: where its file is loaded
-            check_arm_start_of(self)
+            check_on_robot(self)
 
 
-def controller_for(scenario, variant):
+def controller_for(scenario, variant=None):
     """The controller's parameters for one run of `scenario`: a copy of
-    scenario.controller with the `variant`'s base filter switch and
-    learned movement."""
-    params = copy.deepcopy(scenario.controller)
-    params.base_filter.enabled = variant.base_filter
-    if variant.movement is not None:
-        params.whole_body_cdmp.movement = variant.movement
+    scenario.controller on its robot (the robot's own limits and
+    footprint where the scenario gives none,
+    drake_wbc.controller.parameters.for_robot) with the `variant`'s base
+    filter switch and learned movement (None: scenario.controller's)."""
+    params = for_robot(copy.deepcopy(scenario.controller),
+                       scenario_robot(scenario))
+    if variant is not None:
+        params.base_filter.enabled = variant.base_filter
+        if variant.movement is not None:
+            params.whole_body_cdmp.movement = variant.movement
     return params
+
+
+def footprint_of(scenario):
+    """The half sizes (a, b) in m of the footprint of `scenario`'s base
+    (its robot's description)."""
+    return tuple(scenario_robot(scenario).base.footprint_half_sizes)
 
 
 def scenario_robot(scenario):
@@ -293,13 +303,24 @@ def with_robot(scenario, robot_file, echo=print):
             echo(f"the arm starts at {description.name}'s home "
                  f"{list(description.arm.home)} (the scenario's start is "
                  f"for {len(start)} joints)")
-    check_arm_start_of(scenario)
+    check_on_robot(scenario)
     return scenario
 
 
-def check_arm_start_of(scenario):
-    """Checks station.initial_arm_positions against the scenario's robot
-    (one value a joint, within its limits)."""
+def check_on_robot(scenario):
+    """Checks the scenario against its robot: the base's footprint free
+    of the scene's static obstacles at station.initial_base_pose,
+    station.initial_arm_positions one value a joint, within its limits,
+    and the hardware's timeouts within the robot's own
+    (drake_wbc.hardware.options.command_timeout_of)."""
+    base = scenario_robot(scenario).base
+    check_start_is_free(scenario.scene, scenario.station.initial_base_pose,
+                        base)
+    if scenario.hardware is not None:
+        try:
+            command_timeout_of(scenario.hardware, base)
+        except ValueError as error:
+            raise ValueError(f"hardware.{error}") from None
     if scenario.robot:
         arm = ArmKinematics(*make_robot_plant(scenario_robot(scenario)))
         lower, upper = arm.lower, arm.upper
@@ -370,7 +391,7 @@ def load_scenario(path=None, text=None):
             raise ValueError(f"{path or 'text'}: robot = "
                              f"{scenario.robot!r}: {error}") from None
         try:
-            check_arm_start_of(scenario)
+            check_on_robot(scenario)
         except ValueError as error:
             raise ValueError(f"{path or 'text'}: {error}") from None
     return scenario

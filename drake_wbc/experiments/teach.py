@@ -22,6 +22,7 @@ learned rollout.
 import numpy as np
 
 from drake_wbc.experiments.common import new_figure, save_figure
+from drake_wbc.experiments.scenario import controller_arm
 from drake_wbc.math import movement as mv
 from drake_wbc.math.demonstration import (
     demonstration_from_log,
@@ -48,7 +49,8 @@ def learn_from_log(scenario, log, start=None, stop=None, num_basis=None,
     learned with the gains of the scenario's whole-body DMP (so that it
     replays with the same attractor)."""
     start, stop = interval(scenario, start, stop)
-    demo = demonstration_from_log(log, start, stop, ArmKinematics())
+    demo = demonstration_from_log(log, start, stop,
+                                  controller_arm(scenario) or ArmKinematics())
     dmp = scenario.controller.whole_body_cdmp.dmp
     params = mv.dmp.DmpParameters(
         alpha_z=dmp.alpha_z, beta_z=dmp.beta_z, tau=1.0,

@@ -32,6 +32,7 @@ from drake_wbc.experiments.common import (
     save_figure,
     window,
 )
+from drake_wbc.experiments.scenario import controller_for
 
 BASE_BAND = (0.6, 3.0)
 """Hz: above the filter's 1 Hz cut-off and below the mount's mode."""
@@ -159,7 +160,7 @@ def draw_figures(scenario, logs, folder):
     import matplotlib.pyplot as plt
 
     start, end = step_window(scenario)
-    limit = scenario.controller.safety.base_acceleration_limits[0]
+    limit = controller_for(scenario).safety.base_acceleration_limits[0]
     fig, axes = new_figure(5, title=(
         "Trajectory tracking: a 0.1 m/s step of the end effector along x "
         "of $T_b$\n($V_b^{ref}$ without the filter is ramped by the "

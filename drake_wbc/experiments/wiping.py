@@ -51,6 +51,7 @@ from drake_wbc.experiments.common import (
     obstacle_distances,
     save_figure,
 )
+from drake_wbc.experiments.scenario import footprint_of
 from drake_wbc.stages.wrench import ExternalWrenchEstimator
 from drake_wbc.station.scene import Scene
 
@@ -166,6 +167,7 @@ def person_distance(scenario, log):
     without people)."""
     people = Scene(people=list(scenario.scene.people))
     return obstacle_distances(people, log["truth.base_pose"],
+                              footprint_of(scenario),
                               log.signals.get("truth.people_positions"))
 
 
@@ -173,7 +175,8 @@ def static_distance(scenario, log):
     """(N,) distance from the footprint to the nearest static obstacle."""
     static = Scene(cylinders=list(scenario.scene.cylinders),
                    boxes=list(scenario.scene.boxes))
-    return obstacle_distances(static, log["truth.base_pose"])
+    return obstacle_distances(static, log["truth.base_pose"],
+                              footprint_of(scenario))
 
 
 def _rms(values):

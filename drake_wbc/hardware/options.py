@@ -9,11 +9,11 @@ Every field has a default (the channel names and rules of drake_wbc/
 hardware/README.md, the protocol), so `hardware: {}` chooses LCM with the
 defaults. The checks run in `__post_init__`, as for every parameters
 dataclass of the library (drake_wbc.math.validation). Limits may only
-tighten the robot's own: the watchdog limits are checked here against
-the robot's own command timeout, and the base's and the joints' speed and
-acceleration limits (None: the robot's own) against the robot's
+tighten the robot's own: the base's and the joints' speed and
+acceleration limits and the robot side's command timeout (None: the
+robot's own) and the watchdog limits are checked against the robot's
 description and arm model when the command guard is built
-(drake_wbc.hardware.safety.Limits.of_robot).
+(drake_wbc.hardware.safety.Limits.of_robot, `command_timeout_of`).
 """
 
 import re
@@ -27,7 +27,8 @@ from drake_wbc.math.validation import (
 
 ROBOT_OWN = ("base_speed_limit", "base_yaw_rate_limit",
              "base_acceleration_limit", "base_yaw_acceleration_limit",
-             "joint_speed_limit", "joint_acceleration_limit")
+             "joint_speed_limit", "joint_acceleration_limit",
+             "robot_command_timeout")
 """The limits that default to the robot's own (None)."""
 
 CHANNEL_PATTERN = re.compile(r"^[A-Za-z0-9_.\-/]+$")
@@ -48,12 +49,6 @@ ROBOT_STATUS_PERIOD = 0.01
 
 ROBOT_LIDAR_PERIOD = 1.0 / 15.0
 """s: the TiM571 LIDARs scan at 15 Hz (the robot facts)."""
-
-ROBOT_COMMAND_TIMEOUT = 0.25
-"""s: the robot's own watchdog: its base stops when no command came for
-this long (the robot facts). No limit of the controller's watchdog may
-be longer, or the robot would stop first, and uninformed."""
-
 
 def at_most(name, value, own, unit, what="the robot's own"):
     """`value` after checking that it is at most `own` (a limit may
@@ -131,7 +126,8 @@ class WatchdogLimits:
 
     Each is 3 periods of its stream by default; each must be at least one
     period (ROBOT_STATUS_PERIOD, ROBOT_LIDAR_PERIOD) and at most the
-    robot's own command timeout (ROBOT_COMMAND_TIMEOUT).
+    robot's own command timeout (its description's base.command_timeout:
+    the robot would stop first, and uninformed; `command_timeout_of`).
     """
 
     base_state: float = 0.03
@@ -142,8 +138,6 @@ class WatchdogLimits:
     def __post_init__(self):
         for item in fields(self):
             value = positive(item.name, getattr(self, item.name))
-            at_most(item.name, value, ROBOT_COMMAND_TIMEOUT, "s",
-                    "the robot's own command timeout")
             period = (ROBOT_LIDAR_PERIOD if item.name == "obstacle_points"
                       else ROBOT_STATUS_PERIOD)
             if value < period:
@@ -215,7 +209,9 @@ class HardwareOptions:
         truth_period: how often the simulated robot sends its ground
             truth, and the controller its diagnostics, s.
         robot_command_timeout: the robot side stops the base when no base
-            command came for this long, s (0.25 s, as such bases do).
+            command came for this long, s; None (the default): the
+            robot's own (its description's base.command_timeout, 0.25 s
+            for the shipped base), which a given one may only shorten.
         sender_release_time: the robot side hands its command channels
             to another sender only after the one it obeys has been quiet
             for this long, s (1.0 s): a controller that misses the
@@ -242,7 +238,7 @@ class HardwareOptions:
     clock_resync_messages: int = 3
     status_period: float = 0.01
     truth_period: float = 0.01
-    robot_command_timeout: float = 0.25
+    robot_command_timeout: float | None = None
     sender_release_time: float = 1.0
     startup_timeout: float = 10.0
 
@@ -285,18 +281,48 @@ class HardwareOptions:
                     f"is not allowed with status_period = "
                     f"{self.status_period!r} s: must be at least one status "
                     "period, or every status is late")
-        at_most("robot_command_timeout", self.robot_command_timeout,
-                ROBOT_COMMAND_TIMEOUT, "s")
-        if self.sender_release_time < self.robot_command_timeout:
-            raise ValueError(
-                f"sender_release_time = {self.sender_release_time!r} s is "
-                "not allowed with robot_command_timeout = "
-                f"{self.robot_command_timeout!r} s: must be at least it, so "
-                "that the base has stopped before another sender may drive "
-                "it")
 
     @property
     def guard_offset(self):
         """When the command guard samples the controller's commands after
         each control tick, s (half of publish_offset)."""
         return 0.5 * self.publish_offset
+
+
+def command_timeout_of(options, base):
+    """The robot side's command timeout for `options` on a robot, checked:
+    options.robot_command_timeout, or the base's own where None.
+
+    A limit may only tighten the robot's own: the timeout and each
+    watchdog limit (options.watchdog_limits) at most the base's own
+    command timeout (a watchdog slower than the robot's would let the
+    robot stop first, and uninformed), and options.sender_release_time
+    at least the timeout (the base has stopped before another sender may
+    drive it).
+
+    Args:
+        options: HardwareOptions.
+        base: the robot's BaseDescription (its command_timeout).
+
+    Returns:
+        The timeout, s.
+
+    Raises:
+        ValueError: naming the option, its value and the robot's own.
+    """
+    own = float(base.command_timeout)
+    for item in fields(options.watchdog_limits):
+        at_most(f"watchdog_limits.{item.name}",
+                getattr(options.watchdog_limits, item.name), own, "s",
+                "the robot's own command timeout")
+    timeout = options.robot_command_timeout
+    if timeout is None:
+        timeout = own
+    at_most("robot_command_timeout", timeout, own, "s")
+    if options.sender_release_time < timeout:
+        raise ValueError(
+            f"sender_release_time = {options.sender_release_time!r} s is "
+            f"not allowed with robot_command_timeout = {timeout!r} s: must "
+            "be at least it, so that the base has stopped before another "
+            "sender may drive it")
+    return timeout

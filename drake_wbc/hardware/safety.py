@@ -33,7 +33,11 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
-from drake_wbc.hardware.options import STATUS_CHANNELS, HardwareOptions
+from drake_wbc.hardware.options import (
+    STATUS_CHANNELS,
+    HardwareOptions,
+    command_timeout_of,
+)
 from drake_wbc.math.command_limits import limit_base_velocity
 from drake_wbc.math.validation import (
     as_vector,
@@ -99,13 +103,15 @@ class Limits(NamedTuple):
 
         Raises:
             ValueError: when one of the options' base or joint speed or
-                acceleration limits is beyond the robot's own (a limit may
-                tighten the robot's, never widen it).
+                acceleration limits, the robot side's command timeout or a
+                watchdog limit is beyond the robot's own (a limit may
+                tighten the robot's, never widen it; `command_timeout_of`).
         """
         options = checked_instance("options", options, HardwareOptions,
                                    HardwareOptions)
         arm = checked_instance("arm", arm, ArmKinematics, ArmKinematics)
         base = arm.model.description.base
+        command_timeout_of(options, base)
         speed, acceleration = arm_own_limits(arm)
         own = {"base_speed_limit": (min(base.velocity_limits[:2]), "m/s"),
                "base_yaw_rate_limit": (base.velocity_limits[2], "rad/s"),

@@ -105,8 +105,9 @@ class CapabilityBand:
     compensation (ArmCapability), the adaptive weighting factors of the
     intuitive pHRI mode (WorkspaceAdapter) and the switch-off of the
     null-space gain (MotionDistributor). It is
-    ControllerParameters.capability_band, which build_controller hands
-    to each of them (their `band` argument).
+    ControllerParameters.capability_band (by default the robot's, its
+    description's tuning), which build_controller hands to each of them
+    (their `band` argument).
 
     Attributes:
         lower: C_m^l >= 0 (m^3, like C_m); alpha = 1 at and below it.
@@ -138,17 +139,22 @@ class ArmCapabilityParameters:
     argument (one CapabilityBand for every stage that looks at C_m).
 
     Attributes:
-        joint_limit_gain: k_j > 0 of the joint-limit penalization P_jnt.
+        joint_limit_gain: k_j > 0 of the joint-limit penalization P_jnt;
+            None (the default): the robot's, its description's tuning
+            (drake_wbc.robot.description.RobotTuning; the paper's
+            DEFAULT_JOINT_LIMIT_GAIN where it gives none), filled in when
+            the stage is built.
         gradient_damping: lambda_max >= 0 of `capability_gradient`.
         gradient_damping_threshold: eps > 0 of the same.
     """
 
-    joint_limit_gain: float = DEFAULT_JOINT_LIMIT_GAIN
+    joint_limit_gain: float | None = None
     gradient_damping: float = DEFAULT_MAX_DAMPING
     gradient_damping_threshold: float = DEFAULT_DAMPING_THRESHOLD
 
     def __post_init__(self):
-        positive("joint_limit_gain", self.joint_limit_gain)
+        if self.joint_limit_gain is not None:
+            positive("joint_limit_gain", self.joint_limit_gain)
         non_negative("gradient_damping", self.gradient_damping)
         positive("gradient_damping_threshold",
                  self.gradient_damping_threshold)

@@ -31,7 +31,10 @@ class RepulsiveFieldParameters:
         d_th: distance threshold d_th > 0, m (paper 0.5).
         half_sizes: footprint half-sizes (a, b) >= 0 along x and y of T_b,
             m, any sequence of two numbers (a list in YAML), stored as a
-            tuple; default (0.4, 0.3), the 0.8 x 0.6 m base.
+            tuple; None (the default): the robot's own footprint, from
+            its description, filled in when the controller is built
+            (drake_wbc.controller.parameters.for_robot), where a given
+            one may be larger than the robot's, not smaller.
         d_min: 0 < d_min < d_th, m: distances are clamped to it, so the
             force stays finite for a point on or inside the footprint
             (default 0.05).
@@ -48,16 +51,17 @@ class RepulsiveFieldParameters:
 
     k_obs: float = 0.01
     d_th: float = 0.5
-    half_sizes: list[float] = (0.4, 0.3)
+    half_sizes: list[float] | None = None
     d_min: float = 0.05
     max_force: float = 80.0
 
     def __post_init__(self):
         non_negative("k_obs", self.k_obs)
         positive("d_th", self.d_th)
-        self.half_sizes = tuple(
-            non_negative("half_sizes", a)
-            for a in as_vector("half_sizes", self.half_sizes, 2))
+        if self.half_sizes is not None:
+            self.half_sizes = tuple(
+                non_negative("half_sizes", a)
+                for a in as_vector("half_sizes", self.half_sizes, 2))
         if not 0.0 < positive("d_min", self.d_min) < self.d_th:
             raise ValueError(f"d_min = {self.d_min!r} is not allowed: must "
                              f"lie in (0, d_th = {self.d_th!r})")

@@ -25,10 +25,11 @@ it):
    (SafetyParameters, below), and its change from one tick to the next as
    a whole to the acceleration limits.
 
-The robot's limits are those of the robot facts: base 1.0 m/s along x and
-y, 1.0 rad/s in yaw, 1.0 m/s^2 and 1.0 rad/s^2. SafetyParameters may
-tighten them, not widen them (`check_within_robot`, when the controller
-is built).
+The robot's limits are its own, from its description
+(drake_wbc.robot.description: the base's velocity and acceleration
+limits). SafetyParameters may tighten them, not widen them
+(`check_within_robot`, when the controller is built); where they give
+none, the robot's own hold.
 """
 
 import math
@@ -46,12 +47,6 @@ from drake_wbc.math.validation import non_negative, positive, positive_vector
 BASE_AXES = 3
 """The base's velocity components [vx, vy, wz] (T_b)."""
 
-BASE_VELOCITY_LIMITS = (1.0, 1.0, 1.0)
-"""The base's velocity limits [vx, vy, wz]: m/s, m/s, rad/s."""
-
-BASE_ACCELERATION_LIMITS = (1.0, 1.0, 1.0)
-"""The base's acceleration limits [vx, vy, wz]: m/s^2, m/s^2, rad/s^2."""
-
 BASE_LAG = 0.3
 """s: the base's velocity loop lag, the slowest of the facts sheet's 0.1 to
 0.3 s (EST; the station's drivers model 0.2 s), for the robot's own stop
@@ -65,6 +60,10 @@ resumes after a safe stop.
 dropped or corrupted samples at 100 Hz), long enough for the base's
 velocity loop (0.1 to 0.3 s lag) to have come to rest after the stop, and
 short enough not to be a nuisance when an operator clears a fault."""
+
+DEFAULT_STOP_DISTANCE = 0.1
+"""m: the distance the base keeps from an obstacle point by default, where
+the robot's own stop distance (`robot_stop_distance`) is shorter."""
 
 TIME_TOLERANCE = 1e-9
 """Rounding allowance (s) when the valid time is compared to the hold
@@ -113,15 +112,23 @@ class SafetyParameters:
         hold_time: s > 0 for which every input must be valid again before
             the controller resumes after a safe stop (`DEFAULT_HOLD_TIME`).
         base_velocity_limits: (3,) > 0, the base command's limits
-            [vx, vy, wz] in m/s, m/s, rad/s; the robot's 1.0 each, which
-            they may tighten but not widen (`check_within_robot`).
+            [vx, vy, wz] in m/s, m/s, rad/s, which may tighten the
+            robot's own but not widen them (`check_within_robot`); None
+            (the default): the robot's own, from its description, filled
+            in when the controller is built
+            (drake_wbc.controller.parameters.for_robot).
         base_acceleration_limits: (3,) > 0, the limits of the command's
-            rate of change [vx, vy, wz] in m/s^2, m/s^2, rad/s^2; the
-            robot's 1.0 each, likewise.
+            rate of change [vx, vy, wz] in m/s^2, m/s^2, rad/s^2;
+            likewise.
         stop_distance: m >= 0 that the base keeps from an obstacle point,
-            and stop_time: s > 0, the time constant of its approach
-            (drake_wbc.math.separation); 0.1 m and 0.5 s by default:
-            the rule of every obstacle point that is not a moving person.
+            at least the robot's own stop distance
+            (`robot_stop_distance`); None (the default):
+            DEFAULT_STOP_DISTANCE or the robot's own if longer, filled in
+            when the controller is built.
+        stop_time: s > 0, the time constant of the base's approach
+            (drake_wbc.math.separation), 0.5 s by default. These two are
+            the rule of every obstacle point that is not a moving
+            person.
         people: the separation from moving people, ISO/TS 15066's
             protective separation distance
             (drake_wbc.math.separation.PeopleSeparationParameters; its
@@ -133,24 +140,26 @@ class SafetyParameters:
     """
 
     hold_time: float = DEFAULT_HOLD_TIME
-    base_velocity_limits: list[float] = BASE_VELOCITY_LIMITS
-    base_acceleration_limits: list[float] = BASE_ACCELERATION_LIMITS
-    stop_distance: float = 0.1
+    base_velocity_limits: list[float] | None = None
+    base_acceleration_limits: list[float] | None = None
+    stop_distance: float | None = None
     stop_time: float = 0.5
     people: PeopleSeparationParameters = field(
         default_factory=PeopleSeparationParameters)
 
     def __post_init__(self):
         positive("hold_time", self.hold_time)
-        non_negative("stop_distance", self.stop_distance)
+        if self.stop_distance is not None:
+            non_negative("stop_distance", self.stop_distance)
         positive("stop_time", self.stop_time)
         if not isinstance(self.people, PeopleSeparationParameters):
             raise ValueError(f"people = {self.people!r} is not allowed: "
                              "must be a PeopleSeparationParameters")
         for name in ("base_velocity_limits", "base_acceleration_limits"):
-            setattr(self, name, tuple(
-                positive_vector(name, getattr(self, name), BASE_AXES)
-                .tolist()))
+            if getattr(self, name) is not None:
+                setattr(self, name, tuple(
+                    positive_vector(name, getattr(self, name), BASE_AXES)
+                    .tolist()))
 
 
 def robot_stop_distance(stop_time, velocity_limits, acceleration_limits,
@@ -189,15 +198,13 @@ def robot_stop_distance(stop_time, velocity_limits, acceleration_limits,
     return max(stopping - stop_time * u, 0.0)
 
 
-def check_within_robot(params, path="safety",
-                       velocity_limits=BASE_VELOCITY_LIMITS,
-                       acceleration_limits=BASE_ACCELERATION_LIMITS):
+def check_within_robot(params, velocity_limits, acceleration_limits,
+                       path="safety"):
     """Checks that the SafetyParameters `params` only tighten the robot's
-    own limits: the base's velocity and acceleration limits at most
-    `velocity_limits` and `acceleration_limits` (the robot's own, from its
-    description when the controller is built; the shipped base's,
-    BASE_VELOCITY_LIMITS and BASE_ACCELERATION_LIMITS, by default), the
-    stop distance at least `robot_stop_distance`.
+    own limits: the base's velocity and acceleration limits (where given)
+    at most `velocity_limits` and `acceleration_limits` (the robot's own,
+    from its description), the stop distance at least
+    `robot_stop_distance` with the limits that hold.
 
     Raises:
         ValueError: naming the field (under `path`), its value and the
@@ -208,16 +215,18 @@ def check_within_robot(params, path="safety",
              ("m/s", "m/s", "rad/s")),
             ("base_acceleration_limits", acceleration_limits,
              ("m/s^2", "m/s^2", "rad/s^2"))):
-        for i, (value, limit) in enumerate(zip(getattr(params, name), own,
-                                               strict=True)):
+        given = getattr(params, name)
+        for i, (value, limit) in enumerate(zip(
+                own if given is None else given, own, strict=True)):
             if value > limit:
                 raise ValueError(
                     f"{path}.{name}[{i}] = {value!r} is not allowed: must be "
                     f"at most the robot's own {limit!r} {unit[i]} (a limit "
                     "may tighten the robot's, not widen it)")
-    floor = robot_stop_distance(params.stop_time, params.base_velocity_limits,
-                                params.base_acceleration_limits)
-    if params.stop_distance < floor:
+    floor = robot_stop_distance(
+        params.stop_time, params.base_velocity_limits or velocity_limits,
+        params.base_acceleration_limits or acceleration_limits)
+    if params.stop_distance is not None and params.stop_distance < floor:
         raise ValueError(
             f"{path}.stop_distance = {params.stop_distance!r} is not "
             f"allowed with {path}.stop_time = {params.stop_time!r}: must be "

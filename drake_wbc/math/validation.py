@@ -242,6 +242,20 @@ def whole_multiple(name, value, period_name, period, tolerance=1e-9):
     return number
 
 
+def robots_own(name, value):
+    """Returns `value`, a parameter whose default (None) stands for the
+    robot's own value; None here, in a stage built alone, is an error
+    naming it: build_controller fills it in from the robot's description
+    (drake_wbc.controller.parameters.for_robot), a stage alone has no
+    robot to read it from."""
+    if value is None:
+        raise ValueError(
+            f"{name} = None is not allowed here: None stands for the "
+            "robot's own value, which build_controller fills in from the "
+            "robot's description; a stage built alone must be given it")
+    return value
+
+
 def positive(name, value):
     """Returns `value` as a float after checking that it is > 0.
 

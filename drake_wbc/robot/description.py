@@ -34,6 +34,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from drake_wbc.math.capability import DEFAULT_JOINT_LIMIT_GAIN, CapabilityBand
 from drake_wbc.math.loading import load_typed
 from drake_wbc.math.validation import as_vector, positive, text
 
@@ -281,6 +282,36 @@ class ToolDescription:
 
 
 @dataclass
+class RobotTuning:
+    """The controller's tuning that depends on the arm: what the
+    controller uses where its parameters give none (None there).
+
+    Attributes:
+        joint_limit_gain: k_j > 0 of the joint-limit penalization P_jnt
+            (drake_wbc.math.capability); it scales with 4^n on n joints.
+            Default the paper's DEFAULT_JOINT_LIMIT_GAIN (1.5e4, six
+            joints).
+        capability_band: the limitation band C_m^l < C_m < C_m^u of eq.
+            (transition) (drake_wbc.math.capability.CapabilityBand);
+            C_m carries the units of the arm's manipulability, so the
+            band is the arm's. Default the paper's 0.035 and 0.04.
+
+    `drake-wbc demo --robot FILE` surveys the arm and proposes both
+    (drake_wbc.robot.tuning).
+    """
+
+    joint_limit_gain: float = DEFAULT_JOINT_LIMIT_GAIN
+    capability_band: CapabilityBand = field(default_factory=CapabilityBand)
+
+    def __post_init__(self):
+        positive("joint_limit_gain", self.joint_limit_gain)
+        if not isinstance(self.capability_band, CapabilityBand):
+            raise ValueError(
+                f"capability_band = {self.capability_band!r} is not "
+                "allowed: must be a CapabilityBand (lower, upper)")
+
+
+@dataclass
 class RobotDescription:
     """A mobile collaborative robot as data (see the module).
 
@@ -288,6 +319,8 @@ class RobotDescription:
         name: a short name, for reports.
         model: where its model comes from.
         base, arm, tool: the parts.
+        tuning: the controller's tuning for this arm (RobotTuning; the
+            paper's where the file gives none).
         lidar_frames: the scan frames of its planar LIDARs (z up, the scan
             in their x-y plane), on the base.
         root: the folder that relative paths are relative to; the
@@ -299,6 +332,7 @@ class RobotDescription:
     base: BaseDescription = field(default_factory=BaseDescription)
     arm: ArmDescription = field(default_factory=ArmDescription)
     tool: ToolDescription = field(default_factory=ToolDescription)
+    tuning: RobotTuning = field(default_factory=RobotTuning)
     lidar_frames: list[str] = field(default_factory=list)
     root: str = ""
 

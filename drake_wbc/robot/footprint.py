@@ -1,53 +1,54 @@
-"""The base's footprint at the start of a run: the footprint in the plane
-and the height of the base's deck (the robot description's), and
-the check that no static obstacle of a scene overlaps the footprint at
-the base's initial pose, which a Scenario (drake_wbc.experiments.scenario)
+"""The base's footprint at the start of a run: the check that no static
+obstacle of a scene overlaps the footprint of a robot's base (its
+description's footprint in the plane and the height of its deck) at the
+base's initial pose, which a Scenario (drake_wbc.experiments.scenario)
 runs."""
 
 import numpy as np
 
-from drake_wbc.robot.description import shipped_robot
 
-FOOTPRINT_HALF_SIZES = tuple(shipped_robot().base.footprint_half_sizes)
-"""The shipped base's footprint, half length and half width in m (its
-description's: the model's 0.8 x 0.6 m chassis)."""
-
-BASE_HEIGHT = shipped_robot().base.height
-"""The height of the shipped base's deck in m (its description's): a box
-whose bottom is higher may overhang the base."""
-
-
-def check_start_is_free(scene, base_pose):
+def check_start_is_free(scene, base_pose, base):
     """Checks that no static obstacle overlaps the base's footprint at
     its initial pose [x, y, yaw]: no cylinder, and no box reaching below
-    BASE_HEIGHT (the footprint and each box as rectangles in the plane,
-    by separating axes)."""
+    the base's deck (the footprint and each box as rectangles in the
+    plane, by separating axes).
+
+    Args:
+        scene: the Scene (drake_wbc.station.scene).
+        base_pose: [x, y, yaw] of T_b in the world.
+        base: the robot's BaseDescription (its footprint_half_sizes and
+            height).
+
+    Raises:
+        ValueError: naming the obstacle and the pose.
+    """
     x, y, yaw = base_pose
-    footprint = _rectangle(x, y, *FOOTPRINT_HALF_SIZES, yaw)
+    half_sizes = tuple(base.footprint_half_sizes)
+    footprint = _rectangle(x, y, *half_sizes, yaw)
     for i, cylinder in enumerate(scene.cylinders):
         c, s = np.cos(yaw), np.sin(yaw)
         offset = np.asarray(cylinder.position) - [x, y]
         local = np.array([c * offset[0] + s * offset[1],
                           -s * offset[0] + c * offset[1]])
-        nearest = np.clip(local, -np.array(FOOTPRINT_HALF_SIZES),
-                          FOOTPRINT_HALF_SIZES)
+        nearest = np.clip(local, -np.array(half_sizes), half_sizes)
         if np.linalg.norm(local - nearest) < cylinder.radius:
-            _overlap(f"scene.cylinders[{i}]", cylinder.name, base_pose)
+            _overlap(f"scene.cylinders[{i}]", cylinder.name, base_pose,
+                     half_sizes)
     for i, box in enumerate(scene.boxes):
-        if box.center[2] - box.size[2] / 2 >= BASE_HEIGHT:
+        if box.center[2] - box.size[2] / 2 >= base.height:
             continue
         corners = _rectangle(box.center[0], box.center[1], box.size[0] / 2,
                              box.size[1] / 2, box.yaw)
         if not _separated(footprint, corners):
-            _overlap(f"scene.boxes[{i}]", box.name, base_pose)
+            _overlap(f"scene.boxes[{i}]", box.name, base_pose, half_sizes)
 
 
-def _overlap(where, name, base_pose):
+def _overlap(where, name, base_pose, half_sizes):
     raise ValueError(
         f"{where} ({name!r}) is not allowed with station.initial_base_pose "
         f"= {list(base_pose)}: it overlaps the base's "
-        f"{2 * FOOTPRINT_HALF_SIZES[0]} x {2 * FOOTPRINT_HALF_SIZES[1]} m "
-        "footprint at the start")
+        f"{2 * half_sizes[0]} x {2 * half_sizes[1]} m footprint at the "
+        "start")
 
 
 def _rectangle(cx, cy, hx, hy, yaw):

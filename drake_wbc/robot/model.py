@@ -50,12 +50,20 @@ from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
 )
-from drake_wbc.robot.description import RobotDescription, shipped_robot
+from drake_wbc.robot.description import (
+    RobotDescription,
+    models_dir,
+    shipped_robot,
+)
 from drake_wbc.robot.suspension import (
     SUSPENSION_JOINTS,
     SuspensionGains,
     suspended_base_sdf,
 )
+
+LIBRARY_PACKAGE = "drake_wbc"
+"""The package name of the library's models folder (models/: the bases,
+tools and arms it ships), which every robot's parser knows."""
 
 HOME_ARM_POSITIONS = np.array(shipped_robot().arm.home)
 """The shipped robot's home configuration (rad), from its description:
@@ -211,9 +219,17 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
                                    RobotDescription, shipped_robot)
     parser = parser or Parser(plant)
     package_map = parser.package_map()
+    # The library's models (bases, tools) as package://drake_wbc/..., so a
+    # description may put its own arm on one of them without a path.
+    if not package_map.Contains(LIBRARY_PACKAGE):
+        package_map.Add(LIBRARY_PACKAGE, str(models_dir()))
     for name, folder in description.model.packages.items():
-        if not package_map.Contains(name):
-            package_map.Add(name, description.resolve(folder))
+        # The description's folder wins over a package Drake knows by the
+        # same name (e.g. its remote drake_models, which it would try to
+        # download).
+        if package_map.Contains(name):
+            package_map.Remove(name)
+        package_map.Add(name, description.resolve(folder))
     source = description.model
     if suspension is not None and not isinstance(suspension,
                                                  SuspensionGains):

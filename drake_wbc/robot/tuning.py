@@ -115,7 +115,9 @@ def check_tuning(arm, band, k_j):
         problems.append(
             f"capability.joint_limit_gain = {k_j!r} caps P_jnt at "
             f"{best:.2f} on this arm's {n} joints (even with every joint "
-            f"mid-range): give about {proposed_joint_limit_gain(n):.3g}")
+            f"mid-range): give about {proposed_joint_limit_gain(n):.3g} "
+            "(in the controller's parameters, or for every controller of "
+            "this robot in its description's tuning)")
     home = capability_at(arm, arm.home, k_j)
     if home <= band.upper:
         proposal = CapabilityBand(BAND_OVER_HOME[0] * home,
@@ -125,5 +127,6 @@ def check_tuning(arm, band, k_j):
             f"at the robot's home, where C_m = {home:.4g}: the compensation "
             "would give way and k_n switch off from the start; give a band "
             f"below it, e.g. ({proposal.lower:.3g}, {proposal.upper:.3g}) "
-            "(drake-wbc demo --robot FILE surveys the arm)")
+            "in the controller's parameters or the robot description's "
+            "tuning (drake-wbc demo --robot FILE surveys the arm)")
     return problems

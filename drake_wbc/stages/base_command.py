@@ -40,6 +40,7 @@ from drake_wbc.math.validation import (
     checked_instance,
     non_negative,
     positive,
+    robots_own,
 )
 from drake_wbc.stages.support import define_stage
 
@@ -185,22 +186,29 @@ def BaseCommandLimiter_(T):
                 Read when the stage is built.
             time_step: the control period h > 0, s.
             half_sizes: the footprint's half-sizes (a, b) in m, those of
-                the repulsive field (0.4, 0.3 by default).
+                the repulsive field (the robot's own, which
+                build_controller gives).
         """
 
         def _construct(self, params=None, time_step=0.01,
-                       half_sizes=(0.4, 0.3), converter=None):
+                       half_sizes=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             params = checked_instance("params", params, SafetyParameters,
                                       SafetyParameters)
             self.time_step = positive("time_step", time_step)
             self.half_sizes = tuple(
                 non_negative("half_sizes", a)
-                for a in as_vector("half_sizes", half_sizes, 2))
-            self._velocity_limits = params.base_velocity_limits
-            self._acceleration_limits = params.base_acceleration_limits
+                for a in as_vector("half_sizes",
+                                   robots_own("half_sizes", half_sizes), 2))
+            self._velocity_limits = robots_own(
+                "params.base_velocity_limits", params.base_velocity_limits)
+            self._acceleration_limits = robots_own(
+                "params.base_acceleration_limits",
+                params.base_acceleration_limits)
             state_of_points = body_for(separation_state, T)
-            stop_distance, stop_time = params.stop_distance, params.stop_time
+            stop_distance = robots_own("params.stop_distance",
+                                       params.stop_distance)
+            stop_time = params.stop_time
             self._separation = LastPoints(
                 lambda points: state_of_points(points, self.half_sizes,
                                                stop_distance, stop_time))

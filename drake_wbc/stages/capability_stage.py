@@ -11,7 +11,6 @@ from pydrake.systems.framework import LeafSystem_
 from drake_wbc.math import capability, motion_mode, workspace
 from drake_wbc.math.capability import (
     ArmCapabilityParameters,
-    CapabilityBand,
 )
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.motion_mode import MotionMode
@@ -21,6 +20,7 @@ from drake_wbc.math.workspace import WorkspaceAdapterParameters
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.support import (
     arm_mounting,
+    band_of,
     declare_cached_vector,
     declare_inputs,
     declare_slices,
@@ -79,7 +79,7 @@ def ArmCapability_(T):
             arm: the ArmKinematics to use; a new ArmKinematics() of our
                 robot if None.
             band: the CapabilityBand C_m^l, C_m^u of alpha (read here);
-                the paper's 0.035 < C_m < 0.04 if None.
+                the arm's robot's (its description's tuning) if None.
         """
 
         def _construct(self, params=None, arm=None, band=None,
@@ -90,12 +90,13 @@ def ArmCapability_(T):
                 ArmCapabilityParameters)
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         ArmKinematics)
-            self.band = checked_instance("band", band, CapabilityBand,
-                                         CapabilityBand)
+            self.band = band_of(band, self.arm)
             # What the tick needs, as plain floats (see evaluate).
             p = self.params
             self._limits = (self.arm.lower.tolist(), self.arm.upper.tolist())
-            self._constants = (p.joint_limit_gain, p.gradient_damping,
+            k_j = (self.arm.model.description.tuning.joint_limit_gain
+                   if p.joint_limit_gain is None else p.joint_limit_gain)
+            self._constants = (k_j, p.gradient_damping,
                                p.gradient_damping_threshold)
             self._band = (self.band.upper, self.band.lower)
             self._terms = body_for(capability.capability_terms,
@@ -186,8 +187,8 @@ def WorkspaceAdapter_(T):
             arm: ArmKinematics whose R_ba and arm-base position define
                 T_a; our robot's if None.
             band: the CapabilityBand C_m^l, C_m^u of f_xy and f_phi
-                (intuitive pHRI; read here); the paper's
-                0.035 < C_m < 0.04 if None.
+                (intuitive pHRI; read here); the arm's robot's (its
+                description's tuning) if None.
             time_step: the control period h in s (> 0), the period of
                 the intuitive pHRI mode's update and the time of
                 params.max_rate; 0.01 (the paper's 100 Hz) by default.
@@ -202,8 +203,7 @@ def WorkspaceAdapter_(T):
                 WorkspaceAdapterParameters)
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         shared_arm_kinematics)
-            self.band = checked_instance("band", band, CapabilityBand,
-                                         CapabilityBand)
+            self.band = band_of(band, self.arm)
             self.R_ba, self.arm_base_position = arm_mounting(self.arm)
             self._inputs = declare_inputs(self, (
                 ("end_effector_position", 3), ("end_effector_velocity", 6),

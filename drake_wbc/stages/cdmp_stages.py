@@ -12,7 +12,7 @@ from pydrake.systems.framework import LeafSystem_, ValueProducer
 
 from drake_wbc.math import cdmp, repulsion
 from drake_wbc.math.kernels import body_for
-from drake_wbc.math.validation import checked_instance, switch
+from drake_wbc.math.validation import checked_instance, robots_own, switch
 from drake_wbc.stages.cdmp_base import ONE, AffineDynamics, CdmpStage
 from drake_wbc.stages.support import define_stage
 
@@ -53,6 +53,8 @@ def BaseCdmp_(T):
             self.params = params = checked_instance(
                 "params", params, cdmp.BaseCdmpParameters,
                 cdmp.BaseCdmpParameters)
+            robots_own("params.repulsion.half_sizes",
+                       params.repulsion.half_sizes)
             self._dimension = 3
             no_points = np.zeros((0, 2))
 

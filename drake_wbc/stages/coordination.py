@@ -25,7 +25,6 @@ from drake_wbc.math import (
     distribution,
     kernels,
 )
-from drake_wbc.math.capability import CapabilityBand
 from drake_wbc.math.compensation import (
     PROJECTOR_TOLERANCE,
     RobustCompensatorParameters,
@@ -39,6 +38,7 @@ from drake_wbc.math.validation import (
 )
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.support import (
+    band_of,
     declare_cached_vector,
     declare_inputs,
     declare_slices,
@@ -95,7 +95,8 @@ def MotionDistributor_(T):
             params: MotionDistributorParameters; k_n = 0 if None.
             arm: ArmKinematics whose R_ba is used; our robot's if None.
             band: the CapabilityBand C_m^l, C_m^u of the switch-off of
-                k_n (read here); the paper's 0.035 < C_m < 0.04 if None.
+                k_n (read here); the arm's robot's (its description's
+                tuning) if None.
         """
 
         def _construct(self, params=None, arm=None, band=None,
@@ -106,8 +107,7 @@ def MotionDistributor_(T):
                 MotionDistributorParameters)
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         shared_arm_kinematics)
-            self.band = checked_instance("band", band, CapabilityBand,
-                                         CapabilityBand)
+            self.band = band_of(band, self.arm)
             self.R_ba = rotation_matrix("R_ba", self.arm.R_ba)
             # None for the usual mounting ^bR_a = I, the closed form of
             # the float kernel.

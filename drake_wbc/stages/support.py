@@ -14,6 +14,8 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from drake_wbc.math.capability import CapabilityBand
+from drake_wbc.math.validation import checked_instance
 from drake_wbc.robot.model import ArmKinematics
 
 SCALARS = (float, AutoDiffXd)
@@ -69,6 +71,15 @@ def shared_arm_kinematics():
     """One ArmKinematics of the shipped robot, for stages built without
     one that read only its constants (R_ba, the arm base's position)."""
     return ArmKinematics()
+
+
+def band_of(band, arm):
+    """The CapabilityBand a stage uses: `band`, or where it is None the
+    band of `arm`'s robot (its description's tuning,
+    drake_wbc.robot.description.RobotTuning)."""
+    return checked_instance("band", band, CapabilityBand,
+                            lambda: arm.model.description.tuning
+                            .capability_band)
 
 
 def arm_mounting(arm):

@@ -32,7 +32,11 @@ import numpy as np
 
 from drake_wbc.controller.task import Schedule
 from drake_wbc.experiments.common import obstacle_distances, run_metrics
-from drake_wbc.experiments.scenario import Scenario
+from drake_wbc.experiments.scenario import (
+    Scenario,
+    controller_for,
+    footprint_of,
+)
 from drake_wbc.math.validation import validate
 from drake_wbc.robot.model import HOME_ARM_POSITIONS
 from drake_wbc.station.scene import (
@@ -221,7 +225,8 @@ def case_record(seed, index, scenario, log):
     metrics = run_metrics(scenario, log)
     static = copy.deepcopy(scenario.scene)
     static.people = []
-    distance = obstacle_distances(static, log["truth.base_pose"])
+    distance = obstacle_distances(static, log["truth.base_pose"],
+                                  footprint_of(scenario))
     command = log["arm.position_command"]
     dt = np.diff(log.time)[:, None]
     joint_speed = np.abs(np.diff(command, axis=0)) / dt
@@ -229,7 +234,7 @@ def case_record(seed, index, scenario, log):
     base_limits = np.asarray(scenario.station.base.velocity_limits)
     filtered = np.abs(log["filtered_base_velocity"])
     filter_limits = np.asarray(
-        scenario.controller.safety.base_velocity_limits)
+        controller_for(scenario).safety.base_velocity_limits)
     with np.errstate(invalid="ignore"):
         command_margin = np.min(np.minimum(command - lower, upper - command))
     return {
