@@ -158,7 +158,8 @@ class Controller:
         """Starts the controller's state from the robot's measured state:
         the arm command at `arm_position` (the robot's home if None), the
         base filter at rest at
-        `base_velocity` (T_b) and the base command's limiter from it. The
+        `base_velocity` (T_b), and the base command's limiter and the
+        compensator's prediction of the base (if any) from it. The
         DMPs start at rest; the input guard takes `arm_position` as the
         last valid arm measurement."""
         def context_of(name):
@@ -174,6 +175,8 @@ class Controller:
                                                 base_velocity)
         self.stages["base_limiter"].set_previous(context_of("base_limiter"),
                                                  base_velocity)
+        self.stages["compensator"].set_prediction(context_of("compensator"),
+                                                  base_velocity)
         self.stages["guard"].set_last_valid(
             context_of("guard"), "arm.position_measured", arm_position)
         self.stages["wrench"].set_arm_position(context_of("wrench"),
@@ -254,7 +257,7 @@ def build_controller(params=None, robot=None):
             params.safety, time_step=h,
             half_sizes=params.base_cdmp.repulsion.half_sizes)),
         compensator=add("compensator", RobustCompensator(
-            params.compensator, arm)),
+            params.compensator, arm, time_step=h)),
         arm_cdmp=add("arm_cdmp", ArmCdmp(
             params.arm_cdmp, time_step=h, phri_switch=switch)),
         arm_controller=add("arm_controller", ArmCartesianVelocityController(
@@ -316,6 +319,8 @@ def build_controller(params=None, robot=None):
     connect("guard", "lidar.obstacle_points", "base_limiter",
             "obstacle_points")
     connect("guard", "base.state_estimated", "base_limiter", "base_state")
+    # The base's motion of the "measured" source (params.compensator).
+    connect("guard", "base.state_estimated", "compensator", "base_state")
     connect("distributor", "arm_velocity", "compensator", "arm_velocity")
     connect("distributor", "base_velocity", "compensator", "base_velocity")
     connect("base_limiter", "velocity_command", "compensator",

@@ -57,12 +57,18 @@ from drake_wbc.math.validation import (
     as_vector,
     in_closed_range,
     non_negative,
+    positive,
     rotation_matrix,
 )
 
 PROJECTOR_TOLERANCE = 1e-12
 """Norm of grad_x C_m at and below which P_Cm = 0 (gradient_projector's
 default and the compensator's)."""
+
+
+BASE_SOURCES = ("command", "measured", "predicted")
+"""What the compensator takes for the base's motion V_b^flt of eq.
+(wb_error) (RobustCompensatorParameters.base_source)."""
 
 
 @dataclass
@@ -75,13 +81,33 @@ class RobustCompensatorParameters:
             1 (robust compensation, alpha as computed) or 0 (alpha = 0:
             exact compensation whatever C_m); values in between scale
             alpha.
+        base_source: what stands for the base's motion V_b^flt in
+            delta_V_b = V_b^flt - V_b (one of BASE_SOURCES):
+            "command" (the paper's and the default): the command sent,
+            the filter's output after the limiter; "measured": the base's
+            twist from its odometry (base.state_estimated); "predicted":
+            the command through a model of the base's velocity loop, a
+            first-order lag of time constant `base_lag` (eq.
+            (base_lag); `base_velocity_prediction`). What each costs:
+            module docstring, "The base's motion".
+        base_lag: the time constant of the "predicted" source's lag, s,
+            > 0 (0.2, the shipped base's loop; `identify_lag` estimates it
+            from a logged response). Read only by that source.
     """
 
     compensation_switch: float = 1.0
+    base_source: str = "command"
+    base_lag: float = 0.2
 
     def __post_init__(self):
         in_closed_range("compensation_switch", self.compensation_switch,
                         0.0, 1.0)
+        if self.base_source not in BASE_SOURCES:
+            allowed = ", ".join(repr(name) for name in BASE_SOURCES)
+            raise ValueError(
+                f"base_source = {self.base_source!r} is not allowed: must "
+                f"be one of {allowed}")
+        positive("base_lag", self.base_lag)
 
 
 # --- the reference bodies ---------------------------------------------------
@@ -90,6 +116,23 @@ def base_deviation_of(V_b_filtered, V_b):
     """delta_V_b = V_b^flt - V_b for any scalar type (the reference body
     of `base_deviation`, which documents it)."""
     return np.asarray(V_b_filtered) - np.asarray(V_b)
+
+
+def lag_gain(time_step, lag):
+    """g = 1 - e^(-h / T_b) of eq. (base_lag): the fraction of the way to
+    a command held over one period h that a first-order lag of time
+    constant T_b goes (float)."""
+    return -math.expm1(-time_step / lag)
+
+
+def base_velocity_prediction(predicted, command, gain):
+    """V_b^pred+ = V_b^pred + g (V_b^cmd - V_b^pred), eq. (base_lag), for
+    any scalar type: one control period of the base's velocity loop
+    modelled as a first-order lag, the exact step for a command held over
+    the period (zero-order hold), g = `lag_gain(h, T_b)`. From rest, a
+    step to u gives u (1 - e^(-k h / T_b)) after k periods."""
+    predicted = np.asarray(predicted)
+    return predicted + gain * (np.asarray(command) - predicted)
 
 
 def project_on_gradient(twist, grad, tolerance=PROJECTOR_TOLERANCE):
@@ -247,6 +290,51 @@ def base_deviation(V_b_filtered, V_b):
     """
     return base_deviation_of(as_vector("V_b_filtered", V_b_filtered, 3),
                              as_vector("V_b", V_b, 3))
+
+
+def identify_lag(commands, velocities, time_step):
+    """The time constant T_b of eq. (base_lag) that fits a logged response
+    of the base's velocity loop best.
+
+    With u_k the command held over [t_k, t_k + h) and v_k the base's
+    velocity at t_k, the gain g of v_{k+1} - v_k = g (u_k - v_k) is fitted
+    by least squares over every sample and axis, and T_b = -h / ln(1 - g).
+
+    Args:
+        commands: (N,) or (N, k) commands u_k, one row a period.
+        velocities: the base's velocities v_k at the same instants, the
+            same shape.
+        time_step: h, the period of the samples (s, > 0).
+
+    Returns:
+        T_b in s.
+
+    Raises:
+        ValueError: naming the argument, on a bad shape or non-finite
+            entry, fewer than two samples, no command that differs from
+            the velocity (nothing to fit), or a fitted g outside (0, 1)
+            (the response is no lag).
+    """
+    h = positive("time_step", time_step)
+    u = np.atleast_2d(np.asarray(commands, dtype=float).T).T
+    v = np.atleast_2d(np.asarray(velocities, dtype=float).T).T
+    if u.shape != v.shape or u.shape[0] < 2:
+        raise ValueError(
+            f"commands and velocities of shapes {u.shape} and {v.shape} are "
+            "not allowed: must have the same shape, two samples or more")
+    as_vector("commands", u.ravel())
+    as_vector("velocities", v.ravel())
+    error, step = (u - v)[:-1].ravel(), np.diff(v, axis=0).ravel()
+    energy = float(error @ error)
+    if energy == 0.0:
+        raise ValueError("commands = velocities throughout is not allowed: "
+                         "must differ somewhere (a step) to show the lag")
+    gain = float(error @ step) / energy
+    if not 0.0 < gain < 1.0:
+        raise ValueError(
+            f"the fitted gain {gain!r} is not allowed: must be in (0, 1), "
+            "a first-order lag's (the response is not one)")
+    return -h / math.log1p(-gain)
 
 
 def gradient_projector(grad, tolerance=PROJECTOR_TOLERANCE):
