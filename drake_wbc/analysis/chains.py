@@ -163,8 +163,9 @@ def build_split_diagram(params=None, point=None, base_driver=None,
 
     - end_effector_velocity: V_ee (6), the commanded twist in T_b.
     - shares (18): the base's share J_b V_b^flt (J_b v_base with the
-      driver), the arm's share R6_ba V_a^ref, and their sum, the end
-      effector's twist J_wb [V_a^ref; V_b] with an ideal arm; each 6, T_b.
+      driver; the compensator's "measured" source reads v_base), the
+      arm's share R6_ba V_a^ref, and their sum, the end effector's twist
+      J_wb [V_a^ref; V_b] with an ideal arm; each 6, T_b.
       Also exported alone under their names, with filtered_base_velocity
       (3) and arm_reference_velocity (6).
 
@@ -206,7 +207,8 @@ def _build_split(params, point, base_driver, alpha, station):
         params.distributor, band=params.capability_band))
     base_filter = add("base_filter", BaseVelocityFilter(
         params.base_filter, time_step=params.time_step))
-    compensator = add("compensator", RobustCompensator(params.compensator))
+    compensator = add("compensator", RobustCompensator(
+        params.compensator, time_step=params.time_step))
     alpha = point.alpha if alpha is None else alpha
 
     def constant(name, value, destination, port):
@@ -252,6 +254,14 @@ def _build_split(params, point, base_driver, alpha, station):
         connect(filtered, driver.GetInputPort("velocity_command"))
         constant("base_pose", np.zeros(3), driver, "base_pose")
         base_motion = driver.GetOutputPort("velocity")
+    if params.compensator.base_source == "measured":
+        # The odometry as the station's reports it: the base's own
+        # velocity (the driver's loop, or the command of an ideal base).
+        odometry = add("odometry", MatrixGain(np.vstack([np.zeros((3, 3)),
+                                                         np.eye(3)])))
+        connect(base_motion, odometry.get_input_port())
+        connect(odometry.get_output_port(),
+                compensator.GetInputPort("base_state"))
     J_b = kinematics.base_jacobian(p_ee)
     R6 = kinematics.twist_rotation(distributor.R_ba)
     base_share = add("base_share", MatrixGain(J_b))

@@ -275,8 +275,12 @@ def RobustCompensator_(T):
              self._p_ee_port, self._gradient_port, self._alpha_port,
              self._switch_port, self._base_state_port) = (
                  self._inputs.values())
+            # The base's motion: base_state's twist for "measured", else
+            # the command on filtered_base_velocity.
+            unused = ("filtered_base_velocity" if self.source == "measured"
+                      else "base_state")
             used = [port for name, port in self._inputs.items()
-                    if name != "base_state" or self.source == "measured"]
+                    if name != unused]
             prerequisites = tickets(used)
             self._base_motion = self._commanded
             if self.source == "measured":
