@@ -16,6 +16,8 @@ import pytest
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import Linearize
 
+from drake_wbc.analysis import chains
+from drake_wbc.analysis.frequency import frequency_grid, stability_margins
 from drake_wbc.controller import (
     ControllerParameters,
     build_controller,
@@ -287,3 +289,41 @@ def test_the_bases_real_motion_halves_the_tools_deviation(lateral_rms,
     # No new oscillation: the arm command's share above 5 Hz is no larger
     # than with the command (0.5 to 0.6 % over the whole run).
     assert high < 1.2 * command_high
+
+
+# The loop of the tracking-error elimination --------------------------------
+
+def test_the_deviation_loop_closes_through_the_base_only_with_its_motion():
+    """chains.deviation_loop: with an ideal base the measured source's
+    loop is the command's (the base's velocity is the command); with the
+    station's 0.2 s loop the base's lag enters the measured and predicted
+    sources' loops and lowers the gain margin (29.5 to 25.5 dB in
+    fixed_point, 4.4 to 2.4 dB with the controller's DMP in
+    line_tracking); alpha = 0 opens the loop."""
+    scenario = load_scenario(find_scenario("fixed_point"))
+    hertz, omega = frequency_grid(0.01, 49.9, 100)
+    driver = replace(scenario.station.base,
+                     time_step=scenario.station.time_step)
+
+    def params_of(source):
+        return replace(scenario.controller, compensator=replace(
+            scenario.controller.compensator, base_source=source))
+
+    point = chains.operating_point(params_of("command"),
+                                   scenario.station.initial_arm_positions)
+    ideal = {source: chains.deviation_loop(params_of(source), point)[0]
+             for source in ("command", "measured")}
+    for w in omega[::20]:
+        assert ideal["measured"](w) == pytest.approx(ideal["command"](w),
+                                                     rel=1e-9, abs=1e-15)
+    margins = {source: stability_margins(chains.deviation_loop(
+        params_of(source), point, driver)[0], omega)
+        for source in BASE_SOURCES}
+    command = margins["command"].gain_margin_db
+    assert command == pytest.approx(
+        stability_margins(ideal["command"], omega).gain_margin_db)
+    for source in ("measured", "predicted"):
+        assert 20.0 < margins[source].gain_margin_db < command - 2.0
+    opened, _ = chains.deviation_loop(params_of("measured"), point, driver,
+                                      alpha=0.0)
+    assert max(abs(opened(w)) for w in omega[::10]) < 1e-12
