@@ -251,9 +251,10 @@ def test_linearize_runs_on_the_stage_with_each_source(source):
 
 # In the station -------------------------------------------------------
 
-CLOSED_LOOP_DURATION = 6.0
+CLOSED_LOOP_DURATION = 5.0
 """s of line_tracking: the ramp up to 0.3 m/s and the swerve around the
-pillar (abreast at about 4 s)."""
+pillar (abreast at about 4 s); the tool's lateral RMS is then 2.2 mm
+with the command, 0.24 mm measured and 0.07 mm predicted."""
 
 
 @pytest.fixture(scope="module")
