@@ -21,7 +21,8 @@ One control tick, as wired here (design notes, "data flow of one tick")::
                           │          │ ──► base.velocity_command
                           ▼          ▼ (the command, limited)
                    RobustCompensator ◄─ s_c ──► delta_V_ee (to WholeBodyCdmp)
-                          │ V_a^ref
+                          │ V_a^ref    ◄─ base.state_estimated (its
+                          │               "measured" source of the base)
                           ▼
                        ArmCdmp ◄─ F_ext, F_d, S_hri
                           ▼
@@ -77,7 +78,9 @@ Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
   footprint (a protective stop, on `base_protective_stop` and in
   Controller.safety_reason); the compensator sees
   the command actually sent, so the arm makes up for what the limits take
-  from the base (eq. (compensation)). The arm's joint rates are scaled
+  from the base (eq. (compensation)), or, by its `base_source`, the
+  base's measured twist or that command through a model of the base's
+  velocity loop. The arm's joint rates are scaled
   uniformly to their limits by the arm controller (reported on
   `arm_limited`), and its position command never leaves the joint
   limits.

@@ -61,8 +61,9 @@ delta_V_ee = 0. Two other sources stand for what the base really does:
       g = 1 - e^(-h / T_b),                                 eq. (base_lag)
 
   (a label of this project: the paper models no base loop), the exact
-  step for a command held over the period h; the compensator takes V_b^pred+, the base's velocity one period after
-  this tick's command. No sensor noise or delay; the cost is the model's
+  step for a command held over the period h; the compensator takes
+  V_b^pred+, the base's velocity one period after this tick's command.
+  No sensor noise or delay; the cost is the model's
   error: a lag off by Delta T leaves about Delta T / T_b of the command's
   deviation, and a base that is not a first-order lag (one that rings) is
   compensated wrongly; `identify_lag` fits T_b to a logged response.
