@@ -66,7 +66,10 @@ delta_V_ee = 0. Two other sources stand for what the base really does:
   No sensor noise or delay; the cost is the model's
   error: a lag off by Delta T leaves about Delta T / T_b of the command's
   deviation, and a base that is not a first-order lag (one that rings) is
-  compensated wrongly; `identify_lag` fits T_b to a logged response.
+  compensated wrongly; `identify_lag` fits T_b to a logged response. The
+  model has no saturation: it is exact while the command's acceleration
+  stays within the base's limits (the BaseCommandLimiter sees to that),
+  not after a safe stop's step to zero (the arm is then held anyway).
 
 Stability: with alpha = 0 every source is a feedforward into the arm (the
 measured one reads the robot, but the arm does not drive the base's
