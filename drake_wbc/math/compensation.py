@@ -53,7 +53,11 @@ delta_V_ee = 0. Two other sources stand for what the base really does:
   loop's lag (0.2 s), so d = 20 ms costs about a tenth of its deviation.
   The station's odometry is exact and has no delay; what is left there
   comes from the arm's own delay (its command acts a period or two
-  after the tick).
+  after the tick). Measured on line_tracking with the compensator's
+  odometry delayed or made noisy (README, fixed point): 0.75 mm RMS
+  lateral, 1.38 and 2.35 mm delayed 20 and 50 ms, 0.81 and 1.30 mm
+  with 1 and 5 mm/s of white noise, which raises the arm command's
+  share above 5 Hz from 0.5 to 3.5 and 17 %.
 - "predicted": the command through a first-order lag of time constant
   base_lag, eq. (base_lag):
 
