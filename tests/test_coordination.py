@@ -695,7 +695,13 @@ def test_defaults_are_the_papers():
     (RobustCompensator(arm=ARM),
      ["arm_velocity", "base_velocity", "filtered_base_velocity",
       "end_effector_position", "capability_gradient", "alpha",
-      "compensation_switch"],
+      "compensation_switch", "base_state"],
+     ["arm_reference_velocity", "end_effector_deviation"]),
+    (RobustCompensator(RobustCompensatorParameters(
+        base_source="predicted", base_lag=0.3), arm=ARM),
+     ["arm_velocity", "base_velocity", "filtered_base_velocity",
+      "end_effector_position", "capability_gradient", "alpha",
+      "compensation_switch", "base_state"],
      ["arm_reference_velocity", "end_effector_deviation"]),
 ])
 def test_scalar_conversion_keeps_ports_and_parameters(system, inputs,

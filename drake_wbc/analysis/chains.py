@@ -23,7 +23,11 @@ initial configuration, the robot at rest):
   its servo) at the station's static equilibrium; the base's actual
   velocity and the end effector's through the plant are read off its
   state (`plant_outputs`), and `linearize_base_plant` gives the driver
-  and plant alone.
+  and plant alone;
+- the loop of the tracking-error elimination (`deviation_loop`): the
+  deviation the robust compensation leaves out, through WholeBodyCdmp,
+  the split and (with the "measured" or "predicted" source of the base's
+  motion) the base's real velocity loop, back to the deviation.
 
 The force responses of the coupled DMPs are in
 drake_wbc.analysis.dmp_force_response.
@@ -40,6 +44,7 @@ from pydrake.systems.primitives import (
     Multiplexer,
 )
 
+from drake_wbc.analysis.frequency import frequency_response
 from drake_wbc.analysis.period_map import linearize_period_map
 from drake_wbc.analysis.plant_chain import (
     add_station_plant,
@@ -55,6 +60,7 @@ from drake_wbc.stages import (
     BaseVelocityFilter,
     MotionDistributor,
     RobustCompensator,
+    WholeBodyCdmp,
 )
 from drake_wbc.station.drivers import (
     BaseDriverParameters,
@@ -173,8 +179,9 @@ def build_split_diagram(params=None, point=None, base_driver=None,
 
     - end_effector_velocity: V_ee (6), the commanded twist in T_b.
     - shares (18): the base's share J_b V_b^flt (J_b v_base with the
-      driver), the arm's share R6_ba V_a^ref, and their sum, the end
-      effector's twist J_wb [V_a^ref; V_b] with an ideal arm; each 6, T_b.
+      driver; the compensator's "measured" source reads v_base), the
+      arm's share R6_ba V_a^ref, and their sum, the end effector's twist
+      J_wb [V_a^ref; V_b] with an ideal arm; each 6, T_b.
       Also exported alone under their names, with filtered_base_velocity
       (3) and arm_reference_velocity (6).
 
@@ -216,8 +223,8 @@ def _build_split(params, point, base_driver, alpha, station):
         params.distributor, point.arm, band=params.capability_band))
     base_filter = add("base_filter", BaseVelocityFilter(
         params.base_filter, time_step=params.time_step))
-    compensator = add("compensator", RobustCompensator(params.compensator,
-                                                       point.arm))
+    compensator = add("compensator", RobustCompensator(
+        params.compensator, point.arm, time_step=params.time_step))
     alpha = point.alpha if alpha is None else alpha
 
     def constant(name, value, destination, port):
@@ -263,6 +270,14 @@ def _build_split(params, point, base_driver, alpha, station):
         connect(filtered, driver.GetInputPort("velocity_command"))
         constant("base_pose", np.zeros(3), driver, "base_pose")
         base_motion = driver.GetOutputPort("velocity")
+    if params.compensator.base_source == "measured":
+        # The odometry as the station's reports it: the base's own
+        # velocity (the driver's loop, or the command of an ideal base).
+        odometry = add("odometry", MatrixGain(np.vstack([np.zeros((3, 3)),
+                                                         np.eye(3)])))
+        connect(base_motion, odometry.get_input_port())
+        connect(odometry.get_output_port(),
+                compensator.GetInputPort("base_state"))
     J_b = kinematics.base_jacobian(p_ee)
     R6 = kinematics.twist_rotation(distributor.R_ba)
     base_share = add("base_share", MatrixGain(J_b))
@@ -338,3 +353,135 @@ def linearize_split(params=None, point=None, base_driver=None, alpha=None,
                          output.get_index())
     return linearize_period_map(diagram, context, params.time_step, source,
                                 output)
+
+
+def build_deviation_loop(params=None, point=None, base_driver=None,
+                         alpha=1.0):
+    """The loop of the tracking-error elimination, eq. (cdmp-wb-error),
+    broken at WholeBodyCdmp's deviation input, as a Diagram.
+
+    ::
+
+        deviation_in ─► WholeBodyCdmp ─► MotionDistributor ─► BaseVelocity-
+        (delta_V_ee)     (V_ee)            │ V_a, V_b          Filter
+                                           ▼                    │ V_b^flt
+        deviation_out ◄─ RobustCompensator ◄─ (BaseVelocityDriver) ◄┘
+
+    The deviation of eq. (deviation), -alpha R_ba P_Cm delta_V_a^req, is
+    what the robust compensation leaves out; WholeBodyCdmp integrates it
+    into its tracking error and commands it back, through the base: a
+    loop that closes through the base's real velocity loop when the
+    compensator's source (params.compensator.base_source) is "measured"
+    (its odometry: the driver's velocity) or "predicted" (its model of
+    that loop), and through the command alone with "command". The
+    reference, wrench and yaw are zero, S_hri = 0, k_n = 0; p_ee, C_m,
+    grad_x C_m and sigma are the operating point's, alpha is `alpha`
+    (1: the most the compensation leaves out) and s_c 1.
+
+    Args:
+        params: ControllerParameters (the paper's if None).
+        point: OperatingPoint (`operating_point(params)` if None).
+        base_driver: BaseDriverParameters of the base's velocity loop, or
+            None for an ideal base (its velocity the filter's output).
+        alpha: alpha in [0, 1].
+    """
+    params = checked_instance("params", params, ControllerParameters,
+                              ControllerParameters)
+    point = point if point is not None else operating_point(params)
+    builder = DiagramBuilder()
+    add = builder.AddNamedSystem
+    connect = builder.Connect
+    whole_body = add("whole_body_cdmp", WholeBodyCdmp(
+        params.whole_body_cdmp, time_step=params.time_step))
+    distributor = add("distributor", MotionDistributor(
+        params.distributor, band=params.capability_band))
+    base_filter = add("base_filter", BaseVelocityFilter(
+        params.base_filter, time_step=params.time_step))
+    compensator = add("compensator", RobustCompensator(
+        params.compensator, time_step=params.time_step))
+
+    def constant(value, port):
+        source = add(f"{port.get_name()}_{port.get_system().get_name()}",
+                     ConstantVectorSource(np.atleast_1d(
+                         np.asarray(value, dtype=float))))
+        connect(source.get_output_port(), port)
+
+    for name, value in (("reference_velocity", np.zeros(6)),
+                        ("wrench", np.zeros(6)), ("base_yaw", 0.0),
+                        ("phri_switch", 0.0)):
+        constant(value, whole_body.GetInputPort(name))
+    p_ee = point.end_effector_position
+    for name, value in (
+            ("end_effector_position", p_ee), ("capability", point.capability),
+            ("capability_gradient", point.capability_gradient),
+            ("sigma_xy", point.sigma_xy), ("sigma_phi", point.sigma_phi),
+            ("null_space_gain", 0.0)):
+        constant(value, distributor.GetInputPort(name))
+    for name, value in (
+            ("end_effector_position", p_ee),
+            ("capability_gradient", point.capability_gradient),
+            ("alpha", alpha), ("compensation_switch", 1.0)):
+        constant(value, compensator.GetInputPort(name))
+    connect(whole_body.GetOutputPort("end_effector_velocity"),
+            distributor.GetInputPort("end_effector_velocity"))
+    base_velocity = distributor.GetOutputPort("base_velocity")
+    connect(base_velocity, base_filter.get_input_port())
+    connect(base_velocity, compensator.GetInputPort("base_velocity"))
+    connect(distributor.GetOutputPort("arm_velocity"),
+            compensator.GetInputPort("arm_velocity"))
+    filtered = base_filter.get_output_port()
+    connect(filtered, compensator.GetInputPort("filtered_base_velocity"))
+    base_motion = filtered
+    if base_driver is not None:
+        driver = add("base_driver", BaseVelocityDriver(checked_instance(
+            "base_driver", base_driver, BaseDriverParameters, None)))
+        connect(filtered, driver.GetInputPort("velocity_command"))
+        constant(np.zeros(3), driver.GetInputPort("base_pose"))
+        base_motion = driver.GetOutputPort("velocity")
+    odometry = add("odometry", MatrixGain(np.vstack([np.zeros((3, 3)),
+                                                     np.eye(3)])))
+    connect(base_motion, odometry.get_input_port())
+    connect(odometry.get_output_port(),
+            compensator.GetInputPort("base_state"))
+    builder.ExportInput(whole_body.GetInputPort("end_effector_deviation"),
+                        "deviation_in")
+    builder.ExportOutput(compensator.GetOutputPort("end_effector_deviation"),
+                         "deviation_out")
+    diagram = builder.Build()
+    diagram.set_name("deviation_loop")
+    return diagram
+
+
+def deviation_loop(params=None, point=None, base_driver=None, alpha=1.0):
+    """The loop transfer function L(omega) of `build_deviation_loop`
+    (same arguments), for `frequency.stability_margins`: its deviation is
+    always along d = R6_ba grad_x C_m / |.| (P_Cm has rank one), so the
+    loop is the scalar L = -d^T H d, H the broken loop's response from
+    deviation_in to deviation_out (the loop closes as deviation_in =
+    deviation_out; L's sign is that of a negative feedback). Linearised
+    with `linearize_period_map` over one control period (the driver runs
+    at its own step).
+
+    Returns:
+        (L, linear): a callable omega (rad/s) -> complex, and the
+        LinearSystem H (6 by 6, discrete at params.time_step).
+    """
+    params = checked_instance("params", params, ControllerParameters,
+                              ControllerParameters)
+    point = point if point is not None else operating_point(params)
+    diagram = build_deviation_loop(params, point, base_driver, alpha)
+    context = diagram.CreateDefaultContext()
+    source = diagram.GetInputPort("deviation_in")
+    source.FixValue(context, np.zeros(6))
+    linear = linearize_period_map(diagram, context, params.time_step, source,
+                                  diagram.GetOutputPort("deviation_out"))
+    R_ba = diagram.GetSubsystemByName("distributor").R_ba
+    direction = kinematics.twist_rotation(R_ba) @ point.capability_gradient
+    direction = direction / np.linalg.norm(direction)
+
+    def loop(omega):
+        H = frequency_response(linear.A(), linear.B(), linear.C(),
+                               linear.D(), [omega], linear.time_period())[0]
+        return -(direction @ H @ direction)
+
+    return loop, linear

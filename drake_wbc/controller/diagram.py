@@ -21,7 +21,8 @@ One control tick, as wired here (design notes, "data flow of one tick")::
                           │          │ ──► base.velocity_command
                           ▼          ▼ (the command, limited)
                    RobustCompensator ◄─ s_c ──► delta_V_ee (to WholeBodyCdmp)
-                          │ V_a^ref
+                          │ V_a^ref    ◄─ base.state_estimated (its
+                          │               "measured" source of the base)
                           ▼
                        ArmCdmp ◄─ F_ext, F_d, S_hri
                           ▼
@@ -77,7 +78,9 @@ Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
   footprint (a protective stop, on `base_protective_stop` and in
   Controller.safety_reason); the compensator sees
   the command actually sent, so the arm makes up for what the limits take
-  from the base (eq. (compensation)). The arm's joint rates are scaled
+  from the base (eq. (compensation)), or, by its `base_source`, the
+  base's measured twist or that command through a model of the base's
+  velocity loop. The arm's joint rates are scaled
   uniformly to their limits by the arm controller (reported on
   `arm_limited`), and its position command never leaves the joint
   limits.
@@ -158,7 +161,8 @@ class Controller:
         """Starts the controller's state from the robot's measured state:
         the arm command at `arm_position` (the robot's home if None), the
         base filter at rest at
-        `base_velocity` (T_b) and the base command's limiter from it. The
+        `base_velocity` (T_b), and the base command's limiter and the
+        compensator's prediction of the base (if any) from it. The
         DMPs start at rest; the input guard takes `arm_position` as the
         last valid arm measurement."""
         def context_of(name):
@@ -174,6 +178,8 @@ class Controller:
                                                 base_velocity)
         self.stages["base_limiter"].set_previous(context_of("base_limiter"),
                                                  base_velocity)
+        self.stages["compensator"].set_prediction(context_of("compensator"),
+                                                  base_velocity)
         self.stages["guard"].set_last_valid(
             context_of("guard"), "arm.position_measured", arm_position)
         self.stages["wrench"].set_arm_position(context_of("wrench"),
@@ -252,7 +258,7 @@ def build_controller(params=None, robot=None):
             params.safety, time_step=h,
             half_sizes=params.base_cdmp.repulsion.half_sizes)),
         compensator=add("compensator", RobustCompensator(
-            params.compensator, arm)),
+            params.compensator, arm, time_step=h)),
         arm_cdmp=add("arm_cdmp", ArmCdmp(
             params.arm_cdmp, time_step=h, phri_switch=switch)),
         arm_controller=add("arm_controller", ArmCartesianVelocityController(
@@ -314,6 +320,8 @@ def build_controller(params=None, robot=None):
     connect("guard", "lidar.obstacle_points", "base_limiter",
             "obstacle_points")
     connect("guard", "base.state_estimated", "base_limiter", "base_state")
+    # The base's motion of the "measured" source (params.compensator).
+    connect("guard", "base.state_estimated", "compensator", "base_state")
     connect("distributor", "arm_velocity", "compensator", "arm_velocity")
     connect("distributor", "base_velocity", "compensator", "base_velocity")
     connect("base_limiter", "velocity_command", "compensator",

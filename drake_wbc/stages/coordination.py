@@ -4,8 +4,10 @@ MotionDistributor (eq. (wbccm)) and RobustCompensator (eqs.
 weighting factors come from ArmCapability and WorkspaceAdapter
 (stages/capability_stage.py).
 
-Both are stateless: their outputs follow directly from their inputs
-(direct feedthrough), neither sits on a feedback edge. Each runs one
+Both are stateless, but for RobustCompensator's "predicted" source of the
+base's motion (one discrete state, the predicted base velocity): their
+outputs follow directly from their inputs (direct feedthrough), neither
+sits on a feedback edge. Each runs one
 equation of the math layer, chosen once when it is built
 (drake_wbc.math.kernels.body_for): distribution.whole_body_distribution
 and compensation.arm_compensation, scalar-generic, in AutoDiffXd; their
@@ -33,6 +35,7 @@ from drake_wbc.math.distribution import MotionDistributorParameters
 from drake_wbc.math.scalar_support import value_of
 from drake_wbc.math.validation import (
     checked_instance,
+    positive,
     rotation_matrix,
     unit_interval,
 )
@@ -176,7 +179,7 @@ def RobustCompensator_(T):
         """Arm compensation of the filtered base motion, eqs. (wb_error),
         (compensation) and (deviation) (compensation.arm_compensation):
 
-            delta_V_b     = V_b^flt - V_b,
+            delta_V_b     = V_b^flt - V_b,   (V_b^flt: params.base_source)
             delta_V_a^req = -R_ba^T J_b delta_V_b,
             delta_V_a^cmp = (I - s_c alpha P_Cm) delta_V_a^req,
             V_a^ref       = V_a + delta_V_a^cmp,
@@ -196,12 +199,16 @@ def RobustCompensator_(T):
             capability_gradient ───►│                   ├─► end_effector_
             alpha ─────────────────►│                   │   deviation
             compensation_switch ───►│ (optional)        │
+            base_state ────────────►│ ("measured" only) │
                                     └───────────────────┘
 
         - arm_velocity: V_a (6, T_a) and base_velocity: V_b (3, T_b), from
           the MotionDistributor.
         - filtered_base_velocity: V_b^flt (3, T_b), from the
           BaseVelocityFilter (what the base is commanded).
+        - base_state: the odometry [x, y, yaw; vx, vy, wz] (6), whose
+          twist (T_b) the "measured" source takes for V_b^flt; read by no
+          other source (it may stay unconnected).
         - end_effector_position: p_ee (3) in T_b (m), for J_b.
         - capability_gradient: grad_x C_m (6, T_a); alpha (1) of eq.
           (transition), in [0, 1].
@@ -217,17 +224,37 @@ def RobustCompensator_(T):
         With s_c alpha = 0 the arm reference and the filtered base give the
         commanded twist exactly: J_wb [V_a^ref; V_b^flt] = J_wb [V_a; V_b].
 
+        The base's motion (params.base_source; what each costs:
+        drake_wbc.math.compensation, "The base's motion"):
+        - "command" (the paper's): V_b^flt is filtered_base_velocity, the
+          command sent. Stateless.
+        - "measured": the odometry's twist, base_state[3:6].
+          Stateless; the output then feeds through from base_state.
+        - "predicted": the command through eq. (base_lag), a first-order
+          lag of time constant params.base_lag at the control period:
+          one discrete state (3, the predicted base velocity V_b^pred in
+          T_b, updated every `time_step`), and V_b^flt = V_b^pred+ =
+          V_b^pred + g (V_b^flt,cmd - V_b^pred), the base's velocity one
+          period after this tick's command
+          (compensation.base_velocity_prediction); `set_prediction`
+          starts it from the base's measured velocity.
+
         Args:
             params: RobustCompensatorParameters (drake_wbc.math.compensation);
-                s_c = 1 if None.
+                s_c = 1 and the command source if None.
             arm: ArmKinematics whose R_ba is used; our robot's if None.
+            time_step: the control period h in s, > 0 (0.01, the
+                paper's), the period of the "predicted" source's update.
         """
 
-        def _construct(self, params=None, arm=None, converter=None):
+        def _construct(self, params=None, arm=None, time_step=0.01,
+                       converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.params = checked_instance(
                 "params", params, RobustCompensatorParameters,
                 RobustCompensatorParameters)
+            self._time_step = h = positive("time_step", time_step)
+            self.source = self.params.base_source
             self.arm = checked_instance("arm", arm, ArmKinematics,
                                         shared_arm_kinematics)
             self.R_ba = rotation_matrix("R_ba", self.arm.R_ba)
@@ -243,16 +270,57 @@ def RobustCompensator_(T):
                 ("arm_velocity", 6), ("base_velocity", 3),
                 ("filtered_base_velocity", 3), ("end_effector_position", 3),
                 ("capability_gradient", 6), ("alpha", 1),
-                ("compensation_switch", 1)))
+                ("compensation_switch", 1), ("base_state", 6)))
             (self._V_a_port, self._V_b_port, self._V_b_flt_port,
              self._p_ee_port, self._gradient_port, self._alpha_port,
-             self._switch_port) = self._inputs.values()
+             self._switch_port, self._base_state_port) = (
+                 self._inputs.values())
+            # The base's motion: base_state's twist for "measured", else
+            # the command on filtered_base_velocity.
+            unused = ("filtered_base_velocity" if self.source == "measured"
+                      else "base_state")
+            used = [port for name, port in self._inputs.items()
+                    if name != unused]
+            prerequisites = tickets(used)
+            self._base_motion = self._commanded
+            if self.source == "measured":
+                self._base_motion = self._measured
+            elif self.source == "predicted":
+                self._gain = compensation.lag_gain(h, self.params.base_lag)
+                prerequisites.add(self.discrete_state_ticket(
+                    self.DeclareDiscreteState(3)))
+                self.DeclarePeriodicDiscreteUpdateEvent(h, 0.0,
+                                                        self._update)
+                self._base_motion = self._predicted
+                self._predict = kernels.body_for(
+                    compensation.base_velocity_prediction, T)
             entry = declare_cached_vector(
                 self, "compensated arm twist and deviation", self._calc,
-                tickets(self._inputs.values()))
+                prerequisites)
             declare_slices(self, entry, (
                 ("arm_reference_velocity", slice(0, 6)),
                 ("end_effector_deviation", slice(6, 12))))
+
+        def _commanded(self, context):
+            return self._V_b_flt_port.Eval(context)
+
+        def _measured(self, context):
+            return self._base_state_port.Eval(context)[3:6]
+
+        def _predicted(self, context):
+            return self._predict(
+                context.get_discrete_state_vector().CopyToVector(),
+                self._V_b_flt_port.Eval(context), self._gain)
+
+        def _update(self, context, discrete_state):
+            discrete_state.set_value(self._predicted(context))
+
+        def set_prediction(self, context, velocity):
+            """Starts the "predicted" source's state at the base velocity
+            `velocity` (3, T_b), e.g. the base's measured one; nothing to
+            do for the other sources."""
+            if self.source == "predicted":
+                context.SetDiscreteState(np.asarray(velocity))
 
         def _calc(self, context):
             s_c = optional_scalar(self._switch_port, context, self._switch)
@@ -262,7 +330,7 @@ def RobustCompensator_(T):
                 unit_interval("alpha", alpha)
             return self._compensate(
                 self._V_a_port.Eval(context), self._V_b_port.Eval(context),
-                self._V_b_flt_port.Eval(context),
+                self._base_motion(context),
                 self._p_ee_port.Eval(context), self._R_ba,
                 self._gradient_port.Eval(context), s_c * alpha,
                 PROJECTOR_TOLERANCE)
