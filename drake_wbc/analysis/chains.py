@@ -394,11 +394,11 @@ def build_deviation_loop(params=None, point=None, base_driver=None,
     whole_body = add("whole_body_cdmp", WholeBodyCdmp(
         params.whole_body_cdmp, time_step=params.time_step))
     distributor = add("distributor", MotionDistributor(
-        params.distributor, band=params.capability_band))
+        params.distributor, point.arm, band=params.capability_band))
     base_filter = add("base_filter", BaseVelocityFilter(
         params.base_filter, time_step=params.time_step))
     compensator = add("compensator", RobustCompensator(
-        params.compensator, time_step=params.time_step))
+        params.compensator, point.arm, time_step=params.time_step))
 
     def constant(value, port):
         source = add(f"{port.get_name()}_{port.get_system().get_name()}",
