@@ -45,7 +45,7 @@ from drake_wbc.experiments.common import (
     obstacle_distances,
     save_figure,
 )
-from drake_wbc.experiments.scenario import footprint_of
+from drake_wbc.experiments.scenario import controller_arm, footprint_of
 from drake_wbc.math import workspace
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.station.scene import Scene
@@ -109,7 +109,8 @@ def stages(scenario):
 
 def tcp_in_arm_base(log, arm=None):
     """The TCP's position (N, 3) in T_a and in T_b, from the measured
-    joints with the controller's nominal kinematics (mount at rest)."""
+    joints with the controller's nominal kinematics (mount at rest) of
+    `arm` (the run's ArmKinematics, the shipped robot's if None)."""
     arm = arm or ArmKinematics()
     context = arm.plant.CreateDefaultContext()
     X_BA = arm.model.arm_base_frame.CalcPose(context, arm.model.base_frame)
@@ -118,9 +119,10 @@ def tcp_in_arm_base(log, arm=None):
     return in_a, in_a @ X_BA.rotation().matrix().T + X_BA.translation()
 
 
-def extent_and_deflection(log):
-    """d (m) and phi (rad) of the TCP, (N,) each (drake_wbc.math.workspace)."""
-    in_a, _ = tcp_in_arm_base(log)
+def extent_and_deflection(log, arm=None):
+    """d (m) and phi (rad) of the TCP, (N,) each (drake_wbc.math.workspace),
+    on `arm` as `tcp_in_arm_base`."""
+    in_a, _ = tcp_in_arm_base(log, arm)
     return (np.array([workspace.extent(p) for p in in_a]),
             np.array([workspace.deflection(p) for p in in_a]))
 
@@ -200,9 +202,10 @@ def compute_metrics(scenario, logs):
     """STAGE_METRICS of each stage of each run, and the stages' letters."""
     metrics = {}
     windows = stages(scenario)
+    arm = controller_arm(scenario)
     for name, log in logs.items():
-        _, tcp_b = tcp_in_arm_base(log)
-        d, phi = extent_and_deflection(log)
+        _, tcp_b = tcp_in_arm_base(log, arm)
+        d, phi = extent_and_deflection(log, arm)
         distance = static_distance(scenario, log)
         metrics[f"{name}.stages"] = "".join(s for s, _, _ in windows)
         for stage, start, end in windows:
@@ -235,9 +238,10 @@ def draw_figures(scenario, logs, folder):
     band = scenario.controller.workspace.workspace
     windows = stages(scenario)
     paths = []
+    arm = controller_arm(scenario)
     for name, log in logs.items():
         t = log.time
-        d, phi = extent_and_deflection(log)
+        d, phi = extent_and_deflection(log, arm)
         fig, axes = new_figure(5, title="Intuitive pHRI: stages "
                                f"{''.join(s for s, _, _ in windows)} "
                                f"({name})")
