@@ -22,6 +22,13 @@ on the scalar type.
 tests/test_kernels.py holds every registered kernel equal to its
 reference on random inputs drawn by the kernel's own `sample`.
 
+An equation whose true reference needs a MultibodyPlant (the arm's
+kinematics) fits this registry unchanged: its reference body here takes
+the plant's data as plain arrays (drake_wbc.math.chain: a serial chain's
+fixed poses, axes and kinds), the kernel is held equal to it on random
+chains like every other, and the robot layer holds the two equal to the
+plant's own kinematics on every robot at hand (tests/test_robot_model.py).
+
 A kernel whose loops are compiled (drake_wbc.math.compiled) compiles on
 its first call; `body_for` makes that call, once per process, on the
 kernel's own sample, so that a stage's first tick runs machine code.
