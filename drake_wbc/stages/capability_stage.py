@@ -94,7 +94,8 @@ def ArmCapability_(T):
                                          CapabilityBand)
             # What the tick needs, as plain floats (see evaluate).
             p = self.params
-            self._limits = (self.arm.lower.tolist(), self.arm.upper.tolist())
+            self._limits = (np.ascontiguousarray(self.arm.lower, float),
+                            np.ascontiguousarray(self.arm.upper, float))
             self._constants = (p.joint_limit_gain, p.gradient_damping,
                                p.gradient_damping_threshold)
             self._band = (self.band.upper, self.band.lower)
@@ -115,7 +116,7 @@ def ArmCapability_(T):
             checked (shape (n,), finite) by ArmKinematics.evaluate.
             """
             values = self.arm.evaluate(q_a)
-            q = np.asarray(q_a, dtype=float).tolist()
+            q = np.ascontiguousarray(q_a, dtype=float)
             C_m, gradient = self._terms(values.J_a, q, *self._limits,
                                         *self._constants)
             result = np.empty(11)
