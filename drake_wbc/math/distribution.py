@@ -282,9 +282,9 @@ def _whole_body_problems(rng):
 @compiled
 def _closed_form(V_ee, p_ee_in_base, s, p, capability_gradient, k, damped,
                  threshold):
-    """The compiled closed form of `whole_body_distribution_float`: (V_wb
-    (9,), whether it holds: the certificate proved and every value
-    finite)."""
+    """The compiled closed form of `whole_body_distribution_float`: V_wb
+    (9,), or NaN in every entry where it does not hold (the certificate
+    not proved, or a value not finite)."""
     x, y = p_ee_in_base[0], p_ee_in_base[1]
     n0, n1, n2 = (k * capability_gradient[0], k * capability_gradient[1],
                   k * capability_gradient[2])
@@ -319,7 +319,8 @@ def _closed_form(V_ee, p_ee_in_base, s, p, capability_gradient, k, damped,
     V_wb = np.empty(9)
     if not (proved and math.isfinite(x + y + v0 + v1 + v2 + v3 + v4
                                       + v5)):
-        return V_wb, False
+        V_wb[:] = math.nan
+        return V_wb
     z0 = v0 / l00
     z1 = (v1 - l10 * z0) / l11
     z5 = (v5 - l20 * z0 - l21 * z1) / l22
@@ -330,7 +331,7 @@ def _closed_form(V_ee, p_ee_in_base, s, p, capability_gradient, k, damped,
     V_wb[3], V_wb[4], V_wb[5] = v3 + n3, v4 + n4, p * x5 + n5
     V_wb[6], V_wb[7] = a * x0, a * x1
     V_wb[8] = b * (x5 - y * x0 + x * x1)
-    return V_wb, True
+    return V_wb
 
 
 @fast_kernel(whole_body_distribution, sample=_whole_body_problems)
@@ -370,7 +371,8 @@ def whole_body_distribution_float(V_ee, p_ee_in_base, R_ba, sigma_xy,
 
     Args:
         as whole_body_distribution; V_ee, p_ee_in_base and
-        capability_gradient float64 arrays (anything else goes through
+        capability_gradient float64 C-contiguous arrays, as the stages
+        give them (anything but an array goes through
         np.ascontiguousarray first).
 
     Returns:
@@ -380,12 +382,15 @@ def whole_body_distribution_float(V_ee, p_ee_in_base, R_ba, sigma_xy,
         return whole_body_distribution(
             V_ee, p_ee_in_base, R_ba, sigma_xy, sigma_phi,
             capability_gradient, null_space_gain, damping)
-    V_wb, holds = _closed_form(
-        _floats(V_ee), _floats(p_ee_in_base), float(sigma_xy),
-        float(sigma_phi), _floats(capability_gradient),
-        float(null_space_gain), damping is not None,
+    V_wb = _closed_form(
+        V_ee if type(V_ee) is np.ndarray else _floats(V_ee),
+        p_ee_in_base if type(p_ee_in_base) is np.ndarray
+        else _floats(p_ee_in_base), float(sigma_xy), float(sigma_phi),
+        capability_gradient if type(capability_gradient) is np.ndarray
+        else _floats(capability_gradient), float(null_space_gain),
+        damping is not None,
         0.0 if damping is None else float(damping.threshold))
-    if holds:
+    if V_wb[0] == V_wb[0]:  # not NaN: the closed form holds
         return V_wb
     return whole_body_distribution(
         V_ee, p_ee_in_base, None, sigma_xy, sigma_phi, capability_gradient,

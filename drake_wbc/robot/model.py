@@ -574,10 +574,11 @@ class ArmKinematics:
             + np.asarray(self._v_indices)[None, :]).ravel()
         self._q_a_key = None
         self._memo = {}
+        self._frame_chains = {}
         self.chain = serial_chain(plant, self._context, self._arm_base,
                                   self._end_effector, model.arm_joints)
+        self._chain_kinematics = body_for(chain_kinematics_of, float)
         if self.chain is not None:
-            self._chain_kinematics = body_for(chain_kinematics_of, float)
             self._chain_arrays = tuple(self.chain)
 
     MEMO_SIZE = 4
@@ -601,6 +602,22 @@ class ArmKinematics:
         configuration `q_a` (n,)."""
         self._set_arm_positions(q_a)
         return frame.CalcPose(self._context, self._arm_base)
+
+    def frame_matrix(self, q_a, frame):
+        """X_AF of `frame_pose` as a (4, 4) homogeneous matrix, by the
+        compiled chain to `frame` (read from the plant the first time a
+        frame is asked for) where one applies, else from the plant: for
+        the ticks that need a frame other than the end effector (the
+        wrist sensor's)."""
+        chain = self._frame_chains.get(frame.index())
+        if chain is None:
+            chain = self._frame_chains[frame.index()] = serial_chain(
+                self._plant, self._context, self._arm_base, frame,
+                self.model.arm_joints) or ()
+        if not chain:
+            return self.frame_pose(q_a, frame).GetAsMatrix4()
+        q_a = as_float_array("q_a", q_a, (self.num_joints,))
+        return self._chain_kinematics(*chain, q_a)[1]
 
     def evaluate(self, q_a):
         """Returns the ArmKinematicsValues at arm configuration `q_a` (n,).
