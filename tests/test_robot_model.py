@@ -524,3 +524,23 @@ def test_an_end_effector_inboard_of_the_wrist_is_left_to_the_plant(robot):
     values = arm.evaluate(q)
     np.testing.assert_array_equal(values.J_a[:, 4:], 0.0)
     np.testing.assert_array_equal(values.pose, arm.plant_values(q).pose)
+
+
+def test_frame_matrix_gives_the_plants_pose_of_any_frame(robot):
+    """The compiled chain to the wrist sensor's frame and to the flange,
+    and the plant for a frame inboard of the wrist, all equal to
+    frame_pose."""
+    plant, model = robot
+    arm = ArmKinematics(plant, model)
+    rng = np.random.default_rng(11)
+    frames = (model.ft_measurement_frame, model.flange_frame,
+              model.arm_joints[2].child_body().body_frame())
+    for _ in range(50):
+        q = rng.uniform(arm.lower, arm.upper)
+        for frame in frames:
+            np.testing.assert_allclose(
+                arm.frame_matrix(q, frame),
+                arm.frame_pose(q, frame).GetAsMatrix4(), rtol=0.0,
+                atol=1e-12)
+    assert arm._frame_chains[frames[0].index()]
+    assert arm._frame_chains[frames[2].index()] == ()
