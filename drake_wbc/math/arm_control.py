@@ -771,6 +771,37 @@ def _scale_to_float(vector, limits):
 
 
 @compiled
+def _solved(A, b):
+    """x with A x = b (A square, nonsingular) by Gaussian elimination with
+    partial pivoting, as LAPACK's dgesv (the same to rounding), on copies:
+    written out because numba's np.linalg.solve takes ten seconds and
+    more to compile."""
+    n = b.size
+    M = A.copy()
+    x = b.copy()
+    for k in range(n):
+        pivot = k
+        for i in range(k + 1, n):
+            if abs(M[i, k]) > abs(M[pivot, k]):
+                pivot = i
+        if pivot != k:
+            for c in range(n):
+                M[k, c], M[pivot, c] = M[pivot, c], M[k, c]
+            x[k], x[pivot] = x[pivot], x[k]
+        for i in range(k + 1, n):
+            factor = M[i, k] / M[k, k]
+            for c in range(k + 1, n):
+                M[i, c] -= factor * M[k, c]
+            x[i] -= factor * x[k]
+    for k in range(n - 1, -1, -1):
+        total = x[k]
+        for c in range(k + 1, n):
+            total -= M[k, c] * x[c]
+        x[k] = total / M[k, k]
+    return x
+
+
+@compiled
 def _least_squares_float(J, V, damping, threshold):
     """(q_dot, lambda, s_min) of the damped least squares: at a regular
     point (J square, s_min >= eps) by an LU solve, otherwise through the
@@ -779,7 +810,7 @@ def _least_squares_float(J, V, damping, threshold):
     s_min = s[-1]
     rows, n = J.shape
     if rows == n and s_min >= threshold:
-        return np.linalg.solve(J, V), 0.0, s_min
+        return _solved(J, V), 0.0, s_min
     lambda_ = (0.0 if s_min >= threshold
                else damping * (1.0 - (s_min / threshold) ** 2))
     k = s.size
@@ -812,9 +843,25 @@ def _command_float(J, V, q, previous, lower, upper_band, velocity, clear,
         z = np.empty(n)
         for i in range(n):
             z[i] = (-gain) * (q[i] - middle[i]) / half[i]
-        A = J @ J.T + np.eye(rows) * (lambda_ * lambda_)
-        y = np.linalg.solve(A, J @ z)
-        x = x + (z - J.T @ y)
+        # z - J^T (J J^T + lambda^2 I)^-1 J z, the products written out.
+        A = np.empty((rows, rows))
+        Jz = np.empty(rows)
+        for r in range(rows):
+            for c in range(rows):
+                total = 0.0
+                for k in range(n):
+                    total += J[r, k] * J[c, k]
+                A[r, c] = total + (lambda_ * lambda_ if r == c else 0.0)
+            total = 0.0
+            for k in range(n):
+                total += J[r, k] * z[k]
+            Jz[r] = total
+        y = _solved(A, Jz)
+        for k in range(n):
+            total = 0.0
+            for r in range(rows):
+                total += J[r, k] * y[r]
+            x[k] = x[k] + (z[k] - total)
     limited = np.zeros(n, dtype=np.bool_)
     low = np.full(n, np.nan)
     high = np.full(n, np.nan)

@@ -29,6 +29,7 @@ machine code:
   registered with drake_wbc.math.kernels.fast_kernel.
 """
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -133,7 +134,7 @@ def _chain_kinematics(fixed, axes, revolute, q):
             directions[i, r] = R[r, 0] * ax + R[r, 1] * ay + R[r, 2] * az
         # M = R J_i (rotation), p += R a q (translation).
         if revolute[i] == 1.0:
-            c, s = np.cos(q[i]), np.sin(q[i])
+            c, s = math.cos(q[i]), math.sin(q[i])
             t = 1.0 - c
             # I + s K + (1 - c) K^2, as the reference sums it.
             KK00, KK11, KK22 = -(ay * ay + az * az), -(ax * ax + az * az), \
