@@ -378,22 +378,22 @@ def whole_body_distribution_float(V_ee, p_ee_in_base, R_ba, sigma_xy,
     Returns:
         (9,) array V_wb.
     """
-    if R_ba is not None:
-        return whole_body_distribution(
-            V_ee, p_ee_in_base, R_ba, sigma_xy, sigma_phi,
-            capability_gradient, null_space_gain, damping)
-    V_wb = _closed_form(
-        V_ee if type(V_ee) is np.ndarray else _floats(V_ee),
-        p_ee_in_base if type(p_ee_in_base) is np.ndarray
-        else _floats(p_ee_in_base), float(sigma_xy), float(sigma_phi),
-        capability_gradient if type(capability_gradient) is np.ndarray
-        else _floats(capability_gradient), float(null_space_gain),
-        damping is not None,
-        0.0 if damping is None else float(damping.threshold))
-    if V_wb[0] == V_wb[0]:  # not NaN: the closed form holds
-        return V_wb
+    if R_ba is None and (type(V_ee) is type(p_ee_in_base)
+                         is type(capability_gradient) is np.ndarray):
+        V_wb = _closed_form(
+            V_ee, p_ee_in_base, float(sigma_xy), float(sigma_phi),
+            capability_gradient, float(null_space_gain),
+            damping is not None,
+            0.0 if damping is None else damping.threshold)
+        if V_wb[0] == V_wb[0]:  # not NaN: the closed form holds
+            return V_wb
+    elif R_ba is None:
+        return whole_body_distribution_float(
+            _floats(V_ee), _floats(p_ee_in_base), None, sigma_xy,
+            sigma_phi, _floats(capability_gradient), null_space_gain,
+            damping)
     return whole_body_distribution(
-        V_ee, p_ee_in_base, None, sigma_xy, sigma_phi, capability_gradient,
+        V_ee, p_ee_in_base, R_ba, sigma_xy, sigma_phi, capability_gradient,
         null_space_gain, damping)
 
 
