@@ -438,3 +438,109 @@ def test_a_bad_arm_mount_is_refused_naming_its_field(field, value):
 def test_a_given_plant_carries_its_own_mount(robot):
     with pytest.raises(ValueError, match="mount"):
         ArmKinematics(*robot, mount=ArmMount(yaw=1.0))
+
+
+def _omni_arm_plant(folder, n):
+    from omni_arm import write_omni_arm
+
+    from drake_wbc.robot.description import load_robot_description
+    return make_robot_plant(load_robot_description(write_omni_arm(folder,
+                                                                  n)))
+
+
+def _chain_robots(folder):
+    """(name, plant, model) of both shipped robots and the 6- and 7-joint
+    omni arm of tests/omni_arm.py."""
+    from drake_wbc.robot.description import (
+        load_robot_description,
+        models_dir,
+    )
+    robots = [(name, *make_robot_plant(load_robot_description(
+        models_dir() / f"{name}.robot.yaml")))
+        for name in ("mcr", "lbr_omni")]
+    for n in (6, 7):
+        (folder / str(n)).mkdir()
+        robots.append((f"omni_arm_{n}", *_omni_arm_plant(folder / str(n),
+                                                          n)))
+    return robots
+
+
+def test_the_compiled_chain_gives_the_plants_kinematics(tmp_path):
+    """J_a, p_ee and X_AE by the compiled chain (drake_wbc.math.chain)
+    equal the plant's own at random configurations, over and beyond the
+    joints' ranges, for every robot at hand."""
+    rng = np.random.default_rng(20261202)
+    for name, plant, model in _chain_robots(tmp_path):
+        arm = ArmKinematics(plant, model)
+        assert arm.chain is not None, name
+        for _ in range(100):
+            q = rng.uniform(arm.lower - 1.0, arm.upper + 1.0)
+            chain, reference = arm.evaluate(q), arm.plant_values(q)
+            for a, b in ((chain.J_a, reference.J_a),
+                         (chain.p_ee_in_base, reference.p_ee_in_base),
+                         (chain.pose, reference.pose)):
+                np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-12,
+                                           err_msg=name)
+
+
+def test_a_chain_with_prismatic_joints_gives_the_plants_kinematics(
+        tmp_path):
+    """The omni arm's base (two prismatic joints and a revolute one) and
+    its arm, world to TCP, as one chain of n + 3 joints: its Jacobian and
+    pose equal the plant's."""
+    from pydrake.multibody.tree import JacobianWrtVariable
+
+    from drake_wbc.math.chain import chain_kinematics_float
+    from drake_wbc.robot.model import serial_chain
+    plant, model = _omni_arm_plant(tmp_path, 7)
+    joints = model.base_joints + model.arm_joints
+    context = plant.CreateDefaultContext()
+    world, tcp = plant.world_frame(), model.tcp_frame
+    chain = serial_chain(plant, context, world, tcp, joints)
+    assert chain is not None and list(chain.revolute) == [0, 0] + [1] * 8
+    columns = joint_position_indices(joints)
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        q = rng.uniform(-3.0, 3.0, len(joints))
+        positions = plant.GetPositions(context)
+        positions[columns] = q
+        plant.SetPositions(context, positions)
+        J = plant.CalcJacobianSpatialVelocity(
+            context, JacobianWrtVariable.kV, tcp, np.zeros(3), world, world)
+        J_chain, X = chain_kinematics_float(*chain, q)
+        np.testing.assert_allclose(J_chain, J[[3, 4, 5, 0, 1, 2]][:, columns],
+                                   rtol=0.0, atol=1e-12)
+        np.testing.assert_allclose(
+            X, tcp.CalcPoseInWorld(context).GetAsMatrix4(), rtol=0.0,
+            atol=1e-12)
+
+
+def test_an_end_effector_inboard_of_the_wrist_is_left_to_the_plant(robot):
+    plant, model = robot
+    frame = model.arm_joints[3].child_body().body_frame()
+    arm = ArmKinematics(plant, model, end_effector_frame=frame)
+    assert arm.chain is None
+    q = HOME_ARM_POSITIONS + 0.2
+    values = arm.evaluate(q)
+    np.testing.assert_array_equal(values.J_a[:, 4:], 0.0)
+    np.testing.assert_array_equal(values.pose, arm.plant_values(q).pose)
+
+
+def test_frame_matrix_gives_the_plants_pose_of_any_frame(robot):
+    """The compiled chain to the wrist sensor's frame and to the flange,
+    and the plant for a frame inboard of the wrist, all equal to
+    frame_pose."""
+    plant, model = robot
+    arm = ArmKinematics(plant, model)
+    rng = np.random.default_rng(11)
+    frames = (model.ft_measurement_frame, model.flange_frame,
+              model.arm_joints[2].child_body().body_frame())
+    for _ in range(50):
+        q = rng.uniform(arm.lower, arm.upper)
+        for frame in frames:
+            np.testing.assert_allclose(
+                arm.frame_matrix(q, frame),
+                arm.frame_pose(q, frame).GetAsMatrix4(), rtol=0.0,
+                atol=1e-12)
+    assert arm._frame_chains[frames[0].index()]
+    assert arm._frame_chains[frames[2].index()] == ()

@@ -10,7 +10,8 @@ null-space velocity V_n^0 = k_n [grad_x C_m; 0_3] of eq. (wbccm):
 
 whose solution is eq. (wbsln) with the null-space term,
 V_wb = J^+ V_ee + (I - J^+ J_wb) V_n^0. J_wb = [R_ba, J_b] (eq. (1),
-bottom line) needs p_ee from the MultibodyPlant.
+bottom line) needs p_ee from the arm's kinematics (ArmKinematics:
+the compiled chain read from the MultibodyPlant).
 
 Two races, each contender a "solver" (problem, given) -> V_wb, `given`
 a Given (p_ee, and J_wb, the diagonal of Q and V_n^0 for the QP peers):

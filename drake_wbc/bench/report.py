@@ -131,7 +131,7 @@ def markdown(results):
                   "same kinematics) and the QP peers' data preparation "
                   "alone:", ""]
         lines += _table(["what", *TIME_HEADER], [
-            ["kinematics (ArmKinematics.evaluate: p_ee from the plant)",
+            ["kinematics (ArmKinematics.evaluate: J_a, p_ee, compiled)",
              *_time(race["kinematics"])],
             ["QP data preparation (J_wb, Q, V_n^0; unchecked)",
              *_time(race["qp_data"])]])

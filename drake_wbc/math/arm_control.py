@@ -51,11 +51,10 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from scipy.linalg.lapack import dgesdd as _gesdd
-from scipy.linalg.lapack import dgesv as _gesv
 
 from drake_wbc.math import kernels
 from drake_wbc.math.command_limits import uniform_scale
+from drake_wbc.math.compiled import compiled
 from drake_wbc.math.scalar_support import solve, value_of
 from drake_wbc.math.validation import (
     as_matrix,
@@ -659,28 +658,29 @@ def joint_velocity_for_twist(J_a, V_a, q, lower, upper, velocity_limit,
 
 
 class _FloatLimits(NamedTuple):
-    """TwistLimits as the float kernel reads them: lists of floats, and
-    `clear`, the distance from an edge beyond which a joint's bound
-    cannot cut a rate within its velocity limit."""
+    """TwistLimits as the compiled kernel reads them: float64 arrays and
+    floats, and `clear`, the distance from an edge beyond which a joint's
+    bound cannot cut a rate within its velocity limit."""
 
-    lower: list
-    upper: list
-    upper_band: list
-    velocity: list
+    lower: np.ndarray
+    upper_band: np.ndarray
+    velocity: np.ndarray
     h: float
     margin: float
     damping: float
     threshold: float
-    step: list | None
-    step_h: list | None
-    clear: list
+    accelerating: bool
+    step: np.ndarray
+    step_h: np.ndarray
+    clear: np.ndarray
     middle: np.ndarray
     half: np.ndarray
+    gain: float
 
     @classmethod
     def of(cls, limits):
         h, margin = float(limits.time_step), float(limits.margin)
-        velocity = np.asarray(limits.velocity, dtype=float)
+        velocity = np.array(limits.velocity, dtype=float)
         # Beyond the distance `clear` from an edge a joint's bound is at
         # least its velocity limit c (with a margin for rounding), so a
         # rate of at most c towards it is not cut: d / h >= c for
@@ -688,97 +688,199 @@ class _FloatLimits(NamedTuple):
         # maximum of a h^2 (m + 1)(f + m / 2) over f at a given v) so
         # that braking_rate(d) >= c for d >= (c + a h / 2)^2 / (2 a).
         clear = velocity * h
-        step = step_h = None
+        step = step_h = np.zeros(velocity.size)
         if limits.acceleration is not None:
             a = np.asarray(limits.acceleration, dtype=float)
             step = a * h
             step_h = step * h
             clear = np.maximum(clear, (velocity + 0.5 * h * a) ** 2
                                / (2.0 * a))
-            step, step_h = step.tolist(), step_h.tolist()
+        lower = np.array(limits.lower, dtype=float)
+        upper = np.array(limits.upper, dtype=float)
         return cls(
-            lower=limits.lower.tolist(), upper=limits.upper.tolist(),
+            lower=lower,
             # The band's upper edges, formed as upper - margin - q is.
-            upper_band=(limits.upper - margin).tolist(),
-            velocity=velocity.tolist(), h=h, margin=margin,
+            upper_band=upper - margin,
+            velocity=velocity, h=h, margin=margin,
             damping=float(limits.damping),
-            threshold=float(limits.damping_threshold), step=step,
-            step_h=step_h, clear=(clear * (1.0 + 1e-9) + 1e-300).tolist(),
-            middle=0.5 * (limits.lower + limits.upper),
-            half=0.5 * (limits.upper - limits.lower))
+            threshold=float(limits.damping_threshold),
+            accelerating=limits.acceleration is not None,
+            step=np.ascontiguousarray(step),
+            step_h=np.ascontiguousarray(step_h),
+            clear=clear * (1.0 + 1e-9) + 1e-300,
+            middle=0.5 * (lower + upper), half=0.5 * (upper - lower),
+            gain=float(limits.self_motion_gain))
 
 
-def _rate_float(limits, i, distance):
-    """The bound on |q_dot_i| towards an edge `distance` away, in floats:
+@compiled
+def _rate_float(i, distance, h, accelerating, step, step_h):
+    """The bound on |q_dot_i| towards an edge `distance` away:
     min(d / h, braking_rate(d)), d >= 0."""
     distance = max(distance, 0.0)
-    rate = distance / limits.h
-    if limits.step is not None:
-        D = distance / limits.step_h[i]
+    rate = distance / h
+    if accelerating:
+        D = distance / step_h[i]
         r = 0.5 * (math.sqrt(1.0 + 8.0 * D) - 1.0)
         m = max(float(math.ceil(r)) - 1.0, 0.0)
         f = min(max(D / (m + 1.0) - 0.5 * m, 0.0), 1.0)
-        rate = min(rate, (m + f) * limits.step[i])
+        rate = min(rate, (m + f) * step[i])
     return rate
 
 
-def _bounded_float(limits, q_dot, q, limited, bounds):
-    """q_dot (list) clipped to the position bounds at q (list), joint by
-    joint; sets limited[i] where it cuts. A joint's bound is computed only
-    on the side it moves towards and only where it may cut (`clear`);
-    `bounds` remembers those computed, by (joint, side)."""
-    result = []
-    for i, (v, q_i) in enumerate(zip(q_dot, q, strict=True)):
+@compiled
+def _bounded_float(q_dot, q, limited, low, high, lower, upper_band,
+                   velocity, clear, margin, h, accelerating, step, step_h):
+    """q_dot clipped to the position bounds at q, joint by joint; sets
+    limited[i] where it cuts. A joint's bound is computed only on the side
+    it moves towards and only where it may cut (`clear`); `low` and `high`
+    keep those computed (NaN: not yet)."""
+    result = np.empty(q_dot.size)
+    for i in range(q_dot.size):
+        v = q_dot[i]
         if v > 0.0:
-            distance = limits.upper_band[i] - q_i
-            if v > limits.velocity[i] or distance < limits.clear[i]:
-                high = bounds.get((i, 1))
-                if high is None:
-                    high = bounds[i, 1] = _rate_float(limits, i, distance)
-                if v > high:
-                    v, limited[i] = high, True
+            distance = upper_band[i] - q[i]
+            if v > velocity[i] or distance < clear[i]:
+                if math.isnan(high[i]):
+                    high[i] = _rate_float(i, distance, h, accelerating, step,
+                                          step_h)
+                if v > high[i]:
+                    v = high[i]
+                    limited[i] = True
         elif v < 0.0:
-            distance = q_i - limits.lower[i] - limits.margin
-            if -v > limits.velocity[i] or distance < limits.clear[i]:
-                low = bounds.get((i, 0))
-                if low is None:
-                    low = bounds[i, 0] = -_rate_float(limits, i, distance)
-                if v < low:
-                    v, limited[i] = low, True
-        result.append(v)
+            distance = q[i] - lower[i] - margin
+            if -v > velocity[i] or distance < clear[i]:
+                if math.isnan(low[i]):
+                    low[i] = -_rate_float(i, distance, h, accelerating,
+                                          step, step_h)
+                if v < low[i]:
+                    v = low[i]
+                    limited[i] = True
+        result[i] = v
     return result
 
 
-def _least_squares_float(limits, J, V):
-    """(q_dot, lambda, s_min) of the damped least squares, in floats: at a
-    regular point (J square, s_min >= eps) by an LU solve after the
-    singular values alone; otherwise by the thin SVD."""
-    if J.shape[0] == J.shape[1]:
-        _, s, _, info = _gesdd(J.T, compute_uv=0)  # J^T: no copy
-        if info == 0 and s[-1] >= limits.threshold:
-            _, _, x, info = _gesv(J, V)
-            if info == 0:
-                return x, 0.0, float(s[-1])
-    U, s, Vt = np.linalg.svd(J, full_matrices=False)
-    s_min = float(s[-1])
-    lambda_ = (0.0 if s_min >= limits.threshold
-               else float(limits.damping
-                          * (1.0 - (s_min / limits.threshold) ** 2)))
-    denominators = s**2 + lambda_**2
-    safe = np.where(denominators > 0.0, denominators, 1.0)
-    gains = np.where(denominators > 0.0, s / safe, 0.0)
-    return Vt.T @ (gains * (U.T @ V)), lambda_, s_min
-
-
+@compiled
 def _scale_to_float(vector, limits):
-    """The largest factor in (0, 1] with |factor * vector_i| <= limits_i,
-    for lists of floats."""
+    """The largest factor in (0, 1] with |factor * vector_i| <= limits_i."""
     scale = 1.0
-    for value, limit in zip(vector, limits, strict=True):
-        size = abs(value)
-        if size > limit:
-            scale = min(scale, limit / size)
+    for i in range(vector.size):
+        size = abs(vector[i])
+        if size > limits[i]:
+            scale = min(scale, limits[i] / size)
     return scale
+
+
+@compiled
+def _solved(A, b):
+    """x with A x = b (A square, nonsingular) by Gaussian elimination with
+    partial pivoting, as LAPACK's dgesv (the same to rounding), on copies:
+    written out because numba's np.linalg.solve takes ten seconds and
+    more to compile."""
+    n = b.size
+    M = A.copy()
+    x = b.copy()
+    for k in range(n):
+        pivot = k
+        for i in range(k + 1, n):
+            if abs(M[i, k]) > abs(M[pivot, k]):
+                pivot = i
+        if pivot != k:
+            for c in range(n):
+                M[k, c], M[pivot, c] = M[pivot, c], M[k, c]
+            x[k], x[pivot] = x[pivot], x[k]
+        for i in range(k + 1, n):
+            factor = M[i, k] / M[k, k]
+            for c in range(k + 1, n):
+                M[i, c] -= factor * M[k, c]
+            x[i] -= factor * x[k]
+    for k in range(n - 1, -1, -1):
+        total = x[k]
+        for c in range(k + 1, n):
+            total -= M[k, c] * x[c]
+        x[k] = total / M[k, k]
+    return x
+
+
+@compiled
+def _least_squares_float(J, V, damping, threshold):
+    """(q_dot, lambda, s_min) of the damped least squares: at a regular
+    point (J square, s_min >= eps) by an LU solve, otherwise through the
+    thin SVD."""
+    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    s_min = s[-1]
+    rows, n = J.shape
+    if rows == n and s_min >= threshold:
+        return _solved(J, V), 0.0, s_min
+    lambda_ = (0.0 if s_min >= threshold
+               else damping * (1.0 - (s_min / threshold) ** 2))
+    k = s.size
+    projected = np.empty(k)
+    for i in range(k):
+        denominator = s[i] ** 2 + lambda_ ** 2
+        gain = s[i] / denominator if denominator > 0.0 else 0.0
+        total = 0.0
+        for r in range(rows):
+            total += U[r, i] * V[r]
+        projected[i] = gain * total
+    x = np.empty(n)
+    for c in range(n):
+        total = 0.0
+        for i in range(k):
+            total += Vt[i, c] * projected[i]
+        x[c] = total
+    return x, lambda_, s_min
+
+
+@compiled
+def _command_float(J, V, q, previous, lower, upper_band, velocity, clear,
+                   margin, h, damping, threshold, accelerating, step, step_h,
+                   middle, half, gain):
+    """The compiled body of `joint_velocity_command_float`: (q_dot, scale,
+    acceleration_scale, limited, lambda, s_min)."""
+    x, lambda_, s_min = _least_squares_float(J, V, damping, threshold)
+    rows, n = J.shape
+    if n > rows and gain > 0.0:
+        z = np.empty(n)
+        for i in range(n):
+            z[i] = (-gain) * (q[i] - middle[i]) / half[i]
+        # z - J^T (J J^T + lambda^2 I)^-1 J z, the products written out.
+        A = np.empty((rows, rows))
+        Jz = np.empty(rows)
+        for r in range(rows):
+            for c in range(rows):
+                total = 0.0
+                for k in range(n):
+                    total += J[r, k] * J[c, k]
+                A[r, c] = total + (lambda_ * lambda_ if r == c else 0.0)
+            total = 0.0
+            for k in range(n):
+                total += J[r, k] * z[k]
+            Jz[r] = total
+        y = _solved(A, Jz)
+        for k in range(n):
+            total = 0.0
+            for r in range(rows):
+                total += J[r, k] * y[r]
+            x[k] = x[k] + (z[k] - total)
+    limited = np.zeros(n, dtype=np.bool_)
+    low = np.full(n, np.nan)
+    high = np.full(n, np.nan)
+    q_dot = _bounded_float(x, q, limited, low, high, lower, upper_band,
+                           velocity, clear, margin, h, accelerating, step,
+                           step_h)
+    scale = _scale_to_float(q_dot, velocity)
+    if scale != 1.0:
+        q_dot = scale * q_dot
+    acceleration_scale = 1.0
+    if accelerating:
+        change = q_dot - previous
+        acceleration_scale = _scale_to_float(change, step)
+        if acceleration_scale != 1.0:
+            change = acceleration_scale * change
+        q_dot = _bounded_float(previous + change, q, limited, low, high,
+                               lower, upper_band, velocity, clear, margin,
+                               h, accelerating, step, step_h)
+    return q_dot, scale, acceleration_scale, limited, lambda_, s_min
 
 
 def _twist_samples(rng):
@@ -856,33 +958,22 @@ def _boundary_sample(rng):
 
 @kernels.fast_kernel(joint_velocity_command, sample=_twist_samples)
 def joint_velocity_command_float(J_a, V_a, q, previous, limits):
-    """`joint_velocity_command` in plain floats, for the controller's tick
-    (float arrays; the same result to rounding): the least squares by an
-    LU solve at a regular point, then the limits applied joint by joint in
-    Python floats, a joint's bound computed only where it may cut."""
-    floats = limits._floats
-    x, lambda_, s_min = _least_squares_float(floats, J_a, V_a)
-    if J_a.shape[1] > J_a.shape[0] and limits.self_motion_gain > 0.0:
-        z = (-limits.self_motion_gain) * (q - floats.middle) / floats.half
-        rows = J_a.shape[0]
-        x = x + (z - J_a.T @ np.linalg.solve(
-            J_a @ J_a.T + np.eye(rows) * (lambda_ * lambda_), J_a @ z))
-    q = q.tolist()
-    limited = [False] * len(q)
-    bounds = {}
-    q_dot = _bounded_float(floats, x.tolist(), q, limited, bounds)
-    scale = _scale_to_float(q_dot, floats.velocity)
-    if scale != 1.0:
-        q_dot = [scale * v for v in q_dot]
-    acceleration_scale = 1.0
-    if floats.step is not None:
-        previous = previous.tolist()
-        change = [v - p for v, p in zip(q_dot, previous, strict=True)]
-        acceleration_scale = _scale_to_float(change, floats.step)
-        if acceleration_scale != 1.0:
-            change = [acceleration_scale * c for c in change]
-        q_dot = _bounded_float(
-            floats, [p + c for p, c in zip(previous, change, strict=True)],
-            q, limited, bounds)
-    return JointVelocityCommand(np.array(q_dot), scale, acceleration_scale,
-                                np.array(limited), lambda_, s_min)
+    """`joint_velocity_command` in machine code (drake_wbc.math.compiled),
+    for the controller's tick (float arrays; the same result to rounding):
+    the least squares by an LU solve at a regular point, then the limits
+    applied joint by joint, a joint's bound computed only where it may
+    cut."""
+    f = limits._floats
+    q = np.ascontiguousarray(q, dtype=float)
+    previous = (np.ascontiguousarray(previous, dtype=float)
+                if f.accelerating else np.zeros(q.size))
+    q_dot, scale, acceleration_scale, limited, lambda_, s_min = (
+        _command_float(
+            np.ascontiguousarray(J_a, dtype=float),
+            np.ascontiguousarray(V_a, dtype=float), q, previous, f.lower,
+            f.upper_band, f.velocity, f.clear, f.margin, f.h, f.damping,
+            f.threshold, f.accelerating, f.step, f.step_h, f.middle, f.half,
+            f.gain))
+    return JointVelocityCommand(q_dot, float(scale),
+                                float(acceleration_scale), limited,
+                                float(lambda_), float(s_min))

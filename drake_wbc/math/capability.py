@@ -30,7 +30,8 @@ How the module is laid out, for each equation:
   layer that checks the arguments and calls the reference body;
 - at most one float kernel (`*_float`), the controller's per-tick path,
   registered with drake_wbc.math.kernels.fast_kernel: C_m and grad_x C_m
-  from one SVD in plain floats, and alpha and its derivative.
+  from one SVD in machine code (drake_wbc.math.compiled), and alpha and
+  its derivative in plain floats.
 """
 
 import functools
@@ -39,8 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
-from scipy.linalg.lapack import dgesdd
 
+from drake_wbc.math.compiled import compiled
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.scalar_support import through_float_function
 from drake_wbc.math.validation import (
@@ -669,17 +670,13 @@ def transition_derivative(value, upper, lower):
 # The float kernels of the tick
 # ----------------------------------------------------------------------------
 
+@compiled
 def _products_of_others(values):
-    """Returns p (a list) with p_k = prod_{l != k} values_l, computed without
-    any division (the product of the values before k times that of the
-    values after k), so that it stays exact when some values are 0.
-
-    Args:
-        values: a sequence of floats (a few numbers: a list of plain
-            floats is the fastest).
-    """
-    n = len(values)
-    products = [1.0] * n
+    """p with p_k = prod_{l != k} values_l, computed without any division
+    (the product of the values before k times that of the values after
+    k), so that it stays exact when some values are 0."""
+    n = values.size
+    products = np.ones(n)
     before = 1.0
     for k in range(1, n):  # first the product of the values before k
         before *= values[k - 1]
@@ -691,38 +688,34 @@ def _products_of_others(values):
     return products
 
 
+@compiled
 def _penalty_and_gradient(q, lower, upper, k_j):
-    """P_jnt and dP_jnt/dq (a list) in plain floats: q, lower and upper
-    sequences of floats (a handful of them, for which numpy calls cost more
-    than the arithmetic), k_j a float."""
-    factors, slopes = [], []
-    for q_i, l_i, u_i in zip(q, lower, upper, strict=True):
+    """P_jnt and dP_jnt/dq (n,), each joint clamped to its limits."""
+    n = q.size
+    factors, slopes = np.empty(n), np.empty(n)
+    product = 1.0
+    for i in range(n):
+        q_i, l_i, u_i = q[i], lower[i], upper[i]
         if q_i < l_i:
             q_i = l_i
         elif q_i > u_i:
             q_i = u_i
         span2 = (u_i - l_i) * (u_i - l_i)
-        factors.append((q_i - l_i) * (u_i - q_i) / span2)
-        slopes.append((u_i + l_i - 2.0 * q_i) / span2)
-    product = math.prod(factors)
+        factors[i] = (q_i - l_i) * (u_i - q_i) / span2
+        slopes[i] = (u_i + l_i - 2.0 * q_i) / span2
+        product *= factors[i]
     penalty = -math.expm1(-k_j * product)
     scale = k_j * math.exp(-k_j * product)
-    gradient = [scale * slope * others for slope, others
-                in zip(slopes, _products_of_others(factors), strict=True)]
+    others = _products_of_others(factors)
+    gradient = np.empty(n)
+    for i in range(n):
+        gradient[i] = scale * slopes[i] * others[i]
     return penalty, gradient
 
 
-def _svd(J):
-    """The thin SVD (U, s, Vt) of J (rows <= columns), by LAPACK's dgesdd
-    directly (as np.linalg.svd, without its overhead)."""
-    U, s, Vt, info = dgesdd(J, compute_uv=1, full_matrices=0)
-    if info != 0:
-        return np.linalg.svd(J, full_matrices=False)
-    return U, s, Vt
-
-
+@compiled
 def _manipulability_gradient(J, U, s, Vt):
-    """dm/dq (a list) from J and its thin SVD J = U diag(s) Vt, s a list.
+    """dm/dq (n,) from J and its thin SVD J = U diag(s) Vt.
 
     With W = U diag(m / s_k) Vt (6, n), dm/dq_i = sum_j W_j . dJ_j/dq_i
     over the columns j, and by the rules of `jacobian_derivative` and the
@@ -732,41 +725,86 @@ def _manipulability_gradient(J, U, s, Vt):
         a_i = sum_{j >= i} (Jv_j x Wv_j + Jw_j x Ww_j),
         b_i = sum_{j < i} (Wv_j x Jw_j),
 
-    O(n) with running sums, without forming the (n, 6, n) derivative; in
-    plain floats, which for a few columns beat any sequence of numpy calls.
+    O(n) with running sums, without forming the (n, 6, n) derivative.
     """
-    W = (U * _products_of_others(s)) @ Vt  # m / s_k, with no division
-    J0, J1, J2, J3, J4, J5 = J.tolist()
-    W0, W1, W2, W3, W4, W5 = W.tolist()
-    n = len(J0)
-    gradient = [0.0] * n
+    others = _products_of_others(s)  # m / s_k, with no division
+    rows, n = J.shape
+    k = s.size
+    W = np.zeros((rows, n))
+    for r in range(rows):
+        for c in range(n):
+            total = 0.0
+            for i in range(k):
+                total += (U[r, i] * others[i]) * Vt[i, c]
+            W[r, c] = total
+    a = np.empty((n, 3))
     ax = ay = az = 0.0
     for j in range(n - 1, -1, -1):  # a_j, summed from the last column
-        vx, vy, vz, wx, wy, wz = J0[j], J1[j], J2[j], J3[j], J4[j], J5[j]
-        Vx, Vy, Vz, Wx, Wy, Wz = W0[j], W1[j], W2[j], W3[j], W4[j], W5[j]
+        vx, vy, vz, wx, wy, wz = J[0, j], J[1, j], J[2, j], J[3, j], \
+            J[4, j], J[5, j]
+        Vx, Vy, Vz, Wx, Wy, Wz = W[0, j], W[1, j], W[2, j], W[3, j], \
+            W[4, j], W[5, j]
         ax += (vy * Vz - vz * Vy) + (wy * Wz - wz * Wy)
         ay += (vz * Vx - vx * Vz) + (wz * Wx - wx * Wz)
         az += (vx * Vy - vy * Vx) + (wx * Wy - wy * Wx)
-        gradient[j] = (wx, wy, wz, ax, ay, az)
+        a[j, 0], a[j, 1], a[j, 2] = ax, ay, az
+    gradient = np.empty(n)
     bx = by = bz = 0.0
     for i in range(n):  # b_i, summed from the first column
-        wx, wy, wz, ax, ay, az = gradient[i]
-        vx, vy, vz = J0[i], J1[i], J2[i]
-        gradient[i] = ((wx * ax + vx * bx) + (wy * ay + vy * by)
-                       + (wz * az + vz * bz))
-        Vx, Vy, Vz = W0[i], W1[i], W2[i]
+        wx, wy, wz = J[3, i], J[4, i], J[5, i]
+        vx, vy, vz = J[0, i], J[1, i], J[2, i]
+        gradient[i] = ((wx * a[i, 0] + vx * bx) + (wy * a[i, 1] + vy * by)
+                       + (wz * a[i, 2] + vz * bz))
+        Vx, Vy, Vz = W[0, i], W[1, i], W[2, i]
         bx += Vy * wz - Vz * wy
         by += Vz * wx - Vx * wz
         bz += Vx * wy - Vy * wx
     return gradient
 
 
+@compiled
+def _capability_terms(J, q, lower, upper, k_j, damping, damping_threshold):
+    """The compiled body of `capability_terms_float`."""
+    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    m = 1.0
+    for s_k in s:
+        m *= s_k
+    penalty, penalty_gradient = _penalty_and_gradient(q, lower, upper, k_j)
+    manipulability_gradient = _manipulability_gradient(J, U, s, Vt)
+    n = q.size
+    joint_gradient = np.empty(n)
+    for i in range(n):
+        joint_gradient[i] = (penalty * manipulability_gradient[i]
+                             + m * penalty_gradient[i])
+    # g = U diag(s_k / (s_k^2 + lambda^2)) Vt dC_m/dq (0 for a zero
+    # denominator).
+    s_min = s[-1]
+    lambda2 = (damping**2 * (1.0 - (s_min / damping_threshold) ** 2)
+               if s_min < damping_threshold else 0.0)
+    k = s.size
+    projected = np.empty(k)
+    for i in range(k):
+        denominator = s[i] * s[i] + lambda2
+        gain = s[i] / denominator if denominator > 0.0 else 0.0
+        total = 0.0
+        for c in range(n):
+            total += Vt[i, c] * joint_gradient[c]
+        projected[i] = gain * total
+    g = np.empty(6)
+    for r in range(6):
+        total = 0.0
+        for i in range(k):
+            total += U[r, i] * projected[i]
+        g[r] = total
+    return m * penalty, g
+
+
 def _capability_terms_sample(rng):
     """Random arguments of `capability_terms`: J_a from chosen
     singular values (well conditioned, near-singular and singular, the
     damping on and off), n = 6 or 7, joints inside their range, at a
-    limit, beyond one, two at limits; as the stage passes them (J_a an
-    array, q and the limits lists)."""
+    limit, beyond one, two at limits; float64 arrays, as the stage passes
+    them."""
     n = 6 if rng.uniform() < 0.75 else 7
     U, _ = np.linalg.qr(rng.normal(size=(6, 6)))
     V, _ = np.linalg.qr(rng.normal(size=(n, n)))
@@ -792,39 +830,23 @@ def _capability_terms_sample(rng):
     elif limits == 3:
         q[j], q[k] = lower[j], upper[k]
     k_j = rng.uniform(5e3, 3e4) * 4.0 ** (n - 6)
-    return (J, q.tolist(), lower.tolist(), upper.tolist(), k_j, damping,
-            eps)
+    return J, q, lower, upper, k_j, damping, eps
 
 
 @fast_kernel(capability_terms, sample=_capability_terms_sample)
 def capability_terms_float(J_a, q, lower, upper, k_j, damping,
                            damping_threshold):
-    """`capability_terms` for floats, from one SVD of J_a (by
-    LAPACK's dgesdd) and the gradients in plain floats: the per-tick path
-    of the ArmCapability stage. Lists of floats for q, lower and upper are
-    the fastest.
+    """`capability_terms` in machine code (drake_wbc.math.compiled), from
+    one SVD of J_a: the per-tick path of the ArmCapability stage. J_a
+    (6, n), q, lower and upper (n,) float64 C-contiguous arrays, the
+    rest floats.
 
     Returns:
         (C_m, g): C_m as a float and g = grad_x C_m (6,).
     """
-    U, s, Vt = _svd(J_a)
-    s = s.tolist()
-    m = math.prod(s)
-    penalty, penalty_gradient = _penalty_and_gradient(q, lower, upper, k_j)
-    joint_gradient = [penalty * dm + m * dp for dm, dp in zip(
-        _manipulability_gradient(J_a, U, s, Vt), penalty_gradient,
-        strict=True)]
-    # g = U diag(s_k / (s_k^2 + lambda^2)) Vt dC_m/dq (0 for a zero
-    # denominator).
-    s_min = s[-1]
-    lambda2 = (damping**2 * (1.0 - (s_min / damping_threshold) ** 2)
-               if s_min < damping_threshold else 0.0)
-    gains = []
-    for s_k in s:
-        denominator = s_k * s_k + lambda2
-        gains.append(s_k / denominator if denominator > 0.0 else 0.0)
-    return float(m * penalty), U @ (np.array(gains)
-                                    * (Vt @ np.array(joint_gradient)))
+    C_m, g = _capability_terms(J_a, q, lower, upper, float(k_j),
+                               float(damping), float(damping_threshold))
+    return float(C_m), g
 
 
 def _transition_sample(rng):

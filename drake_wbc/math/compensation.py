@@ -96,6 +96,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drake_wbc.math.compiled import compiled
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.kinematics import (
     base_jacobian_of,
@@ -274,50 +275,80 @@ def _compensation_problems(rng):
             PROJECTOR_TOLERANCE)
 
 
-@fast_kernel(arm_compensation, sample=_compensation_problems)
-def arm_compensation_float(V_a, V_b, V_b_filtered, p_ee_in_base, R_ba,
-                           grad_C_m, alpha, tolerance=PROJECTOR_TOLERANCE):
-    """`arm_compensation` in plain floats: J_b delta_V_b = [dv_x - y dw_z,
-    dv_y + x dw_z, 0, 0, 0, dw_z] of eq. (2) and alpha P_Cm d = alpha g
-    (g . d) / (g . g) written out (the same values to rounding).
-
-    Args:
-        as arm_compensation; the vectors float arrays, R_ba None or its
-        rows (a tuple of 3 tuples of floats, or a (3, 3) array).
-    """
-    alpha = float(alpha)
-    b0, b1, b2 = V_b.tolist()
-    f0, f1, f2 = V_b_filtered.tolist()
-    dvx, dvy, dwz = f0 - b0, f1 - b1, f2 - b2
-    x, y = float(p_ee_in_base[0]), float(p_ee_in_base[1])
+@compiled
+def _compensation(V_a, V_b, V_b_filtered, p_ee_in_base, R, rotate, g, alpha,
+                  tolerance):
+    """The compiled body of `arm_compensation_float`; R the (3, 3) ^bR_a,
+    `rotate` False for the identity (the deviation stays as it is)."""
+    dvx = V_b_filtered[0] - V_b[0]
+    dvy = V_b_filtered[1] - V_b[1]
+    dwz = V_b_filtered[2] - V_b[2]
+    x, y = p_ee_in_base[0], p_ee_in_base[1]
     # J_b delta_V_b (eq. (2)), then delta_V_a^req = -R_ba^T J_b delta_V_b.
     tx = dvx - y * dwz
     ty = dvy + x * dwz
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = (
-        _IDENTITY_ROWS if R_ba is None else R_ba)
-    required = [-(r00 * tx + r10 * ty), -(r01 * tx + r11 * ty),
-                -(r02 * tx + r12 * ty), -(r20 * dwz), -(r21 * dwz),
-                -(r22 * dwz)]
-    g0, g1, g2, g3, g4, g5 = grad_C_m.tolist()
-    g_squared = g0 * g0 + g1 * g1 + g2 * g2 + g3 * g3 + g4 * g4 + g5 * g5
+    required = np.empty(6)
+    for c in range(3):
+        required[c] = -(R[0, c] * tx + R[1, c] * ty)
+        required[3 + c] = -(R[2, c] * dwz)
+    result = np.zeros(12)
+    g_squared = 0.0
+    for i in range(6):
+        g_squared += g[i] * g[i]
     if math.sqrt(g_squared) <= tolerance:
-        return np.array([v + d for v, d in zip(V_a.tolist(), required,
-                                               strict=True)] + [0.0] * 6)
-    q0, q1, q2, q3, q4, q5 = required
-    factor = -alpha * (g0 * q0 + g1 * q1 + g2 * q2 + g3 * q3 + g4 * q4
-                       + g5 * q5) / g_squared
-    deviation = [factor * g0, factor * g1, factor * g2, factor * g3,
-                 factor * g4, factor * g5]
-    arm = [v + (d + e) for v, d, e in zip(V_a.tolist(), required, deviation,
-                                          strict=True)]
-    if R_ba is None:
-        return np.array(arm + deviation)
+        for i in range(6):
+            result[i] = V_a[i] + required[i]
+        return result
+    along = 0.0
+    for i in range(6):
+        along += g[i] * required[i]
+    factor = -alpha * along / g_squared
+    deviation = np.empty(6)
+    for i in range(6):
+        deviation[i] = factor * g[i]
+        result[i] = V_a[i] + (required[i] + deviation[i])
+    if not rotate:
+        for i in range(6):
+            result[6 + i] = deviation[i]
+        return result
     # delta_V_ee = R_ba (delta_V_a^cmp - delta_V_a^req), in T_b.
-    e0, e1, e2, e3, e4, e5 = deviation
-    return np.array(arm + [
-        r00 * e0 + r01 * e1 + r02 * e2, r10 * e0 + r11 * e1 + r12 * e2,
-        r20 * e0 + r21 * e1 + r22 * e2, r00 * e3 + r01 * e4 + r02 * e5,
-        r10 * e3 + r11 * e4 + r12 * e5, r20 * e3 + r21 * e4 + r22 * e5])
+    for r in range(3):
+        result[6 + r] = (R[r, 0] * deviation[0] + R[r, 1] * deviation[1]
+                         + R[r, 2] * deviation[2])
+        result[9 + r] = (R[r, 0] * deviation[3] + R[r, 1] * deviation[4]
+                         + R[r, 2] * deviation[5])
+    return result
+
+
+_IDENTITY = np.eye(3)
+
+
+def _floats(values):
+    """`values` as a float64 C-contiguous array (as it is, if it is one
+    already): what the compiled kernel takes."""
+    if (type(values) is np.ndarray and values.dtype == np.float64
+            and values.flags.c_contiguous):
+        return values
+    return np.ascontiguousarray(values, dtype=float)
+
+
+@fast_kernel(arm_compensation, sample=_compensation_problems)
+def arm_compensation_float(V_a, V_b, V_b_filtered, p_ee_in_base, R_ba,
+                           grad_C_m, alpha, tolerance=PROJECTOR_TOLERANCE):
+    """`arm_compensation` in machine code (drake_wbc.math.compiled): J_b
+    delta_V_b = [dv_x - y dw_z, dv_y + x dw_z, 0, 0, 0, dw_z] of eq. (2)
+    and alpha P_Cm d = alpha g (g . d) / (g . g) written out (the same
+    values to rounding).
+
+    Args:
+        as arm_compensation; the vectors float arrays, R_ba None or a
+        (3, 3) array (or its rows).
+    """
+    return _compensation(
+        _floats(V_a), _floats(V_b), _floats(V_b_filtered),
+        _floats(p_ee_in_base),
+        _IDENTITY if R_ba is None else _floats(R_ba), R_ba is not None,
+        _floats(grad_C_m), float(alpha), float(tolerance))
 
 
 # --- the checked functions --------------------------------------------------

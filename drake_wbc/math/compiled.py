@@ -16,9 +16,10 @@ the settings every kernel of the tick shares:
 
 A compiled function compiles for the types of its first call; the
 kernels give it float64 contiguous arrays and floats only, and
-`kernels.body_for` calls each kernel once on its own sample when a stage
-is built, so that no tick compiles (tests/test_kernels.py checks that a
-second call adds no compiled signature).
+`kernels.body_for` calls each kernel on its own samples when a stage
+is built (`kernels.warm`), so that no tick compiles
+(tests/test_kernels.py checks that a second call adds no compiled
+signature).
 """
 
 import numba

@@ -92,6 +92,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from drake_wbc.math.compiled import compiled
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.kinematics import (
     random_rotation,
@@ -278,14 +279,69 @@ def _whole_body_problems(rng):
             DEFAULT_DAMPING if damped else None)
 
 
+@compiled
+def _closed_form(V_ee, p_ee_in_base, s, p, capability_gradient, k, damped,
+                 threshold):
+    """The compiled closed form of `whole_body_distribution_float`: V_wb
+    (9,), or NaN in every entry where it does not hold (the certificate
+    not proved, or a value not finite)."""
+    x, y = p_ee_in_base[0], p_ee_in_base[1]
+    n0, n1, n2 = (k * capability_gradient[0], k * capability_gradient[1],
+                  k * capability_gradient[2])
+    n3, n4, n5 = (k * capability_gradient[3], k * capability_gradient[4],
+                  k * capability_gradient[5])
+    # V_ee - J_wb V_n^0 with J_wb V_n^0 = the arm part of V_n^0.
+    v0, v1, v2 = V_ee[0] - n0, V_ee[1] - n1, V_ee[2] - n2
+    v3, v4, v5 = V_ee[3] - n3, V_ee[4] - n4, V_ee[5] - n5
+    a, b = 1.0 - s, 1.0 - p
+    u = s + a
+    ay = -b * y
+    ax = b * x
+    # The block A on (vx, vy, wz), and its Cholesky factor L.
+    a00, a10, a11 = u + ay * -y, ay * x, u + ax * x
+    a20, a21, a22 = ay, ax, p + b
+    l00 = math.sqrt(a00) if a00 > 0.0 else math.nan
+    l10, l20 = a10 / l00, a20 / l00
+    d11 = a11 - l10 * l10
+    l11 = math.sqrt(d11) if d11 > 0.0 else math.nan
+    l21 = (a21 - l20 * l10) / l11
+    d22 = a22 - l20 * l20 - l21 * l21
+    l22 = math.sqrt(d22) if d22 > 0.0 else math.nan
+    if damped:
+        # The product of 5 L_ii^2 / tr M over the six pivots, three of
+        # them 1.
+        ratio = 5.0 / (3.0 + a00 + a11 + a22)
+        certificate = ((l00 * l00 * ratio) * (l11 * l11 * ratio)
+                       * (l22 * l22 * ratio) * ratio * ratio * ratio)
+        proved = certificate >= 5.0 * threshold
+    else:
+        proved = l22 == l22  # not NaN: A is positive definite
+    V_wb = np.empty(9)
+    if not (proved and math.isfinite(x + y + v0 + v1 + v2 + v3 + v4
+                                      + v5)):
+        V_wb[:] = math.nan
+        return V_wb
+    z0 = v0 / l00
+    z1 = (v1 - l10 * z0) / l11
+    z5 = (v5 - l20 * z0 - l21 * z1) / l22
+    x5 = z5 / l22
+    x1 = (z1 - l21 * x5) / l11
+    x0 = (z0 - l10 * x1 - l20 * x5) / l00
+    V_wb[0], V_wb[1], V_wb[2] = s * x0 + n0, s * x1 + n1, v2 + n2
+    V_wb[3], V_wb[4], V_wb[5] = v3 + n3, v4 + n4, p * x5 + n5
+    V_wb[6], V_wb[7] = a * x0, a * x1
+    V_wb[8] = b * (x5 - y * x0 + x * x1)
+    return V_wb
+
+
 @fast_kernel(whole_body_distribution, sample=_whole_body_problems)
 def whole_body_distribution_float(V_ee, p_ee_in_base, R_ba, sigma_xy,
                                   sigma_phi, capability_gradient,
                                   null_space_gain, damping=DEFAULT_DAMPING):
-    """`whole_body_distribution` in plain floats: the closed form for the
-    usual mounting (R_ba None, ^bR_a = I); any other mounting, a case the
-    damping might touch or a value that is not finite goes to the
-    reference.
+    """`whole_body_distribution` in machine code (drake_wbc.math.compiled):
+    the closed form for the usual mounting (R_ba None, ^bR_a = I); any
+    other mounting, a case the damping might touch or a value that is not
+    finite goes to the reference.
 
     With R_ba = I, M = J Q J^T is the identity on the rows (vz, wx, wy)
     and on (vx, vy, wz) the 3x3 block
@@ -315,64 +371,39 @@ def whole_body_distribution_float(V_ee, p_ee_in_base, R_ba, sigma_xy,
 
     Args:
         as whole_body_distribution; V_ee, p_ee_in_base and
-        capability_gradient float arrays or sequences of floats.
+        capability_gradient float64 C-contiguous arrays, as the stages
+        give them (anything but an array goes through
+        np.ascontiguousarray first).
 
     Returns:
         (9,) array V_wb.
     """
-    if R_ba is not None:
-        return whole_body_distribution(
-            V_ee, p_ee_in_base, R_ba, sigma_xy, sigma_phi,
-            capability_gradient, null_space_gain, damping)
-    x, y = float(p_ee_in_base[0]), float(p_ee_in_base[1])
-    s, p = float(sigma_xy), float(sigma_phi)
-    v0, v1, v2, v3, v4, v5 = (V_ee.tolist() if type(V_ee) is np.ndarray
-                              else map(float, V_ee))
-    k = float(null_space_gain)
-    n0, n1, n2, n3, n4, n5 = [
-        k * e for e in (capability_gradient.tolist()
-                        if type(capability_gradient) is np.ndarray
-                        else map(float, capability_gradient))]
-    # V_ee - J_wb V_n^0 with J_wb V_n^0 = the arm part of V_n^0.
-    v0, v1, v2, v3, v4, v5 = (v0 - n0, v1 - n1, v2 - n2, v3 - n3, v4 - n4,
-                              v5 - n5)
-    a, b = 1.0 - s, 1.0 - p
-    u = s + a
-    ay = -b * y
-    ax = b * x
-    # The block A on (vx, vy, wz), and its Cholesky factor L.
-    a00, a10, a11 = u + ay * -y, ay * x, u + ax * x
-    a20, a21, a22 = ay, ax, p + b
-    l00 = math.sqrt(a00) if a00 > 0.0 else math.nan
-    l10, l20 = a10 / l00, a20 / l00
-    d11 = a11 - l10 * l10
-    l11 = math.sqrt(d11) if d11 > 0.0 else math.nan
-    l21 = (a21 - l20 * l10) / l11
-    d22 = a22 - l20 * l20 - l21 * l21
-    l22 = math.sqrt(d22) if d22 > 0.0 else math.nan
-    if damping is not None:
-        # The product of 5 L_ii^2 / tr M over the six pivots, three of
-        # them 1.
-        ratio = 5.0 / (3.0 + a00 + a11 + a22)
-        certificate = ((l00 * l00 * ratio) * (l11 * l11 * ratio)
-                       * (l22 * l22 * ratio) * ratio * ratio * ratio)
-        proved = certificate >= 5.0 * damping.threshold
-    else:
-        proved = l22 == l22  # not NaN: A is positive definite
-    if not (proved and math.isfinite(x + y + v0 + v1 + v2 + v3 + v4
-                                      + v5)):
-        return whole_body_distribution(
-            V_ee, p_ee_in_base, None, sigma_xy, sigma_phi,
-            capability_gradient, null_space_gain, damping)
-    z0 = v0 / l00
-    z1 = (v1 - l10 * z0) / l11
-    z5 = (v5 - l20 * z0 - l21 * z1) / l22
-    x5 = z5 / l22
-    x1 = (z1 - l21 * x5) / l11
-    x0 = (z0 - l10 * x1 - l20 * x5) / l00
-    return np.array([s * x0 + n0, s * x1 + n1, v2 + n2, v3 + n3, v4 + n4,
-                     p * x5 + n5, a * x0, a * x1,
-                     b * (x5 - y * x0 + x * x1)])
+    if R_ba is None and (type(V_ee) is type(p_ee_in_base)
+                         is type(capability_gradient) is np.ndarray):
+        V_wb = _closed_form(
+            V_ee, p_ee_in_base, float(sigma_xy), float(sigma_phi),
+            capability_gradient, float(null_space_gain),
+            damping is not None,
+            0.0 if damping is None else damping.threshold)
+        if V_wb[0] == V_wb[0]:  # not NaN: the closed form holds
+            return V_wb
+    elif R_ba is None:
+        return whole_body_distribution_float(
+            _floats(V_ee), _floats(p_ee_in_base), None, sigma_xy,
+            sigma_phi, _floats(capability_gradient), null_space_gain,
+            damping)
+    return whole_body_distribution(
+        V_ee, p_ee_in_base, R_ba, sigma_xy, sigma_phi, capability_gradient,
+        null_space_gain, damping)
+
+
+def _floats(values):
+    """`values` as a float64 C-contiguous array (as it is, if it is one
+    already): what the compiled kernels take."""
+    if (type(values) is np.ndarray and values.dtype == np.float64
+            and values.flags.c_contiguous):
+        return values
+    return np.ascontiguousarray(values, dtype=float)
 
 
 # --- the checked functions --------------------------------------------------

@@ -22,9 +22,17 @@ on the scalar type.
 tests/test_kernels.py holds every registered kernel equal to its
 reference on random inputs drawn by the kernel's own `sample`.
 
+An equation whose true reference needs a MultibodyPlant (the arm's
+kinematics) fits this registry unchanged: its reference body here takes
+the plant's data as plain arrays (drake_wbc.math.chain: a serial chain's
+fixed poses, axes and kinds), the kernel is held equal to it on random
+chains like every other, and the robot layer holds the two equal to the
+plant's own kinematics on every robot at hand (tests/test_robot_model.py).
+
 A kernel whose loops are compiled (drake_wbc.math.compiled) compiles on
-its first call; `body_for` makes that call, once per process, on the
-kernel's own sample, so that a stage's first tick runs machine code.
+its first call; `body_for` makes those calls, once per process, on a
+few of the kernel's own samples (`warm`), so that a stage's first tick
+runs machine code.
 """
 
 from collections.abc import Callable
@@ -75,7 +83,7 @@ def fast_kernel(reference, sample):
 def body_for(reference, T):
     """The body a stage of scalar type `T` runs for `reference`, chosen
     once when the stage is built: its fast kernel for float, if it has
-    one (called once on its sample first, see the module); the reference
+    one (called on its samples first, see the module); the reference
     otherwise."""
     kernel = _KERNELS.get(reference)
     if T is float and kernel is not None:
@@ -84,11 +92,20 @@ def body_for(reference, T):
     return reference
 
 
+WARM_SAMPLES = 8
+"""Samples `warm` calls a kernel on: a kernel that leaves some cases to
+its reference (the distribution's closed form, for a turned mounting)
+reaches its compiled path on most samples, not on every one."""
+
+
 def warm(kernel):
-    """Calls `kernel.fast` once on its own sample, the first time only, so
-    that whatever it compiles is compiled before a tick needs it."""
+    """Calls `kernel.fast` on its own samples (WARM_SAMPLES of them, from
+    one seeded generator), the first time only, so that whatever it
+    compiles is compiled before a tick needs it."""
     if kernel.fast not in _WARM:
-        kernel.fast(*kernel.sample(np.random.default_rng(0)))
+        rng = np.random.default_rng(0)
+        for _ in range(WARM_SAMPLES):
+            kernel.fast(*kernel.sample(rng))
         _WARM.add(kernel.fast)
 
 

@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from drake_wbc.math.compiled import compiled
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.validation import boolean, whole_number
 
@@ -189,10 +190,58 @@ def _wrench_inputs(rng):
     return reading, R_LM, payload, motion
 
 
+@compiled
+def _external_wrench(reading, R_LM, mass, weight_map, moment_map, lever_map,
+                     moving, motion):
+    """The compiled body of `external_wrench_float` (`motion` read only
+    when `moving`)."""
+    relieved = np.empty(6)
+    if not moving:
+        for r in range(6):
+            relieved[r] = reading[r] - (weight_map[r, 0] * R_LM[2, 0]
+                                        + weight_map[r, 1] * R_LM[2, 1]
+                                        + weight_map[r, 2] * R_LM[2, 2])
+    else:
+        load = np.empty(3)
+        load[0] = mass * (0.0 - motion[0])
+        load[1] = mass * (0.0 - motion[1])
+        load[2] = mass * (-STANDARD_GRAVITY - motion[2])
+        w_a = np.empty(3)
+        spin = np.empty(3)
+        for c in range(3):
+            w_a[c] = (R_LM[0, c] * load[0] + R_LM[1, c] * load[1]
+                      + R_LM[2, c] * load[2])
+            spin[c] = (R_LM[0, c] * motion[3] + R_LM[1, c] * motion[4]
+                       + R_LM[2, c] * motion[5])
+        for r in range(6):
+            relieved[r] = reading[r] - (moment_map[r, 0] * w_a[0]
+                                        + moment_map[r, 1] * w_a[1]
+                                        + moment_map[r, 2] * w_a[2])
+        for r in range(3):
+            relieved[3 + r] += spin[r]
+    in_M = np.empty(6)
+    for r in range(6):
+        total = 0.0
+        for c in range(6):
+            total += lever_map[r, c] * relieved[c]
+        in_M[r] = total
+    result = np.empty(6)
+    for half in range(2):
+        for r in range(3):
+            result[3 * half + r] = (in_M[3 * half] * R_LM[r, 0]
+                                    + in_M[3 * half + 1] * R_LM[r, 1]
+                                    + in_M[3 * half + 2] * R_LM[r, 2])
+    return result
+
+
+_NO_MOTION = np.zeros(6)
+
+
 @fast_kernel(external_wrench, sample=_wrench_inputs)
 def external_wrench_float(reading, R_LM, payload, motion=None):
-    """`external_wrench` of a float reading, as two constant linear maps
-    and a rotation (the control tick):
+    """`external_wrench` of a float reading in machine code
+    (drake_wbc.math.compiled), as two constant linear maps and a rotation
+    (the control tick):
 
         [f_M; tau_M + p_TM x f_M] = lever_map (reading - weight_map
         R_LM[2, :]),   F_ext = diag(R_LM, R_LM) [...],
@@ -200,16 +249,12 @@ def external_wrench_float(reading, R_LM, payload, motion=None):
     with a moving tool weight_map R_LM[2, :] replaced by moment_map w_a
     and R_LM^T dH added to the torque.
     """
-    if motion is None:
-        in_M = payload.lever_map.dot(reading
-                                     - payload.weight_map.dot(R_LM[2]))
-    else:
-        w_a = R_LM.T.dot(payload.mass * (
-            np.array([0.0, 0.0, -STANDARD_GRAVITY]) - motion[:3]))
-        relieved = reading - payload.moment_map.dot(w_a)
-        relieved[3:] += R_LM.T.dot(motion[3:])
-        in_M = payload.lever_map.dot(relieved)
-    return in_M.reshape(2, 3).dot(R_LM.T).ravel()
+    moving = motion is not None
+    return _external_wrench(
+        np.ascontiguousarray(reading, dtype=float),
+        np.ascontiguousarray(R_LM, dtype=float), float(payload.mass),
+        payload.weight_map, payload.moment_map, payload.lever_map, moving,
+        np.ascontiguousarray(motion, dtype=float) if moving else _NO_MOTION)
 
 
 @dataclass

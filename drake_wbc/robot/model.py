@@ -44,6 +44,13 @@ from pydrake.multibody.tree import (
     ScopedName,
 )
 
+from drake_wbc.math.chain import (
+    PRISMATIC,
+    REVOLUTE,
+    SerialChain,
+    chain_kinematics_of,
+)
+from drake_wbc.math.kernels import body_for
 from drake_wbc.math.validation import (
     as_float_array,
     as_scalar,
@@ -480,19 +487,31 @@ def joint_velocity_indices(joints):
     return np.array([j.velocity_start() for j in joints], dtype=int)
 
 
-class ArmKinematicsValues(NamedTuple):
-    """The arm's kinematics at one configuration (see ArmKinematics).
+class ArmKinematicsValues:
+    """The arm's kinematics at one configuration (see ArmKinematics),
+    unpacked as (J_a, p_ee_in_base, X_AE).
 
     Attributes:
         J_a: (6, n) geometric Jacobian of the end effector in T_a, rows
             [v; w] (the paper's order), columns the arm's n joint rates.
         p_ee_in_base: (3,) end-effector position in T_b (m).
-        X_AE: the end-effector pose in T_a.
+        X_AE: the end-effector pose in T_a, a RigidTransform made when it
+            is read (making one costs more than the whole kinematics, and
+            the tick reads only J_a and p_ee).
+        pose: X_AE as a (4, 4) homogeneous matrix.
     """
 
-    J_a: np.ndarray
-    p_ee_in_base: np.ndarray
-    X_AE: RigidTransform
+    __slots__ = ("J_a", "p_ee_in_base", "pose")
+
+    def __init__(self, J_a, p_ee_in_base, pose):
+        self.J_a, self.p_ee_in_base, self.pose = J_a, p_ee_in_base, pose
+
+    @property
+    def X_AE(self):
+        return RigidTransform(self.pose)
+
+    def __iter__(self):
+        return iter((self.J_a, self.p_ee_in_base, self.X_AE))
 
 
 class ArmKinematics:
@@ -504,6 +523,14 @@ class ArmKinematics:
     these are the nominal kinematics: passive joints at rest, base at the
     origin. T_a is then fixed in T_b and R_ba, the rotation from T_a to
     T_b, is a constant (the identity for the shipped robot).
+
+    `evaluate` runs the compiled kinematics of the arm's serial chain
+    (drake_wbc.math.chain), read from the plant once here
+    (`serial_chain`): the same values as the plant's to rounding
+    (tests/test_robot_model.py holds them equal to 1e-12), at a few
+    microseconds instead of the plant's twenty. Where the end effector is
+    not outboard of the arm's last joint, or T_a not inboard of its first
+    (a frame of the user's choosing), it asks the plant instead.
 
     Attributes (besides the methods): num_joints n; lower, upper,
     velocity_limits, acceleration_limits (n,), the arm's own limits
@@ -554,6 +581,8 @@ class ArmKinematics:
         # T_a is fixed in T_b (nominal kinematics): p_ee in T_b follows
         # from X_AE, with no third query of the plant.
         self._R_BA, self._p_BA = self.R_ba.copy(), X_BA.translation().copy()
+        self._R_BA_rows = self._R_BA.tolist()
+        self._p_BA_list = self._p_BA.tolist()
         self._q = self._plant.GetPositions(self._context)
         # Flat indices of J_a's entries in Drake's (6, nv) Jacobian [w; v].
         self._J_a_entries = (
@@ -561,6 +590,12 @@ class ArmKinematics:
             + np.asarray(self._v_indices)[None, :]).ravel()
         self._q_a_key = None
         self._memo = {}
+        self._frame_chains = {}
+        self.chain = serial_chain(plant, self._context, self._arm_base,
+                                  self._end_effector, model.arm_joints)
+        self._chain_kinematics = body_for(chain_kinematics_of, float)
+        if self.chain is not None:
+            self._chain_arrays = tuple(self.chain)
 
     MEMO_SIZE = 4
     """Configurations whose values `evaluate` remembers (the stages of a
@@ -584,6 +619,22 @@ class ArmKinematics:
         self._set_arm_positions(q_a)
         return frame.CalcPose(self._context, self._arm_base)
 
+    def frame_matrix(self, q_a, frame):
+        """X_AF of `frame_pose` as a (4, 4) homogeneous matrix, by the
+        compiled chain to `frame` (read from the plant the first time a
+        frame is asked for) where one applies, else from the plant: for
+        the ticks that need a frame other than the end effector (the
+        wrist sensor's)."""
+        chain = self._frame_chains.get(frame.index())
+        if chain is None:
+            chain = self._frame_chains[frame.index()] = serial_chain(
+                self._plant, self._context, self._arm_base, frame,
+                self.model.arm_joints) or ()
+        if not chain:
+            return self.frame_pose(q_a, frame).GetAsMatrix4()
+        q_a = as_float_array("q_a", q_a, (self.num_joints,))
+        return self._chain_kinematics(*chain, q_a)[1]
+
     def evaluate(self, q_a):
         """Returns the ArmKinematicsValues at arm configuration `q_a` (n,).
 
@@ -593,17 +644,38 @@ class ArmKinematics:
         key = q_a.tobytes()
         values = self._memo.get(key)
         if values is None:
-            self._set_arm_positions(q_a, key)
-            values = self._evaluate_here()
+            values = self._evaluate(q_a, key)
             if len(self._memo) >= self.MEMO_SIZE:
                 del self._memo[next(iter(self._memo))]
             self._memo[key] = values
-        J_a, p_ee_in_base, X_AE = values
-        return ArmKinematicsValues(J_a.copy(), p_ee_in_base.copy(),
-                                   RigidTransform(X_AE))
+        return ArmKinematicsValues(values.J_a.copy(),
+                                   values.p_ee_in_base.copy(),
+                                   values.pose.copy())
+
+    def _evaluate(self, q_a, key):
+        """J_a, p_ee (T_b) and X_AE (4, 4) at the checked q_a (n,): by the
+        compiled chain, or by the plant (see the class)."""
+        if self.chain is None:
+            self._set_arm_positions(q_a, key)
+            return self._evaluate_here()
+        J_a, X_AE = self._chain_kinematics(*self._chain_arrays, q_a)
+        x, y, z = X_AE[:3, 3].tolist()
+        p_ee_in_base = np.array([
+            ((R_i[0] * x + R_i[1] * y) + R_i[2] * z) + p_i
+            for R_i, p_i in zip(self._R_BA_rows, self._p_BA_list,
+                                strict=True)])
+        return ArmKinematicsValues(J_a, p_ee_in_base, X_AE)
+
+    def plant_values(self, q_a):
+        """The ArmKinematicsValues at q_a (n,) from the plant itself, as
+        `evaluate` gives them when the chain does not apply (X_AE as a
+        (4, 4) matrix): the reference of the compiled chain."""
+        self._set_arm_positions(q_a)
+        return self._evaluate_here()
 
     def _evaluate_here(self):
-        """J_a, p_ee (T_b) and X_AE at the configuration of the context."""
+        """J_a, p_ee (T_b) and X_AE (4, 4) at the configuration of the
+        context, from the plant."""
         J = self._plant.CalcJacobianSpatialVelocity(
             self._context,
             JacobianWrtVariable.kV,
@@ -616,7 +688,46 @@ class ArmKinematics:
         J_a = J.take(self._J_a_entries).reshape(6, self.num_joints)
         X_AE = self._end_effector.CalcPose(self._context, self._arm_base)
         p_ee_in_base = self._R_BA @ X_AE.translation() + self._p_BA
-        return ArmKinematicsValues(J_a, p_ee_in_base, X_AE)
+        return ArmKinematicsValues(J_a, p_ee_in_base, X_AE.GetAsMatrix4())
+
+
+def serial_chain(plant, context, base_frame, end_frame, joints):
+    """The SerialChain (drake_wbc.math.chain) of `joints` (one-dof
+    revolute or prismatic joints of `plant`, base to wrist) from
+    `base_frame` to `end_frame`, its fixed transforms taken at
+    `context` (any other joint between them is held as there); None
+    when it does not describe the plant's kinematics: a joint of another
+    kind, `end_frame` not outboard of the last joint's child, or
+    `base_frame` not inboard of the first joint's parent, or consecutive
+    joints not outboard of each other."""
+    parents = _parents(plant)
+    kinds = {"revolute": REVOLUTE, "prismatic": PRISMATIC}
+    if (not joints or any(j.type_name() not in kinds for j in joints)
+            or not _outboard(parents, end_frame.body(),
+                             joints[-1].child_body())
+            or not _outboard(parents, joints[0].parent_body(),
+                             base_frame.body())
+            or _outboard(parents, base_frame.body(),
+                         joints[0].child_body())):
+        return None
+    for a, b in zip(joints[:-1], joints[1:], strict=True):
+        if not _outboard(parents, b.parent_body(), a.child_body()):
+            return None
+    frames = ([base_frame]
+              + [f for j in joints for f in (j.frame_on_parent(),
+                                              j.frame_on_child())]
+              + [end_frame])
+    fixed = np.array([
+        plant.CalcRelativeTransform(context, frames[2 * i],
+                                    frames[2 * i + 1]).GetAsMatrix4()
+        for i in range(len(joints) + 1)])
+    axes = np.array([
+        j.revolute_axis() if j.type_name() == "revolute"
+        else j.translation_axis() for j in joints], dtype=float)
+    axes /= np.linalg.norm(axes, axis=1)[:, None]
+    revolute = np.array([kinds[j.type_name()] for j in joints])
+    return SerialChain(np.ascontiguousarray(fixed),
+                       np.ascontiguousarray(axes), revolute)
 
 
 def arm_kinematics(robot=None):

@@ -93,7 +93,8 @@ def ArmCapability_(T):
             self.band = band_of(band, self.arm)
             # What the tick needs, as plain floats (see evaluate).
             p = self.params
-            self._limits = (self.arm.lower.tolist(), self.arm.upper.tolist())
+            self._limits = (np.ascontiguousarray(self.arm.lower, float),
+                            np.ascontiguousarray(self.arm.upper, float))
             k_j = (self.arm.model.description.tuning.joint_limit_gain
                    if p.joint_limit_gain is None else p.joint_limit_gain)
             self._constants = (k_j, p.gradient_damping,
@@ -116,7 +117,7 @@ def ArmCapability_(T):
             checked (shape (n,), finite) by ArmKinematics.evaluate.
             """
             values = self.arm.evaluate(q_a)
-            q = np.asarray(q_a, dtype=float).tolist()
+            q = np.ascontiguousarray(q_a, dtype=float)
             C_m, gradient = self._terms(values.J_a, q, *self._limits,
                                         *self._constants)
             result = np.empty(11)

@@ -259,10 +259,9 @@ def RobustCompensator_(T):
                                         shared_arm_kinematics)
             self.R_ba = rotation_matrix("R_ba", self.arm.R_ba)
             # None for the usual mounting ^bR_a = I (no rotation to do),
-            # else its rows, as the float kernel takes them.
+            # else the matrix, as the compiled kernel takes it.
             self._R_ba = (None if np.array_equal(self.R_ba, np.eye(3))
-                          else tuple(tuple(row)
-                                     for row in self.R_ba.tolist()))
+                          else np.ascontiguousarray(self.R_ba, float))
             self._switch = self.params.compensation_switch
             self._compensate = kernels.body_for(
                 compensation.arm_compensation, T)

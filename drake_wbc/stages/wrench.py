@@ -59,8 +59,7 @@ def sensor_rotation_in_base(arm, q_a):
     """R_BM (3, 3), the rotation of the sensor's measurement frame M in
     T_b at the arm's joints q_a (float): ^bR_a R_AM, nominal kinematics
     (base level, mount at rest)."""
-    R_AM = arm.frame_pose(
-        q_a, arm.model.ft_measurement_frame).GetAsMatrix34()[:, :3]
+    R_AM = arm.frame_matrix(q_a, arm.model.ft_measurement_frame)[:3, :3]
     return R_AM if arm.mount.is_identity else arm.R_ba @ R_AM
 
 
