@@ -154,22 +154,30 @@ def ForceErrorSwitch_(T):
             LeafSystem_[T].__init__(self, converter)
             self._default_desired = np.asarray(desired_wrench, float)
             self._default_switch = np.array([float(phri_switch)])
+            self._switched = body_for(stop_switched, T)
             self._wrench = self.DeclareVectorInputPort("wrench", 6)
             self._desired = self.DeclareVectorInputPort("desired_wrench", 6)
             self._phri_port = self.DeclareVectorInputPort("phri_switch", 1)
             self.DeclareVectorOutputPort("force_error", 6, self._output)
 
-        def _optional(self, port, context, default):
-            if port.HasValue(context):
+        @staticmethod
+        def _optional(port, context, default):
+            # Connected in the controller: one Eval (HasValue would
+            # evaluate the source as well), the default when it fails
+            # for want of a value.
+            try:
                 return port.Eval(context)
-            return default
+            except RuntimeError:
+                if port.HasValue(context):
+                    raise
+                return default
 
         def _output(self, context, output):
             error = self._wrench.Eval(context) - self._optional(
                 self._desired, context, self._default_desired)
             switch = self._optional(self._phri_port, context,
                                     self._default_switch)[0]
-            output.SetFromVector(stop_switched(error, switch))
+            output.SetFromVector(self._switched(error, switch))
 
     return Impl
 
