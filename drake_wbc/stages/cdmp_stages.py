@@ -1,7 +1,9 @@
 """The coupled DMPs of the base and the arm as Drake systems: BaseCdmp,
 eq. (cdmp-base), with the repulsive field's obstacle avoidance, and
-ArmCdmp, eq. (cdmp-arm), with hybrid stiffness/force control. Both run
-their affine model through drake_wbc.stages.cdmp_base.CdmpStage; the
+ArmCdmp, eq. (cdmp-arm), with hybrid stiffness/force control. Both
+take their affine model from drake_wbc.stages.cdmp_base.AffineDynamics:
+BaseCdmp runs it in Python (CdmpStage), ArmCdmp as Drake's C++
+AffineSystem (its one switch, S_hri, moved onto an input); the
 whole body's WholeBodyCdmp, eqs. (cdmp-wb) and (cdmp-wb-error), is in
 drake_wbc.stages.whole_body_cdmp.
 """
