@@ -279,21 +279,10 @@ def test_the_controller_hands_each_value_held_once_to_its_stages():
     for name in ("capability", "workspace", "distributor"):
         for stage in (stages[name], stages[name].ToAutoDiffXd()):
             assert (stage.band.lower, stage.band.upper) == (0.03, 0.045)
-    for stage in (stages["whole_body_cdmp"],
-                  stages["whole_body_cdmp"].ToAutoDiffXd()):
-        context = stage.CreateDefaultContext()
-        assert stage._switch(context) == 1  # the port is unconnected
-    # The arm's: with S_hri = 1 (the port unconnected) F_d has no effect.
-    for stage in (stages["arm_cdmp"], stages["arm_cdmp"].ToAutoDiffXd()):
-        outputs = []
-        for desired in (np.zeros(6), np.ones(6)):
+    for name in ("whole_body_cdmp", "arm_cdmp"):
+        for stage in (stages[name], stages[name].ToAutoDiffXd()):
             context = stage.CreateDefaultContext()
-            for name in ("arm_velocity", "wrench"):
-                stage.GetInputPort(name).FixValue(context, np.ones(6))
-            stage.GetInputPort("desired_wrench").FixValue(context, desired)
-            outputs.append(ExtractValue(stage.EvalUniquePeriodicDiscreteUpdate(
-                context).get_vector().CopyToVector()).astype(float))
-        np.testing.assert_array_equal(outputs[0], outputs[1])
+            assert stage._switch(context) == 1  # the port is unconnected
     (switch,) = [spec for spec in stages["guard"].inputs
                  if spec.name == "phri_switch"]
     defaults = {output[0]: list(output[1]) for output in switch.outputs}

@@ -7,16 +7,12 @@ DMPs' couplings with it, so that they do not integrate while stopped
 One function for double, AutoDiffXd and symbolic Expressions: on
 symbolic variables it builds the expressions of the C++
 SymbolicVectorSystem of drake_wbc.stages.stop_switch, so that the
-stage evaluates this very function without Python; its float kernel
-(stop_switched_float, tests/test_kernels.py) switches ArmCdmp's force
-error (drake_wbc.stages.cdmp_stages.ForceErrorSwitch).
+stage evaluates this very function without Python.
 """
 
 import numpy as np
 import pydrake.symbolic as sym
 from pydrake.symbolic import Expression, Variable
-
-from drake_wbc.math.kernels import fast_kernel
 
 STOP_THRESHOLD = 0.5
 """A stop signal at or above this is a stop."""
@@ -38,18 +34,4 @@ def stop_switched(value, stop):
                                           Expression(v)) for v in value])
     if stop >= STOP_THRESHOLD:
         return np.zeros(value.shape)
-    return value
-
-
-def _stop_switched_inputs(rng):
-    size = int(rng.integers(1, 8))
-    stop = rng.choice([0.0, 1.0, STOP_THRESHOLD, rng.random()])
-    return rng.normal(size=size), float(stop)
-
-
-@fast_kernel(stop_switched, sample=_stop_switched_inputs)
-def stop_switched_float(value, stop):
-    """stop_switched for a float array `value` and a float `stop`."""
-    if stop >= STOP_THRESHOLD:
-        return np.zeros(len(value))
     return value

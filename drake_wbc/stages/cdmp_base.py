@@ -1,8 +1,7 @@
 """What the coupled DMP stages share (BaseCdmp and ArmCdmp in
 drake_wbc.stages.cdmp_stages, WholeBodyCdmp in
 drake_wbc.stages.whole_body_cdmp): the affine model of a stage and the
-base class that runs it (ArmCdmp runs its model as Drake's C++
-AffineSystem instead).
+base class that runs it.
 
 For a fixed pHRI switch S_hri, eqs. (cdmp-wb), (cdmp-wb-error),
 (cdmp-base) and (cdmp-arm) are affine in their state and inputs (the
