@@ -3,6 +3,8 @@ very system the controller uses, compared with closed forms."""
 
 import numpy as np
 import pytest
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.symbolic import Expression
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import (
@@ -21,6 +23,7 @@ from drake_wbc.math.filtering import (
     zero_order_hold,
 )
 from drake_wbc.stages import BaseVelocityFilter
+from drake_wbc.stages.base_filter import MODEL_NAME
 
 FREQUENCIES_HZ = np.logspace(-2, 2, 200)
 OMEGA = 2 * np.pi * FREQUENCIES_HZ
@@ -94,15 +97,72 @@ def test_step_response_is_exact_at_the_samples():
     np.testing.assert_allclose(data.data(), expected, atol=1e-12)
 
 
-def test_scalar_conversion_keeps_parameters():
+def test_scalar_conversion_keeps_the_model():
+    """The converted copies (Drake's) keep the ports, the period and the
+    matrices of the parameters the stage was built with."""
     params = BaseFilterParameters(omega_f=3.0, zeta=0.7)
     system = BaseVelocityFilter(params, time_step=0.005)
+    A, B = zero_order_hold(*lowpass_state_space(3.0, 0.7)[:2], 0.005)
     for converted in (system.ToAutoDiffXd(), system.ToSymbolic()):
-        assert converted.params == params
         assert converted.GetUniquePeriodicDiscreteUpdateAttribute(
             ).period_sec() == 0.005
         assert converted.get_input_port().get_name() == "velocity"
         assert converted.get_output_port().get_name() == "filtered_velocity"
+        model = converted.GetSubsystemByName(MODEL_NAME)
+        np.testing.assert_array_equal(_floats(model.A())[2:4, 2:4], A)
+        np.testing.assert_array_equal(_floats(model.B())[4:6, 2:3], B)
+
+
+def _float(value):
+    if isinstance(value, AutoDiffXd):
+        return value.value()
+    if isinstance(value, Expression):
+        return value.Evaluate()
+    return float(value)
+
+
+def _floats(values):
+    """An array of floats, AutoDiffXd or constant Expressions as floats."""
+    return np.vectorize(_float, otypes=[float])(
+        np.asarray(values, dtype=object))
+
+
+@pytest.mark.parametrize("enabled", [True, False])
+@pytest.mark.parametrize("time_step", [0.01, 0.0])
+def test_the_linear_system_is_eq_filtering_on_each_axis(enabled, time_step):
+    """The stage's C++ LinearSystem against eq. (filtering) axis by axis
+    (lowpass_state_space and zero_order_hold of one axis; the bypass
+    x+ = [u, 0]), on random states and inputs, in double, AutoDiffXd
+    and symbolic: the update (or derivatives) and the output."""
+    if not enabled and time_step == 0.0:
+        return  # not allowed (test_a_bad_time_step_for_the_filter...)
+    params = BaseFilterParameters(omega_f=4.0, zeta=0.8, enabled=enabled)
+    A, B, C, _ = lowpass_state_space(4.0, 0.8)
+    if not enabled:
+        A, B = np.zeros((2, 2)), np.array([[1.0], [0.0]])
+    elif time_step > 0.0:
+        A, B = zero_order_hold(A, B, time_step)
+    double = BaseVelocityFilter(params, time_step=time_step)
+    rng = np.random.default_rng(22)
+    for system in (double, double.ToAutoDiffXd(), double.ToSymbolic()):
+        context = system.CreateDefaultContext()
+        for _ in range(20):
+            x, u = rng.normal(size=6), rng.normal(size=3)
+            system.get_input_port().FixValue(context, u)
+            if time_step > 0.0:
+                context.SetDiscreteState(x)
+                new = system.EvalUniquePeriodicDiscreteUpdate(
+                    context).get_vector().CopyToVector()
+            else:
+                context.SetContinuousState(x)
+                new = system.EvalTimeDerivatives(context).CopyToVector()
+            output = system.get_output_port().Eval(context)
+            for axis in range(3):
+                part = slice(2 * axis, 2 * axis + 2)
+                np.testing.assert_allclose(
+                    _floats(new[part]), A @ x[part] + B[:, 0] * u[axis],
+                    rtol=0, atol=1e-14)
+                assert _float(output[axis]) == (C @ x[part])[0]
 
 
 def test_set_velocity_starts_at_rest():

@@ -274,6 +274,51 @@ def test_scalar_conversion(stage, params):
     assert converted.num_output_ports() == system.num_output_ports()
 
 
+@pytest.mark.parametrize("autodiff", [False, True])
+@pytest.mark.parametrize("s_hri", [0.0, 1.0, None])
+def test_arm_cdmp_is_its_reference_body(s_hri, autodiff):
+    """ArmCdmp against math.cdmp.arm_cdmp_derivative itself, on random
+    states and inputs, for S_hri 0 and 1 (fixed, or the default while
+    unconnected, with F_d the parameter's): the output
+    is y_dot, the update a fine integration of the equation over the
+    period with the inputs held."""
+    from pydrake.autodiffutils import ExtractValue
+
+    rng = np.random.default_rng(11)
+    params = cdmp.ArmCdmpParameters(S_m=[1, 0, 1, 0, 0, 1], k_d=0.2)
+    double = ArmCdmp(params, time_step=0.01,
+                     phri_switch=1.0 if s_hri is None else 0.0)
+    system = double.ToAutoDiffXd() if autodiff else double
+    for _ in range(5):
+        context = system.CreateDefaultContext()
+        x = rng.normal(size=18)
+        context.SetDiscreteState(x)
+        V_a, F = rng.normal(size=(2, 6))
+        F_d = params.F_d if s_hri is None else 10 * rng.normal(size=6)
+        inputs = dict(arm_velocity=V_a, wrench=F)
+        if s_hri is not None:
+            inputs.update(desired_wrench=F_d, phri_switch=s_hri)
+        fix_inputs(system, context, inputs)
+        given = cdmp.ArmCdmpParameters(k_p=params.k_p, k_d=params.k_d,
+                                       k_f=params.k_f, S_m=params.S_m,
+                                       F_d=F_d, dmp=params.dmp)
+        switch = 1.0 if s_hri is None else s_hri
+
+        def derivative(state, given=given, switch=switch, V_a=V_a, F=F):
+            y, z, C_a = np.split(state, 3)
+            return np.concatenate(cdmp.arm_cdmp_derivative(
+                y, z, C_a, np.zeros(6), V_a, F, given, S_hri=switch))
+
+        output = ExtractValue(system.get_output_port().Eval(
+            context)).astype(float).ravel()
+        np.testing.assert_allclose(output, derivative(x)[:6], rtol=1e-12,
+                                   atol=1e-12)
+        update = ExtractValue(system.EvalUniquePeriodicDiscreteUpdate(
+            context).get_vector().CopyToVector()).astype(float).ravel()
+        np.testing.assert_allclose(update, rk4_hold(derivative, x, 0.01),
+                                   atol=1e-10)
+
+
 def test_bad_time_step_is_rejected():
     with pytest.raises(ValueError, match="time_step"):
         ArmCdmp(time_step=-0.01)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pydrake.autodiffutils import ExtractValue
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_file
 
 from drake_wbc.controller import (
@@ -240,22 +241,24 @@ def test_the_mode_is_still_given_by_name():
 def test_stages_read_their_parameters_when_built():
     # The base filter reads its parameters and its time step when it is
     # built (they were checked where they were made): a later change does
-    # not reach it, nor its scalar-converted copies, which share them.
+    # not reach it, nor its scalar-converted copies (Drake's copies of
+    # its LinearSystem, made of the matrices it was built with).
     params = BaseFilterParameters()
     stage = BaseVelocityFilter(params, time_step=0.005)
-    assert stage.ToAutoDiffXd().params is stage.params
+    assert stage.params is params
     assert stage.ToAutoDiffXd().GetUniquePeriodicDiscreteUpdateAttribute(
         ).period_sec() == 0.005
 
-    def update():
-        context = stage.CreateDefaultContext()
-        stage.get_input_port().FixValue(context, [1.0, 0.0, 0.0])
-        return stage.EvalUniquePeriodicDiscreteUpdate(
-            context).get_vector().CopyToVector()
+    def update(system):
+        context = system.CreateDefaultContext()
+        system.get_input_port().FixValue(context, [1.0, 0.0, 0.0])
+        return ExtractValue(system.EvalUniquePeriodicDiscreteUpdate(
+            context).get_vector().CopyToVector()).astype(float).ravel()
 
-    before = update()
+    before = update(stage)
     params.zeta = 2.0
-    np.testing.assert_array_equal(update(), before)
+    np.testing.assert_array_equal(update(stage), before)
+    np.testing.assert_array_equal(update(stage.ToAutoDiffXd()), before)
     workspace = WorkspaceAdapterParameters()
     stage = WorkspaceAdapter(workspace)
     workspace.mode = "manipulation"  # read when the stage was built

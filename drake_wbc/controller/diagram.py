@@ -47,7 +47,7 @@ Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
   command held at once would ask the servo for an unbounded
   deceleration). Nothing integrates meanwhile: the DMPs' couplings are
   held (the reference is zero, the phri switches turn the whole body's
-  admittance term and the arm's force term off, StopGates zero the
+  admittance term and the arm's force term off, StopSwitches zero the
   base's and the arm's DMP inputs and the tracking error into
   WholeBodyCdmp), because they are the task's progress, which a reset
   would lose; the transformation systems and the base filter (its input
@@ -113,6 +113,7 @@ from drake_wbc.stages import (
 )
 from drake_wbc.stages.base_command import BaseCommandLimiter
 from drake_wbc.stages.safety import GuardedInput, InputGuard, StopGate
+from drake_wbc.stages.stop_switch import StopSwitch
 from drake_wbc.stages.wrench import ExternalWrenchEstimator
 
 STATION_INPUTS = (
@@ -249,9 +250,9 @@ def build_controller(params=None, robot=None):
         base_gate=add("base_gate", StopGate(
             3, limits=params.safety.base_velocity_limits)),
         # The couplings' inputs held at zero while stopped.
-        base_cdmp_gate=add("base_cdmp_gate", StopGate(3)),
-        arm_cdmp_gate=add("arm_cdmp_gate", StopGate(6)),
-        deviation_gate=add("deviation_gate", StopGate(6)),
+        base_cdmp_gate=add("base_cdmp_gate", StopSwitch(3)),
+        arm_cdmp_gate=add("arm_cdmp_gate", StopSwitch(6)),
+        deviation_gate=add("deviation_gate", StopSwitch(6)),
         base_filter=add("base_filter", BaseVelocityFilter(
             params.base_filter, time_step=h)),
         base_limiter=add("base_limiter", BaseCommandLimiter(

@@ -40,7 +40,7 @@ Names say which is which, in every module:
 - movement, demonstration: a whole-body movement learned from
   demonstrations as a DMP (teach and repeat).
 - arm_control: the arm's Cartesian velocity controller (Sec. III-A).
-- safety, command_limits, separation, people: the run-time checks, the
-  command limits, the speed-and-separation rules and the people tracked
-  between scans.
+- safety, command_limits, separation, people, gating: the run-time
+  checks, the command limits, the speed-and-separation rules, the people
+  tracked between scans, and the stop switch of the couplings.
 """

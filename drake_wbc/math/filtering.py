@@ -117,6 +117,40 @@ def zero_order_hold(A, B, time_step):
     return transition[:n, :n], transition[:n, n:]
 
 
+def base_filter_model(params, time_step, axes=3):
+    """(A, B, C) of the base filter of eq. (filtering) on `axes` axes, as
+    its stage runs it: the state [y, y_dot] per axis, axes stacked (for
+    the base's [vx, vx_dot, vy, vy_dot, wz, wz_dot]), no direct
+    feedthrough (D = 0).
+
+    - time_step = 0: the continuous filter, x_dot = A x + B u
+      (lowpass_state_space on each axis);
+    - time_step = h > 0: its exact zero-order hold, x+ = A x + B u
+      (zero_order_hold);
+    - params.enabled False (h > 0): the bypass, x+ = [u, 0] per axis,
+      y = u sampled and held.
+
+    Args:
+        params: BaseFilterParameters; `time_step` checked against them
+            (check_filter_period).
+        time_step: the control period h in s, >= 0.
+        axes: how many axes, each filtered alike.
+
+    Returns:
+        (A, B, C): float arrays (2 axes, 2 axes), (2 axes, axes),
+        (axes, 2 axes).
+    """
+    h = check_filter_period(params, time_step)
+    A, B, C, _ = lowpass_state_space(params.omega_f, params.zeta)
+    eye = np.eye(axes)
+    A, B, C = np.kron(eye, A), np.kron(eye, B), np.kron(eye, C)
+    if not params.enabled:
+        return np.zeros_like(A), np.kron(eye, [[1.0], [0.0]]), C
+    if h > 0.0:
+        A, B = zero_order_hold(A, B, h)
+    return A, B, C
+
+
 def lowpass_response(omega_f, zeta, omega):
     """Frequency response of eq. (filtering) at angular frequencies `omega`
     (rad/s): omega_f^2 / (omega_f^2 - omega^2 + 2j zeta omega_f omega)."""

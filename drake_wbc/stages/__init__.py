@@ -2,7 +2,10 @@
 
 Every stage is a scalar-convertible `TemplateSystem` (double and
 AutoDiffXd), so that Drake's `Linearize` runs on the very systems the
-controller uses.
+controller uses; where a stage is linear or a switch it is a small
+Diagram of Drake's C++ systems instead (BaseVelocityFilter, StopSwitch:
+stages.support.define_composite_stage), with the same ports, which
+converts as Drake's own systems do.
 
 May import the math layer and the robot (its kinematics); never the
 controller, the station or the hardware.
@@ -56,6 +59,7 @@ from drake_wbc.stages.safety import (
     StopGate,
     StopGate_,
 )
+from drake_wbc.stages.stop_switch import StopSwitch, StopSwitch_
 from drake_wbc.stages.whole_body_cdmp import (
     WholeBodyCdmp,
     WholeBodyCdmp_,
@@ -75,6 +79,8 @@ __all__ = [
     "InputGuard_",
     "StopGate",
     "StopGate_",
+    "StopSwitch",
+    "StopSwitch_",
     "ArmCartesianVelocityController",
     "ArmCartesianVelocityController_",
     "BaseVelocityFilter",

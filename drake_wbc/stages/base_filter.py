@@ -4,25 +4,24 @@ Drake system (its math: drake_wbc.math.filtering)."""
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.symbolic import Expression
-from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.framework import Diagram_
+from pydrake.systems.primitives import LinearSystem_
 
-from drake_wbc.math.filtering import (
-    BaseFilterParameters,
-    check_filter_period,
-    lowpass_state_space,
-    zero_order_hold,
-)
+from drake_wbc.math.filtering import BaseFilterParameters, base_filter_model
 from drake_wbc.math.validation import checked_instance
-from drake_wbc.stages.support import define_stage
+from drake_wbc.stages.support import build_composite, define_composite_stage
 
 BASE_AXES = 3
 """The base's velocity components [vx, vy, wz] (T_b)."""
 
+MODEL_NAME = "eq_filtering"
+"""The name of the stage's LinearSystem inside it."""
 
-@define_stage("BaseVelocityFilter_",
-              scalars=(float, AutoDiffXd, Expression))
+
+@define_composite_stage("BaseVelocityFilter_",
+                        scalars=(float, AutoDiffXd, Expression))
 def BaseVelocityFilter_(T):
-    class Impl(LeafSystem_[T]):
+    class Impl(Diagram_[T]):
         """Second-order low-pass of eq. (filtering) on each base axis.
 
         ::
@@ -34,7 +33,7 @@ def BaseVelocityFilter_(T):
         - velocity: V_b' (3), the base's share after obstacle avoidance,
           [vx, vy, wz] in T_b.
         - filtered_velocity: V_b^flt (3), the base velocity command; it is
-          the filter's state (no direct feedthrough).
+          C x of the filter's state (no direct feedthrough).
 
         With params.enabled False it is bypassed: the output is the input
         sampled at the last tick and held (x+ = [u, 0] per axis).
@@ -43,8 +42,19 @@ def BaseVelocityFilter_(T):
         hold at the control period (time_step > 0, one periodic discrete
         update), so that Drake's `Linearize` applies either way. The state
         is [y, y_dot] per axis, axes stacked: [vx, vx_dot, vy, vy_dot, wz,
-        wz_dot]; it starts at rest. Linear, with no branch on values: also
-        symbolic (`ToSymbolic`).
+        wz_dot]; it starts at rest.
+
+        The filter is linear, so the stage is Drake's C++ `LinearSystem`
+        (named MODEL_NAME, in a Diagram that gives its ports the names
+        above) of the matrices that drake_wbc.math.filtering's
+        base_filter_model computes from eq. (filtering): no Python runs in
+        its tick. The two are held equal by tests/test_base_filter.py (the
+        update and output on random states and inputs against those
+        matrices, in double, AutoDiffXd and symbolic) beside the closed
+        forms of eq. (filtering) that its linearisation meets. Its
+        scalar-converted copies are Drake's (stages.support.
+        define_composite_stage): the same ports, period and matrices;
+        `params` and `set_velocity` are this stage's.
 
         Args:
             params: BaseFilterParameters (checked where they were made);
@@ -56,60 +66,21 @@ def BaseVelocityFilter_(T):
                 filter needs h > 0 (filtering.check_filter_period).
         """
 
-        def _construct(self, params=None, time_step=0.01, converter=None):
-            LeafSystem_[T].__init__(self, converter)
+        def __init__(self, params=None, time_step=0.01):
+            Diagram_[T].__init__(self)
             self.params = params = checked_instance(
                 "params", params, BaseFilterParameters, BaseFilterParameters)
-            self._time_step = h = check_filter_period(params, time_step)
-            A, B, C, _ = lowpass_state_space(params.omega_f, params.zeta)
-            eye = np.eye(BASE_AXES)
-            self._A = np.kron(eye, A)
-            self._B = np.kron(eye, B)
-            self._C = np.kron(eye, C)
-            self._input = self.DeclareVectorInputPort("velocity", BASE_AXES)
-            n = 2 * BASE_AXES
-            if not params.enabled:
-                # Bypassed: x+ = [u, 0] per axis, y = u sampled and held.
-                self._A = np.zeros_like(self._A)
-                self._B = np.kron(eye, [[1.0], [0.0]])
-            elif h > 0.0:
-                self._A, self._B = zero_order_hold(self._A, self._B, h)
-            if h > 0.0:
-                state = self.discrete_state_ticket(
-                    self.DeclareDiscreteState(n))
-                self.DeclarePeriodicDiscreteUpdateEvent(h, 0.0,
-                                                        self._update)
-                self._get_state = self._discrete_state
-            else:
-                self.DeclareContinuousState(n)
-                state = self.xc_ticket()
-                self._get_state = self._continuous_state
-            self.DeclareVectorOutputPort(
-                "filtered_velocity", BASE_AXES, self._output,
-                prerequisites_of_calc={state})
+            A, B, C = base_filter_model(params, time_step, BASE_AXES)
+            self._time_step = h = float(time_step)
 
-        @staticmethod
-        def _discrete_state(context):
-            return context.get_discrete_state_vector().CopyToVector()
+            def build(builder):
+                model = builder.AddNamedSystem(MODEL_NAME, LinearSystem_[T](
+                    A, B, C, np.zeros((BASE_AXES, BASE_AXES)), h))
+                builder.ExportInput(model.get_input_port(), "velocity")
+                builder.ExportOutput(model.get_output_port(),
+                                     "filtered_velocity")
 
-        @staticmethod
-        def _continuous_state(context):
-            return context.get_continuous_state_vector().CopyToVector()
-
-        def _update(self, context, discrete_state):
-            x = self._discrete_state(context)
-            u = self._input.Eval(context)
-            discrete_state.set_value(self._A @ x + self._B @ u)
-
-        def DoCalcTimeDerivatives(self, context, derivatives):
-            x = self._continuous_state(context)
-            u = self._input.Eval(context)
-            derivatives.get_mutable_vector().SetFromVector(
-                self._A @ x + self._B @ u
-            )
-
-        def _output(self, context, output):
-            output.SetFromVector(self._C @ self._get_state(context))
+            build_composite(self, T, build)
 
         def set_velocity(self, context, velocity):
             """Sets the filter at rest at `velocity` (3,): output equal to
@@ -126,4 +97,5 @@ def BaseVelocityFilter_(T):
 
 
 BaseVelocityFilter = BaseVelocityFilter_[None]
-"""BaseVelocityFilter_ for double; `ToAutoDiffXd()` gives the AutoDiff one."""
+"""BaseVelocityFilter_ for double; `ToAutoDiffXd()` gives Drake's
+AutoDiffXd copy of it."""

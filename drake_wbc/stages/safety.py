@@ -405,10 +405,9 @@ def StopGate_(T):
         only by RepulsiveFieldParameters.max_force); the arm compensates
         the part taken away (eq. (compensation)).
 
-        Without limits it holds an integrating stage while stopped: the
-        controller zeroes the inputs of the DMPs' couplings with it
-        (drake_wbc.controller.diagram), so that they do not integrate
-        during a stop.
+        Without limits it is a stop switch; the controller holds the
+        DMPs' couplings with StopSwitch (drake_wbc.stages.stop_switch),
+        the same in Drake's C++ systems.
 
         The scale is computed on the values, so in AutoDiffXd the gate is
         exact where no limit acts (the identity) and treats the scale as

@@ -1,5 +1,7 @@
 """What the stages share in how they are built: their scalar types and
-their definition as scalar-convertible templates (`define_stage`), a
+their definition as scalar-convertible templates (`define_stage`), or,
+where a stage is linear or a switch, as a small Diagram of Drake's C++
+systems (`define_composite_stage`), a
 vector computed once per change of its inputs in a cache entry and
 sliced into named output ports, their named vector inputs and dependency
 tickets, optional one-element inputs, and the constants of the arm's
@@ -10,8 +12,9 @@ import inspect
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
+from pydrake.common.cpp_template import TemplateClass
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import ValueProducer
+from pydrake.systems.framework import DiagramBuilder_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.math.capability import CapabilityBand
@@ -64,6 +67,40 @@ def define_stage(name, scalars=SCALARS):
                 instantiate_with_copy)
 
     return decorate
+
+
+def define_composite_stage(name, scalars=SCALARS):
+    """Defines a stage built of Drake's C++ systems, for a function
+    `instantiate(T)` that returns the stage's class for scalar type T: a
+    subclass of Diagram_[T] whose constructor calls
+    `build_composite(self, T, build)` (below). `name[None]` is the double
+    one.
+
+    Such a stage is one system of the controller with the ports and the
+    name of the Python stage it stands for, and no Python runs in its
+    tick. Its scalar-converted copies (`ToAutoDiffXd()`, and
+    `ToSymbolic()` where every part allows it) are Drake's own: a
+    Diagram_[U] of the converted parts, with the same ports, names,
+    matrices and expressions, but not an instance of the class (the
+    class's attributes and methods belong to the stage it was built as;
+    `name[U](...)` builds one in U directly).
+    """
+
+    def decorate(instantiate):
+        return TemplateClass.define(
+            name, param_list=[(T,) for T in scalars],
+            scope=inspect.getmodule(instantiate))(instantiate)
+
+    return decorate
+
+
+def build_composite(diagram, T, build):
+    """Builds `diagram` (a Diagram_[T] being constructed) from
+    `build(builder)`, which adds its parts to a DiagramBuilder_[T] and
+    exports their ports under the stage's names."""
+    builder = DiagramBuilder_[T]()
+    build(builder)
+    builder.BuildInto(diagram)
 
 
 @functools.cache
