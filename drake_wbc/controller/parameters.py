@@ -134,6 +134,11 @@ class ControllerParameters:
                 raise ValueError(
                     f"{item.name} = {getattr(self, item.name)!r} is not "
                     f"allowed: must be a {item.type.__name__}")
+        if self.capability_band is not None and not isinstance(
+                self.capability_band, CapabilityBand):
+            raise ValueError(
+                f"capability_band = {self.capability_band!r} is not "
+                "allowed: must be a CapabilityBand, or None (the robot's)")
         check_filter_period(self.base_filter, h, prefix="base_filter.")
         for name in ("base_cdmp", "whole_body_cdmp", "arm_cdmp"):
             dmp = getattr(self, name).dmp
