@@ -41,8 +41,8 @@ def test_above_the_limit_the_admittance_buzzes_and_below_it_does_not(runs):
     calm = alternating(slow["arm_velocity_command"][after, :3])
     limited_fast = np.mean(fast["arm_limited"][after, 0] > 0.5)
     limited_slow = np.mean(slow["arm_limited"][after, 0] > 0.5)
-    assert np.max(buzz) > 5e-3  # m/s, millimetres per second at 50 Hz
-    assert np.max(calm) < 1e-3
+    assert np.max(buzz) > 10e-3  # m/s: centimetres per second at 50 Hz
+    assert np.max(calm) < 2e-3  # the sensor's noise times k_hri
     assert limited_fast > 0.3
     assert limited_slow < 0.05
 
