@@ -356,3 +356,20 @@ def test_the_compensating_estimator_in_autodiff_and_its_checks(arm):
                         ("inertia_compensation", 1)):
         with pytest.raises(ValueError, match=name):
             WrenchEstimatorParameters(**{name: value})
+
+
+def test_the_compensating_estimator_remembers_the_last_three_positions(arm):
+    """Its periodic update shifts [q(k-1); q(k-2); q(k-3)] to [q(k);
+    q(k-1); q(k-2)], the oldest dropped."""
+    from drake_wbc.math.wrench import WrenchEstimatorParameters
+
+    estimator = ExternalWrenchEstimator(arm, WrenchEstimatorParameters(
+        inertia_compensation=True))
+    context = estimator.CreateDefaultContext()
+    q = [HOME_ARM_POSITIONS + 0.01 * k for k in range(4)]
+    context.SetDiscreteState(np.r_[q[2], q[1], q[0]])
+    estimator.GetInputPort("arm_position").FixValue(context, q[3])
+    estimator.GetInputPort("wrist_wrench").FixValue(context, np.zeros(6))
+    state = estimator.EvalUniquePeriodicDiscreteUpdate(context)
+    np.testing.assert_array_equal(state.get_vector().CopyToVector(),
+                                  np.r_[q[3], q[2], q[1]])

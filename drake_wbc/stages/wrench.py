@@ -215,7 +215,7 @@ def ExternalWrenchEstimator_(T):
             past = context.get_discrete_state(self._past).CopyToVector()
             discrete_state.get_mutable_vector(self._past).SetFromVector(
                 np.concatenate([self._position.Eval(context),
-                                past[:3 * self._joints]]))
+                                past[:2 * self._joints]]))
 
         def _pose_and_motion(self, positions):
             """[R_BM (9) at the reading's time; motion (6)] from [q(k);

@@ -7,7 +7,8 @@ walking scheduled paths, a person's hand on the tool. In a scenario file
     boxes: [{name: wall, center: [1.2, 0.0, 1.0], size: [0.1, 3.0, 2.0]}]
     people: [{name: alice, times: [0, 10], waypoints: [[3, -2], [3, 2]]}]
     hand: {times: [1, 1.5, 3, 3.5],
-           forces: [[0, 0, 0], [0, 15, 0], [0, 15, 0], [0, 0, 0]]}
+           forces: [[0, 0, 0], [0, 15, 0], [0, 15, 0], [0, 0, 0]],
+           impedance: {stiffness: 300, damping: 8, mass: 0.2}}
 
 In a diagram, `add_static_obstacles` puts the obstacles into the plant
 (drawn, touched); drake_wbc.station.scene_sources adds the people (drawn,
@@ -175,6 +176,60 @@ class WalkingPerson:
                 "(times[-1] - times[0])")
 
 
+HAND_STIFFNESS = 300.0
+"""N/m, a relaxed grip's hand stiffness: measured human hand stiffness
+in a maintained posture is 100 to 1000 N/m, larger with co-contraction
+(Mussa-Ivaldi, Hogan, Bizzi 1985, J. Neurosci. 5(10):2732; Tsuji,
+Morasso, Goto, Ito 1995, Biol. Cybern. 72:475)."""
+
+HAND_DAMPING = 8.0
+"""N s/m, a relaxed grip's hand viscosity: 3 to 30 N s/m in the same
+measurements (Tsuji et al. 1995; Dolan, Friedman, Ebner 1993, IEEE
+Trans. SMC 23(3):698), the upper end for a stiff, co-contracted grip."""
+
+HAND_MASS = 0.2
+"""kg, the mass that moves rigidly with the tool in a grip: the palm and
+fingers; the forearm's share (0.5 to 2 kg of endpoint inertia, Tsuji et
+al. 1995) moves behind the soft tissue of the grip and is left out."""
+
+HAND_REACTION_TIME = 0.3
+"""s, how fast the hand's intention follows the tool it guides: a
+person's voluntary reaction, 0.15 to 0.3 s; slower changes of the tool's
+motion are what the person wants, faster ones meet the arm's impedance."""
+
+
+@dataclass
+class HandImpedance:
+    """The impedance of a person's hand that holds the tool.
+
+    The hand grips the tool centre point through a spring and a damper
+    (the same in x, y and z) towards where the person means the hand to
+    be: the point the hand has been following (the tool's motion slower
+    than `reaction_time`) plus the schedule's force divided by the
+    stiffness, so at rest the hand pushes with the scheduled force. A
+    light touch is a low stiffness and damping, a stiff grip a high one.
+    The twist (the schedule's torques) stays a scripted torque.
+
+    Attributes:
+        stiffness: N/m, > 0 (HAND_STIFFNESS).
+        damping: N s/m, >= 0 (HAND_DAMPING).
+        mass: kg, > 0, what moves with the tool (HAND_MASS); the person
+            carries its weight.
+        reaction_time: s, > 0 (HAND_REACTION_TIME).
+    """
+
+    stiffness: float = HAND_STIFFNESS
+    damping: float = HAND_DAMPING
+    mass: float = HAND_MASS
+    reaction_time: float = HAND_REACTION_TIME
+
+    def __post_init__(self):
+        self.stiffness = positive("stiffness", self.stiffness)
+        self.damping = non_negative("damping", self.damping)
+        self.mass = positive("mass", self.mass)
+        self.reaction_time = positive("reaction_time", self.reaction_time)
+
+
 @dataclass
 class HandForce:
     """A person's hand on the tool: a force at the tool centre point, and
@@ -188,11 +243,16 @@ class HandForce:
         forces: [[fx, fy, fz], ...] N in the world frame, one per time.
         torques: [[tx, ty, tz], ...] N m in the world frame about the tool
             centre point, one per time; empty (the default) for none.
+        impedance: None (the default) for a pure force source, the
+            scheduled forces applied whatever the tool does; a
+            HandImpedance for a hand that holds the tool (throughout the
+            run) and pushes it with those forces at rest.
     """
 
     times: list[float] = field(default_factory=list)
     forces: list[list[float]] = field(default_factory=list)
     torques: list[list[float]] = field(default_factory=list)
+    impedance: HandImpedance | None = None
 
     def __post_init__(self):
         self.times = _times("times", self.times, allow_empty=True)
@@ -201,6 +261,13 @@ class HandForce:
                        as_matrix("forces", self.forces, rows).tolist())
         self.torques = ([] if _empty(self.torques) else
                         as_matrix("torques", self.torques, rows).tolist())
+        if self.impedance is not None:
+            self.impedance = checked_instance(
+                "impedance", self.impedance, HandImpedance, HandImpedance)
+            if not self.times:
+                raise ValueError(
+                    "impedance is not allowed without times: a hand that "
+                    "holds the tool needs a schedule (times and forces)")
 
 
 @dataclass

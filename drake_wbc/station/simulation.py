@@ -84,6 +84,11 @@ from drake_wbc.station.force_torque import (
     WeldWrench,
     WristForceTorqueSensor,
 )
+from drake_wbc.station.hand import (
+    add_hand_body,
+    add_hand_intention,
+    torque_only,
+)
 from drake_wbc.station.lidar import (
     LidarParameters,
     ObstaclePointMerger,
@@ -283,6 +288,8 @@ class SimulatedStation:
         check_arm_start(options.initial_arm_positions, model.limits.lower,
                         model.limits.upper, "station.initial_arm_positions")
         add_static_obstacles(plant, scene)
+        self.hand_body = None if scene.hand.impedance is None else (
+            add_hand_body(plant, model, scene.hand.impedance))
         self._gains = servo_gains(options.initial_arm_positions,
                                   options.base, options.arm, robot,
                                   mount=mount)
@@ -324,8 +331,20 @@ class SimulatedStation:
         s["wrist"] = add("wrist", WristForceTorqueSensor(options.wrist))
         s["people"] = add_people(builder, scene_graph, scene.people,
                                  options.scene_period)
-        s["hand"] = add_hand(builder, plant, model, scene.hand,
-                             options.scene_period)
+        if self.hand_body is None:
+            s["hand"] = add_hand(builder, plant, model, scene.hand,
+                                 options.scene_period)
+            hand_force = s["hand"].GetOutputPort("force")
+        else:
+            # A hand with impedance: the push through its spring and
+            # damper in the plant, its twist a scripted torque.
+            s["hand"] = add_hand(builder, plant, model,
+                                 torque_only(scene.hand),
+                                 options.scene_period)
+            s["hand_intention"] = add_hand_intention(
+                builder, plant, self.hand_body, scene.hand,
+                options.scene_period)
+            hand_force = s["hand_intention"].GetOutputPort("force")
         connect = builder.Connect
         state = plant.get_state_output_port()
         connect(state, s["base_state"].get_input_port())
@@ -384,7 +403,7 @@ class SimulatedStation:
             (s["base_driver"].get_output_port(),
              "truth.base_loop_velocity"),
             (s["weld_wrench"].GetOutputPort("wrench"), "truth.wrist_wrench"),
-            (s["hand"].GetOutputPort("force"), "truth.hand_force"),
+            (hand_force, "truth.hand_force"),
             (s["people"].GetOutputPort("positions"), "truth.people_positions"),
             (scene_graph.get_query_output_port(), "query_object"),
         )
@@ -490,6 +509,16 @@ class SimulatedStation:
         plant.SetPositions(context, q)
         plant.SetVelocities(context, np.zeros(plant.num_velocities()))
         self._settle_under_gravity(context, q_cmd)
+        if self.hand_body is not None:
+            # The hand at rest on the tool centre point.
+            p_tcp = model.tcp_frame.CalcPoseInWorld(context).translation()
+            q = plant.GetPositions(context)
+            q[self.hand_body.position_indices()] = p_tcp
+            plant.SetPositions(context, q)
+            intention = self.systems["hand_intention"]
+            intention.GetMyMutableContextFromRoot(
+                root_context).SetDiscreteState(intention.initial_state(
+                    p_tcp, root_context.get_time()))
         base, arm = self.systems["base_driver"], self.systems["arm_driver"]
         base.GetMyMutableContextFromRoot(root_context).SetDiscreteState(
             base_loop_state(options.base, np.zeros(3)))
