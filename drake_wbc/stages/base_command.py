@@ -174,11 +174,11 @@ def BaseCommandLimiter_(T):
         point inside, the command is exactly that of the static rule.
 
         Scalar types: double and AutoDiffXd, the same calculation; the
-        double one runs the float kernels of separation_state and
-        scale_for_rows (drake_wbc.math.kernels), the AutoDiffXd one their
-        references; limit_base_velocity is scalar-generic, so the
-        derivatives are exact. The obstacle points are float data in
-        both.
+        double one runs the float kernels of separation_state,
+        scale_for_rows and people_scan (drake_wbc.math.kernels), the
+        AutoDiffXd one their references; limit_base_velocity is
+        scalar-generic, so the derivatives are exact. The obstacle points
+        are float data in both.
 
         Args:
             params: SafetyParameters (the limits); the robot's if None.
@@ -205,6 +205,7 @@ def BaseCommandLimiter_(T):
                 lambda points: state_of_points(points, self.half_sizes,
                                                stop_distance, stop_time))
             self._scale = body_for(scale_for_rows, T)
+            self._people_scan = body_for(people_scan, T)
             self._velocity = self.DeclareVectorInputPort(
                 "velocity", safety.BASE_AXES)
             self._stopped = self.DeclareVectorInputPort("stopped", 1)
@@ -368,7 +369,7 @@ def BaseCommandLimiter_(T):
             base = (value_of(self._base_state.Eval(context))
                     if self._base_state.HasValue(context)
                     else np.zeros(6))
-            tracker, people, inside = people_scan(
+            tracker, people, inside = self._people_scan(
                 value_of(state[_TRACKER:]), points, base,
                 float(value_of(context.get_time())), self.half_sizes,
                 self._people)
