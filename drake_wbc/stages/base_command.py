@@ -175,10 +175,10 @@ def BaseCommandLimiter_(T):
 
         Scalar types: double and AutoDiffXd, the same calculation; the
         double one runs the float kernels of separation_state,
-        scale_for_rows and people_scan (drake_wbc.math.kernels), the
-        AutoDiffXd one their references; limit_base_velocity is
-        scalar-generic, so the derivatives are exact. The obstacle points
-        are float data in both.
+        scale_for_rows, people_scan and limit_base_velocity
+        (drake_wbc.math.kernels), the AutoDiffXd one their references
+        (limit_base_velocity's is scalar-generic, so the derivatives are
+        exact). The obstacle points are float data in both.
 
         Args:
             params: SafetyParameters (the limits); the robot's if None.
@@ -197,8 +197,12 @@ def BaseCommandLimiter_(T):
             self.half_sizes = tuple(
                 non_negative("half_sizes", a)
                 for a in as_vector("half_sizes", half_sizes, 2))
-            self._velocity_limits = params.base_velocity_limits
-            self._acceleration_limits = params.base_acceleration_limits
+            # Float arrays: what the float kernel takes without a copy.
+            self._velocity_limits = np.array(params.base_velocity_limits,
+                                             dtype=float)
+            self._acceleration_limits = np.array(
+                params.base_acceleration_limits, dtype=float)
+            self._limit = body_for(limit_base_velocity, T)
             state_of_points = body_for(separation_state, T)
             stop_distance, stop_time = params.stop_distance, params.stop_time
             self._separation = LastPoints(
@@ -274,7 +278,7 @@ def BaseCommandLimiter_(T):
                                                person_allowed)
                     if person_scale < scale:
                         scale = person_scale
-            result = limit_base_velocity(
+            result = self._limit(
                 desired, previous, self._velocity_limits,
                 self._acceleration_limits, self.time_step, scale=scale)
             return np.array(result.command.tolist() + [
