@@ -99,3 +99,28 @@ def test_a_compiled_function_computes_as_numpy_does():
     assert ratio(1.0, 0.0) == np.inf
     assert np.isnan(ratio(0.0, 0.0))
     assert not compiled.is_compiled(lambda x: x)
+
+
+CLOSED_LOOP = """
+description: a person walking past the base, seen by both LIDARs
+duration: 1.5
+scene:
+  people: [{name: walker, times: [0.0, 4.0],
+            waypoints: [[3.0, 1.0], [-3.0, 1.0]]}]
+"""
+
+
+def test_the_closed_loops_ticks_compile_nothing():
+    """The simulated station's LIDAR scans (a person walking past, so the
+    tracker's and the people's kernels run too) give the compiled loops
+    nothing they were not warmed with when the controller was built."""
+    from drake_wbc.experiments.runner import build_closed_loop, start_simulator
+    from drake_wbc.experiments.scenario import load_scenario
+
+    loop = build_closed_loop(load_scenario(text=CLOSED_LOOP))
+    simulator = start_simulator(loop)
+    functions = _compiled_functions()
+    signatures = [list(f.signatures) for f in functions]
+    assert any(signatures)  # warmed when the controller was built
+    simulator.AdvanceTo(1.5)
+    assert [list(f.signatures) for f in functions] == signatures
