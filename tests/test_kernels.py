@@ -99,3 +99,50 @@ def test_a_compiled_function_computes_as_numpy_does():
     assert ratio(1.0, 0.0) == np.inf
     assert np.isnan(ratio(0.0, 0.0))
     assert not compiled.is_compiled(lambda x: x)
+
+
+CLOSED_LOOP = """
+description: a person walking past the base, seen by both LIDARs
+duration: 1.5
+scene:
+  people: [{name: walker, times: [0.0, 4.0],
+            waypoints: [[3.0, 1.0], [-3.0, 1.0]]}]
+"""
+
+
+def test_the_closed_loops_ticks_compile_nothing():
+    """The simulated station's LIDAR scans (a person walking past, so the
+    tracker's and the people's kernels run too) give the compiled loops
+    nothing they were not warmed with when the controller was built."""
+    from drake_wbc.experiments.runner import build_closed_loop, start_simulator
+    from drake_wbc.experiments.scenario import load_scenario
+
+    loop = build_closed_loop(load_scenario(text=CLOSED_LOOP))
+    simulator = start_simulator(loop)
+    functions = _compiled_functions()
+    signatures = [list(f.signatures) for f in functions]
+    assert any(signatures)  # warmed when the controller was built
+    simulator.AdvanceTo(1.5)
+    assert [list(f.signatures) for f in functions] == signatures
+
+
+def test_no_compiled_function_calls_one_of_another_module():
+    """Numba's cache knows a compiled function by its own file only
+    (drake_wbc.math.compiled): one that called a compiled function of
+    another module would run that one's old machine code after it
+    changed."""
+    import inspect
+    import re
+
+    crossing = []
+    for function in _compiled_functions():
+        module = function.py_func.__module__
+        called = set(re.findall(r"\b([A-Za-z_]\w*)\s*\(",
+                                inspect.getsource(function.py_func)))
+        for name in called:
+            other = function.py_func.__globals__.get(name)
+            if (compiled.is_compiled(other)
+                    and other.py_func.__module__ != module):
+                crossing.append(f"{module}.{function.__name__} -> "
+                                f"{other.py_func.__module__}.{name}")
+    assert _compiled_functions() and not crossing, crossing

@@ -10,12 +10,19 @@ The limits themselves are drake_wbc.math.safety.SafetyParameters'.
 One body each, for any scalar type (float, and AutoDiffXd for the stages'
 linearisation): a command has three entries, so the math runs entry by
 entry in Python scalars, which for floats is about ten times faster than
-numpy at this size and needs no separate float kernel.
+numpy at this size. `limit_base_velocity`, which the base command
+limiter runs every tick, has besides a float kernel
+(drake_wbc.math.kernels), `limit_base_velocity_float`: the same
+operations in the same order compiled to machine code
+(drake_wbc.math.compiled), so the same values, bit for bit.
 """
 
 from typing import NamedTuple
 
 import numpy as np
+
+from drake_wbc.math.compiled import compiled, float_array
+from drake_wbc.math.kernels import fast_kernel
 
 
 def uniform_scale(vector, limits):
@@ -113,3 +120,66 @@ def limit_base_velocity(desired, previous, velocity_limits,
         command = command.astype(float)
     return LimitedCommand(command, scale * velocity_scale,
                           acceleration_scale)
+
+
+def _limit_inputs(rng):
+    """Random arguments of limit_base_velocity: desired commands within
+    and beyond the limits, previous commands near and far from them
+    (steps within and beyond the acceleration limits), zero commands,
+    separation scales of 1, 0 and between, whole numbers."""
+    limits = rng.uniform(0.1, 2.0, 3)
+    accelerations = rng.uniform(0.1, 3.0, 3)
+    desired = rng.normal(size=3) * rng.choice([0.0, 0.01, 0.5, 5.0])
+    previous = rng.choice([desired, np.zeros(3),
+                           rng.uniform(-1.0, 1.0, 3) * limits])
+    if rng.random() < 0.2:
+        previous = desired + rng.normal(size=3) * 1e-4
+    scale = float(rng.choice([1.0, 0.0, rng.uniform(0.0, 1.0)]))
+    time_step = float(rng.choice([0.01, 0.001, rng.uniform(1e-3, 0.1)]))
+    if rng.random() < 0.05:
+        desired = rng.integers(-2, 3, 3)
+    return (desired, previous, tuple(limits.tolist()),
+            tuple(accelerations.tolist()), time_step, scale)
+
+
+@fast_kernel(limit_base_velocity, sample=_limit_inputs)
+def limit_base_velocity_float(desired, previous, velocity_limits,
+                              acceleration_limits, time_step, scale=1.0):
+    """`limit_base_velocity` of float commands, compiled
+    (`_limit_loop`): the base command limiter's tick."""
+    command, velocity_scale, acceleration_scale = _limit_loop(
+        float_array(desired), float_array(previous),
+        float_array(velocity_limits), float_array(acceleration_limits),
+        float(time_step), float(scale))
+    return LimitedCommand(command, velocity_scale, acceleration_scale)
+
+
+@compiled
+def _uniform_scale_loop(vector, limits):
+    """`uniform_scale` of float arrays, the same steps."""
+    scale = 1.0
+    for i in range(vector.shape[0]):
+        magnitude = abs(vector[i])
+        if magnitude > limits[i] and limits[i] < scale * magnitude:
+            scale = limits[i] / magnitude
+    return scale
+
+
+@compiled
+def _limit_loop(desired, previous, velocity_limits, acceleration_limits,
+                time_step, scale):
+    """`limit_base_velocity`'s steps on float arrays: (command, scale
+    times the velocity scale, acceleration scale)."""
+    if scale < 1.0:
+        desired = scale * desired
+    velocity_scale = _uniform_scale_loop(desired, velocity_limits)
+    target = (desired if velocity_scale == 1.0
+              else velocity_scale * desired)
+    change = target - previous
+    acceleration_scale = _uniform_scale_loop(
+        change, acceleration_limits * time_step)
+    if acceleration_scale < 1.0:
+        command = previous + acceleration_scale * change
+    else:
+        command = target.copy()
+    return command, scale * velocity_scale, acceleration_scale

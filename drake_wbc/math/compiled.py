@@ -19,10 +19,18 @@ kernels give it float64 contiguous arrays and floats only, and
 `kernels.body_for` calls each kernel on its own samples when a stage
 is built (`kernels.warm`), so that no tick compiles
 (tests/test_kernels.py checks that a second call adds no compiled
-signature).
+signature). A read-only or strided array is a type of its own to numba:
+`float_array` gives the one type they take.
+
+Numba's cache knows a compiled function by its own source file only: a
+compiled function that calls one of another module would keep that
+one's old machine code after the other module changes. So a compiled
+function calls compiled functions of its own module only; across
+modules, the thin Python wrappers call them one after the other.
 """
 
 import numba
+import numpy as np
 
 
 def compiled(function):
@@ -35,3 +43,13 @@ def compiled(function):
 def is_compiled(function):
     """Whether `function` was made by `compiled` (a numba dispatcher)."""
     return isinstance(function, numba.core.registry.CPUDispatcher)
+
+
+def float_array(values):
+    """`values` as a C-contiguous, writeable float64 numpy array: the one
+    array type the compiled loops take (itself when it already is one, a
+    copy otherwise), so that no call compiles for a type of its own."""
+    if (type(values) is np.ndarray and values.dtype == np.float64
+            and values.flags.c_contiguous and values.flags.writeable):
+        return values
+    return np.array(values, dtype=np.float64, order="C")

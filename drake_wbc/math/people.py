@@ -34,8 +34,12 @@ base's odometry, so that a static shape stays still while the base moves:
 
 Only moving tracks are treated as people (eq. (protective)); a cluster
 that does not move keeps the static rule of eq. (allowed): a standing
-person is not told from a pillar. Float only, plain numpy, no kernel: it
-runs once a scan (the stage calls it when the points change). The tracks'
+person is not told from a pillar. Float only: `people_scan` is the
+reference, in plain numpy; its float kernel (drake_wbc.math.kernels),
+`people_scan_float`, finds the clusters and the points inside the
+footprint in one compiled pass over the scan (drake_wbc.math.compiled)
+and shares the rest (the association and the filter, a few tracks).
+The stage runs it once a scan, when the points change. The tracks'
 state is a flat float array (`TRACK_FIELDS` per track, MAX_TRACKS of them,
 then the time of the last scan), which the stage keeps as its discrete
 state.
@@ -43,7 +47,10 @@ state.
 
 import numpy as np
 
+from drake_wbc.math.compiled import compiled, float_array
+from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.repulsion import footprint_gap
+from drake_wbc.math.separation import PeopleSeparationParameters
 
 MAX_TRACKS = 8
 """How many clusters are tracked at once (the nearest first)."""
@@ -261,6 +268,15 @@ def people_scan(state, points, base, time, half_sizes, params):
                    & (np.abs(points[:, 1]) <= b)).any())
     starts, ends, centroids = scan_clusters(points, params.cluster_gap,
                                             params.max_cluster_size)
+    return _tracked(state, points, base, time, half_sizes, params, inside,
+                    starts, ends, centroids)
+
+
+def _tracked(state, points, base, time, half_sizes, params, inside, starts,
+             ends, centroids):
+    """`people_scan` from the scan's clusters (`scan_clusters`) and
+    whether a point is inside the footprint: the candidates within
+    tracked_range, their tracking, the moving people."""
     if len(centroids):
         near = footprint_gap(centroids, half_sizes) <= params.tracked_range
         starts, ends, centroids = starts[near], ends[near], centroids[near]
@@ -289,3 +305,120 @@ def people_scan(state, points, base, time, half_sizes, params):
             people.append((slot, nearest.copy(),
                            np.array([c * vx + s * vy, -s * vx + c * vy])))
     return new, people, inside
+
+
+def _walkers_scan(rng, walkers, time, pose, half_sizes):
+    """The points (T_b, scan order) of a scene at `time` seen from the
+    base's `pose`: each walker (start (2,), velocity (2,), whether seen)
+    a short arc of points, a wall, now and then a crate, a lone return
+    or a point inside the footprint."""
+    parts = []
+    for start, velocity, seen in walkers:
+        if seen:
+            centre = start + velocity * time
+            angle = np.linspace(-1.2, 1.2, int(rng.integers(3, 12)))
+            parts.append(centre + 0.15 * np.column_stack(
+                [np.cos(angle), np.sin(angle)]))
+    if rng.random() < 0.7:
+        x = np.arange(-3.0, 3.0, 0.03)
+        parts.append(np.column_stack([x, np.full(len(x), 2.5)]))
+    if rng.random() < 0.3:
+        parts.append(np.array([1.5, -1.0]) + rng.uniform(0.0, 0.4, (6, 2)))
+    if rng.random() < 0.2:
+        parts.append(rng.uniform(-4.0, 4.0, (1, 2)))
+    world = np.concatenate(parts) if parts else np.zeros((0, 2))
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    points = (world - pose[:2]) @ np.array([[c, -s], [s, c]])
+    if rng.random() < 0.1:
+        points = np.concatenate(
+            [points, rng.uniform(-1.0, 1.0, (1, 2)) * half_sizes])
+    return points
+
+
+def _scan_inputs(rng):
+    """The arguments of people_scan after a few scans (by the reference)
+    of walkers who appear, walk, stop being seen and come back, with a
+    wall, crates, lone returns and points inside the footprint, from a
+    base that moves; now and then a scan after a long gap (every track
+    lost) or fewer than MIN_CLUSTER_POINTS points."""
+    params = PeopleSeparationParameters(
+        min_travel=float(rng.choice([0.0, 0.5])),
+        moving_scans=int(rng.choice([1, 3])))
+    half_sizes = (float(rng.uniform(0.2, 0.5)), float(rng.uniform(0.2, 0.4)))
+    walkers = [[rng.uniform(-4.0, 4.0, 2),
+                rng.uniform(-1.6, 1.6, 2) * rng.choice([0.0, 1.0]), True]
+               for _ in range(rng.integers(0, 4))]
+    base = np.concatenate([rng.uniform(-1.0, 1.0, 3),
+                           rng.uniform(-0.3, 0.3, 3)])
+    state, time = initial_tracker(), 0.0
+    for _ in range(rng.integers(0, 10)):
+        time += params.scan_period * float(rng.choice([1.0, 1.0, 1.0, 4.0]))
+        for walker in walkers:
+            walker[2] = rng.random() < 0.85
+        pose = base[:3] + base[3:] * time
+        state, _, _ = people_scan(state, _walkers_scan(
+            rng, walkers, time, pose, half_sizes), base, time, half_sizes,
+            params)
+    time += params.scan_period
+    points = _walkers_scan(rng, walkers, time, base[:3] + base[3:] * time,
+                           half_sizes)
+    if rng.random() < 0.05:
+        points = points[:int(rng.integers(0, MIN_CLUSTER_POINTS))]
+    return state, points, base, time, half_sizes, params
+
+
+@fast_kernel(people_scan, sample=_scan_inputs)
+def people_scan_float(state, points, base, time, half_sizes, params):
+    """`people_scan` with the scan's clusters and its points inside the
+    footprint found in one compiled pass (`scan_clusters`'s steps, the
+    same sums, so the same centroids)."""
+    points = np.reshape(float_array(points), (-1, 2))
+    a, b = half_sizes
+    inside, starts, ends, centroids = _scan_loop(
+        points, float(a), float(b), float(params.cluster_gap),
+        float(params.max_cluster_size), MIN_CLUSTER_POINTS)
+    return _tracked(state, points, base, time, half_sizes, params, inside,
+                    starts, ends, centroids)
+
+
+@compiled
+def _scan_loop(points, a, b, gap, max_size, min_points):
+    """(inside, starts, ends, centroids) of a scan: whether a point is on
+    or inside the footprint, and `scan_clusters`."""
+    count = points.shape[0]
+    inside = False
+    for i in range(count):
+        if abs(points[i, 0]) <= a and abs(points[i, 1]) <= b:
+            inside = True
+            break
+    starts = np.empty(count, np.int64)
+    ends = np.empty(count, np.int64)
+    centroids = np.empty((count, 2))
+    found = 0
+    if count < min_points:
+        return inside, starts[:0], ends[:0], centroids[:0]
+    # The cumulative sums of np.cumsum, from 0.
+    total = np.zeros((count + 1, 2))
+    for i in range(count):
+        total[i + 1, 0] = total[i, 0] + points[i, 0]
+        total[i + 1, 1] = total[i, 1] + points[i, 1]
+    start = 0
+    for i in range(1, count + 1):
+        if i < count:
+            dx = points[i, 0] - points[i - 1, 0]
+            dy = points[i, 1] - points[i - 1, 1]
+            if not dx * dx + dy * dy > gap * gap:
+                continue
+        # A cluster [start, i).
+        if i - start >= min_points:
+            cx = points[i - 1, 0] - points[start, 0]
+            cy = points[i - 1, 1] - points[start, 1]
+            if cx * cx + cy * cy <= max_size * max_size:
+                size = i - start
+                starts[found] = start
+                ends[found] = i
+                centroids[found, 0] = (total[i, 0] - total[start, 0]) / size
+                centroids[found, 1] = (total[i, 1] - total[start, 1]) / size
+                found += 1
+        start = i
+    return inside, starts[:found], ends[:found], centroids[:found]

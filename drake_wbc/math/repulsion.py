@@ -11,13 +11,16 @@ kernel (drake_wbc.math.kernels), what the controller's tick runs on
 hundreds of LIDAR points: `footprint_distance_float` (whose arithmetic,
 `footprint_geometry`, and its distance alone, `footprint_gap`, the speed
 and separation limits of drake_wbc.math.separation share) and
-`repulsive_force_float`.
+`repulsive_force_float`, each a loop compiled to machine code
+(drake_wbc.math.compiled) over the points.
 """
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from drake_wbc.math.compiled import compiled, float_array
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.validation import as_vector, non_negative, positive
 
@@ -140,44 +143,73 @@ def _distance_inputs(rng):
 
 @fast_kernel(footprint_distance, sample=_distance_inputs)
 def footprint_distance_float(obstacle_points, params):
-    """`footprint_distance` of float points, in few array operations
-    (`footprint_geometry`): the controller's tick."""
-    d, nx, ny = footprint_geometry(np.reshape(obstacle_points, (-1, 2)),
-                                   params.half_sizes)
+    """`footprint_distance` of float points, in one compiled loop
+    (`footprint_geometry`)."""
+    d, nx, ny = footprint_geometry(
+        np.reshape(float_array(obstacle_points), (-1, 2)),
+        params.half_sizes)
     return d, np.column_stack([nx, ny])
+
+
+@compiled
+def _point_geometry(x, y, a, b):
+    """(d, n_x, n_y) of one float point [x, y] and the footprint's
+    half-sizes a, b: `footprint_distance`'s piecewise rule, with
+    math.hypot for the distance outside (> 0 exactly there: no underflow
+    to 0) and, on or inside, the outward normal of the nearest side (x on
+    a tie)."""
+    qx = abs(x) - a
+    qy = abs(y) - b
+    ox = qx if not qx < 0.0 else 0.0  # numpy's maximum: NaN stays NaN
+    oy = qy if not qy < 0.0 else 0.0
+    d = math.hypot(ox, oy)
+    if d > 0.0:
+        return d, math.copysign(ox / d, x), math.copysign(oy / d, y)
+    if qx >= qy:
+        return d, 1.0 if x >= 0.0 else -1.0, 0.0
+    return d, 0.0, 1.0 if y >= 0.0 else -1.0
+
+
+@compiled
+def _geometry_loop(points, a, b):
+    count = points.shape[0]
+    d, nx, ny = np.empty(count), np.empty(count), np.empty(count)
+    for i in range(count):
+        d[i], nx[i], ny[i] = _point_geometry(points[i, 0], points[i, 1], a,
+                                             b)
+    return d, nx, ny
 
 
 def footprint_geometry(points, half_sizes):
     """The arithmetic of `footprint_distance_float`: (M, 2) float points
     and the footprint's half-sizes (a, b) given directly, the direction
-    in its components.
+    in its components; one compiled loop (drake_wbc.math.compiled).
 
     Returns:
         (d, nx, ny), three (M,) arrays: the distance and the two
         components of the outward unit direction n.
     """
-    x, y = points[:, 0], points[:, 1]
-    qx, qy = np.abs(x) - half_sizes[0], np.abs(y) - half_sizes[1]
-    ox, oy = np.maximum(qx, 0.0), np.maximum(qy, 0.0)
-    d = np.hypot(ox, oy)  # > 0 exactly outside: no underflow to 0
-    outside = d > 0.0
-    if outside.all():
-        return d, np.copysign(ox / d, x), np.copysign(oy / d, y)
-    safe = np.where(outside, d, 1.0)
-    sx, sy = np.where(x >= 0, 1.0, -1.0), np.where(y >= 0, 1.0, -1.0)
-    nearer_x = qx >= qy
-    nx = np.where(outside, sx * ox / safe, np.where(nearer_x, sx, 0.0))
-    ny = np.where(outside, sy * oy / safe, np.where(nearer_x, 0.0, sy))
-    return d, nx, ny
+    return _geometry_loop(float_array(points), float(half_sizes[0]),
+                          float(half_sizes[1]))
+
+
+@compiled
+def _gap_loop(points, a, b):
+    gap = np.empty(points.shape[0])
+    for i in range(points.shape[0]):
+        qx = abs(points[i, 0]) - a
+        qy = abs(points[i, 1]) - b
+        gap[i] = math.hypot(qx if not qx < 0.0 else 0.0,
+                            qy if not qy < 0.0 else 0.0)
+    return gap
 
 
 def footprint_gap(points, half_sizes):
     """The distance d (M,) alone of `footprint_geometry`, for (M, 2)
     float points and the footprint's half-sizes (a, b): the cheapest
-    ranking of LIDAR points by how near they are."""
-    qx = np.abs(points[:, 0]) - half_sizes[0]
-    qy = np.abs(points[:, 1]) - half_sizes[1]
-    return np.hypot(np.maximum(qx, 0.0), np.maximum(qy, 0.0))
+    ranking of LIDAR points by how near they are (one compiled loop)."""
+    return _gap_loop(float_array(points), float(half_sizes[0]),
+                     float(half_sizes[1]))
 
 
 def _clamped_distance(obstacle_points, params):
@@ -242,24 +274,39 @@ def _force_inputs(rng):
 
 @fast_kernel(repulsive_force, sample=_force_inputs)
 def repulsive_force_float(obstacle_points, params):
-    """`repulsive_force` of float points, in fewer array operations (the
+    """`repulsive_force` of float points, in one compiled loop (the
     controller's tick; hundreds of LIDAR points): the points farther than
     d_th from the footprint along x or y, which give exact zeros, are
-    dropped first; non-finite points make the force NaN."""
-    points = np.reshape(obstacle_points, (-1, 2))
-    if not np.isfinite(points).all():
-        return np.full(2, np.nan)
+    skipped before their geometry; a non-finite point makes the force
+    NaN."""
     a, b = params.half_sizes
-    reach = params.d_th
-    near = ((np.abs(points[:, 0]) - a <= reach)
-            & (np.abs(points[:, 1]) - b <= reach))
-    if not near.any():
-        return np.zeros(2)
-    d, nx, ny = footprint_geometry(points[near], params.half_sizes)
-    d = np.maximum(d, params.d_min)
-    slope = params.k_obs * (1.0 / d - 1.0 / reach) / (d * d)
-    slope[d > reach] = 0.0
-    return _bounded(np.array([-slope @ nx, -slope @ ny]), params)
+    return _force_loop(np.reshape(float_array(obstacle_points), (-1, 2)),
+                       float(a), float(b), float(params.k_obs),
+                       float(params.d_th), float(params.d_min),
+                       float(params.max_force))
+
+
+@compiled
+def _force_loop(points, a, b, k_obs, reach, d_min, max_force):
+    fx = 0.0
+    fy = 0.0
+    for i in range(points.shape[0]):
+        x, y = points[i, 0], points[i, 1]
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return np.full(2, np.nan)
+        if abs(x) - a <= reach and abs(y) - b <= reach:
+            d, nx, ny = _point_geometry(x, y, a, b)
+            if d < d_min:
+                d = d_min
+            if d <= reach:
+                slope = k_obs * (1.0 / d - 1.0 / reach) / (d * d)
+                fx += slope * nx
+                fy += slope * ny
+    force = np.array([-fx, -fy])
+    squared = force[0] * force[0] + force[1] * force[1]
+    if squared > max_force * max_force:
+        force *= max_force / math.sqrt(squared)
+    return force
 
 
 class LastPoints:

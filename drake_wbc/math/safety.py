@@ -12,9 +12,11 @@ it):
    in eq. (wbccm), s_c outside [0, 1] in eq. (compensation)) or a switch
    other than 0 or 1 (S_hri) is a fault of that input. Obstacle points
    are the exception: a row with a NaN or infinite coordinate is dropped
-   and counted, not a fault (see `check_points`). `check_inputs` has a
-   float kernel for the control tick (`check_inputs_float`,
-   drake_wbc.math.kernels).
+   and counted, not a fault (see `check_points`). `check_inputs` and
+   `check_points` have each a float kernel for the control tick
+   (`check_inputs_float`, `check_points_float`, drake_wbc.math.kernels;
+   the points' in a loop compiled to machine code,
+   drake_wbc.math.compiled).
 2. The safe stop (`next_stop_state`): on a fault the controller stops (zero
    base velocity, the arm braked to rest within its acceleration limit,
    the DMPs' couplings held; drake_wbc.controller.diagram) and it resumes,
@@ -40,6 +42,7 @@ from typing import NamedTuple
 import numpy as np
 
 from drake_wbc.math import kernels
+from drake_wbc.math.compiled import compiled
 from drake_wbc.math.scalar_support import value_of
 from drake_wbc.math.separation import PeopleSeparationParameters
 from drake_wbc.math.validation import non_negative, positive, positive_vector
@@ -376,6 +379,62 @@ def check_points(points):
         return array, 0, VALID
     rows = finite.all(axis=1)
     return array[rows], int(np.count_nonzero(~rows)), VALID
+
+
+def _points_samples(rng):
+    """Random arguments of check_points: scans of finite points, ones
+    with rows the guard must drop (a NaN or an infinity in either
+    coordinate or both, every row now and then), none, and what is not a
+    float (M, 2) array of the compiled loop's type: read-only, strided,
+    whole numbers, nested lists, the wrong shape, not numbers."""
+    count = int(rng.choice([0, 1, 2, rng.integers(3, 400)]))
+    points = rng.uniform(-5.0, 5.0, (count, 2))
+    if count and rng.random() < 0.5:
+        bad = rng.integers(0, count, int(rng.integers(1, count + 1)))
+        points[bad, rng.integers(0, 2, len(bad))] = rng.choice(
+            [np.nan, np.inf, -np.inf], len(bad))
+        if rng.random() < 0.2:
+            points[bad] = np.nan
+    kind = rng.integers(0, 10)
+    if kind == 0:
+        points.flags.writeable = False
+    elif kind == 1:
+        points = np.asfortranarray(points)
+    elif kind == 2:
+        points = np.round(points).astype(int) if np.isfinite(
+            points).all() else points
+    elif kind == 3:
+        points = points.tolist()
+    elif kind == 4:
+        points = [np.zeros(3), np.zeros((count, 3)), np.zeros((2, 2, 2)),
+                  "points", None, [[1.0, "x"]]][rng.integers(6)]
+    return (points,)
+
+
+@kernels.fast_kernel(check_points, sample=_points_samples)
+def check_points_float(points):
+    """`check_points` of a float (M, 2) array as the LIDARs give it (C
+    order, writeable): its rows counted in one compiled loop; anything
+    else the reference checks."""
+    if not (type(points) is np.ndarray and points.dtype == np.float64
+            and points.ndim == 2 and points.shape[1] == 2
+            and points.flags.c_contiguous and points.flags.writeable):
+        return check_points(points)
+    dropped = _non_finite_rows(points)
+    if not dropped:
+        return points, 0, VALID
+    return points[np.isfinite(points).all(axis=1)], dropped, VALID
+
+
+@compiled
+def _non_finite_rows(points):
+    """How many rows of (M, 2) float `points` have a coordinate that is
+    NaN or infinite."""
+    count = 0
+    for i in range(points.shape[0]):
+        if not (math.isfinite(points[i, 0]) and math.isfinite(points[i, 1])):
+            count += 1
+    return count
 
 
 def describe(name, check, size=None):

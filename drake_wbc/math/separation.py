@@ -37,12 +37,12 @@ kernel each (drake_wbc.math.kernels), which the limiter runs in double.
 by hand.
 """
 
-import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
+from drake_wbc.math.compiled import compiled, float_array
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.repulsion import (
     RepulsiveFieldParameters,
@@ -290,37 +290,70 @@ def _separation_state_inputs(rng):
 @fast_kernel(separation_state, sample=_separation_state_inputs)
 def separation_state_float(points, half_sizes, stop_distance, stop_time,
                            count=NEAREST_POINTS):
-    """`separation_state` of float points: with at least `count` points
-    all outside the footprint (the usual scan) the selected points'
-    distances and offsets are taken from the ranking rather than computed
-    again; otherwise the reference's steps on the float geometry."""
-    points = np.reshape(np.asarray(points, dtype=float), (-1, 2))
-    if len(points) >= count:
-        offsets = np.abs(points)
-        offsets[:, 0] -= half_sizes[0]  # no (2,) array made of a tuple
-        offsets[:, 1] -= half_sizes[1]
-        np.maximum(offsets, 0.0, out=offsets)
-        gap = np.hypot(offsets[:, 0], offsets[:, 1])
-        kept = _nearest_first(gap, count)
-        d = gap[kept]
-        if d.min() > 0.0:
-            # The geometry's outside case and approach_rows, on (count, 2)
-            # blocks: n = sign(p) o / d, r = p - d n.
-            near = points[kept]
-            n = np.copysign(offsets[kept] / d[:, None], near)
-            near -= d[:, None] * n
-            state = np.empty(4 * count)
-            rows = state[:3 * count].reshape(count, 3)
-            rows[:, :2] = n
-            rows[:, 2] = near[:, 0] * n[:, 1] - near[:, 1] * n[:, 0]
-            state[3 * count:] = allowed_speeds(d, stop_distance, stop_time)
-            return state
-    near = nearest_points(points, half_sizes, count)
+    """`separation_state` of float points, in compiled loops: the
+    footprint gaps (drake_wbc.math.repulsion.footprint_gap), the `count`
+    nearest kept in one pass (the first `count` of a stable sort, padded
+    with FAR points), their geometry (repulsion.footprint_geometry), then
+    their rows and allowed speeds."""
+    points = np.reshape(float_array(points), (-1, 2))
+    near = _nearest_loop(points, footprint_gap(points, half_sizes),
+                         int(count))
     d, nx, ny = footprint_geometry(near, half_sizes)
-    rx, ry = near[:, 0] - d * nx, near[:, 1] - d * ny
-    return np.concatenate([
-        np.column_stack([nx, ny, rx * ny - ry * nx]).ravel(),
-        allowed_speeds(d, stop_distance, stop_time)])
+    return _state_loop(near, d, nx, ny, float(stop_distance),
+                       float(stop_time))
+
+
+@compiled
+def _nearest_loop(points, gap, count):
+    """The `count` rows of `points` of smallest `gap`, nearest first, ties
+    (and NaNs, after every number) in their order, then FAR points: one
+    pass, each point inserted into the sorted few kept so far."""
+    kept = np.empty(count, np.int64)
+    kept_gap = np.empty(count)
+    size = 0
+    for i in range(gap.shape[0]):
+        g = gap[i]
+        if size < count:
+            j = size
+            size += 1
+        elif g < kept_gap[count - 1] or (
+                kept_gap[count - 1] != kept_gap[count - 1] and g == g):
+            j = count - 1
+        else:
+            continue
+        while j > 0 and (g < kept_gap[j - 1] or (
+                kept_gap[j - 1] != kept_gap[j - 1] and g == g)):
+            kept[j] = kept[j - 1]
+            kept_gap[j] = kept_gap[j - 1]
+            j -= 1
+        kept[j] = i
+        kept_gap[j] = g
+    near = np.empty((count, 2))
+    for k in range(count):
+        if k < size:
+            near[k, 0] = points[kept[k], 0]
+            near[k, 1] = points[kept[k], 1]
+        else:
+            near[k, 0] = FAR
+            near[k, 1] = 0.0
+    return near
+
+
+@compiled
+def _state_loop(near, d, nx, ny, stop_distance, stop_time):
+    """The rows of eq. (approach) at the footprint's nearest points
+    r = p - d n, then the allowed speeds of eq. (allowed)."""
+    count = near.shape[0]
+    state = np.empty(4 * count)
+    for k in range(count):
+        rx = near[k, 0] - d[k] * nx[k]
+        ry = near[k, 1] - d[k] * ny[k]
+        state[3 * k] = nx[k]
+        state[3 * k + 1] = ny[k]
+        state[3 * k + 2] = rx * ny[k] - ry * nx[k]
+        gap = d[k] - stop_distance
+        state[3 * count + k] = (gap if not gap < 0.0 else 0.0) / stop_time
+    return state
 
 
 def _scale_inputs(rng):
@@ -339,20 +372,32 @@ def _scale_inputs(rng):
 
 @fast_kernel(scale_for_rows, sample=_scale_inputs)
 def scale_for_rows_float(command, rows, allowed):
-    """`scale_for_rows` of float arrays: a few rows, so a loop in Python
-    floats beats the masked arrays; the same divisions and minimum, so the
-    same value."""
-    approach = (rows @ command).tolist()
-    scale = None
-    for speed, bound in zip(approach, np.asarray(allowed).tolist(),
-                            strict=True):
+    """`scale_for_rows` of float arrays, in one compiled loop: the same
+    divisions and minimum, so the same value (the approach speeds' sums
+    may round differently from numpy's matrix product)."""
+    return _scale_loop(float_array(command),
+                       np.reshape(float_array(rows), (-1, 3)),
+                       float_array(allowed))
+
+
+@compiled
+def _scale_loop(command, rows, allowed):
+    scale = 1.0
+    found = False
+    for i in range(rows.shape[0]):
+        # From +0.0, as a matrix product sums: a sum of zeros is +0.0.
+        speed = (0.0 + rows[i, 0] * command[0] + rows[i, 1] * command[1]
+                 + rows[i, 2] * command[2])
+        bound = allowed[i]
         if speed > bound:
-            # speed 0 only with a negative bound: numpy's signed infinity
-            ratio = (bound / speed if speed != 0.0
-                     else -math.copysign(math.inf, speed))
-            if scale is None or ratio < scale:
+            # speed 0 only with a negative bound: a signed infinity
+            ratio = bound / speed
+            if not found or ratio < scale:
                 scale = ratio
-    return 1.0 if scale is None else min(max(scale, 0.0), 1.0)
+                found = True
+    if not found:
+        return 1.0
+    return min(max(scale, 0.0), 1.0)
 
 
 # --- the protective separation distance of ISO/TS 15066 (moving people) ---

@@ -175,11 +175,11 @@ def BaseCommandLimiter_(T):
         point inside, the command is exactly that of the static rule.
 
         Scalar types: double and AutoDiffXd, the same calculation; the
-        double one runs the float kernels of separation_state and
-        scale_for_rows (drake_wbc.math.kernels), the AutoDiffXd one their
-        references; limit_base_velocity is scalar-generic, so the
-        derivatives are exact. The obstacle points are float data in
-        both.
+        double one runs the float kernels of separation_state,
+        scale_for_rows, people_scan and limit_base_velocity
+        (drake_wbc.math.kernels), the AutoDiffXd one their references
+        (limit_base_velocity's is scalar-generic, so the derivatives are
+        exact). The obstacle points are float data in both.
 
         Args:
             params: SafetyParameters (the limits); the robot's if None.
@@ -200,11 +200,14 @@ def BaseCommandLimiter_(T):
                 non_negative("half_sizes", a)
                 for a in as_vector("half_sizes",
                                    robots_own("half_sizes", half_sizes), 2))
-            self._velocity_limits = robots_own(
-                "params.base_velocity_limits", params.base_velocity_limits)
-            self._acceleration_limits = robots_own(
+            # Float arrays: what the float kernel takes without a copy.
+            self._velocity_limits = np.array(robots_own(
+                "params.base_velocity_limits", params.base_velocity_limits),
+                dtype=float)
+            self._acceleration_limits = np.array(robots_own(
                 "params.base_acceleration_limits",
-                params.base_acceleration_limits)
+                params.base_acceleration_limits), dtype=float)
+            self._limit = body_for(limit_base_velocity, T)
             state_of_points = body_for(separation_state, T)
             stop_distance = robots_own("params.stop_distance",
                                        params.stop_distance)
@@ -213,6 +216,7 @@ def BaseCommandLimiter_(T):
                 lambda points: state_of_points(points, self.half_sizes,
                                                stop_distance, stop_time))
             self._scale = body_for(scale_for_rows, T)
+            self._people_scan = body_for(people_scan, T)
             self._velocity = self.DeclareVectorInputPort(
                 "velocity", safety.BASE_AXES)
             self._stopped = self.DeclareVectorInputPort("stopped", 1)
@@ -281,7 +285,7 @@ def BaseCommandLimiter_(T):
                                                person_allowed)
                     if person_scale < scale:
                         scale = person_scale
-            result = limit_base_velocity(
+            result = self._limit(
                 desired, previous, self._velocity_limits,
                 self._acceleration_limits, self.time_step, scale=scale)
             return np.array(result.command.tolist() + [
@@ -376,7 +380,7 @@ def BaseCommandLimiter_(T):
             base = (value_of(self._base_state.Eval(context))
                     if self._base_state.HasValue(context)
                     else np.zeros(6))
-            tracker, people, inside = people_scan(
+            tracker, people, inside = self._people_scan(
                 value_of(state[_TRACKER:]), points, base,
                 float(value_of(context.get_time())), self.half_sizes,
                 self._people)

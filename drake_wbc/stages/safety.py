@@ -177,6 +177,7 @@ def InputGuard_(T):
                     or spec.switch) else None
                 for spec in self.inputs)
             self._check_inputs = body_for(check_inputs, T)
+            self._check_points = body_for(check_points, T)
             self._points = None
             if points_name:
                 self._points = self.DeclareAbstractInputPort(
@@ -250,7 +251,7 @@ def InputGuard_(T):
             all_valid = (checks.count(VALID) == len(checks)
                          or all(check.valid for check in checks))
             if self._points is not None and self._points.HasValue(context):
-                points, dropped, points_check = check_points(
+                points, dropped, points_check = self._check_points(
                     self._points.Eval(context))
             else:
                 points, dropped, points_check = np.zeros((0, 2)), 0, VALID
