@@ -70,10 +70,12 @@ def test_the_base_stays_still_while_the_tcp_is_in_the_workspace(summary):
 def test_the_base_follows_once_the_tcp_leaves_the_workspace(summary):
     m, log = summary["metrics"], summary["logs"][RUN]
     # Stage B: the hand pushes along x; the TCP reaches d^l and sigma_xy
-    # falls to 0, so the base carries the motion.
+    # falls to 0, so the base carries the motion: 0.25 m in the 4 s of B
+    # that the run holds (0.2 m asserted: the hand gives way as the tool
+    # speeds up, and sigma_xy falls at its rate limit, 0.1 a tick).
     assert m[f"{RUN}.B.d_max_m"] > 0.75
     assert m[f"{RUN}.B.sigma_xy_min"] < 0.05
-    assert m[f"{RUN}.B.base_dx_m"] > 0.25
+    assert m[f"{RUN}.B.base_dx_m"] > 0.2
     assert abs(m[f"{RUN}.B.base_dy_m"]) < 0.01
     assert m[f"{RUN}.B.mover"] == "base"
     # At the end the base moves at k_hri |F| of the hand's force (the

@@ -9,7 +9,7 @@ import numpy as np
 
 from drake_wbc.experiments.common import obstacle_distances
 from drake_wbc.experiments.runner import build_closed_loop, simulate
-from drake_wbc.experiments.scenario import load_scenario
+from drake_wbc.experiments.scenario import footprint_of, load_scenario
 
 SCENARIO = """
 description: the base at full speed towards a person
@@ -39,6 +39,7 @@ def run(people, duration):
                                                   people=people))
     log = simulate(build_closed_loop(scenario))
     gap = obstacle_distances(scenario.scene, log["truth.base_pose"],
+                             footprint_of(scenario),
                              log["truth.people_positions"])
     speed = np.hypot(*log["truth.base_loop_velocity"][:, :2].T)
     return log, gap, speed

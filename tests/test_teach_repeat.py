@@ -4,6 +4,7 @@ repeat.yaml, repeat_obstacle.yaml). The runs are shared by the tests."""
 
 import argparse
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -158,7 +159,8 @@ def test_teach_and_repeat_use_the_scenarios_robot():
         scenario = with_robot(load_scenario(find_scenario(name)), lbr,
                               echo=None)
         variant = scenario.variants[0]
-        with pytest.warns(RobotTuningWarning):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RobotTuningWarning)  # its own
             log = simulate(build_closed_loop(scenario, variant),
                            duration=1.0)
         assert log["arm.position_measured"].shape[1] == 7
