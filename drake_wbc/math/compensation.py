@@ -96,7 +96,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_wbc.math.compiled import compiled
+from drake_wbc.math.compiled import compiled, float_array
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.kinematics import (
     base_jacobian_of,
@@ -323,14 +323,6 @@ def _compensation(V_a, V_b, V_b_filtered, p_ee_in_base, R, rotate, g, alpha,
 _IDENTITY = np.eye(3)
 
 
-def _floats(values):
-    """`values` as a float64 C-contiguous array (as it is, if it is one
-    already): what the compiled kernel takes."""
-    if (type(values) is np.ndarray and values.dtype == np.float64
-            and values.flags.c_contiguous):
-        return values
-    return np.ascontiguousarray(values, dtype=float)
-
 
 @fast_kernel(arm_compensation, sample=_compensation_problems)
 def arm_compensation_float(V_a, V_b, V_b_filtered, p_ee_in_base, R_ba,
@@ -345,10 +337,10 @@ def arm_compensation_float(V_a, V_b, V_b_filtered, p_ee_in_base, R_ba,
         (3, 3) array (or its rows).
     """
     return _compensation(
-        _floats(V_a), _floats(V_b), _floats(V_b_filtered),
-        _floats(p_ee_in_base),
-        _IDENTITY if R_ba is None else _floats(R_ba), R_ba is not None,
-        _floats(grad_C_m), float(alpha), float(tolerance))
+        float_array(V_a), float_array(V_b), float_array(V_b_filtered),
+        float_array(p_ee_in_base),
+        _IDENTITY if R_ba is None else float_array(R_ba), R_ba is not None,
+        float_array(grad_C_m), float(alpha), float(tolerance))
 
 
 # --- the checked functions --------------------------------------------------

@@ -92,7 +92,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from drake_wbc.math.compiled import compiled
+from drake_wbc.math.compiled import compiled, float_array
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.kinematics import (
     random_rotation,
@@ -389,21 +389,13 @@ def whole_body_distribution_float(V_ee, p_ee_in_base, R_ba, sigma_xy,
             return V_wb
     elif R_ba is None:
         return whole_body_distribution_float(
-            _floats(V_ee), _floats(p_ee_in_base), None, sigma_xy,
-            sigma_phi, _floats(capability_gradient), null_space_gain,
+            float_array(V_ee), float_array(p_ee_in_base), None, sigma_xy,
+            sigma_phi, float_array(capability_gradient), null_space_gain,
             damping)
     return whole_body_distribution(
         V_ee, p_ee_in_base, R_ba, sigma_xy, sigma_phi, capability_gradient,
         null_space_gain, damping)
 
-
-def _floats(values):
-    """`values` as a float64 C-contiguous array (as it is, if it is one
-    already): what the compiled kernels take."""
-    if (type(values) is np.ndarray and values.dtype == np.float64
-            and values.flags.c_contiguous):
-        return values
-    return np.ascontiguousarray(values, dtype=float)
 
 
 # --- the checked functions --------------------------------------------------
