@@ -208,6 +208,21 @@ def build_split_diagram(params=None, point=None, base_driver=None,
     return _build_split(params, point, base_driver, alpha, station)[0]
 
 
+def _connect_split(builder, distributor, base_filter, compensator):
+    """Wires the split in `builder`: V_b from the distributor into the
+    filter and the compensator, V_a into the compensator, V_b^flt into the
+    compensator. Returns the filter's output port."""
+    connect = builder.Connect
+    base_velocity = distributor.GetOutputPort("base_velocity")
+    connect(base_velocity, base_filter.get_input_port())
+    connect(base_velocity, compensator.GetInputPort("base_velocity"))
+    connect(distributor.GetOutputPort("arm_velocity"),
+            compensator.GetInputPort("arm_velocity"))
+    filtered = base_filter.get_output_port()
+    connect(filtered, compensator.GetInputPort("filtered_base_velocity"))
+    return filtered
+
+
 def _build_split(params, point, base_driver, alpha, station):
     """build_split_diagram's diagram, and the RobotModel of its plant (or
     None)."""
@@ -248,13 +263,7 @@ def _build_split(params, point, base_driver, alpha, station):
              params.compensator.compensation_switch)):
         constant(name, value, compensator, name)
     connect = builder.Connect
-    base_velocity = distributor.GetOutputPort("base_velocity")
-    connect(base_velocity, base_filter.get_input_port())
-    connect(base_velocity, compensator.GetInputPort("base_velocity"))
-    connect(distributor.GetOutputPort("arm_velocity"),
-            compensator.GetInputPort("arm_velocity"))
-    filtered = base_filter.get_output_port()
-    connect(filtered, compensator.GetInputPort("filtered_base_velocity"))
+    filtered = _connect_split(builder, distributor, base_filter, compensator)
     base_motion, model = filtered, None
     if station is not None:
         if base_driver is not None:
@@ -424,13 +433,7 @@ def build_deviation_loop(params=None, point=None, base_driver=None,
         constant(value, compensator.GetInputPort(name))
     connect(whole_body.GetOutputPort("end_effector_velocity"),
             distributor.GetInputPort("end_effector_velocity"))
-    base_velocity = distributor.GetOutputPort("base_velocity")
-    connect(base_velocity, base_filter.get_input_port())
-    connect(base_velocity, compensator.GetInputPort("base_velocity"))
-    connect(distributor.GetOutputPort("arm_velocity"),
-            compensator.GetInputPort("arm_velocity"))
-    filtered = base_filter.get_output_port()
-    connect(filtered, compensator.GetInputPort("filtered_base_velocity"))
+    filtered = _connect_split(builder, distributor, base_filter, compensator)
     base_motion = filtered
     if base_driver is not None:
         driver = add("base_driver", BaseVelocityDriver(checked_instance(
