@@ -29,6 +29,7 @@ from drake_wbc.experiments.scenario import (
 from drake_wbc.math.capability import CapabilityBand
 from drake_wbc.math.loading import load_typed
 from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics, ArmMount
+from drake_wbc.robot.tuning import RobotTuningWarning
 from drake_wbc.stages.wrench import tool_weight_reading
 from drake_wbc.station.scene import HandForce, Scene
 from drake_wbc.station.simulation import StationOptions
@@ -174,7 +175,8 @@ def test_the_tracking_error_elimination_removes_the_deviation(
     params = ControllerParameters()
     # C_m at home is 0.071: a band above it puts alpha at 1.
     params.capability_band = CapabilityBand(lower=0.2, upper=0.3)
-    robot = IdealRobot(mounted_arm, params)
+    with pytest.warns(RobotTuningWarning, match="active at the robot's home"):
+        robot = IdealRobot(mounted_arm, params)
     assert robot.output("alpha")[0] == pytest.approx(1.0)
     # Across the arm: T_a's y axis in the world.
     axis = int(np.argmax(np.abs(mounted_arm.R_ba[:2, 1])))
