@@ -128,7 +128,7 @@ def test_run_writes_logs_figures_replay_and_summary(tmp_path, capsys):
 @pytest.mark.parametrize("argv", [
     ["run", "fixed_point"], ["robot-sim", "hardware"], ["deploy", "hardware"],
     ["teach", "teach"], ["replay", "movement.yaml"], ["bode"], ["diagram"],
-    ["demo"]])
+    ["demo"], ["stress"]])
 def test_every_command_that_runs_a_scenario_takes_a_robot(argv):
     args = make_parser().parse_args(argv + ["--robot", "my_robot.yaml"])
     assert args.robot == Path("my_robot.yaml")

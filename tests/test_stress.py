@@ -48,7 +48,10 @@ def test_the_cases_are_valid_scenarios_that_differ_between_seeds():
 def test_the_generated_obstacles_leave_the_way_free():
     """Static obstacles keep CLEARANCE from the footprint's disc at the
     start (the way itself is checked by construction)."""
-    from drake_wbc.stress.cases import CLEARANCE, FOOTPRINT_RADIUS
+    from drake_wbc.robot.description import shipped_robot
+    from drake_wbc.stress.cases import CLEARANCE, footprint_radius
+
+    FOOTPRINT_RADIUS = footprint_radius(shipped_robot().base)  # noqa: N806
 
     for index in range(20):
         scene = random_scenario(5, index, 4.0).scene
@@ -260,3 +263,28 @@ def test_resume_refuses_a_journal_whose_settings_are_damaged(tmp_path):
         stress.run_stress(_stress_arguments(tmp_path, "--cases", "1",
                                             "--resume"))
     assert "settings\": [}" in (tmp_path / "stress.jsonl").read_text()
+
+
+def test_the_cases_run_on_another_robot(tmp_path):
+    """`stress --robot`: on the second shipped robot (a 7-joint arm on a
+    1.0 x 0.7 m base) the arm starts near its home, the obstacles keep
+    clear of its larger footprint, and a case runs within that robot's
+    own limits."""
+    from drake_wbc.robot.description import load_robot_description, models_dir
+    from drake_wbc.stress.cases import CLEARANCE, footprint_radius, run_case
+
+    lbr = str(models_dir() / "lbr_omni.robot.yaml")
+    description = load_robot_description(lbr)
+    reach = footprint_radius(description.base) + CLEARANCE
+    for index in range(6):
+        scenario = random_scenario(3, index, 1.0, robot=lbr)
+        assert scenario.robot == lbr
+        start = scenario.station.initial_arm_positions
+        assert len(start) == 7
+        assert max(abs(q - h) for q, h in zip(start, description.arm.home,
+                                              strict=True)) <= 0.15
+        for cylinder in scenario.scene.cylinders:
+            assert math.hypot(*cylinder.position) >= (
+                reach + cylinder.radius - 1e-12)
+    record = run_case(3, 0, 0.3, lbr)
+    assert not record.get("error") and violations(record) == []

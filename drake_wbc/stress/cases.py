@@ -27,6 +27,7 @@ record breaks (see drake_wbc.stress.run).
 import copy
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -34,11 +35,13 @@ from drake_wbc.controller.task import Schedule
 from drake_wbc.experiments.common import obstacle_distances, run_metrics
 from drake_wbc.experiments.scenario import (
     Scenario,
+    check_on_robot,
+    controller_arm,
     controller_for,
     footprint_of,
 )
 from drake_wbc.math.validation import validate
-from drake_wbc.robot.model import HOME_ARM_POSITIONS
+from drake_wbc.robot.description import load_robot_description, shipped_robot
 from drake_wbc.station.scene import (
     BoxObstacle,
     CylinderObstacle,
@@ -49,13 +52,9 @@ from drake_wbc.station.scene import (
 MODES = ("loco-manipulation", "intuitive-phri")
 """The controller's modes a case is drawn from (Table T:motion-mode)."""
 
-FOOTPRINT_RADIUS = math.hypot(0.4, 0.3)
-"""The distance from the base's centre to a corner of its 0.8 x 0.6 m
-footprint, m: the footprint stays inside this disc whatever its yaw."""
-
 CLEARANCE = 0.25
-"""The least gap, m, between a static obstacle and the disc of radius
-FOOTPRINT_RADIUS swept along the base's nominal way."""
+"""The least gap, m, between a static obstacle and the disc swept along
+the base's nominal way by its footprint (`footprint_radius`)."""
 
 LIDAR_BEAMS = 271
 """Beams per scan in the stress cases (1 degree over 270 degrees instead of
@@ -73,31 +72,40 @@ def _path_distance(point, end):
     return float(np.linalg.norm(point - t * end))
 
 
-def _place(rng, end, size):
+def footprint_radius(base):
+    """The distance, m, from the centre of the robot's base (its
+    BaseDescription) to a corner of its footprint: the footprint stays
+    inside this disc whatever its yaw (0.5 m for the shipped 0.8 x 0.6 m
+    base)."""
+    return math.hypot(*base.footprint_half_sizes)
+
+
+def _place(rng, end, size, footprint):
     """A random position 0.9 to 2.5 m from the way's start whose distance
-    to the segment [0, end] is at least FOOTPRINT_RADIUS + CLEARANCE +
-    `size` (the obstacle's radius)."""
+    to the segment [0, end] is at least `footprint` (the footprint's
+    radius) + CLEARANCE + `size` (the obstacle's radius)."""
     for _ in range(100):
         radius = rng.uniform(0.9, 2.5)
         angle = rng.uniform(-math.pi, math.pi)
         point = radius * np.array([math.cos(angle), math.sin(angle)])
-        if _path_distance(point, end) >= FOOTPRINT_RADIUS + CLEARANCE + size:
+        if _path_distance(point, end) >= footprint + CLEARANCE + size:
             return point
     return None
 
 
-def _obstacles(rng, end):
+def _obstacles(rng, end, footprint):
     cylinders, boxes = [], []
     for i in range(int(rng.integers(0, 3))):
         radius = rng.uniform(0.08, 0.25)
-        point = _place(rng, end, radius)
+        point = _place(rng, end, radius, footprint)
         if point is not None:
             cylinders.append(CylinderObstacle(
                 name=f"pillar_{i}", position=point.tolist(), radius=radius,
                 height=rng.uniform(0.6, 2.0)))
     for i in range(int(rng.integers(0, 2))):
         size = rng.uniform(0.2, 0.6, 3)
-        point = _place(rng, end, 0.5 * math.hypot(size[0], size[1]))
+        point = _place(rng, end, 0.5 * math.hypot(size[0], size[1]),
+                       footprint)
         if point is not None:
             boxes.append(BoxObstacle(
                 name=f"crate_{i}", center=[*point, 0.5 * size[2] + 0.1],
@@ -146,7 +154,7 @@ def _ramped(duration, value, size):
                                          zero], interpolation="linear")
 
 
-def random_scenario(seed, index, duration=4.0):
+def random_scenario(seed, index, duration=4.0, robot=""):
     """The scenario of case `index` of the stress run of `seed`.
 
     Drawn from numpy.random.default_rng([seed, index]) only (module
@@ -156,6 +164,8 @@ def random_scenario(seed, index, duration=4.0):
         seed: a whole number >= 0.
         index: the case's index, a whole number >= 0.
         duration: the simulated time, s.
+        robot: the robot's description file ("" for the shipped robot):
+            the arm starts near its home, every limit is its own.
 
     Returns:
         A validated drake_wbc.experiments.scenario.Scenario.
@@ -182,19 +192,26 @@ def random_scenario(seed, index, duration=4.0):
     scenario.task.reference_velocity = _ramped(duration, velocity, 6)
     yaw = rng.uniform(-math.pi, math.pi)
     scenario.station.initial_base_pose = [0.0, 0.0, yaw]
+    description = load_robot_description(robot) if robot else shipped_robot()
+    home = np.asarray(description.arm.home)
     scenario.station.initial_arm_positions = (
-        HOME_ARM_POSITIONS + rng.uniform(-0.15, 0.15, 6)).tolist()
+        home + rng.uniform(-0.15, 0.15, home.size)).tolist()
     scenario.station.lidar.num_beams = LIDAR_BEAMS
     scenario.station.wrist.seed = int(rng.integers(0, 2**31))
     # The base's nominal way in the world: the end effector's reference
     # motion in the plane, at most all of it carried by the base.
     end = 0.6 * duration * velocity[:2]
-    cylinders, boxes = _obstacles(rng, end)
+    cylinders, boxes = _obstacles(rng, end,
+                                  footprint_radius(description.base))
     scene = scenario.scene
     scene.cylinders, scene.boxes = cylinders, boxes
     scene.people = _people(rng, duration)
     scene.hand = _hand(rng, duration, hand_scale)
-    return validate(scenario)
+    scenario.robot = str(Path(robot).resolve()) if robot else ""
+    scenario = validate(scenario)
+    if robot:  # another robot's: checked against it (Scenario's own check
+        check_on_robot(scenario)  # is the shipped robot's)
+    return scenario
 
 
 def _none_if_inf(x):
@@ -202,10 +219,10 @@ def _none_if_inf(x):
     return None if np.isinf(x) else float(x)
 
 
-def _limits():
+def _limits(scenario):
     from drake_wbc.robot.model import ArmKinematics
 
-    arm = ArmKinematics()
+    arm = controller_arm(scenario) or ArmKinematics()
     return arm.lower, arm.upper, arm.velocity_limits
 
 
@@ -221,7 +238,7 @@ def case_record(seed, index, scenario, log):
         dict of plain numbers and strings (JSON-ready; distances are None
         when there is nothing to measure them to).
     """
-    lower, upper, joint_speed_limits = _limits()
+    lower, upper, joint_speed_limits = _limits(scenario)
     metrics = run_metrics(scenario, log)
     static = copy.deepcopy(scenario.scene)
     static.people = []
@@ -273,8 +290,10 @@ def failed_record(seed, index, error):
             "wall_time_s": float("nan"), "real_time_factor": float("nan")}
 
 
-def run_case(seed, index, duration=4.0):
-    """Builds and simulates case `index` of `seed`; returns its record.
+def run_case(seed, index, duration=4.0, robot=""):
+    """Builds and simulates case `index` of `seed` (on the robot of the
+    description file `robot`, "" for the shipped one); returns its
+    record.
 
     An exception in the simulation (e.g. a non-finite state) does not
     propagate: the record then holds it in "error", a broken invariant.
@@ -282,7 +301,7 @@ def run_case(seed, index, duration=4.0):
     from drake_wbc.experiments.runner import build_closed_loop, simulate
 
     started = time.perf_counter()
-    scenario = random_scenario(seed, index, duration)
+    scenario = random_scenario(seed, index, duration, robot)
     try:
         log = simulate(build_closed_loop(scenario))
         record = case_record(seed, index, scenario, log)

@@ -63,6 +63,7 @@ from multiprocessing import resource_tracker
 from pathlib import Path
 
 from drake_wbc.math.validation import positive, whole_number
+from drake_wbc.robot.description import load_robot_description
 from drake_wbc.stress.cases import TIMING_KEYS, run_case, violations
 
 DEFAULT_DURATION = 4.0
@@ -107,9 +108,14 @@ def add_stress_arguments(parser):
              "(default: %(default)s)")
     parser.add_argument(
         "--resume", action="store_true",
-        help="keep the records of an earlier run of the same seed and "
-             "duration found in the output folder's stress.jsonl and run "
-             "only the missing cases")
+        help="keep the records of an earlier run of the same seed, "
+             "duration and robot found in the output folder's stress.jsonl "
+             "and run only the missing cases")
+    parser.add_argument(
+        "--robot", type=Path, default=None,
+        help="run the cases on the robot of this description YAML "
+             "(default: the shipped one): the arm starts near its home, "
+             "every limit is its own")
 
 
 class ProgressLine:
@@ -138,7 +144,7 @@ class ProgressLine:
 
 
 def run_cases(seed, cases, duration=DEFAULT_DURATION, workers=1,
-              scheduler=None, on_done=None, done=()):
+              scheduler=None, on_done=None, done=(), robot=""):
     """Runs cases 0 .. cases - 1 of `seed`; returns their records, in case
     order.
 
@@ -153,6 +159,7 @@ def run_cases(seed, cases, duration=DEFAULT_DURATION, workers=1,
         on_done: called with each record as it comes in (any order).
         done: records of cases already run (e.g. `Journal.records`): they
             are returned as they are, and only the other cases run.
+        robot: the robot's description file ("" for the shipped robot).
 
     Raises:
         ValueError: naming a bad argument.
@@ -166,10 +173,11 @@ def run_cases(seed, cases, duration=DEFAULT_DURATION, workers=1,
     if not pending:
         records = []
     elif scheduler is not None:
-        records = _on_dask(scheduler, seed, pending, duration, on_done)
+        records = _on_dask(scheduler, seed, pending, duration, on_done,
+                           robot)
     else:
         records = _in_processes(seed, pending, duration,
-                                min(workers, len(pending)), on_done)
+                                min(workers, len(pending)), on_done, robot)
     return sorted([*kept.values(), *records],
                   key=lambda record: record["case"])
 
@@ -190,11 +198,11 @@ def check_arguments(seed, cases, duration, workers):
     return seed, cases, duration, whole_number("workers", workers, 1)
 
 
-def _in_processes(seed, indices, duration, workers, on_done):
+def _in_processes(seed, indices, duration, workers, on_done, robot):
     records = []
     if workers == 1:
         for index in indices:
-            records.append(run_case(seed, index, duration))
+            records.append(run_case(seed, index, duration, robot))
             on_done(records[-1])
         return records
     context = multiprocessing.get_context("spawn")
@@ -208,7 +216,7 @@ def _in_processes(seed, indices, duration, workers, on_done):
         pool = context.Pool(workers, initializer=_start_worker,
                             initargs=(os.getpid(),))
     with pool:
-        jobs = [(seed, index, duration) for index in indices]
+        jobs = [(seed, index, duration, robot) for index in indices]
         for record in pool.imap_unordered(_run_job, jobs):
             records.append(record)
             on_done(record)
@@ -328,14 +336,14 @@ def _exit_now(code):
     os._exit(code)
 
 
-def _on_dask(scheduler, seed, indices, duration, on_done):
+def _on_dask(scheduler, seed, indices, duration, on_done, robot):
     from dask.distributed import Client
     from dask.distributed import as_completed as dask_completed
 
     client = scheduler if isinstance(scheduler, Client) else Client(
         scheduler)
     try:
-        futures = [client.submit(run_case, seed, index, duration,
+        futures = [client.submit(run_case, seed, index, duration, robot,
                                  pure=False, key=f"stress-{seed}-{index}")
                    for index in indices]
         records = []
@@ -562,8 +570,12 @@ def run_stress(args):
         args.seed, args.cases, args.duration, args.workers)
     where = (f"on the Dask cluster at {args.scheduler}" if args.scheduler
              else f"in {workers} worker process(es)")
+    robot = "" if args.robot is None else str(Path(args.robot).resolve())
+    if robot:
+        load_robot_description(robot)  # checked before the journal
     settings = dict(seed=seed, duration_s=duration,
-                    scheduler=args.scheduler, workers=args.workers)
+                    scheduler=args.scheduler, workers=args.workers,
+                    robot=robot)
     journal = None
     with stopped_by_signals():
         try:
@@ -581,7 +593,8 @@ def run_stress(args):
                 progress.update(record)
 
             records = run_cases(seed, cases, duration, workers,
-                                args.scheduler, on_done=on_done, done=kept)
+                                args.scheduler, on_done=on_done, done=kept,
+                                robot=robot)
             print(summary_table(records))
             json_path, csv_path = write_results(args.output, settings,
                                                 records)
