@@ -208,6 +208,18 @@ def build_split_diagram(params=None, point=None, base_driver=None,
     return _build_split(params, point, base_driver, alpha, station)[0]
 
 
+def _add_split_stages(add, params, point):
+    """Adds the split's stages with `add` (a builder's AddNamedSystem):
+    the distributor, the base filter and the compensator of `params` on
+    the operating point's arm. Returns the three."""
+    return (add("distributor", MotionDistributor(
+                params.distributor, point.arm, band=params.capability_band)),
+            add("base_filter", BaseVelocityFilter(
+                params.base_filter, time_step=params.time_step)),
+            add("compensator", RobustCompensator(
+                params.compensator, point.arm, time_step=params.time_step)))
+
+
 def _connect_split(builder, distributor, base_filter, compensator):
     """Wires the split in `builder`: V_b from the distributor into the
     filter and the compensator, V_a into the compensator, V_b^flt into the
@@ -234,12 +246,8 @@ def _build_split(params, point, base_driver, alpha, station):
                          "OperatingPoint or None")
     builder = DiagramBuilder()
     add = builder.AddNamedSystem
-    distributor = add("distributor", MotionDistributor(
-        params.distributor, point.arm, band=params.capability_band))
-    base_filter = add("base_filter", BaseVelocityFilter(
-        params.base_filter, time_step=params.time_step))
-    compensator = add("compensator", RobustCompensator(
-        params.compensator, point.arm, time_step=params.time_step))
+    distributor, base_filter, compensator = _add_split_stages(
+        add, params, point)
     alpha = point.alpha if alpha is None else alpha
 
     def constant(name, value, destination, port):
@@ -402,12 +410,8 @@ def build_deviation_loop(params=None, point=None, base_driver=None,
     connect = builder.Connect
     whole_body = add("whole_body_cdmp", WholeBodyCdmp(
         params.whole_body_cdmp, time_step=params.time_step))
-    distributor = add("distributor", MotionDistributor(
-        params.distributor, point.arm, band=params.capability_band))
-    base_filter = add("base_filter", BaseVelocityFilter(
-        params.base_filter, time_step=params.time_step))
-    compensator = add("compensator", RobustCompensator(
-        params.compensator, point.arm, time_step=params.time_step))
+    distributor, base_filter, compensator = _add_split_stages(
+        add, params, point)
 
     def constant(value, port):
         source = add(f"{port.get_name()}_{port.get_system().get_name()}",
