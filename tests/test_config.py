@@ -171,7 +171,7 @@ BAD_VALUES = [
     ("distributor: {band: {lower: 0.03, upper: 0.04}}",
      "unknown key 'distributor.band'", "null_space_gain"),
     ("whole_body_cdmp: {S_hri: 1.0}", "unknown key 'whole_body_cdmp.S_hri'",
-     "k_hri, dmp, movement"),
+     "k_hri, hri_time_constant, dmp, movement"),
     ("arm_cdmp: {S_hri: 0.0}", "unknown key 'arm_cdmp.S_hri'",
      "k_p, k_d, k_f, S_m, F_d, dmp"),
     ("base_filter: {time_step: 0.01}", "unknown key 'base_filter.time_step'",

@@ -101,6 +101,7 @@ from drake_wbc.math.validation import checked_instance, validated_copy
 from drake_wbc.robot.model import arm_kinematics
 from drake_wbc.robot.tuning import RobotTuningWarning, check_tuning
 from drake_wbc.stages import (
+    AdmittanceFilter,
     ArmCapability,
     ArmCartesianVelocityController,
     ArmCdmp,
@@ -265,6 +266,12 @@ def build_controller(params=None, robot=None):
         arm_controller=add("arm_controller", ArmCartesianVelocityController(
             params.arm_controller, arm, time_step=h)),
     )
+    if params.whole_body_cdmp.hri_time_constant > 0.0:
+        # The admittance's virtual mass on the whole body's F_ext (eq.
+        # (cdmp-wb); math.cdmp.admittance_filter_model).
+        stages["admittance_filter"] = add("admittance_filter",
+                                          AdmittanceFilter(
+            params.whole_body_cdmp.hri_time_constant, time_step=h))
     s = stages
 
     def connect(source, output, destination, input_name):
@@ -301,8 +308,14 @@ def build_controller(params=None, robot=None):
     connect("base_yaw", "y0", "whole_body_cdmp", "base_yaw")
     # F_ext in the frame of each DMP's velocity: T_b for the whole body's
     # (with V_ee), T_a for the arm's (with V_a).
-    connect("wrench", "external_wrench_in_base", "whole_body_cdmp",
-            "wrench")
+    if "admittance_filter" in s:
+        connect("wrench", "external_wrench_in_base", "admittance_filter",
+                "wrench")
+        connect("admittance_filter", "filtered_wrench", "whole_body_cdmp",
+                "wrench")
+    else:
+        connect("wrench", "external_wrench_in_base", "whole_body_cdmp",
+                "wrench")
     connect("wrench", "external_wrench", "arm_cdmp", "wrench")
     for destination in ("workspace", "distributor"):
         connect("whole_body_cdmp", "end_effector_velocity", destination,

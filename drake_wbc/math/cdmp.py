@@ -41,6 +41,7 @@ about the vertical by the base's yaw (eq. (3): drake_wbc.math.kinematics
 `twist_in_base` and its inverse `twist_in_world`).
 """
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -187,16 +188,25 @@ wrist's noise alone, and overflows the DMP's discretisation near
 1e300)."""
 
 
+MAX_HRI_TIME_CONSTANT = 10.0
+"""The longest admittance time constant T_hri, s: at 10 s the robot takes
+half a minute to follow a push (a virtual mass of 200 kg at the paper's
+k_hri), no longer a hand guide."""
+
+
 @dataclass
 class WholeBodyCdmpParameters:
     """Eq. (cdmp-wb): admittance gain k_hri in [0, MAX_K_HRI] (m/(N s);
-    paper 0.05)
-    and an optional learned movement to play (MovementReplay; None, the
-    default, keeps the paper's g = 0 and f = 0). The pHRI switch S_hri is
-    an input (its default is ControllerParameters.phri_switch, one for
-    both DMPs that take it)."""
+    paper 0.05), the admittance's time constant hri_time_constant T_hri
+    in [0, MAX_HRI_TIME_CONSTANT] (s; default 0.1, 0 for the paper's pure
+    admittance; `admittance_filter_model`), and an optional learned
+    movement to play (MovementReplay; None, the default, keeps the
+    paper's g = 0 and f = 0). The pHRI switch S_hri is an input (its
+    default is ControllerParameters.phri_switch, one for both DMPs that
+    take it)."""
 
     k_hri: float = 0.05
+    hri_time_constant: float = 0.1
     dmp: DmpParameters = field(default_factory=DmpParameters)
     movement: MovementReplay | None = None
 
@@ -206,6 +216,12 @@ class WholeBodyCdmpParameters:
                 f"k_hri = {self.k_hri!r} m/(N s) is not allowed: must be at "
                 f"most {MAX_K_HRI!r} m/(N s) (k_hri F_ext is a velocity: "
                 f"at {MAX_K_HRI!r} a push of 1 N already asks for 1 m/s)")
+        if (non_negative("hri_time_constant", self.hri_time_constant)
+                > MAX_HRI_TIME_CONSTANT):
+            raise ValueError(
+                f"hri_time_constant = {self.hri_time_constant!r} s is not "
+                f"allowed: must be at most {MAX_HRI_TIME_CONSTANT!r} s (a "
+                "longer one no longer follows a hand)")
         _dmp(self.dmp)
         self.movement = checked_instance("movement", self.movement,
                                          MovementReplay, lambda: None)
@@ -349,6 +365,53 @@ def whole_body_cdmp_derivative(y, z, C, E, g, V_ee, F_ext, delta_V_ee,
         y + E, z, g + C, None, dmp, forcing,
         coupling_velocity=dmp.tau * C_dot)
     return y_dot, z_dot, C_dot, delta_V_ee
+
+
+def admittance_filter_model(time_constant, time_step, axes=6):
+    """(A, B, C, D) of the admittance's first-order lag on F_ext, the
+    virtual mass of the whole body's admittance (beyond the paper):
+
+        T_hri F_bar_dot = F_ext - F_bar,   C_dot = V_ee + k_hri F_bar S_hri
+
+    in eq. (cdmp-wb) instead of F_ext itself. With S_hri = 1 and V_ee = 0
+    the end effector then obeys M V_dot + D V = F_ext with the damping
+    D = 1 / k_hri of the paper and the virtual mass M = T_hri / k_hri
+    (2 kg for translation, 2 kg m^2 for rotation at T_hri = 0.1 s and the
+    paper's k_hri = 0.05): the classic admittance of eq. (admit-ctrl)
+    with K = 0, in velocity form. Why: the paper's M = 0 feeds the
+    wrist sensor's reading straight back into the velocity command, and
+    with the 100 Hz loop's tick of delay the sensor weighs the tool's
+    own reaction to that command (k_hri m / h, about 3 for the 0.4 kg
+    tool and a 0.2 kg hand) and a stiff grip's damping (k_hri D_hand)
+    with a loop gain above one at the Nyquist rate: the command buzzes
+    at 50 Hz. The lag rolls that gain off above 1 / (2 pi T_hri) (1.6
+    Hz), under the hand's 2 to 8 Hz of intent; its phase is part of
+    the loop that drake_wbc.analysis's admittance loop analyses.
+
+    - time_step = 0: the continuous lag, A = -I / T, B = I / T, C = I,
+      D = 0;
+    - time_step = h > 0: F_bar_k = F_bar_(k-1) + (1 - a) (F_ext_k -
+      F_bar_(k-1)), a = exp(-h / T): the exact zero-order-hold step of
+      the lag over the period in which F_ext_k is held, taken at its end,
+      so the filter adds no tick of delay (x+ = a x + (1 - a) u,
+      y = a x + (1 - a) u, the state the last output).
+
+    Args:
+        time_constant: T_hri in s, > 0 (0 is no filter: its stage is
+            left out).
+        time_step: the control period h in s, >= 0.
+        axes: the wrench's components (6: [f; tau]).
+
+    Returns:
+        (A, B, C, D): float arrays (axes, axes) each.
+    """
+    T = positive("time_constant", time_constant)
+    h = non_negative("time_step", time_step)
+    eye = np.eye(axes)
+    if h == 0.0:
+        return -eye / T, eye / T, eye.copy(), np.zeros((axes, axes))
+    a = math.exp(-h / T)
+    return a * eye, (1.0 - a) * eye, a * eye, (1.0 - a) * eye
 
 
 def base_cdmp_derivative(y, z, C, g, V_b, obstacle_points, params,

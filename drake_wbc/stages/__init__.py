@@ -22,6 +22,10 @@ stages' dataclasses but constructor arguments (`time_step`, `band`,
 down from ControllerParameters.
 """
 
+from drake_wbc.stages.admittance_filter import (
+    AdmittanceFilter,
+    AdmittanceFilter_,
+)
 from drake_wbc.stages.arm_control import (
     ArmCartesianVelocityController,
     ArmCartesianVelocityController_,
@@ -66,6 +70,8 @@ from drake_wbc.stages.whole_body_cdmp import (
 )
 
 __all__ = [
+    "AdmittanceFilter",
+    "AdmittanceFilter_",
     "ArmCdmp",
     "ArmCdmp_",
     "BaseCdmp",
