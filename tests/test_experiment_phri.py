@@ -122,3 +122,14 @@ def test_stages_group_the_pushes():
     assert phri.stages(scenario) == [("A", 0.0, 4.0)]
     scenario.scene.hand = HandForce()
     assert phri.stages(scenario) == []
+
+
+def test_a_run_shorter_than_the_schedule_reports_the_stages_it_reached(
+        tmp_path):
+    """`drake-wbc run phri --duration 3`: the hand's later stages start
+    after the run's end and are left out, the first ends with the run."""
+    summary = run_scenario("phri", tmp_path, duration=3.0, replay=False,
+                           progress=False, echo=None)
+    assert summary["metrics"]["phri.stages"] == "A"
+    assert summary["metrics"]["phri.A.end_s"] == 3.0
+    assert summary["metrics"]["phri.A.arm_path_m"] > 0.01

@@ -13,6 +13,7 @@ output folder:
 The summary is also printed.
 """
 
+import copy
 import json
 from pathlib import Path
 
@@ -55,7 +56,11 @@ def run_scenario(scenario, output, name=None, duration=None, replay=None,
     output = Path(output)
     output.mkdir(parents=True, exist_ok=True)
     replay = scenario.outputs.replay if replay is None else replay
-    duration = scenario.duration if duration is None else duration
+    if duration is not None:
+        # The metrics and figures read the run's length off the scenario.
+        scenario = copy.copy(scenario)
+        scenario.duration = duration
+    duration = scenario.duration
     logs, files = {}, []
     for variant in scenario.variants:
         loop = build_closed_loop(scenario, variant, replay=replay)
