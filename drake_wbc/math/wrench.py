@@ -39,7 +39,9 @@ central differences (second order in the sample period, no phase: they
 stand for the middle sample). A wrist sensor in a velocity loop of
 gain k_hri sees this reaction to the loop's own command; uncompensated,
 k_hri m times the tool's acceleration at the loop's Nyquist rate closes
-a loop of gain above one (the 50 Hz limit cycle of pHRI).
+a loop of gain above one (the 50 Hz limit cycle of the paper's pure
+admittance in pHRI; the whole body's admittance lag,
+math.cdmp.admittance_filter_model, rolls that loop off instead).
 """
 
 from dataclasses import dataclass, field
