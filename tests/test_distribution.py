@@ -195,8 +195,10 @@ def test_distribute_matches_the_formula_as_written():
         error = np.max(np.abs(actual - expected)) / np.max(np.abs(expected))
         worst[kind] = max(worst.get(kind, 0.0), error)
     # Kind 2 (damped, condition numbers up to 1e4) loses digits in the
-    # explicit inverse of the formula as written itself.
-    assert worst[0] < 1e-12 and worst[1] < 1e-12
+    # explicit inverse of the formula as written itself; kinds 0 and 1
+    # differ by rounding, whose last digit depends on the LAPACK at hand
+    # (up to 1.1e-12 seen).
+    assert worst[0] < 5e-12 and worst[1] < 5e-12
     assert worst[2] < 1e-9
 
 

@@ -107,6 +107,11 @@ from drake_wbc.math.validation import (
     positive,
 )
 
+SINGULAR_TOLERANCE = 1e-12
+"""J_wb Q J_wb^T counts as singular (an error without damping) when its
+smallest eigenvalue is at most this fraction of its largest: below it the
+undamped solve's result is rounding."""
+
 
 @dataclass
 class SingularityDamping:
@@ -201,15 +206,16 @@ def weighted_distribution(J_wb, V_ee, Q, null_velocity=None,
         x = 0.0 * rhs  # J Q^(1/2) = 0: no weighted input moves the end effector
     else:
         if damping is None:
-            try:
-                np.linalg.cholesky(M_value)
-            except np.linalg.LinAlgError:
+            # Numerically singular, whatever the rounding of the LAPACK
+            # at hand (a Cholesky factorisation may or may not succeed on
+            # an eigenvalue of 1e-17).
+            if eigenvalues[0] <= SINGULAR_TOLERANCE * eigenvalues[-1]:
                 raise ValueError(
                     "J_wb with J_wb Q J_wb^T of smallest eigenvalue "
                     f"{eigenvalues[0]:.6g} is not allowed with damping=None:"
                     " J_wb Q J_wb^T must be positive definite (J_wb Q^(1/2)"
                     " of full row rank); pass a SingularityDamping"
-                ) from None
+                )
         elif max(eigenvalues[0], 0.0) < damping.threshold * eigenvalues[-1]:
             s_max = vectors[:, -1] @ M @ vectors[:, -1]
             s_min = (vectors[:, 0] @ M @ vectors[:, 0]
