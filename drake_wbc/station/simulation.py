@@ -158,7 +158,9 @@ class StationOptions:
             (drake_wbc.robot.suspension: spring-damper joints in roll and
             pitch, sized to the modes with the arm at
             initial_arm_positions; with `horizontal`, the wheels' shear on
-            the floor in x, y and yaw too).
+            the floor in x, y and yaw too, which the odometry and
+            truth.base_pose, read from the driven joints like wheel
+            odometry, do not see).
         traction: None (the default: the wheels never slip) or the
             TractionParameters of the wheels' grip on the floor
             (drake_wbc.station.traction: the base's drive force saturated
