@@ -248,3 +248,25 @@ def test_a_rapid_step_slips_the_wheels_at_mu_g():
 def test_parameter_errors_name_the_field(kind, fields, name):
     with pytest.raises(ValueError, match=f"^{name} = "):
         kind(**fields)
+
+
+def test_the_station_on_compliant_wheels_starts_at_rest():
+    options = StationOptions(
+        time_step=0.005, suspension=PARAMS,
+        traction=TractionParameters())
+    times, com, odometry = _base_step(options, 0.0, 0.5)
+    station = SimulatedStation(options)
+    assert len(station.model.horizontal_joints) == 3
+    # The base's servo sized for the robot and the drive's own inertia.
+    rigid = SimulatedStation(StationOptions(time_step=0.005))
+    for name, inertia in zip(station.model.description.base.joints,
+                             PARAMS_DRIVE, strict=True):
+        mass = rigid._gains[name].d * rigid.options.base.servo_time_constant
+        assert station._gains[name].d == pytest.approx(
+            (mass + inertia) / options.base.servo_time_constant, rel=1e-12)
+    assert np.max(np.abs(com)) < 1e-6
+    assert np.max(np.abs(odometry)) < 1e-6
+
+
+PARAMS_DRIVE = (HORIZONTAL.drive_inertia, HORIZONTAL.drive_inertia,
+                HORIZONTAL.drive_yaw_inertia)
