@@ -270,3 +270,24 @@ def test_the_station_on_compliant_wheels_starts_at_rest():
 
 PARAMS_DRIVE = (HORIZONTAL.drive_inertia, HORIZONTAL.drive_inertia,
                 HORIZONTAL.drive_yaw_inertia)
+
+
+def test_on_compliant_wheels_the_filter_still_reduces_the_shaking():
+    from drake_wbc.experiments import trajectory_tracking
+    from drake_wbc.experiments.runner import build_closed_loop, simulate
+    from drake_wbc.experiments.scenario import find_scenario, load_scenario
+
+    scenario = load_scenario(find_scenario("trajectory_tracking_wheels"))
+    assert scenario.station.suspension.horizontal is not None
+    assert scenario.station.traction is not None
+    logs = {v.name: simulate(build_closed_loop(scenario, v), duration=2.0)
+            for v in scenario.variants}
+    for log in logs.values():
+        before = log.time < 0.9
+        assert np.max(np.abs(log["truth.end_effector_velocity"][before,
+                                                                 :3])) < 1e-3
+    scenario.duration = 2.0
+    metrics = trajectory_tracking.compute_metrics(scenario, logs)
+    ratio = "ratio_unfiltered_to_filtered."
+    assert metrics[ratio + "oscillation_rms_shaking_band_m_s"] > 1.5
+    assert metrics[ratio + "measured.oscillation_rms_shaking_band_m_s"] > 1.5
