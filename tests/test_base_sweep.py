@@ -34,13 +34,14 @@ def _base(scenario):
 
 
 def test_the_scenarios_own_model_is_a_point_of_every_map(shaking):
-    loop, compliance, acceleration = MAPS
+    loop, compliance, acceleration, wheels = MAPS
     suspension = shaking.station.suspension
     points = [
         point_scenario(shaking, loop, RINGING_LAG, 0.15),
         point_scenario(shaking, compliance, suspension.pitch_frequency,
                        suspension.damping_ratio),
         point_scenario(shaking, acceleration, RINGING_LAG, 5.0),
+        point_scenario(shaking, wheels, RIGID, 0.1),
     ]
     for point in points:
         assert _base(point) == _base(shaking)
@@ -50,6 +51,27 @@ def test_the_scenarios_own_model_is_a_point_of_every_map(shaking):
     assert _base(point) == _base(default)
     assert point_scenario(default, compliance, RIGID, 0.1).station.suspension \
         is None
+
+
+def test_the_wheels_map_varies_the_horizontal_compliance_alone(shaking):
+    wheels = MAPS[3]
+    compliant = load_scenario(find_scenario("trajectory_tracking_wheels"))
+    horizontal = compliant.station.suspension.horizontal
+    own = point_scenario(compliant, wheels, horizontal.frequency,
+                         horizontal.damping_ratio)
+    assert own.station.suspension == compliant.station.suspension
+    assert own.station.traction == compliant.station.traction
+    point = point_scenario(shaking, wheels, 12.0, 0.05)
+    assert point.station.suspension.horizontal.frequency == 12.0
+    assert point.station.suspension.horizontal.damping_ratio == 0.05
+    point.station.suspension.horizontal = None
+    assert point.station.suspension == shaking.station.suspension
+    assert _base(point) == _base(shaking)
+    # No map of the wheels around a rigid chassis (they are the
+    # suspension's).
+    default = load_scenario(find_scenario("trajectory_tracking"))
+    with pytest.raises(ValueError, match="^station.suspension = None"):
+        point_scenario(default, wheels, 8.0, 0.1)
 
 
 def test_a_short_lag_gets_a_plant_step_of_a_tenth_of_it(shaking):

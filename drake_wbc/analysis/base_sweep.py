@@ -9,7 +9,11 @@ scenario's:
   loop) against its damping ratio (a first-order lag in the last row);
 - `compliance`: the suspension's frequency (rigid in the first column)
   against its damping ratio;
-- `acceleration`: the loop's lag against its acceleration limit.
+- `acceleration`: the loop's lag against its acceleration limit;
+- `wheels`: the horizontal compliance of the wheels on the floor, its
+  frequency (rigid wheels in the first column) against its damping ratio
+  (drake_wbc.robot.suspension.HorizontalCompliance; around a scenario
+  with a suspension only, which carries it).
 
 At each point the scenario runs with and without the filter (its two
 variants, full duration) and the point reports the experiment's ratios
@@ -31,7 +35,10 @@ import numpy as np
 from drake_wbc.experiments import trajectory_tracking
 from drake_wbc.experiments.runner import build_closed_loop, simulate
 from drake_wbc.math.validation import validate
-from drake_wbc.robot.suspension import SuspensionParameters
+from drake_wbc.robot.suspension import (
+    HorizontalCompliance,
+    SuspensionParameters,
+)
 from drake_wbc.station.drivers import BaseDriverParameters
 
 RINGING_LAG = 1.0 / (2.0 * np.pi * 3.0)
@@ -61,6 +68,9 @@ MAPS = (
              "suspension damping ratio", (0.3, 0.1, 0.05)),
     SweepMap("acceleration", "loop lag (s)", (0.02, RINGING_LAG, 0.2),
              "loop acceleration limit (m/s^2)", (1.0, 5.0)),
+    SweepMap("wheels", "wheels' horizontal frequency (Hz)",
+             (RIGID, 5.0, 8.0, 12.0), "wheels' damping ratio",
+             (0.2, 0.1, 0.05)),
 )
 """The maps of the sweep."""
 
@@ -83,9 +93,21 @@ def point_scenario(scenario, sweep_map, x, y):
     if sweep_map.name == "loop":
         lag, zeta = x, None if y == FIRST_ORDER else y
     elif sweep_map.name == "compliance":
+        here = suspension or SuspensionParameters()
         suspension = None if x == RIGID else SuspensionParameters(
             roll_frequency=x, pitch_frequency=x, damping_ratio=y,
-            pivot_height=(suspension or SuspensionParameters()).pivot_height)
+            pivot_height=here.pivot_height, horizontal=here.horizontal)
+    elif sweep_map.name == "wheels":
+        if suspension is None:
+            raise ValueError(
+                "station.suspension = None is not allowed for the wheels "
+                "map: the horizontal compliance is the suspension's")
+        suspension = copy.deepcopy(suspension)
+        here = suspension.horizontal or HorizontalCompliance()
+        suspension.horizontal = None if x == RIGID else HorizontalCompliance(
+            frequency=x, yaw_frequency=None, damping_ratio=y,
+            drive_inertia=here.drive_inertia,
+            drive_yaw_inertia=here.drive_yaw_inertia)
     else:
         lag, accel = x, [y] * 3
     step = next(h for h in STEPS if h <= min(station.time_step, lag / 10))
@@ -101,12 +123,20 @@ def point_scenario(scenario, sweep_map, x, y):
 
 
 def _key(scenario):
-    base, suspension = scenario.station.base, scenario.station.suspension
+    station = scenario.station
+    base, suspension = station.base, station.suspension
+    horizontal = None if suspension is None else suspension.horizontal
     return (base.lag, base.damping_ratio, tuple(base.acceleration_limits),
-            base.servo_time_constant, scenario.station.time_step,
+            base.servo_time_constant, station.time_step,
             None if suspension is None else (
                 suspension.roll_frequency, suspension.pitch_frequency,
-                suspension.damping_ratio, suspension.pivot_height))
+                suspension.damping_ratio, suspension.pivot_height),
+            None if horizontal is None else (
+                tuple(horizontal.frequencies()), horizontal.damping_ratio,
+                horizontal.drive_inertia, horizontal.drive_yaw_inertia),
+            None if station.traction is None else (
+                station.traction.friction_coefficient,
+                station.traction.wheel_distance))
 
 
 def point_ratios(scenario):
@@ -134,6 +164,10 @@ def run_sweep(scenario, output, maps=MAPS, echo=print):
             f"experiment = {scenario.experiment!r} is not allowed for a "
             "sweep: must be trajectory_tracking with the variants "
             "filtered and unfiltered")
+    if scenario.station.suspension is None:
+        # The wheels' compliance is the suspension's: no map around a
+        # rigid chassis.
+        maps = tuple(m for m in maps if m.name != "wheels")
     output = Path(output)
     output.mkdir(parents=True, exist_ok=True)
     points = [(m, x, y) for m in maps for y in m.y_values
@@ -222,6 +256,7 @@ def draw_sweep(maps, rows, path, scenario):
     fig.colorbar(image, ax=axes, shrink=0.6,
                  label="without / with filter (> 1: the filter helps)")
     susp = station.suspension
+    wheels = None if susp is None else susp.horizontal
     fig.suptitle(
         "Base filter's benefit, end effector's velocity error while the "
         "0.1 m/s step lasts: ground truth (measured as the paper)\n"
@@ -229,7 +264,11 @@ def draw_sweep(maps, rows, path, scenario):
         f"{station.base.damping_ratio}, acceleration limit "
         f"{station.base.acceleration_limits[0]:g} m/s^2; suspension "
         + ("none" if susp is None else
-           f"{susp.pitch_frequency:g} Hz, {susp.damping_ratio:g}"),
+           f"{susp.pitch_frequency:g} Hz, {susp.damping_ratio:g}")
+        + ("" if wheels is None else
+           f"; wheels {wheels.frequency:g} Hz, {wheels.damping_ratio:g}")
+        + ("" if station.traction is None else
+           f"; grip mu {station.traction.friction_coefficient:g}"),
         fontsize=9)
     fig.savefig(path, dpi=110)
     plt.close(fig)

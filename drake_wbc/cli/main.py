@@ -96,8 +96,9 @@ def _add_run_arguments(parser):
         "--sweep", action="store_true",
         help="trajectory-tracking scenarios: run the step over small maps "
              "of base models around the scenario's (velocity loop, "
-             "suspension, acceleration limit) and plot the filter's "
-             "benefit (in <output>/sweep/; a few minutes)")
+             "suspension, acceleration limit, wheels' compliance) and "
+             "plot the filter's benefit (in <output>/sweep/; a few "
+             "minutes)")
 
 
 def _run_run(args):

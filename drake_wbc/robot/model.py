@@ -40,6 +40,7 @@ from pydrake.multibody.tree import (
     Joint,
     JointIndex,
     ModelInstanceIndex,
+    PrismaticSpring,
     RevoluteSpring,
     ScopedName,
 )
@@ -63,6 +64,7 @@ from drake_wbc.robot.description import (
     shipped_robot,
 )
 from drake_wbc.robot.suspension import (
+    HORIZONTAL_JOINTS,
     SUSPENSION_JOINTS,
     SuspensionGains,
     suspended_base_sdf,
@@ -161,6 +163,9 @@ class RobotModel:
             (roll, pitch) when the robot was added with one, else empty
             (drake_wbc.robot.suspension).
         mount: the ArmMount the arm was welded with.
+        horizontal_joints: the horizontal compliance's joints of the
+            wheels on the floor (x, y, yaw) when the suspension has one,
+            else empty.
     """
 
     description: RobotDescription
@@ -181,6 +186,7 @@ class RobotModel:
     limits: ArmLimits
     suspension_joints: tuple = ()
     mount: ArmMount = field(default_factory=ArmMount)
+    horizontal_joints: tuple = ()
 
     @property
     def num_arm_joints(self):
@@ -202,7 +208,9 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
         suspension: None (the chassis rigid on its planar joints, as the
             model has it) or the SuspensionGains of a suspension under the
             chassis (drake_wbc.robot.suspension), inserted into the
-            directives' first model, the base (model directives only).
+            directives' first model, the base (model directives only);
+            with a horizontal compliance, the base's actuators get the
+            drive's reflected inertia (gains.drive_inertia).
         mount: the ArmMount of the arm on the base (None: as the model
             has it): the pose of the directives' weld whose child is
             arm.base_frame (model directives only).
@@ -279,8 +287,19 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
     model = replace(_robot_model(plant, description), mount=mount)
     if suspension is None:
         return model
-    return replace(model, suspension_joints=tuple(
+    model = replace(model, suspension_joints=tuple(
         plant.GetJointByName(name, model.base) for name in SUSPENSION_JOINTS))
+    if not suspension.has_horizontal:
+        return model
+    inertia = as_vector("drive_inertia", suspension.drive_inertia, 3)
+    by_joint = {plant.get_joint_actuator(i).joint().index(): i
+                for i in plant.GetJointActuatorIndices()}
+    for joint, value in zip(model.base_joints, inertia, strict=True):
+        actuator = plant.get_joint_actuator(by_joint[joint.index()])
+        actuator.set_default_gear_ratio(1.0)
+        actuator.set_default_rotor_inertia(float(value))
+    return replace(model, horizontal_joints=tuple(
+        plant.GetJointByName(name, model.base) for name in HORIZONTAL_JOINTS))
 
 
 def _mount_weld(directives, description):
@@ -784,14 +803,24 @@ def suspension_modes(plant, model, q_a=None):
     return rocking_modes(plant, model, model.suspension_joints, q_a)
 
 
-def suspension_block(gains, q_a=None):
+def horizontal_modes(plant, model, q_a=None):
+    """The modes of the wheels' horizontal compliance on the floor (as
+    mount_rocking_modes, with the mount, the suspension's roll and pitch,
+    the base's driven planar joints and the arm held) of a plant made with
+    one; `shape` is in (x, y, yaw)."""
+    return rocking_modes(plant, model, model.horizontal_joints, q_a)
+
+
+def suspension_block(gains, q_a=None, horizontal=False):
     """(I, G): the diagonals of the mass matrix's block and of the gravity
     stiffness d tau_g / d theta (> 0: gravity topples the raised mass) of
-    the suspension's joints, with the arm at `q_a` (the home if None) and
-    the suspension of SuspensionGains `gains`, at rest."""
+    the suspension's joints (roll, pitch; or, if `horizontal`, the
+    horizontal compliance's x, y, yaw), with the arm at `q_a` (the home if
+    None) and the suspension of SuspensionGains `gains`, at rest."""
     plant, model = make_robot_plant(suspension=gains)
-    M, _, _, gravity = _compliant_block(plant, model,
-                                        model.suspension_joints, q_a)
+    joints = (model.horizontal_joints if horizontal
+              else model.suspension_joints)
+    M, _, _, gravity = _compliant_block(plant, model, joints, q_a)
     return np.diag(M).copy(), np.diag(gravity).copy()
 
 
@@ -837,11 +866,7 @@ def _compliant_block(plant, model, joints, q_a):
     iq = joint_position_indices(joints)
     iv = joint_velocity_indices(joints)
     M = plant.CalcMassMatrix(context)[np.ix_(iv, iv)]
-    springs = {
-        element.joint().index(): element.GetStiffness(context)
-        for element in _force_elements(plant)
-        if isinstance(element, RevoluteSpring)
-    }
+    springs = spring_stiffnesses(plant, context)
     k = np.array([springs.get(j.index(), 0.0) for j in joints])
     C = np.diag([j.default_damping() for j in joints])
     step = 1e-6
@@ -855,6 +880,20 @@ def _compliant_block(plant, model, joints, q_a):
             tau.append(plant.CalcGravityGeneralizedForces(context)[iv])
         gravity_gradient[:, col] = (tau[0] - tau[1]) / (2 * step)
     return M, k, C, gravity_gradient
+
+
+def spring_stiffnesses(plant, context=None):
+    """joint index -> the stiffness of its RevoluteSpring or
+    PrismaticSpring in `plant` (its default if `context` is None)."""
+    springs = {}
+    for element in _force_elements(plant):
+        if isinstance(element, RevoluteSpring):
+            springs[element.joint().index()] = (
+                element.default_stiffness() if context is None
+                else element.GetStiffness(context))
+        elif isinstance(element, PrismaticSpring):
+            springs[element.joint().index()] = element.stiffness()
+    return springs
 
 
 def _force_elements(plant):

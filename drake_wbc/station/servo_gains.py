@@ -36,11 +36,13 @@ def _actuators(plant, joints):
     return [by_joint[j.index()] for j in joints]
 
 
-def servo_gains(arm_positions, base, arm, description=None, mount=None):
+def servo_gains(arm_positions, base, arm, description=None, mount=None,
+                base_drive_inertia=None):
     """The PD gains of the base's and the arm's actuators.
 
-    The base's joints get a pure velocity servo, p = 0 and d = M_ii /
-    servo_time_constant; each arm joint a PD loop of `servo_frequency`
+    The base's joints get a pure velocity servo, p = 0 and d = (M_ii +
+    J_i) / servo_time_constant, J_i the drive's own reflected inertia
+    (none on rigid wheels); each arm joint a PD loop of `servo_frequency`
     and `damping_ratio` on its diagonal inertia I = max(M_ii,
     min_inertia): p = I w^2, d = 2 zeta I w. M is the robot's mass
     matrix with the arm at `arm_positions` (the mount at rest; the base's
@@ -52,20 +54,27 @@ def servo_gains(arm_positions, base, arm, description=None, mount=None):
         arm: ArmDriverParameters.
         description: the RobotDescription; the shipped robot's if None.
         mount: the robot's ArmMount (as its model has it if None).
+        base_drive_inertia: None (rigid wheels) or (3,) J, the drive's
+            reflected inertia of the base's x, y and yaw joints in the
+            plant (a horizontal compliance's,
+            drake_wbc.robot.suspension.SuspensionGains.drive_inertia).
 
     Returns:
         dict: the joint's scoped name (as the description names it) ->
         PdControllerGains, for `set_servo_gains`.
     """
     M, model = _mass_matrix(description, arm_positions, mount)
+    drive = (np.zeros(3) if base_drive_inertia is None
+             else as_vector("base_drive_inertia", base_drive_inertia, 3))
     names = model.description
     w = 2.0 * np.pi * arm.servo_frequency
     gains = {}
-    for name, i in zip(names.base.joints,
-                       joint_velocity_indices(model.base_joints),
-                       strict=True):
+    for name, i, J in zip(names.base.joints,
+                          joint_velocity_indices(model.base_joints), drive,
+                          strict=True):
+        # M_ii + 0.0 is M_ii: rigid wheels' gains are as they were.
         gains[name] = PdControllerGains(
-            p=0.0, d=M[i, i] / base.servo_time_constant)
+            p=0.0, d=(M[i, i] + J) / base.servo_time_constant)
     for name, i in zip(names.arm.joints,
                        joint_velocity_indices(model.arm_joints),
                        strict=True):
@@ -73,6 +82,15 @@ def servo_gains(arm_positions, base, arm, description=None, mount=None):
         gains[name] = PdControllerGains(
             p=inertia * w * w, d=2.0 * arm.damping_ratio * inertia * w)
     return gains
+
+
+def mass_on_wheels(arm_positions, description=None, mount=None):
+    """kg, the mass the base's wheels carry: the robot's mass matrix at
+    its x joint (the whole robot, which that joint moves), with the arm
+    at `arm_positions` (`description`, `mount` as for `servo_gains`)."""
+    M, model = _mass_matrix(description, arm_positions, mount)
+    i = joint_velocity_indices(model.base_joints)[0]
+    return float(M[i, i])
 
 
 def set_servo_gains(plant, model, gains):

@@ -40,11 +40,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
-from pydrake.multibody.tree import (
-    ForceElementIndex,
-    MultibodyForces,
-    RevoluteSpring,
-)
+from pydrake.multibody.tree import MultibodyForces
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import (
     ConstantValueSource,
@@ -68,6 +64,7 @@ from drake_wbc.robot.model import (
     add_robot,
     joint_position_indices,
     joint_velocity_indices,
+    spring_stiffnesses,
 )
 from drake_wbc.robot.suspension import (
     SuspensionParameters,
@@ -103,6 +100,7 @@ from drake_wbc.station.scene import (
 from drake_wbc.station.scene_sources import add_hand, add_people
 from drake_wbc.station.servo_gains import (
     drive_inertias,
+    mass_on_wheels,
     servo_gains,
     set_drive_inertias,
     set_servo_gains,
@@ -119,6 +117,11 @@ from drake_wbc.station.symbolic_drivers import (
     base_loop_state,
     base_loop_system,
     joint_rates_system,
+)
+from drake_wbc.station.traction import (
+    TractionParameters,
+    set_traction_limits,
+    traction_limits,
 )
 
 MAX_TIME_STEP = 0.005
@@ -154,7 +157,14 @@ class StationOptions:
             the suspension's modes between the wheels and the chassis
             (drake_wbc.robot.suspension: spring-damper joints in roll and
             pitch, sized to the modes with the arm at
-            initial_arm_positions).
+            initial_arm_positions; with `horizontal`, the wheels' shear on
+            the floor in x, y and yaw too, which the odometry and
+            truth.base_pose, read from the driven joints like wheel
+            odometry, do not see).
+        traction: None (the default: the wheels never slip) or the
+            TractionParameters of the wheels' grip on the floor
+            (drake_wbc.station.traction: the base's drive force saturated
+            at mu m g, a slip law).
         arm: the arm's position servo.
         wrist: the FT-300 model (noise and quantisation of the real
             sensor by default; ForceTorqueSensorParameters.ideal() for
@@ -177,6 +187,7 @@ class StationOptions:
     scene_period: float = 0.01
     base: BaseDriverParameters = field(default_factory=BaseDriverParameters)
     suspension: SuspensionParameters | None = None
+    traction: TractionParameters | None = None
     arm: ArmDriverParameters = field(default_factory=ArmDriverParameters)
     wrist: ForceTorqueSensorParameters = field(
         default_factory=ForceTorqueSensorParameters)
@@ -201,6 +212,8 @@ class StationOptions:
         self.suspension = checked_instance(
             "suspension", self.suspension, SuspensionParameters,
             lambda: None)
+        self.traction = checked_instance(
+            "traction", self.traction, TractionParameters, lambda: None)
         # The drivers run at the plant's step, whatever their own.
         check_base_time_step(self.base, "time_step", h, prefix="base.")
         check_arm_time_step(self.arm, "time_step", h, prefix="arm.")
@@ -280,20 +293,25 @@ class SimulatedStation:
             time_step=h, discrete_contact_approximation="sap",
             contact_model="hydroelastic_with_fallback",
             use_sampled_output_ports=False), builder)
-        model = add_robot(
-            plant, robot, suspension=None if options.suspension is None
-            else suspension_gains(options.suspension,
-                                  options.initial_arm_positions),
-            mount=mount)
+        suspension = None if options.suspension is None else (
+            suspension_gains(options.suspension,
+                             options.initial_arm_positions))
+        model = add_robot(plant, robot, suspension=suspension, mount=mount)
         check_arm_start(options.initial_arm_positions, model.limits.lower,
                         model.limits.upper, "station.initial_arm_positions")
         add_static_obstacles(plant, scene)
         self.hand_body = None if scene.hand.impedance is None else (
             add_hand_body(plant, model, scene.hand.impedance))
-        self._gains = servo_gains(options.initial_arm_positions,
-                                  options.base, options.arm, robot,
-                                  mount=mount)
+        self._gains = servo_gains(
+            options.initial_arm_positions, options.base, options.arm, robot,
+            mount=mount, base_drive_inertia=None if suspension is None
+            else suspension.drive_inertia)
         set_servo_gains(plant, model, self._gains)
+        if options.traction is not None:
+            set_traction_limits(plant, model, traction_limits(
+                options.traction, mass_on_wheels(
+                    options.initial_arm_positions, robot, mount=mount),
+                np.linalg.norm(plant.gravity_field().gravity_vector())))
         set_drive_inertias(plant, model, drive_inertias(
             options.initial_arm_positions, options.arm, robot, mount=mount))
         plant.Finalize()
@@ -528,8 +546,11 @@ class SimulatedStation:
 
     def _compliant_joints(self):
         """The base's spring-damper joints: the passive ones of the robot
-        (the mount's), then the suspension's if the station has one."""
-        return self.model.passive_joints + self.model.suspension_joints
+        (the mount's), then the suspension's if the station has one (and
+        its horizontal compliance's)."""
+        model = self.model
+        return (model.passive_joints + model.suspension_joints
+                + model.horizontal_joints)
 
     def _settle_under_gravity(self, context, q_cmd, iterations=30):
         """Moves the mount's (and the suspension's) and the arm's joints to
@@ -537,10 +558,7 @@ class SimulatedStation:
         iteration with each joint's own stiffness; gravity's stiffness is
         far smaller)."""
         plant, model = self.plant, self.model
-        springs = {e.joint().index(): e.default_stiffness()
-                   for e in (plant.get_force_element(ForceElementIndex(i))
-                             for i in range(plant.num_force_elements()))
-                   if isinstance(e, RevoluteSpring)}
+        springs = spring_stiffnesses(plant)
         compliant = self._compliant_joints()
         n = len(compliant)
         iq = np.concatenate([
