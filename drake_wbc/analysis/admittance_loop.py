@@ -96,6 +96,7 @@ from drake_wbc.robot.model import add_robot
 from drake_wbc.stages.wrench import sensor_rotation_in_base, tool_weight_reading
 from drake_wbc.station.driver_dynamics import interpolated_command
 from drake_wbc.station.force_torque import WeldWrench
+from drake_wbc.station.hand import add_hand_body
 from drake_wbc.station.scene import HandImpedance
 from drake_wbc.station.servo_gains import (
     drive_inertias,
@@ -156,23 +157,26 @@ def PeriodicArmDriver_(T):
                             converter=converter)
 
         def _sample_time(self, context):
+            # The sample the state holds: the last one strictly before
+            # the context's time. At a sample instant the plant's and
+            # this driver's updates read the state before the update,
+            # the previous sample's (where the station's driver, which
+            # keeps t_k in its state, is at the end of its ramp); after
+            # the update this rule gives the end of the new ramp, which
+            # no update reads before the next step.
             t = context.get_time()
             value = t.value() if hasattr(t, "value") else float(t)
             period = self.params.command_period
-            return period * np.floor(value / period + 1e-9)
+            return period * (np.ceil(value / period - 1e-9) - 1.0)
 
-        def _interpolated(self, context, updating=False):
-            # In the update at t_k the state is still the sample of
-            # t_k - period's.
+        def _interpolated(self, context):
             state = context.get_discrete_state_vector().CopyToVector()
-            t_k = self._sample_time(context) - (
-                self.params.command_period if updating else 0.0)
             return interpolated_command(
-                np.concatenate([state, [t_k]]), context.get_time(),
-                self.params.command_period)
+                np.concatenate([state, [self._sample_time(context)]]),
+                context.get_time(), self.params.command_period)
 
         def _update(self, context, discrete_state):
-            reached = self._interpolated(context, updating=True)[0]
+            reached = self._interpolated(context)[0]
             discrete_state.set_value(np.concatenate(
                 [reached, self._command.Eval(context)]))
 
@@ -199,7 +203,31 @@ def _rest(station):
     return root, station.plant.GetMyContextFromRoot(root)
 
 
-def build_plant_part(station, hand):
+def _add_welded_hand(plant, model, hand, X_WT):
+    """The hand as a point mass welded at the tool centre point, without
+    weight (the person carries it), and its spring-damper to the world
+    pose X_WT where it rests."""
+    instance = plant.AddModelInstance("hand")
+    body = plant.AddRigidBody("hand", instance, SpatialInertia(
+        hand.mass, np.zeros(3), UnitInertia(0.0, 0.0, 0.0)))
+    plant.WeldFrames(model.tcp_frame, body.body_frame(), RigidTransform())
+    plant.set_gravity_enabled(instance, False)
+    anchor = plant.AddFrame(FixedOffsetFrame(
+        "hand_rest", plant.world_frame(), X_WT))
+    plant.AddForceElement(LinearBushingRollPitchYaw(
+        anchor, body.body_frame(), np.zeros(3), np.zeros(3),
+        np.full(3, hand.stiffness), np.full(3, hand.damping)))
+
+
+GRIPS = ("weld", "station")
+"""How build_plant_part attaches the hand: "weld", a point mass welded at
+the tool centre point with a bushing to the world; "station", the
+station's own hand (station.hand.add_hand_body: a sphere on three
+prismatic joints with the hand's PD terms, held to the tool centre point
+by SAP's ball constraint), its desired state held at the rest."""
+
+
+def build_plant_part(station, hand, grip="weld"):
     """The plant part as a Diagram (module docstring): input
     arm.position_command (n), output wrench_measured (6, the sensor's
     frame, like the station's wrist.wrench_measured without noise).
@@ -236,20 +264,13 @@ def build_plant_part(station, hand):
         mount=mount))
     set_drive_inertias(plant, model, drive_inertias(
         options.initial_arm_positions, options.arm, robot, mount=mount))
-    # The hand: a point mass at the tool centre point, without weight (the
-    # person carries it), and its spring-damper to where it rests.
     _, settled = _rest(station)
     X_WT = station.model.tcp_frame.CalcPoseInWorld(settled)
-    instance = plant.AddModelInstance("hand")
-    body = plant.AddRigidBody("hand", instance, SpatialInertia(
-        hand.mass, np.zeros(3), UnitInertia(0.0, 0.0, 0.0)))
-    plant.WeldFrames(model.tcp_frame, body.body_frame(), RigidTransform())
-    plant.set_gravity_enabled(instance, False)
-    anchor = plant.AddFrame(FixedOffsetFrame(
-        "hand_rest", plant.world_frame(), X_WT))
-    plant.AddForceElement(LinearBushingRollPitchYaw(
-        anchor, body.body_frame(), np.zeros(3), np.zeros(3),
-        np.full(3, hand.stiffness), np.full(3, hand.damping)))
+    hand_body = None
+    if grip == "station":
+        hand_body = add_hand_body(plant, model, hand)
+    else:
+        _add_welded_hand(plant, model, hand, X_WT)
     plant.Finalize()
     driver = add("arm_driver", PeriodicArmDriver(
         options.arm, model.num_arm_joints))
@@ -261,6 +282,11 @@ def build_plant_part(station, hand):
             plant.get_desired_state_input_port(model.arm))
     connect(base_hold.get_output_port(),
             plant.get_desired_state_input_port(model.base))
+    if hand_body is not None:
+        hold = add("hand_hold", ConstantVectorSource(np.concatenate(
+            [X_WT.translation(), np.zeros(3)])))
+        connect(hold.get_output_port(),
+                plant.get_desired_state_input_port(hand_body.instance))
     connect(plant.get_reaction_forces_output_port(),
             weld.GetInputPort("reaction_forces"))
     connect(weld.GetOutputPort("wrench"), sensor.get_input_port())
