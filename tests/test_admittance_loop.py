@@ -1,6 +1,7 @@
 """The pHRI admittance loop's linear model (drake_wbc.analysis.
 admittance_loop): its plant part against a closed form, checked on the
-nonlinear plant part simulated in double."""
+nonlinear plant part simulated in double; its largest stable k_hri
+against the simulated station (short runs of stage A of `phri`)."""
 
 import numpy as np
 import pytest
@@ -8,6 +9,7 @@ from pydrake.systems.analysis import Simulator
 
 from drake_wbc.analysis import admittance_loop as al
 from drake_wbc.analysis.frequency import frequency_response
+from drake_wbc.experiments.runner import build_closed_loop, simulate
 from drake_wbc.experiments.scenario import find_scenario, load_scenario
 
 PERIOD = 0.01
@@ -50,3 +52,46 @@ def test_the_hand_spring_reads_minus_k_times_the_tool_displacement(setting):
     np.testing.assert_allclose(reading, -hand.stiffness * dx,
                                atol=0.05 * hand.stiffness
                                * np.linalg.norm(dx))
+
+
+def command_content(k_hri, time_constant, hand, duration=4.0):
+    """The `phri` scenario's first `duration` s (stage A: the first push)
+    at `k_hri` and hri_time_constant `time_constant` with `hand`: (the
+    share of the arm's translational velocity command's RMS above 3 Hz,
+    above the loops' crossovers (about 1 Hz); the share of ticks the arm's
+    acceleration limit acts), after the first second."""
+    scenario = load_scenario(find_scenario("phri"))
+    scenario.scene.hand.impedance = hand
+    whole_body = scenario.controller.whole_body_cdmp
+    whole_body.k_hri, whole_body.hri_time_constant = k_hri, time_constant
+    log = simulate(build_closed_loop(scenario), duration)
+    after = log.time > 1.0
+    u = log["arm_velocity_command"][after, :3]
+    power = np.abs(np.fft.rfft(u - u.mean(axis=0), axis=0)) ** 2
+    hertz = np.fft.rfftfreq(len(u), scenario.controller.time_step)
+    share = np.sqrt(power[hertz > 3.0].sum() / power.sum())
+    return share, float(np.mean(log["arm_limited"][after, 0] > 0.5))
+
+
+AGREEMENT = {"relaxed hand, paper's admittance": (al.HandImpedance(), 0.0),
+             "relaxed hand, T = 0.1 s": (al.HandImpedance(), 0.1),
+             "stiff hand, T = 0.1 s": (al.STIFF_HAND, 0.1)}
+
+
+@pytest.mark.parametrize("name", AGREEMENT)
+def test_the_simulation_oscillates_above_the_reported_limit_only(name,
+                                                                 setting):
+    """The largest stable k_hri of the linear loop, checked in the
+    simulated station: at 1.3 times it the arm's command oscillates
+    (most of it above 3 Hz, the acceleration limit acting), at 0.7 times
+    it does not (the push's slow motion and the sensor's noise)."""
+    scenario, station = setting
+    hand, time_constant = AGREEMENT[name]
+    case = al.AdmittanceCase(scenario, hand=hand,
+                             time_constant=time_constant, station=station)
+    limit = case.limit()
+    assert 1e-3 < limit < 0.5
+    above, limited_above = command_content(1.3 * limit, time_constant, hand)
+    below, limited_below = command_content(0.7 * limit, time_constant, hand)
+    assert above > 0.8 and limited_above > 0.3
+    assert below < 0.5 and limited_below < 0.05
