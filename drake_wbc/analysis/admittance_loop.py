@@ -39,15 +39,26 @@ combines them at the control period h:
   (LinearBushingRollPitchYaw, the hand's K and D in translation, nothing
   in rotation) to a world point at the tool centre point's rest position.
   The person's intention (station.hand.HandIntention) is held: it follows
-  the tool with a reaction time of 0.3 s, far slower than the loop's
-  crossover (above 1 Hz), so over the loop's band the hand is its spring
-  and damper to a fixed point;
+  the tool with a reaction time of 0.3 s (0.5 Hz), slower than the loop's
+  gain crossover (2 to 5 Hz) and far slower than the modes that go
+  unstable (the mount's rocking at 4 to 6 Hz, the tool's inertial
+  reaction at the 50 Hz Nyquist rate), so over the band that decides
+  stability the hand is its spring and damper to a fixed point (below
+  0.5 Hz the real hand follows the tool, which the model does not);
+- the arm's measured positions are fed back too (the estimator removes
+  the tool's weight at the measured configuration): the loop is opened
+  at the wrist's reading alone (`AdmittanceCase.wrench_loop`);
 - the loop (`admittance_loop`): the two in series, L = P C from the
   reading back to the reading (6 by 6, the sensor's frame turned into
   T_b for the per-axis responses), the closed loop's eigenvalues, the
   largest stable k_hri (bisection on k_hri, the controller relinearised;
   stable while the closed loop's spectral radius is below 1) and the
   gain and phase margins per translational axis at the scenario's k_hri.
+
+Checked against the simulated station (tests/test_admittance_loop.py):
+the `phri` scenario's stage A oscillates at 1.3 times the largest stable
+k_hri and is calm at 0.7 times it, for the relaxed hand with and without
+the admittance's lag and for the stiff hand with it.
 
 The scalar loop of one axis is L_i = -(R P C R^T)_ii (negative feedback,
 as frequency.stability_margins takes it; the other axes open), so its
@@ -82,7 +93,7 @@ from pydrake.systems.primitives import (
 )
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_wbc.analysis.frequency import frequency_response, stability_margins
+from drake_wbc.analysis.frequency import stability_margins
 from drake_wbc.analysis.period_map import linearize_period_map
 from drake_wbc.controller import build_controller
 from drake_wbc.experiments.scenario import (
@@ -495,16 +506,20 @@ class LoopResult:
     margins: dict
 
     def axis_loop(self, axis):
-        """omega (rad/s) -> L_axis (complex), `axis` in AXES."""
+        """omega (rad/s, a float or an array) -> L_axis (complex, one per
+        omega), `axis` in AXES: -(R (C (zI - A)^-1 B + D) R^T)_axis,axis
+        of the loop, z = e^(j omega h)."""
         i = AXES.index(axis)
-        R = self.rotation
-        lin = self.loop
+        R, lin = self.rotation, self.loop
+        A, h = lin.A(), lin.time_period()
+        c, b = (R @ lin.C())[i], lin.B() @ R.T[:, i]
+        d = float((R @ lin.D() @ R.T)[i, i])
+        eye = np.eye(A.shape[0])
 
         def loop(omega):
-            H = frequency_response(lin.A(), lin.B(), lin.C(), lin.D(),
-                                   np.atleast_1d(omega),
-                                   lin.time_period())
-            return -np.array([(R @ Hk @ R.T)[i, i] for Hk in H])
+            z = np.exp(1j * np.atleast_1d(omega) * h)
+            return -np.array([c @ np.linalg.solve(p * eye - A, b) + d
+                              for p in z])
 
         return loop
 
