@@ -170,6 +170,10 @@ class ResponseSummary:
         peak_db, peak_hz: the largest gain on the grid and where.
         gain_margin_db, phase_margin_deg: of a loop (nan where no loop
             closes; inf where |L| or the phase never crosses).
+        stable_gain: the largest stable value of a loop's gain (the
+            admittance loop's k_hri), nan where none is computed; the
+            table and summary.csv have this column only if some row has
+            one.
     """
 
     name: str
@@ -179,9 +183,10 @@ class ResponseSummary:
     peak_hz: float
     gain_margin_db: float = float("nan")
     phase_margin_deg: float = float("nan")
+    stable_gain: float = float("nan")
 
 
-def summarize(name, hertz, response, margins=None):
+def summarize(name, hertz, response, margins=None, stable_gain=None):
     """The ResponseSummary of `response` on the grid `hertz` (Hz), with
     the StabilityMargins `margins` of its loop if any."""
     omega = TWO_PI * as_vector("hertz", hertz)
@@ -196,7 +201,9 @@ def summarize(name, hertz, response, margins=None):
         gain_margin_db=(margins.gain_margin_db if margins is not None
                         else float("nan")),
         phase_margin_deg=(margins.phase_margin if margins is not None
-                          else float("nan")))
+                          else float("nan")),
+        stable_gain=(float("nan") if stable_gain is None
+                     else float(stable_gain)))
 
 
 TABLE_COLUMNS = (
@@ -207,7 +214,15 @@ TABLE_COLUMNS = (
     ("at (Hz)", "peak_hz", "{:.3f}"),
     ("GM (dB)", "gain_margin_db", "{:.2f}"),
     ("PM (deg)", "phase_margin_deg", "{:.1f}"),
+    ("largest stable gain", "stable_gain", "{:.4g}"),
 )
+
+
+def _columns(rows):
+    """TABLE_COLUMNS, without stable_gain unless a row has one."""
+    if any(not np.isnan(row.stable_gain) for row in rows):
+        return TABLE_COLUMNS
+    return tuple(c for c in TABLE_COLUMNS if c[1] != "stable_gain")
 
 
 def _cell(fmt, value):
@@ -220,8 +235,9 @@ def _cell(fmt, value):
 
 def format_table(rows):
     """The summaries as a text table, one row each, columns aligned."""
-    cells = [[title for title, _, _ in TABLE_COLUMNS]]
-    cells += [[_cell(fmt, getattr(row, key)) for _, key, fmt in TABLE_COLUMNS]
+    columns = _columns(rows)
+    cells = [[title for title, _, _ in columns]]
+    cells += [[_cell(fmt, getattr(row, key)) for _, key, fmt in columns]
               for row in rows]
     widths = [max(len(r[i]) for r in cells) for i in range(len(cells[0]))]
     lines = ["  ".join(c.ljust(w) if i == 0 else c.rjust(w)
@@ -236,7 +252,7 @@ def write_summary_csv(rows, path):
     path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    keys = [key for _, key, _ in TABLE_COLUMNS]
+    keys = [key for _, key, _ in _columns(rows)]
     with path.open("w", newline="") as stream:
         writer = csv.writer(stream)
         writer.writerow(keys)

@@ -62,7 +62,8 @@ def to_autodiff(system):
     return converted
 
 
-def linearize_period_map(system, context, period, input_port, output_port):
+def linearize_period_map(system, context, period, input_port, output_port,
+                         drop_clocks=False):
     """Linearises a discrete multi-rate `system` over one `period`, by
     AutoDiff through Drake's Simulator.
 
@@ -88,6 +89,12 @@ def linearize_period_map(system, context, period, input_port, output_port):
         period: the map's period in s, a whole multiple of every
             group's period.
         input_port, output_port: the vector ports of u and y.
+        drop_clocks: whether state entries that count time (e.g. the
+            InputGuard's valid_time) may move over the period: an entry
+            that moves is then dropped from the map if it is a clock
+            (its own row of A the identity's, nothing else depending on
+            it: its column of A and C zero elsewhere, its row of B zero);
+            any other moving entry is still an error.
 
     Returns:
         LinearSystem(A, B, C, D, period).
@@ -133,10 +140,23 @@ def linearize_period_map(system, context, period, input_port, output_port):
                          for i in range(len(sizes))])
     dx, dy = ExtractGradient(x1), ExtractGradient(y)
     value = ExtractValue(x1).ravel()
-    if not np.allclose(value, x0, rtol=0.0, atol=1e-9 * (1 + abs(x0).max(
-            initial=0.0))):
+    A, B, C, D = dx[:, :n], dx[:, n:], dy[:, :n], dy[:, n:]
+    moving = ~np.isclose(value, x0, rtol=0.0, atol=1e-9 * (
+        1 + abs(x0).max(initial=0.0)))
+    if drop_clocks:
+        for i in np.nonzero(moving)[0]:
+            others = np.delete(A[:, i], i)
+            if (A[i, i] == 1.0 and not np.delete(A[i], i).any()
+                    and not others.any() and not C[:, i].any()
+                    and not B[i].any()):
+                moving[i] = False
+        clocks = ~np.isclose(value, x0, rtol=0.0, atol=1e-9 * (
+            1 + abs(x0).max(initial=0.0))) & ~moving
+        keep = ~clocks
+        A, B, C = A[np.ix_(keep, keep)], B[keep], C[:, keep]
+    if moving.any():
         raise ValueError(
             "the operating point is not an equilibrium over one period "
-            f"(state moves by {np.abs(value - x0).max():.3g}), which "
-            "linearize_period_map does not allow")
-    return LinearSystem(dx[:, :n], dx[:, n:], dy[:, :n], dy[:, n:], h)
+            f"(state moves by {np.abs(value - x0)[moving].max():.3g}), "
+            "which linearize_period_map does not allow")
+    return LinearSystem(A, B, C, D, h)

@@ -21,7 +21,15 @@ and CSV per figure, summary.csv, and the table it returns):
   (lp-admit) and (tf-admit);
 - contact_loops: the arm's CDMP against a contact spring K (the wiping
   pad's), with the loops' gain and phase margins;
-- filter_sweep, split_sweep: families of curves over omega_f and zeta.
+- filter_sweep, split_sweep: families of curves over omega_f and zeta;
+- admittance_loop_*: in a scenario with intuitive pHRI (S_hri = 1 in its
+  parameters or its task) or a hand on the tool, the admittance loop of
+  drake_wbc.analysis.admittance_loop per case (the scenario's hand and a
+  stiff one, with and without the estimator's inertia compensation, at
+  the scenario's hri_time_constant and at the paper's 0 if that is not
+  it): L per translational axis of T_b, and a row per case with the gain
+  and phase margins of its least stable axis and the largest stable
+  k_hri of the whole loop.
 """
 
 from dataclasses import dataclass, field, replace
@@ -29,7 +37,12 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_wbc.analysis import chains, closed_forms, plant_chain
+from drake_wbc.analysis import (
+    admittance_loop,
+    chains,
+    closed_forms,
+    plant_chain,
+)
 from drake_wbc.analysis.bode import (
     BodePlot,
     draw,
@@ -257,6 +270,66 @@ def _sweep_plots(report, params, point, driver, hertz, omega, h):
     report.plots[split.name] = split
 
 
+def has_admittance_loop(scenario):
+    """Whether `scenario` runs the intuitive pHRI mode (S_hri = 1 in its
+    controller's parameters or at some time of its task) or has a hand on
+    the tool: then its bode report has the admittance loops."""
+    schedule = scenario.task.phri_switch
+    return bool(scenario.controller.phri_switch >= 0.5
+                or any(np.max(v) >= 0.5 for v in schedule.values)
+                or scenario.scene.hand.times)
+
+
+def admittance_cases(scenario):
+    """The cases of the admittance loops: (name, label, HandImpedance,
+    inertia_compensation, hri_time_constant)."""
+    own = scenario.scene.hand.impedance or admittance_loop.HandImpedance()
+    T = scenario.controller.whole_body_cdmp.hri_time_constant
+    cases = []
+    for T_case in ((T, 0.0) if T > 0.0 else (T,)):
+        for hand_name, hand in (("hand", own),
+                                ("stiff", admittance_loop.STIFF_HAND)):
+            for inertia in (False, True):
+                name = (f"admittance_loop_{hand_name}_T{T_case:g}"
+                        f"{'_inertia' if inertia else ''}")
+                label = (f"pHRI loop, {hand_name} {hand.stiffness:g} N/m, "
+                         f"T = {T_case:g} s"
+                         f"{', inertia comp.' if inertia else ''}")
+                cases.append((name, label, hand, inertia, T_case))
+    return cases
+
+
+def _admittance_plots(report, scenario, hertz, omega, h):
+    """admittance_loop_*: the admittance loop of each case at the
+    scenario's k_hri, L per axis of T_b, and its row."""
+    station = SimulatedStation(scenario.station, scenario.scene,
+                               scenario.arm_mount, scenario_robot(scenario))
+    plants = {}
+    for name, label, hand, inertia, T in admittance_cases(scenario):
+        case = admittance_loop.AdmittanceCase(
+            scenario, hand=hand, inertia_compensation=inertia,
+            time_constant=T, station=station, plant=plants.get(id(hand)))
+        plants[id(hand)] = (case.plant, case.rest_reading)
+        result = case.result(label, omega)
+        plot = BodePlot(name, f"{label}: L at k_hri = {result.k_hri:g} "
+                        f"(largest stable {result.limit:.4g})", hertz,
+                        nyquist_hz=0.5 / h)
+        for axis in admittance_loop.AXES:
+            plot.add(f"L, {axis} of T_b", result.axis_loop(axis)(omega))
+        report.plots[name] = plot
+        worst = min(admittance_loop.AXES,
+                    key=lambda a: result.margins[a].gain_margin)
+        report.rows.append(summarize(
+            f"{label} ({worst})", hertz,
+            plot.curves[admittance_loop.AXES.index(worst)].response,
+            result.margins[worst], stable_gain=result.limit))
+        report.notes.append(
+            f"{label}: closed-loop spectral radius {result.spectral_radius:.4f}"
+            f" at k_hri = {result.k_hri:g}; largest stable k_hri "
+            f"{result.limit:.4g}, oscillating at {result.limit_frequency:.3g}"
+            " Hz above it")
+
+
 def compute_bode_report(scenario, points_per_decade=60,
                         contact_stiffness=CONTACT_STIFFNESS):
     """Every response of `scenario` (a
@@ -295,6 +368,8 @@ def compute_bode_report(scenario, points_per_decade=60,
     _split_plots(report, params, point, station, hertz, omega, h)
     _dmp_plots(report, params, hertz, omega, h, contact_stiffness)
     _sweep_plots(report, params, point, driver, hertz, omega, h)
+    if has_admittance_loop(scenario):
+        _admittance_plots(report, scenario, hertz, omega, h)
     report.table = format_table(report.rows)
     report.notes.insert(0, (
         f"operating point: q_a = {np.round(point.arm_positions, 3).tolist()}"

@@ -18,10 +18,12 @@ already holds the forces of the initial state.
 from dataclasses import dataclass
 
 import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
 from pydrake.common.value import AbstractValue
-from pydrake.multibody.math import SpatialForce
+from pydrake.multibody.math import SpatialForce_
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import LeafSystem, LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.math.validation import (
     as_vector,
@@ -202,56 +204,76 @@ class WristForceTorqueSensor(SampledReading, LeafSystem):
         return self._measure(self._wrench.Eval(context), tick)
 
 
-class WeldWrench(LeafSystem):
-    """The true sensor wrench from the reaction forces of a weld.
+@TemplateSystem.define("WeldWrench_", T_list=(float, AutoDiffXd))
+def WeldWrench_(T):
+    class Impl(LeafSystem_[T]):
+        """The true sensor wrench from the reaction forces of a weld.
 
-    ::
+        ::
 
-                              ┌────────────┐
-            reaction_forces ─►│ WeldWrench ├──► wrench
-                              └────────────┘
+                                  ┌────────────┐
+                reaction_forces ─►│ WeldWrench ├──► wrench
+                                  └────────────┘
 
-    - reaction_forces: abstract, the list of SpatialForce that
-      `plant.get_reaction_forces_output_port()` gives, indexed by
-      int(joint.index()); each is the force on the joint's child body at
-      the joint's child frame, expressed in that frame.
-    - wrench: (6) -[f; tau] of the weld's reaction: the wrench the child
-      (the tool) exerts on the parent (the sensor), at and in the weld's
-      child frame (the measurement frame, for `ft300_sensing`).
+        - reaction_forces: abstract, the list of SpatialForce that
+          `plant.get_reaction_forces_output_port()` gives, indexed by
+          int(joint.index()); each is the force on the joint's child body
+          at the joint's child frame, expressed in that frame.
+        - wrench: (6) -[f; tau] of the weld's reaction: the wrench the
+          child (the tool) exerts on the parent (the sensor), at and in
+          the weld's child frame (the measurement frame, for
+          `ft300_sensing`).
 
-    Args:
-        plant: the MultibodyPlant holding the weld.
-        weld_joint: the weld, e.g. plant.GetJointByName("ft300_sensing",
-            model.tool).
-    """
+        Scalar-generic (double and AutoDiffXd, so that a plant's reading
+        can be linearised, drake_wbc.analysis.admittance_loop).
 
-    def __init__(self, plant, weld_joint):
-        super().__init__()
-        if not isinstance(plant, MultibodyPlant):
-            raise ValueError(f"plant = {plant!r} is not allowed: must be a "
-                             "MultibodyPlant (double)")
-        index = getattr(weld_joint, "index", None)
-        if (index is None or int(index()) >= plant.num_joints()
-                or plant.get_joint(index()) is not weld_joint):
-            raise ValueError(f"weld_joint = {weld_joint!r} is not allowed: "
-                             "must be a joint of plant")
-        if weld_joint.num_velocities() != 0:
-            raise ValueError(
-                f"weld_joint = {weld_joint!r} is not allowed: must be a "
-                f"weld (it has {weld_joint.num_velocities()} velocities)")
-        self.joint_index = int(index())
-        self._reactions = self.DeclareAbstractInputPort(
-            "reaction_forces",
-            AbstractValue.Make([SpatialForce(np.zeros(3), np.zeros(3))]))
-        self.DeclareVectorOutputPort("wrench", WRENCH_SIZE, self._output)
+        Args:
+            plant: the MultibodyPlant (double) holding the weld.
+            weld_joint: the weld, e.g. plant.GetJointByName(
+                "ft300_sensing", model.tool).
+        """
 
-    def _output(self, context, output):
-        reactions = self._reactions.Eval(context)
-        if len(reactions) <= self.joint_index:
-            raise ValueError(
-                f"reaction_forces has {len(reactions)} entries, which is not "
-                f"allowed: must have one per joint of the plant (the weld's "
-                f"index is {self.joint_index})")
-        reaction = reactions[self.joint_index]
-        output.SetFromVector(-np.concatenate([reaction.translational(),
-                                              reaction.rotational()]))
+        def _construct(self, plant, weld_joint, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            if not isinstance(plant, MultibodyPlant):
+                raise ValueError(f"plant = {plant!r} is not allowed: must be "
+                                 "a MultibodyPlant (double)")
+            index = getattr(weld_joint, "index", None)
+            if (index is None or int(index()) >= plant.num_joints()
+                    or plant.get_joint(index()) is not weld_joint):
+                raise ValueError(f"weld_joint = {weld_joint!r} is not "
+                                 "allowed: must be a joint of plant")
+            if weld_joint.num_velocities() != 0:
+                raise ValueError(
+                    f"weld_joint = {weld_joint!r} is not allowed: must be a "
+                    f"weld (it has {weld_joint.num_velocities()} velocities)")
+            self._declare(int(index()))
+
+        def _construct_copy(self, other, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._declare(other.joint_index)
+
+        def _declare(self, joint_index):
+            self.joint_index = joint_index
+            self._reactions = self.DeclareAbstractInputPort(
+                "reaction_forces",
+                AbstractValue.Make([SpatialForce_[T](np.zeros(3),
+                                                     np.zeros(3))]))
+            self.DeclareVectorOutputPort("wrench", WRENCH_SIZE, self._output)
+
+        def _output(self, context, output):
+            reactions = self._reactions.Eval(context)
+            if len(reactions) <= self.joint_index:
+                raise ValueError(
+                    f"reaction_forces has {len(reactions)} entries, which is "
+                    "not allowed: must have one per joint of the plant (the "
+                    f"weld's index is {self.joint_index})")
+            reaction = reactions[self.joint_index]
+            output.SetFromVector(-np.concatenate(
+                [reaction.translational(), reaction.rotational()]))
+
+    return Impl
+
+
+WeldWrench = WeldWrench_[None]
+"""The double WeldWrench_ (its docstring)."""
