@@ -57,9 +57,10 @@ def obstacle_points(count, seed=0, clearance=SHIPPED_CLEARANCE):
     """`count` obstacle points (count, 2) in T_b, seeded: a quarter of
     them between 0.05 and 0.4 m outside the circle of radius `clearance`
     around the base's centre (the circle through the footprint's corners:
-    all outside the footprint, inside the repulsive field's d_th), the
-    rest 0.5 to 4.5 m outside it, like LIDAR returns on walls (for the
-    shipped base, 0.55 to 0.9 m and 1 to 5 m from its centre)."""
+    all outside the footprint, most within the repulsive field's
+    d_th = 0.5 m of it), the rest 0.5 to 4.5 m outside that circle, like
+    LIDAR returns on walls (for the shipped base, 0.55 to 0.9 m and 1 to
+    5 m from its centre)."""
     count = whole_number("count", count, minimum=0)
     clearance = positive("clearance", clearance)
     rng = np.random.default_rng(seed)

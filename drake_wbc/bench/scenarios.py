@@ -32,7 +32,11 @@ def _run_in_child(path, duration, chunk, robot=None):
     started = time.perf_counter()
 
     from drake_wbc.experiments.runner import build_closed_loop, start_simulator
-    from drake_wbc.experiments.scenario import load_scenario, with_robot
+    from drake_wbc.experiments.scenario import (
+        load_scenario,
+        scenario_robot,
+        with_robot,
+    )
 
     imported = time.perf_counter()
     scenario = load_scenario(path)
@@ -55,6 +59,7 @@ def _run_in_child(path, duration, chunk, robot=None):
         t = step_end
     finished = time.perf_counter()
     return {
+        "robot": scenario_robot(scenario).name,
         "variant": scenario.variants[0].name,
         "simulated_s": duration,
         "wall_s": finished - built,
@@ -80,7 +85,8 @@ def run_scenario_in_child(path, duration=None, chunk=0.5, robot=None):
             None for the scenario's own robot.
 
     Returns:
-        dict: variant, simulated_s, wall_s, real_time_factor,
+        dict: robot (its name), variant, simulated_s, wall_s,
+        real_time_factor,
         chunk_real_time_factors, import_s, build_s, peak_memory_mib; or
         {"skipped": reason} if the scenario does not apply to `robot`.
     """
