@@ -86,11 +86,20 @@ MEASUREMENT_SETS = 100
 tick; ArmKinematics remembers 4 configurations)."""
 
 
-def footprint_clearance(arm):
-    """The radius in m of the circle through the corners of the
-    footprint of `arm`'s base (its description's footprint_half_sizes)."""
-    a, b = arm.model.description.base.footprint_half_sizes
-    return float(np.hypot(a, b))
+def robot_of(arm):
+    """(home (n,), clearance) of the robot of `arm`: its arm's home and
+    the radius in m of the circle through the corners of its base's
+    footprint (its description's footprint_half_sizes). An ArmKinematics
+    of a checkout from before robot descriptions, which
+    tools/bench_against.py runs this ticker on, has neither: the shipped
+    robot's, as that checkout's bench had them."""
+    description = getattr(getattr(arm, "model", None), "description", None)
+    if description is None:
+        from drake_wbc.robot.model import HOME_ARM_POSITIONS
+
+        return np.asarray(HOME_ARM_POSITIONS, dtype=float), SHIPPED_CLEARANCE
+    a, b = description.base.footprint_half_sizes
+    return arm.home, float(np.hypot(a, b))
 
 
 def measurements(arm, num_points, k, count=MEASUREMENT_SETS):
@@ -100,13 +109,13 @@ def measurements(arm, num_points, k, count=MEASUREMENT_SETS):
     period `count` ticks (amplitudes 0.02 rad and 1e-3), the obstacle
     points (outside that base's footprint) turned by 0.2 rad over the
     cycle, the tool's weight on the wrist at that arm configuration."""
+    home, clearance = robot_of(arm)
     cycle = 2.0 * np.pi * k / count
-    q = arm.home + 0.02 * np.sin(
-        cycle + np.arange(arm.num_joints) * (np.pi / 7))
+    q = home + 0.02 * np.sin(cycle + np.arange(len(home)) * (np.pi / 7))
     base_phase = cycle + np.arange(len(BASE_STATE)) * (np.pi / 7)
     angle = 0.2 * np.sin(cycle)
     c, s = np.cos(angle), np.sin(angle)
-    points = obstacle_points(num_points, clearance=footprint_clearance(arm))
+    points = obstacle_points(num_points, clearance=clearance)
     return {
         "base.state_estimated": BASE_STATE + 1e-3 * np.cos(base_phase),
         "arm.position_measured": q,
