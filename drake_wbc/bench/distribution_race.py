@@ -55,19 +55,19 @@ Solvers:
     tolerances tightened to 1e-9 so they agree.
 - drake_diffik_plant (with kinematics only; informative, not the same
   problem): Drake's overload that evaluates its own kinematics on the
-  robot's MultibodyPlant, in joint velocities, unweighted; the plant has
-  two more velocities (the flexible mount), held at zero by velocity
-  bounds. Its variables are the arm's n joint velocities and the
-  base's 3 (n + 3; the plant's other velocities held at zero), and its
-  null-space velocity is that of eq. (wbccm) at the arm's joints: V_n^0's
-  arm part, the twist k_n grad_x C_m in T_a, as joint velocities,
-  J_a^+ k_n grad_x C_m (J_a^+ = J_a^T (J_a J_a^T)^-1, J_a^-1 on six
-  joints), and 0 for the base (`DistributionProblem.
-  joint_null_velocity`, computed with the problem: given data, as the
-  gradient is). Drake builds the null-space cost from a
+  robot's MultibodyPlant, in joint velocities, unweighted. Its
+  variables are the arm's n joint velocities and the base's 3 (n + 3);
+  the plant's other velocities (the shipped robot's flexible mount, two)
+  are held at zero by velocity bounds. Its null-space velocity is that
+  of eq. (wbccm) at the arm's joints: V_n^0's arm part, the twist
+  k_n grad_x C_m in T_a, as joint velocities, J_a^+ k_n grad_x C_m
+  (J_a^+ = J_a^T (J_a J_a^T)^-1, J_a^-1 on six joints), and 0 for the
+  base (the problem's `joint_null_velocity`, computed with it: given
+  data, as the gradient is). Drake builds the null-space cost from a
   non-orthonormal basis, so with bounds its answer is not the
-  least-norm one of its (n + 3)-DoF problem; its difference is reported,
-  not checked.
+  least-norm one of its (n + 3)-DoF problem; its difference is
+  reported, not checked (without bounds, on a robot without a mount,
+  they agree).
 
 sigma is drawn inside (0.05, 0.95) so that Q is invertible (the QPs need
 Q^-1); no inequality constraint is present, so all the same-problem
