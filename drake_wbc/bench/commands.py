@@ -26,7 +26,6 @@ import warnings
 from pathlib import Path
 
 from drake_wbc.bench import report, timing
-from drake_wbc.cli.robot_option import add_robot_argument
 from drake_wbc.math.validation import positive, whole_number
 
 FULL = dict(repeats=30, problems=200, ticks=100, scaling_ticks=50,
@@ -76,9 +75,11 @@ def add_bench_arguments(parser):
     parser.add_argument("--profile", action="store_true",
                         help="also write cProfile reports of the control "
                              "tick and of a scenario")
-    add_robot_argument(
-        parser, "time the race, the control tick and the scenarios",
-        "; the race and the tick time the shipped robot without it")
+    parser.add_argument(
+        "--robot", type=Path, default=None,
+        help="time the race, the control tick and the scenarios on the "
+             "robot of this description YAML (default: the shipped robot, "
+             "and each scenario's own)")
 
 
 def settings_from(args):
