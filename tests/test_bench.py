@@ -1,7 +1,8 @@
 """drake-wbc bench: the quick run writes well-formed tables; the race is
 fair (every same-problem contender returns the same V_wb); the tick loop
 does one discrete update a tick, on measurements new every tick, and
-pulls the station's commands."""
+pulls the station's commands; with --robot, all of it on the second
+shipped robot (a 7-joint arm on another base)."""
 
 import argparse
 import json
@@ -14,12 +15,27 @@ from drake_wbc.bench import distribution_race as race
 from drake_wbc.bench.commands import FAIRNESS_TOLERANCE
 from drake_wbc.bench.report import GOALS
 from drake_wbc.math import distribution, kinematics
-from drake_wbc.robot.model import ArmKinematics
+from drake_wbc.robot.description import load_robot_description, models_dir
+from drake_wbc.robot.model import ArmKinematics, make_robot_plant
+
+LBR_FILE = models_dir() / "lbr_omni.robot.yaml"
+"""The second shipped robot's description: a 7-joint arm."""
 
 
 @pytest.fixture(scope="module")
 def arm():
     return ArmKinematics()
+
+
+@pytest.fixture(scope="module")
+def lbr():
+    return ArmKinematics(*make_robot_plant(load_robot_description(LBR_FILE)))
+
+
+@pytest.fixture(params=["arm", "lbr"])
+def either(request):
+    """The shipped robot's arm, then the 7-joint one."""
+    return request.getfixturevalue(request.param)
 
 
 def test_quick_bench_writes_well_formed_tables(tmp_path):
@@ -30,8 +46,11 @@ def test_quick_bench_writes_well_formed_tables(tmp_path):
     printed = []
     assert run_bench(args, echo=printed.append) == 0
     results = json.loads((tmp_path / "bench.json").read_text())
-    assert set(results) == {"environment", "settings", "distribution",
-                            "control_tick", "scaling", "scenarios", "goals"}
+    assert set(results) == {"environment", "settings", "robot",
+                            "distribution", "control_tick", "scaling",
+                            "scenarios", "goals"}
+    assert results["robot"] == {"name": "mcr", "arm_joints": 6}
+    assert results["settings"]["robot"] is None
     env = results["environment"]
     assert env["packages"]["drake"] and env["packages"]["numpy"]
     assert env["cpu_count"] >= 1 and env["cpu_model"] and env["python"]
@@ -59,6 +78,7 @@ def test_quick_bench_writes_well_formed_tables(tmp_path):
         == [100.0, 1000.0]
     run = results["scenarios"]["trajectory_tracking"]
     assert run["real_time_factor"] > 0 and run["peak_memory_mib"] > 50
+    assert run["runs"][0]["robot"] == "mcr"
     assert [g["goal"] for g in results["goals"]] == [g[0] for g in GOALS]
     assert all(isinstance(g["met"], bool) for g in results["goals"])
 
@@ -89,7 +109,8 @@ def test_quick_bench_writes_well_formed_tables(tmp_path):
 
 
 @pytest.mark.filterwarnings("ignore:The default value of raise_error")
-def test_contenders_agree_without_active_constraints(arm):
+def test_contenders_agree_without_active_constraints(either):
+    arm = either
     problems = race.make_problems(12, seed=7, arm=arm)
     given = race.given_data(arm, problems)
     solvers = race.make_solvers(arm)
@@ -154,10 +175,14 @@ def test_an_unfair_race_stops_before_timing(arm, monkeypatch):
 
 
 @pytest.mark.filterwarnings("ignore:The default value of raise_error")
-def test_scaled_diffik_is_the_weighted_least_norm_problem(arm):
+def test_scaled_diffik_is_the_weighted_least_norm_problem(either):
     """Independent of the controller's code: the weighted problem's KKT
-    system, solved directly, gives what every contender gives."""
+    system, solved directly, gives what every contender gives (9
+    variables and 6 equalities on the 7-joint arm as on six joints: the
+    arm's input is its twist)."""
+    arm = either
     problem = race.make_problems(1, seed=3, arm=arm)[0]
+    assert race.problem_size(arm) == (9, 6)
     p_ee = arm.evaluate(problem.arm_position).p_ee_in_base
     J = kinematics.whole_body_jacobian(None, p_ee, arm.R_ba)
     W = np.diag(1.0 / np.diag(distribution.weighting_matrix(
@@ -329,3 +354,148 @@ def test_a_tick_pulls_the_station_s_commands():
     assert not any(up_to_date())
     ticker.advance()
     assert all(up_to_date())
+
+
+@pytest.mark.filterwarnings("ignore:The default value of raise_error")
+def test_the_joint_space_peer_takes_eq_wbccm_at_the_arm_s_joints(either):
+    """The joint-space DiffIK peer's null-space velocity moves the tool
+    by V_n^0's arm twist, k_n grad_x C_m (J_a z = that twist, at least
+    norm: z in the row space of J_a), and it answers in the arm's n
+    joints and the base's 3; on the 7-joint arm, whose base has no
+    flexible mount to hold by bounds, Drake's QP is the least-norm
+    problem's answer (an independent KKT system) to 1e-9."""
+    arm = either
+    n = arm.num_joints
+    problems = race.make_problems(6, seed=5, arm=arm)
+    peer = race.PlantDiffIk(arm)
+    for problem in problems:
+        J_a = arm.evaluate(problem.arm_position).J_a
+        z = problem.joint_null_velocity
+        assert z.shape == (n,)
+        np.testing.assert_allclose(
+            J_a @ z, problem.null_space_gain * problem.capability_gradient,
+            atol=1e-12)
+        _, residual, _, _ = np.linalg.lstsq(J_a.T, z, rcond=None)
+        assert residual.size == 0 or residual[0] < 1e-20  # z = J_a^T y
+        assert peer(problem).shape == (n + 3,)
+    if arm.model.passive_joints:
+        return
+    for problem in problems:
+        # min |v - z|^2 s.t. J v = V in the joint space (arm, base in T_w),
+        # by its KKT system, then the base's part turned into T_b.
+        peer(problem)
+        from pydrake.multibody.tree import JacobianWrtVariable
+
+        world = peer.plant.world_frame()
+        J = peer.plant.CalcJacobianSpatialVelocity(
+            peer.context, JacobianWrtVariable.kV, peer.frame, np.zeros(3),
+            world, world)[:, np.concatenate([peer.iv_arm, peer.iv_base])]
+        twist = peer._world_twist(problem)
+        z = np.concatenate([problem.joint_null_velocity, np.zeros(3)])
+        kkt = np.block([[np.eye(n + 3), J.T], [J, np.zeros((6, 6))]])
+        v = np.linalg.solve(kkt, np.concatenate([z, twist]))[:n + 3]
+        c, s = np.cos(problem.base_yaw), np.sin(problem.base_yaw)
+        expected = np.concatenate([v[:n], [c * v[n] + s * v[n + 1],
+                                           -s * v[n] + c * v[n + 1],
+                                           v[n + 2]]])
+        np.testing.assert_allclose(peer(problem), expected, atol=1e-9)
+        np.testing.assert_allclose(peer.least_norm(problem), expected,
+                                   atol=1e-9)
+
+
+def test_a_short_tick_on_the_7_joint_robot(lbr):
+    """The ticker on the second shipped robot: its controller (seven
+    joints in, seven commands out, within its limits), one update a tick,
+    the arm measured about its home, every obstacle point outside its
+    footprint (1.0 x 0.7 m, not the shipped 0.8 x 0.6 m), a quarter of
+    them 0.05 to 0.4 m outside the circle through its corners and the
+    rest 0.5 to 4.5 m."""
+    from drake_wbc.bench.control_tick import ControllerTicker
+
+    ticker = ControllerTicker(lbr, num_points=40, measurement_sets=6)
+    assert ticker.controller.arm is lbr
+    half_sizes = load_robot_description(LBR_FILE).base.footprint_half_sizes
+    for values in ticker.values:
+        q = values["arm.position_measured"]
+        assert q.shape == (7,)
+        assert np.max(np.abs(q - lbr.home)) <= 0.02
+        points = values["lidar.obstacle_points"].get_value()
+        gaps = np.hypot(np.maximum(np.abs(points[:, 0]) - half_sizes[0], 0),
+                        np.maximum(np.abs(points[:, 1]) - half_sizes[1], 0))
+        assert np.all(gaps > 0.0)
+        beyond = np.linalg.norm(points, axis=1) - np.hypot(*half_sizes)
+        near = len(points) // 4
+        assert np.all((beyond[:near] > 0.05) & (beyond[:near] < 0.4))
+        assert np.all((beyond[near:] > 0.5) & (beyond[near:] < 4.5))
+    simulator = ticker.simulator
+    batch = ticker.ticks(5)
+    before = simulator.get_num_discrete_updates()
+    batch()
+    assert simulator.get_num_discrete_updates() - before == 5
+    command = ticker.controller.diagram.GetOutputPort(
+        "arm.position_command").Eval(ticker.context)
+    assert command.shape == (7,)
+    assert np.all(command >= lbr.lower) and np.all(command <= lbr.upper)
+    assert ticker.controller.safety_reason(ticker.context) == ""
+
+
+@pytest.mark.filterwarnings("ignore:The default value of raise_error")
+def test_quick_bench_on_the_7_joint_robot(tmp_path):
+    """`drake-wbc bench --quick --robot models/lbr_omni.robot.yaml`, at
+    the smallest counts its options allow: every part on that robot (the
+    race fair, the joint-space peer answering its own problem, the tick,
+    the scenario run on it)."""
+    parser = argparse.ArgumentParser()
+    add_bench_arguments(parser)
+    args = parser.parse_args(["--quick", "--output", str(tmp_path),
+                              "--repeats", "1", "--scenario-duration",
+                              "0.1", "--robot", str(LBR_FILE)])
+    assert run_bench(args, echo=lambda line: None) == 0
+    results = json.loads((tmp_path / "bench.json").read_text())
+    assert results["robot"] == {"name": "lbr_omni", "arm_joints": 7}
+    assert results["settings"]["robot"] == str(LBR_FILE.resolve())
+    race_results = results["distribution"]
+    assert race_results["fair"]
+    for name, entry in race_results["solve"].items():
+        assert entry["max_abs_difference"] <= FAIRNESS_TOLERANCE, name
+    plant = race_results["with_kinematics"]["drake_diffik_plant"]
+    assert plant["max_abs_difference"] < 1e-9  # no mount: no bounds
+    assert results["control_tick"]["tick"]["time_us"]["median"] > 0
+    run = results["scenarios"]["trajectory_tracking"]
+    assert run["runs"][0]["robot"] == "lbr_omni"
+    assert run["runs"][0]["simulated_s"] == pytest.approx(0.1)
+    assert "Robot: lbr_omni (7 arm joints)." in (
+        tmp_path / "bench.md").read_text()
+
+
+def test_a_scenario_that_does_not_fit_the_robot_is_skipped(tmp_path):
+    """A post 0.7 m ahead of the base's centre (radius 0.25 m) is clear
+    of the shipped base (its front at 0.4 m) and overlaps the 7-joint
+    robot's (at 0.5 m): on that robot the scenario is skipped, with the
+    reason, and the table says so; the goals leave it out."""
+    from drake_wbc.bench import report, timing
+    from drake_wbc.bench.commands import bench_scenarios
+    from drake_wbc.experiments.scenario import find_scenario, load_scenario
+
+    text = find_scenario("trajectory_tracking").read_text()
+    path = tmp_path / "post_ahead.yaml"
+    path.write_text(text + "\nscene:\n  cylinders:\n  - {name: post, "
+                    "position: [0.7, 0.0], radius: 0.25, height: 1.0}\n")
+    load_scenario(path)  # checked on the shipped robot: it fits
+    settings = dict(scenarios=(str(path),), scenario_duration=0.05,
+                    scenario_repeats=2, robot=str(LBR_FILE))
+    printed = []
+    scenarios = bench_scenarios(settings, echo=printed.append)
+    assert set(scenarios) == {"post_ahead"}
+    reason = scenarios["post_ahead"]["skipped"]
+    assert "post" in reason and "footprint" in reason
+    assert sum("skipped" in line for line in printed) == 1  # tried once
+    results = {"environment": timing.environment(), "settings": {},
+               "scenarios": scenarios,
+               "goals": report.evaluate_goals({"scenarios": scenarios})}
+    goal = next(g for g in results["goals"]
+                if g["goal"] == "scenario_real_time_factor")
+    assert goal["measured"] is None and goal["met"] is None
+    rows = [line for line in report.markdown(results).splitlines()
+            if line.startswith("| post_ahead |")]
+    assert len(rows) == 1 and "skipped: " in rows[0]

@@ -1,6 +1,6 @@
 """`drake-wbc bench`: the arguments and the run.
 
-    drake-wbc bench [--quick] [--output DIR] [--repeats N]
+    drake-wbc bench [--quick] [--output DIR] [--repeats N] [--robot FILE]
 
 measures, in one process and interleaved (drake_wbc.bench.timing), in
 wall-clock and in the thread's CPU time: the closed-form motion
@@ -12,6 +12,14 @@ number of obstacle
 points and the control rate, and, each in a child process, every
 scenario's real-time factor and peak memory (bench.scenarios). It prints
 the tables and writes bench.json and bench.md to the output folder.
+
+With `--robot FILE` (a robot description, drake_wbc.robot.description)
+every part times that robot: the race on its arm's joints and mounting,
+the tick of its controller (its limits, footprint and tuning) against
+measurements near its home and obstacle points outside its footprint,
+and the scenarios on it (as `drake-wbc run SCENARIO --robot FILE`), those
+whose start does not fit it skipped. Without it, the shipped robot (and
+each scenario's own), as before.
 """
 
 import warnings
@@ -67,6 +75,11 @@ def add_bench_arguments(parser):
     parser.add_argument("--profile", action="store_true",
                         help="also write cProfile reports of the control "
                              "tick and of a scenario")
+    parser.add_argument(
+        "--robot", type=Path, default=None,
+        help="time the race, the control tick and the scenarios on the "
+             "robot of this description YAML (default: the shipped robot, "
+             "and each scenario's own)")
 
 
 def settings_from(args):
@@ -81,7 +94,27 @@ def settings_from(args):
         "--scenario-repeats", args.scenario_repeats, 1)
     settings["seed"] = args.seed
     settings["quick"] = bool(args.quick)
+    robot = getattr(args, "robot", None)
+    settings["robot"] = None if robot is None else str(Path(robot).resolve())
     return settings
+
+
+def bench_arm(settings):
+    """The ArmKinematics the race and the ticks time: that of the robot
+    of settings["robot"] (a description's file), the shipped robot's if
+    None.
+
+    Raises:
+        ValueError: naming the file and the field of a description that
+            does not load.
+    """
+    from drake_wbc.robot.description import load_robot_description
+    from drake_wbc.robot.model import ArmKinematics, make_robot_plant
+
+    if settings.get("robot") is None:
+        return ArmKinematics()
+    description = load_robot_description(settings["robot"])
+    return ArmKinematics(*make_robot_plant(description))
 
 
 def _stats(times, name, reference=None):
@@ -209,23 +242,26 @@ def bench_scenarios(settings, echo=print):
     paths = (scenario_files() if names is None
              else [find_scenario(name) for name in names])
     results = measure_scenarios(paths, settings["scenario_duration"],
-                                settings["scenario_repeats"], echo=echo)
+                                settings["scenario_repeats"], echo=echo,
+                                robot=settings.get("robot"))
     for entry in results.values():
-        entry["chunk_real_time_factor_stats"] = timing.summarize(
-            entry.pop("chunk_real_time_factor"))
+        if "skipped" not in entry:
+            entry["chunk_real_time_factor_stats"] = timing.summarize(
+                entry.pop("chunk_real_time_factor"))
     return results
 
 
 def run_benchmarks(settings, echo=print):
-    """Every part with `settings` (see FULL); returns the results dict
-    (environment, settings, distribution, control_tick, scaling,
-    scenarios, goals)."""
-    from drake_wbc.robot.model import ArmKinematics
-
-    arm = ArmKinematics()
+    """Every part with `settings` (see FULL; its "robot", a
+    description's file or None, the robot timed); returns the results
+    dict (environment, settings, robot, distribution, control_tick,
+    scaling, scenarios, goals)."""
+    arm = bench_arm(settings)
     results = {"environment": timing.environment(),
                "settings": {k: (list(v) if isinstance(v, tuple) else v)
-                            for k, v in settings.items()}}
+                            for k, v in settings.items()},
+               "robot": dict(name=arm.model.description.name,
+                             arm_joints=arm.num_joints)}
     parts = (("distribution", "motion distribution race",
               lambda: bench_distribution(arm, settings)),
              ("control_tick", "control tick, whole and per stage",
@@ -257,23 +293,23 @@ def run_bench(args, echo=print):
     echo("")
     echo(text)
     if args.profile:
-        _write_profiles(output, settings, echo)
+        _write_profiles(output, settings, echo, arm=bench_arm(settings))
     echo(f"Written to {output}/: bench.json, bench.md"
          + (", profile_tick.txt, profile_scenario.txt"
             if args.profile else ""))
     return 0
 
 
-def _write_profiles(output, settings, echo):
+def _write_profiles(output, settings, echo, arm):
     from drake_wbc.bench import profiling
     from drake_wbc.bench.control_tick import make_ticker
     from drake_wbc.experiments.scenario import find_scenario
 
     echo("bench: profiling ...")
-    ticker = make_ticker(num_points=TICK_POINTS)
+    ticker = make_ticker(arm, num_points=TICK_POINTS)
     (output / "profile_tick.txt").write_text(
         profiling.profile_ticks(ticker, 50 if settings["quick"] else 500))
     (output / "profile_scenario.txt").write_text(profiling.profile_scenario(
         find_scenario("trajectory_tracking"),
-        0.5 if settings["quick"] else 2.0))
+        0.5 if settings["quick"] else 2.0, robot=settings.get("robot")))
 

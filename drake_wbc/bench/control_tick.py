@@ -2,7 +2,9 @@
 as the robot sees it.
 
 The controller runs alone in a Simulator (no plant) against measurements
-that change every tick: the robot near the home pose, each arm joint
+that change every tick, on the robot of its ArmKinematics (the shipped
+one, or any described robot's): the robot near its home pose, each arm
+joint
 moving on a slow sine of its own (a new arm configuration every tick, so
 that no kinematics memo can hit, as on the robot), the base state and the
 obstacle points (scattered around the base, rotating slowly) changing
@@ -36,7 +38,7 @@ from pydrake.systems.framework import PortDataType
 from drake_wbc.controller import ControllerParameters, build_controller
 from drake_wbc.controller.diagram import STATION_INPUTS
 from drake_wbc.math.validation import positive, whole_number
-from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.wrench import tool_weight_reading
 
 REFERENCE_VELOCITY = np.array([0.1, 0.05, 0.0, 0.0, 0.0, 0.05])
@@ -46,15 +48,26 @@ BASE_STATE = np.array([0.0, 0.0, 0.3, 0.0, 0.0, 0.0])
 """The measured base state: at the origin, yawed 0.3 rad, at rest."""
 
 
-def obstacle_points(count, seed=0):
+SHIPPED_CLEARANCE = 0.5
+"""The radius in m of the circle through the corners of the shipped
+base's 0.8 x 0.6 m footprint, obstacle_points' default."""
+
+
+def obstacle_points(count, seed=0, clearance=SHIPPED_CLEARANCE):
     """`count` obstacle points (count, 2) in T_b, seeded: a quarter of
-    them within 0.5 m of the footprint (inside the repulsive field's
-    d_th), the rest between 1 and 5 m away, like LIDAR returns on walls."""
+    them between 0.05 and 0.4 m outside the circle of radius `clearance`
+    around the base's centre (the circle through the footprint's corners:
+    all outside the footprint, most within the repulsive field's
+    d_th = 0.5 m of it), the rest 0.5 to 4.5 m outside that circle, like
+    LIDAR returns on walls (for the shipped base, 0.55 to 0.9 m and 1 to
+    5 m from its centre)."""
     count = whole_number("count", count, minimum=0)
+    clearance = positive("clearance", clearance)
     rng = np.random.default_rng(seed)
     near = count // 4
-    radius = np.concatenate([rng.uniform(0.55, 0.9, near),
-                             rng.uniform(1.0, 5.0, count - near)])
+    radius = np.concatenate(
+        [rng.uniform(clearance + 0.05, clearance + 0.4, near),
+         rng.uniform(clearance + 0.5, clearance + 4.5, count - near)])
     angle = rng.uniform(-np.pi, np.pi, count)
     return np.column_stack([radius * np.cos(angle),
                             radius * np.sin(angle)])
@@ -73,22 +86,42 @@ MEASUREMENT_SETS = 100
 tick; ArmKinematics remembers 4 configurations)."""
 
 
+def robot_of(arm):
+    """(home (n,), clearance) of the robot of `arm`: its arm's home and
+    the radius in m of the circle through the corners of its base's
+    footprint (its description's footprint_half_sizes). An ArmKinematics
+    of a checkout from before robot descriptions, which
+    tools/bench_against.py runs this ticker on, has neither: the shipped
+    robot's, as that checkout's bench had them."""
+    description = getattr(getattr(arm, "model", None), "description", None)
+    if description is None:
+        from drake_wbc.robot.model import HOME_ARM_POSITIONS
+
+        return np.asarray(HOME_ARM_POSITIONS, dtype=float), SHIPPED_CLEARANCE
+    a, b = description.base.footprint_half_sizes
+    return arm.home, float(np.hypot(a, b))
+
+
 def measurements(arm, num_points, k, count=MEASUREMENT_SETS):
-    """The station inputs of tick `k` (of `count` in a cycle): every
-    entry of the arm's joints and the base state on a sine of its own
-    with period `count` ticks (amplitudes 0.02 rad and 1e-3), the
-    obstacle points turned by 0.2 rad over the cycle, the tool's weight
-    on the wrist at that arm configuration."""
-    phase = 2.0 * np.pi * k / count + np.arange(6) * (np.pi / 7)
-    q = HOME_ARM_POSITIONS + 0.02 * np.sin(phase)
-    angle = 0.2 * np.sin(2.0 * np.pi * k / count)
+    """The station inputs of tick `k` (of `count` in a cycle) for the
+    robot of `arm` (ArmKinematics): every entry of the arm's n joints
+    (about its home) and of the base state on a sine of its own with
+    period `count` ticks (amplitudes 0.02 rad and 1e-3), the obstacle
+    points (outside that base's footprint) turned by 0.2 rad over the
+    cycle, the tool's weight on the wrist at that arm configuration."""
+    home, clearance = robot_of(arm)
+    cycle = 2.0 * np.pi * k / count
+    q = home + 0.02 * np.sin(cycle + np.arange(len(home)) * (np.pi / 7))
+    base_phase = cycle + np.arange(len(BASE_STATE)) * (np.pi / 7)
+    angle = 0.2 * np.sin(cycle)
     c, s = np.cos(angle), np.sin(angle)
+    points = obstacle_points(num_points, clearance=clearance)
     return {
-        "base.state_estimated": BASE_STATE + 1e-3 * np.cos(phase),
+        "base.state_estimated": BASE_STATE + 1e-3 * np.cos(base_phase),
         "arm.position_measured": q,
         "wrist.wrench_measured": tool_weight_reading(arm, q),
         "lidar.obstacle_points": AbstractValue.Make(
-            obstacle_points(num_points) @ np.array([[c, s], [-s, c]])),
+            points @ np.array([[c, s], [-s, c]])),
     }
 
 
@@ -127,7 +160,9 @@ class ControllerTicker:
     written again every tick.
 
     Args:
-        arm: a shared ArmKinematics.
+        arm: a shared ArmKinematics, of the robot whose controller ticks
+            (build_controller's `robot`: its limits, footprint and
+            tuning).
         time_step: control period h in s (0.01 s: 100 Hz, the paper's).
         num_points: number of obstacle points on lidar.obstacle_points.
         measurement_sets: how many different measurement sets the ticks

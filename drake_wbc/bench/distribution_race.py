@@ -1,17 +1,22 @@
 """The closed-form motion distribution against QP-based peers.
 
-Every contender solves the same seeded 9-DoF problems: at an arm
-configuration q_a, split an end-effector twist V_ee (T_b) into the
-whole-body input V_wb = [V_a; V_b] by the weighted least-norm problem of
-eq. (wln) with Q(sigma_xy, sigma_phi) of eq. (weight-factors) and the
-null-space velocity V_n^0 = k_n [grad_x C_m; 0_3] of eq. (wbccm):
+Every contender solves the same seeded problems of the robot's arm
+(any arm of n >= 6 joints, ArmKinematics): at an arm configuration q_a
+(n,), split an end-effector twist V_ee (T_b) into the whole-body input
+V_wb = [V_a; V_b] by the weighted least-norm problem of eq. (wln) with
+Q(sigma_xy, sigma_phi) of eq. (weight-factors) and the null-space
+velocity V_n^0 = k_n [grad_x C_m; 0_3] of eq. (wbccm):
 
     min (V_wb - V_n^0)^T Q^-1 (V_wb - V_n^0)   s.t.   J_wb V_wb = V_ee,
 
 whose solution is eq. (wbsln) with the null-space term,
 V_wb = J^+ V_ee + (I - J^+ J_wb) V_n^0. J_wb = [R_ba, J_b] (eq. (1),
 bottom line) needs p_ee from the arm's kinematics (ArmKinematics:
-the compiled chain read from the MultibodyPlant).
+the compiled chain read from the MultibodyPlant). The arm's input V_a is
+its 6-D twist in T_a whatever n (the arm controller maps it to the n
+joints), so this problem has 9 variables and 6 equalities on every arm;
+the QP peers take their sizes from J_wb (`problem_size`), not from
+literals.
 
 Two races, each contender a "solver" (problem, given) -> V_wb, `given`
 a Given (p_ee, and J_wb, the diagonal of Q and V_n^0 for the QP peers):
@@ -50,11 +55,19 @@ Solvers:
     tolerances tightened to 1e-9 so they agree.
 - drake_diffik_plant (with kinematics only; informative, not the same
   problem): Drake's overload that evaluates its own kinematics on the
-  robot's MultibodyPlant, in joint velocities, unweighted; the plant has
-  two more velocities (the flexible mount), held at zero by velocity
-  bounds. Drake builds the null-space cost from a non-orthonormal
-  basis, so with those bounds its answer is not the 9-DoF least-norm
-  one; its difference is reported, not checked.
+  robot's MultibodyPlant, in joint velocities, unweighted. Its
+  variables are the arm's n joint velocities and the base's 3 (n + 3);
+  the plant's other velocities (the shipped robot's flexible mount, two)
+  are held at zero by velocity bounds. Its null-space velocity is that
+  of eq. (wbccm) at the arm's joints: V_n^0's arm part, the twist
+  k_n grad_x C_m in T_a, as joint velocities, J_a^+ k_n grad_x C_m
+  (J_a^+ = J_a^T (J_a J_a^T)^-1, J_a^-1 on six joints), and 0 for the
+  base (the problem's `joint_null_velocity`, computed with it: given
+  data, as the gradient is). Drake builds the null-space cost from a
+  non-orthonormal basis, so with bounds its answer is not the
+  least-norm one of its (n + 3)-DoF problem; its difference is
+  reported, not checked (without bounds, on a robot without a mount,
+  they agree).
 
 sigma is drawn inside (0.05, 0.95) so that Q is invertible (the QPs need
 Q^-1); no inequality constraint is present, so all the same-problem
@@ -109,12 +122,15 @@ class DistributionProblem:
     """One problem of the race (see the module docstring).
 
     Attributes:
-        arm_position: q_a (6), rad.
+        arm_position: q_a (n,), rad.
         base_yaw: phi_b, rad (for drake_diffik_plant's world frame).
         end_effector_velocity: V_ee (6) in T_b, [v; w].
         sigma_xy, sigma_phi: weighting factors in (0, 1).
         capability_gradient: grad_x C_m (6), T_a.
         null_space_gain: k_n >= 0.
+        joint_null_velocity: V_n^0's arm part at the arm's joints,
+            J_a(q_a)^+ k_n grad_x C_m (n,), rad/s: the joint-space
+            peer's null-space velocity (PlantDiffIk).
     """
 
     arm_position: np.ndarray
@@ -124,29 +140,57 @@ class DistributionProblem:
     sigma_phi: float
     capability_gradient: np.ndarray
     null_space_gain: float
+    joint_null_velocity: np.ndarray
+
+
+def joint_null_velocity(J_a, capability_gradient, null_space_gain):
+    """V_n^0 = k_n [grad_x C_m; 0_3] of eq. (wbccm), its arm part (a
+    twist in T_a) at the arm's n joints: the least-norm joint velocity
+    J_a^+ k_n grad_x C_m with J_a^+ = J_a^T (J_a J_a^T)^-1 (J_a^-1 when
+    n = 6), for J_a (6, n) of full row rank."""
+    J_a = np.asarray(J_a, dtype=float)
+    twist = null_space_gain * np.asarray(capability_gradient, dtype=float)
+    return J_a.T @ np.linalg.solve(J_a @ J_a.T, twist)
 
 
 def make_problems(count, seed, arm):
     """`count` problems drawn with numpy's generator seeded by `seed`:
-    q_a uniform in 80 % of the joint ranges of `arm` (ArmKinematics),
-    V_ee normal with 0.1 m/s, rad/s per component, sigma uniform in
-    (0.05, 0.95), k_n uniform in [0, 0.2]."""
+    q_a uniform in 80 % of the joint ranges of `arm` (ArmKinematics, its
+    n joints), V_ee normal with 0.1 m/s, rad/s per component, sigma
+    uniform in (0.05, 0.95), grad_x C_m normal with 0.3 (6,), k_n uniform
+    in [0, 0.2]; the joint-space null velocity from J_a at q_a (no
+    draw: the same seed gives the same problems as without it)."""
     count = whole_number("count", count, minimum=1)
     rng = np.random.default_rng(seed)
     middle = 0.5 * (arm.lower + arm.upper)
     half = 0.4 * (arm.upper - arm.lower)
-    return [
-        DistributionProblem(
-            arm_position=rng.uniform(middle - half, middle + half),
-            base_yaw=float(rng.uniform(-np.pi, np.pi)),
-            end_effector_velocity=rng.normal(0.0, 0.1, 6),
-            sigma_xy=float(rng.uniform(0.05, 0.95)),
-            sigma_phi=float(rng.uniform(0.05, 0.95)),
-            capability_gradient=rng.normal(0.0, 0.3, 6),
-            null_space_gain=float(rng.uniform(0.0, 0.2)),
-        )
-        for _ in range(count)
-    ]
+    problems = []
+    for _ in range(count):
+        q_a = rng.uniform(middle - half, middle + half)
+        base_yaw = float(rng.uniform(-np.pi, np.pi))
+        V_ee = rng.normal(0.0, 0.1, 6)
+        sigma_xy = float(rng.uniform(0.05, 0.95))
+        sigma_phi = float(rng.uniform(0.05, 0.95))
+        gradient = rng.normal(0.0, 0.3, 6)
+        k_n = float(rng.uniform(0.0, 0.2))
+        problems.append(DistributionProblem(
+            arm_position=q_a, base_yaw=base_yaw, end_effector_velocity=V_ee,
+            sigma_xy=sigma_xy, sigma_phi=sigma_phi,
+            capability_gradient=gradient, null_space_gain=k_n,
+            joint_null_velocity=joint_null_velocity(
+                arm.evaluate(q_a).J_a, gradient, k_n)))
+    return problems
+
+
+def problem_size(arm):
+    """(variables, equalities) of the whole-body problem of `arm`: the
+    columns and rows of its J_wb = [R_ba, J_b] (eq. (1), bottom line),
+    formed at the arm's home as `qp_data` forms it."""
+    p_ee = arm.evaluate(arm.home).p_ee_in_base
+    J = kinematics.whole_body_jacobian_of(None, p_ee,
+                                          np.array(arm.R_ba, dtype=float))
+    equalities, variables = np.shape(J)
+    return variables, equalities
 
 
 def mounting(arm):
@@ -169,7 +213,8 @@ def kinematics_of(arm):
 class Given(NamedTuple):
     """What a solver is given: p_ee (3, T_b), and for the QP peers
     J_wb (6, 9), the diagonal w of Q (9,) and V_n^0 (9,) (None for the
-    closed form, which forms them itself)."""
+    closed form, which forms them itself); 9 = V_a's 6 and V_b's 3 on
+    an arm of any number of joints."""
 
     p_ee: np.ndarray
     J_wb: np.ndarray | None = None
@@ -224,11 +269,12 @@ def closed_form(arm):
 
 
 def daqp_solver(arm):
-    """DAQP called directly: daqp.solve with the six rows of J_wb as
+    """DAQP called directly: daqp.solve with the rows of J_wb as
     equalities (sense 5)."""
     import daqp
 
-    sense = np.full(6, 5, dtype=np.int32)
+    _, equalities = problem_size(arm)
+    sense = np.full(equalities, 5, dtype=np.int32)
 
     def solve(problem, given):
         _, J, w, V_n = given
@@ -254,11 +300,12 @@ def proxsuite_solver(arm):
     and updated with each problem's data (qp.update)."""
     from proxsuite import proxqp
 
-    qp = proxqp.dense.QP(9, 6, 0)
+    n, m = problem_size(arm)
+    qp = proxqp.dense.QP(n, m, 0)
     qp.settings.eps_abs = PROXSUITE_TOLERANCE
     qp.settings.eps_rel = 0.0
     qp.settings.verbose = False
-    qp.init(np.eye(9), np.zeros(9), np.zeros((6, 9)), np.zeros(6), None,
+    qp.init(np.eye(n), np.zeros(n), np.zeros((m, n)), np.zeros(m), None,
             None, None)
 
     def solve(problem, given):
@@ -277,26 +324,29 @@ def proxsuite_solver(arm):
 
 def quadprog_solver(arm):
     """quadprog.solve_qp: min 1/2 x^T G x - a^T x s.t. C^T x >= b with
-    the first meq = 6 rows as equalities."""
+    the first meq rows (all of J_wb's) as equalities."""
     import quadprog
 
+    _, equalities = problem_size(arm)
 
     def solve(problem, given):
         _, J, w, V_n = given
         inverse = 1.0 / w
         return quadprog.solve_qp(np.diag(inverse), inverse * V_n,
                                  np.ascontiguousarray(J.T),
-                                 problem.end_effector_velocity, 6)[0]
+                                 problem.end_effector_velocity,
+                                 equalities)[0]
 
     return solve
 
 
 def drake_diffik(arm, time_step=0.01):
     """Drake's DoDifferentialInverseKinematics on the scaled problem."""
-    params = DifferentialInverseKinematicsParameters(9, 9)
+    n, _ = problem_size(arm)
+    params = DifferentialInverseKinematicsParameters(n, n)
     params.set_time_step(time_step)
-    params.set_joint_centering_gain(np.eye(9))
-    zero = np.zeros(9)
+    params.set_joint_centering_gain(np.eye(n))
+    zero = np.zeros(n)
 
     def solve(problem, given):
         _, J, weights, V_n = given
@@ -350,7 +400,9 @@ def qpsolvers_solver(arm, solver):
 
 class PlantDiffIk:
     """Drake's DiffIK overload on the robot's MultibodyPlant (its own
-    kinematics), joint space, mount held by velocity bounds.
+    kinematics), joint space (the arm's n joints and the base's 3), mount
+    held by velocity bounds; its null-space velocity is
+    problem.joint_null_velocity (eq. (wbccm) at the arm's joints).
 
     Args:
         arm: ArmKinematics whose plant (the robot alone) is used.
@@ -383,14 +435,13 @@ class PlantDiffIk:
         return np.concatenate([R_wb @ V[3:], R_wb @ V[:3]])
 
     def __call__(self, problem):
-        """The solution as [dq_a (6); V_b (3, T_b)]."""
+        """The solution as [dq_a (n,); V_b (3, T_b)]."""
         q = np.zeros(self.plant.num_positions())
         q[self.iq_arm] = problem.arm_position
         q[self.iq_base[2]] = problem.base_yaw
         self.plant.SetPositions(self.context, q)
         nominal = q.copy()
-        nominal[self.iq_arm] += (problem.null_space_gain
-                                 * problem.capability_gradient)
+        nominal[self.iq_arm] += problem.joint_null_velocity
         self.params.set_nominal_joint_position(nominal)
         result = DoDifferentialInverseKinematics(
             self.plant, self.context, self._world_twist(problem),
@@ -403,8 +454,8 @@ class PlantDiffIk:
                                [c * vx + s * vy, -s * vx + c * vy, wz]])
 
     def least_norm(self, problem):
-        """The 9-DoF least-norm answer of the same joint-space problem
-        (distribution.weighted_pseudoinverse with Q = I), to compare."""
+        """The (n + 3)-DoF least-norm answer of the same joint-space
+        problem (J^+ of eq. (wbsln) with Q = I), to compare."""
         self(problem)  # sets the configuration
         from pydrake.multibody.tree import JacobianWrtVariable
 
@@ -416,13 +467,17 @@ class PlantDiffIk:
         J = np.vstack([J[3:], J[:3]])[:, columns]
         twist = self._world_twist(problem)
         V = np.concatenate([twist[3:], twist[:3]])
-        z = np.zeros(9)
-        z[:6] = problem.null_space_gain * problem.capability_gradient
-        J_pinv = distribution.weighted_pseudoinverse(J, np.eye(9))
+        n = len(self.iv_arm)
+        z = np.zeros(n + 3)
+        z[:n] = problem.joint_null_velocity
+        # J^+ with Q = I (weighted_pseudoinverse's body, which checks
+        # for 9 columns; this problem has n + 3).
+        J_pinv = distribution.weighted_distribution(
+            J, np.eye(6), np.eye(n + 3), None, distribution.DEFAULT_DAMPING)
         v = J_pinv @ V + z - J_pinv @ (J @ z)
         c, s = np.cos(problem.base_yaw), np.sin(problem.base_yaw)
-        vx, vy, wz = v[6:]
-        return np.concatenate([v[:6], [c * vx + s * vy, -s * vx + c * vy,
+        vx, vy, wz = v[n:]
+        return np.concatenate([v[:n], [c * vx + s * vy, -s * vx + c * vy,
                                        wz]])
 
 

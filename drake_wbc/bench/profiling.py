@@ -25,13 +25,15 @@ def profile_ticks(ticker, count=300, top=30):
     return profile_text(ticker.ticks(count), top)
 
 
-def profile_scenario(path, duration=2.0, top=30):
+def profile_scenario(path, duration=2.0, top=30, robot=None):
     """Profile of `duration` simulated seconds of a scenario's first
     variant (the closed loop of drake_wbc.experiments.runner), in this
-    process."""
+    process, on the robot of the description file `robot` if given."""
     from drake_wbc.experiments.runner import build_closed_loop, simulate
-    from drake_wbc.experiments.scenario import load_scenario
+    from drake_wbc.experiments.scenario import load_scenario, with_robot
 
     scenario = load_scenario(path)
+    if robot is not None:
+        scenario = with_robot(scenario, robot, echo=None)
     loop = build_closed_loop(scenario, scenario.variants[0])
     return profile_text(lambda: simulate(loop, duration=duration), top)

@@ -57,8 +57,10 @@ def evaluate_goals(results):
         measured["control_tick"] = tick["tick"]["time_us"]["median"]
     scenarios = results.get("scenarios")
     if scenarios:
-        measured["scenario_real_time_factor"] = min(
-            entry["real_time_factor"] for entry in scenarios.values())
+        factors = [entry["real_time_factor"] for entry in scenarios.values()
+                   if "skipped" not in entry]
+        if factors:
+            measured["scenario_real_time_factor"] = min(factors)
     goals = []
     for key, statement, threshold in GOALS:
         value = measured.get(key)
@@ -117,6 +119,10 @@ def markdown(results):
         " Times in microseconds per solve or tick: median, p10 and p90 "
         "over the repetitions, contenders interleaved within each repetition.",
     ]
+    robot = results.get("robot")
+    if robot:
+        lines += ["", f"Robot: {robot['name']} ({robot['arm_joints']} arm "
+                  "joints)."]
     race = results.get("distribution")
     if race:
         lines += ["", "## Motion distribution (9-DoF, eqs. (wbsln)/(wbccm))",
@@ -184,6 +190,10 @@ def markdown(results):
                   "each run in a child process)", ""]
         rows = []
         for name, entry in scenarios.items():
+            if "skipped" in entry:
+                rows.append([name, "skipped: " + entry["skipped"], "", "",
+                             "", ""])
+                continue
             chunks = entry["chunk_real_time_factor_stats"]
             run = entry["runs"][0]
             rows.append([name, f"{run['simulated_s']:.1f}",
