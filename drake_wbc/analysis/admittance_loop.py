@@ -71,10 +71,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.math import RigidTransform
-from pydrake.multibody.plant import (
-    DiscreteContactApproximation,
-    MultibodyPlant,
-)
 from pydrake.multibody.tree import (
     FixedOffsetFrame,
     LinearBushingRollPitchYaw,
@@ -95,6 +91,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.analysis.frequency import stability_margins
 from drake_wbc.analysis.period_map import linearize_period_map
+from drake_wbc.analysis.plant_chain import add_robot_plant
 from drake_wbc.controller import build_controller
 from drake_wbc.experiments.scenario import (
     controller_arm,
@@ -103,18 +100,11 @@ from drake_wbc.experiments.scenario import (
 )
 from drake_wbc.math.kinematics import twist_rotation
 from drake_wbc.math.validation import checked_instance, positive
-from drake_wbc.robot.model import add_robot
 from drake_wbc.stages.wrench import sensor_rotation_in_base, tool_weight_reading
 from drake_wbc.station.driver_dynamics import interpolated_command
 from drake_wbc.station.force_torque import WeldWrench
 from drake_wbc.station.hand import add_hand_body
 from drake_wbc.station.scene import HandImpedance
-from drake_wbc.station.servo_gains import (
-    drive_inertias,
-    servo_gains,
-    set_drive_inertias,
-    set_servo_gains,
-)
 from drake_wbc.station.simulation import SimulatedStation
 
 STIFF_HAND = HandImpedance(stiffness=1000.0, damping=30.0, mass=0.2)
@@ -253,28 +243,15 @@ def build_plant_part(station, hand, grip="weld"):
         (diagram, plant, model): the Diagram, its MultibodyPlant and the
         robot's RobotModel in it.
     """
-    if not isinstance(station, SimulatedStation):
-        raise ValueError(f"station = {station!r} is not allowed: must be a "
-                         "SimulatedStation")
     hand = checked_instance("hand", hand, HandImpedance, None)
-    options = station.options
-    h = options.time_step
     builder = DiagramBuilder()
     add = builder.AddNamedSystem
-    plant = add("plant", MultibodyPlant(h))
-    plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
-    plant.SetUseSampledOutputPorts(False)
-    robot, mount = station.model.description, station.model.mount
-    model = add_robot(plant, robot, mount=mount)
+    plant, model = add_robot_plant(builder, station)
+    options = station.options
     if model.base == model.arm:
         raise ValueError("station is not allowed: its base and arm share a "
                          "model instance, which build_plant_part does not "
                          "hold apart")
-    set_servo_gains(plant, model, servo_gains(
-        options.initial_arm_positions, options.base, options.arm, robot,
-        mount=mount))
-    set_drive_inertias(plant, model, drive_inertias(
-        options.initial_arm_positions, options.arm, robot, mount=mount))
     _, settled = _rest(station)
     X_WT = station.model.tcp_frame.CalcPoseInWorld(settled)
     hand_body = None

@@ -35,20 +35,17 @@ split, the arm's share added), in this order after the shares."""
 
 
 
-def add_station_plant(builder, station):
-    """Adds to `builder` the SimulatedStation `station`'s base driver and a
-    copy of its plant: the robot alone (no scene graph, so no contact; the
-    outputs unsampled, so its only state is [q; v]) with the station's
-    servo gains; the base's velocity servo fed the driver's desired_state,
-    the driver the pose of BaseOdometry, the arm's servo held at
-    options.initial_arm_positions. Returns (driver, plant, model)."""
+def add_robot_plant(builder, station):
+    """Adds to `builder` (named "plant") a copy of the SimulatedStation
+    `station`'s plant, not yet finalised: the robot alone (no scene graph,
+    so no contact; the outputs unsampled, so its only state is [q; v]) at
+    the station's step, with the station's servo gains and drive
+    inertias. Returns (plant, model)."""
     if not isinstance(station, SimulatedStation):
         raise ValueError(f"station = {station!r} is not allowed: must be a "
                          "SimulatedStation")
     options = station.options
-    h = options.time_step
-    add = builder.AddNamedSystem
-    plant = add("plant", MultibodyPlant(h))
+    plant = builder.AddNamedSystem("plant", MultibodyPlant(options.time_step))
     plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
     plant.SetUseSampledOutputPorts(False)
     robot, mount = station.model.description, station.model.mount
@@ -58,6 +55,20 @@ def add_station_plant(builder, station):
         mount=mount))
     set_drive_inertias(plant, model, drive_inertias(
         options.initial_arm_positions, options.arm, robot, mount=mount))
+    return plant, model
+
+
+def add_station_plant(builder, station):
+    """Adds to `builder` the SimulatedStation `station`'s base driver and a
+    copy of its plant: the robot alone (no scene graph, so no contact; the
+    outputs unsampled, so its only state is [q; v]) with the station's
+    servo gains; the base's velocity servo fed the driver's desired_state,
+    the driver the pose of BaseOdometry, the arm's servo held at
+    options.initial_arm_positions. Returns (driver, plant, model)."""
+    plant, model = add_robot_plant(builder, station)
+    options = station.options
+    h = options.time_step
+    add = builder.AddNamedSystem
     plant.Finalize()
     driver = add("base_driver", BaseVelocityDriver(
         replace(options.base, time_step=h)))
