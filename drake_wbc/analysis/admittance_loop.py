@@ -91,7 +91,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.analysis.frequency import stability_margins
 from drake_wbc.analysis.period_map import linearize_period_map
-from drake_wbc.analysis.plant_chain import add_robot_plant
+from drake_wbc.analysis.plant_chain import add_robot_plant, station_equilibrium
 from drake_wbc.controller import build_controller
 from drake_wbc.experiments.scenario import (
     controller_arm,
@@ -302,13 +302,7 @@ def plant_part_context(station, diagram, plant, model):
     command input fixed at the initial arm positions."""
     options = station.options
     context = diagram.CreateDefaultContext()
-    _, settled = _rest(station)
-    mine = plant.GetMyMutableContextFromRoot(context)
-    for name in ("base", "arm", "tool"):
-        plant.SetPositions(mine, getattr(model, name),
-                           station.plant.GetPositions(
-                               settled, getattr(station.model, name)))
-    plant.SetVelocities(mine, np.zeros(plant.num_velocities()))
+    station_equilibrium(station, plant, model, context)
     q_cmd = np.asarray(options.initial_arm_positions, dtype=float)
     driver = diagram.GetSubsystemByName("arm_driver")
     driver.GetMyMutableContextFromRoot(context).SetDiscreteState(
