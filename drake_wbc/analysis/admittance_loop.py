@@ -91,7 +91,11 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.analysis.frequency import stability_margins
 from drake_wbc.analysis.period_map import linearize_period_map
-from drake_wbc.analysis.plant_chain import add_robot_plant, station_equilibrium
+from drake_wbc.analysis.plant_chain import (
+    add_robot_plant,
+    station_at_rest,
+    station_equilibrium,
+)
 from drake_wbc.controller import build_controller
 from drake_wbc.experiments.scenario import (
     controller_arm,
@@ -196,14 +200,6 @@ def _station(scenario):
                             scenario.arm_mount, scenario_robot(scenario))
 
 
-def _rest(station):
-    """The station at its static equilibrium: (its root context, the
-    plant's own)."""
-    root = station.diagram.CreateDefaultContext()
-    station.set_initial_state(root)
-    return root, station.plant.GetMyContextFromRoot(root)
-
-
 def _add_welded_hand(plant, model, hand, X_WT):
     """The hand as a point mass welded at the tool centre point, without
     weight (the person carries it), and its spring-damper to the world
@@ -252,7 +248,7 @@ def build_plant_part(station, hand, grip="weld"):
         raise ValueError("station is not allowed: its base and arm share a "
                          "model instance, which build_plant_part does not "
                          "hold apart")
-    _, settled = _rest(station)
+    _, settled = station_at_rest(station)
     X_WT = station.model.tcp_frame.CalcPoseInWorld(settled)
     hand_body = None
     if grip == "station":
@@ -333,7 +329,7 @@ def linearize_plant_part(station, hand, period):
 def rest_measurements(station):
     """What the station reports at its static equilibrium: (base.
     state_estimated (6), arm.position_measured (n))."""
-    root, _ = _rest(station)
+    root, _ = station_at_rest(station)
     return tuple(station.diagram.GetOutputPort(name).Eval(root).copy()
                  for name in ("base.state_estimated",
                               "arm.position_measured"))

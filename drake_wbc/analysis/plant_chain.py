@@ -87,13 +87,20 @@ def add_station_plant(builder, station):
     return driver, plant, model
 
 
+def station_at_rest(station):
+    """The SimulatedStation `station` at its static equilibrium
+    (`SimulatedStation.set_initial_state`): (its root context, its
+    plant's own)."""
+    root = station.diagram.CreateDefaultContext()
+    station.set_initial_state(root)
+    return root, station.plant.GetMyContextFromRoot(root)
+
+
 def station_equilibrium(station, plant, model, context):
     """Puts `plant` (of `add_station_plant`) in `context` (its root's) at
     the station's static equilibrium, `SimulatedStation.set_initial_state`,
     at rest. Returns the plant's own context."""
-    root = station.diagram.CreateDefaultContext()
-    station.set_initial_state(root)
-    settled = station.plant.GetMyContextFromRoot(root)
+    _, settled = station_at_rest(station)
     mine = plant.GetMyMutableContextFromRoot(context)
     for name in ("base", "arm", "tool"):
         plant.SetPositions(mine, getattr(model, name),
