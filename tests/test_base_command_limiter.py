@@ -12,9 +12,10 @@ from shipped_names import BASE_LIMITS
 
 from drake_wbc.math.command_limits import limit_base_velocity
 from drake_wbc.math.repulsion import footprint_gap
-from drake_wbc.math.safety import SafetyParameters
+from drake_wbc.math.safety import BASE_LAG, SafetyParameters
 from drake_wbc.math.separation import (
     NEAREST_POINTS,
+    protective_timing,
     scale_for_rows,
     separation_state,
 )
@@ -58,6 +59,12 @@ def random_tick(rng, previous):
     return desired, stopped, envelope, random_points(rng)
 
 
+def timing_of(params):
+    """The base's reaction, lag and braking the limiter's rules use."""
+    return protective_timing(params.people, H,
+                             params.base_acceleration_limits, BASE_LAG)
+
+
 def model_tick(params, previous, separation, desired, stopped, envelope,
                points, people=None):
     """The limiter's outputs and next static state (the command and the
@@ -86,7 +93,7 @@ def model_tick(params, previous, separation, desired, stopped, envelope,
         limited = 1.0
     saturation = np.array([limited, envelope * scales[0], scales[1]])
     following = separation_state(points, HALF_SIZES, params.stop_distance,
-                                 params.stop_time)
+                                 params.stop_time, timing_of(params))
     return command, saturation, np.concatenate([command, following])
 
 
@@ -107,7 +114,8 @@ def test_the_limiter_is_the_model_tick_by_tick(scalar):
     rng = np.random.default_rng(3)
     previous = np.zeros(3)
     separation = separation_state(np.zeros((0, 2)), HALF_SIZES,
-                                  params.stop_distance, params.stop_time)
+                                  params.stop_distance, params.stop_time,
+                                  timing_of(params))
     seen = set()
     people, last_inside = None, -1e9
     for tick in range(150):

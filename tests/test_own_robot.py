@@ -36,7 +36,6 @@ from drake_wbc.experiments.scenario import (
 from drake_wbc.hardware import messages
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.hardware.safety import CommandGuard, Limits, follow_arm_command
-from drake_wbc.math.safety import robot_stop_distance
 from drake_wbc.robot.description import load_robot_description, shipped_robot
 from drake_wbc.robot.footprint import check_start_is_free
 from drake_wbc.robot.model import ArmKinematics, make_robot_plant
@@ -329,10 +328,10 @@ def test_the_second_shipped_robot_tracks_the_papers_step():
 def test_the_controllers_base_defaults_are_that_robots_own():
     """On the second shipped robot (0.8 m/s, 0.5 m/s^2, a 0.9 x 0.7 m
     footprint), a scenario for the shipped robot gets that robot's base
-    limits, footprint and the stop distance its braking needs (0.2625 m
-    at stop_time 0.5 s, above the 0.1 m default) when the controller is
-    built, not the shipped base's; a limit wider than its own, a
-    footprint smaller than its own or a shorter stop distance is refused,
+    limits, footprint and braking (its separation rule stops it from
+    what its 0.5 m/s^2 can stop from) when the controller is built, not
+    the shipped base's; a limit wider than its own or a footprint
+    smaller than its own is refused,
     naming the field and that robot's own value."""
     scenario = load_scenario(find_scenario("trajectory_tracking"))
     lbr_file = (find_scenario("trajectory_tracking_lbr").parent.parent
@@ -346,13 +345,11 @@ def test_the_controllers_base_defaults_are_that_robots_own():
         base.acceleration_limits)
     assert params.base_cdmp.repulsion.half_sizes == tuple(
         base.footprint_half_sizes)
-    assert params.safety.stop_distance == pytest.approx(robot_stop_distance(
-        0.5, base.velocity_limits, base.acceleration_limits))
-    assert params.safety.stop_distance > 0.1
     controller = build_controller(on_lbr.controller,
                                   robot=controller_arm(on_lbr))
     limiter = controller.stages["base_limiter"]
     assert limiter.half_sizes == tuple(base.footprint_half_sizes)
+    assert limiter.timing.deceleration == min(base.acceleration_limits[:2])
     wider = copy.deepcopy(on_lbr.controller)
     wider.safety.base_velocity_limits = (1.0, 1.0, 1.0)
     with pytest.raises(ValueError, match=re.escape(
@@ -366,10 +363,6 @@ def test_the_controllers_base_defaults_are_that_robots_own():
             f"base_cdmp.repulsion.half_sizes[0] = 0.4 is not allowed: must "
             f"be at least the robot's own {a!r} m")):
         build_controller(smaller, robot=controller_arm(on_lbr))
-    shorter = copy.deepcopy(on_lbr.controller)
-    shorter.safety.stop_distance = 0.1
-    with pytest.raises(ValueError, match="safety.stop_distance = 0.1"):
-        build_controller(shorter, robot=controller_arm(on_lbr))
 
 
 def test_the_start_is_checked_against_the_robots_footprint():

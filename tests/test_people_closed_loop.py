@@ -1,9 +1,10 @@
 """Speed and separation from people in the closed loop: the controller
 drives the simulated station (plant, base drive with its lag, both
 LIDARs at 15 Hz) with the base at full speed in the locomotion mode, and
-a WalkingPerson walks head-on at 1.6 m/s, or steps in ahead of the base.
-The base is at rest (its measured velocity, truth.base_loop_velocity)
-before the person reaches the footprint."""
+a WalkingPerson walks head-on at 1.6 m/s or slowly, steps in ahead of
+the base, or stands on its path. The base is at rest (its measured
+velocity, truth.base_loop_velocity) before the person reaches the
+footprint."""
 
 import numpy as np
 
@@ -81,3 +82,42 @@ def test_a_person_stepping_in_ahead_of_the_base_at_full_speed():
     assert speed[-1] < AT_REST
     print(f"closed loop step-in: top speed {speed.max():.2f} m/s, closest "
           f"{gap.min():.2f} m")
+
+
+def test_a_person_walking_slowly_head_on_meets_the_base_at_rest():
+    """A person walking head-on at 0.3 m/s, from 7 m: tracked as moving
+    (min_speed 0.15 m/s), the base is at rest 1.7 m from them and stays
+    at rest while they come on. (With the static rule alone, as for a
+    person slower than 0.5 m/s before, the base met such a walker at
+    0.7 m/s: the rule stops short of a point that stays, not of one that
+    closes the gap.)"""
+    people = ("[{name: walker, times: [0.0, 43.33], "
+              "waypoints: [[7.0, 0.0], [-6.0, 0.0]]}]")
+    log, gap, speed = run(people, 10.0)
+    assert speed.max() > 0.9
+    rest = np.flatnonzero(speed < AT_REST)
+    rest = rest[rest > np.argmax(speed)]
+    assert len(rest), "at rest"
+    assert np.all(speed[rest[0]:] < AT_REST)
+    assert gap[rest[0]] > 1.0
+    assert gap.min() < 0.6, "the walker came close to the standing base"
+    print(f"closed loop slow walker: at rest {gap[rest[0]]:.2f} m from "
+          f"them at t = {log.time[rest[0]]:.2f} s; closest {gap.min():.2f}"
+          " m, the base at rest")
+
+
+def test_the_base_at_full_speed_stops_short_of_a_person_standing():
+    """A person standing 4 m ahead, a pillar to the tracker (the static
+    rule): the base brakes from 1 m/s where its 1 m/s^2 and its drive's
+    lag can still stop it (eq. (allowed)), and comes to rest within the
+    stop distance's 0.1 m, not in contact (the exponential approach
+    alone starts braking at 0.6 m, where stopping needs 0.8 m: the base
+    met the person at 0.49 m/s)."""
+    people = ("[{name: stander, times: [0.0, 1.0], "
+              "waypoints: [[4.0, 0.0], [4.0, 0.0]]}]")
+    log, gap, speed = run(people, 6.0)
+    assert speed.max() > 0.9
+    assert gap.min() > 0.05, "no contact"
+    assert speed[-1] < AT_REST
+    print(f"closed loop standing person: closest {gap.min():.3f} m, "
+          f"final speed {speed[-1]:.4f} m/s")

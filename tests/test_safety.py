@@ -586,12 +586,8 @@ def test_bad_parameters_are_rejected(kwargs, name):
      r"arm_controller.acceleration_limit = 1000000.0 .* arm's own 12.56"),
     ("arm_controller: {use_acceleration_limit: false}",
      r"arm_controller.use_acceleration_limit = False is not allowed"),
-    ("safety: {stop_distance: 0.01}",
-     r"safety.stop_distance = 0.01 .* robot's own 0.045 m"),
-    ("safety: {stop_distance: 0.2, stop_time: 0.1}",
-     r"safety.stop_distance = 0.2 .*safety.stop_time = 0.1: .* own 0.445 m"),
 ], ids=["base-velocity", "base-acceleration", "arm-acceleration",
-        "arm-acceleration-off", "stop-distance", "stop-time"])
+        "arm-acceleration-off"])
 def test_limits_only_tighten(arm, text, message):
     """Every safety limit may tighten the robot's own, not widen it: the
     error names the field, its value and the robot's."""
@@ -607,15 +603,6 @@ safety: {base_velocity_limits: [0.5, 0.5, 0.5],
          stop_distance: 0.3, stop_time: 1.0}
 arm_controller: {acceleration_limit: 5.0}
 """), arm)
-    # The robot's own stop distance in closed form: from 1 m/s, braking
-    # at 1 m/s^2 after the loop's lag of 0.3 s, 0.5 + 0.045 m, less the
-    # 0.5 m the rule's approach takes.
-    assert safety.robot_stop_distance(0.5, V_MAX, A_MAX) == pytest.approx(
-        0.045)
-    assert safety.robot_stop_distance(0.5, [0.2] * 3, A_MAX) == 0.0
-    # Below a lag = 0.3 m/s the lag alone: 0.25 * 0.3 - 0.1 * 0.25.
-    assert safety.robot_stop_distance(0.1, [0.25] * 3, A_MAX) == (
-        pytest.approx(0.05))
 
 
 def test_parameters_load_from_yaml():

@@ -13,12 +13,31 @@ from drake_wbc.math.repulsion import (
 )
 from drake_wbc.math.separation import (
     FAR,
+    ProtectiveTiming,
+    allowed_speeds,
     approach_speeds,
     nearest_points,
     separation_scale,
 )
 
 HALF = (0.4, 0.3)
+TIMING = ProtectiveTiming(reaction_time=0.097, lag=0.3, deceleration=1.0)
+"""The shipped robot's: a scan, the processing and a tick; its lag and
+1 m/s^2."""
+
+
+def braking_speed(gap, timing=TIMING):
+    """The root u >= 0 of u^2 / (2 a) + (T_r + tau) u = gap, by bisection
+    (independent of the closed form in the module)."""
+    reaction, lag, a = timing
+    low, high = 0.0, 100.0
+    for _ in range(200):
+        u = 0.5 * (low + high)
+        if u * u / (2.0 * a) + (reaction + lag) * u > gap:
+            high = u
+        else:
+            low = u
+    return 0.5 * (low + high)
 
 
 def distance_after(points, command, dt):
@@ -51,10 +70,10 @@ def test_the_scale_meets_every_bound_and_keeps_the_direction():
     for _ in range(50):
         points = rng.uniform(-1.0, 1.0, (30, 2))
         command = rng.uniform(-1.0, 1.0, 3)
-        s = separation_scale(command, points, HALF, 0.1, 0.5)
+        s = separation_scale(command, points, HALF, 0.1, 0.5, TIMING)
         assert 0.0 <= s <= 1.0
         approach, d = approach_speeds(s * command, points, HALF)
-        allowed = np.maximum(d - 0.1, 0.0) / 0.5
+        allowed = allowed_speeds(d, 0.1, 0.5, TIMING)
         assert np.all(approach <= allowed + 1e-12)
         if s < 1.0:  # the largest such factor: one bound is tight
             assert np.any(np.isclose(approach, allowed, atol=1e-12)
@@ -63,14 +82,53 @@ def test_the_scale_meets_every_bound_and_keeps_the_direction():
 
 def test_moving_away_or_along_is_not_limited():
     wall = np.array([[0.9, y] for y in np.linspace(-1.0, 1.0, 21)])
-    assert separation_scale([-0.8, 0.0, 0.0], wall, HALF, 0.1, 0.5) == 1.0
-    assert separation_scale([0.0, 0.8, 0.0], wall, HALF, 0.1, 0.5) == 1.0
-    # Straight at it, 0.5 m away: at most (0.5 - 0.1) / 0.5 = 0.8 m/s.
-    assert separation_scale([1.0, 0.0, 0.0], wall, HALF, 0.1, 0.5) == \
-        pytest.approx(0.8)
+    for command in ([-0.8, 0.0, 0.0], [0.0, 0.8, 0.0]):
+        assert separation_scale(command, wall, HALF, 0.1, 0.5, TIMING) == 1.0
+    # Straight at it, 0.5 m away: the approach alone would allow
+    # (0.5 - 0.1) / 0.5 = 0.8 m/s, but the base brakes from no faster
+    # than the root of u^2 / 2 + 0.397 u = 0.4: 0.582 m/s.
+    assert separation_scale([1.0, 0.0, 0.0], wall, HALF, 0.1, 0.5,
+                            TIMING) == pytest.approx(braking_speed(0.4))
+    assert braking_speed(0.4) == pytest.approx(0.582, abs=1e-3)
     # At the stop distance, nothing towards it.
     near = wall - [0.4, 0.0]
-    assert separation_scale([0.3, 0.1, 0.0], near, HALF, 0.1, 0.5) == 0.0
+    assert separation_scale([0.3, 0.1, 0.0], near, HALF, 0.1, 0.5,
+                            TIMING) == 0.0
+
+
+@pytest.mark.parametrize("timing", [TIMING, ProtectiveTiming(0.0, 0.0, 0.5),
+                                    ProtectiveTiming(0.2, 0.8, 3.0)])
+def test_the_allowed_speed_is_the_approach_or_the_stop_whichever_is_slower(
+        timing):
+    """Eq. (allowed) against its two parts computed independently: the
+    exponential approach g / stop_time and the braking root; slow near
+    the obstacle it is the approach, fast the braking, and they cross at
+    g = 2 a stop_time (stop_time - B)."""
+    gaps = np.linspace(0.0, 3.0, 61)
+    allowed = allowed_speeds(gaps + 0.1, 0.1, 0.5, timing)
+    expected = [min(g / 0.5, braking_speed(g, timing)) for g in gaps]
+    np.testing.assert_allclose(allowed, expected, rtol=1e-12, atol=1e-12)
+    reaction, lag, a = timing
+    crossing = 2.0 * a * 0.5 * (0.5 - reaction - lag)
+    if crossing > 0.0:
+        assert braking_speed(crossing, timing) == pytest.approx(
+            crossing / 0.5, rel=1e-9)
+    # Inside the stop distance, nothing.
+    assert np.all(allowed_speeds(np.array([0.0, 0.05, 0.1]), 0.1, 0.5,
+                                 timing) == 0.0)
+
+
+def test_approaching_at_the_bound_never_asks_for_more_than_the_braking():
+    """An ideal base approaching a wall at the bound, d' = -u(d): the
+    bound's rate of fall (finite differences along the approach) stays
+    below the deceleration a, so the acceleration limits can follow it;
+    the exponential approach alone asks for up to u / stop_time."""
+    d = np.linspace(0.1, 2.0, 4001)
+    u = allowed_speeds(d, 0.1, 0.5, TIMING)
+    fall = np.gradient(u, d) * u  # du/dt = du/dd * (-d') = u'(d) u
+    assert fall.max() <= TIMING.deceleration * (1.0 + 1e-6)
+    exponential = np.maximum(d - 0.1, 0.0) / 0.5
+    assert (exponential / 0.5).max() > 3.0 * TIMING.deceleration
 
 
 def test_nearest_points_keeps_the_closest_and_pads_far():
@@ -80,7 +138,8 @@ def test_nearest_points_keeps_the_closest_and_pads_far():
                                          [2.0, 0.0]])
     padded = nearest_points(np.zeros((0, 2)), HALF, count=2)
     np.testing.assert_array_equal(padded, [[FAR, 0.0], [FAR, 0.0]])
-    assert separation_scale([1.0, 1.0, 1.0], padded, HALF, 0.1, 0.5) == 1.0
+    assert separation_scale([1.0, 1.0, 1.0], padded, HALF, 0.1, 0.5,
+                            TIMING) == 1.0
 
 
 def test_the_footprint_gap_is_the_footprint_distance():

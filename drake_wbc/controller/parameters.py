@@ -42,10 +42,8 @@ from drake_wbc.math.filtering import (
 )
 from drake_wbc.math.loading import load_typed
 from drake_wbc.math.safety import (
-    DEFAULT_STOP_DISTANCE,
     SafetyParameters,
     check_within_robot,
-    robot_stop_distance,
 )
 from drake_wbc.math.validation import positive, switch
 from drake_wbc.math.workspace import WorkspaceAdapterParameters
@@ -221,10 +219,6 @@ def for_robot(params, robot):
     - safety.base_velocity_limits and base_acceleration_limits: the
       base's own where None; a given one at most the base's
       (drake_wbc.math.safety.check_within_robot).
-    - safety.stop_distance: DEFAULT_STOP_DISTANCE, or the distance the
-      base needs to stop with these limits if longer
-      (drake_wbc.math.safety.robot_stop_distance), where None; a given
-      one at least that distance.
     - capability_band and capability.joint_limit_gain: the robot's
       tuning (its description's RobotTuning, the paper's where it gives
       none) where None.
@@ -262,10 +256,6 @@ def for_robot(params, robot):
         float(v) for v in base.velocity_limits)
     acceleration = safety.base_acceleration_limits or tuple(
         float(a) for a in base.acceleration_limits)
-    stop_distance = safety.stop_distance
-    if stop_distance is None:
-        stop_distance = max(DEFAULT_STOP_DISTANCE, robot_stop_distance(
-            safety.stop_time, velocity, acceleration))
     k_j = params.capability.joint_limit_gain
     return dataclasses.replace(
         params,
@@ -275,8 +265,7 @@ def for_robot(params, robot):
             joint_limit_gain=tuning.joint_limit_gain if k_j is None else k_j),
         safety=dataclasses.replace(
             safety, base_velocity_limits=velocity,
-            base_acceleration_limits=acceleration,
-            stop_distance=stop_distance),
+            base_acceleration_limits=acceleration),
         base_cdmp=dataclasses.replace(
             params.base_cdmp, repulsion=dataclasses.replace(
                 repulsion, half_sizes=repulsion.half_sizes or own)))

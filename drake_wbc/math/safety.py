@@ -52,8 +52,9 @@ BASE_AXES = 3
 
 BASE_LAG = 0.3
 """s: the base's velocity loop lag, the slowest of the facts sheet's 0.1 to
-0.3 s (EST; the station's drivers model 0.2 s), for the robot's own stop
-distance (`robot_stop_distance`)."""
+0.3 s (EST; the station's drivers model 0.2 s), for the base's stop in
+the separation rules (drake_wbc.math.separation, eqs. (allowed) and
+(protective))."""
 
 DEFAULT_HOLD_TIME = 0.5
 """Seconds for which every input must be valid again before the controller
@@ -65,8 +66,7 @@ velocity loop (0.1 to 0.3 s lag) to have come to rest after the stop, and
 short enough not to be a nuisance when an operator clears a fault."""
 
 DEFAULT_STOP_DISTANCE = 0.1
-"""m: the distance the base keeps from an obstacle point by default, where
-the robot's own stop distance (`robot_stop_distance`) is shorter."""
+"""m: the distance the base keeps from an obstacle point by default."""
 
 TIME_TOLERANCE = 1e-9
 """Rounding allowance (s) when the valid time is compared to the hold
@@ -123,11 +123,11 @@ class SafetyParameters:
         base_acceleration_limits: (3,) > 0, the limits of the command's
             rate of change [vx, vy, wz] in m/s^2, m/s^2, rad/s^2;
             likewise.
-        stop_distance: m >= 0 that the base keeps from an obstacle point,
-            at least the robot's own stop distance
-            (`robot_stop_distance`); None (the default):
-            DEFAULT_STOP_DISTANCE or the robot's own if longer, filled in
-            when the controller is built.
+        stop_distance: m >= 0 that the base keeps from an obstacle point
+            (DEFAULT_STOP_DISTANCE). Any value is safe: the rule's own
+            braking term (drake_wbc.math.separation, eq. (allowed)) holds
+            the base's approach to what its limits and lag can stop from,
+            so no stop distance of the robot's needs adding to it.
         stop_time: s > 0, the time constant of the base's approach
             (drake_wbc.math.separation), 0.5 s by default. These two are
             the rule of every obstacle point that is not a moving
@@ -145,15 +145,14 @@ class SafetyParameters:
     hold_time: float = DEFAULT_HOLD_TIME
     base_velocity_limits: list[float] | None = None
     base_acceleration_limits: list[float] | None = None
-    stop_distance: float | None = None
+    stop_distance: float = DEFAULT_STOP_DISTANCE
     stop_time: float = 0.5
     people: PeopleSeparationParameters = field(
         default_factory=PeopleSeparationParameters)
 
     def __post_init__(self):
         positive("hold_time", self.hold_time)
-        if self.stop_distance is not None:
-            non_negative("stop_distance", self.stop_distance)
+        non_negative("stop_distance", self.stop_distance)
         positive("stop_time", self.stop_time)
         if not isinstance(self.people, PeopleSeparationParameters):
             raise ValueError(f"people = {self.people!r} is not allowed: "
@@ -165,49 +164,12 @@ class SafetyParameters:
                     .tolist()))
 
 
-def robot_stop_distance(stop_time, velocity_limits, acceleration_limits,
-                        lag=BASE_LAG):
-    """The shortest stop distance the robot itself allows (m): the
-    distance by which its base may overshoot the separation rule's
-    approach when its command is cut to zero (a safe stop or a trip).
-
-    The rule lets the footprint approach an obstacle point at
-    u = (d - stop_distance) / stop_time at most. Cut to zero at once, the
-    base's velocity loop (a lag `lag` saturated at the acceleration
-    limit a, as drake_wbc.station.driver_dynamics.base_loop_step) covers
-
-        S(u) = u lag                            for u <= a lag,
-        S(u) = u^2 / (2 a) + a lag^2 / 2        otherwise,
-
-    before it is at rest. It stops short of the point for every d when
-    stop_distance >= S(u) - stop_time u for every u the limits allow;
-    S(u) - stop_time u is convex, so the largest is at the fastest u,
-    along an axis: u the larger planar velocity limit, a the smaller
-    planar acceleration limit. With the robot's limits, lag 0.3 s and
-    stop_time 0.5 s: 0.045 m.
-
-    Args:
-        stop_time: s > 0.
-        velocity_limits, acceleration_limits: (3,) [x, y, yaw] > 0.
-        lag: s >= 0.
-
-    Returns:
-        The distance, >= 0.
-    """
-    u = max(velocity_limits[0], velocity_limits[1])
-    a = min(acceleration_limits[0], acceleration_limits[1])
-    stopping = u * lag if u <= a * lag else (
-        u * u / (2.0 * a) + 0.5 * a * lag * lag)
-    return max(stopping - stop_time * u, 0.0)
-
-
 def check_within_robot(params, velocity_limits, acceleration_limits,
                        path="safety"):
     """Checks that the SafetyParameters `params` only tighten the robot's
     own limits: the base's velocity and acceleration limits (where given)
     at most `velocity_limits` and `acceleration_limits` (the robot's own,
-    from its description), the stop distance at least
-    `robot_stop_distance` with the limits that hold.
+    from its description).
 
     Raises:
         ValueError: naming the field (under `path`), its value and the
@@ -226,16 +188,6 @@ def check_within_robot(params, velocity_limits, acceleration_limits,
                     f"{path}.{name}[{i}] = {value!r} is not allowed: must be "
                     f"at most the robot's own {limit!r} {unit[i]} (a limit "
                     "may tighten the robot's, not widen it)")
-    floor = robot_stop_distance(
-        params.stop_time, params.base_velocity_limits or velocity_limits,
-        params.base_acceleration_limits or acceleration_limits)
-    if params.stop_distance is not None and params.stop_distance < floor:
-        raise ValueError(
-            f"{path}.stop_distance = {params.stop_distance!r} is not "
-            f"allowed with {path}.stop_time = {params.stop_time!r}: must be "
-            f"at least the robot's own {floor:.4g} m, the distance its base "
-            "needs to stop from the approach the rule allows "
-            "(drake_wbc.math.safety.robot_stop_distance)")
 
 
 def check_vector(value, lower=-math.inf, upper=math.inf, switch=False):

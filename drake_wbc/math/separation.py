@@ -16,16 +16,30 @@ nearest point approaches it,
 nearest to point i and n_i the unit direction from it to the point, all
 in T_b) must not exceed
 
-    a_i <= max(d_i - stop_distance, 0) / stop_time,         (allowed)
+    a_i <= min(g_i / stop_time, u_stop(g_i)),               (allowed)
+    g_i = max(d_i - stop_distance, 0),
+    u_stop(g) = a (sqrt(B^2 + 2 g / a) - B),  B = T_r + tau,
 
-d_i the point's distance from the footprint. The whole command is scaled
+d_i the point's distance from the footprint. The first term is the
+approach itself: at it the distance decays as exp(-t / stop_time) towards
+stop_distance. The second is the fastest approach from which the base
+still stops stop_distance short, reacting within T_r (the points are up
+to a scan old, and a control period), through its velocity loop's lag
+tau and braking at a, its acceleration limit: the root of
+u^2 / (2 a) + B u = g, eq. (protective) with no human motion and the
+stop distance as its only margin (`protective_speeds`). Slower than
+2 a (stop_time - B) (0.2 m/s with the robot's limits: within 0.1 m of
+the stop distance) the exponential approach binds; faster, the braking
+does: the base starts to slow where it can still stop (0.9 m short of
+the stop distance at 1 m/s), not where the exponential approach alone
+would have it brake harder than it can (at 0.5 m, needing 2 m/s^2).
+Approaching at the bound, the bound falls no faster than a (by
+a u / (u + a B) per second), so the command follows it within the
+acceleration limits. The whole command is scaled
 by the largest factor in [0, 1] that meets every bound (the separation
 scale), so its direction is kept, as by the velocity limits
 (drake_wbc.math.command_limits.limit_base_velocity); motion away from or
-along an obstacle is not limited. Approaching at the bound, the distance
-decays as exp(-t / stop_time) towards stop_distance, so the base stops
-stop_distance short of the obstacle; the base's own lag and the
-acceleration limit take some of that margin.
+along an obstacle is not limited.
 
 The paper has no such rule; these labels, (approach) and (allowed), are
 this module's. Each has one scalar-generic reference body here (float
@@ -136,10 +150,21 @@ def approach_rows(points, half_sizes):
     return np.column_stack([n[:, 0], n[:, 1], rx * n[:, 1] - ry * n[:, 0]]), d
 
 
-def allowed_speeds(d, stop_distance, stop_time):
-    """The largest approach speed max(d - stop_distance, 0) / stop_time
-    to each point at distance d (M,), eq. (allowed)."""
-    return np.maximum(d - stop_distance, 0.0) / stop_time
+def allowed_speeds(d, stop_distance, stop_time, timing):
+    """The largest approach speed to each point at distance d (M,),
+    eq. (allowed): min(g / stop_time, u_stop(g)), g = max(d -
+    stop_distance, 0), u_stop the fastest approach from which the base
+    stops stop_distance short (`protective_speeds` with no human motion).
+
+    Args:
+        d: (M,) distances from the footprint, m (float or AutoDiffXd).
+        stop_distance: m >= 0.
+        stop_time: s > 0.
+        timing: ProtectiveTiming, the base's reaction, lag and braking.
+    """
+    gap = np.maximum(d - stop_distance, 0.0)
+    return np.minimum(gap / stop_time,
+                      protective_speeds(d, 0.0, timing, stop_distance))
 
 
 def scale_for_rows(command, rows, allowed):
@@ -170,7 +195,7 @@ def scale_for_rows(command, rows, allowed):
     return min(max(min(ratios.tolist()), 0.0), 1.0)
 
 
-def separation_state(points, half_sizes, stop_distance, stop_time,
+def separation_state(points, half_sizes, stop_distance, stop_time, timing,
                      count=NEAREST_POINTS):
     """The `approach_rows` (count, 3), raveled row by row, then the
     `allowed_speeds` (count,) of the `nearest_points` of `points`: what
@@ -181,19 +206,20 @@ def separation_state(points, half_sizes, stop_distance, stop_time,
         half_sizes: the footprint's half-sizes (a, b), m.
         stop_distance: m >= 0 left between the footprint and an obstacle.
         stop_time: s > 0, the time constant of the approach.
+        timing: ProtectiveTiming, the base's reaction, lag and braking.
         count: how many points to keep, >= 1.
     """
     rows, d = approach_rows(nearest_points(points, half_sizes, count),
                             half_sizes)
-    return np.concatenate([rows.ravel(),
-                           allowed_speeds(d, stop_distance, stop_time)])
+    return np.concatenate([rows.ravel(), allowed_speeds(
+        d, stop_distance, stop_time, timing)])
 
 
 def separation_scale(command, points, half_sizes, stop_distance,
-                     stop_time):
+                     stop_time, timing):
     """The largest factor s in [0, 1] such that s * command approaches no
-    obstacle point faster than max(d_i - stop_distance, 0) / stop_time
-    (eqs. (approach), (allowed)), its arguments checked.
+    obstacle point faster than eq. (allowed) lets it (eq. (approach)), its
+    arguments checked.
 
     Args:
         command: (3,) [vx, vy, wz] in T_b, finite.
@@ -201,6 +227,8 @@ def separation_scale(command, points, half_sizes, stop_distance,
         half_sizes: the footprint's half-sizes (a, b) >= 0, m.
         stop_distance: m >= 0 left between the footprint and an obstacle.
         stop_time: s > 0, the time constant of the approach.
+        timing: ProtectiveTiming (`protective_timing`): the base's
+            reaction time, velocity lag and braking.
 
     Returns:
         s as a float (1.0 when no bound acts).
@@ -214,7 +242,7 @@ def separation_scale(command, points, half_sizes, stop_distance,
     rows, d = approach_rows(points, half_sizes)
     return scale_for_rows(command, rows, allowed_speeds(
         d, non_negative("stop_distance", stop_distance),
-        positive("stop_time", stop_time)))
+        positive("stop_time", stop_time), _checked_timing(timing)))
 
 
 def approach_speeds(command, points, half_sizes):
@@ -250,6 +278,13 @@ def _checked_half_sizes(half_sizes):
                  for a in as_vector("half_sizes", half_sizes, 2))
 
 
+def _checked_timing(timing):
+    reaction, lag, deceleration = as_vector("timing", timing, 3)
+    return ProtectiveTiming(non_negative("timing.reaction_time", reaction),
+                            non_negative("timing.lag", lag),
+                            positive("timing.deceleration", deceleration))
+
+
 # --- the fast float kernels of the tick ------------------------------------
 
 
@@ -282,14 +317,17 @@ def _scan(rng, half_sizes, count):
 def _separation_state_inputs(rng):
     half_sizes = (float(rng.uniform(0.2, 0.6)), float(rng.uniform(0.2, 0.5)))
     count = int(rng.choice([1, 4, NEAREST_POINTS]))
+    timing = ProtectiveTiming(float(rng.uniform(0.0, 0.2)),
+                              float(rng.uniform(0.0, 0.5)),
+                              float(rng.uniform(0.3, 3.0)))
     return (_scan(rng, half_sizes, count), half_sizes,
             float(rng.uniform(0.0, 0.3)), float(rng.uniform(0.1, 1.0)),
-            count)
+            timing, count)
 
 
 @fast_kernel(separation_state, sample=_separation_state_inputs)
 def separation_state_float(points, half_sizes, stop_distance, stop_time,
-                           count=NEAREST_POINTS):
+                           timing, count=NEAREST_POINTS):
     """`separation_state` of float points, in compiled loops: the
     footprint gaps (drake_wbc.math.repulsion.footprint_gap), the `count`
     nearest kept in one pass (the first `count` of a stable sort, padded
@@ -299,8 +337,10 @@ def separation_state_float(points, half_sizes, stop_distance, stop_time,
     near = _nearest_loop(points, footprint_gap(points, half_sizes),
                          int(count))
     d, nx, ny = footprint_geometry(near, half_sizes)
+    reaction, lag, deceleration = timing
     return _state_loop(near, d, nx, ny, float(stop_distance),
-                       float(stop_time))
+                       float(stop_time), float(reaction + lag),
+                       float(deceleration))
 
 
 @compiled
@@ -340,9 +380,11 @@ def _nearest_loop(points, gap, count):
 
 
 @compiled
-def _state_loop(near, d, nx, ny, stop_distance, stop_time):
+def _state_loop(near, d, nx, ny, stop_distance, stop_time, b,
+                deceleration):
     """The rows of eq. (approach) at the footprint's nearest points
-    r = p - d n, then the allowed speeds of eq. (allowed)."""
+    r = p - d n, then the allowed speeds of eq. (allowed), b = T_r + tau
+    and a = deceleration (`protective_speeds`' order of operations)."""
     count = near.shape[0]
     state = np.empty(4 * count)
     for k in range(count):
@@ -352,7 +394,11 @@ def _state_loop(near, d, nx, ny, stop_distance, stop_time):
         state[3 * k + 1] = ny[k]
         state[3 * k + 2] = rx * ny[k] - ry * nx[k]
         gap = d[k] - stop_distance
-        state[3 * count + k] = (gap if not gap < 0.0 else 0.0) / stop_time
+        gap = gap if not gap < 0.0 else 0.0
+        braking = deceleration * (
+            np.sqrt(b * b + 2.0 * gap / deceleration) - b)
+        approach = gap / stop_time
+        state[3 * count + k] = approach if approach < braking else braking
     return state
 
 
@@ -459,13 +505,16 @@ class PeopleSeparationParameters:
         robot_uncertainty: Z_r, m >= 0: the base's position uncertainty
             over a stop (odometry, the footprint's tolerance): 0.02 m.
         min_speed: m/s in (0, 0.5], the filtered speed above which a
-            tracked cluster is a moving person (0.5 m/s: a slow walk;
-            above the apparent motion of a static shape's visible part as
-            the base drives by at full speed, e.g. the piece of a wall at
-            the edge of a scanner's field of view, which slides along the
-            wall with the base: up to 0.45 m/s at 1 m/s). It may be
-            lowered, not raised. A person walking slower keeps the static
-            rule (what a standing person has too).
+            tracked cluster is a moving person (0.15 m/s: a shuffle, a
+            third of a slow walk). A static shape's apparent motion as
+            the base drives by is told apart by the other tests, not by
+            this speed: the piece of a wall at the edge of a scanner's
+            field of view slides along the wall with the base (up to
+            0.45 m/s at 1 m/s) but not relative to it, and a crate's
+            centroid shifts by less than min_travel. It may be lowered,
+            not raised. A person slower keeps the static rule (what a
+            standing person has too): in the closed loop a base from full
+            speed meets a 0.1 m/s walker at 0.02 m/s.
         moving_scans: scans, >= 1, in a row with the speed above
             min_speed before the cluster counts as moving (3: 0.2 s at
             15 Hz; one jump of a box's visible side is not a walk).
@@ -502,7 +551,7 @@ class PeopleSeparationParameters:
     intrusion: float = 0.2
     sensor_uncertainty: float = 0.05
     robot_uncertainty: float = 0.02
-    min_speed: float = 0.5
+    min_speed: float = 0.15
     moving_scans: int = 3
     min_travel: float = 0.5
     moving_hold: float = 1.0
@@ -550,12 +599,14 @@ class PeopleSeparationParameters:
 
 
 class ProtectiveTiming(NamedTuple):
-    """The base's side of eq. (protective).
+    """The base's side of eqs. (protective) and (allowed).
 
     Attributes:
-        reaction_time: T_r, s: from a person's step to the base's command
-            reacting: the scan period, the processing time and one
-            control period (the limiter's state is the tick's).
+        reaction_time: T_r, s: from a person's step (or the base's
+            advance towards a point) to the base's command reacting: the
+            scan period (a point is up to a scan old), the processing
+            time and one control period (the limiter's state is the
+            tick's).
         lag: tau, s: the base's velocity loop lag (its drive starts to
             brake within it).
         deceleration: a, m/s^2 > 0: the base's braking (the smaller
@@ -585,10 +636,11 @@ def protective_separation(robot_speed, human_speed, timing, margin):
         T_s = SETTLING tau + v_r / a,  S_s = v_r tau + v_r^2 / (2 a),
 
     the base's stop distance modelled as its lag tau (coasting) then
-    braking at a: a bound of the lagged, saturated loop's own stop (the
-    distance u^2 / (2 a) + a tau^2 / 2 of
-    drake_wbc.math.safety.robot_stop_distance is at most
-    v_r tau + v_r^2 / (2 a) for v_r >= a tau / 2, and u tau below). Its
+    braking at a: the lagged loop's stop when its command ramps down at a
+    (the ramp's v_r^2 / (2 a), and v_r tau that a first-order lag adds
+    to any ramp), and a bound of its stop when the command is cut to zero
+    at once (u tau for u <= a tau, u^2 / (2 a) + a tau^2 / 2 above, the
+    loop saturated at a). Its
     stopping time, which the person walks on for, is the braking's v_r / a
     and the lag's settling: a first-order lag never quite ends, and
     SETTLING tau (3 tau: down to 5%, under 1 cm/s from the 0.2 m/s a lag

@@ -114,7 +114,8 @@ def BaseCommandLimiter_(T):
           NEAREST_POINTS nearest the footprint, which limit the next
           tick's command (drake_wbc.math.separation: the footprint
           approaches no point faster than max(d - stop_distance, 0) /
-          stop_time, eqs. (approach), (allowed)).
+          stop_time, nor faster than the base can brake from to stop
+          stop_distance short, eqs. (approach), (allowed)).
           Read only by the update, so the outputs do not depend on it
           directly. The points are also tracked between scans
           (drake_wbc.math.people, in the odometry's world): the approach
@@ -209,12 +210,18 @@ def BaseCommandLimiter_(T):
                 params.base_acceleration_limits), dtype=float)
             self._limit = body_for(limit_base_velocity, T)
             state_of_points = body_for(separation_state, T)
-            stop_distance = robots_own("params.stop_distance",
-                                       params.stop_distance)
+            stop_distance = params.stop_distance
             stop_time = params.stop_time
+            # The base's reaction, lag and braking (a ProtectiveTiming), for
+            # the static rule's stop (eq. (allowed)) and the people's S_p
+            # (eq. (protective)).
+            self.timing = protective_timing(
+                params.people, self.time_step, self._acceleration_limits,
+                BASE_LAG)
             self._separation = LastPoints(
                 lambda points: state_of_points(points, self.half_sizes,
-                                               stop_distance, stop_time))
+                                               stop_distance, stop_time,
+                                               self.timing))
             self._scale = body_for(scale_for_rows, T)
             self._people_scan = body_for(people_scan, T)
             self._velocity = self.DeclareVectorInputPort(
@@ -225,9 +232,6 @@ def BaseCommandLimiter_(T):
                 "obstacle_points", AbstractValue.Make(np.zeros((0, 2))))
             self._base_state = self.DeclareVectorInputPort("base_state", 6)
             self._people = params.people
-            self._timing = protective_timing(
-                params.people, self.time_step, self._acceleration_limits,
-                BASE_LAG)
             self._hold_time = params.hold_time
             # The signature of the points last summed (`_track`).
             self._signature = None
@@ -386,7 +390,7 @@ def BaseCommandLimiter_(T):
                 self._people)
             rows, allowed = people_rows(
                 [p[1] for p in people], [p[2] for p in people],
-                self.half_sizes, self._people, self._timing, MAX_TRACKS)
+                self.half_sizes, self._people, self.timing, MAX_TRACKS)
             state[_PEOPLE:_PEOPLE_ALLOWED] = rows.ravel()
             state[_PEOPLE_ALLOWED:_PROTECTIVE] = allowed
             state[_PROTECTIVE + 2] = 1.0 if inside else 0.0
