@@ -82,6 +82,7 @@ def description_text(n, extra=""):
           footprint_half_sizes: [0.45, 0.35]
           height: 0.35
           command_timeout: 0.2
+          velocity_lag: 0.2
         arm:
           joints: [{joints}]
           base_frame: omni_arm::chassis

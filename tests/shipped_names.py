@@ -32,7 +32,7 @@ FOOTPRINT = tuple(ROBOT.base.footprint_half_sizes)
 """The shipped base's footprint half sizes (a, b), m."""
 BASE_LIMITS = dict(base_velocity_limits=BASE_VELOCITY_LIMITS,
                    base_acceleration_limits=BASE_ACCELERATION_LIMITS,
-                   stop_distance=0.1)
+                   base_lag=ROBOT.base.velocity_lag, stop_distance=0.1)
 """SafetyParameters' keywords for the shipped base's own limits and stop
 distance (what build_controller fills in; a stage built alone is given
 them)."""

@@ -12,7 +12,7 @@ from shipped_names import BASE_LIMITS
 
 from drake_wbc.math.command_limits import limit_base_velocity
 from drake_wbc.math.repulsion import footprint_gap
-from drake_wbc.math.safety import BASE_LAG, SafetyParameters
+from drake_wbc.math.safety import SafetyParameters
 from drake_wbc.math.separation import (
     NEAREST_POINTS,
     protective_timing,
@@ -62,7 +62,8 @@ def random_tick(rng, previous):
 def timing_of(params):
     """The base's reaction, lag and braking the limiter's rules use."""
     return protective_timing(params.people, H,
-                             params.base_acceleration_limits, BASE_LAG)
+                             params.base_acceleration_limits,
+                             params.base_lag)
 
 
 def model_tick(params, previous, separation, desired, stopped, envelope,
@@ -167,7 +168,7 @@ def test_the_autodiff_limiter_differentiates_the_separation_scale():
     the way)."""
     params = SafetyParameters(base_velocity_limits=[2.0, 2.0, 2.0],
                               base_acceleration_limits=[1e3, 1e3, 1e3],
-                              stop_distance=0.1)
+                              base_lag=0.3, stop_distance=0.1)
     system = BaseCommandLimiter(params, H, HALF_SIZES).ToAutoDiffXd()
     context = system.CreateDefaultContext()
     wall = np.array([[0.9, y] for y in np.linspace(-1.0, 1.0, 21)])
@@ -202,12 +203,12 @@ def test_the_autodiff_limiter_differentiates_the_limits_exactly(limit):
     if limit == "velocity":
         params = SafetyParameters(base_velocity_limits=[2.0, 2.0, 2.0],
                                   base_acceleration_limits=[1e3, 1e3, 1e3],
-                                  stop_distance=0.1)
+                                  base_lag=0.3, stop_distance=0.1)
         scale = 2.0 / 3.0
     else:
         params = SafetyParameters(base_velocity_limits=[4.0, 4.0, 4.0],
                                   base_acceleration_limits=[50.0, 50.0, 50.0],
-                                  stop_distance=0.1)
+                                  base_lag=0.3, stop_distance=0.1)
         scale = 50.0 * H / 3.0
     system = BaseCommandLimiter(params, H, HALF_SIZES).ToAutoDiffXd()
     context = system.CreateDefaultContext()

@@ -98,6 +98,8 @@ def test_the_controller_of_a_urdf_robot_tracks_a_world_twist(tmp_path, n):
     with warnings.catch_warnings():
         warnings.simplefilter("error", RobotTuningWarning)
         controller = build_controller(params, robot=arm)
+    # Its base's own lag (0.2 s, not the shipped 0.3) in the separation.
+    assert controller.stages["base_limiter"].timing.lag == 0.2
     builder = DiagramBuilder()
     c = builder.AddSystem(controller.diagram)
     base = builder.AddSystem(IdealBase())

@@ -20,7 +20,6 @@ from shipped_names import (
 from drake_wbc.math import people as tracking
 from drake_wbc.math.repulsion import footprint_gap
 from drake_wbc.math.safety import (
-    BASE_LAG,
     SafetyParameters,
     check_within_robot,
 )
@@ -39,6 +38,8 @@ from drake_wbc.station.lidar import LidarParameters, scan, scan_points
 
 HALF = (0.4, 0.3)
 H = 0.01
+LAG = BASE_LIMITS["base_lag"]
+"""s: the shipped base's velocity loop lag (its description's)."""
 SCAN_TICKS = 7
 SCAN = SCAN_TICKS * H
 """The scan period of the ideal runs: every 7th tick, 0.07 s (15 Hz is
@@ -57,7 +58,7 @@ def test_the_protective_separation_is_its_closed_form():
     T_s = 3 tau + v_r / a and S_s = v_r tau + v_r^2 / (2 a), term by term
     at the defaults: T_r = 1/15 + 0.02 + 0.01 s, tau = 0.3 s, a = 1."""
     people = PeopleSeparationParameters()
-    timing = protective_timing(people, H, (1.0, 1.0, 1.0), BASE_LAG)
+    timing = protective_timing(people, H, (1.0, 1.0, 1.0), LAG)
     t_r = 1.0 / 15.0 + 0.02 + 0.01
     assert timing == pytest.approx(ProtectiveTiming(t_r, 0.3, 1.0))
     margin = 0.2 + 0.05 + 0.02
@@ -111,7 +112,7 @@ def test_people_rows_use_iso_speed_at_least():
     """An approaching person faster than ISO's speed uses the measured
     speed; slower, or walking away, ISO's (2.0 m/s within 0.5 m)."""
     people = PeopleSeparationParameters()
-    timing = protective_timing(people, H, (1.0, 1.0, 1.0), BASE_LAG)
+    timing = protective_timing(people, H, (1.0, 1.0, 1.0), LAG)
     nearest = [[2.4, 0.0], [2.4, 0.0], [2.4, 0.0], [0.7, 0.0]]
     velocities = [[-3.0, 0.0], [-1.0, 0.0], [1.5, 0.0], [0.0, 0.0]]
     rows, allowed = people_rows(nearest, velocities, HALF, people, timing, 6)
@@ -139,7 +140,7 @@ def test_human_speeds_cannot_be_set_below_iso():
         with pytest.raises(ValueError, match=name):
             PeopleSeparationParameters(**{name: -0.1})
     check_within_robot(SafetyParameters(), BASE_VELOCITY_LIMITS,
-                       BASE_ACCELERATION_LIMITS)
+                       BASE_ACCELERATION_LIMITS, LAG)
 
 
 # --- the tracker ------------------------------------------------------------

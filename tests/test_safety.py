@@ -586,8 +586,11 @@ def test_bad_parameters_are_rejected(kwargs, name):
      r"arm_controller.acceleration_limit = 1000000.0 .* arm's own 12.56"),
     ("arm_controller: {use_acceleration_limit: false}",
      r"arm_controller.use_acceleration_limit = False is not allowed"),
+    ("safety: {base_lag: 0.1}",
+     r"safety.base_lag = 0.1 is not allowed: must be at least the robot's "
+     r"own 0.3 s"),
 ], ids=["base-velocity", "base-acceleration", "arm-acceleration",
-        "arm-acceleration-off"])
+        "arm-acceleration-off", "base-lag"])
 def test_limits_only_tighten(arm, text, message):
     """Every safety limit may tighten the robot's own, not widen it: the
     error names the field, its value and the robot's."""

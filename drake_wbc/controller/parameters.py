@@ -218,7 +218,8 @@ def for_robot(params, robot):
 
     - safety.base_velocity_limits and base_acceleration_limits: the
       base's own where None; a given one at most the base's
-      (drake_wbc.math.safety.check_within_robot).
+      (drake_wbc.math.safety.check_within_robot); safety.base_lag: the
+      base's velocity_lag where None, a given one at least it.
     - capability_band and capability.joint_limit_gain: the robot's
       tuning (its description's RobotTuning, the paper's where it gives
       none) where None.
@@ -242,7 +243,8 @@ def for_robot(params, robot):
     base, tuning = robot.base, robot.tuning
     safety, repulsion = params.safety, params.base_cdmp.repulsion
     check_within_robot(safety, velocity_limits=base.velocity_limits,
-                       acceleration_limits=base.acceleration_limits)
+                       acceleration_limits=base.acceleration_limits,
+                       velocity_lag=base.velocity_lag)
     own = tuple(float(a) for a in base.footprint_half_sizes)
     if repulsion.half_sizes is not None:
         for i, (value, limit) in enumerate(zip(repulsion.half_sizes, own,
@@ -265,7 +267,9 @@ def for_robot(params, robot):
             joint_limit_gain=tuning.joint_limit_gain if k_j is None else k_j),
         safety=dataclasses.replace(
             safety, base_velocity_limits=velocity,
-            base_acceleration_limits=acceleration),
+            base_acceleration_limits=acceleration,
+            base_lag=(base.velocity_lag if safety.base_lag is None
+                      else safety.base_lag)),
         base_cdmp=dataclasses.replace(
             params.base_cdmp, repulsion=dataclasses.replace(
                 repulsion, half_sizes=repulsion.half_sizes or own)))

@@ -50,12 +50,6 @@ from drake_wbc.math.validation import non_negative, positive, positive_vector
 BASE_AXES = 3
 """The base's velocity components [vx, vy, wz] (T_b)."""
 
-BASE_LAG = 0.3
-"""s: the base's velocity loop lag, the slowest of the facts sheet's 0.1 to
-0.3 s (EST; the station's drivers model 0.2 s), for the base's stop in
-the separation rules (drake_wbc.math.separation, eqs. (allowed) and
-(protective))."""
-
 DEFAULT_HOLD_TIME = 0.5
 """Seconds for which every input must be valid again before the controller
 resumes after a safe stop.
@@ -132,6 +126,12 @@ class SafetyParameters:
             (drake_wbc.math.separation), 0.5 s by default. These two are
             the rule of every obstacle point that is not a moving
             person.
+        base_lag: s >= 0, the base's velocity loop lag that the
+            separation rules' stop allows for (eqs. (allowed),
+            (protective)); None (the default): the robot's own (its
+            description's base.velocity_lag), filled in when the
+            controller is built; a given one at least the robot's own
+            (a longer lag brakes earlier).
         people: the separation from moving people, ISO/TS 15066's
             protective separation distance
             (drake_wbc.math.separation.PeopleSeparationParameters; its
@@ -147,6 +147,7 @@ class SafetyParameters:
     base_acceleration_limits: list[float] | None = None
     stop_distance: float = DEFAULT_STOP_DISTANCE
     stop_time: float = 0.5
+    base_lag: float | None = None
     people: PeopleSeparationParameters = field(
         default_factory=PeopleSeparationParameters)
 
@@ -154,6 +155,8 @@ class SafetyParameters:
         positive("hold_time", self.hold_time)
         non_negative("stop_distance", self.stop_distance)
         positive("stop_time", self.stop_time)
+        if self.base_lag is not None:
+            non_negative("base_lag", self.base_lag)
         if not isinstance(self.people, PeopleSeparationParameters):
             raise ValueError(f"people = {self.people!r} is not allowed: "
                              "must be a PeopleSeparationParameters")
@@ -165,11 +168,12 @@ class SafetyParameters:
 
 
 def check_within_robot(params, velocity_limits, acceleration_limits,
-                       path="safety"):
+                       velocity_lag, path="safety"):
     """Checks that the SafetyParameters `params` only tighten the robot's
     own limits: the base's velocity and acceleration limits (where given)
-    at most `velocity_limits` and `acceleration_limits` (the robot's own,
-    from its description).
+    at most `velocity_limits` and `acceleration_limits`, its lag (where
+    given) at least `velocity_lag` (the robot's own, from its
+    description).
 
     Raises:
         ValueError: naming the field (under `path`), its value and the
@@ -188,6 +192,11 @@ def check_within_robot(params, velocity_limits, acceleration_limits,
                     f"{path}.{name}[{i}] = {value!r} is not allowed: must be "
                     f"at most the robot's own {limit!r} {unit[i]} (a limit "
                     "may tighten the robot's, not widen it)")
+    if params.base_lag is not None and params.base_lag < velocity_lag:
+        raise ValueError(
+            f"{path}.base_lag = {params.base_lag!r} is not allowed: must be "
+            f"at least the robot's own {velocity_lag!r} s (a shorter lag "
+            "would brake later than the base can)")
 
 
 def check_vector(value, lower=-math.inf, upper=math.inf, switch=False):

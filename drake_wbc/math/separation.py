@@ -621,7 +621,7 @@ class ProtectiveTiming(NamedTuple):
 def protective_timing(people, time_step, acceleration_limits, lag):
     """ProtectiveTiming from the PeopleSeparationParameters `people`, the
     control period, the base's acceleration limits [x, y, yaw] and its
-    velocity loop lag (drake_wbc.math.safety.BASE_LAG)."""
+    velocity loop lag (its description's base.velocity_lag)."""
     return ProtectiveTiming(
         people.scan_period + people.processing_time + time_step, lag,
         min(acceleration_limits[0], acceleration_limits[1]))

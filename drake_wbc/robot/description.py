@@ -36,7 +36,7 @@ from pathlib import Path
 
 from drake_wbc.math.capability import DEFAULT_JOINT_LIMIT_GAIN, CapabilityBand
 from drake_wbc.math.loading import load_typed
-from drake_wbc.math.validation import as_vector, positive, text
+from drake_wbc.math.validation import as_vector, non_negative, positive, text
 
 MIN_ARM_JOINTS = 6
 """The controller needs a 6-D task space from the arm alone (pHRI moves
@@ -172,6 +172,10 @@ class BaseDescription:
             overhang the base).
         command_timeout: > 0, s, after which the base stops by itself when
             no command arrives (its own watchdog).
+        velocity_lag: >= 0, s, the time constant of its velocity loop,
+            from a command to the base's velocity (the slowest of its
+            axes): the separation rules brake allowing for it
+            (drake_wbc.math.separation, eqs. (allowed), (protective)).
     """
 
     frame: str = ""
@@ -182,6 +186,7 @@ class BaseDescription:
     footprint_half_sizes: list[float] = field(default_factory=list)
     height: float = math.nan
     command_timeout: float = math.nan
+    velocity_lag: float = math.nan
 
     def __post_init__(self):
         if _blank(self):
@@ -202,6 +207,7 @@ class BaseDescription:
         self.height = positive("height", self.height)
         self.command_timeout = positive("command_timeout",
                                         self.command_timeout)
+        self.velocity_lag = non_negative("velocity_lag", self.velocity_lag)
 
 
 @dataclass

@@ -25,7 +25,7 @@ from drake_wbc.math.people import (
     people_scan,
 )
 from drake_wbc.math.repulsion import LastPoints
-from drake_wbc.math.safety import BASE_LAG, SafetyParameters
+from drake_wbc.math.safety import SafetyParameters
 from drake_wbc.math.scalar_support import value_of
 from drake_wbc.math.separation import (
     FAR,
@@ -217,7 +217,7 @@ def BaseCommandLimiter_(T):
             # (eq. (protective)).
             self.timing = protective_timing(
                 params.people, self.time_step, self._acceleration_limits,
-                BASE_LAG)
+                robots_own("params.base_lag", params.base_lag))
             self._separation = LastPoints(
                 lambda points: state_of_points(points, self.half_sizes,
                                                stop_distance, stop_time,
