@@ -69,7 +69,6 @@ loop's (all six axes closed), the number that the simulation checks.
 from dataclasses import dataclass, replace
 
 import numpy as np
-from pydrake.autodiffutils import AutoDiffXd
 from pydrake.math import RigidTransform
 from pydrake.multibody.tree import (
     FixedOffsetFrame,
@@ -87,7 +86,6 @@ from pydrake.systems.primitives import (
     Multiplexer,
     ZeroOrderHold,
 )
-from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.analysis.frequency import stability_margins
 from drake_wbc.analysis.period_map import linearize_period_map
@@ -104,6 +102,7 @@ from drake_wbc.experiments.scenario import (
 )
 from drake_wbc.math.kinematics import twist_rotation
 from drake_wbc.math.validation import checked_instance, positive
+from drake_wbc.stages.support import define_stage
 from drake_wbc.stages.wrench import sensor_rotation_in_base, tool_weight_reading
 from drake_wbc.station.driver_dynamics import interpolated_command
 from drake_wbc.station.force_torque import WeldWrench
@@ -119,7 +118,7 @@ AXES = ("x", "y", "z")
 """The translational axes of T_b of the per-axis loops."""
 
 
-@TemplateSystem.define("PeriodicArmDriver_", T_list=(float, AutoDiffXd))
+@define_stage("PeriodicArmDriver_")
 def PeriodicArmDriver_(T):
     class Impl(LeafSystem_[T]):
         """The station's arm driver (station.drivers.ArmPositionDriver:

@@ -1,5 +1,6 @@
 """What the stages share in how they are built: their scalar types and
-their definition as scalar-convertible templates (`define_stage`), or,
+their definition as scalar-convertible templates (`define_stage`, which
+the station's and the analyses' scalar-convertible systems use too), or,
 where a stage is linear or a switch, as a small Diagram of Drake's C++
 systems (`define_composite_stage`), a
 vector computed once per change of its inputs in a cache entry and
@@ -7,11 +8,14 @@ sliced into named output ports, their named vector inputs and dependency
 tickets, optional one-element inputs, and the constants of the arm's
 mounting (^bR_a and the arm base's origin in T_b) they read."""
 
+import contextlib
 import functools
 import inspect
+import sys
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
+from pydrake.common import cpp_template
 from pydrake.common.cpp_template import TemplateClass
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import DiagramBuilder_, ValueProducer
@@ -40,6 +44,11 @@ def define_stage(name, scalars=SCALARS):
     copy shares them with its original), so that no stage writes a
     `_construct_copy` of its own. A class that needs another copy rule
     may still define `_construct_copy`.
+
+    Every scalar type's class is made here, when the stage's module is
+    imported, with pydrake's look-up of the caller's module made cheap
+    (`_cheap_caller_lookup`): `name[None]` and `ToAutoDiffXd()` then
+    find it made.
     """
 
     def decorate(instantiate):
@@ -62,11 +71,49 @@ def define_stage(name, scalars=SCALARS):
             cls._construct_copy = _construct_copy
             return cls
 
-        return TemplateSystem.define(
-            name, T_list=scalars, scope=inspect.getmodule(instantiate))(
-                instantiate_with_copy)
+        with _cheap_caller_lookup():
+            template = TemplateSystem.define(
+                name, T_list=scalars, scope=inspect.getmodule(instantiate))(
+                    instantiate_with_copy)
+            for T in scalars:
+                template[T]
+        return template
 
     return decorate
+
+
+@contextlib.contextmanager
+def _cheap_caller_lookup():
+    """Within it, pydrake finds a caller's module by walking the frames
+    rather than with `inspect.stack()`.
+
+    When a TemplateSystem makes the class of a scalar type, it names that
+    class's ToScalarType methods after the module that calls it, which
+    pydrake finds as `inspect.getmodule(inspect.stack()[2][0])`.
+    `inspect.stack()` reads the source of every frame of the stack, and
+    for each frame of the import system (frozen modules, without a file)
+    `inspect.getmodule` scans all of `sys.modules` (CPython issue 92041).
+    A stage's module is imported some ten imports deep, with over a
+    thousand modules loaded: each class cost about 60 ms, 2.4 s of the
+    7 s of `drake-wbc run`. `sys._getframe(frame)` is the same frame as
+    `inspect.stack()[frame][0]` (both count from the look-up's own), so
+    the module found is the same. pydrake's look-up is restored on exit;
+    where a pydrake has none of that name, nothing is changed.
+    """
+    lookup = getattr(cpp_template, "_get_module_from_stack", None)
+    if lookup is None:
+        yield
+        return
+    cpp_template._get_module_from_stack = _caller_module
+    try:
+        yield
+    finally:
+        cpp_template._get_module_from_stack = lookup
+
+
+def _caller_module(frame=2):
+    """The module of the frame `frame` levels above this one."""
+    return inspect.getmodule(sys._getframe(frame))
 
 
 def define_composite_stage(name, scalars=SCALARS):

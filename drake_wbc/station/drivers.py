@@ -25,9 +25,7 @@ import copy
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
-from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.math.validation import (
     as_vector,
@@ -38,16 +36,13 @@ from drake_wbc.math.validation import (
     whole_multiple,
 )
 from drake_wbc.robot.model import HOME_ARM_POSITIONS
+from drake_wbc.stages.support import define_stage
 from drake_wbc.station.driver_dynamics import (
     base_loop_size,
     base_loop_step,
     body_to_world_rates,
     interpolated_command,
 )
-
-SCALARS = [float, AutoDiffXd]
-"""The drivers branch on values (saturation), so no symbolic scalar."""
-
 
 BASE_LOOPS = {
     # Today's model: a heavy base whose velocity loop is a first-order lag
@@ -243,7 +238,7 @@ def check_arm_time_step(params, name, time_step, prefix=""):
     return h
 
 
-@TemplateSystem.define("BaseVelocityDriver_", T_list=SCALARS)
+@define_stage("BaseVelocityDriver_")
 def BaseVelocityDriver_(T):
     class Impl(LeafSystem_[T]):
         """The base's velocity loop: lag and saturation.
@@ -314,7 +309,7 @@ def BaseVelocityDriver_(T):
     return Impl
 
 
-@TemplateSystem.define("ArmPositionDriver_", T_list=SCALARS)
+@define_stage("ArmPositionDriver_")
 def ArmPositionDriver_(T):
     class Impl(LeafSystem_[T]):
         """The arm's position servo: sample, then interpolate.

@@ -18,12 +18,10 @@ already holds the forces of the initial state.
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.autodiffutils import AutoDiffXd
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.math import SpatialForce_
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import LeafSystem, LeafSystem_
-from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.math.validation import (
     as_vector,
@@ -32,6 +30,7 @@ from drake_wbc.math.validation import (
     positive,
     whole_number,
 )
+from drake_wbc.stages.support import define_stage
 from drake_wbc.station.sampling import SampledReading
 
 WRENCH_SIZE = 6
@@ -204,7 +203,7 @@ class WristForceTorqueSensor(SampledReading, LeafSystem):
         return self._measure(self._wrench.Eval(context), tick)
 
 
-@TemplateSystem.define("WeldWrench_", T_list=(float, AutoDiffXd))
+@define_stage("WeldWrench_")
 def WeldWrench_(T):
     class Impl(LeafSystem_[T]):
         """The true sensor wrench from the reaction forces of a weld.

@@ -11,18 +11,17 @@
 """
 
 import numpy as np
-from pydrake.autodiffutils import AutoDiffXd
 from pydrake.common.value import AbstractValue
 from pydrake.math import RollPitchYaw
 from pydrake.symbolic import MakeVectorVariable
 from pydrake.systems.framework import LeafSystem, LeafSystem_, ValueProducer
 from pydrake.systems.primitives import SymbolicVectorSystem
-from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_wbc.robot.model import (
     joint_position_indices,
     joint_velocity_indices,
 )
+from drake_wbc.stages.support import define_stage
 
 
 def selection_matrix(indices, size):
@@ -63,7 +62,7 @@ def base_state_selection(plant, model):
                          nq + nv)])
 
 
-@TemplateSystem.define("BaseOdometry_", T_list=[float, AutoDiffXd])
+@define_stage("BaseOdometry_")
 def BaseOdometry_(T):
     class Impl(LeafSystem_[T]):
         """The base's odometry from the plant's state.
