@@ -72,6 +72,9 @@ def _add(text):
     ({"base.velocity_limits": [1.0, -1.0, 1.0]},
      r"base.velocity_limits\[1\] = -1.0"),
     ({"tool": None}, r"tool is missing"),
+    ({"base.velocity_lag": None}, r"base.velocity_lag is missing: a robot "
+     r"description must give it"),
+    ({"base.command_timeout": None}, r"base.command_timeout is missing"),
     ({"arm.position_lower": [0.0] * 6, "arm.position_upper": [0.0] * 6},
      r"arm.position_lower\[0\] = 0.0 is not allowed: must be below"),
     ({"arm.flange": "elfin5::flange"}, r"arm.flange"),

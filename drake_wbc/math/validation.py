@@ -384,14 +384,15 @@ def validated_copy(params):
 
 def _qualified(message, prefix, names):
     """`message` with the fields `names` it reports (`name = ...`,
-    `name[i] = ...`, `name.sub[j].x = ...`, `name has shape ...`) renamed
+    `name[i] = ...`, `name.sub[j].x = ...`, `name has shape ...`,
+    `name is missing`) renamed
     `prefix + name`; the message is prefixed with the path instead when it
     reports no field."""
     if not prefix:
         return message
     pattern = re.compile(
         r"(?<![\w.])(" + "|".join(map(re.escape, names))
-        + r")(?=(?:\[\d+\]|\.\w+)* (?:=|has shape))")
+        + r")(?=(?:\[\d+\]|\.\w+)* (?:=|has shape|is missing))")
     renamed, count = pattern.subn(lambda m: prefix + m.group(1), message)
     return renamed if count else f"{prefix[:-1]}: {message}"
 

@@ -79,6 +79,19 @@ def _blank(part):
     return True
 
 
+def _check_given(part):
+    """Raises naming the first number of the dataclass `part` that its
+    file left out (a float field whose default, NaN, says that a
+    description must give it)."""
+    for f in dataclasses.fields(part):
+        if (isinstance(f.default, float) and math.isnan(f.default)
+                and isinstance(getattr(part, f.name), float)
+                and math.isnan(getattr(part, f.name))):
+            raise ValueError(f"{f.name} is missing: a robot description "
+                             "must give it (see the README, 'Use your own "
+                             "robot')")
+
+
 def _names(name, values, count=None, minimum=0):
     """`values` as a tuple of non-empty, distinct strings, `count` of them
     (or at least `minimum`)."""
@@ -191,6 +204,7 @@ class BaseDescription:
     def __post_init__(self):
         if _blank(self):
             return
+        _check_given(self)
         self.frame = _names("frame", [self.frame])[0]
         self.joints = _names("joints", self.joints, count=3)
         self.passive_joints = _names("passive_joints", self.passive_joints)
