@@ -67,8 +67,9 @@ from drake_wbc.math.validation import positive
 from drake_wbc.station.simulation import SimulatedStation
 
 CONTACT_STIFFNESS = 3.0e3
-"""K of the contact loops, N/m: the wiping pad's sponge (about 3e3 N/m,
-models/ft300_wiping_tool.sdf)."""
+"""K of the contact loops, N/m: a soft sponge pressed against a wall
+(about 3e3 N/m, as the shipped wiping pad's; `compute_bode_report`
+takes another)."""
 
 REPRODUCTION_TOLERANCE = 0.1
 """|V_ee,actual / V_ee - 1| above which the end effector's command counts

@@ -65,8 +65,8 @@ class ControllerParameters:
             (capability), the adaptive weighting factors of the intuitive
             pHRI mode (workspace) and the switch-off of k_n
             (distributor). None (the default): the robot's, its
-            description's tuning (the paper's 0.035 and 0.04 for the
-            shipped Elfin5), filled in when the controller is built
+            description's tuning (the paper's 0.035 and 0.04 where it
+            gives none), filled in when the controller is built
             (`for_robot`).
         phri_switch: the default pHRI switch S_hri, 0 or 1, of both DMPs
             that take it (whole_body_cdmp and arm_cdmp, eqs. (cdmp-wb),

@@ -191,11 +191,11 @@ class HardwareOptions:
             (checked against the robot's description, Limits.of_robot).
         joint_speed_limit: the largest joint speed the arm commands may
             ask for from one command to the next, rad/s, the same on every
-            joint; None for the arm's own, joint by joint (the robot
-            description's: 1.57 rad/s on the shipped Elfin5).
+            joint; None for the arm's own, joint by joint (from the
+            robot's model and description).
         joint_acceleration_limit: the largest change of that speed,
-            rad/s^2; None for the arm's own (12.56 rad/s^2 on the
-            Elfin5). Both may tighten the arm's own, never widen them
+            rad/s^2; None for the arm's own, joint by joint. Both may
+            tighten the arm's own, never widen them
             (checked against the robot, Limits.of_robot).
         clock_tolerance: how far a sender's time stamp may run ahead of
             the receiver's clock since the last good message, s (0.1 s);

@@ -15,9 +15,10 @@ The invariants checked on every case (drake_wbc.stress.cases.violations):
 2. every logged signal is finite: the commands, the controller's
    diagnostics and the station's state (no NaN, no infinity);
 3. every base velocity command lies within the base's velocity limits
-   (station.base.velocity_limits: 1 m/s in x and y, 1 rad/s in yaw);
+   (station.base.velocity_limits);
 4. every joint position command moves each joint no faster than its
-   velocity limit (1.57 rad/s on the Elfin5): the change between two
+   velocity limit (the arm's own, from the robot's model and
+   description): the change between two
    consecutive commands over the control period;
 5. every joint position command lies within the joint's limits;
 6. the base's footprint never touches a static obstacle (distance from
