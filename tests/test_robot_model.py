@@ -17,6 +17,7 @@ from reference_kinematics import (
 )
 from shipped_names import ARM_JOINTS, BASE_JOINTS, MOUNT_JOINTS
 
+from drake_wbc.robot.description import shipped_robot
 from drake_wbc.robot.model import (
     HOME_ARM_POSITIONS,
     ArmKinematics,
@@ -25,6 +26,7 @@ from drake_wbc.robot.model import (
     joint_position_indices,
     make_robot_plant,
     mount_rocking_modes,
+    shared_robot_plant,
 )
 
 # Efforts (N m) and link masses (kg, base to L6) of the Elfin5 facts table;
@@ -544,3 +546,24 @@ def test_frame_matrix_gives_the_plants_pose_of_any_frame(robot):
                 atol=1e-12)
     assert arm._frame_chains[frames[0].index()]
     assert arm._frame_chains[frames[2].index()] == ()
+
+
+def test_the_shared_plant_is_made_once_per_description_and_mount():
+    """shared_robot_plant parses a robot once per description (by its
+    contents) and mount; make_robot_plant makes a plant of one's own."""
+    plant, model = shared_robot_plant()
+    assert shared_robot_plant(shipped_robot())[0] is plant
+    assert ArmKinematics().plant is plant
+    assert make_robot_plant()[0] is not plant
+    turned = ArmMount(yaw=0.3)
+    assert shared_robot_plant(mount=turned)[0] is not plant
+    assert shared_robot_plant(mount=ArmMount(yaw=0.3))[0] is (
+        shared_robot_plant(mount=turned)[0])
+    other = shipped_robot()
+    other.base.velocity_lag = 0.25
+    assert shared_robot_plant(other)[0] is not plant
+    # The same kinematics as a plant of one's own.
+    q = HOME_ARM_POSITIONS + 0.1
+    ours, theirs = ArmKinematics(), ArmKinematics(*make_robot_plant())
+    np.testing.assert_array_equal(ours.evaluate(q).J_a,
+                                  theirs.evaluate(q).J_a)

@@ -43,7 +43,7 @@ from drake_wbc.math.validation import (
 )
 from drake_wbc.robot.description import load_robot_description, shipped_robot
 from drake_wbc.robot.footprint import check_start_is_free
-from drake_wbc.robot.model import ArmKinematics, ArmMount, make_robot_plant
+from drake_wbc.robot.model import ArmKinematics, ArmMount, shared_robot_plant
 from drake_wbc.station.scene import Scene
 from drake_wbc.station.simulation import (
     StationOptions,
@@ -278,8 +278,8 @@ def controller_arm(scenario):
     mount = scenario.arm_mount
     if mount.is_identity and not scenario.robot:
         return None
-    return ArmKinematics(*make_robot_plant(scenario_robot(scenario),
-                                           mount=mount))
+    return ArmKinematics(*shared_robot_plant(scenario_robot(scenario),
+                                             mount=mount))
 
 
 def with_robot(scenario, robot_file, echo=print):
@@ -322,7 +322,7 @@ def check_on_robot(scenario):
         except ValueError as error:
             raise ValueError(f"hardware.{error}") from None
     if scenario.robot:
-        arm = ArmKinematics(*make_robot_plant(scenario_robot(scenario)))
+        arm = ArmKinematics(*shared_robot_plant(scenario_robot(scenario)))
         lower, upper = arm.lower, arm.upper
     else:
         lower, upper = arm_joint_limits()

@@ -496,6 +496,30 @@ def make_robot_plant(description=None, time_step=0.0, suspension=None,
     return plant, model
 
 
+_SHARED_PLANTS = {}
+"""shared_robot_plant's plants, by the reprs of their description and
+mount."""
+
+
+def shared_robot_plant(description=None, mount=None):
+    """(plant, model) as make_robot_plant(description, mount=mount) makes
+    them (continuous, without a suspension), made once per description
+    and mount in a process and shared by every caller. Parsing the
+    robot's model costs about 80 ms, and one run used to parse it nine
+    times for its kinematics and servo gains.
+
+    For reading only: its callers make their own contexts (kinematics,
+    mass matrices) and never add to it, change it or put it into a
+    Diagram (make_robot_plant makes a plant of one's own). A description
+    is known by its contents: a copy that differs in any field gets a
+    plant of its own."""
+    key = (repr(shipped_robot() if description is None else description),
+           repr(mount))
+    if key not in _SHARED_PLANTS:
+        _SHARED_PLANTS[key] = make_robot_plant(description, mount=mount)
+    return _SHARED_PLANTS[key]
+
+
 def joint_position_indices(joints):
     """Returns the indices in q of the one-dof `joints`."""
     return np.array([j.position_start() for j in joints], dtype=int)
@@ -569,7 +593,7 @@ class ArmKinematics:
     def __init__(self, plant=None, model=None, end_effector_frame=None,
                  mount=None):
         if plant is None:
-            plant, model = make_robot_plant(mount=mount)
+            plant, model = shared_robot_plant(mount=mount)
         elif model is None:
             raise ValueError(
                 "model = None is not allowed when plant is given: pass the "
@@ -755,7 +779,7 @@ def arm_kinematics(robot=None):
     its plant)."""
     if isinstance(robot, ArmKinematics):
         return robot
-    return ArmKinematics(*make_robot_plant(checked_instance(
+    return ArmKinematics(*shared_robot_plant(checked_instance(
         "robot", robot, RobotDescription, shipped_robot)))
 
 

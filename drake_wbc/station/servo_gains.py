@@ -10,7 +10,7 @@ from drake_wbc.math.validation import as_vector
 from drake_wbc.robot.model import (
     joint_position_indices,
     joint_velocity_indices,
-    make_robot_plant,
+    shared_robot_plant,
 )
 
 
@@ -18,7 +18,7 @@ def _mass_matrix(description, arm_positions, mount):
     """(M, model): the robot's mass matrix with the arm at
     `arm_positions` (n,) and mounted by the ArmMount `mount`, everything
     else at rest, and its RobotModel."""
-    plant, model = make_robot_plant(description, mount=mount)
+    plant, model = shared_robot_plant(description, mount=mount)
     q_a = as_vector("arm_positions", arm_positions, model.num_arm_joints)
     context = plant.CreateDefaultContext()
     q = plant.GetPositions(context)
