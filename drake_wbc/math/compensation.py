@@ -144,7 +144,9 @@ class RobustCompensatorParameters:
             module docstring, "The base's motion".
         base_lag: the time constant of the "predicted" source's lag, s,
             > 0 (0.2, the shipped base's loop; `identify_lag` estimates it
-            from a logged response). Read only by that source.
+            from a logged response). Read only by that source. An
+            estimate; the separation's stop allows for a bound instead
+            (the robot's base.velocity_lag, SafetyParameters.base_lag).
     """
 
     compensation_switch: float = 1.0

@@ -131,7 +131,9 @@ class SafetyParameters:
             (protective)); None (the default): the robot's own (its
             description's base.velocity_lag), filled in when the
             controller is built; a given one at least the robot's own
-            (a longer lag brakes earlier).
+            (a longer lag brakes earlier). A bound, for safety; the
+            compensator's base_lag is an estimate, for its prediction
+            (drake_wbc.math.compensation, eq. (base_lag)).
         people: the separation from moving people, ISO/TS 15066's
             protective separation distance
             (drake_wbc.math.separation.PeopleSeparationParameters; its

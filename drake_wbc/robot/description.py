@@ -185,9 +185,10 @@ class BaseDescription:
             overhang the base).
         command_timeout: > 0, s, after which the base stops by itself when
             no command arrives (its own watchdog).
-        velocity_lag: >= 0, s, the time constant of its velocity loop,
-            from a command to the base's velocity (the slowest of its
-            axes): the separation rules brake allowing for it
+        velocity_lag: >= 0, s, the longest time constant of its
+            velocity loop, from a command to the base's velocity (the
+            slowest of its axes; where it is not known exactly, an upper
+            bound): the separation rules brake allowing for it
             (drake_wbc.math.separation, eqs. (allowed), (protective)).
     """
 
