@@ -82,6 +82,11 @@ def define_stage(name, scalars=SCALARS):
     return decorate
 
 
+_PYDRAKE_LOOKUP = getattr(cpp_template, "_get_module_from_stack", None)
+"""pydrake's own look-up of a caller's module, which `_cheap_caller_lookup`
+puts back (also when two threads define systems at once)."""
+
+
 @contextlib.contextmanager
 def _cheap_caller_lookup():
     """Within it, pydrake finds a caller's module by walking the frames
@@ -100,15 +105,14 @@ def _cheap_caller_lookup():
     the module found is the same. pydrake's look-up is restored on exit;
     where a pydrake has none of that name, nothing is changed.
     """
-    lookup = getattr(cpp_template, "_get_module_from_stack", None)
-    if lookup is None:
+    if _PYDRAKE_LOOKUP is None:
         yield
         return
     cpp_template._get_module_from_stack = _caller_module
     try:
         yield
     finally:
-        cpp_template._get_module_from_stack = lookup
+        cpp_template._get_module_from_stack = _PYDRAKE_LOOKUP
 
 
 def _caller_module(frame=2):
