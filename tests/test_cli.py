@@ -92,9 +92,25 @@ def test_run_lists_every_scenario(capsys):
     out = capsys.readouterr().out.splitlines()
     names = [path.stem for path in scenario_files()]
     assert [line.split()[0] for line in out] == names
+    # The descriptions start in one column, after the longest name.
+    width = max(map(len, names))
+    assert all(line[width:width + 2] == "  " and line[width + 2] != " "
+               for line in out)
     assert "controller" not in names
     assert sum("(default)" in line for line in out) == (
         DEFAULT_SCENARIO in names)
+
+
+def test_a_closed_pipe_ends_the_command_quietly():
+    """`drake-wbc run --list | head -1`: when the reader has gone, the
+    command ends with 141 (as a shell's SIGPIPE) and no traceback."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "drake_wbc.cli", "run", "--list"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    process.stdout.close()  # gone before the first line is written
+    _, error = process.communicate(timeout=120)
+    assert process.returncode == 141, error.decode()
+    assert error == b""
 
 
 def test_run_names_an_unknown_scenario(capsys):

@@ -7,6 +7,7 @@ the exit code. Heavy imports happen inside the runners, so that
 """
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -111,10 +112,12 @@ def _run_run(args):
     )
 
     if args.list:
-        for path in scenario_files():
+        paths = scenario_files()
+        width = max(len(path.stem) for path in paths)
+        for path in paths:
             scenario = load_scenario(path)
             marker = " (default)" if path.stem == DEFAULT_SCENARIO else ""
-            print(f"{path.stem:22s} {scenario.description}{marker}")
+            print(f"{path.stem:{width}s}  {scenario.description}{marker}")
         return 0
     path = find_scenario(args.scenario or DEFAULT_SCENARIO)
     if args.duration is not None and not args.duration > 0:
@@ -256,13 +259,19 @@ def main(argv=None):
         parser.print_help()
         return 2
     try:
-        return args.run(args)
+        code = args.run(args)
+        sys.stdout.flush()  # a closed pipe is found here, not at exit
+        return code
     except ValueError as error:
         print(f"drake-wbc {args.command}: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # Ctrl-C: stop without a traceback
         print(f"\ndrake-wbc {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # e.g. `drake-wbc run --list | head -3`
+        # Python would flush stdout again at exit, into the closed pipe.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
 
 
 if __name__ == "__main__":
