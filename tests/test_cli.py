@@ -41,6 +41,11 @@ def test_demo_reports_the_model_and_writes_a_page(tmp_path, capsys):
     C_m = capability.capability(J_a, HOME_ARM_POSITIONS, kinematics.lower,
                                 kinematics.upper)
     assert f"C_m = {C_m:.4f}" in out
+    # The base's numbers that the controller's safety takes, as described.
+    base = kinematics.model.description.base
+    assert (f"footprint {2 * base.footprint_half_sizes[0]:.2f} x "
+            f"{2 * base.footprint_half_sizes[1]:.2f} m") in out
+    assert f"velocity loop lag {base.velocity_lag:g} s" in out
     page = tmp_path / "mcr_model.html"
     html = page.read_text()
     assert html.lstrip().lower().startswith("<!doctype html")

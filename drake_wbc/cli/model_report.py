@@ -38,8 +38,10 @@ def describe_robot(q_a=None, k_j=None, description=None):
     (its home if None).
 
     Lists every moving joint with its limits and whether it is actuated,
-    the masses, the mount's rocking modes (with a two-joint mount), and
-    the capability of movement (m, P_jnt, C_m and grad_x C_m) at `q_a`.
+    the masses, the mount's rocking modes (with a two-joint mount), the
+    base's described limits, footprint, timeout and lag (what the
+    controller's safety takes), and the capability of movement (m,
+    P_jnt, C_m and grad_x C_m) at `q_a`.
 
     Args:
         q_a: (n,) the arm's joints, rad.
@@ -109,6 +111,16 @@ def describe_robot(q_a=None, k_j=None, description=None):
                 for mode in modes
             )
         )
+    base = model.description.base
+    footprint = 2.0 * np.asarray(base.footprint_half_sizes)
+    lines += [
+        "Base, as described (the controller's limits may only tighten "
+        "these):",
+        f"  velocity limits {list(base.velocity_limits)} (m/s, m/s, "
+        f"rad/s), acceleration limits {list(base.acceleration_limits)}",
+        f"  footprint {footprint[0]:.2f} x {footprint[1]:.2f} m, stops "
+        f"itself {base.command_timeout:g} s after the last command, "
+        f"velocity loop lag {base.velocity_lag:g} s"]
     kinematics = ArmKinematics(plant, model)
     values = kinematics.evaluate(q_a)
     lower, upper = kinematics.lower, kinematics.upper
