@@ -75,6 +75,10 @@ def _add(text):
     ({"base.velocity_lag": None}, r"base.velocity_lag is missing: a robot "
      r"description must give it"),
     ({"base.command_timeout": None}, r"base.command_timeout is missing"),
+    ({"base.velocity_limits": None}, r"base.velocity_limits is missing"),
+    ({"base.frame": None}, r"base.frame is missing"),
+    ({"arm.home": None}, r"arm.home is missing"),
+    ({"tool.ft_sensor_joint": None}, r"tool.ft_sensor_joint is missing"),
     ({"arm.position_lower": [0.0] * 6, "arm.position_upper": [0.0] * 6},
      r"arm.position_lower\[0\] = 0.0 is not allowed: must be below"),
     ({"arm.flange": "elfin5::flange"}, r"arm.flange"),

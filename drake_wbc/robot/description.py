@@ -79,14 +79,19 @@ def _blank(part):
     return True
 
 
-def _check_given(part):
-    """Raises naming the first number of the dataclass `part` that its
-    file left out (a float field whose default, NaN, says that a
-    description must give it)."""
+def _check_given(part, optional=()):
+    """Raises naming the first field of the dataclass `part` that its file
+    left out: a field still at a blank default (NaN, "" or an empty list)
+    that is not one of the `optional` field names."""
     for f in dataclasses.fields(part):
-        if (isinstance(f.default, float) and math.isnan(f.default)
-                and isinstance(getattr(part, f.name), float)
-                and math.isnan(getattr(part, f.name))):
+        if f.name in optional:
+            continue
+        value = getattr(part, f.name)
+        left_out = (isinstance(f.default, float) and math.isnan(f.default)
+                    and isinstance(value, float) and math.isnan(value))
+        if f.default == "" or f.default_factory is list:
+            left_out = len(value) == 0
+        if left_out:
             raise ValueError(f"{f.name} is missing: a robot description "
                              "must give it (see the README, 'Use your own "
                              "robot')")
@@ -205,7 +210,7 @@ class BaseDescription:
     def __post_init__(self):
         if _blank(self):
             return
-        _check_given(self)
+        _check_given(self, optional=("passive_joints",))
         self.frame = _names("frame", [self.frame])[0]
         self.joints = _names("joints", self.joints, count=3)
         self.passive_joints = _names("passive_joints", self.passive_joints)
@@ -256,6 +261,7 @@ class ArmDescription:
     def __post_init__(self):
         if _blank(self):
             return
+        _check_given(self)
         self.joints = _names("joints", self.joints, minimum=MIN_ARM_JOINTS)
         n = len(self.joints)
         self.base_frame = _names("base_frame", [self.base_frame])[0]
@@ -298,6 +304,7 @@ class ToolDescription:
     def __post_init__(self):
         if _blank(self):
             return
+        _check_given(self)
         for name in ("tcp_frame", "ft_sensor_frame", "ft_sensor_joint"):
             setattr(self, name, _names(name, [getattr(self, name)])[0])
 
