@@ -9,7 +9,6 @@ limit margins, all from ground truth; and one overview figure.
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
 from drake_wbc.experiments.scenario import controller_arm, footprint_of
 from drake_wbc.math import repulsion
@@ -30,6 +29,10 @@ def band_rms(time, signal, band, mask=None, order=4):
     """RMS of `signal` (N,) band-passed to `band` (low, high) Hz with a
     zero-phase Butterworth filter, over the samples in `mask` (all if
     None). `time` must be evenly sampled."""
+    # Imported here: scipy.signal takes 0.7 s to import, which every other
+    # command and scenario would pay for nothing.
+    from scipy.signal import butter, sosfiltfilt
+
     fs = 1.0 / np.median(np.diff(time))
     sos = butter(order, band, btype="bandpass", fs=fs, output="sos")
     filtered = sosfiltfilt(sos, np.asarray(signal, dtype=float))
