@@ -357,6 +357,36 @@ def test_end_effector_velocity_is_the_derivative_of_its_position(station):
     assert np.max(np.linalg.norm(velocities, axis=1)) > 0.1
 
 
+def test_the_ground_truth_is_the_plants_own_tool_motion(station):
+    """truth.end_effector_* equal the tool body's pose and velocity from
+    the plant's own output ports (in the station's context), shifted to
+    the tool centre point, while the robot moves."""
+    run = Run(station, (0.4, -0.3, 0.9))
+    run.command(base=[0.3, 0.2, -0.4], arm=run.q_cmd + 0.2)
+    plant, model = station.plant, station.model
+    tool = model.tcp_frame.body()
+    X_tool_tcp = model.tcp_frame.GetFixedPoseInBodyFrame()
+    for t in (0.05, 0.2):
+        run.advance(t)
+        X_W_tool = plant.get_body_poses_output_port().Eval(
+            run.plant_context)[int(tool.index())]
+        V_W_tool = plant.get_body_spatial_velocities_output_port().Eval(
+            run.plant_context)[int(tool.index())]
+        X_W_tcp = X_W_tool @ X_tool_tcp
+        V_W_tcp = V_W_tool.Shift(
+            X_W_tool.rotation() @ X_tool_tcp.translation())
+        pose, velocity = (run["truth.end_effector_pose"],
+                          run["truth.end_effector_velocity"])
+        np.testing.assert_allclose(pose[:3], X_W_tcp.translation(),
+                                   atol=1e-12)
+        np.testing.assert_allclose(
+            RotationMatrix(RollPitchYaw(pose[3:])).matrix(),
+            X_W_tcp.rotation().matrix(), atol=1e-12)
+        np.testing.assert_allclose(velocity, np.concatenate(
+            [V_W_tcp.translational(), V_W_tcp.rotational()]), atol=1e-12)
+        assert np.linalg.norm(velocity[:3]) > 0.05
+
+
 def on_box_boundary(points_W, box, tolerance):
     c, s = np.cos(box.yaw), np.sin(box.yaw)
     local = (points_W - box.center[:2]) @ np.array([[c, -s], [s, c]])

@@ -117,10 +117,6 @@ def robot():
     model = add_robot(plant)
     plant.Finalize()
     truth = builder.AddSystem(GroundTruth(plant, model))
-    builder.Connect(plant.get_body_poses_output_port(),
-                    truth.GetInputPort("body_poses"))
-    builder.Connect(plant.get_body_spatial_velocities_output_port(),
-                    truth.GetInputPort("body_spatial_velocities"))
     builder.Connect(plant.get_state_output_port(),
                     truth.GetInputPort("plant_state"))
     return builder.Build(), plant, model, truth

@@ -372,10 +372,6 @@ class SimulatedStation:
         connect(state, s["base_pose"].get_input_port())
         if model.passive_joints:
             connect(state, s["mount_angles"].get_input_port())
-        connect(plant.get_body_poses_output_port(),
-                s["truth"].GetInputPort("body_poses"))
-        connect(plant.get_body_spatial_velocities_output_port(),
-                s["truth"].GetInputPort("body_spatial_velocities"))
         connect(s["base_driver"].get_output_port(),
                 s["base_rates_input"].get_input_port(0))
         connect(s["base_pose"].get_output_port(),

@@ -6,8 +6,9 @@
   (`odometry_system`, fed by `base_state_selection`).
 - `GroundTruth`: what no sensor of the real robot measures, for metrics
   only (the motion-capture system of the paper's tracking experiment):
-  the end effector's pose and velocity in the world, the base's pose and
-  the flexible mount's angles. The controller never reads it.
+  the end effector's pose and velocity in the world (the base's pose and
+  the mount's angles are selections of the plant's state, in C++). The
+  controller never reads it.
 """
 
 import numpy as np
@@ -119,23 +120,25 @@ BaseOdometry = BaseOdometry_[None]
 
 
 class GroundTruth(LeafSystem):
-    """The robot's true motion, for metrics (double only).
+    """The end effector's true motion, for metrics (double only).
 
     ::
 
-                                    ┌─────────────┐
-        body_poses ────────────────►│             ├──► end_effector_pose
-        body_spatial_velocities ───►│ GroundTruth ├──► end_effector_velocity
-        plant_state ───────────────►│             ├──► base_pose
-                                    │             ├──► mount_angles
-                                    └─────────────┘
+                           ┌─────────────┐
+        plant_state ──────►│ GroundTruth ├──► end_effector_pose
+                           │             ├──► end_effector_velocity
+                           └─────────────┘
 
     - end_effector_pose: (6) the tool centre point's position [x, y, z]
       and its orientation as roll, pitch, yaw, in the world.
     - end_effector_velocity: (6) its twist [v; w] in the world, the
       linear part at the tool centre point.
-    - base_pose: [x, y, yaw] (3) of T_b in the world.
-    - mount_angles: [roll, pitch] (2) of the flexible mount, rad.
+
+    Both come from one evaluation of the plant's kinematics at its state,
+    in a context of this system's own (the plant's body pose and velocity
+    ports would convert every body's to Python at each reading: 5% of a
+    closed loop). The base's pose and the mount's angles are C++
+    selections of the state beside it (station.simulation).
 
     Args:
         plant: the finalized plant holding the robot.
@@ -144,27 +147,17 @@ class GroundTruth(LeafSystem):
 
     def __init__(self, plant, model):
         super().__init__()
-        tool = model.tcp_frame.body()
-        self._tool_index = int(tool.index())
-        self._X_tool_tcp = model.tcp_frame.GetFixedPoseInBodyFrame()
-        nq, nv = plant.num_positions(), plant.num_velocities()
-        self._base_q = joint_position_indices(model.base_joints)
-        self._mount_q = joint_position_indices(model.passive_joints)
-        self._poses = self.DeclareAbstractInputPort(
-            "body_poses", plant.get_body_poses_output_port().Allocate())
-        self._velocities = self.DeclareAbstractInputPort(
-            "body_spatial_velocities",
-            plant.get_body_spatial_velocities_output_port().Allocate())
-        self._state = self.DeclareVectorInputPort("plant_state", nq + nv)
-        # Both end-effector outputs come from one evaluation of the body
-        # poses and velocities (each Eval converts a list of every body).
+        self._plant = plant
+        self._kinematics = plant.CreateDefaultContext()
+        self._tcp = model.tcp_frame
+        self._state = self.DeclareVectorInputPort(
+            "plant_state", plant.num_positions() + plant.num_velocities())
         self._motion = self.DeclareCacheEntry(
             "end_effector_motion",
             ValueProducer(allocate=lambda: AbstractValue.Make(np.zeros(12)),
                           calc=self._calc_motion),
             prerequisites_of_calc={
-                self.input_port_ticket(self._poses.get_index()),
-                self.input_port_ticket(self._velocities.get_index())})
+                self.input_port_ticket(self._state.get_index())})
         self.DeclareVectorOutputPort(
             "end_effector_pose", 6,
             lambda context, output: output.set_value(
@@ -175,22 +168,13 @@ class GroundTruth(LeafSystem):
             lambda context, output: output.set_value(
                 self._motion.Eval(context)[6:]),
             prerequisites_of_calc={self._motion.ticket()})
-        self.DeclareVectorOutputPort(
-            "base_pose", 3,
-            lambda context, output: output.SetFromVector(
-                self._state.Eval(context)[self._base_q]))
-        self.DeclareVectorOutputPort(
-            "mount_angles", 2,
-            lambda context, output: output.SetFromVector(
-                self._state.Eval(context)[self._mount_q]))
 
     def _calc_motion(self, context, value):
         """[end_effector_pose; end_effector_velocity] (12)."""
-        X_W_tool = self._poses.Eval(context)[self._tool_index]
-        V_W_tool = self._velocities.Eval(context)[self._tool_index]
-        X_W_tcp = X_W_tool @ self._X_tool_tcp
-        p_tool_tcp_W = X_W_tool.rotation() @ self._X_tool_tcp.translation()
-        V_W_tcp = V_W_tool.Shift(p_tool_tcp_W)
+        self._plant.SetPositionsAndVelocities(self._kinematics,
+                                              self._state.Eval(context))
+        X_W_tcp = self._tcp.CalcPoseInWorld(self._kinematics)
+        V_W_tcp = self._tcp.CalcSpatialVelocityInWorld(self._kinematics)
         value.set_value(np.concatenate([
             X_W_tcp.translation(),
             RollPitchYaw(X_W_tcp.rotation()).vector(),
