@@ -135,9 +135,10 @@ class GroundTruth(LeafSystem):
       linear part at the tool centre point.
 
     Both come from one evaluation of the plant's kinematics at its state,
-    in a context of this system's own (the plant's body pose and velocity
-    ports would convert every body's to Python at each reading: 5% of a
-    closed loop). The base's pose and the mount's angles are C++
+    in a scratch context of this system's own (the plant's body pose and
+    velocity ports would convert every body's to Python at each reading:
+    5% of a closed loop); so one GroundTruth serves one simulation at a
+    time, as every station builds its own. The base's pose and the mount's angles are C++
     selections of the state beside it (station.simulation).
 
     Args:
