@@ -138,8 +138,9 @@ class GroundTruth(LeafSystem):
     in a scratch context of this system's own (the plant's body pose and
     velocity ports would convert every body's to Python at each reading:
     5% of a closed loop); so one GroundTruth serves one simulation at a
-    time, as every station builds its own. The base's pose and the mount's angles are C++
-    selections of the state beside it (station.simulation).
+    time, as every station builds its own. The base's pose and the
+    mount's angles are C++ selections of the state beside it
+    (station.simulation).
 
     Args:
         plant: the finalized plant holding the robot.
