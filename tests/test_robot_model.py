@@ -389,6 +389,27 @@ def test_p_ee_from_the_pose_matches_the_plant(memo_arm):
         assert np.max(np.abs(p_ee - expected)) < 1e-15
 
 
+
+def test_origin_in_sums_each_entry_in_pythons_order():
+    """drake_wbc.math.chain.origin_in: R_BA p_AE + p_BA, each entry summed
+    as Python sums it (bit for bit), and R_BA @ p_AE + p_BA to
+    rounding."""
+    from drake_wbc.math.chain import origin_in
+
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        R_BA, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        p_BA = rng.uniform(-1.0, 1.0, 3)
+        X_AE = np.eye(4)
+        X_AE[:3, 3] = rng.uniform(-1.0, 1.0, 3)
+        x, y, z = X_AE[:3, 3].tolist()
+        by_hand = [((R[0] * x + R[1] * y) + R[2] * z) + p
+                   for R, p in zip(R_BA.tolist(), p_BA.tolist(), strict=True)]
+        p_BE = origin_in(R_BA, p_BA, X_AE)
+        assert p_BE.tolist() == by_hand
+        np.testing.assert_allclose(p_BE, R_BA @ X_AE[:3, 3] + p_BA,
+                                   rtol=0.0, atol=1e-15)
+
 def _rz(angle):
     c, s = np.cos(angle), np.sin(angle)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])

@@ -26,7 +26,9 @@ machine code:
 - `chain_kinematics_of`: the reference body, scalar-generic (float, or
   numpy object arrays of AutoDiffXd for q);
 - `chain_kinematics_float`: its compiled kernel (drake_wbc.math.compiled),
-  registered with drake_wbc.math.kernels.fast_kernel.
+  registered with drake_wbc.math.kernels.fast_kernel;
+- `origin_in`: E's origin in a frame B in which A is fixed, from X_AE,
+  compiled (B is the base's T_b for the nominal kinematics).
 """
 
 import math
@@ -216,6 +218,19 @@ def _chain_sample(rng):
     q = np.where(revolute == REVOLUTE, rng.uniform(-7.0, 7.0, n),
                  rng.uniform(-0.5, 0.5, n))
     return fixed, axes, revolute, q
+
+
+@compiled
+def origin_in(R_BA, p_BA, X_AE):
+    """p_BE = R_BA p_AE + p_BA (3,): the origin of E, at X_AE (4, 4), in a
+    frame B in which A is fixed at (R_BA (3, 3), p_BA (3,)), each entry
+    summed as ((R_0 x + R_1 y) + R_2 z) + p, the order of Python's
+    arithmetic on the entries. Float64 C-contiguous arrays."""
+    p_BE = np.empty(3)
+    for r in range(3):
+        p_BE[r] = ((R_BA[r, 0] * X_AE[0, 3] + R_BA[r, 1] * X_AE[1, 3])
+                   + R_BA[r, 2] * X_AE[2, 3]) + p_BA[r]
+    return p_BE
 
 
 @fast_kernel(chain_kinematics_of, sample=_chain_sample)

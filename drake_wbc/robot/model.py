@@ -50,6 +50,7 @@ from drake_wbc.math.chain import (
     REVOLUTE,
     SerialChain,
     chain_kinematics_of,
+    origin_in,
 )
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.validation import (
@@ -624,8 +625,7 @@ class ArmKinematics:
         # T_a is fixed in T_b (nominal kinematics): p_ee in T_b follows
         # from X_AE, with no third query of the plant.
         self._R_BA, self._p_BA = self.R_ba.copy(), X_BA.translation().copy()
-        self._R_BA_rows = self._R_BA.tolist()
-        self._p_BA_list = self._p_BA.tolist()
+        origin_in(self._R_BA, self._p_BA, np.eye(4))  # compiled now
         self._q = self._plant.GetPositions(self._context)
         # Flat indices of J_a's entries in Drake's (6, nv) Jacobian [w; v].
         self._J_a_entries = (
@@ -702,12 +702,8 @@ class ArmKinematics:
             self._set_arm_positions(q_a, key)
             return self._evaluate_here()
         J_a, X_AE = self._chain_kinematics(*self._chain_arrays, q_a)
-        x, y, z = X_AE[:3, 3].tolist()
-        p_ee_in_base = np.array([
-            ((R_i[0] * x + R_i[1] * y) + R_i[2] * z) + p_i
-            for R_i, p_i in zip(self._R_BA_rows, self._p_BA_list,
-                                strict=True)])
-        return ArmKinematicsValues(J_a, p_ee_in_base, X_AE)
+        return ArmKinematicsValues(J_a, origin_in(self._R_BA, self._p_BA,
+                                                  X_AE), X_AE)
 
     def plant_values(self, q_a):
         """The ArmKinematicsValues at q_a (n,) from the plant itself, as
@@ -729,9 +725,10 @@ class ArmKinematics:
         )
         # Drake orders spatial velocities [w; v]; the paper orders [v; w].
         J_a = J.take(self._J_a_entries).reshape(6, self.num_joints)
-        X_AE = self._end_effector.CalcPose(self._context, self._arm_base)
-        p_ee_in_base = self._R_BA @ X_AE.translation() + self._p_BA
-        return ArmKinematicsValues(J_a, p_ee_in_base, X_AE.GetAsMatrix4())
+        X_AE = self._end_effector.CalcPose(self._context,
+                                           self._arm_base).GetAsMatrix4()
+        return ArmKinematicsValues(J_a, origin_in(self._R_BA, self._p_BA,
+                                                  X_AE), X_AE)
 
 
 def serial_chain(plant, context, base_frame, end_frame, joints):
