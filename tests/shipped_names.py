@@ -15,7 +15,6 @@ def _element(name):
 ARM_JOINTS = tuple(_element(n) for n in ROBOT.arm.joints)
 BASE_JOINTS = tuple(_element(n) for n in ROBOT.base.joints)
 MOUNT_JOINTS = tuple(_element(n) for n in ROBOT.base.passive_joints)
-LIDAR_FRAMES = tuple(_element(n) for n in ROBOT.lidar_frames)
 SCOPED = {_element(n): n for n in
           ROBOT.arm.joints + ROBOT.base.joints + ROBOT.base.passive_joints}
 """Unscoped joint name -> scoped name."""

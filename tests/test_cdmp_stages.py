@@ -365,13 +365,6 @@ def test_the_default_phri_switch_acts_while_the_port_is_unconnected(stage):
         assert np.abs(update_of(other, context) - fixed).max() > 1e-6
 
 
-def set_state(system, context, x):
-    if system._time_step > 0.0:
-        context.SetDiscreteState(x)
-    else:
-        context.SetContinuousState(x)
-
-
 def update_of(system, context):
     return system.EvalUniquePeriodicDiscreteUpdate(
         context).get_vector().CopyToVector()

@@ -47,7 +47,7 @@ combines them at the control period h:
   0.5 Hz the real hand follows the tool, which the model does not);
 - the arm's measured positions are fed back too (the estimator removes
   the tool's weight at the measured configuration): the loop is opened
-  at the wrist's reading alone (`AdmittanceCase.wrench_loop`);
+  at the wrist's reading alone (`reading_loop`);
 - the loop (`admittance_loop`): the two in series, L = P C from the
   reading back to the reading (6 by 6, the sensor's frame turned into
   T_b for the per-axis responses), the closed loop's eigenvalues, the
@@ -106,7 +106,6 @@ from drake_wbc.stages.support import define_stage
 from drake_wbc.stages.wrench import sensor_rotation_in_base, tool_weight_reading
 from drake_wbc.station.driver_dynamics import interpolated_command
 from drake_wbc.station.force_torque import WeldWrench
-from drake_wbc.station.hand import add_hand_body
 from drake_wbc.station.scene import HandImpedance
 from drake_wbc.station.simulation import SimulatedStation
 
@@ -215,15 +214,7 @@ def _add_welded_hand(plant, model, hand, X_WT):
         np.full(3, hand.stiffness), np.full(3, hand.damping)))
 
 
-GRIPS = ("weld", "station")
-"""How build_plant_part attaches the hand: "weld", a point mass welded at
-the tool centre point with a bushing to the world; "station", the
-station's own hand (station.hand.add_hand_body: a sphere on three
-prismatic joints with the hand's PD terms, held to the tool centre point
-by SAP's ball constraint), its desired state held at the rest."""
-
-
-def build_plant_part(station, hand, grip="weld"):
+def build_plant_part(station, hand):
     """The plant part as a Diagram (module docstring): input
     arm.position_command (n), output wrench_measured (6, the sensor's
     frame, like the station's wrist.wrench_measured without noise).
@@ -249,11 +240,7 @@ def build_plant_part(station, hand, grip="weld"):
                          "hold apart")
     _, settled = station_at_rest(station)
     X_WT = station.model.tcp_frame.CalcPoseInWorld(settled)
-    hand_body = None
-    if grip == "station":
-        hand_body = add_hand_body(plant, model, hand)
-    else:
-        _add_welded_hand(plant, model, hand, X_WT)
+    _add_welded_hand(plant, model, hand, X_WT)
     plant.Finalize()
     driver = add("arm_driver", PeriodicArmDriver(
         options.arm, model.num_arm_joints))
@@ -265,11 +252,6 @@ def build_plant_part(station, hand, grip="weld"):
             plant.get_desired_state_input_port(model.arm))
     connect(base_hold.get_output_port(),
             plant.get_desired_state_input_port(model.base))
-    if hand_body is not None:
-        hold = add("hand_hold", ConstantVectorSource(np.concatenate(
-            [X_WT.translation(), np.zeros(3)])))
-        connect(hold.get_output_port(),
-                plant.get_desired_state_input_port(hand_body.instance))
     connect(plant.get_reaction_forces_output_port(),
             weld.GetInputPort("reaction_forces"))
     connect(weld.GetOutputPort("wrench"), sensor.get_input_port())
@@ -428,6 +410,14 @@ def close_channels(loop, channels):
                         loop.time_period())
 
 
+def reading_loop(loop):
+    """`loop` (measured -> measured: the wrist's reading (6), then the
+    arm's positions) broken at the wrist's reading alone, the arm's
+    positions fed back (`close_channels`): reading -> reading, 6 by 6,
+    the sensor's frame."""
+    return close_channels(loop, range(6, loop.B().shape[1]))
+
+
 def closed_loop_matrix(loop):
     """The closed loop's A of `loop` (series: reading -> reading) with the
     reading fed back as measured, u = y (the real loop's sign)."""
@@ -447,8 +437,7 @@ class LoopResult:
         time_constant: hri_time_constant T, s.
         k_hri: the scenario's gain.
         loop: the loop broken at the wrist's reading at k_hri (reading
-            -> reading, 6, the sensor's frame; AdmittanceCase.
-            wrench_loop).
+            -> reading, 6, the sensor's frame; `reading_loop`).
         rotation: R6 (6, 6) from the sensor's frame to T_b.
         spectral_radius: of the closed loop at k_hri.
         limit: the largest stable k_hri (nan if none up to the search's
@@ -566,13 +555,6 @@ class AdmittanceCase:
         reading and the arm's positions) at `k_hri`."""
         return series(self.controller_part(k_hri), self.plant)
 
-    def wrench_loop(self, k_hri):
-        """The loop broken at the wrist's reading alone (6 -> 6, sensor
-        frame), the arm's measured positions fed back: `close_channels`
-        of `loop`."""
-        loop = self.loop(k_hri)
-        return close_channels(loop, range(6, loop.B().shape[1]))
-
     def radius(self, k_hri):
         """The closed loop's spectral radius at `k_hri`."""
         return spectral_radius(closed_loop_matrix(self.loop(k_hri)))
@@ -598,7 +580,7 @@ class AdmittanceCase:
         the grid `omega` (rad/s)."""
         k = self.params.whole_body_cdmp.k_hri if k_hri is None else k_hri
         loop = self.loop(k)
-        wrench = close_channels(loop, range(6, loop.B().shape[1]))
+        wrench = reading_loop(loop)
         radius = spectral_radius(closed_loop_matrix(loop))
         limit = self.limit()
         frequency = float("nan")

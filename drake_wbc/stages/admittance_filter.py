@@ -2,7 +2,6 @@
 mass of eq. (cdmp-wb)'s admittance, as a Drake system (its math:
 drake_wbc.math.cdmp.admittance_filter_model)."""
 
-import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.symbolic import Expression
 from pydrake.systems.framework import Diagram_
@@ -67,14 +66,6 @@ def AdmittanceFilter_(T):
                                      "filtered_wrench")
 
             build_composite(self, T, build)
-
-        def set_wrench(self, context, wrench):
-            """Sets the lag at rest at `wrench` (6,)."""
-            value = np.asarray(wrench, dtype=float)
-            if self.GetSubsystemByName(MODEL_NAME).time_period() > 0.0:
-                context.SetDiscreteState(value)
-            else:
-                context.SetContinuousState(value)
 
     return Impl
 

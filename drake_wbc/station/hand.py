@@ -58,10 +58,6 @@ class HandBody:
         """The hand's x, y, z in the plant's positions."""
         return [j.position_start() for j in self.joints]
 
-    def velocity_indices(self):
-        """The hand's vx, vy, vz in the plant's velocities."""
-        return [j.velocity_start() for j in self.joints]
-
 
 def add_hand_body(plant, model, impedance):
     """Adds the hand of `impedance` (a HandImpedance) gripping the tool
