@@ -272,7 +272,7 @@ def test_moving_goal_is_followed_without_blow_up():
         return g0 + minimum_jerk(x) * (g1 - g0)
 
     _, y_run, yd_run = rollout(learned.params, y[0], None, 2.0, DT,
-                                   learned.weights, goal_trajectory=goal)
+                               learned.weights, goal_trajectory=goal)
     assert np.all(np.isfinite(y_run)) and np.all(np.isfinite(yd_run))
     # Fixed-goal path plus at most the goal's own displacement, no more.
     _, y_fixed, _ = rollout(learned.params, y[0], g0, 2.0, DT,
