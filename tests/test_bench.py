@@ -88,7 +88,14 @@ def test_quick_bench_writes_well_formed_tables(tmp_path):
     for name in contenders:
         assert sum(line.startswith(f"| {name} |") for line in tables) == (
             2 if name in solve else 1), name
-    assert any(line.startswith("| stage capability |") for line in tables)
+    for name, entry in tick["stages"].items():
+        # Each stage beside its hollow twin: the rest is its own work.
+        own = (entry["tick"]["time_us"]["median"]
+               - entry["hollow"]["time_us"]["median"])
+        row = next(line for line in tables
+                   if line.startswith(f"| stage {name} |"))
+        assert entry["hollow"]["time_us"]["median"] > 0, name
+        assert row.rstrip(" |").endswith(f"| {own:.1f}"), row
     assert any(line.startswith("| trajectory_tracking |")
                for line in tables)
     tick_goal = next(line for line in tables

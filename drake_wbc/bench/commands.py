@@ -178,18 +178,21 @@ def bench_distribution(arm, settings):
 def bench_tick(arm, settings):
     """Part 2: the full tick (new measurements every tick, the station's
     commands pulled), the same without the pull, the framework floor,
-    and each stage."""
+    and each stage beside its hollow twin."""
     from drake_wbc.bench.control_tick import ControllerTicker, stage_tickers
     from drake_wbc.bench.framework_floor import FloorTicker
 
     ticker = ControllerTicker(arm, num_points=TICK_POINTS)
+    floor = FloorTicker(ticker)
     stages = stage_tickers(ticker)
+    hollow = stage_tickers(floor)
     n = settings["ticks"]
     contenders = {"tick": ticker.ticks(n),
                   "tick_unpulled": ticker.ticks(n, pull=False),
-                  "tick_floor": FloorTicker(ticker).ticks(n)}
+                  "tick_floor": floor.ticks(n)}
     for name, stage in stages.items():
         contenders[f"stage:{name}"] = stage.contender(n)
+        contenders[f"hollow:{name}"] = hollow[name].contender(n)
         contenders[f"inputs:{name}"] = stage.contender(n, inputs_only=True)
     times = timing.interleave(contenders, settings["repeats"])
 
@@ -202,6 +205,7 @@ def bench_tick(arm, settings):
         tick=us("tick"), tick_unpulled=us("tick_unpulled"),
         framework_floor=us("tick_floor"),
         stages={name: dict(tick=us(f"stage:{name}"),
+                           hollow=us(f"hollow:{name}"),
                            inputs=us(f"inputs:{name}"))
                 for name in stages})
 

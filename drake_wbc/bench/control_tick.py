@@ -176,6 +176,7 @@ class ControllerTicker:
                              minimum=ArmKinematics.MEMO_SIZE + 1)
         params = ControllerParameters(time_step=self.time_step)
         self.controller = build_controller(params, arm)
+        self.stages = self.controller.stages
         diagram = self.controller.diagram
         self.simulator = Simulator(diagram)
         self.context = self.simulator.get_mutable_context()
@@ -239,15 +240,17 @@ class StageTicker:
 
     Args:
         ticker: a ControllerTicker (after at least one tick, so that every
-            connected input has its running value).
-        name: the stage's name (a key of Controller.stages).
+            connected input has its running value), or a
+            drake_wbc.bench.framework_floor.FloorTicker (its hollow
+            stages).
+        name: the stage's name (a key of the ticker's `stages`).
         ports: the stage's connected input ports.
         values: for each port, the values it had over successive ticks of
             the running diagram (written in turn, one set a tick).
     """
 
     def __init__(self, ticker, name, ports, values):
-        stage = ticker.controller.stages[name]
+        stage = ticker.stages[name]
         inner = stage.GetMyContextFromRoot(ticker.context)
         self.stage, self.name = stage, name
         self.context = stage.CreateDefaultContext()
@@ -292,15 +295,15 @@ def _input_value(port, context):
 
 
 def stage_tickers(ticker, ticks=None):
-    """A StageTicker for every stage of `ticker`'s controller, with the
-    inputs each stage had over `ticks` successive ticks (the ticker's
-    measurement sets if None) of the running diagram, from its initial
-    state."""
+    """A StageTicker for every stage of `ticker` (a ControllerTicker or a
+    FloorTicker: its `stages`), with the inputs each stage had over
+    `ticks` successive ticks (the ticker's measurement sets if None) of
+    the running diagram, from its initial state."""
     ticks = len(ticker.values) if ticks is None else whole_number(
         "ticks", ticks, minimum=2)
     ticker.restart()
     ticker.advance()
-    stages = ticker.controller.stages
+    stages = ticker.stages
     ports, values = {}, {}
     for name, stage in stages.items():
         inner = stage.GetMyContextFromRoot(ticker.context)

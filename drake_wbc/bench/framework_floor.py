@@ -126,6 +126,9 @@ class FloorTicker:
     """The hollow copy of a ControllerTicker's controller, in a Simulator
     of its own, against the same measurements, ticked as the controller
     is (AdvanceTo((k + 1) h), the station's commands pulled after each).
+    Its hollow stages (`stages`, by the controller's names) tick alone
+    as the controller's do (control_tick.stage_tickers), so that each
+    stage's own work is its tick less its hollow twin's.
 
     Args:
         ticker: a drake_wbc.bench.control_tick.ControllerTicker.
@@ -154,8 +157,11 @@ class FloorTicker:
             builder.ExportOutput(hollow[id(source)].get_output_port(j),
                                  diagram.get_output_port(i).get_name())
         self.diagram = builder.Build()
+        self.stages = {name: self.diagram.GetSubsystemByName(name)
+                       for name in controller.stages}
         self.simulator = Simulator(self.diagram)
         self.context = self.simulator.get_mutable_context()
+        self.values = ticker.values
         self.fixed = [
             Fixed(self.diagram.GetInputPort(name), self.context,
                   [values[name] for values in ticker.values])
@@ -166,24 +172,36 @@ class FloorTicker:
             self.context, REFERENCE_VELOCITY)
         self.simulator.Initialize()
         self._start = self.context.Clone()
+        self.tick_count = 0
+
+    def restart(self):
+        """Back to the initial state at time 0; the next tick writes the
+        first measurement set."""
+        self.context.SetTimeStateAndParametersFrom(self._start)
+        self.simulator.Initialize(RESTART)
+        self.tick_count = 0
+        for fixed in self.fixed:
+            fixed.restart()
+
+    def advance(self):
+        """One tick: the next measurements written, AdvanceTo((k + 1) h),
+        the commands pulled."""
+        for fixed in self.fixed:
+            fixed.write()
+        self.tick_count += 1
+        self.simulator.AdvanceTo(self.tick_count * self.time_step)
+        for port in self.commands:
+            port.Eval(self.context)
 
     def ticks(self, count):
-        """A timing.interleave contender: `count` ticks, measurements
-        written again before each."""
+        """A timing.interleave contender: `count` ticks from the initial
+        state (see `advance`)."""
         count = whole_number("count", count, minimum=1)
-        h = self.time_step
 
         def run():
-            self.context.SetTimeStateAndParametersFrom(self._start)
-            self.simulator.Initialize(RESTART)
-            for fixed in self.fixed:
-                fixed.restart()
-            for k in range(1, count + 1):
-                for fixed in self.fixed:
-                    fixed.write()
-                self.simulator.AdvanceTo(k * h)
-                for port in self.commands:
-                    port.Eval(self.context)
+            self.restart()
+            for _ in range(count):
+                self.advance()
             return count
 
         return run

@@ -163,16 +163,27 @@ def markdown(results):
                   f"{tick['rate_hz']:g} Hz, {tick['obstacle_points']} "
                   "obstacle points, new measurements every tick from "
                   f"{tick['measurement_sets']} sets)", ""]
-        rows = [["full tick (commands pulled)", *_time(tick["tick"]), ""],
+        rows = [["full tick (commands pulled)", *_time(tick["tick"]), "",
+                 "", ""],
                 ["full tick, commands not pulled",
-                 *_time(tick["tick_unpulled"]), ""],
+                 *_time(tick["tick_unpulled"]), "", "", ""],
                 ["framework floor (the same diagram, stages that do "
-                 "nothing)", *_time(tick["framework_floor"]), ""]]
+                 "nothing)", *_time(tick["framework_floor"]), "", "", ""]]
         for name, entry in tick["stages"].items():
+            median = entry["tick"]["time_us"]["median"]
+            hollow = entry["hollow"]["time_us"]["median"]
             rows.append([f"stage {name}", *_time(entry["tick"]),
-                         f"{entry['inputs']['time_us']['median']:.1f}"])
+                         f"{entry['inputs']['time_us']['median']:.1f}",
+                         f"{hollow:.1f}", f"{median - hollow:.1f}"])
         lines += _table(["what", *TIME_HEADER,
-                         "of which fixing inputs (median)"], rows)
+                         "of which fixing inputs (median)",
+                         "hollow twin (median)",
+                         "own work (median, less the twin)"], rows)
+        lines += ["", "A stage's hollow twin has its ports, feedthrough "
+                  "and state and does no work (the framework floor's "
+                  "stage, a Python system, ticked alone the same way): "
+                  "the rest is the stage's own work, below zero where the "
+                  "stage is built of Drake's C++ systems."]
     scaling = results.get("scaling")
     if scaling:
         lines += ["", "## How the cost grows", ""]
