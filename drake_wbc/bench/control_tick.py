@@ -155,33 +155,25 @@ class Fixed:
             data.SetFrom(value)
 
 
-class ControllerTicker:
-    """The controller Diagram in a Simulator of its own, with fixed inputs
-    written again every tick.
+class DiagramTicker:
+    """A Diagram with the controller's ports in a Simulator of its own,
+    with fixed inputs written again every tick: a measurement set each
+    tick, the reference twist fixed.
 
     Args:
-        arm: a shared ArmKinematics, of the robot whose controller ticks
-            (build_controller's `robot`: its limits, footprint and
-            tuning).
-        time_step: control period h in s (0.01 s: 100 Hz, the paper's).
-        num_points: number of obstacle points on lidar.obstacle_points.
-        measurement_sets: how many different measurement sets the ticks
-            cycle through (>= 5, more than the kinematics memo holds).
+        diagram: the Diagram (the controller's input and output ports).
+        stages: its stages by name (systems of `diagram`).
+        time_step: control period h in s.
+        values: the measurement sets (`measurements`), written in turn.
+        initialize: initialize(context), called before the Simulator's
+            Initialize (None: nothing to do).
     """
 
-    def __init__(self, arm, time_step=0.01, num_points=300,
-                 measurement_sets=MEASUREMENT_SETS):
-        self.time_step = positive("time_step", time_step)
-        count = whole_number("measurement_sets", measurement_sets,
-                             minimum=ArmKinematics.MEMO_SIZE + 1)
-        params = ControllerParameters(time_step=self.time_step)
-        self.controller = build_controller(params, arm)
-        self.stages = self.controller.stages
-        diagram = self.controller.diagram
+    def __init__(self, diagram, stages, time_step, values, initialize=None):
+        self.diagram, self.stages = diagram, stages
+        self.time_step, self.values = time_step, values
         self.simulator = Simulator(diagram)
         self.context = self.simulator.get_mutable_context()
-        self.values = [measurements(arm, num_points, k, count)
-                       for k in range(count)]
         self.fixed = [
             Fixed(diagram.GetInputPort(name), self.context,
                   [values[name] for values in self.values])
@@ -190,7 +182,8 @@ class ControllerTicker:
                          for name in STATION_COMMANDS]
         diagram.GetInputPort("reference_velocity").FixValue(
             self.context, REFERENCE_VELOCITY)
-        self.controller.initialize(self.context)
+        if initialize is not None:
+            initialize(self.context)
         self.simulator.Initialize()
         self._start = self.context.Clone()
         self.tick_count = 0
@@ -222,8 +215,8 @@ class ControllerTicker:
                 port.Eval(self.context)
 
     def ticks(self, count, refresh=True, pull=True):
-        """A timing.interleave contender: `count` ticks of the controller
-        from its initial state (see `advance`)."""
+        """A timing.interleave contender: `count` ticks from the initial
+        state (see `advance`)."""
         count = whole_number("count", count, minimum=1)
 
         def run():
@@ -233,6 +226,33 @@ class ControllerTicker:
             return count
 
         return run
+
+
+class ControllerTicker(DiagramTicker):
+    """The controller Diagram, ticked (DiagramTicker) against
+    measurements new every tick.
+
+    Args:
+        arm: a shared ArmKinematics, of the robot whose controller ticks
+            (build_controller's `robot`: its limits, footprint and
+            tuning).
+        time_step: control period h in s (0.01 s: 100 Hz, the paper's).
+        num_points: number of obstacle points on lidar.obstacle_points.
+        measurement_sets: how many different measurement sets the ticks
+            cycle through (>= 5, more than the kinematics memo holds).
+    """
+
+    def __init__(self, arm, time_step=0.01, num_points=300,
+                 measurement_sets=MEASUREMENT_SETS):
+        time_step = positive("time_step", time_step)
+        count = whole_number("measurement_sets", measurement_sets,
+                             minimum=ArmKinematics.MEMO_SIZE + 1)
+        params = ControllerParameters(time_step=time_step)
+        self.controller = build_controller(params, arm)
+        super().__init__(
+            self.controller.diagram, self.controller.stages, time_step,
+            [measurements(arm, num_points, k, count) for k in range(count)],
+            initialize=self.controller.initialize)
 
 
 class StageTicker:

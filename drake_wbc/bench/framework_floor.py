@@ -18,7 +18,6 @@ the floor under the controller's tick.
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import (
     DiagramBuilder,
     LeafSystem,
@@ -27,14 +26,7 @@ from pydrake.systems.framework import (
     ValueProducer,
 )
 
-from drake_wbc.bench.control_tick import (
-    REFERENCE_VELOCITY,
-    RESTART,
-    STATION_COMMANDS,
-    Fixed,
-)
-from drake_wbc.controller.diagram import STATION_INPUTS
-from drake_wbc.math.validation import whole_number
+from drake_wbc.bench.control_tick import DiagramTicker
 
 
 class HollowStage(LeafSystem):
@@ -122,10 +114,12 @@ class HollowStage(LeafSystem):
         self._pull(context, self._connected)
 
 
-class FloorTicker:
+class FloorTicker(DiagramTicker):
     """The hollow copy of a ControllerTicker's controller, in a Simulator
     of its own, against the same measurements, ticked as the controller
-    is (AdvanceTo((k + 1) h), the station's commands pulled after each).
+    is (a DiagramTicker: AdvanceTo((k + 1) h), the station's commands
+    pulled after each).
+
     Its hollow stages (`stages`, by the controller's names) tick alone
     as the controller's do (control_tick.stage_tickers), so that each
     stage's own work is its tick less its hollow twin's.
@@ -136,13 +130,12 @@ class FloorTicker:
 
     def __init__(self, ticker):
         controller = ticker.controller
-        self.time_step = ticker.time_step
         builder = DiagramBuilder()
         hollow = {}
         for name, stage in controller.stages.items():
             hollow[id(stage)] = builder.AddNamedSystem(name, HollowStage(
                 stage, stage.GetMyContextFromRoot(ticker.context),
-                self.time_step))
+                ticker.time_step))
         diagram = controller.diagram
         for (destination, i), (source, j) in (
                 diagram.connection_map().items()):
@@ -156,52 +149,8 @@ class FloorTicker:
             source, j = diagram.get_output_port_locator(OutputPortIndex(i))
             builder.ExportOutput(hollow[id(source)].get_output_port(j),
                                  diagram.get_output_port(i).get_name())
-        self.diagram = builder.Build()
-        self.stages = {name: self.diagram.GetSubsystemByName(name)
-                       for name in controller.stages}
-        self.simulator = Simulator(self.diagram)
-        self.context = self.simulator.get_mutable_context()
-        self.values = ticker.values
-        self.fixed = [
-            Fixed(self.diagram.GetInputPort(name), self.context,
-                  [values[name] for values in ticker.values])
-            for name in STATION_INPUTS]
-        self.commands = [self.diagram.GetOutputPort(name)
-                         for name in STATION_COMMANDS]
-        self.diagram.GetInputPort("reference_velocity").FixValue(
-            self.context, REFERENCE_VELOCITY)
-        self.simulator.Initialize()
-        self._start = self.context.Clone()
-        self.tick_count = 0
-
-    def restart(self):
-        """Back to the initial state at time 0; the next tick writes the
-        first measurement set."""
-        self.context.SetTimeStateAndParametersFrom(self._start)
-        self.simulator.Initialize(RESTART)
-        self.tick_count = 0
-        for fixed in self.fixed:
-            fixed.restart()
-
-    def advance(self):
-        """One tick: the next measurements written, AdvanceTo((k + 1) h),
-        the commands pulled."""
-        for fixed in self.fixed:
-            fixed.write()
-        self.tick_count += 1
-        self.simulator.AdvanceTo(self.tick_count * self.time_step)
-        for port in self.commands:
-            port.Eval(self.context)
-
-    def ticks(self, count):
-        """A timing.interleave contender: `count` ticks from the initial
-        state (see `advance`)."""
-        count = whole_number("count", count, minimum=1)
-
-        def run():
-            self.restart()
-            for _ in range(count):
-                self.advance()
-            return count
-
-        return run
+        diagram = builder.Build()
+        super().__init__(
+            diagram, {name: diagram.GetSubsystemByName(name)
+                      for name in controller.stages},
+            ticker.time_step, ticker.values)
