@@ -713,7 +713,7 @@ class _FloatLimits(NamedTuple):
 
 
 @compiled
-def _rate_float(i, distance, h, accelerating, step, step_h):
+def _rate(i, distance, h, accelerating, step, step_h):
     """The bound on |q_dot_i| towards an edge `distance` away:
     min(d / h, braking_rate(d)), d >= 0."""
     distance = max(distance, 0.0)
@@ -728,8 +728,8 @@ def _rate_float(i, distance, h, accelerating, step, step_h):
 
 
 @compiled
-def _bounded_float(q_dot, q, limited, low, high, lower, upper_band,
-                   velocity, clear, margin, h, accelerating, step, step_h):
+def _bounded(q_dot, q, limited, low, high, lower, upper_band, velocity,
+             clear, margin, h, accelerating, step, step_h):
     """q_dot clipped to the position bounds at q, joint by joint; sets
     limited[i] where it cuts. A joint's bound is computed only on the side
     it moves towards and only where it may cut (`clear`); `low` and `high`
@@ -741,8 +741,8 @@ def _bounded_float(q_dot, q, limited, low, high, lower, upper_band,
             distance = upper_band[i] - q[i]
             if v > velocity[i] or distance < clear[i]:
                 if math.isnan(high[i]):
-                    high[i] = _rate_float(i, distance, h, accelerating, step,
-                                          step_h)
+                    high[i] = _rate(i, distance, h, accelerating, step,
+                                    step_h)
                 if v > high[i]:
                     v = high[i]
                     limited[i] = True
@@ -750,8 +750,8 @@ def _bounded_float(q_dot, q, limited, low, high, lower, upper_band,
             distance = q[i] - lower[i] - margin
             if -v > velocity[i] or distance < clear[i]:
                 if math.isnan(low[i]):
-                    low[i] = -_rate_float(i, distance, h, accelerating,
-                                          step, step_h)
+                    low[i] = -_rate(i, distance, h, accelerating, step,
+                                    step_h)
                 if v < low[i]:
                     v = low[i]
                     limited[i] = True
@@ -760,7 +760,7 @@ def _bounded_float(q_dot, q, limited, low, high, lower, upper_band,
 
 
 @compiled
-def _scale_to_float(vector, limits):
+def _scale_to(vector, limits):
     """The largest factor in (0, 1] with |factor * vector_i| <= limits_i."""
     scale = 1.0
     for i in range(vector.size):
@@ -802,7 +802,7 @@ def _solved(A, b):
 
 
 @compiled
-def _least_squares_float(J, V, damping, threshold):
+def _least_squares(J, V, damping, threshold):
     """(q_dot, lambda, s_min) of the damped least squares: at a regular
     point (J square, s_min >= eps) by an LU solve, otherwise through the
     thin SVD."""
@@ -832,12 +832,12 @@ def _least_squares_float(J, V, damping, threshold):
 
 
 @compiled
-def _command_float(J, V, q, previous, lower, upper_band, velocity, clear,
-                   margin, h, damping, threshold, accelerating, step, step_h,
-                   middle, half, gain):
+def _command(J, V, q, previous, lower, upper_band, velocity, clear, margin,
+             h, damping, threshold, accelerating, step, step_h, middle, half,
+             gain):
     """The compiled body of `joint_velocity_command_float`: (q_dot, scale,
     acceleration_scale, limited, lambda, s_min)."""
-    x, lambda_, s_min = _least_squares_float(J, V, damping, threshold)
+    x, lambda_, s_min = _least_squares(J, V, damping, threshold)
     rows, n = J.shape
     if n > rows and gain > 0.0:
         z = np.empty(n)
@@ -865,21 +865,20 @@ def _command_float(J, V, q, previous, lower, upper_band, velocity, clear,
     limited = np.zeros(n, dtype=np.bool_)
     low = np.full(n, np.nan)
     high = np.full(n, np.nan)
-    q_dot = _bounded_float(x, q, limited, low, high, lower, upper_band,
-                           velocity, clear, margin, h, accelerating, step,
-                           step_h)
-    scale = _scale_to_float(q_dot, velocity)
+    q_dot = _bounded(x, q, limited, low, high, lower, upper_band, velocity,
+                     clear, margin, h, accelerating, step, step_h)
+    scale = _scale_to(q_dot, velocity)
     if scale != 1.0:
         q_dot = scale * q_dot
     acceleration_scale = 1.0
     if accelerating:
         change = q_dot - previous
-        acceleration_scale = _scale_to_float(change, step)
+        acceleration_scale = _scale_to(change, step)
         if acceleration_scale != 1.0:
             change = acceleration_scale * change
-        q_dot = _bounded_float(previous + change, q, limited, low, high,
-                               lower, upper_band, velocity, clear, margin,
-                               h, accelerating, step, step_h)
+        q_dot = _bounded(previous + change, q, limited, low, high, lower,
+                         upper_band, velocity, clear, margin, h,
+                         accelerating, step, step_h)
     return q_dot, scale, acceleration_scale, limited, lambda_, s_min
 
 
@@ -968,7 +967,7 @@ def joint_velocity_command_float(J_a, V_a, q, previous, limits):
     previous = (np.ascontiguousarray(previous, dtype=float)
                 if f.accelerating else np.zeros(q.size))
     q_dot, scale, acceleration_scale, limited, lambda_, s_min = (
-        _command_float(
+        _command(
             np.ascontiguousarray(J_a, dtype=float),
             np.ascontiguousarray(V_a, dtype=float), q, previous, f.lower,
             f.upper_band, f.velocity, f.clear, f.margin, f.h, f.damping,
