@@ -1,6 +1,7 @@
 """The station's float shortcuts against plain formulations of the same
-math: the F/T measurement, the schedules' interpolation, the end
-effector's motion from one cache entry and the merger's caching."""
+math: the F/T measurement, the schedules' interpolation (numpy's, bit for
+bit), the end effector's motion from the plant's kinematics and the
+merger's caching."""
 
 import numpy as np
 import pytest
@@ -12,8 +13,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from drake_wbc.robot.model import add_robot
 from drake_wbc.station.force_torque import (
     ForceTorqueSensorParameters,
-    _Measurement,
-    _per_axis,
+    measure,
 )
 from drake_wbc.station.lidar import ObstaclePointMerger
 from drake_wbc.station.scene import (
@@ -21,9 +21,12 @@ from drake_wbc.station.scene import (
     HandSchedule,
     WalkingPerson,
     Walks,
-    _interp_rows,
 )
 from drake_wbc.station.state_sensors import GroundTruth
+
+
+def _per_axis(force, torque):
+    return np.array([force] * 3 + [torque] * 3, dtype=float)
 
 
 def reference_measure(wrench, params, tick):
@@ -49,38 +52,16 @@ def reference_measure(wrench, params, tick):
     {"force_range": 1.0, "torque_range": 0.05, "force_resolution": 0.5}])
 def test_measurement_is_the_plain_formula_bit_for_bit(fields):
     params = ForceTorqueSensorParameters(**fields)
-    fast = _Measurement(params)
     rng = np.random.default_rng(11)
     for tick in range(500):
         wrench = rng.normal(size=6) * rng.choice([1e-3, 1.0, 50.0, 1e3])
         if tick % 50 == 0:  # halfway between two quantisation steps
             wrench = np.array([0.005, -0.015, 0.025, 5e-4, -1.5e-3, 0.0])
         kept = wrench.copy()
-        reading = fast(wrench, tick)
+        reading = measure(wrench, params, tick)
         np.testing.assert_array_equal(
             reading, reference_measure(wrench, params, tick))
         np.testing.assert_array_equal(wrench, kept)  # input untouched
-
-
-def test_interpolation_is_numpys_bit_for_bit():
-    rng = np.random.default_rng(5)
-    for size in (1, 2, 3, 8):
-        times = np.cumsum(rng.uniform(0.1, 2.0, size)) - 1.0
-        rows = rng.normal(size=(3, size)) * 10.0
-        rows[0, -1] = rows[0, 0]  # a flat stretch in one row
-        ts = np.concatenate([times, rng.uniform(times[0] - 1.0,
-                                                times[-1] + 1.0, 300),
-                             [np.nextafter(times[-1], np.inf),
-                              np.nextafter(times[0], -np.inf)]])
-        for left, right in ((None, None), (0.0, 0.0), (-3.0, 4.0)):
-            for t in ts:
-                got = _interp_rows(float(t), times.tolist(), rows.tolist(),
-                                   left, right)
-                want = [np.interp(t, times, row, left, right)
-                        for row in rows]
-                np.testing.assert_array_equal(got, want)
-    assert np.isnan(_interp_rows(np.nan, [0.0, 1.0], [[1.0, 2.0]],
-                                 None, None)[0])
 
 
 def test_schedules_are_numpys_interpolation():

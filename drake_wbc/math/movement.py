@@ -199,55 +199,79 @@ def learn_movement(demonstrations, params=None, num_basis=None,
             t, demo.tcp, yd, ydd, demo.tcp[-1], params))
         designs.append(dmp.design_matrix(
             dmp.canonical_phase(t, params), params))
-    weights = dmp.fit_weights(np.vstack(designs),
-                                       np.vstack(targets), regularisation)
+    weights = dmp.fit_weights(np.vstack(designs), np.vstack(targets),
+                              regularisation)
     return LearnedMovement(
         params, weights, np.mean([d.tcp[0] for d in demonstrations], axis=0),
         np.mean([d.tcp[-1] for d in demonstrations], axis=0),
         tuple(demonstrations), source)
 
 
-def interpolated_row(x, times, rows):
+def interpolated_row(x, times, rows, left=None, right=None):
     """The row of a table at x, linear between its times: np.interp(x,
-    times, column) of every column of `rows` (held at the first and last
-    row outside the times).
+    times, column, left, right) of every column of `rows`.
 
     Args:
         x: a float.
         times: a strictly increasing list of N floats.
         rows: a list of N lists of floats (one a time, all as long).
+        left, right: the value of every column before times[0] and after
+            times[-1]; None to hold the first or last row.
 
     Returns:
         a new list, one float a column.
     """
     columns = np.asarray(rows, dtype=float).T
-    return [float(np.interp(x, times, column)) for column in columns]
+    return [float(np.interp(x, times, column, left, right))
+            for column in columns]
 
 
 def _table_inputs(rng):
-    """A random table and a time before, after, on and between its
-    times, for interpolated_row_float."""
+    """A random table and a time before, after, on, just beside and
+    between its times, for interpolated_row_float: with and without
+    values outside, flat stretches, one time in twenty NaN."""
     n = int(rng.integers(1, 40))
     times = np.cumsum(rng.uniform(1e-3, 1.0, n)) - rng.uniform(0.0, 5.0)
     rows = rng.normal(size=(n, int(rng.integers(1, 5))))
+    if n > 1 and rng.uniform() < 0.3:
+        rows[1] = rows[0]
     x = rng.choice([times[0] - rng.random(), times[-1] + rng.random(),
-                    times[rng.integers(n)],
+                    times[rng.integers(n)], np.nextafter(times[0], -np.inf),
+                    np.nextafter(times[-1], np.inf),
                     rng.uniform(times[0], times[-1])])
-    return float(x), times.tolist(), rows.tolist()
+    if rng.uniform() < 0.05:
+        x = np.nan
+    left, right = ((None, None) if rng.uniform() < 0.5
+                   else tuple(rng.choice([0.0, -3.0, 4.0], 2).tolist()))
+    return float(x), times.tolist(), rows.tolist(), left, right
 
 
 @fast_kernel(interpolated_row, sample=_table_inputs)
-def interpolated_row_float(x, times, rows):
-    """`interpolated_row` in plain floats (a bisection and the same
-    formula as np.interp): the replay's tables each control tick."""
+def interpolated_row_float(x, times, rows, left=None, right=None):
+    """`interpolated_row` in plain floats: numpy's operations in numpy's
+    order (its search, its slope and its fallbacks), so the same numbers
+    without a numpy call a column: the replay's tables and the scene's
+    schedules, each control tick."""
+    if x != x:  # NaN: numpy's own answer
+        return interpolated_row(x, times, rows, left, right)
     j = bisect_right(times, x) - 1
     if j < 0:
-        return list(rows[0])
+        return list(rows[0]) if left is None else [left] * len(rows[0])
     if j >= len(times) - 1 or times[j] == x:
+        if right is not None and x > times[-1]:
+            return [right] * len(rows[-1])
         return list(rows[j])
     t0, t1 = times[j], times[j + 1]
-    return [(b - a) / (t1 - t0) * (x - t0) + a
-            for a, b in zip(rows[j], rows[j + 1], strict=True)]
+    values = []
+    for a, b in zip(rows[j], rows[j + 1], strict=True):
+        slope = (b - a) / (t1 - t0)
+        value = slope * (x - t0) + a
+        if value != value:  # numpy's fallbacks, for infinite values
+            value = slope * (x - t1) + b
+            if value != value and a == b:
+                value = a
+        values.append(value)
+    return values
 
 
 def resolve_movement_file(file):

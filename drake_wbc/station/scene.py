@@ -15,7 +15,6 @@ In a diagram, `add_static_obstacles` puts the obstacles into the plant
 never touched; the LIDARs take their positions) and the hand.
 """
 
-from bisect import bisect_right
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -33,6 +32,8 @@ from pydrake.multibody.plant import (
     CoulombFriction,
 )
 
+from drake_wbc.math.kernels import body_for
+from drake_wbc.math.movement import interpolated_row
 from drake_wbc.math.validation import (
     as_matrix,
     as_scalar,
@@ -316,39 +317,6 @@ def person_positions(people, t):
     return Walks(people)(as_scalar("t", t))
 
 
-def _interp_rows(t, times, rows, left, right):
-    """[np.interp(t, times, row, left, right) for row in rows] in plain
-    floats: numpy's operations in numpy's order (its search, its slope
-    and its fallbacks), so the same numbers, without a numpy call a row.
-
-    Args:
-        t: a float time.
-        times: list of strictly increasing floats.
-        rows: lists of floats, one value per time each.
-        left, right: the value before times[0] and after times[-1]; None
-            for each row's first or last value.
-    """
-    if t != t:  # nan: numpy's own answer
-        return [float(np.interp(t, times, row, left, right)) for row in rows]
-    if t < times[0]:
-        return [row[0] if left is None else left for row in rows]
-    if t > times[-1]:
-        return [row[-1] if right is None else right for row in rows]
-    j = bisect_right(times, t) - 1
-    if j == len(times) - 1 or times[j] == t:
-        return [row[j] for row in rows]
-    values = []
-    for row in rows:
-        slope = (row[j + 1] - row[j]) / (times[j + 1] - times[j])
-        value = slope * (t - times[j]) + row[j]
-        if value != value:
-            value = slope * (t - times[j + 1]) + row[j + 1]
-            if value != value and row[j] == row[j + 1]:
-                value = row[j]
-        values.append(value)
-    return values
-
-
 class Walks:
     """`person_positions` of a fixed validated list of people, with their
     schedules as float lists once: a call takes a float time as it is."""
@@ -356,14 +324,15 @@ class Walks:
     def __init__(self, people):
         self._walks = [
             ([float(x) for x in p.times],
-             np.asarray(p.waypoints, dtype=float).T.tolist(),
+             np.asarray(p.waypoints, dtype=float).tolist(),
              float(p.times[0]), float(p.repeat)) for p in people]
+        self._interpolated = body_for(interpolated_row, float)
 
     def __call__(self, t):
         rows = []
         for times, path, t0, repeat in self._walks:
             s = t0 + (t - t0) % repeat if repeat > 0.0 and t > t0 else t
-            rows.append(_interp_rows(s, times, path, None, None))
+            rows.append(self._interpolated(s, times, path))
         return np.array(rows, dtype=float).reshape(len(rows), 2)
 
 
@@ -385,13 +354,14 @@ class HandSchedule:
             columns[:, :3] = hand.forces
             if hand.torques:
                 columns[:, 3:] = hand.torques
-        self._columns = columns.T.tolist()
+        self._rows = columns.tolist()
+        self._interpolated = body_for(interpolated_row, float)
 
     def __call__(self, t):
         if not self._times:
             return np.zeros(6)
-        return np.array(_interp_rows(t, self._times, self._columns, 0.0,
-                                     0.0), dtype=float)
+        return np.array(self._interpolated(t, self._times, self._rows, 0.0,
+                                           0.0), dtype=float)
 
 
 def planar_shapes(scene, height):
