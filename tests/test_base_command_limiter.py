@@ -20,11 +20,7 @@ from drake_wbc.math.separation import (
     separation_state,
 )
 from drake_wbc.stages import BaseCommandLimiter
-from drake_wbc.stages.base_command import (
-    _PEOPLE,
-    _PEOPLE_ALLOWED,
-    _PROTECTIVE,
-)
+from drake_wbc.stages.base_command import limiter_state
 
 HALF_SIZES = (0.4, 0.3)
 H = 0.01
@@ -134,23 +130,26 @@ def test_the_limiter_is_the_model_tick_by_tick(scalar):
             context).get_vector().CopyToVector()
         context.SetDiscreteState(state)
         state = values(state)
+        parts = limiter_state(state)
         expected = model_tick(params, previous, separation, desired,
                               stopped, envelope, points, people)
         # The protective stop: from a point on or inside the footprint,
         # for hold_time after the last such scan.
         if len(points) and footprint_gap(points, HALF_SIZES).min() <= 0.0:
             last_inside = tick * H
-        assert state[_PROTECTIVE] == (
+        stop = parts.protective[0]
+        assert stop == (
             1.0 if tick * H - last_inside < params.hold_time - 1e-9 else 0.0)
-        seen.add(f"protective {state[_PROTECTIVE]}")
-        for got, wanted in zip((command, saturation, state[:_PEOPLE]),
-                               expected, strict=True):
+        seen.add(f"protective {stop}")
+        for got, wanted in zip(
+                (command, saturation,
+                 np.concatenate([parts.previous, parts.separation])),
+                expected, strict=True):
             np.testing.assert_allclose(got, wanted, rtol=0.0,
                                        atol=TOLERANCE * max(
                                            1.0, np.abs(wanted).max()))
-        previous, separation = state[:3], state[3:_PEOPLE]
-        people = (state[_PEOPLE:_PEOPLE_ALLOWED].reshape(-1, 3),
-                  state[_PEOPLE_ALLOWED:_PROTECTIVE], state[_PROTECTIVE])
+        previous, separation = parts.previous, parts.separation
+        people = (parts.person_rows, parts.person_allowed, stop)
         if stopped < 0.5 and np.isfinite(desired).all():
             seen.add("passed" if np.array_equal(command, desired)
                      else "limited")

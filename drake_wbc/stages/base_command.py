@@ -7,6 +7,7 @@ InputGuard, which decides the stop, and StopGate are in
 drake_wbc.stages.safety."""
 
 import logging
+from typing import NamedTuple
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -64,6 +65,41 @@ _TRACKER = _SCAN + 7
 """Where the people tracker's state (TRACKER_SIZE) starts."""
 
 _SIZE = _TRACKER + TRACKER_SIZE
+
+class LimiterState(NamedTuple):
+    """BaseCommandLimiter's state vector in its parts (views of it, in
+    its order; `limiter_state`).
+
+    Attributes:
+        previous: the previous command (3).
+        separation: the static rule's approach rows (3 NEAREST_POINTS,
+            row by row) and allowed speeds (NEAREST_POINTS).
+        person_rows: the moving people's approach rows (MAX_TRACKS, 3).
+        person_allowed: their allowed speeds (MAX_TRACKS; FAR where
+            none).
+        protective: [stopped, the last tick's time with a point on or
+            inside the footprint, whether the last scan had one].
+        scan: the last scan's signature (7).
+        tracker: the people tracker's state (TRACKER_SIZE).
+    """
+
+    previous: np.ndarray
+    separation: np.ndarray
+    person_rows: np.ndarray
+    person_allowed: np.ndarray
+    protective: np.ndarray
+    scan: np.ndarray
+    tracker: np.ndarray
+
+
+def limiter_state(state):
+    """The LimiterState of a BaseCommandLimiter's state vector (_SIZE,)."""
+    return LimiterState(
+        state[:safety.BASE_AXES], state[safety.BASE_AXES:_PEOPLE],
+        state[_PEOPLE:_PEOPLE_ALLOWED].reshape(-1, 3),
+        state[_PEOPLE_ALLOWED:_PROTECTIVE], state[_PROTECTIVE:_SCAN],
+        state[_SCAN:_TRACKER], state[_TRACKER:])
+
 
 def _signature_of(points):
     """A scan's signature: [points, its first, middle and last point] (0
