@@ -136,21 +136,20 @@ class FloorTicker(DiagramTicker):
             hollow[id(stage)] = builder.AddNamedSystem(name, HollowStage(
                 stage, stage.GetMyContextFromRoot(ticker.context),
                 ticker.time_step))
-        diagram = controller.diagram
+        wired = controller.diagram
         for (destination, i), (source, j) in (
-                diagram.connection_map().items()):
+                wired.connection_map().items()):
             builder.Connect(hollow[id(source)].get_output_port(j),
                             hollow[id(destination)].get_input_port(i))
-        for i in range(diagram.num_input_ports()):
-            name = diagram.get_input_port(i).get_name()
+        for i in range(wired.num_input_ports()):
+            name = wired.get_input_port(i).get_name()
             guard = hollow[id(controller.stages["guard"])]
             builder.ExportInput(guard.GetInputPort(name), name)
-        for i in range(diagram.num_output_ports()):
-            source, j = diagram.get_output_port_locator(OutputPortIndex(i))
+        for i in range(wired.num_output_ports()):
+            source, j = wired.get_output_port_locator(OutputPortIndex(i))
             builder.ExportOutput(hollow[id(source)].get_output_port(j),
-                                 diagram.get_output_port(i).get_name())
-        diagram = builder.Build()
+                                 wired.get_output_port(i).get_name())
         super().__init__(
-            diagram, {name: diagram.GetSubsystemByName(name)
-                      for name in controller.stages},
+            builder.Build(), {name: hollow[id(stage)] for name, stage
+                              in controller.stages.items()},
             ticker.time_step, ticker.values)
