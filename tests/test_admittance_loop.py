@@ -10,7 +10,11 @@ from pydrake.systems.analysis import Simulator
 from drake_wbc.analysis import admittance_loop as al
 from drake_wbc.analysis.frequency import frequency_response
 from drake_wbc.experiments.runner import build_closed_loop, simulate
-from drake_wbc.experiments.scenario import find_scenario, load_scenario
+from drake_wbc.experiments.scenario import (
+    find_scenario,
+    load_scenario,
+    scenario_station,
+)
 
 PERIOD = 0.01
 STEP = np.array([0.0, -0.0155, -0.0219, 0.0, 0.0069, 0.0])
@@ -20,7 +24,7 @@ STEP = np.array([0.0, -0.0155, -0.0219, 0.0, 0.0069, 0.0])
 @pytest.fixture(scope="module")
 def setting():
     scenario = load_scenario(find_scenario("phri"))
-    station = al._station(scenario)
+    station = scenario_station(scenario)
     return scenario, station
 
 

@@ -17,7 +17,9 @@ from drake_wbc.experiments.scenario import (
     controller_arm,
     find_scenario,
     load_scenario,
+    scenario_robot,
 )
+from drake_wbc.robot.description import shipped_robot
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 PLOTS = ("base_filter", "split_ideal", "split_base_loop", "base_plant",
@@ -141,6 +143,28 @@ def test_diagram_writes_dot_and_says_when_graphviz_is_missing(
         assert not (folder / f"{stem}.svg").exists()
     assert "Graphviz's `dot` program is not on PATH" in text
     assert commands.render_svg(folder / "controller.dot") is None
+
+
+def test_diagram_draws_the_station_of_the_scenarios_robot(tmp_path):
+    """A scenario on the second shipped robot: the station's diagram is
+    of its 7-joint arm, as the controller's is (the station was built of
+    the shipped robot, whose 6 joints refused the scenario's 7 initial
+    positions)."""
+    folder = tmp_path / "diagram"
+    args = _parse(commands.add_diagram_arguments,
+                  ["trajectory_tracking_lbr", "--output", str(folder)])
+    code, _ = _run(commands.run_diagram, args)
+    assert code == 0
+    station = (folder / "station.dot").read_text()
+    robot = scenario_robot(
+        load_scenario(find_scenario("trajectory_tracking_lbr")))
+    shipped = shipped_robot()
+    assert len(robot.arm.joints) == 7
+    # The plant's ports are named by model instance: the arm's scope.
+    arm, shipped_arm = (r.arm.joints[0].split("::")[0]
+                        for r in (robot, shipped))
+    assert f"{arm}_state" in station
+    assert f"{shipped_arm}_state" not in station
 
 
 def test_the_chains_are_linearised_on_the_scenarios_robot():

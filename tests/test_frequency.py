@@ -25,7 +25,11 @@ from drake_wbc.analysis.frequency import (
     peak_gain,
     stability_margins,
 )
-from drake_wbc.experiments.scenario import find_scenario, load_scenario
+from drake_wbc.experiments.scenario import (
+    find_scenario,
+    load_scenario,
+    scenario_station,
+)
 from drake_wbc.math import cdmp
 from drake_wbc.math.compensation import RobustCompensatorParameters
 from drake_wbc.math.dmp import DmpParameters
@@ -310,9 +314,7 @@ def test_base_loop_chain_linearisation_matches_simulation(scenario, point,
 
 @pytest.fixture(scope="module")
 def station(scenario):
-    from drake_wbc.station.simulation import SimulatedStation
-
-    return SimulatedStation(scenario.station, scenario.scene)
+    return scenario_station(scenario)
 
 
 @pytest.fixture(scope="module")

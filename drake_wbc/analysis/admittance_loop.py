@@ -98,7 +98,7 @@ from drake_wbc.controller import build_controller
 from drake_wbc.experiments.scenario import (
     controller_arm,
     controller_for,
-    scenario_robot,
+    scenario_station,
 )
 from drake_wbc.math.kinematics import twist_rotation
 from drake_wbc.math.validation import checked_instance, positive
@@ -107,7 +107,6 @@ from drake_wbc.stages.wrench import sensor_rotation_in_base, tool_weight_reading
 from drake_wbc.station.driver_dynamics import interpolated_command
 from drake_wbc.station.force_torque import WeldWrench
 from drake_wbc.station.scene import HandImpedance
-from drake_wbc.station.simulation import SimulatedStation
 
 STIFF_HAND = HandImpedance(stiffness=1000.0, damping=30.0, mass=0.2)
 """A stiff grip: the top of the range of a person's hand impedance in a
@@ -191,11 +190,6 @@ def PeriodicArmDriver_(T):
 
 
 PeriodicArmDriver = PeriodicArmDriver_[None]
-
-
-def _station(scenario):
-    return SimulatedStation(scenario.station, scenario.scene,
-                            scenario.arm_mount, scenario_robot(scenario))
 
 
 def _add_welded_hand(plant, model, hand, X_WT):
@@ -530,7 +524,8 @@ class AdmittanceCase:
             whole_body.hri_time_constant = float(time_constant)
         self.hand = hand if hand is not None else (
             scenario.scene.hand.impedance or HandImpedance())
-        self.station = station if station is not None else _station(scenario)
+        self.station = (station if station is not None
+                        else scenario_station(scenario))
         self.arm = controller_arm(scenario)
         h = self.params.time_step
         self.plant, self.rest_reading = plant if plant is not None else (

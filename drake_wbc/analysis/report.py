@@ -57,14 +57,13 @@ from drake_wbc.analysis.frequency import (
     linear_system_response,
     stability_margins,
 )
-from drake_wbc.experiments.scenario import controller_arm, scenario_robot
+from drake_wbc.experiments.scenario import controller_arm, scenario_station
 from drake_wbc.math import distribution, kinematics
 from drake_wbc.math.filtering import (
     lowpass_response,
     lowpass_zoh_response,
 )
 from drake_wbc.math.validation import positive
-from drake_wbc.station.simulation import SimulatedStation
 
 CONTACT_STIFFNESS = 3.0e3
 """K of the contact loops, N/m: a soft sponge pressed against a wall
@@ -303,8 +302,7 @@ def admittance_cases(scenario):
 def _admittance_plots(report, scenario, hertz, omega, h):
     """admittance_loop_*: the admittance loop of each case at the
     scenario's k_hri, L per axis of T_b, and its row."""
-    station = SimulatedStation(scenario.station, scenario.scene,
-                               scenario.arm_mount, scenario_robot(scenario))
+    station = scenario_station(scenario)
     plants = {}
     for name, label, hand, inertia, T in admittance_cases(scenario):
         case = admittance_loop.AdmittanceCase(
@@ -346,8 +344,7 @@ def compute_bode_report(scenario, points_per_decade=60,
                                    controller_arm(scenario))
     driver = replace(scenario.station.base,
                      time_step=scenario.station.time_step)
-    station = SimulatedStation(scenario.station, scenario.scene,
-                               scenario.arm_mount, scenario_robot(scenario))
+    station = scenario_station(scenario)
     report = BodeReport()
     f = replace(params.base_filter, enabled=True)
     plot = BodePlot("base_filter", "base filter, eq. (filtering): "

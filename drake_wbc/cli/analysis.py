@@ -95,8 +95,10 @@ def run_diagram(args):
     (Drake's GetGraphvizString) and their SVGs where Graphviz is
     installed. Returns 0."""
     from drake_wbc.controller import build_controller
-    from drake_wbc.experiments.scenario import controller_arm
-    from drake_wbc.station.simulation import SimulatedStation
+    from drake_wbc.experiments.scenario import (
+        controller_arm,
+        scenario_station,
+    )
 
     name, scenario, output = _scenario(args, "diagram")
     print(f"drake-wbc diagram {name}: writing to {output}/")
@@ -104,8 +106,7 @@ def run_diagram(args):
     diagrams = (
         ("controller", build_controller(
             scenario.controller, controller_arm(scenario)).diagram),
-        ("station", SimulatedStation(scenario.station, scenario.scene,
-                                     scenario.arm_mount).diagram),
+        ("station", scenario_station(scenario).diagram),
     )
     missing = False
     for stem, diagram in diagrams:

@@ -40,7 +40,7 @@ from dataclasses import replace
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.lcm import LcmInterfaceSystem
 
-from drake_wbc.experiments.scenario import Scenario, scenario_robot
+from drake_wbc.experiments.scenario import Scenario, scenario_station
 from drake_wbc.hardware.codecs import (
     ClockRules,
     CommandReceiver,
@@ -57,7 +57,6 @@ from drake_wbc.hardware.safety import (
 )
 from drake_wbc.math.validation import checked_instance
 from drake_wbc.robot.model import ArmKinematics
-from drake_wbc.station.simulation import SimulatedStation
 
 TRUTH_SIGNALS = ("truth.end_effector_pose", "truth.end_effector_velocity",
                  "truth.base_pose", "truth.base_loop_velocity",
@@ -103,9 +102,7 @@ class RobotSide:
         s = self.systems = {}
         if add_lcm_interface:
             s["lcm"] = builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
-        self.station = SimulatedStation(scenario.station, scenario.scene,
-                                        scenario.arm_mount,
-                                        scenario_robot(scenario))
+        self.station = scenario_station(scenario)
         station = builder.AddNamedSystem("station", self.station.diagram)
 
         bus = receiving_bus(lcm)

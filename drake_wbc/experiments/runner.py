@@ -25,7 +25,7 @@ from drake_wbc.experiments.scenario import (
     Variant,
     controller_arm,
     controller_for,
-    scenario_robot,
+    scenario_station,
 )
 from drake_wbc.math.validation import checked_instance
 from drake_wbc.station.simulation import SimulatedStation
@@ -67,8 +67,7 @@ def build_closed_loop(scenario, variant=None, replay=False):
     scenario = checked_instance("scenario", scenario, Scenario, Scenario)
     variant = variant or scenario.variants[0]
     builder = DiagramBuilder()
-    station = SimulatedStation(scenario.station, scenario.scene,
-                               scenario.arm_mount, scenario_robot(scenario))
+    station = scenario_station(scenario)
     builder.AddNamedSystem("station", station.diagram)
     controller, sources = add_controller(
         builder, controller_for(scenario, variant), scenario.task,

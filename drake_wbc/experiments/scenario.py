@@ -46,6 +46,7 @@ from drake_wbc.robot.footprint import check_start_is_free
 from drake_wbc.robot.model import ArmKinematics, ArmMount, shared_robot_plant
 from drake_wbc.station.scene import Scene
 from drake_wbc.station.simulation import (
+    SimulatedStation,
     StationOptions,
     arm_joint_limits,
     check_arm_start,
@@ -269,6 +270,13 @@ def scenario_robot(scenario):
     if not scenario.robot:
         return shipped_robot()
     return load_robot_description(scenario.robot)
+
+
+def scenario_station(scenario):
+    """The SimulatedStation of `scenario`: its station options and scene,
+    its robot (`scenario_robot`) on its arm mount."""
+    return SimulatedStation(scenario.station, scenario.scene,
+                            scenario.arm_mount, scenario_robot(scenario))
 
 
 def controller_arm(scenario):
