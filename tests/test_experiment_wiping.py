@@ -12,15 +12,22 @@ from drake_wbc.controller.task import Schedule
 from drake_wbc.experiments import wiping
 from drake_wbc.experiments.reports import run_scenario
 from drake_wbc.experiments.scenario import (
+    controller_arm,
     find_scenario,
     load_scenario,
+    with_robot,
 )
+from drake_wbc.robot.description import models_dir
+from drake_wbc.stages.wrench import tool_weight_reading
 
 DURATION = 8.0
 """s: contact and settling (under 1 s), then the first stroke along +y
 (4 to 6.5 s) and the start of the way back."""
 
 RUN = "wiping"
+
+LBR_FILE = models_dir() / "lbr_omni.robot.yaml"
+"""The second shipped robot: a 7-joint arm."""
 
 
 @pytest.fixture(scope="module")
@@ -97,8 +104,25 @@ def test_outputs_are_written(summary, tmp_path):
     assert [p.name for p in paths] == [f"wiping_{RUN}.png"]
     assert paths[0].stat().st_size > 10_000
     saved = RunLog.load(folder / f"log_{RUN}.npz")
-    np.testing.assert_allclose(wiping.external_wrench(saved),
-                               wiping.external_wrench(logs[RUN]))
+    np.testing.assert_allclose(wiping.external_wrench(scenario, saved),
+                               wiping.external_wrench(scenario, logs[RUN]))
+
+
+def test_the_force_is_estimated_on_the_runs_robot():
+    """On the second shipped robot (seven joints) the estimator is of
+    that robot: the tool's weight alone at its poses reads as no external
+    wrench (the shipped six-joint robot's estimator refused the log)."""
+    scenario = with_robot(load_scenario(find_scenario("wiping")),
+                          LBR_FILE, echo=None)
+    arm = controller_arm(scenario)
+    assert arm.num_joints == 7
+    q = arm.home + np.linspace(0.0, 0.3, 5)[:, None]
+    log = RunLog(np.arange(5) * 0.01, {
+        "arm.position_measured": q,
+        "wrist.wrench_measured": np.array(
+            [tool_weight_reading(arm, row) for row in q])}, {})
+    np.testing.assert_allclose(wiping.external_wrench(scenario, log),
+                               np.zeros((5, 6)), atol=1e-9)
 
 
 def test_settling_finds_contact_and_settling():

@@ -51,7 +51,7 @@ from drake_wbc.experiments.common import (
     obstacle_distances,
     save_figure,
 )
-from drake_wbc.experiments.scenario import footprint_of
+from drake_wbc.experiments.scenario import controller_arm, footprint_of
 from drake_wbc.stages.wrench import ExternalWrenchEstimator
 from drake_wbc.station.scene import Scene
 
@@ -80,11 +80,13 @@ METRICS = (
 """The metrics of each run (module docstring), as `<run>.<metric>`."""
 
 
-def external_wrench(log, signal="wrist.wrench_measured"):
+def external_wrench(scenario, log, signal="wrist.wrench_measured"):
     """F_ext (N, 6) in T_a at the tool centre point, from the log's sensor
     wrench `signal` (`wrist.wrench_measured` or `truth.wrist_wrench`) and
-    `arm.position_measured`, by the controller's ExternalWrenchEstimator."""
-    estimator = ExternalWrenchEstimator()
+    `arm.position_measured`, by an ExternalWrenchEstimator on the run's
+    robot (`scenario`'s): the reading less the tool's weight, the paper's
+    estimate."""
+    estimator = ExternalWrenchEstimator(controller_arm(scenario))
     context = estimator.CreateDefaultContext()
     reading = estimator.GetInputPort("wrist_wrench")
     position = estimator.GetInputPort("arm_position")
@@ -191,9 +193,10 @@ def run_metrics(scenario, log):
     """The metrics of one run (METRICS, unprefixed)."""
     t = log.time
     F_d = desired_force(scenario, log)
-    force = external_wrench(log)[:, 0]
+    force = external_wrench(scenario, log)[:, 0]
     error = force - F_d
-    truth_error = external_wrench(log, "truth.wrist_wrench")[:, 0] - F_d
+    truth_error = (external_wrench(scenario, log, "truth.wrist_wrench")[:, 0]
+                   - F_d)
     contact, settled = settling(t, force, error)
     after = t >= settled if np.isfinite(settled) else np.zeros(len(t), bool)
     deviation, angle, commanded = path_deviation(log)
@@ -259,7 +262,7 @@ def draw_figures(scenario, logs, folder):
                                f"while wiping along y ({name})")
         axes[0].plot(t, desired_force(scenario, log), "k--", lw=1.0,
                      label="$F_x^d$")
-        axes[0].plot(t, external_wrench(log)[:, 0], lw=0.8,
+        axes[0].plot(t, external_wrench(scenario, log)[:, 0], lw=0.8,
                      label="$F_x^e$")
         axes[0].set_ylabel("force (N)")
         pose = log["truth.end_effector_pose"]
