@@ -11,8 +11,10 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink
 from shipped_names import ARM_JOINTS, BASE_JOINTS, MOUNT_JOINTS
 
+from drake_wbc.robot.description import load_robot_description, models_dir
 from drake_wbc.robot.model import (
     HOME_ARM_POSITIONS,
+    ArmMount,
     add_robot,
     joint_position_indices,
     joint_velocity_indices,
@@ -70,14 +72,13 @@ def test_the_suspension_adds_two_spring_damper_joints_and_moves_nothing(
             atol=1e-12)
 
 
-def test_each_axis_has_the_frequency_asked_for_from_the_plant(suspended):
-    gains, plant, model = suspended
-    # Read from the plant: the springs' k, the diagonal of the mass matrix
-    # I (mount held) and gravity's stiffness G by central differences.
+def _inertia_and_gravity(plant, model, q_a):
+    """Read from the plant at the arm's q_a: the diagonal of the mass
+    matrix I of the suspension's joints (mount held) and gravity's
+    stiffness G by central differences."""
     context = plant.CreateDefaultContext()
     q = plant.GetPositions(context)
-    q[joint_position_indices(model.arm_joints)] = (
-        HOME_ARM_POSITIONS)
+    q[joint_position_indices(model.arm_joints)] = q_a
     plant.SetPositions(context, q)
     iq = joint_position_indices(model.suspension_joints)
     iv = joint_velocity_indices(model.suspension_joints)
@@ -91,6 +92,12 @@ def test_each_axis_has_the_frequency_asked_for_from_the_plant(suspended):
             plant.SetPositions(context, shifted)
             tau.append(plant.CalcGravityGeneralizedForces(context)[j])
         gravity.append((tau[0] - tau[1]) / 2e-5)
+    return inertia, np.array(gravity)
+
+
+def test_each_axis_has_the_frequency_asked_for_from_the_plant(suspended):
+    gains, plant, model = suspended
+    inertia, gravity = _inertia_and_gravity(plant, model, HOME_ARM_POSITIONS)
     frequency = np.sqrt((gains.stiffness - gravity) / inertia) / (2 * np.pi)
     np.testing.assert_allclose(frequency, [PARAMS.roll_frequency,
                                            PARAMS.pitch_frequency],
@@ -103,6 +110,29 @@ def test_each_axis_has_the_frequency_asked_for_from_the_plant(suspended):
     modes = suspension_modes(plant, model)
     np.testing.assert_allclose([m.frequency_hz for m in modes], [3.0, 5.0],
                                rtol=1e-3)
+
+
+def test_the_suspension_is_sized_on_the_robot_it_carries():
+    """On the second shipped robot (seven joints, its own base), its arm
+    turned and tilted on the mount: the gains give the modes asked for on
+    that robot (the sizing used the shipped six-joint robot's plant,
+    which refused the seven positions)."""
+    robot = load_robot_description(models_dir() / "lbr_omni.robot.yaml")
+    mount = ArmMount(yaw=0.5, tilt=0.2)
+    home = np.asarray(robot.arm.home, dtype=float)
+    gains = suspension_gains(PARAMS, home, robot, mount)
+    plant, model = make_robot_plant(robot, suspension=gains, mount=mount)
+    assert model.num_arm_joints == 7
+    inertia, gravity = _inertia_and_gravity(plant, model, home)
+    np.testing.assert_allclose(
+        np.sqrt((gains.stiffness - gravity) / inertia) / (2 * np.pi),
+        [PARAMS.roll_frequency, PARAMS.pitch_frequency], rtol=1e-6)
+    # The turned arm couples roll and pitch a little: the modes move by
+    # half a percent from the axes' frequencies.
+    modes = suspension_modes(plant, model, home)
+    np.testing.assert_allclose(sorted(m.frequency_hz for m in modes),
+                               [PARAMS.pitch_frequency, PARAMS.roll_frequency],
+                               rtol=0.01)
 
 
 def test_the_chassis_rocks_at_the_suspensions_frequency_in_simulation(

@@ -832,13 +832,17 @@ def horizontal_modes(plant, model, q_a=None):
     return rocking_modes(plant, model, model.horizontal_joints, q_a)
 
 
-def suspension_block(gains, q_a=None, horizontal=False):
+def suspension_block(gains, q_a=None, horizontal=False, description=None,
+                     mount=None):
     """(I, G): the diagonals of the mass matrix's block and of the gravity
     stiffness d tau_g / d theta (> 0: gravity topples the raised mass) of
     the suspension's joints (roll, pitch; or, if `horizontal`, the
     horizontal compliance's x, y, yaw), with the arm at `q_a` (the home if
-    None) and the suspension of SuspensionGains `gains`, at rest."""
-    plant, model = make_robot_plant(suspension=gains)
+    None) and the suspension of SuspensionGains `gains`, at rest, on the
+    robot of RobotDescription `description` (the shipped one if None)
+    with its arm mounted by ArmMount `mount` (as described if None)."""
+    plant, model = make_robot_plant(description, suspension=gains,
+                                    mount=mount)
     joints = (model.horizontal_joints if horizontal
               else model.suspension_joints)
     M, _, _, gravity = _compliant_block(plant, model, joints, q_a)

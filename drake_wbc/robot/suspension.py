@@ -287,16 +287,19 @@ def _massless_link(name, pose=""):
             "<iyz>0</iyz></inertia></inertial></link>")
 
 
-def suspension_gains(params, arm_positions):
+def suspension_gains(params, arm_positions, description=None, mount=None):
     """The SuspensionGains that give SuspensionParameters `params`' modes
-    with the arm at `arm_positions` (6,): k = I w^2 + G and c = 2 zeta w
+    with the arm at `arm_positions` (n,): k = I w^2 + G and c = 2 zeta w
     I per axis (the module's docstring), I and G from a plant of the robot
     with the suspension (and k = I w^2, c = 2 zeta w I for the horizontal
-    compliance's axes, from a plant with it)."""
+    compliance's axes, from a plant with it): the robot of
+    RobotDescription `description` (the shipped one if None), its arm
+    mounted by ArmMount `mount`."""
     from drake_wbc.robot.model import suspension_block
 
     unsprung = SuspensionGains(np.zeros(2), np.zeros(2), params.pivot_height)
-    inertia, gravity = suspension_block(unsprung, arm_positions)
+    inertia, gravity = suspension_block(unsprung, arm_positions,
+                                        description=description, mount=mount)
     w = 2.0 * np.pi * np.array([params.roll_frequency,
                                 params.pitch_frequency])
     gains = SuspensionGains(
@@ -310,7 +313,8 @@ def suspension_gains(params, arm_positions):
                       horizontal.drive_yaw_inertia])
     inertia = suspension_block(gains._replace(
         horizontal_stiffness=np.zeros(3), horizontal_damping=np.zeros(3),
-        drive_inertia=drive), arm_positions, horizontal=True)[0]
+        drive_inertia=drive), arm_positions, horizontal=True,
+        description=description, mount=mount)[0]
     w = 2.0 * np.pi * horizontal.frequencies()
     return gains._replace(
         horizontal_stiffness=inertia * w * w,

@@ -295,7 +295,7 @@ class SimulatedStation:
             use_sampled_output_ports=False), builder)
         suspension = None if options.suspension is None else (
             suspension_gains(options.suspension,
-                             options.initial_arm_positions))
+                             options.initial_arm_positions, robot, mount))
         model = add_robot(plant, robot, suspension=suspension, mount=mount)
         check_arm_start(options.initial_arm_positions, model.limits.lower,
                         model.limits.upper, "station.initial_arm_positions")
