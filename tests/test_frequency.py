@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from omni_arm import write_omni_arm
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import (
@@ -38,7 +39,9 @@ from drake_wbc.math.filtering import (
     lowpass_response,
     lowpass_zoh_response,
 )
+from drake_wbc.robot.description import load_robot_description
 from drake_wbc.stages.cdmp_stages import AffineDynamics
+from drake_wbc.station.simulation import SimulatedStation, StationOptions
 
 HERTZ, OMEGA = frequency_grid(0.01, 100.0, 40)
 """The log grid of the checks, 0.01 to 100 Hz."""
@@ -407,6 +410,25 @@ def test_base_plant_linearisation_matches_the_station(station, base_plant):
         station, 0, [("base.state_estimated", 3),
                      ("truth.end_effector_velocity", 0)])
     predicted = linear_system_response(base_plant, omegas)
+    _check(base, predicted[:, 0, 0])
+    _check(end_effector, predicted[:, 3, 0])
+
+
+
+def test_base_plant_of_a_one_urdf_robot_matches_its_station(tmp_path):
+    """A robot whose base and arm are one model instance (one URDF): the
+    analysis' copy of the station's plant feeds its servos in the order
+    of that instance's actuators, as the station does, and its
+    linearisation matches the station's response."""
+    robot = load_robot_description(write_omni_arm(tmp_path, 7))
+    station = SimulatedStation(StationOptions(
+        initial_arm_positions=list(robot.arm.home)), robot=robot)
+    assert station.model.base == station.model.arm
+    linear = plant_chain.linearize_base_plant(station)
+    (base, end_effector), omegas = _station_response(
+        station, 0, [("base.state_estimated", 3),
+                     ("truth.end_effector_velocity", 0)])
+    predicted = linear_system_response(linear, omegas)
     _check(base, predicted[:, 0, 0])
     _check(end_effector, predicted[:, 3, 0])
 

@@ -38,7 +38,8 @@ from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.hardware.safety import CommandGuard, Limits, follow_arm_command
 from drake_wbc.robot.description import load_robot_description, shipped_robot
 from drake_wbc.robot.footprint import check_start_is_free
-from drake_wbc.robot.model import ArmKinematics, make_robot_plant
+from drake_wbc.robot.model import ArmKinematics, ArmMount, make_robot_plant
+from drake_wbc.robot.suspension import SuspensionParameters
 from drake_wbc.robot.tuning import (
     RobotTuningWarning,
     check_tuning,
@@ -46,6 +47,7 @@ from drake_wbc.robot.tuning import (
 )
 from drake_wbc.stages.wrench import tool_weight_reading
 from drake_wbc.station.scene import CylinderObstacle, Scene
+from drake_wbc.station.simulation import SimulatedStation, StationOptions
 
 H = 0.01
 
@@ -295,6 +297,24 @@ def test_the_simulated_station_runs_that_robot(tmp_path):
     assert 0.6 * 0.02 < moved[2] < 1.4 * 0.02
     assert abs(moved[1]) < 0.01
     assert loop.controller.safety_reason(root) == ""
+
+
+@pytest.mark.parametrize("part, suspension, mount", [
+    ("suspension", SuspensionParameters(), ArmMount()),
+    ("mount", None, ArmMount(yaw=0.3))])
+def test_a_one_file_robot_says_what_cannot_be_added_to_it(
+        tmp_path, part, suspension, mount):
+    """A robot described by one URDF file: a suspension or a turned arm,
+    which only model directives can take, is refused naming the part, the
+    robot and its file, and what to do."""
+    description = load_robot_description(write_omni_arm(tmp_path, 7))
+    options = StationOptions(
+        initial_arm_positions=list(description.arm.home),
+        suspension=suspension)
+    with pytest.raises(ValueError, match=(
+            rf"^{part} is not allowed on {description.name}: its model is "
+            r"one file .*omni_arm.*\.urdf.* model\.directives")):
+        SimulatedStation(options, mount=mount, robot=description)
 
 
 def test_the_second_shipped_robot_tracks_the_papers_step():

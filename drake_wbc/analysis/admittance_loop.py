@@ -107,6 +107,7 @@ from drake_wbc.stages.wrench import sensor_rotation_in_base, tool_weight_reading
 from drake_wbc.station.driver_dynamics import interpolated_command
 from drake_wbc.station.force_torque import WeldWrench
 from drake_wbc.station.scene import HandImpedance
+from drake_wbc.station.simulation import add_desired_states, arm_state_output
 
 STIFF_HAND = HandImpedance(stiffness=1000.0, damping=30.0, mass=0.2)
 """A stiff grip: the top of the range of a person's hand impedance in a
@@ -228,10 +229,6 @@ def build_plant_part(station, hand):
     add = builder.AddNamedSystem
     plant, model = add_robot_plant(builder, station)
     options = station.options
-    if model.base == model.arm:
-        raise ValueError("station is not allowed: its base and arm share a "
-                         "model instance, which build_plant_part does not "
-                         "hold apart")
     _, settled = station_at_rest(station)
     X_WT = station.model.tcp_frame.CalcPoseInWorld(settled)
     _add_welded_hand(plant, model, hand, X_WT)
@@ -242,16 +239,14 @@ def build_plant_part(station, hand):
     weld = add("weld_wrench", WeldWrench(plant, model.ft_sensor_joint))
     sensor = add("wrist", ZeroOrderHold(1.0 / options.wrist.rate, 6))
     connect = builder.Connect
-    connect(driver.get_output_port(),
-            plant.get_desired_state_input_port(model.arm))
-    connect(base_hold.get_output_port(),
-            plant.get_desired_state_input_port(model.base))
+    add_desired_states(builder, plant, model, base_hold.get_output_port(),
+                       driver.get_output_port())
     connect(plant.get_reaction_forces_output_port(),
             weld.GetInputPort("reaction_forces"))
     connect(weld.GetOutputPort("wrench"), sensor.get_input_port())
     builder.ExportInput(driver.get_input_port(), "arm.position_command")
     n = model.num_arm_joints
-    arm_state = plant.get_state_output_port(model.arm)
+    arm_state, _ = arm_state_output(builder, plant, model)
     positions = add("arm_positions", MatrixGain(np.eye(n, 2 * n)))
     connect(arm_state, positions.get_input_port())
     both = add("measured", Multiplexer([6, n]))

@@ -25,7 +25,7 @@ from drake_wbc.station.servo_gains import (
     set_drive_inertias,
     set_servo_gains,
 )
-from drake_wbc.station.simulation import SimulatedStation
+from drake_wbc.station.simulation import SimulatedStation, add_desired_states
 from drake_wbc.station.state_sensors import BaseOdometry
 
 PLANT_OUTPUTS = (("base_velocity", 3), ("end_effector_velocity", 6))
@@ -80,10 +80,9 @@ def add_station_plant(builder, station):
                     odometry.GetInputPort("plant_state"))
     builder.Connect(odometry.GetOutputPort("pose"),
                     driver.GetInputPort("base_pose"))
-    builder.Connect(driver.GetOutputPort("desired_state"),
-                    plant.get_desired_state_input_port(model.base))
-    builder.Connect(hold.get_output_port(),
-                    plant.get_desired_state_input_port(model.arm))
+    add_desired_states(builder, plant, model,
+                       driver.GetOutputPort("desired_state"),
+                       hold.get_output_port())
     return driver, plant, model
 
 

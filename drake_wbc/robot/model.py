@@ -274,12 +274,17 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
                 first.file = f"file://{suspended}"
                 ProcessModelDirectives(directives, plant, parser)
     else:
-        for name, value in (("suspension", suspension),
-                            ("mount", None if mount.is_identity else mount)):
+        for name, value, what in (
+                ("suspension", suspension, "the suspension's joints"),
+                ("mount", None if mount.is_identity else mount,
+                 "the arm's mount")):
             if value is not None:
                 raise ValueError(
-                    f"{name} = {value!r} is not allowed with model.file: it "
-                    "changes model directives; model it in the file")
+                    f"{name} is not allowed on {description.name}: its model "
+                    f"is one file (model.file = {source.file!r}), and "
+                    f"{what} can only be added to model directives; "
+                    "describe the robot by model.directives, or model "
+                    f"{what} in its file")
         url = description.resolve(source.file)
         if "://" in url:
             parser.AddModelsFromUrl(url)

@@ -260,6 +260,73 @@ def arm_joint_limits():
     return arm.lower.copy(), arm.upper.copy()
 
 
+def add_desired_states(builder, plant, model, base_desired, arm_desired):
+    """Feeds the plant's servos: `base_desired` (an output port, the base's
+    planar joints' [q (3); v (3)]) and `arm_desired` (the arm's [q (n);
+    v (n)]) each to its model instance's desired state, or, for a robot
+    whose base and arm are one model instance (one URDF), both through a
+    Multiplexer ("drives") and a MatrixGain ("desired_state") that
+    permutes them into the order of the instance's actuators. Returns
+    the systems it added, by name.
+
+    Raises:
+        ValueError: a shared instance whose actuated joints are not
+            exactly the base's and the arm's.
+    """
+    if model.base != model.arm:
+        builder.Connect(base_desired,
+                        plant.get_desired_state_input_port(model.base))
+        builder.Connect(arm_desired,
+                        plant.get_desired_state_input_port(model.arm))
+        return {}
+    n = model.num_arm_joints
+    drives = {j.index(): i for i, j in enumerate(model.base_joints)}
+    drives.update({j.index(): 6 + i for i, j in enumerate(model.arm_joints)})
+    order = [plant.get_joint_actuator(a).joint().index()
+             for a in plant.GetJointActuatorIndices(model.base)]
+    if sorted(order) != sorted(drives):
+        raise ValueError(
+            "robot is not allowed: its base and arm share a model instance "
+            "whose actuated joints are not exactly the base's and the arm's "
+            "joints")
+    permutation = np.zeros((2 * len(order), 6 + 2 * n))
+    for row, joint in enumerate(order):
+        q_column = drives[joint]
+        v_column = q_column + (3 if q_column < 6 else n)
+        permutation[row, q_column] = 1.0
+        permutation[len(order) + row, v_column] = 1.0
+    added = {
+        "drives": builder.AddNamedSystem("drives", Multiplexer([6, 2 * n])),
+        "desired_state": builder.AddNamedSystem("desired_state",
+                                                MatrixGain(permutation)),
+    }
+    builder.Connect(base_desired, added["drives"].get_input_port(0))
+    builder.Connect(arm_desired, added["drives"].get_input_port(1))
+    builder.Connect(added["drives"].get_output_port(),
+                    added["desired_state"].get_input_port())
+    builder.Connect(added["desired_state"].get_output_port(),
+                    plant.get_desired_state_input_port(model.base))
+    return added
+
+
+def arm_state_output(builder, plant, model):
+    """(port, added): an output port of the arm's [q (n); v (n)]: its model
+    instance's state, or, where the base and the arm are one instance,
+    a selection of the plant's state (a MatrixGain "arm_joints", in
+    `added`, by name)."""
+    if model.base != model.arm:
+        return plant.get_state_output_port(model.arm), {}
+    nq = plant.num_positions()
+    selection = builder.AddNamedSystem("arm_joints", MatrixGain(
+        selection_matrix(np.concatenate([
+            joint_position_indices(model.arm_joints),
+            nq + joint_velocity_indices(model.arm_joints)]),
+            plant.num_multibody_states())))
+    builder.Connect(plant.get_state_output_port(),
+                    selection.get_input_port())
+    return selection.get_output_port(), {"arm_joints": selection}
+
+
 class SimulatedStation:
     """The built station: its Diagram and the parts inside it.
 
@@ -378,17 +445,12 @@ class SimulatedStation:
                 s["base_rates_input"].get_input_port(1))
         connect(s["base_rates_input"].get_output_port(),
                 s["base_rates"].get_input_port())
-        if model.base != model.arm:
-            connect(s["base_rates"].get_output_port(),
-                    plant.get_desired_state_input_port(model.base))
-            connect(s["arm_driver"].get_output_port(),
-                    plant.get_desired_state_input_port(model.arm))
-            connect(plant.get_state_output_port(model.arm),
-                    s["arm_state"].get_input_port())
-        else:
-            # One model instance for base and arm (one URDF): its desired
-            # state, in the order of its actuators, from both drivers'.
-            self._add_shared_drives(builder, n)
+        s.update(add_desired_states(
+            builder, plant, model, s["base_rates"].get_output_port(),
+            s["arm_driver"].get_output_port()))
+        arm_state, selection = arm_state_output(builder, plant, model)
+        s.update(selection)
+        connect(arm_state, s["arm_state"].get_input_port())
         connect(plant.get_reaction_forces_output_port(),
                 s["weld_wrench"].GetInputPort("reaction_forces"))
         connect(s["weld_wrench"].GetOutputPort("wrench"),
@@ -425,51 +487,6 @@ class SimulatedStation:
             export_out(port, name)
         self.diagram = builder.Build()
         self.diagram.set_name("simulated_station")
-
-    def _add_shared_drives(self, builder, n):
-        """Feeds the desired state of a model instance that holds the
-        base's and the arm's joints (base [q (3); v (3)] and arm [q (n);
-        v (n)], permuted to the instance's actuators), and reads the arm's
-        state from the plant's."""
-        plant, model, s = self.plant, self.model, self.systems
-        drives = {j.index(): i for i, j in enumerate(model.base_joints)}
-        drives.update({j.index(): 6 + i
-                       for i, j in enumerate(model.arm_joints)})
-        order = [plant.get_joint_actuator(a).joint().index()
-                 for a in plant.GetJointActuatorIndices(model.base)]
-        if sorted(order) != sorted(drives):
-            raise ValueError(
-                "robot is not allowed: its base and arm share a model "
-                "instance whose actuated joints are not exactly the base's "
-                "and the arm's joints")
-        width = 6 + 2 * n
-        permutation = np.zeros((2 * len(order), width))
-        for row, joint in enumerate(order):
-            q_column = drives[joint]
-            v_column = q_column + (3 if q_column < 6 else n)
-            permutation[row, q_column] = 1.0
-            permutation[len(order) + row, v_column] = 1.0
-        s["drives"] = builder.AddNamedSystem("drives", Multiplexer([6, 2 * n]))
-        s["desired_state"] = builder.AddNamedSystem(
-            "desired_state", MatrixGain(permutation))
-        builder.Connect(s["base_rates"].get_output_port(),
-                        s["drives"].get_input_port(0))
-        builder.Connect(s["arm_driver"].get_output_port(),
-                        s["drives"].get_input_port(1))
-        builder.Connect(s["drives"].get_output_port(),
-                        s["desired_state"].get_input_port())
-        builder.Connect(s["desired_state"].get_output_port(),
-                        plant.get_desired_state_input_port(model.base))
-        nq = plant.num_positions()
-        s["arm_joints"] = builder.AddNamedSystem("arm_joints", MatrixGain(
-            selection_matrix(np.concatenate([
-                joint_position_indices(model.arm_joints),
-                nq + joint_velocity_indices(model.arm_joints)]),
-                plant.num_multibody_states())))
-        builder.Connect(plant.get_state_output_port(),
-                        s["arm_joints"].get_input_port())
-        builder.Connect(s["arm_joints"].get_output_port(),
-                        s["arm_state"].get_input_port())
 
     def _add_lidars(self, builder, scene):
         """The robot's scanners (its description's lidar_frames), each
