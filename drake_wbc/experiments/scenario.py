@@ -48,7 +48,6 @@ from drake_wbc.station.scene import Scene
 from drake_wbc.station.simulation import (
     SimulatedStation,
     StationOptions,
-    arm_joint_limits,
     check_arm_start,
 )
 
@@ -329,13 +328,9 @@ def check_on_robot(scenario):
             command_timeout_of(scenario.hardware, base)
         except ValueError as error:
             raise ValueError(f"hardware.{error}") from None
-    if scenario.robot:
-        arm = ArmKinematics(*shared_robot_plant(scenario_robot(scenario)))
-        lower, upper = arm.lower, arm.upper
-    else:
-        lower, upper = arm_joint_limits()
-    check_arm_start(scenario.station.initial_arm_positions, lower, upper,
-                    "station.initial_arm_positions")
+    limits = shared_robot_plant(scenario_robot(scenario))[1].limits
+    check_arm_start(scenario.station.initial_arm_positions, limits.lower,
+                    limits.upper, "station.initial_arm_positions")
 
 
 _PARTS = dict(controller=ControllerParameters, station=StationOptions,

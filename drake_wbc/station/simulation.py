@@ -34,7 +34,6 @@ FT-300 at 100 Hz, the LIDARs at 15 Hz), the scripted scene every
     station.set_initial_state(root_context)
 """
 
-import functools
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -248,16 +247,6 @@ def check_arm_start(positions, lower, upper, path="initial_arm_positions"):
             f"{path}[{i}] = {float(q[i])!r} rad is not allowed: must lie "
             f"within the joint's limits [{float(lower[i])!r}, "
             f"{float(upper[i])!r}] rad")
-
-
-@functools.cache
-def arm_joint_limits():
-    """(lower, upper): the shipped arm's joint limits in rad, from the
-    model."""
-    from drake_wbc.robot.model import ArmKinematics
-
-    arm = ArmKinematics()
-    return arm.lower.copy(), arm.upper.copy()
 
 
 def add_desired_states(builder, plant, model, base_desired, arm_desired):
