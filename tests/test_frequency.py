@@ -433,6 +433,34 @@ def test_base_plant_of_a_one_urdf_robot_matches_its_station(tmp_path):
     _check(end_effector, predicted[:, 3, 0])
 
 
+
+def test_base_plant_of_a_shaking_base_matches_its_station():
+    """The base on its suspension (trajectory_tracking_shaking: the
+    ringing loop, roll and pitch springs under the chassis at 4 Hz): the
+    analysis' copy of the station's plant carries the suspension too
+    (it failed on the suspension's two positions before), and its
+    linearisation matches the station's response below the suspension's
+    modes, and the tool's at them to 3% (2.0% measured; a copy without
+    the suspension puts the tool's 12% off at 1.5 Hz and 43% at 4 Hz). The base's is not compared at
+    the modes: the analysis reports T_b, the rocking chassis, where the
+    station's odometry reads the wheels' planar joints (12% apart at
+    4 Hz; with the joints' velocity as the analysis' output they agree
+    to 1e-4 there too)."""
+    station = scenario_station(load_scenario(find_scenario(
+        "trajectory_tracking_shaking")))
+    assert station.model.suspension_joints
+    linear = plant_chain.linearize_base_plant(station)
+    (base, end_effector), omegas = _station_response(
+        station, 0, [("base.state_estimated", 3),
+                     ("truth.end_effector_velocity", 0)])
+    predicted = linear_system_response(linear, omegas)
+    below = np.array(SIM_HZ) < 2.0
+    _check(base[below], predicted[below, 0, 0])
+    _check(end_effector[below], predicted[below, 3, 0])
+    ratio = np.abs(end_effector / predicted[:, 3, 0])
+    assert np.abs(ratio - 1.0).max() < 0.03
+
+
 # Margins, bandwidth and peak against textbook loops.
 
 def test_gain_margin_of_a_third_order_loop():

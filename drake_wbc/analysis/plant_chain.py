@@ -17,14 +17,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LinearSystem
 
 from drake_wbc.analysis.period_map import linearize_period_map
-from drake_wbc.robot.model import add_robot
 from drake_wbc.station.drivers import BaseVelocityDriver
-from drake_wbc.station.servo_gains import (
-    drive_inertias,
-    servo_gains,
-    set_drive_inertias,
-    set_servo_gains,
-)
 from drake_wbc.station.simulation import SimulatedStation, add_desired_states
 from drake_wbc.station.state_sensors import BaseOdometry
 
@@ -39,23 +32,17 @@ def add_robot_plant(builder, station):
     """Adds to `builder` (named "plant") a copy of the SimulatedStation
     `station`'s plant, not yet finalised: the robot alone (no scene graph,
     so no contact; the outputs unsampled, so its only state is [q; v]) at
-    the station's step, with the station's servo gains and drive
-    inertias. Returns (plant, model)."""
+    the station's step, as the station has it (its suspension, mount,
+    servo gains and drive inertias: SimulatedStation.add_robot_to).
+    Returns (plant, model)."""
     if not isinstance(station, SimulatedStation):
         raise ValueError(f"station = {station!r} is not allowed: must be a "
                          "SimulatedStation")
-    options = station.options
-    plant = builder.AddNamedSystem("plant", MultibodyPlant(options.time_step))
+    plant = builder.AddNamedSystem("plant", MultibodyPlant(
+        station.options.time_step))
     plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
     plant.SetUseSampledOutputPorts(False)
-    robot, mount = station.model.description, station.model.mount
-    model = add_robot(plant, robot, mount=mount)
-    set_servo_gains(plant, model, servo_gains(
-        options.initial_arm_positions, options.base, options.arm, robot,
-        mount=mount))
-    set_drive_inertias(plant, model, drive_inertias(
-        options.initial_arm_positions, options.arm, robot, mount=mount))
-    return plant, model
+    return plant, station.add_robot_to(plant)
 
 
 def add_station_plant(builder, station):

@@ -349,27 +349,21 @@ class SimulatedStation:
             time_step=h, discrete_contact_approximation="sap",
             contact_model="hydroelastic_with_fallback",
             use_sampled_output_ports=False), builder)
-        suspension = None if options.suspension is None else (
-            suspension_gains(options.suspension,
-                             options.initial_arm_positions, robot, mount))
-        model = add_robot(plant, robot, suspension=suspension, mount=mount)
+        self._robot, self._mount = robot, mount
+        self._suspension = suspension = (
+            None if options.suspension is None else suspension_gains(
+                options.suspension, options.initial_arm_positions, robot,
+                mount))
+        self._gains = servo_gains(
+            options.initial_arm_positions, options.base, options.arm, robot,
+            mount=mount, base_drive_inertia=None if suspension is None
+            else suspension.drive_inertia)
+        model = self.add_robot_to(plant)
         check_arm_start(options.initial_arm_positions, model.limits.lower,
                         model.limits.upper, "station.initial_arm_positions")
         add_static_obstacles(plant, scene)
         self.hand_body = None if scene.hand.impedance is None else (
             add_hand_body(plant, model, scene.hand.impedance))
-        self._gains = servo_gains(
-            options.initial_arm_positions, options.base, options.arm, robot,
-            mount=mount, base_drive_inertia=None if suspension is None
-            else suspension.drive_inertia)
-        set_servo_gains(plant, model, self._gains)
-        if options.traction is not None:
-            set_traction_limits(plant, model, traction_limits(
-                options.traction, mass_on_wheels(
-                    options.initial_arm_positions, robot, mount=mount),
-                np.linalg.norm(plant.gravity_field().gravity_vector())))
-        set_drive_inertias(plant, model, drive_inertias(
-            options.initial_arm_positions, options.arm, robot, mount=mount))
         plant.Finalize()
         self.plant, self.scene_graph, self.model = plant, scene_graph, model
         self.lidar_names = tuple(lidar_name(f) for f in model.lidar_frames)
@@ -512,6 +506,25 @@ class SimulatedStation:
                                 lidar.GetInputPort("moving_positions"))
             builder.Connect(lidar.GetOutputPort("points"),
                             s["lidar_points"].GetInputPort(f"points_{i}"))
+
+    def add_robot_to(self, plant):
+        """Adds the station's robot to `plant` (not finalised) as the
+        station's own plant has it: its suspension and its arm's mount,
+        its servo gains, traction limits and drive inertias. Returns its
+        RobotModel. The station's plant is made with it, and so are the
+        analyses' copies of it (drake_wbc.analysis.plant_chain)."""
+        options, robot, mount = self.options, self._robot, self._mount
+        model = add_robot(plant, robot, suspension=self._suspension,
+                          mount=mount)
+        set_servo_gains(plant, model, self._gains)
+        if options.traction is not None:
+            set_traction_limits(plant, model, traction_limits(
+                options.traction, mass_on_wheels(
+                    options.initial_arm_positions, robot, mount=mount),
+                np.linalg.norm(plant.gravity_field().gravity_vector())))
+        set_drive_inertias(plant, model, drive_inertias(
+            options.initial_arm_positions, options.arm, robot, mount=mount))
+        return model
 
     def set_initial_state(self, root_context):
         """Puts the robot at the options' initial pose, at rest and in
