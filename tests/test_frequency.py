@@ -441,11 +441,11 @@ def test_base_plant_of_a_shaking_base_matches_its_station():
     (it failed on the suspension's two positions before), and its
     linearisation matches the station's response below the suspension's
     modes, and the tool's at them to 3% (2.0% measured; a copy without
-    the suspension puts the tool's 12% off at 1.5 Hz and 43% at 4 Hz). The base's is not compared at
-    the modes: the analysis reports T_b, the rocking chassis, where the
-    station's odometry reads the wheels' planar joints (12% apart at
-    4 Hz; with the joints' velocity as the analysis' output they agree
-    to 1e-4 there too)."""
+    the suspension puts the tool's 12% off at 1.5 Hz and 43% at 4 Hz).
+    The base's is not compared at the modes: the analysis reports T_b,
+    the rocking chassis, where the station's odometry reads the wheels'
+    planar joints (12% apart at 4 Hz; with the joints' velocity as the
+    analysis' output they agree to 1e-4 there too)."""
     station = scenario_station(load_scenario(find_scenario(
         "trajectory_tracking_shaking")))
     assert station.model.suspension_joints

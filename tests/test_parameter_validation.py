@@ -431,3 +431,8 @@ def test_the_arms_start_is_checked_against_the_robot_of_the_station():
             initial_arm_positions=[0, 0, 3.0, 0, 0, 0]))
     with pytest.raises(ValueError, match="has 6 joints, give one value"):
         SimulatedStation(StationOptions(initial_arm_positions=[0.0] * 7))
+    # Before the suspension is sized at that start, too.
+    from drake_wbc.robot.suspension import SuspensionParameters
+    with pytest.raises(ValueError, match="has 6 joints, give one value"):
+        SimulatedStation(StationOptions(initial_arm_positions=[0.0] * 7,
+                                        suspension=SuspensionParameters()))

@@ -63,6 +63,7 @@ from drake_wbc.robot.model import (
     add_robot,
     joint_position_indices,
     joint_velocity_indices,
+    shared_robot_plant,
     spring_stiffnesses,
 )
 from drake_wbc.robot.suspension import (
@@ -349,6 +350,10 @@ class SimulatedStation:
             time_step=h, discrete_contact_approximation="sap",
             contact_model="hydroelastic_with_fallback",
             use_sampled_output_ports=False), builder)
+        # The start first: the gains below are sized at it.
+        limits = shared_robot_plant(robot, mount=mount)[1].limits
+        check_arm_start(options.initial_arm_positions, limits.lower,
+                        limits.upper, "station.initial_arm_positions")
         self._robot, self._mount = robot, mount
         self._suspension = suspension = (
             None if options.suspension is None else suspension_gains(
@@ -359,8 +364,6 @@ class SimulatedStation:
             mount=mount, base_drive_inertia=None if suspension is None
             else suspension.drive_inertia)
         model = self.add_robot_to(plant)
-        check_arm_start(options.initial_arm_positions, model.limits.lower,
-                        model.limits.upper, "station.initial_arm_positions")
         add_static_obstacles(plant, scene)
         self.hand_body = None if scene.hand.impedance is None else (
             add_hand_body(plant, model, scene.hand.impedance))
