@@ -405,14 +405,24 @@ def _station_response(station, axis, outputs):
     return gains, omegas
 
 
-def test_base_plant_linearisation_matches_the_station(station, base_plant):
+def _base_plant_against_station(station, base_plant=None):
+    """(base, tool, predicted): the station's base and tool velocity
+    along x at SIM_HZ for a command along x (_station_response), and the
+    base plant's linearisation there (computed first if not given: it
+    needs the station's diagram before the response embeds it)."""
+    if base_plant is None:
+        base_plant = plant_chain.linearize_base_plant(station)
     (base, end_effector), omegas = _station_response(
         station, 0, [("base.state_estimated", 3),
                      ("truth.end_effector_velocity", 0)])
-    predicted = linear_system_response(base_plant, omegas)
+    return base, end_effector, linear_system_response(base_plant, omegas)
+
+
+def test_base_plant_linearisation_matches_the_station(station, base_plant):
+    base, end_effector, predicted = _base_plant_against_station(
+        station, base_plant)
     _check(base, predicted[:, 0, 0])
     _check(end_effector, predicted[:, 3, 0])
-
 
 
 def test_base_plant_of_a_one_urdf_robot_matches_its_station(tmp_path):
@@ -424,14 +434,9 @@ def test_base_plant_of_a_one_urdf_robot_matches_its_station(tmp_path):
     station = SimulatedStation(StationOptions(
         initial_arm_positions=list(robot.arm.home)), robot=robot)
     assert station.model.base == station.model.arm
-    linear = plant_chain.linearize_base_plant(station)
-    (base, end_effector), omegas = _station_response(
-        station, 0, [("base.state_estimated", 3),
-                     ("truth.end_effector_velocity", 0)])
-    predicted = linear_system_response(linear, omegas)
+    base, end_effector, predicted = _base_plant_against_station(station)
     _check(base, predicted[:, 0, 0])
     _check(end_effector, predicted[:, 3, 0])
-
 
 
 def test_base_plant_of_a_shaking_base_matches_its_station():
@@ -449,11 +454,7 @@ def test_base_plant_of_a_shaking_base_matches_its_station():
     station = scenario_station(load_scenario(find_scenario(
         "trajectory_tracking_shaking")))
     assert station.model.suspension_joints
-    linear = plant_chain.linearize_base_plant(station)
-    (base, end_effector), omegas = _station_response(
-        station, 0, [("base.state_estimated", 3),
-                     ("truth.end_effector_velocity", 0)])
-    predicted = linear_system_response(linear, omegas)
+    base, end_effector, predicted = _base_plant_against_station(station)
     below = np.array(SIM_HZ) < 2.0
     _check(base[below], predicted[below, 0, 0])
     _check(end_effector[below], predicted[below, 3, 0])
