@@ -2,6 +2,8 @@
 (memq://, simulated time) reproduces the in-process simulation, and
 `drake-wbc plot` draws the run from a log of its messages."""
 
+import json
+
 import lcm
 import numpy as np
 import pytest
@@ -130,3 +132,37 @@ def test_plot_draws_the_run_from_its_lcm_log(runs, capsys):
     assert main(["plot", str(runs["path"]), "--output",
                  str(folder / "generic")]) == 0
     assert (folder / "generic" / "overview_run.png").is_file()
+
+
+def test_plot_computes_the_metrics_on_the_robot_that_ran(tmp_path, capsys):
+    """A deployment of the second shipped robot (seven joints, given as
+    --robot, as `deploy --robot` would): `plot --robot` computes the
+    metrics on that arm; without it the command says that the log's arm
+    is not the scenario's robot's and what to give."""
+    from drake_wbc.experiments.scenario import with_robot
+    from drake_wbc.robot.description import models_dir
+
+    robot = models_dir() / "lbr_omni.robot.yaml"
+    scenario = with_robot(load_scenario(find_scenario("trajectory_tracking")),
+                          robot, echo=None)
+    scenario.duration = DURATION
+    loop = build_loopback(scenario, scenario.variants[0])
+    simulator = make_simulator(loop)
+    root = simulator.get_context()
+    path = tmp_path / "run.lcmlog"
+    event_log = lcm.EventLog(str(path), "w", overwrite=True)
+    loop.lcm.SubscribeAllChannels(lambda channel, data: event_log.write_event(
+        int(round(root.get_time() * 1e6)), channel, data))
+    simulate_loopback(loop, simulator=simulator)
+    event_log.close()
+    assert main(["plot", str(path), "--scenario", "trajectory_tracking",
+                 "--robot", str(robot), "--output",
+                 str(tmp_path / "out")]) == 0
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    margin = summary["runs"]["filtered"]["min_joint_limit_margin_rad"]
+    assert 0.0 < margin < np.pi
+    capsys.readouterr()
+    assert main(["plot", str(path), "--scenario", "trajectory_tracking",
+                 "--output", str(tmp_path / "shipped")]) != 0
+    assert ("its robot mcr's arm has 6 joints, the log's 7; give the robot "
+            "that ran (drake-wbc plot --robot FILE)") in capsys.readouterr().err

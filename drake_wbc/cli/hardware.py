@@ -248,6 +248,9 @@ def add_plot_arguments(parser):
         "--deployment", type=int, default=0,
         help="which deployment when the log holds several (0: the first, "
              "-1: the last)")
+    add_robot_argument(
+        parser, "compute the metrics",
+        ": the robot that ran, as deploy's --robot gave it")
 
 
 def run_plot(args):
@@ -259,7 +262,19 @@ def run_plot(args):
         raise ValueError(f"logfile = {str(args.logfile)!r} is not allowed: "
                          "no such file")
     output = args.output or Path("out") / args.logfile.stem
-    summary = plot_lcm_log(args.logfile, output, scenario=args.scenario,
+    scenario = args.scenario
+    if args.robot is not None:
+        from drake_wbc.experiments.scenario import (
+            Scenario,
+            find_scenario,
+            load_scenario,
+        )
+
+        scenario = on_robot(
+            Scenario(description=f"LCM log {args.logfile.stem}")
+            if scenario is None else load_scenario(find_scenario(scenario)),
+            args)
+    summary = plot_lcm_log(args.logfile, output, scenario=scenario,
                            variant=args.variant, deployment=args.deployment)
     print(json.dumps({k: v for k, v in summary.items() if k != "runs"},
                      indent=2))

@@ -27,6 +27,7 @@ from drake_wbc.experiments.scenario import (
     Scenario,
     find_scenario,
     load_scenario,
+    scenario_robot,
 )
 from drake_wbc.hardware.interface import DIAGNOSTICS
 from drake_wbc.hardware.options import HardwareOptions
@@ -63,6 +64,14 @@ def plot_lcm_log(logfile, output, scenario=None, variant=None,
                          f"{names}")
     log = read_lcm_log(logfile, scenario.hardware or HardwareOptions(),
                        deployment)
+    robot = scenario_robot(scenario)
+    if "arm.position_measured" in log and (
+            log["arm.position_measured"].shape[1] != len(robot.arm.joints)):
+        raise ValueError(
+            f"scenario = {name!r} is not allowed for this log: its robot "
+            f"{robot.name}'s arm has {len(robot.arm.joints)} joints, the "
+            f"log's {log['arm.position_measured'].shape[1]}; give the robot "
+            "that ran (drake-wbc plot --robot FILE)")
     output = Path(output)
     output.mkdir(parents=True, exist_ok=True)
     files = [log.save(output / f"log_{run}")]
