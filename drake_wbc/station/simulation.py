@@ -363,6 +363,12 @@ class SimulatedStation:
             options.initial_arm_positions, options.base, options.arm, robot,
             mount=mount, base_drive_inertia=None if suspension is None
             else suspension.drive_inertia)
+        self._traction = None if options.traction is None else (
+            traction_limits(options.traction, mass_on_wheels(
+                options.initial_arm_positions, robot, mount=mount),
+                np.linalg.norm(plant.gravity_field().gravity_vector())))
+        self._drive_inertias = drive_inertias(
+            options.initial_arm_positions, options.arm, robot, mount=mount)
         model = self.add_robot_to(plant)
         add_static_obstacles(plant, scene)
         self.hand_body = None if scene.hand.impedance is None else (
@@ -515,18 +521,14 @@ class SimulatedStation:
         station's own plant has it: its suspension and its arm's mount,
         its servo gains, traction limits and drive inertias. Returns its
         RobotModel. The station's plant is made with it, and so are the
-        analyses' copies of it (drake_wbc.analysis.plant_chain)."""
-        options, robot, mount = self.options, self._robot, self._mount
-        model = add_robot(plant, robot, suspension=self._suspension,
-                          mount=mount)
+        analyses' copies of it (drake_wbc.analysis.plant_chain): the
+        values, sized once when the station was made, are the same."""
+        model = add_robot(plant, self._robot, suspension=self._suspension,
+                          mount=self._mount)
         set_servo_gains(plant, model, self._gains)
-        if options.traction is not None:
-            set_traction_limits(plant, model, traction_limits(
-                options.traction, mass_on_wheels(
-                    options.initial_arm_positions, robot, mount=mount),
-                np.linalg.norm(plant.gravity_field().gravity_vector())))
-        set_drive_inertias(plant, model, drive_inertias(
-            options.initial_arm_positions, options.arm, robot, mount=mount))
+        if self._traction is not None:
+            set_traction_limits(plant, model, self._traction)
+        set_drive_inertias(plant, model, self._drive_inertias)
         return model
 
     def set_initial_state(self, root_context):
