@@ -33,9 +33,19 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-SCENARIOS = ("trajectory_tracking", "fixed_point", "line_tracking",
-             "wiping", "phri", "teach", "repeat", "repeat_obstacle",
-             "hardware")
+NOT_SCENARIOS = ("controller",)
+"""The files of diagrams/ that are not scenarios (the controller's
+defaults)."""
+
+
+def common_scenarios(checkout):
+    """Every scenario of diagrams/ in both this checkout and `checkout`,
+    in order (a scenario added since is not in the other one)."""
+    def names(root):
+        return {path.stem for path in (root / "diagrams").glob("*.yaml")
+                if path.stem not in NOT_SCENARIOS}
+
+    return sorted(names(ROOT) & names(checkout))
 
 
 def _entry_point(checkout):
@@ -101,7 +111,9 @@ def compare_run(ours, theirs, rtol, atol):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("scenarios", nargs="*", default=list(SCENARIOS))
+    parser.add_argument("scenarios", nargs="*",
+                        help="scenario names (default: every scenario of "
+                             "both checkouts)")
     parser.add_argument("--against", required=True,
                         help="the other commit (any git revision)")
     parser.add_argument("--keep", type=Path,
@@ -119,6 +131,7 @@ def main(argv=None):
         worktree = Path(scratch) / f"at_{commit[:12]}"
         subprocess.run(["git", "worktree", "add", "--detach", "--quiet",
                         str(worktree), commit], cwd=ROOT, check=True)
+        args.scenarios = args.scenarios or common_scenarios(worktree)
         try:
             run_scenarios(worktree, args.scenarios, theirs_dir)
         finally:
