@@ -320,7 +320,9 @@ def test_the_watchdog_stops_the_base_on_the_wire_within_its_limit(frozen,
     on_the_wire = t_zero - last
     print(f"watchdog latency: {latency * 1e3:.1f} ms on the controller's "
           f"clock, {on_the_wire * 1e3:.1f} ms on the wire")
-    assert limit < latency <= limit + 0.002 + 1e-6
+    # Both ends are read from time stamps in whole microseconds (the
+    # messages' utime), each off by up to 1 us: 52.00106 ms was seen.
+    assert limit < latency <= limit + 0.002 + 2e-6
     # The logger stamps both messages on arrival, in a third process: on a
     # busy machine the statuses reach it late, bunched (49.95 and 25.0 ms
     # seen at load 2 to 7, with 51.0 ms on the controller's clock), so its
