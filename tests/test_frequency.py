@@ -408,8 +408,7 @@ def _station_response(station, axis, outputs):
 def _base_plant_against_station(station, base_plant=None):
     """(base, tool, predicted): the station's base and tool velocity
     along x at SIM_HZ for a command along x (_station_response), and the
-    base plant's linearisation there (computed first if not given: it
-    needs the station's diagram before the response embeds it)."""
+    base plant's linearisation there."""
     if base_plant is None:
         base_plant = plant_chain.linearize_base_plant(station)
     (base, end_effector), omegas = _station_response(
@@ -423,6 +422,29 @@ def test_base_plant_linearisation_matches_the_station(station, base_plant):
         station, base_plant)
     _check(base, predicted[:, 0, 0])
     _check(end_effector, predicted[:, 3, 0])
+
+
+def test_a_station_in_a_closed_loop_can_still_be_analysed(scenario,
+                                                          base_plant):
+    """Once the station is part of another diagram (a closed loop), its
+    linearisation is the same, from the same equilibrium: the analysis
+    puts the station's own context at rest, which set_initial_state
+    takes as it takes a root context (it failed on the context's
+    owner before)."""
+    station = scenario_station(scenario)
+    builder = DiagramBuilder()
+    builder.AddSystem(station.diagram)
+    loop = builder.Build()
+    root = loop.CreateDefaultContext()
+    station.set_initial_state(root)
+    _, alone = plant_chain.station_at_rest(station)
+    np.testing.assert_array_equal(
+        station.plant.GetPositions(alone),
+        station.plant.GetPositions(station.plant.GetMyContextFromRoot(root)))
+    again = plant_chain.linearize_base_plant(station)
+    for matrix in ("A", "B", "C", "D"):
+        np.testing.assert_array_equal(getattr(again, matrix)(),
+                                      getattr(base_plant, matrix)())
 
 
 def test_base_plant_of_a_one_urdf_robot_matches_its_station(tmp_path):

@@ -76,10 +76,10 @@ def add_station_plant(builder, station):
 def station_at_rest(station):
     """The SimulatedStation `station` at its static equilibrium
     (`SimulatedStation.set_initial_state`): (its root context, its
-    plant's own)."""
+    plant's own). The station may be part of another diagram."""
     root = station.diagram.CreateDefaultContext()
     station.set_initial_state(root)
-    return root, station.plant.GetMyContextFromRoot(root)
+    return root, station.diagram.GetSubsystemContext(station.plant, root)
 
 
 def station_equilibrium(station, plant, model, context):

@@ -32,6 +32,10 @@ FT-300 at 100 Hz, the LIDARs at 15 Hz), the scripted scene every
     builder.AddSystem(station.diagram)
     ...
     station.set_initial_state(root_context)
+
+`set_initial_state` also takes the station's own context, so a station
+that is part of a closed loop can still be analysed alone
+(drake_wbc.analysis.plant_chain).
 """
 
 from dataclasses import dataclass, field, replace
@@ -531,38 +535,59 @@ class SimulatedStation:
         set_drive_inertias(plant, model, self._drive_inertias)
         return model
 
-    def set_initial_state(self, root_context):
+    def set_initial_state(self, context):
         """Puts the robot at the options' initial pose, at rest and in
         static equilibrium (the mount's sag and the arm servo's droop
         under gravity), with the drivers holding it there. (The sensors
-        take their first reading when the Simulator initializes.)"""
+        take their first reading when the Simulator initializes.)
+
+        Args:
+            context: the root context of a diagram that holds the
+                station, or the station diagram's own context (its
+                `CreateDefaultContext()`, also once the station is part
+                of another diagram).
+        """
         options, plant, model = self.options, self.plant, self.model
-        context = plant.GetMyMutableContextFromRoot(root_context)
-        q = plant.GetPositions(context)
+        own = self._own_context(context)
+
+        def of(system):
+            return self.diagram.GetMutableSubsystemContext(system, own)
+
+        plant_context = of(plant)
+        q = plant.GetPositions(plant_context)
         q[joint_position_indices(model.base_joints)] = (
             options.initial_base_pose)
         q_cmd = np.asarray(options.initial_arm_positions, dtype=float)
         q[joint_position_indices(model.arm_joints)] = q_cmd
         q[joint_position_indices(self._compliant_joints())] = 0.0
-        plant.SetPositions(context, q)
-        plant.SetVelocities(context, np.zeros(plant.num_velocities()))
-        self._settle_under_gravity(context, q_cmd)
+        plant.SetPositions(plant_context, q)
+        plant.SetVelocities(plant_context, np.zeros(plant.num_velocities()))
+        self._settle_under_gravity(plant_context, q_cmd)
         if self.hand_body is not None:
             # The hand at rest on the tool centre point.
-            p_tcp = model.tcp_frame.CalcPoseInWorld(context).translation()
-            q = plant.GetPositions(context)
+            p_tcp = model.tcp_frame.CalcPoseInWorld(
+                plant_context).translation()
+            q = plant.GetPositions(plant_context)
             q[self.hand_body.position_indices()] = p_tcp
-            plant.SetPositions(context, q)
+            plant.SetPositions(plant_context, q)
             intention = self.systems["hand_intention"]
-            intention.GetMyMutableContextFromRoot(
-                root_context).SetDiscreteState(intention.initial_state(
-                    p_tcp, root_context.get_time()))
-        base, arm = self.systems["base_driver"], self.systems["arm_driver"]
-        base.GetMyMutableContextFromRoot(root_context).SetDiscreteState(
+            of(intention).SetDiscreteState(
+                intention.initial_state(p_tcp, own.get_time()))
+        of(self.systems["base_driver"]).SetDiscreteState(
             base_loop_state(options.base, np.zeros(3)))
-        arm.GetMyMutableContextFromRoot(root_context).SetDiscreteState(
-            arm_interpolator_state(q_cmd, root_context.get_time(),
+        of(self.systems["arm_driver"]).SetDiscreteState(
+            arm_interpolator_state(q_cmd, own.get_time(),
                                    options.initial_arm_positions))
+
+    def _own_context(self, context):
+        """The station diagram's own context in `context`: the root
+        context of a diagram that holds the station, or the station's own
+        context itself."""
+        try:
+            self.diagram.ValidateContext(context)
+        except RuntimeError:
+            return self.diagram.GetMyMutableContextFromRoot(context)
+        return context
 
     def _compliant_joints(self):
         """The base's spring-damper joints: the passive ones of the robot
