@@ -246,12 +246,15 @@ def test_the_scenes_hand_moves_the_simulated_tool_along_its_push(mount):
 
 def test_a_scenario_names_its_arm_mount():
     """`arm_mount:` in a scenario's YAML, checked where it enters; the
-    controller's kinematics of the scenario carry it."""
+    controller's kinematics of the scenario carry it (and share one plant
+    for the shipped robot unturned)."""
     scenario = load_typed(Scenario, text="arm_mount: {yaw: 1.25, tilt: 0.2}")
     assert scenario.arm_mount == ArmMount(yaw=1.25, tilt=0.2)
     np.testing.assert_allclose(controller_arm(scenario).R_ba,
                                ArmMount(yaw=1.25, tilt=0.2).rotation(),
                                atol=1e-15)
-    assert controller_arm(load_typed(Scenario, text="{}")) is None
+    # The shipped robot on the shipped mount: the controller's own plant.
+    assert (controller_arm(load_typed(Scenario, text="{}")).plant
+            is ArmKinematics().plant)
     with pytest.raises(ValueError, match=r"arm_mount\.tilt = 2\.0"):
         load_typed(Scenario, text="arm_mount: {tilt: 2.0}")

@@ -13,7 +13,6 @@ import numpy as np
 from drake_wbc.experiments.scenario import controller_arm, footprint_of
 from drake_wbc.math import repulsion
 from drake_wbc.math.safety import STATUS_FIELDS
-from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.station.scene import planar_shapes
 
 BOUNDARY_POINTS_PER_METRE = 200
@@ -105,7 +104,7 @@ def obstacle_distances(scene, base_pose, footprint, people_positions=None,
 
 def run_metrics(scenario, log):
     """The metrics every run reports (see the module's docstring)."""
-    arm = controller_arm(scenario) or ArmKinematics()  # the run's robot
+    arm = controller_arm(scenario)  # the run's robot
     q = log["arm.position_measured"]
     margin = np.minimum(q - arm.lower, arm.upper - q)
     command = log["arm.position_command"]

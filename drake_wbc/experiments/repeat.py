@@ -37,7 +37,6 @@ from drake_wbc.experiments.common import (
 from drake_wbc.experiments.scenario import controller_arm, footprint_of
 from drake_wbc.math import movement as mv
 from drake_wbc.math.demonstration import tcp_poses
-from drake_wbc.robot.model import ArmKinematics
 
 SPEED_FILTER_HZ = 2.0
 """Hz: the speed profiles are low-passed (zero phase) at this before
@@ -68,7 +67,7 @@ def replay_comparison(scenario, name, log):
     u = (demo.time - demo.time[0]) / demo.duration
     tcp = tcp_poses(log["base.state_estimated"][:, :3],
                     log["arm.position_measured"],
-                    controller_arm(scenario) or ArmKinematics())
+                    controller_arm(scenario))
     # The same turn of the yaw as the demonstration's.
     tcp[:, 3] += 2 * np.pi * np.round((demo.tcp[0, 3] - tcp[0, 3])
                                       / (2 * np.pi))

@@ -279,14 +279,12 @@ def scenario_station(scenario):
 
 
 def controller_arm(scenario):
-    """The controller's ArmKinematics for `scenario`'s robot: None (the
-    controller's own, the shipped robot's) for the shipped robot on the
-    shipped mount, else one of its robot with its arm_mount."""
+    """The controller's ArmKinematics for `scenario`'s robot on its
+    arm_mount (on the plant shared_robot_plant shares: the shipped robot
+    on the shipped mount shares the controller's own)."""
     mount = scenario.arm_mount
-    if mount.is_identity and not scenario.robot:
-        return None
-    return ArmKinematics(*shared_robot_plant(scenario_robot(scenario),
-                                             mount=mount))
+    return ArmKinematics(*shared_robot_plant(
+        scenario_robot(scenario), mount=None if mount.is_identity else mount))
 
 
 def with_robot(scenario, robot_file, echo=print):

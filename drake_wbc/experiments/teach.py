@@ -28,7 +28,6 @@ from drake_wbc.math.demonstration import (
     demonstration_from_log,
     teaching_interval,
 )
-from drake_wbc.robot.model import ArmKinematics
 
 
 def interval(scenario, start=None, stop=None):
@@ -50,7 +49,7 @@ def learn_from_log(scenario, log, start=None, stop=None, num_basis=None,
     replays with the same attractor)."""
     start, stop = interval(scenario, start, stop)
     demo = demonstration_from_log(log, start, stop,
-                                  controller_arm(scenario) or ArmKinematics())
+                                  controller_arm(scenario))
     dmp = scenario.controller.whole_body_cdmp.dmp
     params = mv.dmp.DmpParameters(
         alpha_z=dmp.alpha_z, beta_z=dmp.beta_z, tau=1.0,

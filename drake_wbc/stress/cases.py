@@ -220,9 +220,7 @@ def _none_if_inf(x):
 
 
 def _limits(scenario):
-    from drake_wbc.robot.model import ArmKinematics
-
-    arm = controller_arm(scenario) or ArmKinematics()
+    arm = controller_arm(scenario)
     return arm.lower, arm.upper, arm.velocity_limits
 
 
