@@ -3,6 +3,8 @@ admittance_loop): its plant part against a closed form, checked on the
 nonlinear plant part simulated in double; its largest stable k_hri
 against the simulated station (short runs of stage A of `phri`)."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
@@ -11,10 +13,14 @@ from drake_wbc.analysis import admittance_loop as al
 from drake_wbc.analysis.frequency import frequency_response
 from drake_wbc.experiments.runner import build_closed_loop, simulate
 from drake_wbc.experiments.scenario import (
+    controller_arm,
+    controller_for,
     find_scenario,
     load_scenario,
     scenario_station,
+    with_robot,
 )
+from drake_wbc.math.arm_control import centring_velocity, self_motion
 
 PERIOD = 0.01
 STEP = np.array([0.0, -0.0155, -0.0219, 0.0, 0.0069, 0.0])
@@ -99,3 +105,48 @@ def test_the_simulation_oscillates_above_the_reported_limit_only(name,
     below, limited_below = command_content(0.7 * limit, time_constant, hand)
     assert above > 0.8 and limited_above > 0.3
     assert below < 0.5 and limited_below < 0.05
+
+
+SEVEN_JOINTS = (Path(__file__).resolve().parent.parent / "models"
+                / "lbr_omni.robot.yaml")
+
+
+def test_a_redundant_arm_is_linearised_where_its_self_motion_rests():
+    """A seven-joint arm's self-motion (the joint centring, here at 2 /s)
+    still moves at the scenario's start: the controller has no
+    equilibrium there, which the period map now refuses (its tolerance
+    once scaled with the base limiter's -1e9 s, and the closed loop then
+    showed a real eigenvalue 1.0002 at any k_hri: the tool's free
+    rotations, which the hand does not hold, bent by the moving
+    self-motion). The loop is linearised where the self-motion rests:
+    the end effector where it started, the centring's null-space part
+    zero by the reference bodies of drake_wbc.math.arm_control, the
+    controller's own modes no longer growing, and the loop stable at the
+    scenario's k_hri."""
+    scenario = with_robot(load_scenario(find_scenario("phri")),
+                          SEVEN_JOINTS, echo=None)
+    scenario.controller.arm_controller.self_motion_gain = 2.0
+    arm = controller_arm(scenario)
+    start = np.asarray(scenario.station.initial_arm_positions, dtype=float)
+    rest = al.operating_scenario(scenario)
+    q = np.asarray(rest.station.initial_arm_positions, dtype=float)
+    assert np.abs(q - start).max() > 0.05
+    np.testing.assert_allclose(arm.evaluate(q).p_ee_in_base,
+                               arm.evaluate(start).p_ee_in_base, atol=1e-4)
+    drift = self_motion(arm.evaluate(q).J_a,
+                        centring_velocity(q, arm.lower, arm.upper, 2.0), 0.0)
+    assert np.abs(drift).max() < 1e-7
+
+    params = controller_for(scenario)
+    base_state, measured = al.rest_measurements(scenario_station(scenario))
+    with pytest.raises(ValueError, match="not an equilibrium"):
+        al.linearize_controller_part(params, arm, base_state, measured,
+                                     start)
+
+    case = al.AdmittanceCase(scenario)
+    np.testing.assert_array_equal(
+        case.station.options.initial_arm_positions, q)
+    own = np.abs(np.linalg.eigvals(
+        case.controller_part(params.whole_body_cdmp.k_hri).A()))
+    assert own.max() <= 1.0 + 1e-9
+    assert case.radius(params.whole_body_cdmp.k_hri) < 1.0

@@ -11,6 +11,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import (
     ConstantVectorSource,
+    LinearSystem,
     LogVectorOutput,
     MatrixGain,
     Sine,
@@ -18,6 +19,7 @@ from pydrake.systems.primitives import (
 
 from drake_wbc.analysis import chains, closed_forms, plant_chain
 from drake_wbc.analysis.dmp_force_response import linearize_dmp_force
+from drake_wbc.analysis.period_map import linearize_period_map
 from drake_wbc.analysis.frequency import (
     bandwidth,
     frequency_grid,
@@ -216,6 +218,31 @@ def test_split_with_alpha_gives_way(scenario, point):
     response = linear_system_response(
         chains.linearize_split(params, point, alpha=1.0), OMEGA)
     assert np.abs(response[:, 12, 0] - 1.0).max() > 0.05
+
+
+@pytest.mark.parametrize("rate", [0.0, 1e-3])
+def test_period_map_refuses_a_point_that_moves_beside_a_large_state(rate):
+    """An integrator fed `rate` beside a state that holds -1e9 (as a
+    time that never was does): at rest it is an equilibrium; moving by
+    1e-5 a period it is not, however large the other entry (the
+    tolerance once scaled with the largest entry, and took it)."""
+    h = 0.01
+    system = LinearSystem(np.eye(2), np.array([[0.0], [h]]), np.eye(2),
+                          np.zeros((2, 1)), h)
+    context = system.CreateDefaultContext()
+    context.SetDiscreteState(np.array([-1e9, 0.5]))
+    system.get_input_port().FixValue(context, [rate])
+
+    def linearize():
+        return linearize_period_map(system, context, h,
+                                    system.get_input_port(),
+                                    system.get_output_port())
+
+    if rate == 0.0:
+        np.testing.assert_array_equal(linearize().A(), np.eye(2))
+    else:
+        with pytest.raises(ValueError, match="not an equilibrium"):
+            linearize()
 
 
 def test_period_map_equals_linearize_at_one_rate(scenario, point):

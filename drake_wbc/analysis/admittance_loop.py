@@ -102,6 +102,7 @@ from drake_wbc.experiments.scenario import (
 )
 from drake_wbc.math.kinematics import twist_rotation
 from drake_wbc.math.validation import checked_instance, positive
+from drake_wbc.stages.arm_control import ArmCartesianVelocityController
 from drake_wbc.stages.support import define_stage
 from drake_wbc.stages.wrench import sensor_rotation_in_base, tool_weight_reading
 from drake_wbc.station.driver_dynamics import interpolated_command
@@ -491,26 +492,95 @@ def least_stable(A, drift_tolerance=DRIFT_TOLERANCE):
     return eig[np.argmax(np.abs(eig))]
 
 
+SETTLED_SPEED = 1e-8
+"""rad/s: the arm controller's joint speed below which a redundant arm's
+self-motion has come to rest (`settled_arm_positions`); over a control
+period it moves the command less than the period map's equilibrium
+tolerance (analysis.period_map.EQUILIBRIUM_TOLERANCE)."""
+
+
+def settled_arm_positions(params, arm, start, longest=1000.0):
+    """Where the arm comes to rest from `start` (n, rad) with no twist
+    asked of it: `start` itself for an arm of six joints or one at rest
+    there; for an arm of
+    more, the end of its self-motion, the joint centring of
+    drake_wbc.math.arm_control.centring_velocity, which moves the joints
+    without moving the end effector (to first order), found by running
+    the controller's ArmCartesianVelocityController (params.arm_controller
+    of the ControllerParameters `params`, on the ArmKinematics `arm`) with
+    a zero twist until its joint speeds are below SETTLED_SPEED.
+
+    The admittance loop is linearised there: at `start` a redundant arm
+    is still moving (not an equilibrium), and the self-motion's change of
+    direction with the configuration turns the tool's free directions
+    (the hand holds no torque) from drifts into slowly growing modes.
+
+    Raises:
+        ValueError: if the self-motion has not come to rest within
+            `longest` simulated seconds.
+    """
+    start = np.asarray(start, dtype=float)
+    if arm.num_joints <= 6 or params.arm_controller.self_motion_gain == 0.0:
+        return start
+    stage = ArmCartesianVelocityController(params.arm_controller, arm,
+                                           params.time_step)
+    context = stage.CreateDefaultContext()
+    stage.GetInputPort("arm_velocity").FixValue(context, np.zeros(6))
+    stage.set_arm_position(context, start)
+    simulator = Simulator(stage, context)
+    n, chunk = arm.num_joints, params.time_step
+    while context.get_time() < longest:
+        simulator.AdvanceTo(context.get_time() + chunk)
+        state = context.get_discrete_state_vector().CopyToVector()
+        if np.abs(state[n:2 * n]).max() < SETTLED_SPEED:
+            # At rest from the first tick: `start` itself (so that a
+            # settled start settles to itself).
+            return start if chunk < 10.0 else state[:n]
+        chunk = 10.0
+    raise ValueError(
+        f"the arm's self-motion from {start.tolist()} has not come to rest "
+        f"within {longest:g} s (joint speeds up to "
+        f"{np.abs(state[n:2 * n]).max():.3g} rad/s): the admittance loop "
+        "has no operating point there; start the arm nearer the middle of "
+        "its joints' ranges or raise arm_controller.self_motion_gain")
+
+
+def operating_scenario(scenario):
+    """`scenario` with its arm starting where the admittance loop is
+    linearised, `settled_arm_positions` of its initial arm positions (the
+    very scenario if the arm starts at rest)."""
+    start = scenario.station.initial_arm_positions
+    settled = settled_arm_positions(controller_for(scenario),
+                                    controller_arm(scenario), start)
+    if np.array_equal(settled, np.asarray(start, dtype=float)):
+        return scenario
+    return replace(scenario, station=replace(
+        scenario.station, initial_arm_positions=settled.tolist()))
+
+
 class AdmittanceCase:
     """The linear admittance loop of one scenario, hand and estimator
     setting, relinearising only the controller part for each k_hri.
 
     Args:
         scenario: an experiments.scenario.Scenario (its controller with
-            S_hri = 1, its station).
+            S_hri = 1, its station); the loop is linearised at its
+            `operating_scenario` (`scenario` itself unless the arm is
+            redundant).
         hand: HandImpedance (the scenario's scene.hand.impedance if None,
             or HandImpedance() if it has none).
         inertia_compensation: the estimator's setting (the scenario's if
             None).
         time_constant: hri_time_constant T in s (the scenario's if None).
-        station: a SimulatedStation of `scenario` to share (built if None).
+        station: a SimulatedStation of `operating_scenario(scenario)` to
+            share (built if None).
         plant: (LinearSystem, rest reading) of the plant part to share
             (linearised if None).
     """
 
     def __init__(self, scenario, hand=None, inertia_compensation=None,
                  time_constant=None, station=None, plant=None):
-        self.scenario = scenario
+        self.scenario = scenario = operating_scenario(scenario)
         self.params = controller_for(scenario)
         wrench, whole_body = self.params.wrench, self.params.whole_body_cdmp
         if inertia_compensation is not None:
@@ -519,8 +589,17 @@ class AdmittanceCase:
             whole_body.hri_time_constant = float(time_constant)
         self.hand = hand if hand is not None else (
             scenario.scene.hand.impedance or HandImpedance())
-        self.station = (station if station is not None
-                        else scenario_station(scenario))
+        if station is None:
+            station = scenario_station(scenario)
+        elif not np.array_equal(station.options.initial_arm_positions,
+                                scenario.station.initial_arm_positions):
+            raise ValueError(
+                "station is not allowed: its arm starts at "
+                f"{list(station.options.initial_arm_positions)}, not where "
+                "the loop is linearised, "
+                f"{scenario.station.initial_arm_positions}: give a station "
+                "of operating_scenario(scenario), or None")
+        self.station = station
         self.arm = controller_arm(scenario)
         h = self.params.time_step
         self.plant, self.rest_reading = plant if plant is not None else (

@@ -29,6 +29,10 @@ from pydrake.systems.primitives import LinearSystem
 
 from drake_wbc.math.validation import positive
 
+EQUILIBRIUM_TOLERANCE = 1e-9
+"""How far a state entry x_i may move over the period at an operating
+point, relative to 1 + |x_i|: further, and it is not an equilibrium."""
+
 
 def _discrete_groups(context):
     state = context.get_discrete_state()
@@ -92,9 +96,11 @@ def linearize_period_map(system, context, period, input_port, output_port,
         drop_clocks: whether state entries that count time (e.g. the
             InputGuard's valid_time) may move over the period: an entry
             that moves is then dropped from the map if it is a clock
-            (its own row of A the identity's, nothing else depending on
-            it: its column of A and C zero elsewhere, its row of B zero);
-            any other moving entry is still an error.
+            (its own row of A the identity's, or zero for a clock kept
+            in floats, nothing else depending on it: its column of A and
+            C zero elsewhere, its row of B zero); any other moving entry
+            is still an error. Each entry is compared with its own size
+            (EQUILIBRIUM_TOLERANCE).
 
     Returns:
         LinearSystem(A, B, C, D, period).
@@ -141,17 +147,20 @@ def linearize_period_map(system, context, period, input_port, output_port,
     dx, dy = ExtractGradient(x1), ExtractGradient(y)
     value = ExtractValue(x1).ravel()
     A, B, C, D = dx[:, :n], dx[:, n:], dy[:, :n], dy[:, n:]
-    moving = ~np.isclose(value, x0, rtol=0.0, atol=1e-9 * (
-        1 + abs(x0).max(initial=0.0)))
+    # Each entry against its own size: a state that holds a large
+    # sentinel (a time that never was, -1e9 s) must not hide another
+    # entry's motion.
+    changed = ~np.isclose(value, x0, rtol=EQUILIBRIUM_TOLERANCE,
+                          atol=EQUILIBRIUM_TOLERANCE)
+    moving = changed.copy()
     if drop_clocks:
         for i in np.nonzero(moving)[0]:
             others = np.delete(A[:, i], i)
-            if (A[i, i] == 1.0 and not np.delete(A[i], i).any()
+            if (A[i, i] in (0.0, 1.0) and not np.delete(A[i], i).any()
                     and not others.any() and not C[:, i].any()
                     and not B[i].any()):
                 moving[i] = False
-        clocks = ~np.isclose(value, x0, rtol=0.0, atol=1e-9 * (
-            1 + abs(x0).max(initial=0.0))) & ~moving
+        clocks = changed & ~moving
         keep = ~clocks
         A, B, C = A[np.ix_(keep, keep)], B[keep], C[:, keep]
     if moving.any():

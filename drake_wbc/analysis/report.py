@@ -301,7 +301,17 @@ def admittance_cases(scenario):
 
 def _admittance_plots(report, scenario, hertz, omega, h):
     """admittance_loop_*: the admittance loop of each case at the
-    scenario's k_hri, L per axis of T_b, and its row."""
+    scenario's k_hri, L per axis of T_b, and its row; linearised where a
+    redundant arm's self-motion comes to rest."""
+    start = scenario.station.initial_arm_positions
+    scenario = admittance_loop.operating_scenario(scenario)
+    settled = scenario.station.initial_arm_positions
+    if settled != start:
+        report.notes.append(
+            "pHRI loops linearised where the arm's self-motion comes to "
+            f"rest, q_a = {np.round(settled, 3).tolist()} (from "
+            f"{np.round(start, 3).tolist()}; the loop has no equilibrium "
+            "while the self-motion moves)")
     station = scenario_station(scenario)
     plants = {}
     for name, label, hand, inertia, T in admittance_cases(scenario):
