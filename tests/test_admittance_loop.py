@@ -5,6 +5,7 @@ against the simulated station (short runs of stage A of `phri`)."""
 
 import copy
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -173,3 +174,16 @@ def test_a_redundant_arms_limit_holds_in_simulation():
                                            scenario=scenario)
     assert above > 0.8 and limited_above > 0.3
     assert below < 0.5 and limited_below < 0.05
+
+
+@pytest.mark.parametrize("limit, frequency, says", [
+    (0.0777, 5.2, "largest stable k_hri 0.0777, oscillating at 5.2 Hz"),
+    (float("nan"), float("nan"), "unstable at every k_hri down to 0.0001"),
+    (al.K_HRI_SEARCH[1], float("nan"), "stable up to k_hri = 1 at least")])
+def test_the_report_says_where_the_search_ended(limit, frequency, says):
+    """A loop unstable at the search's lowest k_hri, or stable at its
+    highest, is said so in words (the report printed 'largest stable
+    k_hri nan, oscillating at nan Hz')."""
+    result = SimpleNamespace(limit=limit, limit_frequency=frequency)
+    assert says in al.limit_sentence(result)
+    assert "nan" not in al.limit_sentence(result)

@@ -19,7 +19,6 @@ from pydrake.systems.primitives import (
 
 from drake_wbc.analysis import chains, closed_forms, plant_chain
 from drake_wbc.analysis.dmp_force_response import linearize_dmp_force
-from drake_wbc.analysis.period_map import linearize_period_map
 from drake_wbc.analysis.frequency import (
     bandwidth,
     frequency_grid,
@@ -28,6 +27,7 @@ from drake_wbc.analysis.frequency import (
     peak_gain,
     stability_margins,
 )
+from drake_wbc.analysis.period_map import linearize_period_map
 from drake_wbc.experiments.scenario import (
     find_scenario,
     load_scenario,

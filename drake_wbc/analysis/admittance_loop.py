@@ -430,10 +430,10 @@ class LoopResult:
             -> reading, 6, the sensor's frame; `reading_loop`).
         rotation: R6 (6, 6) from the sensor's frame to T_b.
         spectral_radius: of the closed loop at k_hri.
-        limit: the largest stable k_hri (nan if none up to the search's
-            top).
+        limit: the largest stable k_hri in K_HRI_SEARCH (nan if the
+            loop is unstable at its lowest, its highest if stable there).
         limit_frequency: Hz, of the closed loop's least stable
-            eigenvalue at the limit.
+            eigenvalue just above the limit (nan where there is none).
         margins: per axis of T_b (AXES), StabilityMargins of
             L_i = -(R P C R^T)_ii at k_hri.
     """
@@ -475,6 +475,23 @@ oscillation or a divergence: the base's position on its velocity servo
 and the like, integrators that the loop leaves (all but) free, with
 time constants above h / 1e-4 = 100 s. `spectral_radius` leaves them
 out."""
+
+
+K_HRI_SEARCH = (1e-4, 1.0)
+"""m/(N s): the range in which `AdmittanceCase.limit` looks for the
+largest stable k_hri."""
+
+
+def limit_sentence(result):
+    """What a LoopResult says of its largest stable k_hri, in words."""
+    low, high = K_HRI_SEARCH
+    if np.isnan(result.limit):
+        return (f"unstable at every k_hri down to {low:g} (the search's "
+                "lowest)")
+    if result.limit >= high:
+        return f"stable up to k_hri = {high:g} at least (the search's highest)"
+    return (f"largest stable k_hri {result.limit:.4g}, oscillating at "
+            f"{result.limit_frequency:.3g} Hz above it")
 
 
 def spectral_radius(A, drift_tolerance=DRIFT_TOLERANCE):
@@ -628,7 +645,8 @@ class AdmittanceCase:
         """The closed loop's spectral radius at `k_hri`."""
         return spectral_radius(closed_loop_matrix(self.loop(k_hri)))
 
-    def limit(self, low=1e-4, high=1.0, tolerance=0.01):
+    def limit(self, low=K_HRI_SEARCH[0], high=K_HRI_SEARCH[1],
+              tolerance=0.01):
         """The largest stable k_hri by bisection on [low, high] (relative
         `tolerance`), or nan if `low` is unstable; `high` if it is
         stable."""
@@ -653,7 +671,7 @@ class AdmittanceCase:
         radius = spectral_radius(closed_loop_matrix(loop))
         limit = self.limit()
         frequency = float("nan")
-        if np.isfinite(limit):
+        if np.isfinite(limit) and limit < K_HRI_SEARCH[1]:
             worst = least_stable(closed_loop_matrix(self.loop(limit * 1.01)))
             frequency = abs(np.angle(worst)) / (2 * np.pi
                                                 * loop.time_period())

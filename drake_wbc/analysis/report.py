@@ -320,8 +320,9 @@ def _admittance_plots(report, scenario, hertz, omega, h):
             time_constant=T, station=station, plant=plants.get(id(hand)))
         plants[id(hand)] = (case.plant, case.rest_reading)
         result = case.result(label, omega)
+        limit = admittance_loop.limit_sentence(result).split(", oscil")[0]
         plot = BodePlot(name, f"{label}: L at k_hri = {result.k_hri:g} "
-                        f"(largest stable {result.limit:.4g})", hertz,
+                        f"({limit})", hertz,
                         nyquist_hz=0.5 / h)
         for axis in admittance_loop.AXES:
             plot.add(f"L, {axis} of T_b", result.axis_loop(axis)(omega))
@@ -334,9 +335,8 @@ def _admittance_plots(report, scenario, hertz, omega, h):
             result.margins[worst], stable_gain=result.limit))
         report.notes.append(
             f"{label}: closed-loop spectral radius {result.spectral_radius:.4f}"
-            f" at k_hri = {result.k_hri:g}; largest stable k_hri "
-            f"{result.limit:.4g}, oscillating at {result.limit_frequency:.3g}"
-            " Hz above it")
+            f" at k_hri = {result.k_hri:g}; "
+            f"{admittance_loop.limit_sentence(result)}")
 
 
 def compute_bode_report(scenario, points_per_decade=60,
