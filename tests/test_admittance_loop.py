@@ -142,6 +142,11 @@ def test_a_redundant_arm_is_linearised_where_its_self_motion_rests():
     assert np.abs(drift).max() < 1e-7
 
     params = controller_for(scenario)
+    with pytest.raises(ValueError, match="has not come to rest within 1 s"):
+        al.settled_arm_positions(params, arm, start, longest=1.0)
+    assert al.operating_scenario(rest) is rest
+    shipped = load_scenario(find_scenario("phri"))
+    assert al.operating_scenario(shipped) is shipped  # six joints
     base_state, measured = al.rest_measurements(scenario_station(scenario))
     with pytest.raises(ValueError, match="not an equilibrium"):
         al.linearize_controller_part(params, arm, base_state, measured,

@@ -102,7 +102,10 @@ from drake_wbc.experiments.scenario import (
 )
 from drake_wbc.math.kinematics import twist_rotation
 from drake_wbc.math.validation import checked_instance, positive
-from drake_wbc.stages.arm_control import ArmCartesianVelocityController
+from drake_wbc.stages.arm_control import (
+    TWIST_SIZE,
+    ArmCartesianVelocityController,
+)
 from drake_wbc.stages.support import define_stage
 from drake_wbc.stages.wrench import sensor_rotation_in_base, tool_weight_reading
 from drake_wbc.station.driver_dynamics import interpolated_command
@@ -518,14 +521,14 @@ tolerance (analysis.period_map.EQUILIBRIUM_TOLERANCE)."""
 
 def settled_arm_positions(params, arm, start, longest=1000.0):
     """Where the arm comes to rest from `start` (n, rad) with no twist
-    asked of it: `start` itself for an arm of six joints or one at rest
-    there; for an arm of
-    more, the end of its self-motion, the joint centring of
-    drake_wbc.math.arm_control.centring_velocity, which moves the joints
-    without moving the end effector (to first order), found by running
-    the controller's ArmCartesianVelocityController (params.arm_controller
-    of the ControllerParameters `params`, on the ArmKinematics `arm`) with
-    a zero twist until its joint speeds are below SETTLED_SPEED.
+    asked of it: `start` itself for an arm of six joints, or one at rest
+    there; for an arm of more, the end of its self-motion (the joint
+    centring of drake_wbc.math.arm_control.centring_velocity, which moves
+    the joints without moving the end effector, to first order), found
+    by running the controller's ArmCartesianVelocityController
+    (params.arm_controller of the ControllerParameters `params`, on the
+    ArmKinematics `arm`) with a zero twist until its joint speeds are
+    below SETTLED_SPEED.
 
     The admittance loop is linearised there: at `start` a redundant arm
     is still moving (not an equilibrium), and the self-motion's change of
@@ -537,29 +540,32 @@ def settled_arm_positions(params, arm, start, longest=1000.0):
             `longest` simulated seconds.
     """
     start = np.asarray(start, dtype=float)
-    if arm.num_joints <= 6 or params.arm_controller.self_motion_gain == 0.0:
+    if (arm.num_joints <= TWIST_SIZE
+            or params.arm_controller.self_motion_gain == 0.0):
         return start
     stage = ArmCartesianVelocityController(params.arm_controller, arm,
                                            params.time_step)
     context = stage.CreateDefaultContext()
-    stage.GetInputPort("arm_velocity").FixValue(context, np.zeros(6))
+    stage.GetInputPort("arm_velocity").FixValue(context, np.zeros(TWIST_SIZE))
     stage.set_arm_position(context, start)
     simulator = Simulator(stage, context)
-    n, chunk = arm.num_joints, params.time_step
+    speeds = stage.GetOutputPort("arm_velocity_command")
+    chunk = params.time_step
     while context.get_time() < longest:
         simulator.AdvanceTo(context.get_time() + chunk)
-        state = context.get_discrete_state_vector().CopyToVector()
-        if np.abs(state[n:2 * n]).max() < SETTLED_SPEED:
+        speed = np.abs(speeds.Eval(context)).max()
+        if speed < SETTLED_SPEED:
             # At rest from the first tick: `start` itself (so that a
             # settled start settles to itself).
-            return start if chunk < 10.0 else state[:n]
+            return start if chunk == params.time_step else (
+                stage.GetOutputPort("arm_position_command").Eval(context))
         chunk = 10.0
     raise ValueError(
         f"the arm's self-motion from {start.tolist()} has not come to rest "
-        f"within {longest:g} s (joint speeds up to "
-        f"{np.abs(state[n:2 * n]).max():.3g} rad/s): the admittance loop "
-        "has no operating point there; start the arm nearer the middle of "
-        "its joints' ranges or raise arm_controller.self_motion_gain")
+        f"within {longest:g} s (joint speeds up to {speed:.3g} rad/s): the "
+        "admittance loop has no operating point there; start the arm "
+        "nearer the middle of its joints' ranges or raise "
+        "arm_controller.self_motion_gain")
 
 
 def operating_scenario(scenario):
