@@ -53,12 +53,14 @@ def bode(tmp_path_factory):
     folder = tmp_path_factory.mktemp("bode")
     args = _parse(commands.add_bode_arguments, ["--output", str(folder)])
     assert args.scenario is None  # the default scenario
-    code, text = _run(commands.run_bode, args)
-    return code, text, folder
+    progress = io.StringIO()
+    with contextlib.redirect_stderr(progress):
+        code, text = _run(commands.run_bode, args)
+    return code, text, folder, progress.getvalue()
 
 
 def test_bode_writes_every_plot_and_table(bode):
-    code, text, folder = bode
+    code, text, folder, _ = bode
     assert code == 0
     assert "drake-wbc bode trajectory_tracking" in text
     for name in PLOTS:
@@ -79,8 +81,20 @@ def test_bode_writes_every_plot_and_table(bode):
     assert all(len(row) == len(summary[0]) for row in summary)
 
 
+def test_bode_says_each_part_as_it_starts(bode):
+    """The parts are said on stderr as they start, in order (the table
+    and the notes stay on stdout)."""
+    *_, progress = bode
+    parts = ("the base filter", "the split of V_ee", "the coupled DMPs",
+             "the sweeps")
+    lines = progress.splitlines()
+    assert len(lines) == len(parts)
+    for line, part in zip(lines, parts, strict=True):
+        assert line.startswith(f"drake-wbc bode trajectory_tracking: {part}")
+
+
 def test_bode_ideal_split_is_flat(bode):
-    _, _, folder = bode
+    _, _, folder, _ = bode
     header, data = read_csv(folder / "split_ideal.csv")
     total = header.index("sum: end effector magnitude_db")
     assert np.abs(data[:, total]).max() < 1e-9
@@ -90,7 +104,7 @@ def test_bode_ideal_split_is_flat(bode):
 
 
 def test_bode_shows_the_plant(bode):
-    _, text, folder = bode
+    _, text, folder, _ = bode
     header, data = read_csv(folder / "split_base_loop.csv")
     plant = header.index(
         "end effector with the base loop and the plant magnitude_db")
@@ -109,7 +123,7 @@ def test_bode_shows_the_plant(bode):
 
 
 def test_bode_table_reports_the_contact_loop_margins(bode):
-    _, text, _ = bode
+    _, text, _, _ = bode
     line = next(x for x in text.splitlines()
                 if x.startswith("contact loop, admittance axis"))
     # The discrete integrator K k_f h / (z - 1) with K k_f h = 0.3: gain

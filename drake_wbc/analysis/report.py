@@ -299,10 +299,11 @@ def admittance_cases(scenario):
     return cases
 
 
-def _admittance_plots(report, scenario, hertz, omega, h):
+def _admittance_plots(report, scenario, hertz, omega, h, say):
     """admittance_loop_*: the admittance loop of each case at the
     scenario's k_hri, L per axis of T_b, and its row; linearised where a
-    redundant arm's self-motion comes to rest."""
+    redundant arm's self-motion comes to rest. `say` is told of each
+    case as it starts."""
     start = scenario.station.initial_arm_positions
     scenario = admittance_loop.operating_scenario(scenario)
     settled = scenario.station.initial_arm_positions
@@ -314,7 +315,9 @@ def _admittance_plots(report, scenario, hertz, omega, h):
             "while the self-motion moves)")
     station = scenario_station(scenario)
     plants = {}
-    for name, label, hand, inertia, T in admittance_cases(scenario):
+    cases = admittance_cases(scenario)
+    for k, (name, label, hand, inertia, T) in enumerate(cases, 1):
+        say(f"{label} ({k} of {len(cases)})")
         case = admittance_loop.AdmittanceCase(
             scenario, hand=hand, inertia_compensation=inertia,
             time_constant=T, station=station, plant=plants.get(id(hand)))
@@ -340,11 +343,18 @@ def _admittance_plots(report, scenario, hertz, omega, h):
 
 
 def compute_bode_report(scenario, points_per_decade=60,
-                        contact_stiffness=CONTACT_STIFFNESS):
+                        contact_stiffness=CONTACT_STIFFNESS, progress=None):
     """Every response of `scenario` (a
     drake_wbc.experiments.scenario.Scenario), on a
     grid from 0.01 Hz to the lower of 100 Hz and the control rate's
-    Nyquist frequency. Returns a BodeReport (nothing written)."""
+    Nyquist frequency; `progress`, if given, is called with a short text
+    as each part starts (the pHRI loops take about ten seconds each).
+    Returns a BodeReport (nothing written)."""
+    def say(text):
+        if progress is not None:
+            progress(text)
+
+    say("the base filter and the operating point")
     params = scenario.controller
     h = params.time_step
     hertz, omega = frequency_grid(0.01, min(100.0, 0.5 / h),
@@ -373,11 +383,14 @@ def compute_bode_report(scenario, points_per_decade=60,
     report.plots[plot.name] = plot
     report.rows += [summarize(f"base filter, h = {h:g} s", hertz, discrete),
                     summarize("base filter, continuous", hertz, continuous)]
+    say("the split of V_ee, ideal and through the base's loop and plant")
     _split_plots(report, params, point, station, hertz, omega, h)
+    say("the coupled DMPs' force responses")
     _dmp_plots(report, params, hertz, omega, h, contact_stiffness)
+    say("the sweeps over omega_f and zeta")
     _sweep_plots(report, params, point, driver, hertz, omega, h)
     if has_admittance_loop(scenario):
-        _admittance_plots(report, scenario, hertz, omega, h)
+        _admittance_plots(report, scenario, hertz, omega, h, say)
     report.table = format_table(report.rows)
     report.notes.insert(0, (
         f"operating point: q_a = {np.round(point.arm_positions, 3).tolist()}"

@@ -7,6 +7,7 @@ code. Heavy imports (Drake, matplotlib) happen inside the runners.
 
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 from drake_wbc.cli.robot_option import add_robot_argument, on_robot
@@ -57,7 +58,11 @@ def run_bode(args):
 
     name, scenario, output = _scenario(args, "bode")
     print(f"drake-wbc bode {name}: writing to {output}/")
-    report = write_bode_report(scenario, output)
+
+    def progress(text):
+        print(f"drake-wbc bode {name}: {text}", file=sys.stderr, flush=True)
+
+    report = write_bode_report(scenario, output, progress=progress)
     print(report.table)
     print()
     for line in report.notes:
