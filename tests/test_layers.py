@@ -103,3 +103,68 @@ def test_the_check_sees_a_layer_that_reaches_up(tmp_path):
     module.write_text("def f():\n    from drake_wbc.station import x\n")
     names = [name for name, _ in _imports(module)]
     assert "drake_wbc.station" in names
+
+
+def _module_name(path):
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _import_graph(paths):
+    """{module: the package's modules it imports}, imports inside
+    functions included; `from M import name` counts as an import of
+    M.name where that is a module (a package's submodule), else of M."""
+    names = {_module_name(p): p for p in paths}
+    graph = {}
+    for name, path in names.items():
+        imported = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                imported.update(alias.name for alias in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                for alias in node.names:
+                    submodule = f"{node.module}.{alias.name}"
+                    imported.add(submodule if submodule in names
+                                 else node.module)
+        graph[name] = {m for m in imported if m in names and m != name}
+    return graph
+
+
+def _circle(graph):
+    """A list of modules that import each other in a loop, or None."""
+    state, stack = {}, []
+
+    def visit(node):
+        state[node] = "open"
+        stack.append(node)
+        for other in sorted(graph[node]):
+            if state.get(other) == "open":
+                return stack[stack.index(other):] + [other]
+            if other not in state:
+                found = visit(other)
+                if found:
+                    return found
+        state[node] = "done"
+        stack.pop()
+        return None
+
+    for node in sorted(graph):
+        if node not in state:
+            found = visit(node)
+            if found:
+                return found
+    return None
+
+
+def test_no_modules_import_each_other_in_a_loop():
+    """Within a layer too: a loop (even through an import inside a
+    function, which only hides it) means two modules hold one concept
+    between them, or one holds what belongs below both."""
+    circle = _circle(_import_graph(_modules()))
+    assert circle is None, " -> ".join(circle)
+
+
+def test_the_check_sees_a_loop():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert _circle(graph) == ["a", "b", "c", "a"]
+    assert _circle({"a": {"b"}, "b": set()}) is None

@@ -19,13 +19,10 @@ from drake_wbc.robot.model import (
     joint_position_indices,
     joint_velocity_indices,
     make_robot_plant,
+    suspension_gains,
     suspension_modes,
 )
-from drake_wbc.robot.suspension import (
-    SUSPENSION_JOINTS,
-    SuspensionParameters,
-    suspension_gains,
-)
+from drake_wbc.robot.suspension import SUSPENSION_JOINTS, SuspensionParameters
 
 PARAMS = SuspensionParameters(roll_frequency=5.0, pitch_frequency=3.0,
                               damping_ratio=0.08)

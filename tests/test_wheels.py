@@ -19,13 +19,13 @@ from drake_wbc.robot.model import (
     joint_velocity_indices,
     make_robot_plant,
     spring_stiffnesses,
+    suspension_gains,
 )
 from drake_wbc.robot.suspension import (
     HORIZONTAL_JOINTS,
     SUSPENSION_JOINTS,
     HorizontalCompliance,
     SuspensionParameters,
-    suspension_gains,
 )
 from drake_wbc.station.drivers import BaseDriverParameters
 from drake_wbc.station.simulation import SimulatedStation, StationOptions

@@ -854,6 +854,39 @@ def suspension_block(gains, q_a=None, horizontal=False, description=None,
     return np.diag(M).copy(), np.diag(gravity).copy()
 
 
+def suspension_gains(params, arm_positions, description=None, mount=None):
+    """The SuspensionGains that give SuspensionParameters `params`' modes
+    with the arm at `arm_positions` (n,): k = I w^2 + G and c = 2 zeta w
+    I per axis (the module's docstring), I and G from a plant of the robot
+    with the suspension (and k = I w^2, c = 2 zeta w I for the horizontal
+    compliance's axes, from a plant with it): the robot of
+    RobotDescription `description` (the shipped one if None), its arm
+    mounted by ArmMount `mount`."""
+    unsprung = SuspensionGains(np.zeros(2), np.zeros(2), params.pivot_height)
+    inertia, gravity = suspension_block(unsprung, arm_positions,
+                                        description=description, mount=mount)
+    w = 2.0 * np.pi * np.array([params.roll_frequency,
+                                params.pitch_frequency])
+    gains = SuspensionGains(
+        stiffness=inertia * w * w + gravity,
+        damping=2.0 * params.damping_ratio * w * inertia,
+        pivot_height=params.pivot_height)
+    horizontal = params.horizontal
+    if horizontal is None:
+        return gains
+    drive = np.array([horizontal.drive_inertia, horizontal.drive_inertia,
+                      horizontal.drive_yaw_inertia])
+    inertia = suspension_block(gains._replace(
+        horizontal_stiffness=np.zeros(3), horizontal_damping=np.zeros(3),
+        drive_inertia=drive), arm_positions, horizontal=True,
+        description=description, mount=mount)[0]
+    w = 2.0 * np.pi * horizontal.frequencies()
+    return gains._replace(
+        horizontal_stiffness=inertia * w * w,
+        horizontal_damping=2.0 * horizontal.damping_ratio * w * inertia,
+        drive_inertia=drive)
+
+
 def rocking_modes(plant, model, joints, q_a=None):
     """The modes of the spring-damper `joints` of the base (all else held
     still, the arm at `q_a`, its home if None), lowest frequency first

@@ -9,7 +9,8 @@ joints, `suspension_roll` (about x) then `suspension_pitch` (about y),
 through a pivot `pivot_height` above the floor, each with a linear
 torsional spring and a viscous damper. Their values come from the modes
 asked for (frequency and damping ratio, with the arm at the station's
-initial pose and the flexible mount held):
+initial pose and the flexible mount held; drake_wbc.robot.model.
+suspension_gains, beside the plant it sizes them on):
 
     k = I w^2 + G,   c = 2 zeta w I,
 
@@ -180,7 +181,9 @@ class SuspensionParameters:
 
 
 class SuspensionGains(NamedTuple):
-    """The suspension's joint values (see `suspension_gains`).
+    """The suspension's joint values (see
+    drake_wbc.robot.model.suspension_gains, which sizes them on the
+    robot's plant).
 
     Attributes:
         stiffness: (2,) roll, pitch springs, N m/rad.
@@ -285,38 +288,3 @@ def _massless_link(name, pose=""):
     return (f'<link name="{name}">{pose}<inertial><mass>0</mass><inertia>'
             "<ixx>0</ixx><iyy>0</iyy><izz>0</izz><ixy>0</ixy><ixz>0</ixz>"
             "<iyz>0</iyz></inertia></inertial></link>")
-
-
-def suspension_gains(params, arm_positions, description=None, mount=None):
-    """The SuspensionGains that give SuspensionParameters `params`' modes
-    with the arm at `arm_positions` (n,): k = I w^2 + G and c = 2 zeta w
-    I per axis (the module's docstring), I and G from a plant of the robot
-    with the suspension (and k = I w^2, c = 2 zeta w I for the horizontal
-    compliance's axes, from a plant with it): the robot of
-    RobotDescription `description` (the shipped one if None), its arm
-    mounted by ArmMount `mount`."""
-    from drake_wbc.robot.model import suspension_block
-
-    unsprung = SuspensionGains(np.zeros(2), np.zeros(2), params.pivot_height)
-    inertia, gravity = suspension_block(unsprung, arm_positions,
-                                        description=description, mount=mount)
-    w = 2.0 * np.pi * np.array([params.roll_frequency,
-                                params.pitch_frequency])
-    gains = SuspensionGains(
-        stiffness=inertia * w * w + gravity,
-        damping=2.0 * params.damping_ratio * w * inertia,
-        pivot_height=params.pivot_height)
-    horizontal = params.horizontal
-    if horizontal is None:
-        return gains
-    drive = np.array([horizontal.drive_inertia, horizontal.drive_inertia,
-                      horizontal.drive_yaw_inertia])
-    inertia = suspension_block(gains._replace(
-        horizontal_stiffness=np.zeros(3), horizontal_damping=np.zeros(3),
-        drive_inertia=drive), arm_positions, horizontal=True,
-        description=description, mount=mount)[0]
-    w = 2.0 * np.pi * horizontal.frequencies()
-    return gains._replace(
-        horizontal_stiffness=inertia * w * w,
-        horizontal_damping=2.0 * horizontal.damping_ratio * w * inertia,
-        drive_inertia=drive)

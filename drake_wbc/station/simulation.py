@@ -69,11 +69,9 @@ from drake_wbc.robot.model import (
     joint_velocity_indices,
     shared_robot_plant,
     spring_stiffnesses,
-)
-from drake_wbc.robot.suspension import (
-    SuspensionParameters,
     suspension_gains,
 )
+from drake_wbc.robot.suspension import SuspensionParameters
 from drake_wbc.station.drivers import (
     ArmDriverParameters,
     BaseDriverParameters,
