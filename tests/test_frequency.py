@@ -21,10 +21,12 @@ from drake_wbc.analysis import chains, closed_forms, plant_chain
 from drake_wbc.analysis.dmp_force_response import linearize_dmp_force
 from drake_wbc.analysis.frequency import (
     bandwidth,
+    coupled_states,
     frequency_grid,
     frequency_response,
     linear_system_response,
     peak_gain,
+    response_function,
     stability_margins,
 )
 from drake_wbc.analysis.period_map import linearize_period_map
@@ -512,6 +514,50 @@ def test_base_plant_of_a_shaking_base_matches_its_station():
 
 
 # Margins, bandwidth and peak against textbook loops.
+
+def test_only_the_coupled_states_enter_the_response():
+    """coupled_states on a chain: u drives x0 -> x1 -> y; x2 is driven
+    but not seen, x3 seen but not driven, x4 neither."""
+    A = np.zeros((5, 5))
+    A[1, 0] = A[2, 1] = A[1, 3] = A[4, 4] = 1.0
+    B = np.array([[1.0], [0.0], [0.0], [0.0], [0.0]])
+    C = np.array([[0.0, 1.0, 0.0, 1.0, 0.0]])
+    np.testing.assert_array_equal(coupled_states(A, B, C), [0, 1])
+
+
+@pytest.mark.parametrize("time_step", [0.0, 0.01])
+def test_the_response_of_the_coupled_states_is_the_whole_systems(
+        time_step):
+    """response_function (the coupled states only) against
+    C (pI - A)^-1 B + D by a dense solve of the whole system, on random
+    systems with parts that no input reaches or no output sees (with
+    integrators among them, as a controller's held states are) and
+    lightly damped modes near the band."""
+    rng = np.random.default_rng(3)
+    for n, m, p in ((1, 1, 1), (7, 2, 3), (60, 6, 6)):
+        A = rng.normal(size=(n, n)) / np.sqrt(n)
+        B, C = rng.normal(size=(n, m)), rng.normal(size=(p, n))
+        if n > 2:
+            third = n // 3
+            A[:third, third:] = 0.0  # the first third: not driven ...
+            B[:third] = 0.0
+            A[:, third:2 * third] = 0.0  # the second: seen by none
+            A[third:2 * third, third:2 * third] = 0.0  # integrators
+            C[:, third:2 * third] = 0.0
+        if time_step:
+            A = np.eye(n) + time_step * A
+        D = rng.normal(size=(p, m))
+        omega = np.geomspace(0.05, 300.0, 40)
+        points = (np.exp(1j * omega * time_step) if time_step
+                  else 1j * omega)
+        dense = np.array([C @ np.linalg.solve(z * np.eye(n) - A, B) + D
+                          for z in points])
+        fast = response_function(A, B, C, D, time_step)(omega)
+        np.testing.assert_allclose(fast, dense, rtol=1e-9,
+                                   atol=1e-12 * np.abs(dense).max())
+        if n > 2:
+            assert len(coupled_states(A, B, C)) <= n - 2 * (n // 3)
+
 
 def test_gain_margin_of_a_third_order_loop():
     # L = K / (s (s + 1) (s + 2)): phase crossover at sqrt(2) rad/s, where

@@ -87,7 +87,7 @@ from pydrake.systems.primitives import (
     ZeroOrderHold,
 )
 
-from drake_wbc.analysis.frequency import stability_margins
+from drake_wbc.analysis.frequency import response_function, stability_margins
 from drake_wbc.analysis.period_map import linearize_period_map
 from drake_wbc.analysis.plant_chain import (
     add_robot_plant,
@@ -459,17 +459,10 @@ class LoopResult:
         of the loop, z = e^(j omega h)."""
         i = AXES.index(axis)
         R, lin = self.rotation, self.loop
-        A, h = lin.A(), lin.time_period()
-        c, b = (R @ lin.C())[i], lin.B() @ R.T[:, i]
-        d = float((R @ lin.D() @ R.T)[i, i])
-        eye = np.eye(A.shape[0])
-
-        def loop(omega):
-            z = np.exp(1j * np.atleast_1d(omega) * h)
-            return -np.array([c @ np.linalg.solve(p * eye - A, b) + d
-                              for p in z])
-
-        return loop
+        response = response_function(
+            lin.A(), lin.B() @ R.T[:, i:i + 1], (R @ lin.C())[i:i + 1],
+            (R @ lin.D() @ R.T)[i:i + 1, i:i + 1], lin.time_period())
+        return lambda omega: -response(omega)[:, 0, 0]
 
 
 DRIFT_TOLERANCE = 1e-4
