@@ -2,6 +2,8 @@
 and brute force, the Drake system through its ports, its scalar conversion
 and its linearisation."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from pydrake.autodiffutils import ExtractValue, InitializeAutoDiff
@@ -26,7 +28,12 @@ from drake_wbc.math.arm_control import (
     singularity_damping,
 )
 from drake_wbc.math.capability import jacobian_derivative
-from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.robot.description import load_robot_description
+from drake_wbc.robot.model import (
+    HOME_ARM_POSITIONS,
+    ArmKinematics,
+    arm_kinematics,
+)
 from drake_wbc.stages import ArmCartesianVelocityController
 
 H = 0.01
@@ -442,6 +449,35 @@ def controller_update(system, context, q, previous, V, hold=None):
         system.GetInputPort("hold").FixValue(context, [hold])
     return system.EvalUniquePeriodicDiscreteUpdate(context).get_vector(
     ).CopyToVector()
+
+
+SEVEN_JOINTS = (Path(__file__).resolve().parent.parent / "models"
+                / "lbr_omni.robot.yaml")
+
+
+def test_a_hold_stops_a_redundant_arms_self_motion():
+    """On a seven-joint arm away from the middles of its joints, the
+    self-motion moves the command with no twist asked; a hold (a safe
+    stop) brakes it to rest and it stays there: the joint centring must
+    not go on moving a stopped robot (it did, at 0.02 rad/s)."""
+    arm = arm_kinematics(load_robot_description(SEVEN_JOINTS))
+    start = np.asarray(arm.home) + 0.3
+    commands = {}
+    for hold in (0.0, 1.0):
+        system = ArmCartesianVelocityController(None, arm)
+        context = system.CreateDefaultContext()
+        system.GetInputPort("arm_velocity").FixValue(context, np.zeros(6))
+        system.GetInputPort("hold").FixValue(context, [hold])
+        system.set_arm_position(context, start)
+        Simulator(system, context).AdvanceTo(2.0)
+        commands[hold] = (
+            system.GetOutputPort("arm_position_command").Eval(context),
+            system.GetOutputPort("arm_velocity_command").Eval(context))
+    moving, _ = commands[0.0]
+    held, rate = commands[1.0]
+    assert np.abs(moving - start).max() > 0.01
+    np.testing.assert_array_equal(held, start)
+    np.testing.assert_array_equal(rate, 0.0)
 
 
 def test_controller_update_is_the_stages_as_written(arm):

@@ -5,6 +5,7 @@ Diagram advanced against fixed measurements."""
 
 import logging
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -36,7 +37,12 @@ from drake_wbc.controller.diagram import (
 from drake_wbc.math import command_limits, safety
 from drake_wbc.math.motion_mode import MotionMode
 from drake_wbc.math.safety import STATUS_FIELDS, Reason, SafetyParameters
-from drake_wbc.robot.model import HOME_ARM_POSITIONS, ArmKinematics
+from drake_wbc.robot.description import load_robot_description
+from drake_wbc.robot.model import (
+    HOME_ARM_POSITIONS,
+    ArmKinematics,
+    arm_kinematics,
+)
 from drake_wbc.stages import BaseCommandLimiter, InputGuard, StopGate
 from drake_wbc.stages.safety import LOGGER, GuardedInput
 
@@ -276,6 +282,36 @@ def test_no_command_jumps_through_a_trip(arm):
     accelerations = np.abs(np.diff(rates, axis=0)) / H
     assert accelerations.max() <= JOINT_ACCELERATION * (1 + 1e-6)
     assert np.abs(rates[-100:]).max() > 1e-3            # moving again
+
+
+def test_a_redundant_arm_holds_still_in_a_stop():
+    """A seven-joint arm started away from the middles of its joints,
+    whose self-motion keeps moving it: a NaN on an input stops the
+    controller, and once braked (within the acceleration limit) the arm's
+    command stays where it is until the stop clears (the joint centring
+    went on moving a stopped robot at 0.02 rad/s), then moves again."""
+    description = load_robot_description(
+        Path(__file__).resolve().parent.parent / "models"
+        / "lbr_omni.robot.yaml")
+    arm = arm_kinematics(description)
+    rig = Rig(arm, q=np.asarray(arm.home) + 0.3)
+    rig.set("reference_velocity", [0.0] * 6)
+    rig.advance(1.0)
+    bad = np.array(rig.valid["base.state_estimated"], dtype=float)
+    bad[0] = np.nan
+    rig.set("base.state_estimated", bad)
+    rig.advance(0.3)
+    rig.set("base.state_estimated", rig.valid["base.state_estimated"])
+    rig.advance(HOLD + 0.5)
+    _, q_cmd = rig.log("arm.position_command")
+    _, status = rig.log("safety_status")
+    stopped = np.flatnonzero(status[:, STATUS["stopped"]])
+    first, last = stopped[0], stopped[-1]
+    assert np.abs(q_cmd[first - 1] - q_cmd[first - 2]).max() > 1e-5
+    braked = first + 14  # at most 0.125 s from 1.57 rad/s
+    np.testing.assert_array_equal(
+        q_cmd[braked:last + 1], np.tile(q_cmd[braked], (last - braked + 1, 1)))
+    assert np.abs(q_cmd[-1] - q_cmd[last]).max() > 1e-5  # moving again
 
 
 @pytest.mark.parametrize("case", ["admittance", "force-control"])

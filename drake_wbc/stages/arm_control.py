@@ -2,6 +2,7 @@
 commands as a Drake system."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 from pydrake.systems.framework import BasicVector_, LeafSystem_
@@ -49,7 +50,8 @@ def ArmCartesianVelocityController_(T):
         - hold (1): optional (no hold while unconnected); >= 0.5 brings
           the command to rest and holds it there (a safe stop, see
           drake_wbc.stages.safety.InputGuard's `stop`): the update runs
-          as for a zero twist, so q_dot falls to 0 within the
+          as for a zero twist and without the self-motion of an arm of
+          more than six joints, so q_dot falls to 0 within the
           acceleration limit, along its direction, and within the joint
           limits' braking bounds (at 12.56 rad/s^2, at most 0.125 s and
           0.1 rad from 1.57 rad/s), then q_cmd stays. A position command
@@ -149,6 +151,9 @@ def ArmCartesianVelocityController_(T):
                        kinematics.acceleration_limits)
                 if params.use_acceleration_limit else None,
                 params.self_motion_gain)
+            # A hold brakes to rest and stays: without the self-motion of
+            # an arm of more than six joints, which would go on moving it.
+            self._hold_limits = replace(self._limits, self_motion_gain=0.0)
             self._command = body_for(joint_velocity_command, T)
             self._no_twist = np.zeros(TWIST_SIZE)
             self._input = self.DeclareVectorInputPort("arm_velocity",
@@ -189,11 +194,12 @@ def ArmCartesianVelocityController_(T):
             parts and V_a (arrays of T); with `hold` (or a V_a that is not
             finite) the command brakes to rest as for a zero twist."""
             finite = _all_finite(V_a)
+            limits = self._limits
             if hold or not finite:
-                V_a = self._no_twist
+                V_a, limits = self._no_twist, self._hold_limits
             command = self._command(
                 through_float_function(self._jacobian, q), V_a, q, previous,
-                self._limits)
+                limits)
             h = self._time_step
             # The bounds keep q in the band up to rounding; the clip makes
             # the joint limits exact.
