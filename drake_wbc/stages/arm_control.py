@@ -107,7 +107,9 @@ def ArmCartesianVelocityController_(T):
         therefore accurate to about 1e-9 relative; where a limit is just
         switching, the derivative is that of the side taken. The system
         is at equilibrium only with V_a = 0 and at rest, where `Linearize`
-        applies; while it moves, use Drake's
+        applies (an arm of more than six joints also needs its
+        self-motion to have come to rest: it moves on by itself until
+        the joints' centring is satisfied); while it moves, use Drake's
         `FirstOrderTaylorApproximation` (same A and B).
 
         Args:
