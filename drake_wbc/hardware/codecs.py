@@ -557,7 +557,7 @@ class CommandReceiver(LeafSystem):
     - velocity: (3) the base command of the last good base_command
       message; zero before the first and once it is older than
       `timeout` (the robot's own command timeout).
-    - positions: (6) the arm command of the last good arm_command
+    - positions: (n) the arm command of the last good arm_command
       message (`initial_positions` before the first): the arm holds it.
     - status: (4) COMMAND_STATUS: messages rejected on each channel (not
       decodable, out of sequence; see `receive`), messages refused
