@@ -478,16 +478,20 @@ K_HRI_SEARCH = (1e-4, 1.0)
 largest stable k_hri."""
 
 
-def limit_sentence(result):
-    """What a LoopResult says of its largest stable k_hri, in words."""
+def limit_sentence(result, frequency=True):
+    """What a LoopResult says of its largest stable k_hri, in words (with
+    the frequency of the oscillation above it if `frequency`)."""
     low, high = K_HRI_SEARCH
     if np.isnan(result.limit):
         return (f"unstable at every k_hri down to {low:g} (the search's "
                 "lowest)")
     if result.limit >= high:
         return f"stable up to k_hri = {high:g} at least (the search's highest)"
-    return (f"largest stable k_hri {result.limit:.4g}, oscillating at "
-            f"{result.limit_frequency:.3g} Hz above it")
+    sentence = f"largest stable k_hri {result.limit:.4g}"
+    if frequency:
+        sentence += (f", oscillating at {result.limit_frequency:.3g} Hz "
+                     "above it")
+    return sentence
 
 
 def spectral_radius(A, drift_tolerance=DRIFT_TOLERANCE):

@@ -304,15 +304,15 @@ def _admittance_plots(report, scenario, hertz, omega, h, say):
     scenario's k_hri, L per axis of T_b, and its row; linearised where a
     redundant arm's self-motion comes to rest. `say` is told of each
     case as it starts."""
-    start = scenario.station.initial_arm_positions
-    scenario = admittance_loop.operating_scenario(scenario)
-    settled = scenario.station.initial_arm_positions
-    if settled != start:
+    operating = admittance_loop.operating_scenario(scenario)
+    if operating is not scenario:
+        settled, start = (np.round(s.station.initial_arm_positions, 3)
+                          .tolist() for s in (operating, scenario))
         report.notes.append(
             "pHRI loops linearised where the arm's self-motion comes to "
-            f"rest, q_a = {np.round(settled, 3).tolist()} (from "
-            f"{np.round(start, 3).tolist()}; the loop has no equilibrium "
-            "while the self-motion moves)")
+            f"rest, q_a = {settled} (from {start}; the loop has no "
+            "equilibrium while the self-motion moves)")
+    scenario = operating
     station = scenario_station(scenario)
     plants = {}
     cases = admittance_cases(scenario)
@@ -323,7 +323,7 @@ def _admittance_plots(report, scenario, hertz, omega, h, say):
             time_constant=T, station=station, plant=plants.get(id(hand)))
         plants[id(hand)] = (case.plant, case.rest_reading)
         result = case.result(label, omega)
-        limit = admittance_loop.limit_sentence(result).split(", oscil")[0]
+        limit = admittance_loop.limit_sentence(result, frequency=False)
         plot = BodePlot(name, f"{label}: L at k_hri = {result.k_hri:g} "
                         f"({limit})", hertz,
                         nyquist_hz=0.5 / h)
@@ -348,7 +348,7 @@ def compute_bode_report(scenario, points_per_decade=60,
     drake_wbc.experiments.scenario.Scenario), on a
     grid from 0.01 Hz to the lower of 100 Hz and the control rate's
     Nyquist frequency; `progress`, if given, is called with a short text
-    as each part starts (the pHRI loops take about ten seconds each).
+    as each part starts (a pHRI loop takes a few seconds).
     Returns a BodeReport (nothing written)."""
     def say(text):
         if progress is not None:
