@@ -101,6 +101,13 @@ def limiter_state(state):
         state[_SCAN:_TRACKER], state[_TRACKER:])
 
 
+def _rows_and_allowed(separation):
+    """The approach rows (NEAREST_POINTS, 3) and allowed speeds
+    (NEAREST_POINTS,) of LimiterState.separation, views of it."""
+    return (separation[:3 * NEAREST_POINTS].reshape(-1, 3),
+            separation[3 * NEAREST_POINTS:])
+
+
 def _signature_of(points):
     """A scan's signature: [points, its first, middle and last point] (0
     for none): a new scan of a base or a scene that moves changes them
@@ -108,8 +115,8 @@ def _signature_of(points):
     count = len(points)
     if not count:
         return np.zeros(7)
-    return np.array([count, *points[0], *points[count // 2],
-                     *points[count - 1]], dtype=float)
+    return np.concatenate(((float(count),), points[0], points[count // 2],
+                           points[count - 1]))
 
 
 LOGGER = logging.getLogger("drake_wbc.math.safety")
@@ -333,17 +340,16 @@ def BaseCommandLimiter_(T):
                 result.acceleration_scale])
 
         def _calc_result(self, context, value):
-            state = context.get_discrete_state_vector().CopyToVector()
+            state = limiter_state(
+                context.get_discrete_state_vector().CopyToVector())
+            stop = state.protective[0]
             people = None
-            if state[_PROTECTIVE] >= 0.5 or state[_PEOPLE_ALLOWED] != FAR:
-                people = (state[_PEOPLE:_PEOPLE_ALLOWED].reshape(-1, 3),
-                          state[_PEOPLE_ALLOWED:_PROTECTIVE],
-                          state[_PROTECTIVE])
+            if stop >= 0.5 or state.person_allowed[0] != FAR:
+                people = (state.person_rows, state.person_allowed, stop)
             value.set_value(self._limited(
-                self._velocity.Eval(context), state[:safety.BASE_AXES],
+                self._velocity.Eval(context), state.previous,
                 self._stopped.Eval(context)[0],
-                state[safety.BASE_AXES:_ALLOWED].reshape(-1, 3),
-                state[_ALLOWED:_PEOPLE], people))
+                *_rows_and_allowed(state.separation), people))
 
         def _command_output(self, context, output):
             output.SetFromVector(self._result.Eval(context)[:3])
@@ -367,16 +373,17 @@ def BaseCommandLimiter_(T):
             points = (self._points.Eval(context)
                       if self._points.HasValue(context)
                       else np.zeros((0, 2)))
-            old = context.get_discrete_state_vector().CopyToVector()
-            state = np.concatenate([self._result.Eval(context)[:3],
-                                    self._separation(points),
-                                    old[_PEOPLE:]])
+            vector = context.get_discrete_state_vector().CopyToVector()
+            state = limiter_state(vector)
+            state.previous[:] = self._result.Eval(context)[:3]
+            state.separation[:] = self._separation(points)
             self._track(context, points, state, self._separation.changed)
-            discrete_state.set_value(state)
+            discrete_state.set_value(vector)
 
         def _track(self, context, points, state, changed):
-            """The people's part of the state (in place): from a scan when
-            the points changed, and the protective stop at every tick.
+            """The people's part of `state` (a LimiterState, in place):
+            from a scan when the points changed, and the protective stop
+            at every tick.
 
             A scan is new when its signature (`_signature_of`) differs
             from the one in the state (a scan equal to the last one
@@ -385,25 +392,25 @@ def BaseCommandLimiter_(T):
             the one taken last (another context)."""
             signature = self._signature
             if changed or signature is None or (
-                    state[_SCAN:_TRACKER] != signature).any():
+                    state.scan != signature).any():
                 points = np.asarray(points, dtype=float).reshape(-1, 2)
                 signature = _signature_of(points)
                 self._signature = signature
-                if (value_of(state[_SCAN:_TRACKER]) != signature).any():
+                if (value_of(state.scan) != signature).any():
                     self._scan(context, points, state, signature)
             time = context.get_time()
             time = time if isinstance(time, float) else time.value()
-            flags = state[_PROTECTIVE:_SCAN]
+            flags = state.protective
             if flags.dtype == object:
                 flags = value_of(flags)
             was, last_inside, inside = flags[0] >= 0.5, flags[1], flags[2]
             if inside >= 0.5:
                 last_inside = time
-                state[_PROTECTIVE + 1] = time
+                state.protective[1] = time
             stopped = time - last_inside < self._hold_time - 1e-9
             if stopped == was:
                 return
-            state[_PROTECTIVE] = 1.0 if stopped else 0.0
+            state.protective[0] = 1.0 if stopped else 0.0
             if stopped:
                 LOGGER.warning("protective stop at t = %.3f s: %s", time,
                                self._reason(True))
@@ -416,22 +423,22 @@ def BaseCommandLimiter_(T):
         def _scan(self, context, points, state, signature):
             """The tracking of a new scan (float, drake_wbc.math.people)
             and the people's rows and allowed speeds of eq.
-            (protective), into the state (in place)."""
+            (protective), into `state` (a LimiterState, in place)."""
             base = (value_of(self._base_state.Eval(context))
                     if self._base_state.HasValue(context)
                     else np.zeros(6))
             tracker, people, inside = self._people_scan(
-                value_of(state[_TRACKER:]), points, base,
+                value_of(state.tracker), points, base,
                 float(value_of(context.get_time())), self.half_sizes,
                 self._people)
             rows, allowed = people_rows(
                 [p[1] for p in people], [p[2] for p in people],
                 self.half_sizes, self._people, self.timing, MAX_TRACKS)
-            state[_PEOPLE:_PEOPLE_ALLOWED] = rows.ravel()
-            state[_PEOPLE_ALLOWED:_PROTECTIVE] = allowed
-            state[_PROTECTIVE + 2] = 1.0 if inside else 0.0
-            state[_SCAN:_TRACKER] = signature
-            state[_TRACKER:] = tracker
+            state.person_rows[:] = rows
+            state.person_allowed[:] = allowed
+            state.protective[2] = 1.0 if inside else 0.0
+            state.scan[:] = signature
+            state.tracker[:] = tracker
 
         def _reason(self, stopped):
             if not stopped:
@@ -452,7 +459,7 @@ def BaseCommandLimiter_(T):
             velocity when the controller takes over."""
             vector = context.get_mutable_discrete_state_vector()
             state = vector.CopyToVector()
-            state[:safety.BASE_AXES] = as_vector(
+            limiter_state(state).previous[:] = as_vector(
                 "velocity", velocity, safety.BASE_AXES)
             vector.SetFromVector(state)
 
