@@ -94,6 +94,15 @@ def test_malformed_messages_are_rejected():
     with pytest.raises(messages.MessageError, match="finite"):
         messages.decode_base_command(messages.encode_base_command(
             1, [np.nan, 0.0, 0.0]))
+    # A flood of points: refused beyond the most allowed, taken up to it.
+    points = np.ones((11, 2))
+    with pytest.raises(messages.MessageError, match=r"num_points = 11 is "
+                       r"not allowed: must be at most 10 \(hardware"):
+        messages.decode_obstacle_points(
+            messages.encode_obstacle_points(1, points), max_points=10)
+    decoded = messages.decode_obstacle_points(
+        messages.encode_obstacle_points(1, points[:10]), max_points=10)
+    np.testing.assert_array_equal(decoded.values[0], points[:10])
 
 
 @pytest.mark.parametrize("n", [6, 7])
@@ -214,6 +223,8 @@ def test_options_are_checked():
         HardwareOptions(watchdog_period=0.003)
     with pytest.raises(ValueError, match="clock_resync_messages = 1"):
         HardwareOptions(clock_resync_messages=1)
+    with pytest.raises(ValueError, match="max_obstacle_points = 0"):
+        HardwareOptions(max_obstacle_points=0)
     with pytest.raises(ValueError,
                        match=r"obstacle_points = 0.05 s.*\(0.06667 s\)"):
         WatchdogLimits(obstacle_points=0.05)

@@ -83,6 +83,17 @@ sleep 1.0
 kill -STOP $ROBOT; sleep 0.3; kill -CONT $ROBOT
 {python} -c "{forger}" > forger.out 2>&1
 wait $FROZEN; echo $? > frozen.code
+# A fourth: while the base moves, the controller itself freezes for 0.4 s
+# (its clock stands still, the robot's command timeout runs on).
+{python} -m drake_wbc.cli deploy scenario.yaml \
+    --duration 3 --realtime-rate {rate} > stalled.out 2>&1 & STALLED=$!
+for i in $(seq 300); do
+    grep -q running stalled.out && break
+    sleep 0.1
+done
+sleep 1.0
+kill -STOP $STALLED; sleep 0.4; kill -CONT $STALLED
+wait $STALLED; echo $? > stalled.code
 kill -INT $ROBOT; wait $ROBOT; echo $? > robot.code
 kill -TERM $LOGGER; wait $LOGGER
 """
@@ -135,10 +146,10 @@ def run(tmp_path_factory):
         if process.poll() is None:  # hung: end the whole session
             os.killpg(process.pid, signal.SIGKILL)
             process.wait()
-    outputs = {name: (folder / f"{name}.out").read_text()
-               for name in ("robot", "deploy", "stopped", "frozen")}
+    names = ("robot", "deploy", "stopped", "frozen", "stalled")
+    outputs = {name: (folder / f"{name}.out").read_text() for name in names}
     codes = {name: int((folder / f"{name}.code").read_text())
-             for name in ("robot", "deploy", "stopped", "frozen")}
+             for name in names}
     print(outputs)
     return dict(folder=folder, outputs=outputs, codes=codes,
                 scenario=load_scenario(folder / "scenario.yaml"))
@@ -351,6 +362,37 @@ def test_no_command_jumps_after_the_trip(frozen, run):
     acceleration = np.abs(np.diff(arm, 2, axis=0)) / h**2
     print(f"largest joint acceleration: {np.max(acceleration):.3f} rad/s^2")
     assert np.max(acceleration) <= 12.56 + 1e-6
+
+
+def test_a_controller_that_misses_the_processor_stops_the_robot(run):
+    """The fourth deployment's controller froze for 0.4 s while its base
+    moved: its clock stood still, and the robot's own command timeout
+    stopped the base. Its first base command after the freeze is zero, not
+    the speed it had before (a step for a robot at rest), it says why, and
+    the commands resume from rest within the acceleration limits."""
+    h = run["scenario"].hardware.publish_period
+    events = read_events(run["folder"] / "run.lcmlog")
+    times = [messages.decode_signal_bundle(data)[1]
+             for _, data in events["WBC_CONTROLLER"]]
+    stamps = np.array([stamp for stamp, _ in events["WBC_CONTROLLER"]])
+    window = stamps[deployments(times)[3]]
+    base = [(t, messages.decode_base_command(data).values[0])
+            for t, data in events["WBC_BASE_COMMAND"]
+            if window[0] <= t <= window[-1]]
+    sent = np.array([t for t, _ in base])
+    velocity = np.array([v for _, v in base])
+    gap = int(np.argmax(np.diff(sent)))
+    assert sent[gap + 1] - sent[gap] > 0.3, "the controller did not freeze"
+    assert np.any(velocity[gap]), "the base was still"
+    np.testing.assert_array_equal(velocity[gap + 1], 0.0)
+    after = velocity[gap + 1:]
+    steps = np.abs(np.diff(after, axis=0))
+    assert np.all(steps <= 1.0 * h + 1e-9)
+    assert np.any(after[-1]), "the commands did not resume"
+    output = run["outputs"]["stalled"]
+    assert "behind the wall clock" in output
+    assert "watchdog cleared" in output
+    assert run["codes"]["stalled"] == 0
 
 
 def test_the_robot_refuses_a_second_sender(frozen, run):

@@ -16,11 +16,13 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from drake_wbc.hardware import messages
+from drake_wbc.deployment.deploy import STOP_REPEATS, send_stop
+from drake_wbc.hardware import codecs, messages
 from drake_wbc.hardware.interface import DIAGNOSTICS, HardwareInterface
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.hardware.safety import (
     Limits,
+    WallClock,
     brake_speed,
     follow_arm_command,
     saturate_base_velocity,
@@ -40,11 +42,12 @@ class Bench:
     """The interface in a Diagram, with constant controller commands that
     a test can change, and the test in the robot's place on LCM."""
 
-    def __init__(self, **options):
+    def __init__(self, wall_clock=None, **options):
         self.options = HardwareOptions(lcm_url="memq://", **options)
         self.lcm = DrakeLcm("memq://")
         builder = DiagramBuilder()
-        self.hw = HardwareInterface(self.options, self.lcm, HOME_ARM_POSITIONS)
+        self.hw = HardwareInterface(self.options, self.lcm, HOME_ARM_POSITIONS,
+                                    wall_clock=wall_clock)
         builder.AddSystem(self.hw.diagram)
         self.base = builder.AddSystem(ConstantVectorSource(BASE_COMMAND))
         self.arm = builder.AddSystem(ConstantVectorSource(HOME_ARM_POSITIONS))
@@ -327,7 +330,10 @@ def test_bad_messages_never_reach_the_controller():
             messages.encode_wrench(9, np.ones(6))],
         "obstacle_points": [
             messages.encode_obstacle_points(utime, [[np.nan, 1.0]]),
-            messages.encode_obstacle_points(-1, [[3.0, 3.0]])],
+            messages.encode_obstacle_points(-1, [[3.0, 3.0]]),
+            # A flood of points, in sequence and finite: one too many.
+            messages.encode_obstacle_points(utime + 2, np.full(
+                (bench.options.max_obstacle_points + 1, 2), 3.0))],
     }
     for i in range(4):
         def send(b, i=i):
@@ -380,22 +386,166 @@ def test_one_future_stamped_message_locks_nothing_out():
                                   HOME_ARM_POSITIONS)
 
 
-def test_a_sender_clock_that_jumps_is_followed():
+def test_a_sender_clock_that_jumps_stops_the_commands_until_it_recovers(
+        caplog):
     """The robot's clock jumps back by 50 s (a restart of its driver) and
-    later forward by 20 s (a clock step): the controller follows after
-    three consistent messages each time, without a stop."""
+    later forward by 20 s (a clock step, or another sender on its
+    channels): the controller takes the new clock after three consistent
+    messages, but as a stale stream: it stops at once, says why, and
+    resumes only once every stream has been fresh for the recovery time,
+    from rest within the acceleration limits."""
+    caplog.set_level(logging.WARNING, logger="drake_wbc.hardware")
     bench = Bench()
+    recovery = bench.options.watchdog_recovery_time
     bench.run(60)
-    for jump in (-50_000_000, 20_000_000):
+    for trips, jump in enumerate((-50_000_000, 20_000_000), start=1):
         bench.utime_offset += jump
-        bench.run(50)
+        start = bench.tick * H
+        bench.run(10)
+        diagnostics = bench.diagnostics()
+        assert diagnostics["watchdog_trips"] == trips
+        assert diagnostics["watchdog_tripped"] == 1.0
+        bench.run(110)
+        times, base = bench.commands("base", start)
+        # Zero from the check after the jump was taken (the third
+        # message, 2 periods in) until the recovery time has passed (the
+        # LIDAR's, at 1/6 of the rate, a little longer), then from rest
+        # within the acceleration limits.
+        taken = start + 2 * H + 2 * bench.options.watchdog_period
+        stopped = (times > taken) & (times < taken + recovery)
+        assert stopped.sum() >= recovery / H - 2
+        np.testing.assert_array_equal(base[stopped], 0.0)
+        assert np.all(_steps(base[times > taken]) <= 1.0 * H + 1e-10)
+        _rows_equal(base[times > bench.tick * H - 0.05], BASE_COMMAND)
     diagnostics = bench.diagnostics()
-    assert diagnostics["watchdog_trips"] == 0.0
+    assert diagnostics["watchdog_tripped"] == 0.0
     assert diagnostics["base_state_rejected"] == 4.0  # 2 a jump
     assert diagnostics["base_state_age"] <= H + 1e-9
     decoder = bench.hw.systems["decoder.base_state"]
     reception = decoder.reception(decoder.GetMyContextFromRoot(bench.root))
     assert reception.clock_jumps == 2
+    assert len(_records(caplog, "base_state (its sender's clock "
+                                "jumped)")) == 2
+
+
+class SteppedClock:
+    """A wall clock for a test: `now` s, moved by the test."""
+
+    def __init__(self):
+        self.now = 100.0
+
+    def __call__(self):
+        return self.now
+
+
+def test_a_controller_behind_the_wall_clock_stops_and_resumes_from_rest(
+        caplog):
+    """The controller's process misses the processor for 0.4 s while the
+    base moves: its clock stood still while the wall clock ran on (and
+    the robot's own command timeout stopped the base), so at its next
+    check every stream is stale. The base gets zero at once, the arm
+    stops within its limits, the run says why, and the commands resume
+    from rest once the controller has caught up and every stream has
+    been fresh for the recovery time."""
+    caplog.set_level(logging.WARNING, logger="drake_wbc.hardware")
+    clock = SteppedClock()
+    wall_clock = WallClock(clock=clock)
+    bench = Bench(wall_clock=wall_clock)
+    limits = Limits.of_robot(bench.options)
+    recovery = bench.options.watchdog_recovery_time
+    lag_limit = min(bench.options.watchdog_limits.as_tuple())
+    wall_clock.start(bench.root.get_time())
+
+    def in_step(bench):
+        clock.now = 100.0 + bench.tick * H + bench.behind
+
+    bench.behind = 0.0
+    bench.run(60, extra=in_step)
+    _rows_equal(bench.commands("base", 0.45)[1], BASE_COMMAND)
+    # A lag within the smallest watchdog limit changes nothing.
+    bench.behind = 0.9 * lag_limit
+    bench.run(10, extra=in_step)
+    assert bench.diagnostics()["watchdog_trips"] == 0.0
+    assert bench.diagnostics()["controller_lag"] == pytest.approx(
+        0.9 * lag_limit - H + bench.options.watchdog_period, abs=H)
+    # The stall: 0.4 s of wall clock, none of the controller's, caught up
+    # over the next 40 ticks.
+    stall = bench.tick * H
+    arm_before = bench.sent["arm"][-1][1]
+    caught_up = None
+    for k in range(40):
+        bench.behind = 0.4 * (1.0 - k / 40.0)
+        if caught_up is None and bench.behind <= lag_limit:
+            caught_up = bench.tick * H
+        bench.run(1, extra=in_step)
+    times, base = bench.commands("base", stall)
+    np.testing.assert_array_equal(base, 0.0)
+    assert times[0] < stall + 2 * bench.options.watchdog_period
+    diagnostics = bench.diagnostics()
+    assert diagnostics["watchdog_trips"] == 1.0
+    assert diagnostics["watchdog_tripped"] == 1.0
+    times, arm = bench.commands("arm", stall)
+    rate = np.diff(np.vstack([arm_before, arm]), axis=0) / H
+    assert np.all(np.abs(np.diff(rate, axis=0))
+                  <= limits.joint_acceleration * H + 1e-9)
+    assert len(_records(caplog, "behind the wall clock")) == 1
+    # In step again (from `caught_up`, to a period: the test's wall clock
+    # moves once a period, the controller's at every check): zero for the
+    # recovery time, then from rest within the acceleration limits.
+    bench.behind = 0.0
+    bench.run(100, extra=in_step)
+    times, base = bench.commands("base", caught_up)
+    np.testing.assert_array_equal(base[times < caught_up - H + recovery],
+                                  0.0)
+    assert np.all(_steps(base) <= limits.base_acceleration * H + 1e-10)
+    _rows_equal(base[times > caught_up + recovery + 0.35], BASE_COMMAND)
+    assert bench.diagnostics()["watchdog_trips"] == 1.0
+
+
+def test_the_wall_clock_measures_the_controllers_lag():
+    """WallClock.lag: the wall clock's seconds since `start` times the
+    rate, less the controller's; 0 before `start`."""
+    clock = SteppedClock()
+    wall_clock = WallClock(rate=0.5, clock=clock)
+    assert wall_clock.lag(3.0) == 0.0
+    wall_clock.start(1.0)
+    clock.now += 2.0  # one controller second at half real time
+    assert wall_clock.lag(2.0) == pytest.approx(0.0)
+    assert wall_clock.lag(1.5) == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="rate = 0.0 is not allowed"):
+        WallClock(rate=0)
+
+
+def test_the_final_stop_follows_the_runs_commands_on_the_robot():
+    """The stop a deployment sends when it ends is stamped on the run's
+    time base, after its last command: a robot whose receiver took the
+    run's commands takes every copy of the stop in sequence, also when
+    the controller's clock ended 0.4 s behind the wall clock."""
+    bench = Bench()
+    offset = 1.7e9
+    bench.hw.set_time_offset(bench.root, offset)
+    stamps = []
+    bench.lcm.Subscribe(bench.options.channels.base_command, lambda data:
+                        stamps.append(messages.decode_base_command(data)))
+    bench.run(60)
+    bench.simulator.AdvanceTo(bench.tick * H + 0.004)
+    # The robot's receiver took the run's last command at its now, the
+    # wall clock 0.4 s ahead of the controller's.
+    last = stamps[-1]
+    now = 1e-6 * last.utime + 0.4
+    reception = codecs.take(codecs.Reception(None, (np.zeros(3),), -np.inf),
+                            last, now)
+    count = len(stamps)
+    send_stop(bench.lcm, bench.options, HOME_ARM_POSITIONS,
+              bench.hw.sender, bench.hw.command_utime(bench.root) + 1)
+    bench.lcm.HandleSubscriptions(0)
+    stops = stamps[count:]
+    assert len(stops) == STOP_REPEATS
+    for i, stop in enumerate(stops):
+        np.testing.assert_array_equal(stop.values[0], 0.0)
+        reception = codecs.take(reception, stop, now + 0.002 * (i + 1))
+        assert reception.utime == stop.utime  # taken
+        assert reception.rejected == 0
 
 
 def test_a_flood_hides_no_genuine_message():

@@ -37,6 +37,7 @@ from drake_wbc.hardware.interface import (
     add_publisher,
 )
 from drake_wbc.hardware.options import STATUS_CHANNELS, HardwareOptions
+from drake_wbc.hardware.safety import WallClock
 from drake_wbc.math.validation import checked_instance, positive
 
 COMMANDS = ("base.velocity_command", "arm.position_command")
@@ -81,7 +82,7 @@ class ControllerSide:
 
 
 def add_controller_side(builder, scenario, variant=None, options=None,
-                        lcm=None):
+                        lcm=None, wall_clock=None):
     """Adds the controller, the task sources, the hardware interface and
     the diagnostics publisher to `builder` (see the module's docstring).
 
@@ -92,6 +93,9 @@ def add_controller_side(builder, scenario, variant=None, options=None,
         options: HardwareOptions (the scenario's, or the defaults, if
             None).
         lcm: the DrakeLcmInterface to talk over.
+        wall_clock: the WallClock of a run in real time (`deploy`), whose
+            lag the hardware interface's guard watches; None on
+            simulated time.
 
     Returns:
         ControllerSide.
@@ -111,7 +115,8 @@ def add_controller_side(builder, scenario, variant=None, options=None,
     # or another robot's home.
     hardware = HardwareInterface(
         options, lcm, None if scenario.robot
-        else scenario.station.initial_arm_positions, robot=arm)
+        else scenario.station.initial_arm_positions, robot=arm,
+        wall_clock=wall_clock)
     builder.AddNamedSystem("hardware", hardware.diagram)
     controller, sources = add_controller(
         builder, controller_for(scenario, variant), scenario.task,
@@ -166,7 +171,7 @@ def wait_for_status(lcm, options, num_joints, timeout=None, stop=None):
     """
     timeout = options.startup_timeout if timeout is None else positive(
         "timeout", timeout)
-    formats = message_formats(num_joints)
+    formats = message_formats(num_joints, options.max_obstacle_points)
     decoders = {getattr(options.channels, name): formats[name].decode
                 for name in STATUS_CHANNELS}
     received, waiting = {}, [True]
@@ -212,10 +217,15 @@ def wait_for_next(lcm, channel, timeout):
     return bool(arrived)
 
 
-def send_stop(lcm, options, arm_positions, sender, utime=None):
+def send_stop(lcm, options, arm_positions, sender, utime):
     """Sends zero base velocity and `arm_positions` (the arm held) on the
-    command channels, from `sender`, STOP_REPEATS times."""
-    utime = int(time.time() * 1e6) if utime is None else int(utime)
+    command channels, from `sender`, STOP_REPEATS times, stamped utime,
+    utime + 1, ...: `utime` later than the run's last command on the
+    run's time base (HardwareInterface.command_utime), so that the robot
+    takes each in sequence (a stamp of the wall clock is ahead of the
+    run's by as much as the controller fell behind, and beyond the
+    protocol's clock_tolerance the robot rejects it)."""
+    utime = int(utime)
     for i in range(STOP_REPEATS):
         lcm.Publish(options.channels.base_command,
                     messages.encode_base_command(utime + i, np.zeros(3),
@@ -272,8 +282,10 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
         "duration", duration)
     realtime_rate = positive("realtime_rate", realtime_rate)
     lcm = lcm or DrakeLcm(options.lcm_url)
+    wall_clock = WallClock(realtime_rate)
     builder = DiagramBuilder()
-    side = add_controller_side(builder, scenario, variant, options, lcm)
+    side = add_controller_side(builder, scenario, variant, options, lcm,
+                               wall_clock)
     diagram = builder.Build()
     diagram.set_name("deployment")
     status = wait_for_status(lcm, options, side.hardware.arm.num_joints,
@@ -297,6 +309,7 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
     side.hardware.discard_pending()
     started = time.perf_counter()
     try:
+        wall_clock.start(root.get_time())
         simulator.Initialize()
         if on_start is not None:
             on_start(held)
@@ -310,7 +323,9 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
             held = guard.GetOutputPort("arm_position_command").Eval(
                 guard.GetMyContextFromRoot(root))
     finally:
-        send_stop(lcm, options, held, side.hardware.sender)
+        # Stamped after the run's last command, on its time base.
+        send_stop(lcm, options, held, side.hardware.sender,
+                  utime=side.hardware.command_utime(root) + 1)
     elapsed = time.perf_counter() - started
     values = side.hardware.diagram.GetOutputPort(
         "hardware.diagnostics").Eval(

@@ -50,9 +50,11 @@ class MessageFormat(NamedTuple):
     ports: tuple
 
 
-def message_formats(num_joints):
+def message_formats(num_joints, max_points=None):
     """The message kinds of the protocol, by name, for an arm of
-    `num_joints` joints (an arm message of another size is refused)."""
+    `num_joints` joints (an arm message of another size is refused) and
+    obstacle point messages of at most `max_points` points (None: any
+    number)."""
     n = int(num_joints)
     if n < 1:
         raise ValueError(f"num_joints = {num_joints!r} is not allowed: must "
@@ -72,7 +74,9 @@ def message_formats(num_joints):
         MessageFormat("wrist_wrench", messages.encode_wrench,
                       messages.decode_wrench, (("wrench", 6),)),
         MessageFormat("obstacle_points", messages.encode_obstacle_points,
-                      messages.decode_obstacle_points, (("points", None),)),
+                      functools.partial(messages.decode_obstacle_points,
+                                        max_points=max_points),
+                      (("points", None),)),
     )}
 
 
@@ -80,9 +84,9 @@ MESSAGE_KINDS = tuple(message_formats(1))
 """The names of the protocol's message kinds."""
 
 
-def _format(message_format, num_joints):
-    """`message_format`, or the one of `message_formats(num_joints)` it
-    names."""
+def _format(message_format, num_joints, max_points=None):
+    """`message_format`, or the one of `message_formats(num_joints,
+    max_points)` it names."""
     if isinstance(message_format, MessageFormat):
         return message_format
     if message_format not in MESSAGE_KINDS:
@@ -92,7 +96,7 @@ def _format(message_format, num_joints):
     if num_joints is None and message_format.startswith("arm_"):
         raise ValueError(f"num_joints = None is not allowed for "
                          f"{message_format!r}: give the arm's joint count")
-    return message_formats(num_joints or 1)[message_format]
+    return message_formats(num_joints or 1, max_points)[message_format]
 
 
 class ClockRules(NamedTuple):
@@ -406,6 +410,7 @@ class MessageDecoder(LeafSystem):
                         │                ├──► <value ports of the format>
                         │ MessageDecoder ├──► age
                         │                ├──► rejected
+                        │                ├──► clock_jumps
                         └────────────────┘
 
     - value ports: as the format names them (e.g. `positions`,
@@ -414,6 +419,8 @@ class MessageDecoder(LeafSystem):
     - age: (1) s since the last good message was taken in (inf before
       the first), on the receiver's clock (the context's time).
     - rejected: (1) how many messages were rejected (see `receive`).
+    - clock_jumps: (1) how many times the sender's clock was taken to
+      have jumped (Reception.clock_jumps).
 
     It subscribes to `channel` itself and takes in every message
     delivered, in order, at the simulator step after the delivery (an
@@ -436,12 +443,16 @@ class MessageDecoder(LeafSystem):
             command timeout); None keeps the last values forever.
         rules: the ClockRules of the sender's time stamps.
         num_joints: the arm's joint count, for the arm's kinds by name.
+        max_points: the most points an obstacle points message may hold,
+            for that kind by name (None: any number).
     """
 
     def __init__(self, message_format, lcm, channel, defaults=None,
-                 timeout=None, rules=DEFAULT_RULES, num_joints=None):
+                 timeout=None, rules=DEFAULT_RULES, num_joints=None,
+                 max_points=None):
         super().__init__()
-        self.format = message_format = _format(message_format, num_joints)
+        self.format = message_format = _format(message_format, num_joints,
+                                               max_points)
         ports = message_format.ports
         if defaults is None:
             defaults = [np.zeros((0, 2)) if size is None else np.zeros(size)
@@ -473,6 +484,9 @@ class MessageDecoder(LeafSystem):
                         self._values(c)[i]))
         self.DeclareVectorOutputPort("age", 1, self._age)
         self.DeclareVectorOutputPort("rejected", 1, self._rejected)
+        self.DeclareVectorOutputPort(
+            "clock_jumps", 1, lambda c, o: o.SetAtIndex(
+                0, self.reception(c).clock_jumps))
         self.DeclarePerStepUnrestrictedUpdateEvent(self._update)
 
     def reception(self, context):
@@ -739,6 +753,11 @@ class MessageEncoder(LeafSystem):
         """Stamps messages with 1e6 (t + offset) in `context` (this
         system's or the root's)."""
         set_time_offset(self, context, offset)
+
+    def utime(self, context):
+        """The stamp of a message encoded at `context` (this system's or
+        the root's), microseconds."""
+        return _utime(self, self.GetMyContextFromRoot(context))
 
     def _encode(self, context, output):
         values = [port.Eval(context) for port in self._inputs]

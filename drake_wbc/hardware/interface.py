@@ -113,10 +113,13 @@ class HardwareInterface:
             shipped robot if None) or the ArmKinematics of one. Its arm
             sizes the arm's messages and ports, and its own limits bound
             the commands (Limits.of_robot).
+        wall_clock: the WallClock (drake_wbc.hardware.safety) of a run in
+            real time, whose lag the guard watches; None on simulated
+            time.
     """
 
     def __init__(self, options=None, lcm=None, initial_arm_positions=None,
-                 sender=None, robot=None):
+                 sender=None, robot=None, wall_clock=None):
         self.options = options = checked_instance(
             "options", options, HardwareOptions, HardwareOptions)
         if lcm is None:
@@ -141,16 +144,18 @@ class HardwareInterface:
             s[f"decoder.{name}"] = builder.AddNamedSystem(
                 f"decoder.{name}", MessageDecoder(
                     name, bus, getattr(channels, name), rules=rules,
-                    num_joints=n))
+                    num_joints=n, max_points=options.max_obstacle_points))
         s["guard"] = guard = builder.AddNamedSystem("guard", CommandGuard(
-            options, initial_arm_positions, Limits.of_robot(options, arm)))
-        ages = builder.AddNamedSystem("status_ages",
-                                      Multiplexer([1] * len(STATUS_CHANNELS)))
-        for i, name in enumerate(STATUS_CHANNELS):
-            builder.Connect(s[f"decoder.{name}"].GetOutputPort("age"),
-                            ages.get_input_port(i))
-        builder.Connect(ages.get_output_port(),
-                        guard.GetInputPort("status_ages"))
+            options, initial_arm_positions, Limits.of_robot(options, arm),
+            wall_clock=wall_clock))
+        for port, name in (("age", "status_ages"),
+                           ("clock_jumps", "clock_jumps")):
+            mux = builder.AddNamedSystem(
+                name, Multiplexer([1] * len(STATUS_CHANNELS)))
+            for i, channel in enumerate(STATUS_CHANNELS):
+                builder.Connect(s[f"decoder.{channel}"].GetOutputPort(port),
+                                mux.get_input_port(i))
+            builder.Connect(mux.get_output_port(), guard.GetInputPort(name))
         for name, port in (("base_command", "base_velocity_command"),
                            ("arm_command", "arm_position_command")):
             s[f"encoder.{name}"] = encoder = builder.AddNamedSystem(
@@ -211,6 +216,14 @@ class HardwareInterface:
         before the Simulator starts."""
         for name in STATUS_CHANNELS:
             self.systems[f"decoder.{name}"].discard_pending()
+
+    def command_utime(self, root_context):
+        """The stamp the commands carry at `root_context`'s time,
+        microseconds: a message sent by hand after the run (its final
+        stop) is stamped from it, on the same time base as the run's, so
+        that the robot takes it in sequence however far the controller's
+        clock is behind the wall clock."""
+        return self.systems["encoder.base_command"].utime(root_context)
 
     def set_time_offset(self, root_context, offset):
         """Stamps the commands with 1e6 (t + offset) microseconds, t the

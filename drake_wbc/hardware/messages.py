@@ -218,9 +218,16 @@ def encode_obstacle_points(utime, points):
     return message.encode()
 
 
-def decode_obstacle_points(data):
-    """Decoded (points (M, 2)) of obstacle_points_t bytes."""
+def decode_obstacle_points(data, max_points=None):
+    """Decoded (points (M, 2)) of obstacle_points_t bytes; more than
+    `max_points` points (None: any number) are refused, since the
+    controller's tick grows with them
+    (HardwareOptions.max_obstacle_points)."""
     m = _decode(obstacle_points_t, data)
+    if max_points is not None and m.num_points > max_points:
+        raise MessageError(
+            f"num_points = {m.num_points} is not allowed: must be at most "
+            f"{max_points} (hardware.max_obstacle_points)")
     x = _finite("x", m.x, m.num_points)
     y = _finite("y", m.y, m.num_points)
     return Decoded(m.utime, (np.column_stack([x, y]),))

@@ -219,6 +219,12 @@ class HardwareOptions:
             does not lose the robot to a stray sender meanwhile.
         startup_timeout: how long `drake-wbc deploy` waits for the
             robot's first status before giving up, s.
+        max_obstacle_points: the most points an obstacle points message
+            may hold (4096); one with more is rejected as malformed, since
+            the controller's tick grows with the points and a flood of
+            them would slow it below real time. A robot's LIDARs together
+            give fewer (the shipped robot's two TiM571 give 1622 a scan
+            pair); raise it for a robot whose scans hold more.
     """
 
     lcm_url: str = "udpm://239.255.76.67:7667?ttl=0"
@@ -241,6 +247,7 @@ class HardwareOptions:
     robot_command_timeout: float | None = None
     sender_release_time: float = 1.0
     startup_timeout: float = 10.0
+    max_obstacle_points: int = 4096
 
     def __post_init__(self):
         if not isinstance(self.lcm_url, str) or not self.lcm_url.startswith(
@@ -257,10 +264,13 @@ class HardwareOptions:
             if item.name in ROBOT_OWN and getattr(self, item.name) is None:
                 continue
             if item.name not in ("lcm_url", "channels", "watchdog_limits",
-                                 "clock_resync_messages"):
+                                 "clock_resync_messages",
+                                 "max_obstacle_points"):
                 positive(item.name, getattr(self, item.name))
         self.clock_resync_messages = whole_number(
             "clock_resync_messages", self.clock_resync_messages, 2)
+        self.max_obstacle_points = whole_number(
+            "max_obstacle_points", self.max_obstacle_points, 1)
         if self.publish_offset >= self.publish_period:
             raise ValueError(
                 f"publish_offset = {self.publish_offset!r} s is not allowed "

@@ -27,6 +27,7 @@ fresh for the recovery time.
 
 import logging
 import math
+import time
 from typing import NamedTuple
 
 import numpy as np
@@ -64,12 +65,15 @@ the base alone."""
 
 GUARD_STATUS = ("watchdog_tripped", "watchdog_trips", "base_stopped",
                 "base_stops", "base_command_saturated",
-                "arm_command_saturated", "invalid_commands")
+                "arm_command_saturated", "invalid_commands",
+                "controller_lag")
 """The entries of CommandGuard's `status` output: the full stop (0/1; 1
 also at the start until the streams' first messages) and how many began
 while the commands ran, the base's stop for want of fresh obstacle
 points (0/1, likewise) and how many, a command limited this period (0/1
-each), how many controller commands were not finite."""
+each), how many controller commands were not finite, and how far the
+controller's clock was behind the wall clock at the last check, s
+(WallClock; 0 on simulated time)."""
 
 
 class Limits(NamedTuple):
@@ -305,6 +309,10 @@ class GuardState(NamedTuple):
         urgent: a stop began at this check, between two command times:
             the base's zero goes out at the next check (CommandGuard's
             `urgent` output).
+        clock_jumps: (4,) per stream, how many times its sender's clock
+            had jumped at the last check (the decoders' counts).
+        lag: how far the controller's clock was behind the wall clock at
+            the last check, s.
     """
 
     base: np.ndarray
@@ -322,6 +330,8 @@ class GuardState(NamedTuple):
     fresh_since: tuple = (math.nan,) * len(STATUS_CHANNELS)
     recovering: tuple = (False,) * len(STATUS_CHANNELS)
     urgent: bool = False
+    clock_jumps: tuple = (0,) * len(STATUS_CHANNELS)
+    lag: float = 0.0
 
     def __deepcopy__(self, memo):
         # Never changed in place (only replaced), so the copies that Drake
@@ -360,17 +370,25 @@ class GuardConfig(NamedTuple):
                    limits or Limits.of_robot(options))
 
 
-def guard_step(state, now, ages, base, arm, command_time, config):
+def guard_step(state, now, ages, base, arm, command_time, config,
+               clock_jumps=None, lag=0.0):
     """One check of the command guard.
 
     Each stream is fresh while its age is within its watchdog limit; it
     counts once fresh, or, after it went stale, once fresh for
-    `config.recovery_time`. A stream of FULL_STOP_STREAMS that does not
-    count stops everything; obstacle_points stop the base. A stop that
-    begins between command times zeroes the base at once (`urgent`). At
-    a command time the commands to send are computed: in a full stop
-    (or for a controller command that is not finite) zero base velocity
-    and the arm stopping (`stop_arm`); otherwise the arm following the
+    `config.recovery_time`. A stream whose sender's clock jumped since
+    the last check (a restart or a clock step of the robot, or another
+    sender on its channel) is stale at this check: its freshness is not
+    to be judged across the jump. While the controller's clock is behind
+    the wall clock by more than the smallest watchdog limit (`lag`: its
+    process missed the processor, and the ages it measures stood still
+    meanwhile, while the robot's own command timeout ran) every stream
+    is stale. A stream of FULL_STOP_STREAMS that does not count stops
+    everything; obstacle_points stop the base. A stop that begins
+    between command times zeroes the base at once (`urgent`). At a
+    command time the commands to send are computed: in a full stop (or
+    for a controller command that is not finite) zero base velocity and
+    the arm stopping (`stop_arm`); otherwise the arm following the
     controller's (`follow_arm_command`) and the base zero in a base stop,
     else the controller's within the limits (`limit_base_command`), from
     what was sent last, so nothing jumps when the commands resume.
@@ -383,15 +401,25 @@ def guard_step(state, now, ages, base, arm, command_time, config):
         arm: (n,) the controller's arm command.
         command_time: whether this check computes the commands to send.
         config: GuardConfig.
+        clock_jumps: (4,) per stream, how many times its sender's clock
+            has jumped (the decoders' Reception.clock_jumps); None: none.
+        lag: s the controller's clock is behind the wall clock
+            (WallClock.lag; 0 on simulated time).
 
     Returns:
         (GuardState, list of (event, detail) for the log: "tripped",
         "cleared", "base stopped", "base cleared", "started").
     """
-    fresh_since, recovering, counts = [], [], []
+    jumps = state.clock_jumps if clock_jumps is None else tuple(
+        int(count) for count in clock_jumps)
+    lag_limit = min(config.watchdog_limits)
+    lagging = lag > lag_limit + AGE_TOLERANCE
+    fresh_since, recovering, counts, why = [], [], [], []
     for i, age in enumerate(ages):
         since, again = state.fresh_since[i], state.recovering[i]
-        if age <= config.watchdog_limits[i] + AGE_TOLERANCE:
+        jumped = jumps[i] > state.clock_jumps[i]
+        if age <= config.watchdog_limits[i] + AGE_TOLERANCE and not (
+                lagging or jumped):
             since = now - age if math.isnan(since) else since
             counts.append(not again or now - since
                           >= config.recovery_time - AGE_TOLERANCE)
@@ -401,13 +429,18 @@ def guard_step(state, now, ages, base, arm, command_time, config):
             counts.append(False)
         fresh_since.append(since)
         recovering.append(again)
+        if not counts[-1] and not lagging:
+            why.append(f"{STATUS_CHANNELS[i]} (its sender's clock jumped)"
+                       if jumped else
+                       f"{STATUS_CHANNELS[i]} (age {age:.3f} s, limit "
+                       f"{config.watchdog_limits[i]:.3f} s)")
     full = not all(counts[STATUS_CHANNELS.index(n)] for n in FULL_STOP_STREAMS)
     lidar = STATUS_CHANNELS.index("obstacle_points")
     base_stop = not counts[lidar]
-    stale = ", ".join(
-        f"{n} (age {a:.3f} s, limit {lim:.3f} s)"
-        for n, a, lim, c in zip(STATUS_CHANNELS, ages, config.watchdog_limits,
-                                counts, strict=True) if not c)
+    stale = ", ".join(why) if not lagging else (
+        f"every stream: the controller's clock is {lag:.3f} s behind the "
+        f"wall clock (limit {lag_limit:.3f} s), so its process missed the "
+        "processor and the streams' ages stood still")
     events = []
     tripped = full and not state.full_stop and state.started
     if tripped:
@@ -415,9 +448,12 @@ def guard_step(state, now, ages, base, arm, command_time, config):
     elif state.full_stop and not full:
         events.append(("cleared" if state.started else "started", ""))
     base_stopped = base_stop and not state.base_stop and state.started
-    if base_stopped:
+    # The base's own stop and recovery are said while the rest runs (a
+    # full stop's words cover the base).
+    if base_stopped and not full:
         events.append(("base stopped", stale))
-    elif state.base_stop and not base_stop and recovering[lidar]:
+    elif (state.base_stop and not base_stop and recovering[lidar]
+          and not full):
         events.append(("base cleared", ""))
     new = state._replace(
         full_stop=full, base_stop=base_stop,
@@ -425,7 +461,7 @@ def guard_step(state, now, ages, base, arm, command_time, config):
         trips=state.trips + tripped,
         base_stops=state.base_stops + base_stopped,
         fresh_since=tuple(fresh_since), recovering=tuple(recovering),
-        urgent=False)
+        urgent=False, clock_jumps=jumps, lag=float(lag))
     if not command_time:
         if (tripped or base_stopped) and np.any(state.base != 0.0):
             new = new._replace(base=np.zeros(3), urgent=True)
@@ -453,6 +489,46 @@ def guard_step(state, now, ages, base, arm, command_time, config):
                         arm_saturated=arm_saturated), events
 
 
+class WallClock:
+    """The wall clock a controller running in real time keeps pace with.
+
+    A deployed controller measures its streams' ages on its own clock,
+    the Simulator's, which stands still while its process misses the
+    processor (the scheduler, a swap, a stop signal) and then runs fast
+    to catch up. Meanwhile the robot's own command timeout runs on the
+    wall clock: its base stops, and the commands computed in the catch-up
+    would start it again with a step. `lag` says how far the controller's
+    clock is behind: the CommandGuard stops everything while it exceeds
+    the smallest watchdog limit, and the commands resume from rest after
+    the recovery time.
+
+    Args:
+        rate: the Simulator's target real-time rate (controller seconds
+            a wall-clock second), > 0.
+        clock: the wall clock, s (time.monotonic; a test may give its
+            own).
+    """
+
+    def __init__(self, rate=1.0, clock=time.monotonic):
+        self.rate = positive("rate", rate)
+        self._clock = clock
+        self._origin = None
+
+    def start(self, controller_time=0.0):
+        """Ties the controller's time `controller_time` (s) to the wall
+        clock's now: call it just before the Simulator starts pacing
+        (its Initialize)."""
+        self._origin = (self._clock(), float(controller_time))
+
+    def lag(self, controller_time):
+        """How far the controller's time `controller_time` (s) is behind
+        the wall clock, in controller seconds (0 before `start`)."""
+        if self._origin is None:
+            return 0.0
+        wall, start = self._origin
+        return self.rate * (self._clock() - wall) - (controller_time - start)
+
+
 class CommandGuard(LeafSystem):
     """The watchdog and the limits of the commands to the robot.
 
@@ -470,9 +546,12 @@ class CommandGuard(LeafSystem):
     - arm_position_command: (n) the controller's joint positions (n the
       size of the limits).
     - status_ages: (4) the ages of the streams of STATUS_CHANNELS, s.
+    - clock_jumps: optional (none when unconnected), (4) per stream, how
+      many times its sender's clock has jumped (the decoders'
+      `clock_jumps`): a jump is a stale stream at that check.
     - base_velocity_command, arm_position_command (outputs): what is
       sent, from state (`guard_step`).
-    - status: (7) GUARD_STATUS.
+    - status: (8) GUARD_STATUS.
     - urgent: (1) 1 when a stop began at the last check between two
       command times: a FlaggedPublisher sends the base's zero at once.
     - tripped: (1) 1 during a full stop of the watchdog (not while it
@@ -495,11 +574,16 @@ class CommandGuard(LeafSystem):
             sets it in a context); the robot's home if None.
         limits: Limits (Limits.of_robot(options), of the shipped robot,
             if None).
+        wall_clock: the WallClock the controller keeps pace with when it
+            runs in real time (drake_wbc.deployment.deploy), whose lag
+            every check reads; None on simulated time (no lag).
     """
 
     def __init__(self, options=None, initial_arm_positions=None,
-                 limits=None):
+                 limits=None, wall_clock=None):
         super().__init__()
+        self.wall_clock = checked_instance("wall_clock", wall_clock,
+                                           WallClock, lambda: None)
         self.options = options = checked_instance(
             "options", options, HardwareOptions, HardwareOptions)
         self.config = GuardConfig.of(options, limits)
@@ -514,6 +598,8 @@ class CommandGuard(LeafSystem):
         self._arm_in = self.DeclareVectorInputPort("arm_position_command", n)
         self._ages = self.DeclareVectorInputPort("status_ages",
                                                  len(STATUS_CHANNELS))
+        self._jumps = self.DeclareVectorInputPort("clock_jumps",
+                                                  len(STATUS_CHANNELS))
         self._state = self.DeclareAbstractState(AbstractValue.Make(
             GuardState.holding(initial)))
         self.DeclarePeriodicUnrestrictedUpdateEvent(
@@ -545,7 +631,8 @@ class CommandGuard(LeafSystem):
         s = self.stored(context)
         output.SetFromVector([
             float(s.full_stop), s.trips, float(s.base_stop), s.base_stops,
-            float(s.base_saturated), float(s.arm_saturated), s.invalid])
+            float(s.base_saturated), float(s.arm_saturated), s.invalid,
+            s.lag])
 
     def set_arm_command(self, context, positions):
         """Holds the arm at `positions` (and the base at rest) in `context`
@@ -560,9 +647,13 @@ class CommandGuard(LeafSystem):
                       / self.options.watchdog_period)
         command_time = check % self._checks_per_command == 0
         ages = self._ages.Eval(context)
+        jumps = (self._jumps.Eval(context) if self._jumps.HasValue(context)
+                 else None)
+        lag = 0.0 if self.wall_clock is None else self.wall_clock.lag(now)
         result, events = guard_step(
             self.stored(context), now, ages, self._base_in.Eval(context),
-            self._arm_in.Eval(context), command_time, self.config)
+            self._arm_in.Eval(context), command_time, self.config,
+            clock_jumps=jumps, lag=lag)
         for event, detail in events:
             _say(event, detail, now, self.options)
         if command_time and result.invalid > self.stored(context).invalid:
