@@ -91,6 +91,11 @@ def vector_injections():
                   "null_space_gain[0] = -0.1 is out of the range"),
         Injection("compensation_switch", (0, 1.5), Reason.OUT_OF_RANGE, 0,
                   "compensation_switch[0] = 1.5 is out of the range"),
+        # A joint read a million radians off (a corrupted or forged
+        # status): beyond the span of the joints' limits.
+        Injection("arm.position_measured", (5, 1e6), Reason.OUT_OF_RANGE, 5,
+                  "arm.position_measured[5] = 1000000.0 is out of the "
+                  "range"),
         Injection("lidar.obstacle_points", np.zeros(3), Reason.MALFORMED, -1,
                   "lidar.obstacle_points is malformed"),
     ]

@@ -97,6 +97,7 @@ from drake_wbc.controller.parameters import (
     check_arm_limits,
     for_robot,
 )
+from drake_wbc.math.safety import MEASURED_POSITION_MARGIN
 from drake_wbc.math.validation import checked_instance, validated_copy
 from drake_wbc.robot.model import arm_kinematics
 from drake_wbc.robot.tuning import RobotTuningWarning, check_tuning
@@ -379,12 +380,16 @@ def build_controller(params=None, robot=None):
 def _input_guard(params, arm):
     """The InputGuard of every controller input: the task inputs' defaults
     are the stages' parameters (what the stages used while their port was
-    not connected), and their ranges those the stages accept."""
+    not connected), and their ranges those the stages accept; the arm's
+    measured positions within the span of its joints' limits, give or
+    take MEASURED_POSITION_MARGIN (one range for every entry)."""
     inf = np.inf
     vector = GuardedInput
     inputs = (
         vector("base.state_estimated", 6),
-        vector("arm.position_measured", arm.num_joints, initial=arm.home),
+        vector("arm.position_measured", arm.num_joints, initial=arm.home,
+               lower=float(np.min(arm.lower)) - MEASURED_POSITION_MARGIN,
+               upper=float(np.max(arm.upper)) + MEASURED_POSITION_MARGIN),
         vector("wrist.wrench_measured", 6),
         vector("reference_velocity", 6, zero_when_stopped=True),
         vector("desired_wrench", 6,

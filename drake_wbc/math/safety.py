@@ -66,6 +66,12 @@ TIME_TOLERANCE = 1e-9
 """Rounding allowance (s) when the valid time is compared to the hold
 time."""
 
+MEASURED_POSITION_MARGIN = 0.1
+"""rad: how far beyond its joints' position limits an arm's measured
+position may read before the controller takes it for a fault (a
+corrupted or forged status): the encoders of a joint held at its limit
+read a little past it, and no arm reads 0.1 rad past it."""
+
 
 class Reason(IntEnum):
     """Why an input is not valid (the reason code of the safety status)."""
