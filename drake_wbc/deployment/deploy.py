@@ -309,8 +309,9 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
     side.hardware.discard_pending()
     started = time.perf_counter()
     try:
-        wall_clock.start(root.get_time())
         simulator.Initialize()
+        # Where the Simulator's pacing starts (Initialize resets it).
+        wall_clock.start(root.get_time())
         if on_start is not None:
             on_start(held)
         t = 0.0

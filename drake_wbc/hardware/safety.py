@@ -516,8 +516,8 @@ class WallClock:
 
     def start(self, controller_time=0.0):
         """Ties the controller's time `controller_time` (s) to the wall
-        clock's now: call it just before the Simulator starts pacing
-        (its Initialize)."""
+        clock's now: call it where the Simulator starts pacing (just
+        after its Initialize, which resets the pacing's reference)."""
         self._origin = (self._clock(), float(controller_time))
 
     def lag(self, controller_time):
