@@ -93,8 +93,8 @@ def add_controller_side(builder, scenario, variant=None, options=None,
         options: HardwareOptions (the scenario's, or the defaults, if
             None).
         lcm: the DrakeLcmInterface to talk over.
-        wall_clock: the WallClock of a run in real time (`deploy`), whose
-            lag the hardware interface's guard watches; None on
+        wall_clock: the WallClock of a run in real time (`deploy`), which
+            the hardware interface's guard reads at every check; None on
             simulated time.
 
     Returns:
@@ -310,8 +310,6 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
     started = time.perf_counter()
     try:
         simulator.Initialize()
-        # Where the Simulator's pacing starts (Initialize resets it).
-        wall_clock.start(root.get_time())
         if on_start is not None:
             on_start(held)
         t = 0.0

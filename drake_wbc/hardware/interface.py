@@ -114,8 +114,8 @@ class HardwareInterface:
             sizes the arm's messages and ports, and its own limits bound
             the commands (Limits.of_robot).
         wall_clock: the WallClock (drake_wbc.hardware.safety) of a run in
-            real time, whose lag the guard watches; None on simulated
-            time.
+            real time, which the guard reads at every check; None on
+            simulated time.
     """
 
     def __init__(self, options=None, lcm=None, initial_arm_positions=None,

@@ -66,14 +66,15 @@ the base alone."""
 GUARD_STATUS = ("watchdog_tripped", "watchdog_trips", "base_stopped",
                 "base_stops", "base_command_saturated",
                 "arm_command_saturated", "invalid_commands",
-                "controller_lag")
+                "check_interval")
 """The entries of CommandGuard's `status` output: the full stop (0/1; 1
 also at the start until the streams' first messages) and how many began
 while the commands ran, the base's stop for want of fresh obstacle
 points (0/1, likewise) and how many, a command limited this period (0/1
-each), how many controller commands were not finite, and how far the
-controller's clock was behind the wall clock at the last check, s
-(WallClock; 0 on simulated time)."""
+each), how many controller commands were not finite, and the wall
+clock's time between the last two checks, in controller seconds
+(WallClock; 0 on simulated time; the checks' period while the controller
+keeps pace)."""
 
 
 class Limits(NamedTuple):
@@ -88,6 +89,8 @@ class Limits(NamedTuple):
         joint_acceleration: (n,) the largest joint accelerations, rad/s^2.
         lower, upper: (n,) the joints' position limits, rad (n the arm's
             joints).
+        command_timeout: the robot side stops its base when no command
+            came for this long, s (`command_timeout_of`; inf: never).
     """
 
     base_speed: float
@@ -97,6 +100,7 @@ class Limits(NamedTuple):
     joint_acceleration: np.ndarray
     lower: np.ndarray
     upper: np.ndarray
+    command_timeout: float = math.inf
 
     @classmethod
     def of_robot(cls, options=None, arm=None):
@@ -115,7 +119,7 @@ class Limits(NamedTuple):
                                    HardwareOptions)
         arm = checked_instance("arm", arm, ArmKinematics, ArmKinematics)
         base = arm.model.description.base
-        command_timeout_of(options, base)
+        timeout = command_timeout_of(options, base)
         speed, acceleration = arm_own_limits(arm)
         own = {"base_speed_limit": (min(base.velocity_limits[:2]), "m/s"),
                "base_yaw_rate_limit": (base.velocity_limits[2], "rad/s"),
@@ -143,7 +147,7 @@ class Limits(NamedTuple):
                              value["base_yaw_acceleration_limit"]]),
                    np.array(value["joint_speed_limit"], dtype=float),
                    np.array(value["joint_acceleration_limit"], dtype=float),
-                   arm.lower.copy(), arm.upper.copy())
+                   arm.lower.copy(), arm.upper.copy(), float(timeout))
 
 
 def arm_own_limits(arm):
@@ -311,8 +315,10 @@ class GuardState(NamedTuple):
             `urgent` output).
         clock_jumps: (4,) per stream, how many times its sender's clock
             had jumped at the last check (the decoders' counts).
-        lag: how far the controller's clock was behind the wall clock at
-            the last check, s.
+        wall_time: the wall clock at the last check, in controller
+            seconds (WallClock.now; nan: none, on simulated time).
+        check_interval: the wall clock's time between the last two
+            checks, in controller seconds (0 on simulated time).
     """
 
     base: np.ndarray
@@ -331,7 +337,8 @@ class GuardState(NamedTuple):
     recovering: tuple = (False,) * len(STATUS_CHANNELS)
     urgent: bool = False
     clock_jumps: tuple = (0,) * len(STATUS_CHANNELS)
-    lag: float = 0.0
+    wall_time: float = math.nan
+    check_interval: float = 0.0
 
     def __deepcopy__(self, memo):
         # Never changed in place (only replaced), so the copies that Drake
@@ -370,8 +377,17 @@ class GuardConfig(NamedTuple):
                    limits or Limits.of_robot(options))
 
 
+def stall_limit(config):
+    """The longest time on the wall clock between two checks of the
+    guard, s: the robot's command timeout less one command period (the
+    last command before a stall went out up to a period before it),
+    beyond which the robot has stopped its base on its own (GuardConfig
+    `config`)."""
+    return config.limits.command_timeout - config.period
+
+
 def guard_step(state, now, ages, base, arm, command_time, config,
-               clock_jumps=None, lag=0.0):
+               clock_jumps=None, wall_time=None):
     """One check of the command guard.
 
     Each stream is fresh while its age is within its watchdog limit; it
@@ -379,12 +395,16 @@ def guard_step(state, now, ages, base, arm, command_time, config,
     `config.recovery_time`. A stream whose sender's clock jumped since
     the last check (a restart or a clock step of the robot, or another
     sender on its channel) is stale at this check: its freshness is not
-    to be judged across the jump. While the controller's clock is behind
-    the wall clock by more than the smallest watchdog limit (`lag`: its
-    process missed the processor, and the ages it measures stood still
-    meanwhile, while the robot's own command timeout ran) every stream
-    is stale. A stream of FULL_STOP_STREAMS that does not count stops
-    everything; obstacle_points stop the base. A stop that begins
+    to be judged across the jump. When the wall clock ran longer since
+    the last check than the robot's command timeout less a command
+    period (`stall_limit`: the controller's process missed the processor
+    so long, its own clock standing still), the robot has stopped its
+    base on its own timeout meanwhile: every stream is stale at this
+    check, so that the commands resume from rest after the recovery time
+    (a shorter stall is as a late message: the robot still runs the last
+    command, and the commands go on from it). A stream of
+    FULL_STOP_STREAMS that does not count stops everything;
+    obstacle_points stop the base. A stop that begins
     between command times zeroes the base at once (`urgent`). At a
     command time the commands to send are computed: in a full stop (or
     for a controller command that is not finite) zero base velocity and
@@ -403,8 +423,8 @@ def guard_step(state, now, ages, base, arm, command_time, config,
         config: GuardConfig.
         clock_jumps: (4,) per stream, how many times its sender's clock
             has jumped (the decoders' Reception.clock_jumps); None: none.
-        lag: s the controller's clock is behind the wall clock
-            (WallClock.lag; 0 on simulated time).
+        wall_time: the wall clock now, in controller seconds
+            (WallClock.now); None on simulated time.
 
     Returns:
         (GuardState, list of (event, detail) for the log: "tripped",
@@ -412,8 +432,9 @@ def guard_step(state, now, ages, base, arm, command_time, config,
     """
     jumps = state.clock_jumps if clock_jumps is None else tuple(
         int(count) for count in clock_jumps)
-    lag_limit = min(config.watchdog_limits)
-    lagging = lag > lag_limit + AGE_TOLERANCE
+    interval = (0.0 if wall_time is None or math.isnan(state.wall_time)
+                else wall_time - state.wall_time)
+    lagging = interval > stall_limit(config) + AGE_TOLERANCE
     fresh_since, recovering, counts, why = [], [], [], []
     for i, age in enumerate(ages):
         since, again = state.fresh_since[i], state.recovering[i]
@@ -438,9 +459,10 @@ def guard_step(state, now, ages, base, arm, command_time, config,
     lidar = STATUS_CHANNELS.index("obstacle_points")
     base_stop = not counts[lidar]
     stale = ", ".join(why) if not lagging else (
-        f"every stream: the controller's clock is {lag:.3f} s behind the "
-        f"wall clock (limit {lag_limit:.3f} s), so its process missed the "
-        "processor and the streams' ages stood still")
+        f"every stream: {interval:.3f} s of wall clock passed since the "
+        f"last check (limit {stall_limit(config):.3f} s): the controller's "
+        "process missed the processor for longer than the robot waits for "
+        "a command")
     events = []
     tripped = full and not state.full_stop and state.started
     if tripped:
@@ -461,7 +483,9 @@ def guard_step(state, now, ages, base, arm, command_time, config,
         trips=state.trips + tripped,
         base_stops=state.base_stops + base_stopped,
         fresh_since=tuple(fresh_since), recovering=tuple(recovering),
-        urgent=False, clock_jumps=jumps, lag=float(lag))
+        urgent=False, clock_jumps=jumps,
+        wall_time=math.nan if wall_time is None else float(wall_time),
+        check_interval=float(interval))
     if not command_time:
         if (tripped or base_stopped) and np.any(state.base != 0.0):
             new = new._replace(base=np.zeros(3), urgent=True)
@@ -490,17 +514,18 @@ def guard_step(state, now, ages, base, arm, command_time, config,
 
 
 class WallClock:
-    """The wall clock a controller running in real time keeps pace with.
+    """The wall clock of a controller running in real time.
 
     A deployed controller measures its streams' ages on its own clock,
     the Simulator's, which stands still while its process misses the
     processor (the scheduler, a swap, a stop signal) and then runs fast
     to catch up. Meanwhile the robot's own command timeout runs on the
     wall clock: its base stops, and the commands computed in the catch-up
-    would start it again with a step. `lag` says how far the controller's
-    clock is behind: the CommandGuard stops everything while it exceeds
-    the smallest watchdog limit, and the commands resume from rest after
-    the recovery time.
+    would start it again with a step. The CommandGuard reads `now` at
+    each of its checks: a check that finds more of the wall clock passed
+    since the one before than the robot's command timeout less a period
+    (`stall_limit`) stops everything, and the commands resume from rest
+    after the recovery time.
 
     Args:
         rate: the Simulator's target real-time rate (controller seconds
@@ -512,21 +537,11 @@ class WallClock:
     def __init__(self, rate=1.0, clock=time.monotonic):
         self.rate = positive("rate", rate)
         self._clock = clock
-        self._origin = None
 
-    def start(self, controller_time=0.0):
-        """Ties the controller's time `controller_time` (s) to the wall
-        clock's now: call it where the Simulator starts pacing (just
-        after its Initialize, which resets the pacing's reference)."""
-        self._origin = (self._clock(), float(controller_time))
-
-    def lag(self, controller_time):
-        """How far the controller's time `controller_time` (s) is behind
-        the wall clock, in controller seconds (0 before `start`)."""
-        if self._origin is None:
-            return 0.0
-        wall, start = self._origin
-        return self.rate * (self._clock() - wall) - (controller_time - start)
+    def now(self):
+        """The wall clock, in controller seconds (its differences are
+        what counts)."""
+        return self.rate * self._clock()
 
 
 class CommandGuard(LeafSystem):
@@ -574,9 +589,9 @@ class CommandGuard(LeafSystem):
             sets it in a context); the robot's home if None.
         limits: Limits (Limits.of_robot(options), of the shipped robot,
             if None).
-        wall_clock: the WallClock the controller keeps pace with when it
-            runs in real time (drake_wbc.deployment.deploy), whose lag
-            every check reads; None on simulated time (no lag).
+        wall_clock: the WallClock of a controller running in real time
+            (drake_wbc.deployment.deploy), which every check reads; None
+            on simulated time.
     """
 
     def __init__(self, options=None, initial_arm_positions=None,
@@ -632,7 +647,7 @@ class CommandGuard(LeafSystem):
         output.SetFromVector([
             float(s.full_stop), s.trips, float(s.base_stop), s.base_stops,
             float(s.base_saturated), float(s.arm_saturated), s.invalid,
-            s.lag])
+            s.check_interval])
 
     def set_arm_command(self, context, positions):
         """Holds the arm at `positions` (and the base at rest) in `context`
@@ -649,11 +664,12 @@ class CommandGuard(LeafSystem):
         ages = self._ages.Eval(context)
         jumps = (self._jumps.Eval(context) if self._jumps.HasValue(context)
                  else None)
-        lag = 0.0 if self.wall_clock is None else self.wall_clock.lag(now)
+        wall_time = (None if self.wall_clock is None
+                     else self.wall_clock.now())
         result, events = guard_step(
             self.stored(context), now, ages, self._base_in.Eval(context),
             self._arm_in.Eval(context), command_time, self.config,
-            clock_jumps=jumps, lag=lag)
+            clock_jumps=jumps, wall_time=wall_time)
         for event, detail in events:
             _say(event, detail, now, self.options)
         if command_time and result.invalid > self.stored(context).invalid:
