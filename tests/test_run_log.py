@@ -146,6 +146,19 @@ def test_an_lcm_logs_joint_columns_are_one_a_joint(tmp_path):
         f"v{i}" for i in range(1, n + 1))
 
 
+def test_the_real_time_factor_reads_back(tmp_path):
+    """save then load gives the run's real-time factor, and NaN back for
+    a run that does not know it."""
+    builder = DiagramBuilder()
+    log = SignalLogger(builder, _signals(builder), 0.02)
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(0.1)
+    for factor in (2.5, np.nan):
+        run = log.run_log(simulator.get_context(), real_time_factor=factor)
+        back = RunLog.load(run.save(tmp_path / "run"))
+        np.testing.assert_equal(back.real_time_factor, factor)
+
+
 def test_names_that_do_not_fit_the_signal_are_refused():
     """A signal that SIGNALS names with a fixed tuple, logged from a port
     of another size, is refused rather than mislabelled."""

@@ -153,15 +153,18 @@ class RunLog:
 
     def save(self, path):
         """Writes the log as NPZ (arrays `time` and one per signal, and
-        `header`, a JSON description of the columns and units) and as CSV
-        next to it (one column per signal's component)."""
+        `header`, a JSON description of the columns and units and the
+        real-time factor, null if unknown) and as CSV next to it (one
+        column per signal's component)."""
         import json
 
+        factor = float(self.real_time_factor)
         header = json.dumps({
             "time": "s",
             "signals": {k: list(v) for k, v in self.columns.items()},
             "units": "SI: m, rad, s, N, N m; twists [v; w]; see "
                      "drake_wbc.controller.run_log.SIGNALS",
+            "real_time_factor": None if np.isnan(factor) else factor,
         })
         np.savez_compressed(path.with_suffix(".npz"), time=self.time,
                             header=header, **self.signals)
@@ -174,11 +177,14 @@ class RunLog:
 
     @classmethod
     def load(cls, path):
-        """Reads a log written by `save` (the .npz file)."""
+        """Reads a log written by `save` (the .npz file); its real-time
+        factor is NaN if the log does not know it."""
         import json
 
         with np.load(path) as data:
             header = json.loads(str(data["header"]))
             signals = {k: data[k] for k in header["signals"]}
             columns = {k: tuple(v) for k, v in header["signals"].items()}
-            return cls(data["time"], signals, columns)
+            factor = header.get("real_time_factor")
+            return cls(data["time"], signals, columns,
+                       np.nan if factor is None else factor)
