@@ -44,7 +44,11 @@ def BaseCdmp_(T):
 
         Args:
             params: cdmp.BaseCdmpParameters (checked where they were
-                made; paper values if None), read here.
+                made), read here, with repulsion.half_sizes (the
+                footprint) given: its default None stands for the
+                robot's own, which build_controller fills in, and is
+                refused here (ValueError), as is params None (the
+                defaults).
             time_step: control period h (0: continuous), default 0.01 s.
         """
 
