@@ -268,7 +268,7 @@ def MovementTracking_(T):
           K (p*(t) - p) on x, y, z and yaw (0 on roll and pitch, and
           before the movement's start_time), p* = player.reference(t), p
           the TCP's pose through the nominal kinematics
-          (demonstration.TcpPose), the yaw error wrapped into (-pi, pi].
+          (demonstration.TcpPose), the yaw error wrapped into [-pi, pi).
 
         It enters the whole-body CDMP as the coupling C of eq. (cdmp-wb)
         (C_dot = V_ee^ref), an integral action of gain K on the TCP's
