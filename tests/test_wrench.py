@@ -412,3 +412,14 @@ def test_the_arm_frame_wrench_follows_a_change_of_the_remembered_positions(
     base = in_base.Eval(context)
     np.testing.assert_allclose(after, np.r_[R_ab @ base[:3], R_ab @ base[3:]],
                                rtol=0, atol=1e-12 * np.abs(base).max())
+
+
+def test_the_arm_must_be_an_arm_kinematics():
+    """Anything else than an ArmKinematics (or None) is refused naming
+    the argument, as the sibling stages do: a RobotDescription too."""
+    from drake_wbc.robot.description import shipped_robot
+
+    for arm in (shipped_robot(), "arm", 6):
+        with pytest.raises(ValueError, match=r"arm = .* ArmKinematics"):
+            ExternalWrenchEstimator(arm)
+    assert isinstance(ExternalWrenchEstimator()._arm, ArmKinematics)

@@ -128,7 +128,8 @@ def ExternalWrenchEstimator_(T):
         through through_float_function.
 
         Args:
-            arm: an ArmKinematics of the robot (a new one if None).
+            arm: an ArmKinematics of the robot (a new one of the shipped
+                robot if None); anything else is refused (ValueError).
             params: WrenchEstimatorParameters (the weight alone if None).
             time_step: the control period h, s (the arm positions'
                 sample period, with inertia compensation).
@@ -137,7 +138,8 @@ def ExternalWrenchEstimator_(T):
         def _construct(self, arm=None, params=None, time_step=0.01,
                        converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self._arm = ArmKinematics() if arm is None else arm
+            self._arm = checked_instance("arm", arm, ArmKinematics,
+                                         ArmKinematics)
             self.params = checked_instance(
                 "params", params, WrenchEstimatorParameters,
                 WrenchEstimatorParameters)
