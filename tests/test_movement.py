@@ -410,3 +410,14 @@ def test_the_tasks_tracking_uses_the_controllers_arm(given):
     assert tracking._pose.arm is controller.arm
     assert tracking.GetInputPort("arm.position_measured").size() == (
         controller.arm.num_joints)
+
+
+def test_movement_tracking_refuses_what_is_not_an_arm_kinematics(
+        player_stage):
+    """A RobotDescription (or anything but an ArmKinematics or None) is
+    refused naming the argument, not failed on later."""
+    from drake_wbc.robot.description import shipped_robot
+
+    for arm in (shipped_robot(), "arm"):
+        with pytest.raises(ValueError, match=r"arm = .* ArmKinematics"):
+            MovementTracking(player_stage.player, arm)

@@ -42,6 +42,7 @@ from drake_wbc.math.movement import (
 )
 from drake_wbc.math.scalar_support import value_of
 from drake_wbc.math.validation import checked_instance, switch
+from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.cdmp_base import ONE, AffineDynamics, CdmpStage
 from drake_wbc.stages.support import define_stage, shared_arm_kinematics
 
@@ -279,13 +280,15 @@ def MovementTracking_(T):
 
         Args:
             player: the movement.MovementPlayer of the WholeBodyCdmp.
-            arm: an ArmKinematics (the shipped robot's if None).
+            arm: an ArmKinematics (the shipped robot's if None);
+                anything else is refused (ValueError).
         """
 
         def _construct(self, player, arm=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.player = player
-            arm = arm or shared_arm_kinematics()
+            arm = checked_instance("arm", arm, ArmKinematics,
+                                   shared_arm_kinematics)
             self._pose = TcpPose(arm)
             self._tcp_pose_in_world = body_for(tcp_pose_in_world, float)
             self._base = self.DeclareVectorInputPort(
