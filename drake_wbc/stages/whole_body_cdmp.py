@@ -44,7 +44,11 @@ from drake_wbc.math.scalar_support import value_of
 from drake_wbc.math.validation import checked_instance, switch
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.cdmp_base import ONE, AffineDynamics, CdmpStage
-from drake_wbc.stages.support import define_stage, shared_arm_kinematics
+from drake_wbc.stages.support import (
+    define_stage,
+    optional_scalar,
+    shared_arm_kinematics,
+)
 
 
 def movement_player(params):
@@ -184,11 +188,6 @@ def WholeBodyCdmp_(T):
                             other._default_switch, converter=converter,
                             player=other.player)
 
-        def _base_yaw(self, context):
-            """phi_b from its input port, 0 when unconnected."""
-            yaw = self._yaw
-            return yaw.Eval(context)[0] if yaw.HasValue(context) else 0.0
-
         def _model_key(self, context, t=None):
             """The model in force at time t (the context's if None)."""
             s_hri = self._switch(context)
@@ -200,7 +199,7 @@ def WholeBodyCdmp_(T):
         def _inputs(self, context):
             """u (continuous time): the reference, the wrench and the
             deviation in the world, and the movement's g and f at t."""
-            yaw = self._base_yaw(context)
+            yaw = optional_scalar(self._yaw, context, 0.0)
             parts = [self._reference.Eval(context),
                      self._in_world(self._wrench.Eval(context), yaw),
                      self._in_world(self._deviation.Eval(context), yaw)]
@@ -211,7 +210,7 @@ def WholeBodyCdmp_(T):
         def _calc_result(self, context, value):
             """(V_ee in T_b, the next state without the deviation's part,
             the model of the update, the yaw)."""
-            yaw = self._base_yaw(context)
+            yaw = optional_scalar(self._yaw, context, 0.0)
             known = (self._state(context), self._reference.Eval(context),
                      self._in_world(self._wrench.Eval(context), yaw))
             player, d = self.player, self._dimension
