@@ -50,6 +50,15 @@ from drake_wbc.stages.support import (
     shared_arm_kinematics,
 )
 
+# The input u of the affine models: V_ee^ref, then F_ext and delta_V_ee
+# rotated into the world (18 entries), and with a learned movement its goal
+# g and forcing term f (30 entries).
+_REFERENCE = slice(0, 6)
+_WRENCH = slice(6, 12)
+_DEVIATION = slice(12, 18)
+_GOAL = slice(18, 24)
+_FORCING = slice(24, 30)
+
 
 def movement_player(params):
     """The movement.MovementPlayer of params.movement (None without one),
@@ -126,7 +135,8 @@ def WholeBodyCdmp_(T):
             self._dimension = 6
             self._default_switch = switch("phri_switch", phri_switch)
             self.player = player or movement_player(params)
-            num_inputs = 18 if self.player is None else 30
+            num_inputs = (_DEVIATION.stop if self.player is None
+                          else _FORCING.stop)
             self._in_world = body_for(twist_in_world, T)
             self._in_base = body_for(twist_in_base, T)
 
@@ -136,26 +146,28 @@ def WholeBodyCdmp_(T):
 
                 def f(x, u):
                     y, z, C, E = np.split(x, 4)
-                    g, forcing = ((u[18:24], u[24:30]) if num_inputs == 30
+                    g, forcing = ((u[_GOAL], u[_FORCING])
+                                  if num_inputs == _FORCING.stop
                                   else (np.zeros(6), 0.0))
                     return np.concatenate(cdmp.whole_body_cdmp_derivative(
-                        y, z, C, E, g, u[:6], u[6:12], u[12:18], params,
-                        S_hri=s_hri, forcing=forcing, dmp=dmp))
+                        y, z, C, E, g, u[_REFERENCE], u[_WRENCH],
+                        u[_DEVIATION], params, S_hri=s_hri, forcing=forcing,
+                        dmp=dmp))
                 return f
 
             if self.player is None:
                 self._models = {
-                    s: AffineDynamics(derivative(s, False), 24, 18,
-                                      time_step)
+                    s: AffineDynamics(derivative(s, False), 24,
+                                      num_inputs, time_step)
                     for s in (0, 1)
                 }
             else:
                 self._models = {
                     (s, playing): AffineDynamics(
-                        derivative(s, playing), 24, 30, time_step)
+                        derivative(s, playing), 24, num_inputs, time_step)
                     for s in (0, 1) for playing in (False, True)
                 }
-            self._check_state_only(slice(12, 18))
+            self._check_state_only(_DEVIATION)
             self._reference = self.DeclareVectorInputPort(
                 "reference_velocity", 6)
             self._wrench = self.DeclareVectorInputPort("wrench", 6)
@@ -175,10 +187,11 @@ def WholeBodyCdmp_(T):
             # The shared result leaves out the deviation (state only),
             # which the update adds: B_d's columns of it.
             self._declare_output("end_effector_velocity", prerequisites, [
-                i for i in range(num_inputs) if not 12 <= i < 18])
+                i for i in range(num_inputs)
+                if not _DEVIATION.start <= i < _DEVIATION.stop])
             if time_step > 0.0:
                 self._deviation_columns = {
-                    key: np.ascontiguousarray(model.B_d[:, 12:18])
+                    key: np.ascontiguousarray(model.B_d[:, _DEVIATION])
                     for key, model in self._models.items()}
 
         def _construct_copy(self, other, converter=None):
