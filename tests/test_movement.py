@@ -355,3 +355,69 @@ def test_tcp_pose_is_the_plants():
             pose(base, q), np.r_[X_WT.translation(),
                                  np.arctan2(R[1, 0], R[0, 0])],
             rtol=0, atol=1e-14)
+
+
+def _stub_station(num_joints):
+    """A Diagram with the station's ports: constant measurements out
+    (controller.diagram.STATION_INPUTS), the two commands into sinks."""
+    from pydrake.common.value import AbstractValue
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import (
+        ConstantValueSource,
+        ConstantVectorSource,
+        VectorLogSink,
+    )
+
+    builder = DiagramBuilder()
+    for name, size in (("base.state_estimated", 6),
+                       ("arm.position_measured", num_joints),
+                       ("wrist.wrench_measured", 6)):
+        source = builder.AddSystem(ConstantVectorSource(np.zeros(size)))
+        builder.ExportOutput(source.get_output_port(), name)
+    points = builder.AddSystem(ConstantValueSource(
+        AbstractValue.Make(np.zeros((0, 2)))))
+    builder.ExportOutput(points.get_output_port(), "lidar.obstacle_points")
+    for name, size in (("base.velocity_command", 3),
+                       ("arm.position_command", num_joints)):
+        sink = builder.AddSystem(VectorLogSink(size))
+        builder.ExportInput(sink.get_input_port(), name)
+    return builder.Build()
+
+
+@pytest.mark.parametrize("given", ["description", "none"])
+def test_the_tasks_tracking_uses_the_controllers_arm(given):
+    """add_controller with a learned movement to track: the task's
+    MovementTracking measures the TCP with the controller's own
+    ArmKinematics, whether the caller gave a RobotDescription or
+    nothing."""
+    from pydrake.systems.framework import DiagramBuilder
+
+    from drake_wbc.controller.parameters import ControllerParameters
+    from drake_wbc.controller.task import TaskInputs, add_controller
+    from drake_wbc.robot.description import shipped_robot
+
+    robot = shipped_robot()
+    params = ControllerParameters()
+    params.whole_body_cdmp.movement = MOVEMENT
+    builder = DiagramBuilder()
+    station = builder.AddNamedSystem(
+        "station", _stub_station(robot.num_arm_joints))
+    controller, _ = add_controller(
+        builder, params, TaskInputs(), station,
+        arm=robot if given == "description" else None)
+    tracking = builder.GetSubsystemByName("task.movement_tracking")
+    assert isinstance(tracking, MovementTracking)
+    assert tracking._pose.arm is controller.arm
+    assert tracking.GetInputPort("arm.position_measured").size() == (
+        controller.arm.num_joints)
+
+
+def test_movement_tracking_refuses_what_is_not_an_arm_kinematics(
+        player_stage):
+    """A RobotDescription (or anything but an ArmKinematics or None) is
+    refused naming the argument, not failed on later."""
+    from drake_wbc.robot.description import shipped_robot
+
+    for arm in (shipped_robot(), "arm"):
+        with pytest.raises(ValueError, match=r"arm = .* ArmKinematics"):
+            MovementTracking(player_stage.player, arm)

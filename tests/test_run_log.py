@@ -13,6 +13,7 @@ from pydrake.systems.primitives import (
 )
 
 from drake_wbc.controller.run_log import RunLog, SignalLogger
+from drake_wbc.robot.description import load_robot_description, models_dir
 
 
 def _signals(builder):
@@ -81,3 +82,91 @@ def test_run_log_files_read_back(tmp_path):
     np.testing.assert_allclose(table[:, 0], run.time, rtol=1e-8)
     np.testing.assert_allclose(table[:, 1:4], run["sine"], rtol=1e-8,
                                atol=1e-12)
+
+
+def _robot_log(robot, period=0.05, duration=0.2):
+    """The RunLog of a robot's arm standing at home: its measured and
+    commanded positions, one entry a joint of the robot's description."""
+    home = np.asarray(robot.arm.home, dtype=float)
+    builder = DiagramBuilder()
+    source = builder.AddSystem(ConstantVectorSource(home))
+    log = SignalLogger(builder, {
+        "arm.position_measured": source.get_output_port(),
+        "arm.position_command": source.get_output_port()}, period)
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(duration)
+    return log.run_log(simulator.get_context())
+
+
+def test_a_seven_joint_arms_columns_are_one_a_joint(tmp_path):
+    """The second shipped robot's seven joints: q1, ..., q7 in the log and
+    in the CSV, whose header has as many fields as each row."""
+    robot = load_robot_description(models_dir() / "lbr_omni.robot.yaml")
+    n = robot.num_arm_joints
+    assert n == 7
+    run = _robot_log(robot)
+    expected = tuple(f"q{i}" for i in range(1, n + 1))
+    assert run.columns == {"arm.position_measured": expected,
+                           "arm.position_command": expected}
+    run.save(tmp_path / "run")
+    lines = (tmp_path / "run.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    assert header == ["time"] + [f"{signal}.{name}" for signal in run.columns
+                                 for name in expected]
+    assert {len(line.split(",")) for line in lines[1:]} == {len(header)}
+    table = np.loadtxt(tmp_path / "run.csv", delimiter=",", skiprows=1)
+    np.testing.assert_allclose(table[:, 1:1 + n], run["arm.position_measured"],
+                               rtol=1e-8)
+
+
+def test_an_lcm_logs_joint_columns_are_one_a_joint(tmp_path):
+    """A seven-joint arm's status read from an LCM log: positions q1, ...,
+    q7 and velocities v1, ..., v7."""
+    import lcm
+
+    from drake_wbc.deployment.lcm_logs import read_lcm_log
+    from drake_wbc.hardware import messages
+    from drake_wbc.hardware.options import HardwareOptions
+
+    robot = load_robot_description(models_dir() / "lbr_omni.robot.yaml")
+    n = robot.num_arm_joints
+    home = np.asarray(robot.arm.home, dtype=float)
+    path = tmp_path / "run.lcmlog"
+    channel = HardwareOptions().channels.arm_status
+    log = lcm.EventLog(str(path), "w", overwrite=True)
+    for k in range(3):
+        log.write_event(k * 10000, channel, messages.encode_arm_status(
+            0.01 * k, home, np.zeros(n)))
+    log.close()
+    run = read_lcm_log(path)
+    assert run["arm.position_measured"].shape[1] == n
+    assert run.columns["arm.position_measured"] == tuple(
+        f"q{i}" for i in range(1, n + 1))
+    assert run.columns["arm.velocity_estimated"] == tuple(
+        f"v{i}" for i in range(1, n + 1))
+
+
+def test_the_real_time_factor_reads_back(tmp_path):
+    """save then load gives the run's real-time factor, and NaN back for
+    a run that does not know it."""
+    builder = DiagramBuilder()
+    log = SignalLogger(builder, _signals(builder), 0.02)
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(0.1)
+    for factor in (2.5, np.nan):
+        run = log.run_log(simulator.get_context(), real_time_factor=factor)
+        back = RunLog.load(run.save(tmp_path / "run"))
+        np.testing.assert_equal(back.real_time_factor, factor)
+
+
+def test_names_that_do_not_fit_the_signal_are_refused():
+    """A signal that SIGNALS names with a fixed tuple, logged from a port
+    of another size, is refused rather than mislabelled."""
+    from drake_wbc.controller.run_log import SIGNALS
+
+    builder = DiagramBuilder()
+    size = len(SIGNALS["alpha"]) + 1
+    source = builder.AddSystem(ConstantVectorSource(np.zeros(size)))
+    with pytest.raises(ValueError,
+                       match=rf"SIGNALS\['alpha'\] = .* have {size} names"):
+        SignalLogger(builder, {"alpha": source.get_output_port()}, 0.01)

@@ -90,6 +90,13 @@ def test_stop_switched_builds_if_then_else_on_symbols():
         assert entry.Evaluate(env) == 0.0
 
 
-def test_the_size_is_checked():
-    with pytest.raises(ValueError, match="size"):
-        StopSwitch(0)
+@pytest.mark.parametrize("stage", [StopSwitch, StopGate])
+def test_the_size_is_checked(stage):
+    """A size that is not a whole number >= 1 is refused by both stages
+    alike; a whole float gives ports of that size."""
+    for size in (0, -1, 2.7, True):
+        with pytest.raises(ValueError, match="size"):
+            stage(size)
+    system = stage(3.0)
+    assert system.size == 3
+    assert system.GetInputPort("value").size() == 3

@@ -373,3 +373,53 @@ def test_the_compensating_estimator_remembers_the_last_three_positions(arm):
     state = estimator.EvalUniquePeriodicDiscreteUpdate(context)
     np.testing.assert_array_equal(state.get_vector().CopyToVector(),
                                   np.r_[q[3], q[2], q[1]])
+
+
+@pytest.mark.parametrize("mount", [ArmMount(), MOUNTS["tilted"]],
+                         ids=["shipped", "tilted"])
+def test_the_arm_frame_wrench_follows_a_change_of_the_remembered_positions(
+        mount):
+    """With inertia compensation both outputs depend on the remembered
+    arm positions (the state): after only the state changes, the T_a
+    wrench evaluated in the same context is a fresh context's, R_ba^T of
+    the T_b one, and not the value before the change."""
+    from drake_wbc.math.wrench import WrenchEstimatorParameters
+
+    arm = ArmKinematics(mount=mount)
+    estimator = ExternalWrenchEstimator(arm, WrenchEstimatorParameters(
+        inertia_compensation=True))
+    q = np.asarray(arm.home, dtype=float)
+    past = np.r_[q + 0.05, q + 0.1, q + 0.15]
+    reading = tool_weight_reading(arm, q)
+
+    def context_with(state):
+        context = estimator.CreateDefaultContext()
+        context.SetDiscreteState(state)
+        estimator.GetInputPort("wrist_wrench").FixValue(context, reading)
+        estimator.GetInputPort("arm_position").FixValue(context, q)
+        return context
+
+    in_arm = estimator.GetOutputPort("external_wrench")
+    in_base = estimator.GetOutputPort("external_wrench_in_base")
+    context = context_with(np.tile(q, 3))
+    before = in_arm.Eval(context).copy()
+    context.SetDiscreteState(past)
+    after = in_arm.Eval(context)
+    fresh = in_arm.Eval(context_with(past))
+    assert np.max(np.abs(fresh - before)) > 1e-3
+    np.testing.assert_array_equal(after, fresh)
+    R_ab = arm.R_ba.T
+    base = in_base.Eval(context)
+    np.testing.assert_allclose(after, np.r_[R_ab @ base[:3], R_ab @ base[3:]],
+                               rtol=0, atol=1e-12 * np.abs(base).max())
+
+
+def test_the_arm_must_be_an_arm_kinematics():
+    """Anything else than an ArmKinematics (or None) is refused naming
+    the argument, as the sibling stages do: a RobotDescription too."""
+    from drake_wbc.robot.description import shipped_robot
+
+    for arm in (shipped_robot(), "arm", 6):
+        with pytest.raises(ValueError, match=r"arm = .* ArmKinematics"):
+            ExternalWrenchEstimator(arm)
+    assert isinstance(ExternalWrenchEstimator()._arm, ArmKinematics)

@@ -15,7 +15,7 @@ from drake_wbc.math.safety import STATUS_FIELDS
 SIGNALS = {
     # station: what the robot's sensors report
     "base.state_estimated": ("x", "y", "yaw", "vx", "vy", "wz"),
-    "arm.position_measured": tuple(f"q{i}" for i in range(1, 7)),
+    "arm.position_measured": "q",  # q1, ..., qn: one a joint
     "wrist.wrench_measured": ("fx", "fy", "fz", "tx", "ty", "tz"),
     # station: ground truth, for metrics
     "truth.end_effector_pose": ("x", "y", "z", "roll", "pitch", "yaw"),
@@ -28,7 +28,7 @@ SIGNALS = {
     "truth.people_positions": None,  # x0, y0, x1, y1, ...
     # controller: commands and diagnostics
     "base.velocity_command": ("vx", "vy", "wz"),
-    "arm.position_command": tuple(f"q{i}" for i in range(1, 7)),
+    "arm.position_command": "q",
     "capability": ("C_m",),
     "alpha": ("alpha",),
     "sigma_xy": ("sigma_xy",),
@@ -43,7 +43,42 @@ SIGNALS = {
     # task
     "reference_velocity": ("vx", "vy", "vz", "wx", "wy", "wz"),
 }
-"""The logged signals and the names of their columns."""
+"""The logged signals and the names of their columns: a tuple of names,
+a prefix numbered from 1 for one column an entry (the arm's joints, as
+many as the robot has), or None (x0, y0, x1, ...). See `column_names`."""
+
+
+def column_names(name, size, columns=None):
+    """The names of the `size` columns of signal `name`.
+
+    Args:
+        name: the signal's name.
+        size: the number of entries of its vector.
+        columns: dict signal name -> names (a tuple of names or a
+            prefix, as in SIGNALS) for signals that SIGNALS does not name
+            or that are to be named otherwise; None for none.
+
+    Returns:
+        tuple of `size` names: columns[name], else SIGNALS[name]; a
+        prefix p gives p1, ..., p<size>; x0, y0, x1, ... where neither
+        names the signal.
+
+    Raises:
+        ValueError: when the names given for the signal are not one per
+            entry.
+    """
+    given = (columns or {}).get(name)
+    names = given or SIGNALS.get(name)
+    if isinstance(names, str):
+        return tuple(f"{names}{i}" for i in range(1, size + 1))
+    if names is None:
+        return tuple(f"{'xy'[i % 2]}{i // 2}" for i in range(size))
+    if len(names) != size:
+        where = "columns" if given else "SIGNALS"
+        raise ValueError(
+            f"{where}[{name!r}] = {names!r} is not allowed: must have "
+            f"{size} names, one per entry of the signal")
+    return tuple(names)
 
 
 class SignalLogger:
@@ -59,8 +94,9 @@ class SignalLogger:
         ports: dict signal name -> vector OutputPort, in logging order
             (ports of size 0 are left out).
         period: the sample period in s.
-        columns: dict signal name -> column names, for the signals that
-            SIGNALS does not name (x0, y0, x1, ... where neither does).
+        columns: dict signal name -> column names (a tuple, or a prefix
+            numbered from 1), for the signals that SIGNALS does not name
+            (`column_names`).
     """
 
     def __init__(self, builder, ports, period, columns=None):
@@ -79,17 +115,9 @@ class SignalLogger:
         ends = np.cumsum([0] + sizes)
         self.slices = {name: slice(int(a), int(b)) for name, a, b in
                        zip(ports, ends[:-1], ends[1:], strict=True)}
-        columns = columns or {}
-        for name, names in columns.items():
-            if name in ports and len(names) != ports[name].size():
-                raise ValueError(
-                    f"columns[{name!r}] = {names!r} is not allowed: must "
-                    f"have {ports[name].size()} names, one per entry of "
-                    "the port")
         self.columns = {
-            name: columns.get(name) or SIGNALS.get(name) or tuple(
-                f"{'xy'[i % 2]}{i // 2}" for i in range(part.stop - part.start))
-            for name, part in self.slices.items()}
+            name: column_names(name, port.size(), columns)
+            for name, port in ports.items()}
 
     def run_log(self, root_context, real_time_factor=np.nan):
         """The RunLog of the samples taken in `root_context`."""
@@ -125,15 +153,18 @@ class RunLog:
 
     def save(self, path):
         """Writes the log as NPZ (arrays `time` and one per signal, and
-        `header`, a JSON description of the columns and units) and as CSV
-        next to it (one column per signal's component)."""
+        `header`, a JSON description of the columns and units and the
+        real-time factor, null if unknown) and as CSV next to it (one
+        column per signal's component)."""
         import json
 
+        factor = float(self.real_time_factor)
         header = json.dumps({
             "time": "s",
             "signals": {k: list(v) for k, v in self.columns.items()},
             "units": "SI: m, rad, s, N, N m; twists [v; w]; see "
                      "drake_wbc.controller.run_log.SIGNALS",
+            "real_time_factor": None if np.isnan(factor) else factor,
         })
         np.savez_compressed(path.with_suffix(".npz"), time=self.time,
                             header=header, **self.signals)
@@ -146,11 +177,14 @@ class RunLog:
 
     @classmethod
     def load(cls, path):
-        """Reads a log written by `save` (the .npz file)."""
+        """Reads a log written by `save` (the .npz file); its real-time
+        factor is NaN if the log does not know it."""
         import json
 
         with np.load(path) as data:
             header = json.loads(str(data["header"]))
             signals = {k: data[k] for k in header["signals"]}
             columns = {k: tuple(v) for k, v in header["signals"].items()}
-            return cls(data["time"], signals, columns)
+            factor = header.get("real_time_factor")
+            return cls(data["time"], signals, columns,
+                       np.nan if factor is None else factor)

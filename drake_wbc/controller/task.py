@@ -153,8 +153,10 @@ def add_controller(builder, params, task, station, arm=None):
             Scenario.controller_for(variant)).
         task: TaskInputs.
         station: the station's Diagram, already added to `builder`.
-        arm: the controller's ArmKinematics (build_controller's default,
-            the shipped robot's, if None): that of the station's robot.
+        arm: the station's robot, as build_controller takes it: a
+            RobotDescription or the ArmKinematics of one (the shipped
+            robot if None). The task's stages use the built controller's
+            ArmKinematics (Controller.arm).
 
     Returns:
         (controller, sources): the drake_wbc.controller.diagram.Controller
@@ -179,22 +181,21 @@ def add_controller(builder, params, task, station, arm=None):
                             controller.diagram.GetInputPort(name))
     player = controller.stages["whole_body_cdmp"].player
     if player is not None and player.tracking_gain > 0.0:
-        _add_movement_tracking(builder, controller, sources, station, player,
-                               arm)
+        _add_movement_tracking(builder, controller, sources, station, player)
     return controller, sources
 
 
-def _add_movement_tracking(builder, controller, sources, station, player,
-                           arm=None):
+def _add_movement_tracking(builder, controller, sources, station, player):
     """Adds the learned movement's tracking (MovementTracking, with the
-    controller's ArmKinematics `arm`) to the task's reference velocity
-    (cdmp.MovementReplay.tracking_gain)."""
+    controller's own ArmKinematics, controller.arm) to the task's
+    reference velocity (cdmp.MovementReplay.tracking_gain)."""
     from pydrake.systems.primitives import Adder
 
     from drake_wbc.stages.whole_body_cdmp import MovementTracking
 
     tracking = builder.AddNamedSystem("task.movement_tracking",
-                                      MovementTracking(player, arm))
+                                      MovementTracking(player,
+                                                       controller.arm))
     for name in ("base.state_estimated", "arm.position_measured"):
         builder.Connect(station.GetOutputPort(name),
                         tracking.GetInputPort(name))

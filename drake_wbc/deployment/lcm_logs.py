@@ -35,7 +35,7 @@ from collections import defaultdict
 import lcm
 import numpy as np
 
-from drake_wbc.controller.run_log import SIGNALS, RunLog
+from drake_wbc.controller.run_log import RunLog, column_names
 from drake_wbc.hardware import messages
 from drake_wbc.hardware.interface import DIAGNOSTICS
 from drake_wbc.hardware.options import HardwareOptions
@@ -57,10 +57,11 @@ CHANNEL_SIGNALS = (
 """(channel field, decoder, signal names of its values)."""
 
 EXTRA_COLUMNS = {
-    "arm.velocity_estimated": tuple(f"v{i}" for i in range(1, 7)),
+    "arm.velocity_estimated": "v",  # v1, ..., vn: one a joint
     "hardware.diagnostics": DIAGNOSTICS,
 }
-"""Column names of the signals that run_log.SIGNALS does not list."""
+"""Column names of the signals that run_log.SIGNALS does not list (as
+there: a tuple, or a prefix numbered from 1; run_log.column_names)."""
 
 
 def read_events(path):
@@ -163,7 +164,9 @@ def read_lcm_log(path, options=None, deployment=0):
         RunLog.
 
     Raises:
-        ValueError: naming the file when it holds none of the channels.
+        ValueError: naming the file when it holds none of the channels;
+            naming the signal when its size is not that of its column
+            names (run_log.column_names).
     """
     options = checked_instance("options", options, HardwareOptions,
                                HardwareOptions)
@@ -212,7 +215,6 @@ def read_lcm_log(path, options=None, deployment=0):
         times = bundle_times if name == clock else to_clock(bundle_stamps)
         for signal, values in bundle.items():
             signals[signal] = hold(times, values, grid)
-    columns = {name: EXTRA_COLUMNS.get(name) or SIGNALS.get(name) or tuple(
-        f"{'xy'[i % 2]}{i // 2}" for i in range(values.shape[1]))
-        for name, values in signals.items()}
+    columns = {name: column_names(name, values.shape[1], EXTRA_COLUMNS)
+               for name, values in signals.items()}
     return RunLog(np.asarray(grid, dtype=float), signals, columns)

@@ -16,7 +16,7 @@ from drake_wbc.math.kernels import body_for
 from drake_wbc.math.scalar_support import through_float_function, value_of
 from drake_wbc.math.validation import as_vector, checked_instance, positive
 from drake_wbc.robot.model import ArmKinematics
-from drake_wbc.stages.support import define_stage
+from drake_wbc.stages.support import define_stage, optional_scalar
 
 TWIST_SIZE = 6
 """V_a = [v_a; w_a] in T_a."""
@@ -215,8 +215,7 @@ def ArmCartesianVelocityController_(T):
             return np.array(state)
 
         def _update(self, context, discrete_state):
-            hold = (self._hold.HasValue(context)
-                    and self._hold.Eval(context)[0] >= 0.5)
+            hold = optional_scalar(self._hold, context, 0.0) >= 0.5
             x = self._state(context)
             discrete_state.set_value(self._next_state(
                 x[self._q], x[self._q_dot], self._input.Eval(context),

@@ -35,6 +35,7 @@ from pydrake.systems.framework import ValueProducer
 
 from drake_wbc.math.filtering import zero_order_hold
 from drake_wbc.math.validation import non_negative
+from drake_wbc.stages.support import optional_scalar
 
 ONE = np.ones(1)
 ONE.flags.writeable = False
@@ -125,18 +126,13 @@ class CdmpStage:
             return context.get_continuous_state_vector().CopyToVector()
         return context.get_discrete_state_vector().CopyToVector()
 
-    def _optional(self, port, context, default):
-        if port.HasValue(context):
-            return port.Eval(context)
-        return default
-
     def _switch(self, context):
         """S_hri from its input port (a value >= 0.5 means 1) or the
         stage's default (its constructor's phri_switch)."""
-        value = self._optional(self._phri_port, context, None)
+        value = optional_scalar(self._phri_port, context, None)
         if value is None:
             return int(self._default_switch)
-        return 1 if value[0] >= 0.5 else 0
+        return 1 if value >= 0.5 else 0
 
     def _model_key(self, context):
         """The key of the affine model in force (by S_hri)."""

@@ -14,7 +14,7 @@ from drake_wbc.math import cdmp, repulsion
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.validation import checked_instance, robots_own, switch
 from drake_wbc.stages.cdmp_base import ONE, AffineDynamics, CdmpStage
-from drake_wbc.stages.support import define_stage
+from drake_wbc.stages.support import define_stage, optional_input
 
 
 @define_stage("BaseCdmp_")
@@ -44,7 +44,11 @@ def BaseCdmp_(T):
 
         Args:
             params: cdmp.BaseCdmpParameters (checked where they were
-                made; paper values if None), read here.
+                made), read here, with repulsion.half_sizes (the
+                footprint) given: its default None stands for the
+                robot's own, which build_controller fills in, and is
+                refused here (ValueError), as is params None (the
+                defaults).
             time_step: control period h (0: continuous), default 0.01 s.
         """
 
@@ -84,7 +88,7 @@ def BaseCdmp_(T):
                 ValueProducer(
                     allocate=lambda: AbstractValue.Make(np.zeros(3)),
                     calc=lambda context, value: value.set_value(
-                        self._force_of(self._optional(
+                        self._force_of(optional_input(
                             self._points, context, no_points)))),
                 {self.input_port_ticket(self._points.get_index())})
             state = self._declare_state(9, time_step)
@@ -199,7 +203,7 @@ def ArmCdmp_(T):
             return np.concatenate([
                 self._velocity_in.Eval(context),
                 self._wrench.Eval(context),
-                self._optional(self._desired, context,
+                optional_input(self._desired, context,
                                self._default_desired),
             ])
 
@@ -207,7 +211,7 @@ def ArmCdmp_(T):
             return np.concatenate((
                 self._state(context), self._velocity_in.Eval(context),
                 self._wrench.Eval(context),
-                self._optional(self._desired, context,
+                optional_input(self._desired, context,
                                self._default_desired), ONE))
 
     return Impl

@@ -33,6 +33,7 @@ from drake_wbc.math.validation import (
     checked_instance,
     positive,
     positive_vector,
+    whole_number,
 )
 from drake_wbc.stages.support import define_stage
 
@@ -415,13 +416,13 @@ def StopGate_(T):
         a constant where one does.
 
         Args:
-            size: the signal's size.
+            size: the signal's size, a whole number >= 1.
             limits: None (no envelope), or (size,) limits > 0.
         """
 
         def _construct(self, size=3, limits=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self.size = int(size)
+            self.size = whole_number("size", size, minimum=1)
             self.limits = None if limits is None else tuple(
                 positive_vector("limits", limits, self.size).tolist())
             self._zeros = np.zeros(self.size)

@@ -5,7 +5,7 @@ where a stage is linear or a switch, as a small Diagram of Drake's C++
 systems (`define_composite_stage`), a
 vector computed once per change of its inputs in a cache entry and
 sliced into named output ports, their named vector inputs and dependency
-tickets, optional one-element inputs, and the constants of the arm's
+tickets, optional inputs, and the constants of the arm's
 mounting (^bR_a and the arm base's origin in T_b) they read."""
 
 import contextlib
@@ -216,6 +216,20 @@ def declare_inputs(system, sizes):
 def tickets(ports):
     """The dependency tickets of `ports`."""
     return {port.ticket() for port in ports}
+
+
+def optional_input(port, context, default):
+    """The value of input `port` (vector or abstract), or `default` if it
+    is neither connected nor fixed.
+
+    HasValue then Eval, as optional_scalar: HasValue evaluates the
+    upstream output, so Eval reads it from the cache; the other ways to
+    read an optional port in one call (Eval inside try, which raises on
+    an unconnected port, or System.EvalVectorInput) cost more per tick.
+    """
+    if port.HasValue(context):
+        return port.Eval(context)
+    return default
 
 
 def optional_scalar(port, context, default):

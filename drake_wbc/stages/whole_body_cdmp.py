@@ -42,8 +42,22 @@ from drake_wbc.math.movement import (
 )
 from drake_wbc.math.scalar_support import value_of
 from drake_wbc.math.validation import checked_instance, switch
+from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.cdmp_base import ONE, AffineDynamics, CdmpStage
-from drake_wbc.stages.support import define_stage, shared_arm_kinematics
+from drake_wbc.stages.support import (
+    define_stage,
+    optional_scalar,
+    shared_arm_kinematics,
+)
+
+# The input u of the affine models: V_ee^ref, then F_ext and delta_V_ee
+# rotated into the world (18 entries), and with a learned movement its goal
+# g and forcing term f (30 entries).
+_REFERENCE = slice(0, 6)
+_WRENCH = slice(6, 12)
+_DEVIATION = slice(12, 18)
+_GOAL = slice(18, 24)
+_FORCING = slice(24, 30)
 
 
 def movement_player(params):
@@ -121,7 +135,8 @@ def WholeBodyCdmp_(T):
             self._dimension = 6
             self._default_switch = switch("phri_switch", phri_switch)
             self.player = player or movement_player(params)
-            num_inputs = 18 if self.player is None else 30
+            num_inputs = (_DEVIATION.stop if self.player is None
+                          else _FORCING.stop)
             self._in_world = body_for(twist_in_world, T)
             self._in_base = body_for(twist_in_base, T)
 
@@ -131,26 +146,28 @@ def WholeBodyCdmp_(T):
 
                 def f(x, u):
                     y, z, C, E = np.split(x, 4)
-                    g, forcing = ((u[18:24], u[24:30]) if num_inputs == 30
+                    g, forcing = ((u[_GOAL], u[_FORCING])
+                                  if num_inputs == _FORCING.stop
                                   else (np.zeros(6), 0.0))
                     return np.concatenate(cdmp.whole_body_cdmp_derivative(
-                        y, z, C, E, g, u[:6], u[6:12], u[12:18], params,
-                        S_hri=s_hri, forcing=forcing, dmp=dmp))
+                        y, z, C, E, g, u[_REFERENCE], u[_WRENCH],
+                        u[_DEVIATION], params, S_hri=s_hri, forcing=forcing,
+                        dmp=dmp))
                 return f
 
             if self.player is None:
                 self._models = {
-                    s: AffineDynamics(derivative(s, False), 24, 18,
-                                      time_step)
+                    s: AffineDynamics(derivative(s, False), 24,
+                                      num_inputs, time_step)
                     for s in (0, 1)
                 }
             else:
                 self._models = {
                     (s, playing): AffineDynamics(
-                        derivative(s, playing), 24, 30, time_step)
+                        derivative(s, playing), 24, num_inputs, time_step)
                     for s in (0, 1) for playing in (False, True)
                 }
-            self._check_state_only(slice(12, 18))
+            self._check_state_only(_DEVIATION)
             self._reference = self.DeclareVectorInputPort(
                 "reference_velocity", 6)
             self._wrench = self.DeclareVectorInputPort("wrench", 6)
@@ -170,10 +187,11 @@ def WholeBodyCdmp_(T):
             # The shared result leaves out the deviation (state only),
             # which the update adds: B_d's columns of it.
             self._declare_output("end_effector_velocity", prerequisites, [
-                i for i in range(num_inputs) if not 12 <= i < 18])
+                i for i in range(num_inputs)
+                if not _DEVIATION.start <= i < _DEVIATION.stop])
             if time_step > 0.0:
                 self._deviation_columns = {
-                    key: np.ascontiguousarray(model.B_d[:, 12:18])
+                    key: np.ascontiguousarray(model.B_d[:, _DEVIATION])
                     for key, model in self._models.items()}
 
         def _construct_copy(self, other, converter=None):
@@ -182,11 +200,6 @@ def WholeBodyCdmp_(T):
             Impl._construct(self, other.params, other._time_step,
                             other._default_switch, converter=converter,
                             player=other.player)
-
-        def _base_yaw(self, context):
-            """phi_b from its input port, 0 when unconnected."""
-            yaw = self._yaw
-            return yaw.Eval(context)[0] if yaw.HasValue(context) else 0.0
 
         def _model_key(self, context, t=None):
             """The model in force at time t (the context's if None)."""
@@ -199,7 +212,7 @@ def WholeBodyCdmp_(T):
         def _inputs(self, context):
             """u (continuous time): the reference, the wrench and the
             deviation in the world, and the movement's g and f at t."""
-            yaw = self._base_yaw(context)
+            yaw = optional_scalar(self._yaw, context, 0.0)
             parts = [self._reference.Eval(context),
                      self._in_world(self._wrench.Eval(context), yaw),
                      self._in_world(self._deviation.Eval(context), yaw)]
@@ -210,7 +223,7 @@ def WholeBodyCdmp_(T):
         def _calc_result(self, context, value):
             """(V_ee in T_b, the next state without the deviation's part,
             the model of the update, the yaw)."""
-            yaw = self._base_yaw(context)
+            yaw = optional_scalar(self._yaw, context, 0.0)
             known = (self._state(context), self._reference.Eval(context),
                      self._in_world(self._wrench.Eval(context), yaw))
             player, d = self.player, self._dimension
@@ -268,7 +281,7 @@ def MovementTracking_(T):
           K (p*(t) - p) on x, y, z and yaw (0 on roll and pitch, and
           before the movement's start_time), p* = player.reference(t), p
           the TCP's pose through the nominal kinematics
-          (demonstration.TcpPose), the yaw error wrapped into (-pi, pi].
+          (demonstration.TcpPose), the yaw error wrapped into [-pi, pi).
 
         It enters the whole-body CDMP as the coupling C of eq. (cdmp-wb)
         (C_dot = V_ee^ref), an integral action of gain K on the TCP's
@@ -279,13 +292,15 @@ def MovementTracking_(T):
 
         Args:
             player: the movement.MovementPlayer of the WholeBodyCdmp.
-            arm: an ArmKinematics (the shipped robot's if None).
+            arm: an ArmKinematics (the shipped robot's if None);
+                anything else is refused (ValueError).
         """
 
         def _construct(self, player, arm=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.player = player
-            arm = arm or shared_arm_kinematics()
+            arm = checked_instance("arm", arm, ArmKinematics,
+                                   shared_arm_kinematics)
             self._pose = TcpPose(arm)
             self._tcp_pose_in_world = body_for(tcp_pose_in_world, float)
             self._base = self.DeclareVectorInputPort(

@@ -16,7 +16,7 @@ from drake_wbc.math.wrench import (
     tool_motion,
 )
 from drake_wbc.robot.model import ArmKinematics, bodies_outboard
-from drake_wbc.stages.support import define_stage
+from drake_wbc.stages.support import define_stage, tickets
 
 
 def _payload_inertia(arm):
@@ -128,7 +128,8 @@ def ExternalWrenchEstimator_(T):
         through through_float_function.
 
         Args:
-            arm: an ArmKinematics of the robot (a new one if None).
+            arm: an ArmKinematics of the robot (a new one of the shipped
+                robot if None); anything else is refused (ValueError).
             params: WrenchEstimatorParameters (the weight alone if None).
             time_step: the control period h, s (the arm positions'
                 sample period, with inertia compensation).
@@ -137,7 +138,8 @@ def ExternalWrenchEstimator_(T):
         def _construct(self, arm=None, params=None, time_step=0.01,
                        converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self._arm = ArmKinematics() if arm is None else arm
+            self._arm = checked_instance("arm", arm, ArmKinematics,
+                                         ArmKinematics)
             self.params = checked_instance(
                 "params", params, WrenchEstimatorParameters,
                 WrenchEstimatorParameters)
@@ -166,6 +168,9 @@ def ExternalWrenchEstimator_(T):
                 raise ValueError(
                     "params.inertia_compensation = True is not allowed for "
                     "a tool not welded to the sensor")
+            # What F_ext depends on: the two inputs and, with inertia
+            # compensation, the remembered arm positions.
+            depends = tickets((self._reading, self._position))
             if moving:
                 self._payload = ToolPayload(
                     self._tool_mass, self._p_M_com, p_TM,
@@ -174,14 +179,13 @@ def ExternalWrenchEstimator_(T):
                     np.tile(self._arm.home, 3))
                 self.DeclarePeriodicDiscreteUpdateEvent(
                     self._h, 0.0, self._remember)
+                depends.add(self.discrete_state_ticket(self._past))
             calc = (self._output_moving if moving else
                     self._output if welded else self._output_with_lever)
             self._in_base = self.DeclareVectorOutputPort(
-                "external_wrench_in_base", 6, calc)
+                "external_wrench_in_base", 6, calc, depends)
             self.DeclareVectorOutputPort(
-                "external_wrench", 6, self._output_in_arm,
-                {self.input_port_ticket(port.get_index())
-                 for port in (self._reading, self._position)})
+                "external_wrench", 6, self._output_in_arm, depends)
 
         def _rotation(self, q_a):
             """R_BM (3, 3) at the arm's joints (float)."""
