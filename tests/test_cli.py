@@ -153,3 +153,22 @@ def test_run_writes_logs_figures_replay_and_summary(tmp_path, capsys):
 def test_every_command_that_runs_a_scenario_takes_a_robot(argv):
     args = make_parser().parse_args(argv + ["--robot", "my_robot.yaml"])
     assert args.robot == Path("my_robot.yaml")
+
+
+@pytest.mark.parametrize("argv", [
+    ["run"], ["run", "--sweep"], ["bode"], ["diagram"], ["stress"],
+    ["replay", "movement.yaml"], ["teach", "teach"], ["bench", "--quick"],
+    ["deploy", "hardware"], ["robot-sim", "hardware"], ["demo"]])
+def test_every_command_names_a_robot_file_that_is_not_there(
+        argv, tmp_path, monkeypatch, capsys):
+    """A --robot that names no file is refused with the option, its value
+    and why, before anything is printed or written."""
+    monkeypatch.chdir(tmp_path)
+    assert main(argv + ["--robot", "nosuch.yaml"]) == 2
+    out, err = capsys.readouterr()
+    assert err == (f"drake-wbc {argv[0]}: --robot = 'nosuch.yaml' is not "
+                   "allowed: no such file\n")
+    assert out == ""
+    assert list(tmp_path.iterdir()) == []
+    assert main(argv + ["--robot", str(tmp_path)]) == 2
+    assert "a folder, not a robot description file" in capsys.readouterr().err

@@ -49,6 +49,7 @@ def _run_demo(args):
     )
     from drake_wbc.controller import load_controller_parameters
     from drake_wbc.controller.parameters import ControllerParameters, for_robot
+    from drake_wbc.experiments.scenario import robot_option_file
     from drake_wbc.robot.description import (
         load_robot_description,
         shipped_robot,
@@ -57,7 +58,8 @@ def _run_demo(args):
 
     try:
         description = (shipped_robot() if args.robot is None
-                       else load_robot_description(args.robot))
+                       else load_robot_description(
+                           robot_option_file(args.robot)))
         params = for_robot(
             ControllerParameters() if args.controller is None
             else load_controller_parameters(args.controller), description)
@@ -135,9 +137,9 @@ def _run_run(args):
         run_sweep(scenario, output / "sweep",
                   echo=lambda line: print(line, flush=True))
         return 0
-    print(f"drake-wbc run {path.stem}: writing to {output}/")
     scenario = path if args.robot is None else on_robot(load_scenario(path),
                                                         args)
+    print(f"drake-wbc run {path.stem}: writing to {output}/")
     run_scenario(scenario, output, name=path.stem, duration=args.duration,
                  replay=False if args.no_replay else None)
     return 0

@@ -63,6 +63,7 @@ import time
 from multiprocessing import resource_tracker
 from pathlib import Path
 
+from drake_wbc.experiments.scenario import robot_option_file
 from drake_wbc.math.validation import positive, whole_number
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.stress.cases import TIMING_KEYS, run_case, violations
@@ -571,7 +572,8 @@ def run_stress(args):
         args.seed, args.cases, args.duration, args.workers)
     where = (f"on the Dask cluster at {args.scheduler}" if args.scheduler
              else f"in {workers} worker process(es)")
-    robot = "" if args.robot is None else str(Path(args.robot).resolve())
+    robot = "" if args.robot is None else str(
+        robot_option_file(args.robot).resolve())
     if robot:
         load_robot_description(robot)  # checked before the journal
     settings = dict(seed=seed, duration_s=duration,
