@@ -172,3 +172,21 @@ def test_every_command_names_a_robot_file_that_is_not_there(
     assert list(tmp_path.iterdir()) == []
     assert main(argv + ["--robot", str(tmp_path)]) == 2
     assert "a folder, not a robot description file" in capsys.readouterr().err
+
+
+def test_demo_reports_the_capability_with_the_controllers_k_j(tmp_path,
+                                                                capsys):
+    """The capability line and the tuning's take the k_j the controller
+    runs: the description's tuning where the controller gives none, the
+    controller's own where --controller gives one."""
+    robot = (Path(__file__).resolve().parents[1] / "examples" / "own_robot"
+             / "omni_arm.robot.yaml")
+    controller = tmp_path / "controller.yaml"
+    controller.write_text("capability:\n  joint_limit_gain: 30000\n")
+    for extra, k_j in (([], "60000"),
+                       (["--controller", str(controller)], "30000")):
+        assert main(["demo", "--robot", str(robot), "--output",
+                     str(tmp_path)] + extra) == 0
+        out = capsys.readouterr().out
+        assert f"Capability of movement (k_j = {k_j})" in out
+        assert f"with k_j = {k_j} and the band" in out

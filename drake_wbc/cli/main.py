@@ -63,7 +63,9 @@ def _run_demo(args):
         params = for_robot(
             ControllerParameters() if args.controller is None
             else load_controller_parameters(args.controller), description)
-        report = describe_robot(args.q_arm, description=description)
+        report = describe_robot(
+            args.q_arm, k_j=params.capability.joint_limit_gain,
+            description=description)
     except (ValueError, OSError) as error:
         print(f"drake-wbc demo: {error}", file=sys.stderr)
         return 2
