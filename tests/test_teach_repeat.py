@@ -92,6 +92,22 @@ def test_the_demonstration_is_the_measured_whole_body_movement(teach_run):
     assert metrics["fit_rms_m"] < 1e-3
 
 
+def test_zero_basis_functions_are_refused_not_replaced(teach_run, tmp_path,
+                                                       capsys):
+    """num_basis = 0 is an error, not the default 40."""
+    scenario, log = teach_run
+    with pytest.raises(ValueError, match="num_basis = 0 is not allowed"):
+        teach.learn_from_log(scenario, log, num_basis=0)
+    from drake_wbc.cli.main import main
+
+    assert main(["teach", "teach", "--num-basis", "0", "--output",
+                 str(tmp_path)]) == 2
+    assert capsys.readouterr().err == (
+        "drake-wbc teach: --num-basis = 0 is not allowed: must be 1 to "
+        f"{mv.dmp.MAX_BASIS}\n")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_replay_reproduces_the_demonstrated_path_within_1_cm(demonstrated):
     """The issue's first test: time aligned through the phase."""
     assert demonstrated["path_rms_m"] < 0.01
@@ -128,6 +144,13 @@ def test_replay_command_builds_its_scenario():
     assert scenario.scene.cylinders[-1].position == [0.6, -0.6]
     with pytest.raises(ValueError, match="no movement file"):
         teach_commands.replay_scenario(parser.parse_args(["nothing.yaml"]))
+    # A zero duration is refused, not replaced by the movement's length.
+    with pytest.raises(ValueError, match=r"^--duration = 0\.0 is not "
+                       r"allowed: must be > 0 s$"):
+        teach_commands.replay_scenario(parser.parse_args([
+            "movements/teach.yaml", "--duration", "0"]))
+    assert teach_commands.replay_scenario(parser.parse_args([
+        "movements/teach.yaml", "--duration", "2.5"])).duration == 2.5
 
 
 def test_the_replay_command_runs_and_writes_its_outputs(tmp_path, capsys):

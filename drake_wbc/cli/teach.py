@@ -62,7 +62,11 @@ def run_teach(args, argv=None, echo=print):
     from drake_wbc.experiments import teach
     from drake_wbc.experiments.reports import format_summary, plain_values
     from drake_wbc.experiments.scenario import find_scenario, load_scenario
+    from drake_wbc.math.dmp import MAX_BASIS
 
+    if args.num_basis is not None and not 1 <= args.num_basis <= MAX_BASIS:
+        raise ValueError(f"--num-basis = {args.num_basis!r} is not allowed: "
+                         f"must be 1 to {MAX_BASIS}")
     path = find_scenario(args.scenario)
     scenario = on_robot(load_scenario(path), args, echo)
     output = args.output or Path("out") / f"teach_{path.stem}"
@@ -147,6 +151,9 @@ def replay_scenario(args):
     from drake_wbc.math.validation import validate
     from drake_wbc.station.scene import CylinderObstacle
 
+    if args.duration is not None and not args.duration > 0:
+        raise ValueError(f"--duration = {args.duration!r} is not allowed: "
+                         "must be > 0 s")
     scenario = on_robot(load_scenario(find_scenario(args.scenario)), args)
     file = resolve_movement_file(args.movement).resolve()
     movement = LearnedMovement.load(file)
@@ -158,8 +165,10 @@ def replay_scenario(args):
     replay = MovementReplay(file=str(file), goal=args.goal, tau=args.tau,
                             start_time=start_time, start=base.start)
     tau = movement.params.tau if args.tau is None else args.tau
-    duration = args.duration or (start_time + movement.params.duration
-                                 * tau / movement.params.tau + 1.5)
+    duration = args.duration
+    if duration is None:
+        duration = (start_time + movement.params.duration * tau
+                    / movement.params.tau + 1.5)
     cylinders = list(scenario.scene.cylinders) + [
         CylinderObstacle(name=f"obstacle_{i}", position=[x, y], radius=r,
                          height=1.0)

@@ -53,7 +53,7 @@ def learn_from_log(scenario, log, start=None, stop=None, num_basis=None,
     dmp = scenario.controller.whole_body_cdmp.dmp
     params = mv.dmp.DmpParameters(
         alpha_z=dmp.alpha_z, beta_z=dmp.beta_z, tau=1.0,
-        num_basis=num_basis or mv.DEFAULT_NUM_BASIS)
+        num_basis=mv.DEFAULT_NUM_BASIS if num_basis is None else num_basis)
     return mv.learn_movement(demo, params, source=source)
 
 
