@@ -92,6 +92,21 @@ def test_the_demonstration_is_the_measured_whole_body_movement(teach_run):
     assert metrics["fit_rms_m"] < 1e-3
 
 
+def test_a_given_interval_must_lie_within_the_log(teach_run):
+    """--start before the log's start or --stop past its end is refused
+    as a reversed interval is, not cut to the log in silence."""
+    scenario, log = teach_run
+    assert log.time[0] == 0.0 and log.time[-1] == pytest.approx(7.0)
+    for start, stop in ((0.0, 100.0), (-1.0, 5.0), (3.0, 1.0)):
+        with pytest.raises(ValueError, match=(
+                rf"start = {start!r} s, stop = {stop!r} s is not allowed: "
+                r"must be an interval of the log \(from 0\.000 to 7\.000 "
+                r"s\)")):
+            teach.learn_from_log(scenario, log, start, stop)
+    assert teach.learn_from_log(scenario, log, 0.0, 7.0).params.duration \
+        == pytest.approx(7.0)
+
+
 def test_zero_basis_functions_are_refused_not_replaced(teach_run, tmp_path,
                                                        capsys):
     """num_basis = 0 is an error, not the default 40."""
