@@ -138,6 +138,11 @@ def test_run_writes_logs_figures_replay_and_summary(tmp_path, capsys):
                  "--output", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "ratio_unfiltered_to_filtered" in out
+    # The last line names every file written.
+    written = out.strip().splitlines()[-1]
+    assert written.startswith(f"Written to {tmp_path}/: ")
+    assert sorted(written.split(": ", 1)[1].split(", ")) == sorted(
+        path.name for path in tmp_path.iterdir())
     for name in ("summary.json", "trajectory_tracking.png",
                  "log_filtered.npz", "log_unfiltered.csv",
                  "replay_filtered.html"):

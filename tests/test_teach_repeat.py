@@ -107,6 +107,18 @@ def test_a_given_interval_must_lie_within_the_log(teach_run):
         == pytest.approx(7.0)
 
 
+def test_the_teach_command_names_every_file_it_writes(tmp_path, capsys):
+    from drake_wbc.cli.main import main
+
+    assert main(["teach", "teach", "--output", str(tmp_path)]) == 0
+    *_, written, movement = capsys.readouterr().out.strip().splitlines()
+    assert movement == f"Movement written to {tmp_path / 'movement.yaml'}"
+    assert written.startswith(f"Written to {tmp_path}/: ")
+    assert sorted(written.split(": ", 1)[1].split(", ")
+                  + ["movement.yaml"]) == sorted(
+        path.name for path in tmp_path.iterdir())
+
+
 def test_zero_basis_functions_are_refused_not_replaced(teach_run, tmp_path,
                                                        capsys):
     """num_basis = 0 is an error, not the default 40."""

@@ -71,6 +71,7 @@ def run_teach(args, argv=None, echo=print):
     scenario = on_robot(load_scenario(path), args, echo)
     output = args.output or Path("out") / f"teach_{path.stem}"
     output.mkdir(parents=True, exist_ok=True)
+    written = []
     if args.log is not None:
         from drake_wbc.deployment.lcm_logs import read_lcm_log
 
@@ -83,7 +84,8 @@ def run_teach(args, argv=None, echo=print):
 
         log = simulate(build_closed_loop(scenario, scenario.variants[0]),
                        progress=echo is not None)
-        log.save(output / "log_teach")
+        saved = log.save(output / "log_teach")
+        written += [saved, saved.with_suffix(".csv")]
     argv = sys.argv[1:] if argv is None else argv
     source = "drake-wbc " + shlex.join(argv)
     movement = teach.learn_from_log(scenario, log, args.start, args.stop,
@@ -99,7 +101,8 @@ def run_teach(args, argv=None, echo=print):
     summary = {"scenario": path.stem, "description": scenario.description,
                "experiment": "teach", "runs": {},
                "metrics": plain_values(metrics),
-               "files": [figure.name], "movement": str(file)}
+               "files": [f.name for f in written + [figure]],
+               "movement": str(file)}
     (output / "summary.json").write_text(json.dumps(summary, indent=2))
     if echo is not None:
         echo(format_summary(summary, output))

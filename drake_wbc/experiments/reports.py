@@ -66,7 +66,8 @@ def run_scenario(scenario, output, name=None, duration=None, replay=None,
         loop = build_closed_loop(scenario, variant, replay=replay)
         log = simulate(loop, duration=duration, progress=progress)
         logs[variant.name] = log
-        files.append(log.save(output / f"log_{variant.name}"))
+        saved = log.save(output / f"log_{variant.name}")
+        files += [saved, saved.with_suffix(".csv")]
         if loop.recorder is not None:
             tcp = log["truth.end_effector_pose"][:, :3]
             loop.recorder.add_path("end_effector", tcp)
