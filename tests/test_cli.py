@@ -80,7 +80,24 @@ def test_demo_rejects_a_bad_configuration(tmp_path, capsys):
     code = main(["demo", "--output", str(tmp_path), "--q-arm",
                  "0", "0", "nan", "0", "0", "0"])
     assert code == 2
-    assert "q_a" in capsys.readouterr().err
+    assert "--q-arm" in capsys.readouterr().err
+
+
+def test_demo_rejects_a_configuration_outside_the_joint_limits(tmp_path,
+                                                               capsys):
+    """A joint past its limit is named with its value and limits, not
+    reported as a capability of zero."""
+    upper = float(ArmKinematics().upper[0])
+    assert main(["demo", "--output", str(tmp_path), "--q-arm",
+                 "9", "0", "0", "0", "0", "0"]) == 2
+    out, err = capsys.readouterr()
+    assert err == (
+        "drake-wbc demo: --q-arm[0] = 9.0 rad (joint joint1) is not "
+        f"allowed: must lie within the joint's limits [{-upper!r}, "
+        f"{upper!r}] rad\n")
+    assert out == "" and list(tmp_path.iterdir()) == []
+    q = ["0"] * 5 + [repr(upper)]  # at a limit: allowed
+    assert main(["demo", "--output", str(tmp_path), "--q-arm", *q]) == 0
 
 
 @pytest.mark.parametrize("q", [np.zeros(6), HOME_ARM_POSITIONS])

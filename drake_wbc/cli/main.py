@@ -41,6 +41,30 @@ def _add_demo_arguments(parser):
              "check on the robot (default: diagrams/controller.yaml's)")
 
 
+def _checked_q_arm(q_arm, arm):
+    """`q_arm` (--q-arm; None: the home pose) checked against the arm of
+    `arm`, an ArmKinematics: one finite value a joint, each within its
+    joint's limits.
+
+    Raises:
+        ValueError: naming --q-arm, and the joint, its value and its
+            limits for one outside them.
+    """
+    if q_arm is None:
+        return None
+    from drake_wbc.math.validation import as_vector
+
+    q = as_vector("--q-arm", q_arm, arm.num_joints)
+    for i, joint in enumerate(arm.model.arm_joints):
+        low, high = float(arm.lower[i]), float(arm.upper[i])
+        if not low <= q[i] <= high:
+            raise ValueError(
+                f"--q-arm[{i}] = {float(q[i])!r} rad (joint "
+                f"{joint.name()}) is not allowed: must lie within the "
+                f"joint's limits [{low!r}, {high!r}] rad")
+    return q
+
+
 def _run_demo(args):
     from drake_wbc.cli.model_report import (
         describe_robot,
@@ -63,8 +87,10 @@ def _run_demo(args):
         params = for_robot(
             ControllerParameters() if args.controller is None
             else load_controller_parameters(args.controller), description)
+        arm = ArmKinematics(*make_robot_plant(description))
+        q_arm = _checked_q_arm(args.q_arm, arm)
         report = describe_robot(
-            args.q_arm, k_j=params.capability.joint_limit_gain,
+            q_arm, k_j=params.capability.joint_limit_gain,
             description=description)
     except (ValueError, OSError) as error:
         print(f"drake-wbc demo: {error}", file=sys.stderr)
@@ -73,11 +99,10 @@ def _run_demo(args):
           f"({args.robot or 'the shipped robot'})\n")
     print(report)
     print()
-    print(describe_tuning(ArmKinematics(*make_robot_plant(description)),
-                          params.capability_band,
+    print(describe_tuning(arm, params.capability_band,
                           params.capability.joint_limit_gain))
     page = write_model_page(args.output / f"{description.name}_model.html",
-                            args.q_arm, description=description)
+                            q_arm, description=description)
     print(f"\nMeshcat page of the model (open it in a browser): {page}")
     return 0
 
