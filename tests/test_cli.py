@@ -212,3 +212,16 @@ def test_demo_reports_the_capability_with_the_controllers_k_j(tmp_path,
         out = capsys.readouterr().out
         assert f"Capability of movement (k_j = {k_j})" in out
         assert f"with k_j = {k_j} and the band" in out
+
+
+def test_the_summary_heads_a_single_run_without_its_name():
+    """One run's metrics read "Run metrics:" (not "Run run:", the default
+    run's name); several runs are each headed by their name."""
+    from drake_wbc.experiments.reports import format_summary
+
+    summary = dict(scenario="s", description="d", metrics={},
+                   runs={"run": {"m": 1.0}}, files=["log_run.npz"])
+    assert "Run metrics:\n  m " in format_summary(summary, Path("out"))
+    summary["runs"]["other"] = {"m": 2.0}
+    text = format_summary(summary, Path("out"))
+    assert "Run run:\n  m " in text and "Run other:\n  m " in text
