@@ -169,6 +169,15 @@ def test_replay_command_builds_its_scenario():
     assert variant.movement.start_time == 0.5
     assert scenario.duration == pytest.approx(0.5 + 9.0 + 1.5)
     assert scenario.scene.cylinders[-1].position == [0.6, -0.6]
+    # Described as this replay, not as the repeat scenario's three runs.
+    assert scenario.description == (
+        "the robot plays the movement movements/teach.yaml to the goal "
+        "[1.7, 0.3, 0.7, -2.8] at tau 1.5, past a new pillar of radius "
+        "0.1 m at (0.6, -0.6) (in the scene of repeat)")
+    assert teach_commands.replay_scenario(parser.parse_args([
+        "movements/teach.yaml"])).description == (
+        "the robot plays the movement movements/teach.yaml to its goal (in "
+        "the scene of repeat)")
     with pytest.raises(ValueError, match="no movement file"):
         teach_commands.replay_scenario(parser.parse_args(["nothing.yaml"]))
     # A zero duration is refused, not replaced by the movement's length.

@@ -143,7 +143,8 @@ def add_replay_arguments(parser):
 
 def replay_scenario(args):
     """The Scenario that `drake-wbc replay` runs: the repeat scenario
-    with one run playing `args.movement` (and the obstacles added)."""
+    with one run playing `args.movement` (and the obstacles added),
+    described as this replay."""
     from drake_wbc.experiments.scenario import (
         Variant,
         find_scenario,
@@ -157,7 +158,8 @@ def replay_scenario(args):
     if args.duration is not None and not args.duration > 0:
         raise ValueError(f"--duration = {args.duration!r} is not allowed: "
                          "must be > 0 s")
-    scenario = on_robot(load_scenario(find_scenario(args.scenario)), args)
+    path = find_scenario(args.scenario)
+    scenario = on_robot(load_scenario(path), args)
     file = resolve_movement_file(args.movement).resolve()
     movement = LearnedMovement.load(file)
     base = (scenario.variants[0].movement
@@ -178,8 +180,15 @@ def replay_scenario(args):
         for i, (x, y, r) in enumerate(args.obstacle or [])]
     label = "replay" + (f", goal {list(args.goal)}" if args.goal else "") \
         + (f", tau {args.tau}" if args.tau else "")
+    description = (
+        f"the robot plays the movement {args.movement} "
+        + (f"to the goal {list(args.goal)}" if args.goal else "to its goal")
+        + (f" at tau {args.tau:g}" if args.tau is not None else "")
+        + "".join(f", past a new pillar of radius {r:g} m at ({x:g}, {y:g})"
+                  for x, y, r in args.obstacle or [])
+        + f" (in the scene of {path.stem})")
     scenario = replace(
-        scenario, duration=duration,
+        scenario, description=description, duration=duration,
         scene=replace(scenario.scene, cylinders=cylinders),
         variants=[Variant(name="replay", label=label, movement=replay)])
     return validate(scenario)
