@@ -1,7 +1,7 @@
 """`drake-wbc teach` and `drake-wbc replay`: teach a whole-body movement by
 hand and repeat it (drake_wbc.math.movement).
 
-    drake-wbc teach teach --movement diagrams/movements/teach.yaml
+    drake-wbc teach teach
     drake-wbc teach teach --log robot.lcmlog --start 2 --stop 9
     drake-wbc replay diagrams/movements/teach.yaml --goal 1.9 0.2 0.7 -2.7
     drake-wbc replay diagrams/movements/teach.yaml --tau 1.5
