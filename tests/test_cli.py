@@ -80,7 +80,24 @@ def test_demo_rejects_a_bad_configuration(tmp_path, capsys):
     code = main(["demo", "--output", str(tmp_path), "--q-arm",
                  "0", "0", "nan", "0", "0", "0"])
     assert code == 2
-    assert "q_a" in capsys.readouterr().err
+    assert "--q-arm" in capsys.readouterr().err
+
+
+def test_demo_rejects_a_configuration_outside_the_joint_limits(tmp_path,
+                                                               capsys):
+    """A joint past its limit is named with its value and limits, not
+    reported as a capability of zero."""
+    upper = float(ArmKinematics().upper[0])
+    assert main(["demo", "--output", str(tmp_path), "--q-arm",
+                 "9", "0", "0", "0", "0", "0"]) == 2
+    out, err = capsys.readouterr()
+    assert err == (
+        "drake-wbc demo: --q-arm[0] = 9.0 rad (joint joint1) is not "
+        f"allowed: must lie within the joint's limits [{-upper!r}, "
+        f"{upper!r}] rad\n")
+    assert out == "" and list(tmp_path.iterdir()) == []
+    q = ["0"] * 5 + [repr(upper)]  # at a limit: allowed
+    assert main(["demo", "--output", str(tmp_path), "--q-arm", *q]) == 0
 
 
 @pytest.mark.parametrize("q", [np.zeros(6), HOME_ARM_POSITIONS])
@@ -138,6 +155,11 @@ def test_run_writes_logs_figures_replay_and_summary(tmp_path, capsys):
                  "--output", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "ratio_unfiltered_to_filtered" in out
+    # The last line names every file written.
+    written = out.strip().splitlines()[-1]
+    assert written.startswith(f"Written to {tmp_path}/: ")
+    assert sorted(written.split(": ", 1)[1].split(", ")) == sorted(
+        path.name for path in tmp_path.iterdir())
     for name in ("summary.json", "trajectory_tracking.png",
                  "log_filtered.npz", "log_unfiltered.csv",
                  "replay_filtered.html"):
@@ -153,3 +175,53 @@ def test_run_writes_logs_figures_replay_and_summary(tmp_path, capsys):
 def test_every_command_that_runs_a_scenario_takes_a_robot(argv):
     args = make_parser().parse_args(argv + ["--robot", "my_robot.yaml"])
     assert args.robot == Path("my_robot.yaml")
+
+
+@pytest.mark.parametrize("argv", [
+    ["run"], ["run", "--sweep"], ["bode"], ["diagram"], ["stress"],
+    ["replay", "movement.yaml"], ["teach", "teach"], ["bench", "--quick"],
+    ["deploy", "hardware"], ["robot-sim", "hardware"], ["demo"]])
+def test_every_command_names_a_robot_file_that_is_not_there(
+        argv, tmp_path, monkeypatch, capsys):
+    """A --robot that names no file is refused with the option, its value
+    and why, before anything is printed or written."""
+    monkeypatch.chdir(tmp_path)
+    assert main(argv + ["--robot", "nosuch.yaml"]) == 2
+    out, err = capsys.readouterr()
+    assert err == (f"drake-wbc {argv[0]}: --robot = 'nosuch.yaml' is not "
+                   "allowed: no such file\n")
+    assert out == ""
+    assert list(tmp_path.iterdir()) == []
+    assert main(argv + ["--robot", str(tmp_path)]) == 2
+    assert "a folder, not a robot description file" in capsys.readouterr().err
+
+
+def test_demo_reports_the_capability_with_the_controllers_k_j(tmp_path,
+                                                                capsys):
+    """The capability line and the tuning's take the k_j the controller
+    runs: the description's tuning where the controller gives none, the
+    controller's own where --controller gives one."""
+    robot = (Path(__file__).resolve().parents[1] / "examples" / "own_robot"
+             / "omni_arm.robot.yaml")
+    controller = tmp_path / "controller.yaml"
+    controller.write_text("capability:\n  joint_limit_gain: 30000\n")
+    for extra, k_j in (([], "60000"),
+                       (["--controller", str(controller)], "30000")):
+        assert main(["demo", "--robot", str(robot), "--output",
+                     str(tmp_path)] + extra) == 0
+        out = capsys.readouterr().out
+        assert f"Capability of movement (k_j = {k_j})" in out
+        assert f"with k_j = {k_j} and the band" in out
+
+
+def test_the_summary_heads_a_single_run_without_its_name():
+    """One run's metrics read "Run metrics:" (not "Run run:", the default
+    run's name); several runs are each headed by their name."""
+    from drake_wbc.experiments.reports import format_summary
+
+    summary = dict(scenario="s", description="d", metrics={},
+                   runs={"run": {"m": 1.0}}, files=["log_run.npz"])
+    assert "Run metrics:\n  m " in format_summary(summary, Path("out"))
+    summary["runs"]["other"] = {"m": 2.0}
+    text = format_summary(summary, Path("out"))
+    assert "Run run:\n  m " in text and "Run other:\n  m " in text

@@ -125,7 +125,11 @@ def test_plot_draws_the_run_from_its_lcm_log(runs, capsys):
     code = main(["plot", str(runs["path"]), "--scenario", str(scenario_file),
                  "--output", str(folder / "out")])
     assert code == 0
-    assert "trajectory_tracking.png" in capsys.readouterr().out
+    written = capsys.readouterr().out.strip().splitlines()[-1]
+    assert "trajectory_tracking.png" in written
+    # The last line names every file written.
+    assert sorted(written.split(": ", 1)[1].split(", ")) == sorted(
+        path.name for path in (folder / "out").iterdir())
     for name in ("trajectory_tracking.png", "hardware.png"):
         assert (folder / "out" / name).stat().st_size > 10_000
     assert (folder / "out" / "log_filtered.npz").is_file()

@@ -54,6 +54,12 @@ def test_a_rollout_is_recovered():
     assert rollout_error(learned, t, y) < 1e-3
 
 
+def test_zero_basis_functions_are_refused_not_replaced():
+    params, _, t, y = synthetic()
+    with pytest.raises(ValueError, match="num_basis = 0 is not allowed"):
+        mv.learn_movement(Demonstration(t, y), params, num_basis=0)
+
+
 def test_several_noisy_demonstrations_average():
     params, _, t, y = synthetic(seed=1)
     rng = np.random.default_rng(2)

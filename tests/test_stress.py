@@ -207,14 +207,17 @@ def test_a_long_run_summarises_the_spread_and_lists_the_failures(serial):
 
 
 @pytest.mark.parametrize("bad, fragment", [
-    (("--cases", "0"), "cases = 0"),
-    (("--cases", "1", "--workers", "0"), "workers = 0"),
-    (("--cases", "1", "--duration", "0"), "duration = 0.0"),
-    (("--cases", "1", "--seed", "-1"), "seed = -1"),
+    (("--cases", "0"), "^--cases = 0 is not allowed: must be 1 or greater$"),
+    (("--cases", "1", "--workers", "0"),
+     "^--workers = 0 is not allowed: must be 1 or greater$"),
+    (("--cases", "1", "--duration", "0"), "^--duration = 0.0 is not allowed"),
+    (("--cases", "1", "--seed", "-1"),
+     "^--seed = -1 is not allowed: must be 0 or greater$"),
 ])
 def test_bad_arguments_leave_the_journal_untouched(tmp_path, bad, fragment):
     """A mistyped --cases 0 wiped the previous run's journal before the
-    arguments were checked."""
+    arguments were checked. The error names the option as it is typed,
+    a whole number as an integer."""
     journal = stress.Journal(tmp_path, dict(seed=SEED, duration_s=0.3))
     journal.append(dict(case=0, seed=SEED, error=""))
     before = journal.path.read_bytes()

@@ -92,6 +92,49 @@ def test_the_demonstration_is_the_measured_whole_body_movement(teach_run):
     assert metrics["fit_rms_m"] < 1e-3
 
 
+def test_a_given_interval_must_lie_within_the_log(teach_run):
+    """--start before the log's start or --stop past its end is refused
+    as a reversed interval is, not cut to the log in silence."""
+    scenario, log = teach_run
+    assert log.time[0] == 0.0 and log.time[-1] == pytest.approx(7.0)
+    for start, stop in ((0.0, 100.0), (-1.0, 5.0), (3.0, 1.0)):
+        with pytest.raises(ValueError, match=(
+                rf"start = {start!r} s, stop = {stop!r} s is not allowed: "
+                r"must be an interval of the log \(from 0\.000 to 7\.000 "
+                r"s\)")):
+            teach.learn_from_log(scenario, log, start, stop)
+    assert teach.learn_from_log(scenario, log, 0.0, 7.0).params.duration \
+        == pytest.approx(7.0)
+
+
+def test_the_teach_command_names_every_file_it_writes(tmp_path, capsys):
+    from drake_wbc.cli.main import main
+
+    assert main(["teach", "teach", "--output", str(tmp_path)]) == 0
+    *_, written, movement = capsys.readouterr().out.strip().splitlines()
+    assert movement == f"Movement written to {tmp_path / 'movement.yaml'}"
+    assert written.startswith(f"Written to {tmp_path}/: ")
+    assert sorted(written.split(": ", 1)[1].split(", ")
+                  + ["movement.yaml"]) == sorted(
+        path.name for path in tmp_path.iterdir())
+
+
+def test_zero_basis_functions_are_refused_not_replaced(teach_run, tmp_path,
+                                                       capsys):
+    """num_basis = 0 is an error, not the default 40."""
+    scenario, log = teach_run
+    with pytest.raises(ValueError, match="num_basis = 0 is not allowed"):
+        teach.learn_from_log(scenario, log, num_basis=0)
+    from drake_wbc.cli.main import main
+
+    assert main(["teach", "teach", "--num-basis", "0", "--output",
+                 str(tmp_path)]) == 2
+    assert capsys.readouterr().err == (
+        "drake-wbc teach: --num-basis = 0 is not allowed: must be 1 to "
+        f"{mv.dmp.MAX_BASIS}\n")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_replay_reproduces_the_demonstrated_path_within_1_cm(demonstrated):
     """The issue's first test: time aligned through the phase."""
     assert demonstrated["path_rms_m"] < 0.01
@@ -126,8 +169,24 @@ def test_replay_command_builds_its_scenario():
     assert variant.movement.start_time == 0.5
     assert scenario.duration == pytest.approx(0.5 + 9.0 + 1.5)
     assert scenario.scene.cylinders[-1].position == [0.6, -0.6]
+    # Described as this replay, not as the repeat scenario's three runs.
+    assert scenario.description == (
+        "the robot plays the movement movements/teach.yaml to the goal "
+        "[1.7, 0.3, 0.7, -2.8] at tau 1.5, past a new pillar of radius "
+        "0.1 m at (0.6, -0.6) (in the scene of repeat)")
+    assert teach_commands.replay_scenario(parser.parse_args([
+        "movements/teach.yaml"])).description == (
+        "the robot plays the movement movements/teach.yaml to its goal (in "
+        "the scene of repeat)")
     with pytest.raises(ValueError, match="no movement file"):
         teach_commands.replay_scenario(parser.parse_args(["nothing.yaml"]))
+    # A zero duration is refused, not replaced by the movement's length.
+    with pytest.raises(ValueError, match=r"^--duration = 0\.0 is not "
+                       r"allowed: must be > 0 s$"):
+        teach_commands.replay_scenario(parser.parse_args([
+            "movements/teach.yaml", "--duration", "0"]))
+    assert teach_commands.replay_scenario(parser.parse_args([
+        "movements/teach.yaml", "--duration", "2.5"])).duration == 2.5
 
 
 def test_the_replay_command_runs_and_writes_its_outputs(tmp_path, capsys):

@@ -1,12 +1,16 @@
 """The argument checks of drake_wbc.math.validation that the math and the
-stages share: as_float_array's pass-through and unit_interval for every
-scalar type."""
+stages share: as_float_array's pass-through, unit_interval for every
+scalar type and whole_number's errors."""
 
 import numpy as np
 import pytest
 from pydrake.autodiffutils import AutoDiffXd
 
-from drake_wbc.math.validation import as_float_array, unit_interval
+from drake_wbc.math.validation import (
+    as_float_array,
+    unit_interval,
+    whole_number,
+)
 
 
 def test_as_float_array_passes_a_right_array_and_checks_the_rest():
@@ -36,3 +40,17 @@ def test_unit_interval_names_the_value_outside(value):
     with pytest.raises(ValueError,
                        match=r"^sigma_xy = .* must lie in \[0, 1\]"):
         unit_interval("sigma_xy", value)
+
+
+@pytest.mark.parametrize("value, message", [
+    (0, "count = 0 is not allowed: must be 1 or greater"),
+    (-3.0, "count = -3 is not allowed: must be 1 or greater"),
+    (2.5, "count = 2.5 is not allowed: must be a whole number"),
+    (True, "count = True is not allowed: must be a whole number"),
+    (np.nan, "count = nan is not allowed: must be finite"),
+])
+def test_whole_number_shows_a_whole_value_as_an_integer(value, message):
+    with pytest.raises(ValueError) as error:
+        whole_number("count", value, 1)
+    assert str(error.value) == message
+    assert whole_number("count", 811.0, 1) == 811

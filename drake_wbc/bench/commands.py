@@ -95,7 +95,11 @@ def settings_from(args):
     settings["seed"] = args.seed
     settings["quick"] = bool(args.quick)
     robot = getattr(args, "robot", None)
-    settings["robot"] = None if robot is None else str(Path(robot).resolve())
+    if robot is not None:
+        from drake_wbc.experiments.scenario import robot_option_file
+
+        robot = str(robot_option_file(robot).resolve())
+    settings["robot"] = robot
     return settings
 
 

@@ -278,7 +278,8 @@ def run_plot(args):
                            variant=args.variant, deployment=args.deployment)
     print(json.dumps({k: v for k, v in summary.items() if k != "runs"},
                      indent=2))
-    print(f"Written to {output}/: {', '.join(summary['files'])}")
+    print(f"Written to {output}/: "
+          f"{', '.join(summary['files'] + ['summary.json'])}")
     return 0
 
 

@@ -41,6 +41,30 @@ def _add_demo_arguments(parser):
              "check on the robot (default: diagrams/controller.yaml's)")
 
 
+def _checked_q_arm(q_arm, arm):
+    """`q_arm` (--q-arm; None: the home pose) checked against the arm of
+    `arm`, an ArmKinematics: one finite value a joint, each within its
+    joint's limits.
+
+    Raises:
+        ValueError: naming --q-arm, and the joint, its value and its
+            limits for one outside them.
+    """
+    if q_arm is None:
+        return None
+    from drake_wbc.math.validation import as_vector
+
+    q = as_vector("--q-arm", q_arm, arm.num_joints)
+    for i, joint in enumerate(arm.model.arm_joints):
+        low, high = float(arm.lower[i]), float(arm.upper[i])
+        if not low <= q[i] <= high:
+            raise ValueError(
+                f"--q-arm[{i}] = {float(q[i])!r} rad (joint "
+                f"{joint.name()}) is not allowed: must lie within the "
+                f"joint's limits [{low!r}, {high!r}] rad")
+    return q
+
+
 def _run_demo(args):
     from drake_wbc.cli.model_report import (
         describe_robot,
@@ -49,6 +73,7 @@ def _run_demo(args):
     )
     from drake_wbc.controller import load_controller_parameters
     from drake_wbc.controller.parameters import ControllerParameters, for_robot
+    from drake_wbc.experiments.scenario import robot_option_file
     from drake_wbc.robot.description import (
         load_robot_description,
         shipped_robot,
@@ -57,11 +82,16 @@ def _run_demo(args):
 
     try:
         description = (shipped_robot() if args.robot is None
-                       else load_robot_description(args.robot))
+                       else load_robot_description(
+                           robot_option_file(args.robot)))
         params = for_robot(
             ControllerParameters() if args.controller is None
             else load_controller_parameters(args.controller), description)
-        report = describe_robot(args.q_arm, description=description)
+        arm = ArmKinematics(*make_robot_plant(description))
+        q_arm = _checked_q_arm(args.q_arm, arm)
+        report = describe_robot(
+            q_arm, k_j=params.capability.joint_limit_gain,
+            description=description)
     except (ValueError, OSError) as error:
         print(f"drake-wbc demo: {error}", file=sys.stderr)
         return 2
@@ -69,11 +99,10 @@ def _run_demo(args):
           f"({args.robot or 'the shipped robot'})\n")
     print(report)
     print()
-    print(describe_tuning(ArmKinematics(*make_robot_plant(description)),
-                          params.capability_band,
+    print(describe_tuning(arm, params.capability_band,
                           params.capability.joint_limit_gain))
     page = write_model_page(args.output / f"{description.name}_model.html",
-                            args.q_arm, description=description)
+                            q_arm, description=description)
     print(f"\nMeshcat page of the model (open it in a browser): {page}")
     return 0
 
@@ -135,9 +164,9 @@ def _run_run(args):
         run_sweep(scenario, output / "sweep",
                   echo=lambda line: print(line, flush=True))
         return 0
-    print(f"drake-wbc run {path.stem}: writing to {output}/")
     scenario = path if args.robot is None else on_robot(load_scenario(path),
                                                         args)
+    print(f"drake-wbc run {path.stem}: writing to {output}/")
     run_scenario(scenario, output, name=path.stem, duration=args.duration,
                  replay=False if args.no_replay else None)
     return 0

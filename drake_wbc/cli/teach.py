@@ -1,7 +1,7 @@
 """`drake-wbc teach` and `drake-wbc replay`: teach a whole-body movement by
 hand and repeat it (drake_wbc.math.movement).
 
-    drake-wbc teach teach --movement diagrams/movements/teach.yaml
+    drake-wbc teach teach
     drake-wbc teach teach --log robot.lcmlog --start 2 --stop 9
     drake-wbc replay diagrams/movements/teach.yaml --goal 1.9 0.2 0.7 -2.7
     drake-wbc replay diagrams/movements/teach.yaml --tau 1.5
@@ -62,11 +62,16 @@ def run_teach(args, argv=None, echo=print):
     from drake_wbc.experiments import teach
     from drake_wbc.experiments.reports import format_summary, plain_values
     from drake_wbc.experiments.scenario import find_scenario, load_scenario
+    from drake_wbc.math.dmp import MAX_BASIS
 
+    if args.num_basis is not None and not 1 <= args.num_basis <= MAX_BASIS:
+        raise ValueError(f"--num-basis = {args.num_basis!r} is not allowed: "
+                         f"must be 1 to {MAX_BASIS}")
     path = find_scenario(args.scenario)
     scenario = on_robot(load_scenario(path), args, echo)
     output = args.output or Path("out") / f"teach_{path.stem}"
     output.mkdir(parents=True, exist_ok=True)
+    written = []
     if args.log is not None:
         from drake_wbc.deployment.lcm_logs import read_lcm_log
 
@@ -79,7 +84,8 @@ def run_teach(args, argv=None, echo=print):
 
         log = simulate(build_closed_loop(scenario, scenario.variants[0]),
                        progress=echo is not None)
-        log.save(output / "log_teach")
+        saved = log.save(output / "log_teach")
+        written += [saved, saved.with_suffix(".csv")]
     argv = sys.argv[1:] if argv is None else argv
     source = "drake-wbc " + shlex.join(argv)
     movement = teach.learn_from_log(scenario, log, args.start, args.stop,
@@ -95,7 +101,8 @@ def run_teach(args, argv=None, echo=print):
     summary = {"scenario": path.stem, "description": scenario.description,
                "experiment": "teach", "runs": {},
                "metrics": plain_values(metrics),
-               "files": [figure.name], "movement": str(file)}
+               "files": [f.name for f in written + [figure]],
+               "movement": str(file)}
     (output / "summary.json").write_text(json.dumps(summary, indent=2))
     if echo is not None:
         echo(format_summary(summary, output))
@@ -136,7 +143,8 @@ def add_replay_arguments(parser):
 
 def replay_scenario(args):
     """The Scenario that `drake-wbc replay` runs: the repeat scenario
-    with one run playing `args.movement` (and the obstacles added)."""
+    with one run playing `args.movement` (and the obstacles added),
+    described as this replay."""
     from drake_wbc.experiments.scenario import (
         Variant,
         find_scenario,
@@ -147,7 +155,11 @@ def replay_scenario(args):
     from drake_wbc.math.validation import validate
     from drake_wbc.station.scene import CylinderObstacle
 
-    scenario = on_robot(load_scenario(find_scenario(args.scenario)), args)
+    if args.duration is not None and not args.duration > 0:
+        raise ValueError(f"--duration = {args.duration!r} is not allowed: "
+                         "must be > 0 s")
+    path = find_scenario(args.scenario)
+    scenario = on_robot(load_scenario(path), args)
     file = resolve_movement_file(args.movement).resolve()
     movement = LearnedMovement.load(file)
     base = (scenario.variants[0].movement
@@ -158,16 +170,25 @@ def replay_scenario(args):
     replay = MovementReplay(file=str(file), goal=args.goal, tau=args.tau,
                             start_time=start_time, start=base.start)
     tau = movement.params.tau if args.tau is None else args.tau
-    duration = args.duration or (start_time + movement.params.duration
-                                 * tau / movement.params.tau + 1.5)
+    duration = args.duration
+    if duration is None:
+        duration = (start_time + movement.params.duration * tau
+                    / movement.params.tau + 1.5)
     cylinders = list(scenario.scene.cylinders) + [
         CylinderObstacle(name=f"obstacle_{i}", position=[x, y], radius=r,
                          height=1.0)
         for i, (x, y, r) in enumerate(args.obstacle or [])]
     label = "replay" + (f", goal {list(args.goal)}" if args.goal else "") \
         + (f", tau {args.tau}" if args.tau else "")
+    description = (
+        f"the robot plays the movement {args.movement} "
+        + (f"to the goal {list(args.goal)}" if args.goal else "to its goal")
+        + (f" at tau {args.tau:g}" if args.tau is not None else "")
+        + "".join(f", past a new pillar of radius {r:g} m at ({x:g}, {y:g})"
+                  for x, y, r in args.obstacle or [])
+        + f" (in the scene of {path.stem})")
     scenario = replace(
-        scenario, duration=duration,
+        scenario, description=description, duration=duration,
         scene=replace(scenario.scene, cylinders=cylinders),
         variants=[Variant(name="replay", label=label, movement=replay)])
     return validate(scenario)

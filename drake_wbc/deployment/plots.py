@@ -74,7 +74,8 @@ def plot_lcm_log(logfile, output, scenario=None, variant=None,
             "that ran (drake-wbc plot --robot FILE)")
     output = Path(output)
     output.mkdir(parents=True, exist_ok=True)
-    files = [log.save(output / f"log_{run}")]
+    saved = log.save(output / f"log_{run}")
+    files = [saved, saved.with_suffix(".csv")]
     summary = {"scenario": name, "description": scenario.description,
                "experiment": scenario.experiment, "logfile": str(logfile),
                "duration_s": float(log.time[-1]) if len(log.time) else 0.0,

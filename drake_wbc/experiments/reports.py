@@ -66,7 +66,8 @@ def run_scenario(scenario, output, name=None, duration=None, replay=None,
         loop = build_closed_loop(scenario, variant, replay=replay)
         log = simulate(loop, duration=duration, progress=progress)
         logs[variant.name] = log
-        files.append(log.save(output / f"log_{variant.name}"))
+        saved = log.save(output / f"log_{variant.name}")
+        files += [saved, saved.with_suffix(".csv")]
         if loop.recorder is not None:
             tcp = log["truth.end_effector_pose"][:, :3]
             loop.recorder.add_path("end_effector", tcp)
@@ -102,7 +103,8 @@ def plain_values(value):
 
 
 def format_summary(summary, output):
-    """The summary as text: the experiment's metrics, then each run's."""
+    """The summary as text: the experiment's metrics, then each run's
+    (headed by its name when there are several), then the files."""
     lines = [f"{summary['scenario']}: {summary['description']}", ""]
     if summary["metrics"]:
         lines.append("Experiment metrics:")
@@ -110,7 +112,8 @@ def format_summary(summary, output):
                   for k, v in summary["metrics"].items()]
         lines.append("")
     for run, metrics in summary["runs"].items():
-        lines.append(f"Run {run}:")
+        lines.append("Run metrics:" if len(summary["runs"]) == 1
+                     else f"Run {run}:")
         lines += [f"  {k:44s} {_shown(v)}" for k, v in metrics.items()]
         lines.append("")
     lines.append(f"Written to {output}/: " + ", ".join(summary["files"])

@@ -287,6 +287,21 @@ def controller_arm(scenario):
         scenario_robot(scenario), mount=None if mount.is_identity else mount))
 
 
+def robot_option_file(robot_file):
+    """`robot_file`, a command line's --robot, as a Path.
+
+    Raises:
+        ValueError: naming --robot and its value when it is no file.
+    """
+    path = Path(robot_file)
+    if not path.is_file():
+        raise ValueError(
+            f"--robot = {str(robot_file)!r} is not allowed: "
+            + ("a folder, not a robot description file" if path.is_dir()
+               else "no such file"))
+    return path
+
+
 def with_robot(scenario, robot_file, echo=print):
     """A copy of `scenario` on the robot of the description `robot_file`
     (a command line's --robot): its arm starts at the robot's home when
@@ -294,10 +309,11 @@ def with_robot(scenario, robot_file, echo=print):
     and the start is checked against it.
 
     Raises:
-        ValueError: naming the file and the field of a description that
-            does not load, or a start outside the robot's limits.
+        ValueError: naming --robot when its file does not exist, the file
+            and the field of a description that does not load, or a
+            start outside the robot's limits.
     """
-    robot_file = Path(robot_file).resolve()
+    robot_file = robot_option_file(robot_file).resolve()
     description = load_robot_description(robot_file)
     scenario = copy.deepcopy(scenario)
     scenario.robot = str(robot_file)

@@ -30,16 +30,31 @@ from drake_wbc.math.demonstration import (
 )
 
 
-def interval(scenario, start=None, stop=None):
+def interval(scenario, start=None, stop=None, log=None):
     """(start, stop) of the demonstration: the S_hri markers of the
-    scenario's task, each replaced by `start`/`stop` when given."""
+    scenario's task, each replaced by `start`/`stop` when given.
+
+    Raises:
+        ValueError: a given `start` before the first time of `log` (a
+            RunLog, when given) or a given `stop` past its last.
+    """
+    given_start, given_stop = start is not None, stop is not None
     if start is None or stop is None:
         marked = teaching_interval(
             scenario.task.phri_switch, scenario.duration,
             scenario.controller.phri_switch)
         start = marked[0] if start is None else start
         stop = marked[1] if stop is None else stop
-    return float(start), float(stop)
+    start, stop = float(start), float(stop)
+    if log is not None and len(log.time):
+        first, last = float(log.time[0]), float(log.time[-1])
+        if (given_start and start < first - 1e-9) or (
+                given_stop and stop > last + 1e-9):
+            raise ValueError(
+                f"start = {start!r} s, stop = {stop!r} s is not allowed: "
+                f"must be an interval of the log (from {first:.3f} to "
+                f"{last:.3f} s)")
+    return start, stop
 
 
 def learn_from_log(scenario, log, start=None, stop=None, num_basis=None,
@@ -47,13 +62,13 @@ def learn_from_log(scenario, log, start=None, stop=None, num_basis=None,
     """The LearnedMovement of the demonstration in `log` (a RunLog),
     learned with the gains of the scenario's whole-body DMP (so that it
     replays with the same attractor)."""
-    start, stop = interval(scenario, start, stop)
+    start, stop = interval(scenario, start, stop, log)
     demo = demonstration_from_log(log, start, stop,
                                   controller_arm(scenario))
     dmp = scenario.controller.whole_body_cdmp.dmp
     params = mv.dmp.DmpParameters(
         alpha_z=dmp.alpha_z, beta_z=dmp.beta_z, tau=1.0,
-        num_basis=num_basis or mv.DEFAULT_NUM_BASIS)
+        num_basis=mv.DEFAULT_NUM_BASIS if num_basis is None else num_basis)
     return mv.learn_movement(demo, params, source=source)
 
 

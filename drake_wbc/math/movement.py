@@ -190,7 +190,8 @@ def learn_movement(demonstrations, params=None, num_basis=None,
     duration = float(np.mean([d.duration for d in demonstrations]))
     params = params or dmp.DmpParameters(num_basis=DEFAULT_NUM_BASIS)
     params = replace(params, duration=positive("duration", duration),
-                     num_basis=num_basis or params.num_basis)
+                     num_basis=(params.num_basis if num_basis is None
+                                else num_basis))
     designs, targets = [], []
     for demo in demonstrations:
         t = (demo.time - demo.time[0]) * (duration / demo.duration)

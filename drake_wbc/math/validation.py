@@ -161,12 +161,16 @@ def whole_number(name, value, minimum=0):
     """`value` as an int >= `minimum` (811.0 is accepted; a bool is not).
 
     Raises:
-        ValueError: naming `name`, its value and what is allowed.
+        ValueError: naming `name`, its value (a whole one as an integer)
+            and what is allowed.
     """
-    number = in_closed_range(name, value, minimum, np.inf)
+    number = as_scalar(name, value)
     if not number.is_integer() or isinstance(value, (bool, np.bool_)):
         raise ValueError(f"{name} = {value!r} is not allowed: must be a "
                          "whole number")
+    if number < minimum:
+        raise ValueError(f"{name} = {int(number)} is not allowed: must be "
+                         f"{minimum} or greater")
     return int(number)
 
 

@@ -63,6 +63,7 @@ import time
 from multiprocessing import resource_tracker
 from pathlib import Path
 
+from drake_wbc.experiments.scenario import robot_option_file
 from drake_wbc.math.validation import positive, whole_number
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.stress.cases import TIMING_KEYS, run_case, violations
@@ -183,20 +184,24 @@ def run_cases(seed, cases, duration=DEFAULT_DURATION, workers=1,
                   key=lambda record: record["case"])
 
 
-def check_arguments(seed, cases, duration, workers):
+def check_arguments(seed, cases, duration, workers, prefix=""):
     """(seed, cases, duration, workers) checked: whole numbers seed >= 0,
     cases >= 1 and workers >= 1 (None: one per core), duration > 0 s.
+
+    `prefix` comes before each argument's name in an error ("--" names
+    the command line's options).
 
     Raises:
         ValueError: naming the first bad argument, its value and what is
             allowed.
     """
-    seed = whole_number("seed", seed)
-    cases = whole_number("cases", cases, 1)
-    duration = positive("duration", duration)
+    seed = whole_number(f"{prefix}seed", seed)
+    cases = whole_number(f"{prefix}cases", cases, 1)
+    duration = positive(f"{prefix}duration", duration)
     if workers is None:
         workers = os.cpu_count() or 1
-    return seed, cases, duration, whole_number("workers", workers, 1)
+    return seed, cases, duration, whole_number(f"{prefix}workers", workers,
+                                               1)
 
 
 def _in_processes(seed, indices, duration, workers, on_done, robot):
@@ -568,10 +573,11 @@ def run_stress(args):
         ValueError: naming a bad argument, before anything is written.
     """
     seed, cases, duration, workers = check_arguments(
-        args.seed, args.cases, args.duration, args.workers)
+        args.seed, args.cases, args.duration, args.workers, prefix="--")
     where = (f"on the Dask cluster at {args.scheduler}" if args.scheduler
              else f"in {workers} worker process(es)")
-    robot = "" if args.robot is None else str(Path(args.robot).resolve())
+    robot = "" if args.robot is None else str(
+        robot_option_file(args.robot).resolve())
     if robot:
         load_robot_description(robot)  # checked before the journal
     settings = dict(seed=seed, duration_s=duration,
