@@ -219,3 +219,28 @@ def test_the_second_signal_does_not_wait_for_a_slow_stop(tmp_path):
         if child.poll() is None:
             child.kill()
             child.wait()
+
+
+def test_a_stop_that_surfaces_through_compiled_code_is_a_stop():
+    """A SIGINT whose handler raised Stopped while compiled code had
+    called back into Python comes out of that code as a SystemError
+    caused by the Stopped (seen once in `drake-wbc stress`, inside a
+    compiled kernel): it is still the stop, found through the causes;
+    any other error is not."""
+    from drake_wbc.stress.run import Stopped, stop_within
+
+    stop = Stopped(signal.SIGINT)
+    try:
+        try:
+            raise stop
+        except Stopped as cause:
+            raise SystemError("returned a result with an exception "
+                              "set") from cause
+    except SystemError as error:
+        assert stop_within(error) is stop
+    assert stop_within(stop) is stop
+    assert stop_within(ValueError("no")) is None
+    looped = ValueError("a")
+    looped.__context__ = ValueError("b")
+    looped.__context__.__context__ = looped
+    assert stop_within(looped) is None

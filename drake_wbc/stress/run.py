@@ -282,6 +282,20 @@ class Stopped(BaseException):
         self.signum, self.code = signum, 128 + signum
 
 
+def stop_within(error):
+    """The Stopped that `error` is or was raised from, or None. A signal's
+    Stopped raised while Python code runs on behalf of compiled code (a
+    compiled kernel's call back into the interpreter) comes out of it as
+    a SystemError caused by the Stopped."""
+    seen = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, Stopped):
+            return error
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__
+    return None
+
+
 _SIGNALS = {"held": 0, "pending": None, "received": []}
 """The state of stopped_by_signals: how deep in signals_held blocks, the
 signal that came while held, the signals received."""
@@ -605,7 +619,10 @@ def run_stress(args):
             print(summary_table(records))
             json_path, csv_path = write_results(args.output, settings,
                                                 records)
-        except Stopped as stop:
+        except BaseException as error:
+            stop = stop_within(error)
+            if stop is None:
+                raise
             sys.stdout.flush()
             print(f"\nstress: stopped by {stop}: {_kept(journal, cases)}",
                   file=sys.stderr)
