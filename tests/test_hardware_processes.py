@@ -60,40 +60,38 @@ cd {folder}
 {python} -m drake_wbc.cli deploy scenario.yaml \\
     --realtime-rate {rate} > deploy.out 2>&1
 echo $? > deploy.code
+# Starts a deployment in the background (`deploy_running NAME ARGS`:
+# its output in NAME.out, its process in $PID) and returns once it runs.
+deploy_running() {{
+    name=$1
+    shift
+    {python} -m drake_wbc.cli deploy scenario.yaml "$@" \
+        --realtime-rate {rate} > $name.out 2>&1 &
+    PID=$!
+    for i in $(seq 300); do
+        grep -q running $name.out && break
+        sleep 0.1
+    done
+}}
 # A second deployment, stopped by SIGINT once it runs (the programs
 # handle SIGINT themselves, which a background job of sh ignores).
-{python} -m drake_wbc.cli deploy scenario.yaml \\
-    --duration 60 --realtime-rate {rate} > stopped.out 2>&1 & STOPPED=$!
-for i in $(seq 300); do
-    grep -q running stopped.out && break
-    sleep 0.1
-done
+deploy_running stopped --duration 60
 sleep 1
-kill -INT $STOPPED; wait $STOPPED; echo $? > stopped.code
+kill -INT $PID; wait $PID; echo $? > stopped.code
 # A third deployment: while the base moves, the robot freezes for 0.3 s
 # (SIGSTOP: every stream stops at once), and a second sender tries the
 # command channels.
-{python} -m drake_wbc.cli deploy scenario.yaml \\
-    --duration 3 --realtime-rate {rate} > frozen.out 2>&1 & FROZEN=$!
-for i in $(seq 300); do
-    grep -q running frozen.out && break
-    sleep 0.1
-done
+deploy_running frozen --duration 3
 sleep 1.0
 kill -STOP $ROBOT; sleep 0.3; kill -CONT $ROBOT
 {python} -c "{forger}" > forger.out 2>&1
-wait $FROZEN; echo $? > frozen.code
+wait $PID; echo $? > frozen.code
 # A fourth: while the base moves, the controller itself freezes for 0.4 s
 # (its clock stands still, the robot's command timeout runs on).
-{python} -m drake_wbc.cli deploy scenario.yaml \
-    --duration 3 --realtime-rate {rate} > stalled.out 2>&1 & STALLED=$!
-for i in $(seq 300); do
-    grep -q running stalled.out && break
-    sleep 0.1
-done
+deploy_running stalled --duration 3
 sleep 1.0
-kill -STOP $STALLED; sleep 0.4; kill -CONT $STALLED
-wait $STALLED; echo $? > stalled.code
+kill -STOP $PID; sleep 0.4; kill -CONT $PID
+wait $PID; echo $? > stalled.code
 kill -INT $ROBOT; wait $ROBOT; echo $? > robot.code
 kill -TERM $LOGGER; wait $LOGGER
 """
