@@ -400,7 +400,9 @@ def joint_position_bounds(q, lower, upper, time_step, margin,
                           acceleration=None):
     """The bounds (low, high) on q_dot from the joints' position limits
     (see `joint_position_velocity_bounds`), for any scalar type: lists of
-    n entries.
+    n entries. A joint whose angle is not finite has NaN bounds (it is
+    nowhere, so no rate of it is known to be safe), which `_clipped`
+    passes on to its rate.
 
     Args:
         q: (n,) joint angles, rad.
@@ -411,6 +413,10 @@ def joint_position_bounds(q, lower, upper, time_step, margin,
     """
     low, high = [], []
     for i in range(len(q)):
+        if not math.isfinite(float(value_of(q[i]))):
+            low.append(q[i] * math.nan)
+            high.append(q[i] * math.nan)
+            continue
         step = None if acceleration is None else acceleration[i] * time_step
         for distance, bounds, sign in (
                 ((upper[i] - margin) - q[i], high, 1.0),
@@ -425,12 +431,20 @@ def joint_position_bounds(q, lower, upper, time_step, margin,
 
 
 def _clipped(values, low, high):
-    """values clipped to [low, high] entry by entry, and which were cut."""
+    """values clipped to [low, high] entry by entry, and which were cut;
+    a NaN bound (`joint_position_bounds` at a joint angle that is not
+    finite) makes the value NaN, and cut; a NaN value stays NaN, not cut
+    (no bound acted on it)."""
     result, cut = [], []
     for value, lowest, highest in zip(values, low, high, strict=True):
+        if math.isnan(float(value_of(lowest))):
+            result.append(value * math.nan)
+            cut.append(True)
+            continue
         clipped = min(max(value, lowest), highest)
         result.append(clipped)
-        cut.append(bool(clipped != value))
+        cut.append(bool(clipped != value)
+                   and not math.isnan(float(value_of(value))))
     return result, cut
 
 
@@ -733,9 +747,14 @@ def _bounded(q_dot, q, limited, low, high, lower, upper_band, velocity,
     """q_dot clipped to the position bounds at q, joint by joint; sets
     limited[i] where it cuts. A joint's bound is computed only on the side
     it moves towards and only where it may cut (`clear`); `low` and `high`
-    keep those computed (NaN: not yet)."""
+    keep those computed (NaN: not yet). A joint whose angle is not finite
+    has no bound: its rate is NaN, and cut (as in the reference)."""
     result = np.empty(q_dot.size)
     for i in range(q_dot.size):
+        if not math.isfinite(q[i]):
+            result[i] = math.nan
+            limited[i] = True
+            continue
         v = q_dot[i]
         if v > 0.0:
             distance = upper_band[i] - q[i]
@@ -886,7 +905,8 @@ def _twist_samples(rng):
     """Random arguments of joint_velocity_command: Jacobians of 5 to 7
     columns with singular values from regular to exactly zero (damped and
     undamped solves), joints inside, on and beyond the edges of their
-    bands, slow and fast twists, previous rates from rest to beyond the
+    bands (and one case in ten with a joint angle NaN or infinite), slow
+    and fast twists, previous rates from rest to beyond the
     limits, with and without an acceleration limit; and one case in five
     with a diagonal J_a whose rates lie just below, at and just above the
     velocity limits, at distances from the edges just inside and outside
@@ -912,6 +932,8 @@ def _twist_samples(rng):
         edge = (lower[i] + margin if rng.uniform() < 0.5
                 else upper[i] - margin)
         q[i] = edge + rng.choice([-1.0, 0.0, 1.0]) * rng.uniform(0.0, 0.05)
+    if rng.uniform() < 0.1:
+        q[rng.integers(n)] = rng.choice([np.nan, np.inf, -np.inf])
     h = float(rng.choice([0.01, 0.01, 0.001, 0.1]))
     acceleration = (None if rng.uniform() < 0.3
                     else float(rng.choice([12.56, 1.0])))
