@@ -43,7 +43,7 @@ from pydrake.autodiffutils import AutoDiffXd
 
 from drake_wbc.math.compiled import compiled
 from drake_wbc.math.kernels import fast_kernel
-from drake_wbc.math.scalar_support import through_float_function
+from drake_wbc.math.scalar_support import constant_like, through_float_function
 from drake_wbc.math.validation import (
     as_matrix,
     as_scalar,
@@ -357,10 +357,21 @@ def transition_of(value, upper, lower):
         alpha in [0, 1], of the scalar type of `value`.
     """
     if value <= lower:
-        return _zero_like(value) + 1.0
+        return _constant(value, 1.0)
     if value >= upper:
-        return _zero_like(value)
+        return _constant(value, 0.0)
     return 0.5 * (1.0 + np.cos(np.pi * (value - lower) / (upper - lower)))
+
+
+def _constant(value, constant):
+    """`constant` of the scalar type of `value`, without derivative:
+    value * 0 + constant (the zero's sign kept) for a finite value, and
+    for an infinite one, where value * 0 is NaN, the exact constant
+    (scalar_support.constant_like)."""
+    zero = _zero_like(value)
+    if zero != zero:
+        return constant_like(value, constant)
+    return zero + constant if constant else zero
 
 
 def transition_derivative_of(value, upper, lower):
@@ -368,7 +379,7 @@ def transition_derivative_of(value, upper, lower):
     -0.5 pi / (upper - lower) sin(pi x) inside the band, 0 outside, with x
     as in `transition_of` (the same arguments)."""
     if value <= lower or value >= upper:
-        return _zero_like(value)
+        return _constant(value, 0.0)
     width = upper - lower
     return -0.5 * np.pi / width * np.sin(np.pi * (value - lower) / width)
 
@@ -852,10 +863,10 @@ def capability_terms_float(J_a, q, lower, upper, k_j, damping,
 def _transition_sample(rng):
     """(value, upper, lower): a band of any width at any place (C_m's, or a
     workspace's d and phi), the value inside it, on either edge or beyond
-    either."""
+    either, or NaN or infinite."""
     lower = rng.uniform(0.0, 1.0) if rng.uniform() < 0.8 else 0.0
     upper = lower + 10.0 ** rng.uniform(-4.0, 0.0)
-    kind = rng.integers(5)
+    kind = rng.integers(6)
     if kind == 0:
         value = lower
     elif kind == 1:
@@ -864,8 +875,10 @@ def _transition_sample(rng):
         value = lower - rng.uniform(0.0, 1.0)
     elif kind == 3:
         value = upper + rng.uniform(0.0, 1.0)
-    else:
+    elif kind == 4:
         value = rng.uniform(lower, upper)
+    else:
+        value = float(rng.choice([np.nan, np.inf, -np.inf]))
     return value, upper, lower
 
 

@@ -121,7 +121,6 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from pydrake.autodiffutils import AutoDiffXd
 
 from drake_wbc.math.capability import (
     transition_derivative_float,
@@ -131,7 +130,7 @@ from drake_wbc.math.capability import (
 )
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.motion_mode import MotionMode, fixed_weighting_factors
-from drake_wbc.math.scalar_support import is_autodiff, value_of
+from drake_wbc.math.scalar_support import constant_like, value_of
 from drake_wbc.math.validation import (
     as_scalar,
     as_vector,
@@ -426,19 +425,10 @@ def _side(previous, gradient, V_a, direction, speed):
     leads = (_lead(gradient, V_a, speed),
              _lead(-direction[:3], V_a[:3], speed))
     if 1 in leads:
-        return _constant_like(previous, 1.0)
+        return constant_like(previous, 1.0)
     if leads == (-1, -1):
-        return _constant_like(previous, 0.0)
+        return constant_like(previous, 0.0)
     return previous
-
-
-def _constant_like(like, value):
-    """`value` of the scalar type of `like` (float, or AutoDiffXd with zero
-    derivatives), whatever like's value: `like * 0 + value` would be NaN
-    for a NaN `like`."""
-    if is_autodiff(like):
-        return AutoDiffXd(value, np.zeros(like.derivatives().size))
-    return value
 
 
 def _limited(previous, target, max_step):
