@@ -240,8 +240,18 @@ def _cross(a, b):
 def _manipulability(J):
     """m = sqrt(det(J_a J_a^T)) = prod_i s_i (Sec. IV-A): the product of the
     singular values s_i of J_a, which stays accurate near a singularity
-    where det(J_a J_a^T) loses all its digits."""
+    where det(J_a J_a^T) loses all its digits; NaN for a J_a that is not
+    finite (see `_finite_jacobian`)."""
+    if not _finite_jacobian(J):
+        return math.nan
     return np.prod(np.linalg.svd(J, compute_uv=False))
+
+
+def _finite_jacobian(J):
+    """Whether the float J_a is finite: the bodies that take its SVD test
+    this first, since numpy refuses the SVD of a NaN and never ends that
+    of an infinity; theirs is NaN then."""
+    return bool(np.isfinite(J).all())
 
 
 def _limit_factors(q, lower, upper):
@@ -289,6 +299,8 @@ def _jacobian_derivative(J):
 def _manipulability_joint_gradient(J):
     """dm/dq_i = sum_k (prod_{l != k} s_l) u_k^T (dJ_a/dq_i) v_k (see
     `manipulability_joint_gradient`)."""
+    if not _finite_jacobian(J):
+        return np.full(J.shape[1], math.nan)
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
     W = (U * _others_as_written(s)) @ Vt  # m J_a^+T, without division
     return np.einsum("rc,irc->i", W, _jacobian_derivative(J))
@@ -308,6 +320,8 @@ def _capability_gradient(J, q, lower, upper, k_j, damping,
     """grad_x C_m = (J_a J_a^T + lambda^2 I)^-1 J_a dC_m/dq through the SVD
     of J_a, lambda^2 = lambda_max^2 (1 - (s_min / eps)^2) below eps, else 0
     (see `capability_gradient`)."""
+    if not _finite_jacobian(J):
+        return np.full(J.shape[0], math.nan)
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
     lambda2 = (damping**2 * (1.0 - (s[-1] / damping_threshold) ** 2)
                if s[-1] < damping_threshold else 0.0)
@@ -775,7 +789,12 @@ def _manipulability_gradient(J, U, s, Vt):
 
 @compiled
 def _capability_terms(J, q, lower, upper, k_j, damping, damping_threshold):
-    """The compiled body of `capability_terms_float`."""
+    """The compiled body of `capability_terms_float`: NaN for a J that is
+    not finite (which numba's SVD refuses)."""
+    for r in range(J.shape[0]):
+        for c in range(J.shape[1]):
+            if not math.isfinite(J[r, c]):
+                return np.nan, np.full(J.shape[0], np.nan)
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
     m = 1.0
     for s_k in s:
@@ -814,8 +833,8 @@ def _capability_terms_sample(rng):
     """Random arguments of `capability_terms`: J_a from chosen
     singular values (well conditioned, near-singular and singular, the
     damping on and off), n = 6 or 7, joints inside their range, at a
-    limit, beyond one, two at limits; float64 arrays, as the stage passes
-    them."""
+    limit, beyond one, two at limits; in one case in twenty an entry of
+    J_a NaN or infinite; float64 arrays, as the stage passes them."""
     n = 6 if rng.uniform() < 0.75 else 7
     U, _ = np.linalg.qr(rng.normal(size=(6, 6)))
     V, _ = np.linalg.qr(rng.normal(size=(n, n)))
@@ -841,6 +860,9 @@ def _capability_terms_sample(rng):
     elif limits == 3:
         q[j], q[k] = lower[j], upper[k]
     k_j = rng.uniform(5e3, 3e4) * 4.0 ** (n - 6)
+    if rng.uniform() < 0.05:
+        J[rng.integers(6), rng.integers(n)] = rng.choice(
+            [np.nan, np.inf, -np.inf])
     return J, q, lower, upper, k_j, damping, eps
 
 
