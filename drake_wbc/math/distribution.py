@@ -377,27 +377,22 @@ def whole_body_distribution_float(V_ee, p_ee_in_base, R_ba, sigma_xy,
 
     Args:
         as whole_body_distribution; V_ee, p_ee_in_base and
-        capability_gradient float64 C-contiguous arrays, as the stages
-        give them (anything but an array goes through
-        np.ascontiguousarray first).
+        capability_gradient go through `float_array` (themselves when
+        float64 C-contiguous writeable arrays, as the stages give them; a
+        copy otherwise, a strided view or a list), so that no call
+        compiles a signature of its own.
 
     Returns:
         (9,) array V_wb.
     """
-    if R_ba is None and (type(V_ee) is type(p_ee_in_base)
-                         is type(capability_gradient) is np.ndarray):
+    if R_ba is None:
         V_wb = _closed_form(
-            V_ee, p_ee_in_base, float(sigma_xy), float(sigma_phi),
-            capability_gradient, float(null_space_gain),
-            damping is not None,
+            float_array(V_ee), float_array(p_ee_in_base), float(sigma_xy),
+            float(sigma_phi), float_array(capability_gradient),
+            float(null_space_gain), damping is not None,
             0.0 if damping is None else damping.threshold)
         if V_wb[0] == V_wb[0]:  # not NaN: the closed form holds
             return V_wb
-    elif R_ba is None:
-        return whole_body_distribution_float(
-            float_array(V_ee), float_array(p_ee_in_base), None, sigma_xy,
-            sigma_phi, float_array(capability_gradient), null_space_gain,
-            damping)
     return whole_body_distribution(
         V_ee, p_ee_in_base, R_ba, sigma_xy, sigma_phi, capability_gradient,
         null_space_gain, damping)
