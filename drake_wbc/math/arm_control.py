@@ -284,8 +284,8 @@ class TwistLimits:
 
     @functools.cached_property
     def _floats(self):
-        """The limits as the float kernel reads them (lists of floats),
-        computed once."""
+        """The limits as the float kernel reads them (`_FloatLimits`:
+        float64 arrays and floats), computed once."""
         return _FloatLimits.of(self)
 
 
