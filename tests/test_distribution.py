@@ -15,6 +15,7 @@ from drake_wbc.math.distribution import (
     SingularityDamping,
     capability_null_velocity,
     distribute,
+    weighted_distribution,
     weighted_pseudoinverse,
     weighting_matrix,
 )
@@ -474,3 +475,41 @@ def test_sigma_grid_boundaries_agree_with_nearby_interior():
             distribute(J, V_ee, *near),
             rtol=0, atol=1e-5,
         )
+
+
+def test_a_strided_twist_compiles_nothing_new():
+    """The float kernel gives a strided view (a reversed twist) to its
+    compiled closed form as the C-contiguous array it was compiled for:
+    the same result, no new signature in the tick."""
+    from drake_wbc.math import distribution, kernels
+
+    kernel = next(k for k in kernels.registered_kernels()
+                  if k.reference is distribution.whole_body_distribution)
+    kernels.warm(kernel)
+    signatures = len(distribution._closed_form.signatures)
+    args = list(kernel.sample(np.random.default_rng(3)))
+    args[2] = None  # the usual mounting: the closed form
+    expected = kernel.fast(*args)
+    for index in (0, 1, 5):  # V_ee, p_ee_in_base, capability_gradient
+        strided = list(args)
+        strided[index] = np.array(args[index][::-1])[::-1]
+        assert not strided[index].flags.c_contiguous
+        np.testing.assert_array_equal(kernel.fast(*strided), expected)
+    assert len(distribution._closed_form.signatures) == signatures
+
+
+def test_without_damping_a_zero_jacobian_is_rejected_not_zero():
+    """J Q J^T = 0 is not positive definite: with damping=None the checked
+    functions raise, as they do for a singular one (the reference gives
+    NaN: no exact inverse), rather than give zeros."""
+    J = np.zeros((6, 9))
+    with pytest.raises(ValueError, match="J_wb .*damping=None"):
+        weighted_pseudoinverse(J, weighting_matrix(0.5, 0.5), damping=None)
+    with pytest.raises(ValueError, match="J_wb .*damping=None"):
+        distribute(J, np.ones(6), 0.5, 0.5, damping=None)
+    assert np.isnan(weighted_distribution(
+        J, np.ones(6), np.ones(9), damping=None)).all()
+    # Damped, no weighted input moves the end effector: zeros.
+    np.testing.assert_array_equal(
+        weighted_pseudoinverse(J, weighting_matrix(0.5, 0.5)),
+        np.zeros((9, 6)))

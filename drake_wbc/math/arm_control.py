@@ -284,8 +284,8 @@ class TwistLimits:
 
     @functools.cached_property
     def _floats(self):
-        """The limits as the float kernel reads them (lists of floats),
-        computed once."""
+        """The limits as the float kernel reads them (`_FloatLimits`:
+        float64 arrays and floats), computed once."""
         return _FloatLimits.of(self)
 
 
@@ -335,8 +335,12 @@ def damping_rule(s_min, damping, threshold):
 def smallest_singular_value(J):
     """s_min of J (m, n), for any scalar type: the value from the SVD of
     J's value, and for AutoDiffXd the derivative u^T dJ v of a simple
-    singular value (u, v its singular vectors)."""
+    singular value (u, v its singular vectors); NaN for a J that is not
+    finite (whose SVD numpy refuses, or, with an infinity, never
+    ends)."""
     J_value = value_of(J)
+    if not np.isfinite(J_value).all():
+        return 0.0 * (J - J_value)[0, 0] + math.nan
     U, s, Vt = np.linalg.svd(J_value, full_matrices=False)
     return float(s[-1]) + U[:, -1] @ (J - J_value) @ Vt[-1]
 
@@ -359,9 +363,15 @@ def damped_solve(J, V, damping):
         damping: lambda >= 0.
 
     Returns:
-        (n,) joint velocity.
+        (n,) joint velocity: all NaN for a J, V or lambda that is not
+        finite (whose infinities the solve would mix into some NaNs and
+        some numbers, differently for every way of solving).
     """
     rows, n = J.shape
+    if not (np.isfinite(value_of(J)).all() and np.isfinite(value_of(V)).all()
+            and math.isfinite(float(value_of(damping)))):
+        with np.errstate(invalid="ignore"):
+            return (J.T @ V) * math.nan
     square = damping * damping
     try:
         if n == rows and square == 0.0:
@@ -400,7 +410,9 @@ def joint_position_bounds(q, lower, upper, time_step, margin,
                           acceleration=None):
     """The bounds (low, high) on q_dot from the joints' position limits
     (see `joint_position_velocity_bounds`), for any scalar type: lists of
-    n entries.
+    n entries. A joint whose angle is not finite has NaN bounds (it is
+    nowhere, so no rate of it is known to be safe), which `_clipped`
+    passes on to its rate.
 
     Args:
         q: (n,) joint angles, rad.
@@ -411,6 +423,10 @@ def joint_position_bounds(q, lower, upper, time_step, margin,
     """
     low, high = [], []
     for i in range(len(q)):
+        if not math.isfinite(float(value_of(q[i]))):
+            low.append(q[i] * math.nan)
+            high.append(q[i] * math.nan)
+            continue
         step = None if acceleration is None else acceleration[i] * time_step
         for distance, bounds, sign in (
                 ((upper[i] - margin) - q[i], high, 1.0),
@@ -425,12 +441,20 @@ def joint_position_bounds(q, lower, upper, time_step, margin,
 
 
 def _clipped(values, low, high):
-    """values clipped to [low, high] entry by entry, and which were cut."""
+    """values clipped to [low, high] entry by entry, and which were cut;
+    a NaN bound (`joint_position_bounds` at a joint angle that is not
+    finite) makes the value NaN, and cut; a NaN value stays NaN, not cut
+    (no bound acted on it)."""
     result, cut = [], []
     for value, lowest, highest in zip(values, low, high, strict=True):
+        if math.isnan(float(value_of(lowest))):
+            result.append(value * math.nan)
+            cut.append(True)
+            continue
         clipped = min(max(value, lowest), highest)
         result.append(clipped)
-        cut.append(bool(clipped != value))
+        cut.append(bool(clipped != value)
+                   and not math.isnan(float(value_of(value))))
     return result, cut
 
 
@@ -733,9 +757,14 @@ def _bounded(q_dot, q, limited, low, high, lower, upper_band, velocity,
     """q_dot clipped to the position bounds at q, joint by joint; sets
     limited[i] where it cuts. A joint's bound is computed only on the side
     it moves towards and only where it may cut (`clear`); `low` and `high`
-    keep those computed (NaN: not yet)."""
+    keep those computed (NaN: not yet). A joint whose angle is not finite
+    has no bound: its rate is NaN, and cut (as in the reference)."""
     result = np.empty(q_dot.size)
     for i in range(q_dot.size):
+        if not math.isfinite(q[i]):
+            result[i] = math.nan
+            limited[i] = True
+            continue
         v = q_dot[i]
         if v > 0.0:
             distance = upper_band[i] - q[i]
@@ -805,10 +834,22 @@ def _solved(A, b):
 def _least_squares(J, V, damping, threshold):
     """(q_dot, lambda, s_min) of the damped least squares: at a regular
     point (J square, s_min >= eps) by an LU solve, otherwise through the
-    thin SVD."""
+    thin SVD; all NaN for a J that is not finite (which numba's SVD
+    refuses), q_dot NaN for a V that is not (as `damped_solve`)."""
+    rows, n = J.shape
+    for r in range(rows):
+        for c in range(n):
+            if not math.isfinite(J[r, c]):
+                return np.full(n, np.nan), np.nan, np.nan
+    finite_twist = True
+    for r in range(rows):
+        finite_twist = finite_twist and math.isfinite(V[r])
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
     s_min = s[-1]
-    rows, n = J.shape
+    if not finite_twist:
+        return np.full(n, np.nan), (
+            0.0 if s_min >= threshold
+            else damping * (1.0 - (s_min / threshold) ** 2)), s_min
     if rows == n and s_min >= threshold:
         return _solved(J, V), 0.0, s_min
     lambda_ = (0.0 if s_min >= threshold
@@ -886,7 +927,9 @@ def _twist_samples(rng):
     """Random arguments of joint_velocity_command: Jacobians of 5 to 7
     columns with singular values from regular to exactly zero (damped and
     undamped solves), joints inside, on and beyond the edges of their
-    bands, slow and fast twists, previous rates from rest to beyond the
+    bands (and one case in ten with a joint angle NaN or infinite, one
+    in twenty each with an entry of J_a or V_a NaN or infinite), slow
+    and fast twists, previous rates from rest to beyond the
     limits, with and without an acceleration limit; and one case in five
     with a diagonal J_a whose rates lie just below, at and just above the
     velocity limits, at distances from the edges just inside and outside
@@ -912,6 +955,14 @@ def _twist_samples(rng):
         edge = (lower[i] + margin if rng.uniform() < 0.5
                 else upper[i] - margin)
         q[i] = edge + rng.choice([-1.0, 0.0, 1.0]) * rng.uniform(0.0, 0.05)
+    if rng.uniform() < 0.1:
+        q[rng.integers(n)] = rng.choice([np.nan, np.inf, -np.inf])
+    if rng.uniform() < 0.05:
+        J[rng.integers(6), rng.integers(n)] = rng.choice(
+            [np.nan, np.inf, -np.inf])
+    V = rng.normal(0.0, rng.choice([1e-3, 0.05, 0.3, 3.0]), 6)
+    if rng.uniform() < 0.05:
+        V[rng.integers(6)] = rng.choice([np.nan, np.inf, -np.inf])
     h = float(rng.choice([0.01, 0.01, 0.001, 0.1]))
     acceleration = (None if rng.uniform() < 0.3
                     else float(rng.choice([12.56, 1.0])))
@@ -924,7 +975,6 @@ def _twist_samples(rng):
         margin=margin, acceleration_limit=acceleration,
         self_motion_gain=float(rng.choice([0.0, DEFAULT_SELF_MOTION_GAIN,
                                            5.0])))
-    V = rng.normal(0.0, rng.choice([1e-3, 0.05, 0.3, 3.0]), 6)
     previous = (None if acceleration is None else
                 rng.normal(0.0, rng.choice([0.0, 0.3, 3.0]), n))
     return J, V, q, previous, limits

@@ -43,7 +43,7 @@ from pydrake.autodiffutils import AutoDiffXd
 
 from drake_wbc.math.compiled import compiled
 from drake_wbc.math.kernels import fast_kernel
-from drake_wbc.math.scalar_support import through_float_function
+from drake_wbc.math.scalar_support import constant_like, through_float_function
 from drake_wbc.math.validation import (
     as_matrix,
     as_scalar,
@@ -240,8 +240,18 @@ def _cross(a, b):
 def _manipulability(J):
     """m = sqrt(det(J_a J_a^T)) = prod_i s_i (Sec. IV-A): the product of the
     singular values s_i of J_a, which stays accurate near a singularity
-    where det(J_a J_a^T) loses all its digits."""
+    where det(J_a J_a^T) loses all its digits; NaN for a J_a that is not
+    finite (see `_finite_jacobian`)."""
+    if not _finite_jacobian(J):
+        return math.nan
     return np.prod(np.linalg.svd(J, compute_uv=False))
+
+
+def _finite_jacobian(J):
+    """Whether the float J_a is finite: the bodies that take its SVD test
+    this first, since numpy refuses the SVD of a NaN and never ends that
+    of an infinity; theirs is NaN then."""
+    return bool(np.isfinite(J).all())
 
 
 def _limit_factors(q, lower, upper):
@@ -289,6 +299,8 @@ def _jacobian_derivative(J):
 def _manipulability_joint_gradient(J):
     """dm/dq_i = sum_k (prod_{l != k} s_l) u_k^T (dJ_a/dq_i) v_k (see
     `manipulability_joint_gradient`)."""
+    if not _finite_jacobian(J):
+        return np.full(J.shape[1], math.nan)
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
     W = (U * _others_as_written(s)) @ Vt  # m J_a^+T, without division
     return np.einsum("rc,irc->i", W, _jacobian_derivative(J))
@@ -308,6 +320,8 @@ def _capability_gradient(J, q, lower, upper, k_j, damping,
     """grad_x C_m = (J_a J_a^T + lambda^2 I)^-1 J_a dC_m/dq through the SVD
     of J_a, lambda^2 = lambda_max^2 (1 - (s_min / eps)^2) below eps, else 0
     (see `capability_gradient`)."""
+    if not _finite_jacobian(J):
+        return np.full(J.shape[0], math.nan)
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
     lambda2 = (damping**2 * (1.0 - (s[-1] / damping_threshold) ** 2)
                if s[-1] < damping_threshold else 0.0)
@@ -357,10 +371,21 @@ def transition_of(value, upper, lower):
         alpha in [0, 1], of the scalar type of `value`.
     """
     if value <= lower:
-        return _zero_like(value) + 1.0
+        return _constant(value, 1.0)
     if value >= upper:
-        return _zero_like(value)
+        return _constant(value, 0.0)
     return 0.5 * (1.0 + np.cos(np.pi * (value - lower) / (upper - lower)))
+
+
+def _constant(value, constant):
+    """`constant` of the scalar type of `value`, without derivative:
+    value * 0 + constant (the zero's sign kept) for a finite value, and
+    for an infinite one, where value * 0 is NaN, the exact constant
+    (scalar_support.constant_like)."""
+    zero = _zero_like(value)
+    if zero != zero:
+        return constant_like(value, constant)
+    return zero + constant if constant else zero
 
 
 def transition_derivative_of(value, upper, lower):
@@ -368,7 +393,7 @@ def transition_derivative_of(value, upper, lower):
     -0.5 pi / (upper - lower) sin(pi x) inside the band, 0 outside, with x
     as in `transition_of` (the same arguments)."""
     if value <= lower or value >= upper:
-        return _zero_like(value)
+        return _constant(value, 0.0)
     width = upper - lower
     return -0.5 * np.pi / width * np.sin(np.pi * (value - lower) / width)
 
@@ -764,7 +789,12 @@ def _manipulability_gradient(J, U, s, Vt):
 
 @compiled
 def _capability_terms(J, q, lower, upper, k_j, damping, damping_threshold):
-    """The compiled body of `capability_terms_float`."""
+    """The compiled body of `capability_terms_float`: NaN for a J that is
+    not finite (which numba's SVD refuses)."""
+    for r in range(J.shape[0]):
+        for c in range(J.shape[1]):
+            if not math.isfinite(J[r, c]):
+                return np.nan, np.full(J.shape[0], np.nan)
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
     m = 1.0
     for s_k in s:
@@ -803,8 +833,8 @@ def _capability_terms_sample(rng):
     """Random arguments of `capability_terms`: J_a from chosen
     singular values (well conditioned, near-singular and singular, the
     damping on and off), n = 6 or 7, joints inside their range, at a
-    limit, beyond one, two at limits; float64 arrays, as the stage passes
-    them."""
+    limit, beyond one, two at limits; in one case in twenty an entry of
+    J_a NaN or infinite; float64 arrays, as the stage passes them."""
     n = 6 if rng.uniform() < 0.75 else 7
     U, _ = np.linalg.qr(rng.normal(size=(6, 6)))
     V, _ = np.linalg.qr(rng.normal(size=(n, n)))
@@ -830,6 +860,9 @@ def _capability_terms_sample(rng):
     elif limits == 3:
         q[j], q[k] = lower[j], upper[k]
     k_j = rng.uniform(5e3, 3e4) * 4.0 ** (n - 6)
+    if rng.uniform() < 0.05:
+        J[rng.integers(6), rng.integers(n)] = rng.choice(
+            [np.nan, np.inf, -np.inf])
     return J, q, lower, upper, k_j, damping, eps
 
 
@@ -852,10 +885,10 @@ def capability_terms_float(J_a, q, lower, upper, k_j, damping,
 def _transition_sample(rng):
     """(value, upper, lower): a band of any width at any place (C_m's, or a
     workspace's d and phi), the value inside it, on either edge or beyond
-    either."""
+    either, or NaN or infinite."""
     lower = rng.uniform(0.0, 1.0) if rng.uniform() < 0.8 else 0.0
     upper = lower + 10.0 ** rng.uniform(-4.0, 0.0)
-    kind = rng.integers(5)
+    kind = rng.integers(6)
     if kind == 0:
         value = lower
     elif kind == 1:
@@ -864,8 +897,10 @@ def _transition_sample(rng):
         value = lower - rng.uniform(0.0, 1.0)
     elif kind == 3:
         value = upper + rng.uniform(0.0, 1.0)
-    else:
+    elif kind == 4:
         value = rng.uniform(lower, upper)
+    else:
+        value = float(rng.choice([np.nan, np.inf, -np.inf]))
     return value, upper, lower
 
 

@@ -266,14 +266,24 @@ _IDENTITY_ROWS = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 def _compensation_problems(rng):
     """Arguments of arm_compensation: mountings the identity (as None and
     as rows) and random; gradients zero, below, just above and far above
-    the tolerance; alpha at 0, 1 and between."""
+    the tolerance; alpha at 0, 1 and between; in one case in ten an entry
+    of a vector, or alpha, NaN or infinite."""
     mounting = rng.choice(3)
     R = (None, _IDENTITY_ROWS, random_rotation(rng))[mounting]
     gradient = rng.normal(size=6) * rng.choice([0.0, 1e-13, 1e-11, 1.0,
                                                  1e3])
     alpha = float(rng.choice([0.0, 1.0, rng.uniform()]))
-    return (rng.normal(size=6), rng.normal(size=3), rng.normal(size=3),
-            rng.uniform(-1.5, 1.5, 3), R, gradient, alpha,
+    vectors = [rng.normal(size=6), rng.normal(size=3), rng.normal(size=3),
+               rng.uniform(-1.5, 1.5, 3), gradient]
+    if rng.uniform() < 0.1:
+        bad = float(rng.choice([np.nan, np.inf, -np.inf]))
+        which = rng.integers(len(vectors) + 1)
+        if which == len(vectors):
+            alpha = bad
+        else:
+            vectors[which][rng.integers(vectors[which].size)] = bad
+    V_a, V_b, V_b_filtered, p_ee, gradient = vectors
+    return (V_a, V_b, V_b_filtered, p_ee, R, gradient, alpha,
             PROJECTOR_TOLERANCE)
 
 
@@ -281,7 +291,15 @@ def _compensation_problems(rng):
 def _compensation(V_a, V_b, V_b_filtered, p_ee_in_base, R, rotate, g, alpha,
                   tolerance):
     """The compiled body of `arm_compensation_float`; R the (3, 3) ^bR_a,
-    `rotate` False for the identity (the deviation stays as it is)."""
+    `rotate` False for the identity (the deviation stays as it is). An
+    empty result where an input is not finite: the caller takes the
+    reference, whose NaNs this arithmetic, written out, would not give
+    (its early return for a small gradient reads neither alpha nor the
+    zeros of J_b, where 0 * NaN is NaN)."""
+    if not (math.isfinite(alpha) and _finite(V_a) and _finite(V_b)
+            and _finite(V_b_filtered) and _finite(p_ee_in_base)
+            and _finite(R.ravel()) and _finite(g)):
+        return np.empty(0)
     dvx = V_b_filtered[0] - V_b[0]
     dvy = V_b_filtered[1] - V_b[1]
     dwz = V_b_filtered[2] - V_b[2]
@@ -322,6 +340,15 @@ def _compensation(V_a, V_b, V_b_filtered, p_ee_in_base, R, rotate, g, alpha,
     return result
 
 
+@compiled
+def _finite(values):
+    """Whether every entry of the float vector `values` is finite."""
+    for value in values:
+        if not math.isfinite(value):
+            return False
+    return True
+
+
 _IDENTITY = np.eye(3)
 
 
@@ -334,15 +361,23 @@ def arm_compensation_float(V_a, V_b, V_b_filtered, p_ee_in_base, R_ba,
     and alpha P_Cm d = alpha g (g . d) / (g . g) written out (the same
     values to rounding).
 
+    An input that is not finite takes the reference (whose result it
+    is: NaN where the equations give NaN).
+
     Args:
         as arm_compensation; the vectors float arrays, R_ba None or a
         (3, 3) array (or its rows).
     """
-    return _compensation(
+    result = _compensation(
         float_array(V_a), float_array(V_b), float_array(V_b_filtered),
         float_array(p_ee_in_base),
         _IDENTITY if R_ba is None else float_array(R_ba), R_ba is not None,
         float_array(grad_C_m), float(alpha), float(tolerance))
+    if result.size == 0:
+        with np.errstate(invalid="ignore"):  # 0 * inf, as it should be
+            return arm_compensation(V_a, V_b, V_b_filtered, p_ee_in_base,
+                                    R_ba, grad_C_m, alpha, tolerance)
+    return result
 
 
 # --- the checked functions --------------------------------------------------

@@ -189,11 +189,10 @@ def weighted_distribution(J_wb, V_ee, Q, null_velocity=None,
         damping: a SingularityDamping, or None for the exact inverse.
 
     Returns:
-        (9,) V_wb (or (9, k)), of the arguments' scalar type.
-
-    Raises:
-        ValueError: with damping None, if J Q J^T is not positive
-            definite.
+        (9,) V_wb (or (9, k)), of the arguments' scalar type; NaN where
+        J Q J^T is not finite, and with damping None where it is not
+        positive definite (`_not_invertible`; the checked functions
+        raise there instead).
     """
     J, Q, V_ee = np.asarray(J_wb), np.asarray(Q), np.asarray(V_ee)
     JQ = J * Q if Q.ndim == 1 else J @ Q
@@ -201,22 +200,18 @@ def weighted_distribution(J_wb, V_ee, Q, null_velocity=None,
     M = 0.5 * (M + M.T)
     rhs = V_ee if null_velocity is None else V_ee - J @ null_velocity
     M_value = value_of(M)
+    if not np.isfinite(M_value).all():  # whose eigh numpy refuses
+        x = math.nan * rhs
+        V_wb = JQ.T @ x
+        return V_wb if null_velocity is None else V_wb + null_velocity
     eigenvalues, vectors = np.linalg.eigh(M_value)
-    if eigenvalues[-1] <= 0.0:
+    if damping is None and _not_invertible(eigenvalues):
+        x = math.nan * rhs  # no exact inverse
+    elif eigenvalues[-1] <= 0.0:
         x = 0.0 * rhs  # J Q^(1/2) = 0: no weighted input moves the end effector
     else:
-        if damping is None:
-            # Numerically singular, whatever the rounding of the LAPACK
-            # at hand (a Cholesky factorisation may or may not succeed on
-            # an eigenvalue of 1e-17).
-            if eigenvalues[0] <= SINGULAR_TOLERANCE * eigenvalues[-1]:
-                raise ValueError(
-                    "J_wb with J_wb Q J_wb^T of smallest eigenvalue "
-                    f"{eigenvalues[0]:.6g} is not allowed with damping=None:"
-                    " J_wb Q J_wb^T must be positive definite (J_wb Q^(1/2)"
-                    " of full row rank); pass a SingularityDamping"
-                )
-        elif max(eigenvalues[0], 0.0) < damping.threshold * eigenvalues[-1]:
+        if (damping is not None and max(eigenvalues[0], 0.0)
+                < damping.threshold * eigenvalues[-1]):
             s_max = vectors[:, -1] @ M @ vectors[:, -1]
             s_min = (vectors[:, 0] @ M @ vectors[:, 0]
                      if eigenvalues[0] > 0.0 else 0.0 * s_max)
@@ -227,6 +222,32 @@ def weighted_distribution(J_wb, V_ee, Q, null_velocity=None,
              np.stack([solve(M, column) for column in rhs.T], axis=1))
     V_wb = JQ.T @ x
     return V_wb if null_velocity is None else V_wb + null_velocity
+
+
+def _not_invertible(eigenvalues):
+    """Whether J Q J^T of these ascending eigenvalues has no exact inverse:
+    zero, or numerically singular, whatever the rounding of the LAPACK at
+    hand (a Cholesky factorisation may or may not succeed on an
+    eigenvalue of 1e-17)."""
+    return bool(eigenvalues[-1] <= 0.0
+                or eigenvalues[0] <= SINGULAR_TOLERANCE * eigenvalues[-1])
+
+
+def _check_invertible(J, Q, damping):
+    """With damping None, raises the ValueError of the checked functions
+    where `weighted_distribution` has no exact inverse (and gives NaN):
+    J Q J^T not positive definite. J, Q (9,) or (9, 9) checked floats."""
+    if damping is not None:
+        return
+    M = (J * Q if Q.ndim == 1 else J @ Q) @ J.T
+    eigenvalues = np.linalg.eigvalsh(0.5 * (M + M.T))
+    if _not_invertible(eigenvalues):
+        raise ValueError(
+            "J_wb with J_wb Q J_wb^T of smallest eigenvalue "
+            f"{eigenvalues[0]:.6g} (largest {eigenvalues[-1]:.6g}) is not "
+            "allowed with damping=None: J_wb Q J_wb^T must be positive "
+            "definite (J_wb Q^(1/2) of full row rank); pass a "
+            "SingularityDamping")
 
 
 def capability_null_velocity_of(grad_x_C_m, k_n):
@@ -272,7 +293,8 @@ def _whole_body_problems(rng):
     sometimes a random one (the general path); reaches up to 3 m, where
     the certificate holds, and up to 30 m, where it fails and the general
     path damps; sigmas at 0 and 1; zero gradients and gains; no damping
-    at arm's reach."""
+    at arm's reach; in one case in twenty an entry of V_ee, p_ee or the
+    gradient NaN or infinite."""
     damped = rng.random() < 0.75
     reach = rng.choice([1.0, 2.3, 20.0] if damped else [1.0])
     p = rng.uniform(-1.5, 1.5, 3) * reach
@@ -280,9 +302,13 @@ def _whole_body_problems(rng):
     sigma_xy, sigma_phi = rng.choice([0.0, 1.0, *rng.uniform(size=3)], 2)
     gradient = rng.normal(size=6) * rng.choice([0.0, 1e-3, 1.0])
     gain = rng.choice([0.0, 0.1, rng.uniform(0.0, 3.0)])
-    return (rng.normal(size=6) * rng.choice([1e-3, 1.0]), p, R,
-            float(sigma_xy), float(sigma_phi), gradient, float(gain),
-            DEFAULT_DAMPING if damped else None)
+    V_ee = rng.normal(size=6) * rng.choice([1e-3, 1.0])
+    if rng.random() < 0.05:
+        vector = (V_ee, p, gradient)[rng.integers(3)]
+        vector[rng.integers(vector.size)] = rng.choice(
+            [np.nan, np.inf, -np.inf])
+    return (V_ee, p, R, float(sigma_xy), float(sigma_phi), gradient,
+            float(gain), DEFAULT_DAMPING if damped else None)
 
 
 @compiled
@@ -377,27 +403,22 @@ def whole_body_distribution_float(V_ee, p_ee_in_base, R_ba, sigma_xy,
 
     Args:
         as whole_body_distribution; V_ee, p_ee_in_base and
-        capability_gradient float64 C-contiguous arrays, as the stages
-        give them (anything but an array goes through
-        np.ascontiguousarray first).
+        capability_gradient go through `float_array` (themselves when
+        float64 C-contiguous writeable arrays, as the stages give them; a
+        copy otherwise, a strided view or a list), so that no call
+        compiles a signature of its own.
 
     Returns:
         (9,) array V_wb.
     """
-    if R_ba is None and (type(V_ee) is type(p_ee_in_base)
-                         is type(capability_gradient) is np.ndarray):
+    if R_ba is None:
         V_wb = _closed_form(
-            V_ee, p_ee_in_base, float(sigma_xy), float(sigma_phi),
-            capability_gradient, float(null_space_gain),
-            damping is not None,
+            float_array(V_ee), float_array(p_ee_in_base), float(sigma_xy),
+            float(sigma_phi), float_array(capability_gradient),
+            float(null_space_gain), damping is not None,
             0.0 if damping is None else damping.threshold)
         if V_wb[0] == V_wb[0]:  # not NaN: the closed form holds
             return V_wb
-    elif R_ba is None:
-        return whole_body_distribution_float(
-            float_array(V_ee), float_array(p_ee_in_base), None, sigma_xy,
-            sigma_phi, float_array(capability_gradient), null_space_gain,
-            damping)
     return whole_body_distribution(
         V_ee, p_ee_in_base, R_ba, sigma_xy, sigma_phi, capability_gradient,
         null_space_gain, damping)
@@ -499,8 +520,9 @@ def weighted_pseudoinverse(J_wb, Q, damping=DEFAULT_DAMPING):
     """
     J = as_matrix("J_wb", J_wb, (6, 9))
     Q = _checked_weights(Q)
-    return weighted_distribution(J, np.eye(6), Q, None,
-                                 _checked_damping(damping))
+    damping = _checked_damping(damping)
+    _check_invertible(J, Q, damping)
+    return weighted_distribution(J, np.eye(6), Q, None, damping)
 
 
 def capability_null_velocity(grad_x_C_m, k_n):
@@ -556,7 +578,8 @@ def distribute(
 
     Raises:
         ValueError: on a bad argument (wrong shape, non-finite entry, sigma
-            outside [0, 1]), naming it.
+            outside [0, 1]), naming it; with damping=None, if J Q J^T is
+            not positive definite.
     """
     J = as_matrix("J_wb", J_wb, (6, 9))
     V_ee = as_vector("V_ee", V_ee, 6)
@@ -565,8 +588,9 @@ def distribute(
                                              1.0))
     V_n = (None if null_velocity is None
            else as_vector("null_velocity", null_velocity, 9))
-    return weighted_distribution(J, V_ee, weights, V_n,
-                                 _checked_damping(damping))
+    damping = _checked_damping(damping)
+    _check_invertible(J, weights, damping)
+    return weighted_distribution(J, V_ee, weights, V_n, damping)
 
 
 @dataclass

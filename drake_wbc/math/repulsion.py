@@ -22,6 +22,7 @@ import numpy as np
 
 from drake_wbc.math.compiled import compiled, float_array
 from drake_wbc.math.kernels import fast_kernel
+from drake_wbc.math.scalar_support import value_of
 from drake_wbc.math.validation import as_vector, non_negative, positive
 
 
@@ -78,28 +79,36 @@ def footprint_distance(obstacle_points, params):
 
     Piecewise: outside, the Euclidean distance to the rectangle; on or
     inside it, d = 0 and n the outward normal of the nearest side (x on a
-    tie). obstacle_points: (M, 2) points [x, y] in T_b, m; params:
-    RepulsiveFieldParameters. Returns (d, n), (M,) and (M, 2).
+    tie); a point with a coordinate that is not finite has d and n NaN
+    (it is nowhere). obstacle_points: (M, 2) points [x, y] in T_b, m;
+    params: RepulsiveFieldParameters. Returns (d, n), (M,) and (M, 2).
     """
     P = np.reshape(obstacle_points, (-1, 2))
     x, y = P[:, 0], P[:, 1]
     a, b = params.half_sizes
     sx, sy = np.where(x >= 0, 1.0, -1.0), np.where(y >= 0, 1.0, -1.0)
-    qx, qy = np.abs(x) - a, np.abs(y) - b
-    zero = 0.0 * qx
-    ox, oy = np.where(qx > 0, qx, zero), np.where(qy > 0, qy, zero)
-    outside = (qx > 0) | (qy > 0)
-    # r = |(ox, oy)|, scaled by the larger part first so that it cannot
-    # underflow to 0 outside (which would make n = 0 / 0).
-    m = np.where(outside, np.where(ox >= oy, ox, oy), zero + 1.0)
-    r = m * np.sqrt(np.where(outside, (ox / m)**2 + (oy / m)**2,
-                             zero + 1.0))
-    nearer_x = qx >= qy
-    n = np.stack([
-        np.where(outside, sx * ox / r, np.where(nearer_x, sx, 0.0) + zero),
-        np.where(outside, sy * oy / r, np.where(nearer_x, 0.0, sy) + zero),
-    ], axis=1)
-    return np.where(outside, r, zero), n
+    # A point that is not finite makes 0 * inf and inf / inf (NaN, replaced
+    # below): no warning for it.
+    with np.errstate(invalid="ignore"):
+        qx, qy = np.abs(x) - a, np.abs(y) - b
+        zero = 0.0 * qx
+        # max(q, 0) as numpy's maximum (and the kernel) take it: NaN stays NaN.
+        ox, oy = np.where(qx < 0, zero, qx), np.where(qy < 0, zero, qy)
+        outside = (qx > 0) | (qy > 0)
+        # r = |(ox, oy)|, scaled by the larger part first so that it cannot
+        # underflow to 0 outside (which would make n = 0 / 0).
+        m = np.where(outside, np.where(ox >= oy, ox, oy), zero + 1.0)
+        r = m * np.sqrt(np.where(outside, (ox / m)**2 + (oy / m)**2,
+                                 zero + 1.0))
+        nearer_x = qx >= qy
+        n = np.stack([
+            np.where(outside, sx * ox / r, np.where(nearer_x, sx, 0.0) + zero),
+            np.where(outside, sy * oy / r, np.where(nearer_x, 0.0, sy) + zero),
+        ], axis=1)
+    finite = np.isfinite(value_of(x)) & np.isfinite(value_of(y))
+    nowhere = zero + math.nan
+    return (np.where(finite, np.where(outside, r, zero), nowhere),
+            np.where(finite[:, None], n, nowhere[:, None]))
 
 
 def _field(rng):
@@ -118,7 +127,8 @@ def _field(rng):
 def _points(rng, params):
     """(M, 2) points around the footprint of `params` (M from 0 to a
     few hundred): anywhere, inside it, on its edges and corners, just
-    outside it, at the reach d_th along x or y and beyond it."""
+    outside it, at the reach d_th along x or y and beyond it; in one
+    case in ten a point with a coordinate (or both) NaN or infinite."""
     a, b = params.half_sizes
     count = int(rng.choice([0, 1, 2, rng.integers(3, 400)]))
     kind = rng.integers(0, 6, count)
@@ -133,6 +143,10 @@ def _points(rng, params):
          sign * [a, b] + sign * 1e-7 * np.abs(u),
          np.column_stack([(a + reach) * sign[:, 0], b * u[:, 1]])],
         default=u * 50.0)
+    if count and rng.random() < 0.1:
+        columns = [[0], [1], [0, 1]][rng.integers(3)]
+        points[rng.integers(count), columns] = rng.choice(
+            [np.nan, np.inf, -np.inf])
     return points
 
 
@@ -157,7 +171,9 @@ def _point_geometry(x, y, a, b):
     half-sizes a, b: `footprint_distance`'s piecewise rule, with
     math.hypot for the distance outside (> 0 exactly there: no underflow
     to 0) and, on or inside, the outward normal of the nearest side (x on
-    a tie)."""
+    a tie); NaN for all three at a point that is not finite."""
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return math.nan, math.nan, math.nan
     qx = abs(x) - a
     qy = abs(y) - b
     ox = qx if not qx < 0.0 else 0.0  # numpy's maximum: NaN stays NaN

@@ -33,6 +33,16 @@ def is_autodiff(array):
     return array.dtype == object and isinstance(array.flat[0], AutoDiffXd)
 
 
+def constant_like(like, constant):
+    """`constant` as a scalar of the type of the scalar `like`: a float,
+    or an AutoDiffXd with as many derivatives as `like`'s, all zero; for
+    any value of `like` (`like * 0 + constant`, the usual way, is NaN for
+    an infinite or NaN `like`)."""
+    if isinstance(like, AutoDiffXd):
+        return AutoDiffXd(constant, np.zeros(like.derivatives().size))
+    return constant
+
+
 def value_of(array):
     """The float value of an array of any scalar type."""
     array = np.asarray(array)

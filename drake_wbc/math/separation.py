@@ -291,7 +291,8 @@ def _checked_timing(timing):
 def _scan(rng, half_sizes, count):
     """Random obstacle points of a few kinds around a footprint of
     `half_sizes`: a scan, one with points inside, fewer than `count`,
-    duplicates (ties), points on the edges and corners, none."""
+    duplicates (ties), points on the edges and corners, none; in one case
+    in ten with a few points of a coordinate (or both) NaN or infinite."""
     kind = rng.choice(["scan", "inside", "few", "ties", "edge", "none"])
     size = int(rng.integers(20, 400))
     radius = rng.uniform(0.3, 5.0, size)
@@ -311,6 +312,10 @@ def _scan(rng, half_sizes, count):
                       [a, b], [-a - 1e-12, -b]]
     elif kind == "none":
         points = np.zeros((0, 2))
+    if len(points) and rng.random() < 0.1:
+        for i in rng.integers(0, len(points), rng.integers(1, 4)):
+            points[i, [[0], [1], [0, 1]][rng.integers(3)]] = rng.choice(
+                [np.nan, np.inf, -np.inf])
     return points
 
 

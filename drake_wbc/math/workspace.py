@@ -130,6 +130,7 @@ from drake_wbc.math.capability import (
 )
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.motion_mode import MotionMode, fixed_weighting_factors
+from drake_wbc.math.scalar_support import constant_like, value_of
 from drake_wbc.math.validation import (
     as_scalar,
     as_vector,
@@ -418,14 +419,15 @@ def _lead(covector, V, speed):
 def _side(previous, gradient, V_a, direction, speed):
     """The side of the deactivation strategy with hysteresis (see the
     module): 1 (deactivated) if a test leads back faster than `speed`, 0
-    if both lead out, else `previous`; of the scalar type of `previous`'s
-    arithmetic (1 and 0 as `previous * 0 + 1`, `previous * 0`)."""
+    if both lead out, else `previous`; of the scalar type of `previous`
+    (1 and 0 without derivatives, and exact even where `previous` is NaN:
+    the tests decide the side whatever it was)."""
     leads = (_lead(gradient, V_a, speed),
              _lead(-direction[:3], V_a[:3], speed))
     if 1 in leads:
-        return _zero_like(previous) + 1.0
+        return constant_like(previous, 1.0)
     if leads == (-1, -1):
-        return _zero_like(previous)
+        return constant_like(previous, 0.0)
     return previous
 
 
@@ -521,7 +523,10 @@ def adaptive_weighting_factors(previous, p_ee_in_base, V_ee, C_m, grad_C_m,
     the deactivation strategy, with its hysteresis and sigma's rate limit,
     see the module), the reference body of the WorkspaceAdapter stage's
     discrete update and outputs: `local_workspace_state`'s factors and
-    sides, for any scalar type, with nothing checked.
+    sides, for any scalar type, with nothing checked: an input (other
+    than `previous`) that is not finite makes all four NaN, since the
+    deactivation's tests, comparisons, would otherwise read a NaN twist
+    or gradient as "no lead" and give a confident state.
 
     Args:
         previous: (4,) the last tick's (sigma_xy, sigma_phi,
@@ -537,6 +542,11 @@ def adaptive_weighting_factors(previous, p_ee_in_base, V_ee, C_m, grad_C_m,
         (sigma_xy, sigma_phi, deactivated_xy, deactivated_phi), this
         tick's state, of the scalar type of the inputs.
     """
+    if not np.isfinite(np.concatenate([
+            np.ravel(value_of(part))
+            for part in (p_ee_in_base, V_ee, C_m, grad_C_m)])).all():
+        nowhere = _zero_like(C_m) + math.nan
+        return nowhere, nowhere, nowhere, nowhere
     state = _state(previous, p_ee_in_base, V_ee, C_m, grad_C_m, constants)
     return (state.sigma_xy, state.sigma_phi, state.deactivated_xy,
             state.deactivated_phi)
@@ -777,7 +787,9 @@ def _weighting_sample(rng):
     band of the factors (the ramp); the mounting the identity or any; the
     previous state any (the sides 0 or 1), the hysteresis none or up to
     0.1 m/s, the rate limit none or 0.001 to 0.5 a tick, and the twist's
-    size from 1e-3 to 1, so that its speeds fall on both sides of v_h."""
+    size from 1e-3 to 1, so that its speeds fall on both sides of v_h;
+    in one case in ten an entry of p_ee, V_ee, C_m, grad C_m or the
+    previous state NaN or infinite."""
     upper = rng.uniform(0.03, 0.07)
     lower = upper - rng.uniform(0.002, 0.02)
     ws = LocalWorkspace(extent_lower=rng.uniform(0.5, 0.75),
@@ -821,7 +833,16 @@ def _weighting_sample(rng):
                                 constants.deflection)
         if P_d * P_phi > 0.0:
             C_m = rng.uniform(lower, upper) / (P_d * P_phi)
-    return previous, p, V, C_m, rng.normal(size=6) * 0.1, constants
+    grad_C_m = rng.normal(size=6) * 0.1
+    if rng.uniform() < 0.1:
+        bad = float(rng.choice([np.nan, np.inf, -np.inf]))
+        which = rng.integers(5)
+        if which == 2:
+            C_m = bad
+        else:
+            vector = (p, V, None, grad_C_m, previous)[which]
+            vector[rng.integers(vector.size)] = bad
+    return previous, p, V, C_m, grad_C_m, constants
 
 
 def _float_lead(covector, V, speed):
@@ -874,7 +895,8 @@ def adaptive_weighting_factors_float(previous, p_ee_in_base, V_ee, C_m,
     sign of its y coordinate decides, at phi = pi, which way phi grows,
     which the deactivation's rate test reads.
 
-    An input that is not finite raises a ValueError that names it.
+    An input that is not finite makes all four NaN (the reference's
+    rule; the stage's tick does not raise for a value).
 
     Returns:
         (sigma_xy, sigma_phi, deactivated_xy, deactivated_phi), floats,
@@ -887,12 +909,8 @@ def adaptive_weighting_factors_float(previous, p_ee_in_base, V_ee, C_m,
     grad_C_m = np.asarray(grad_C_m, dtype=float).tolist()
     C_m = float(C_m)
     if not math.isfinite(C_m + sum(p.tolist()) + sum(V_ee) + sum(grad_C_m)):
-        # Name the input that is not finite; finite ones whose sum
-        # overflowed take the reference.
-        _vector("p_ee_in_base", p, 3)
-        _vector("V_ee", V_ee, 6)
-        _scalar("C_m", C_m)
-        _vector("grad_C_m", grad_C_m, 6)
+        # An input that is not finite (all four NaN), or finite ones whose
+        # sum overflowed: the reference.
         return tuple(float(sigma) for sigma in
                      adaptive_weighting_factors(
                          previous, p, V_ee, C_m, grad_C_m, constants))
