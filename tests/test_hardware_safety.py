@@ -495,6 +495,20 @@ def test_a_controller_that_missed_the_processor_stops_and_resumes_from_rest(
     diagnostics = bench.diagnostics()
     assert diagnostics["watchdog_trips"] == 1.0
     assert diagnostics["check_interval"] == 0.0  # within the last tick
+    # A stall that ends between a check and the send after it (the send
+    # at a time goes before the check at that time): the send is zero
+    # already, and the check after it trips.
+    bench.run(60, extra=wall(H))
+    _rows_equal(bench.commands("base", bench.tick * H - 0.05)[1],
+                BASE_COMMAND)
+    stall = bench.tick * H + 0.0015  # after the check at 1 ms
+    bench.simulator.AdvanceTo(stall)
+    clock.now += 0.4
+    bench.run(30, extra=wall(H))
+    times, base = bench.commands("base", stall)
+    assert times[0] == pytest.approx(stall + 0.0005)  # the send at 2 ms
+    np.testing.assert_array_equal(base, 0.0)
+    assert bench.diagnostics()["watchdog_trips"] == 2.0
 
 
 def test_the_wall_clock_is_in_controller_seconds():

@@ -620,9 +620,12 @@ class CommandGuard(LeafSystem):
         self.DeclarePeriodicUnrestrictedUpdateEvent(
             options.watchdog_period, options.guard_offset, self._update)
         ticket = {self.abstract_state_ticket(self._state)}
+        # With a wall clock the base's command is read afresh at every
+        # send (time among its prerequisites): see `_base_command`.
         self.DeclareVectorOutputPort(
-            "base_velocity_command", 3, lambda c, o: o.SetFromVector(
-                self.stored(c).base), prerequisites_of_calc=ticket)
+            "base_velocity_command", 3, self._base_command,
+            prerequisites_of_calc=ticket if self.wall_clock is None
+            else {*ticket, self.time_ticket()})
         self.DeclareVectorOutputPort(
             "arm_position_command", n, lambda c, o: o.SetFromVector(
                 self.stored(c).arm), prerequisites_of_calc=ticket)
@@ -641,6 +644,20 @@ class CommandGuard(LeafSystem):
     def stored(self, context):
         """The GuardState at `context`."""
         return context.get_abstract_state(self._state).get_value()
+
+    def _base_command(self, context, output):
+        """The base command to send: the stored one, or zero when more of
+        the wall clock passed since the last check than `stall_limit`.
+        A stall can end just before a send (the send at a time comes
+        before the check at that time), which must then not go out with
+        the command of before the stall; the check that follows trips."""
+        state = self.stored(context)
+        if self.wall_clock is not None and (
+                self.wall_clock.now() - state.wall_time
+                > stall_limit(self.config) + AGE_TOLERANCE):
+            output.SetFromVector(np.zeros(3))
+        else:
+            output.SetFromVector(state.base)
 
     def _status(self, context, output):
         s = self.stored(context)
