@@ -20,9 +20,11 @@ command is within the base's speed limits, and within its acceleration
 limits of the one before except a stop, which is zero at once (the
 base's own velocity loop brakes within its limits); a stale stream stops
 what depends on it within its watchdog limit and one watchdog period
-(the stop goes out at the next period, not the next control tick); and
-the commands resume only after every stream behind the stop has been
-fresh for the recovery time.
+(the stop goes out at the next period, not the next control tick); a
+sender's clock that jumps, and a stall of the controller's own process
+long enough for the robot to stop on its command timeout (WallClock),
+are stale streams; and the commands resume only after every stream
+behind the stop has been fresh for the recovery time.
 """
 
 import logging
