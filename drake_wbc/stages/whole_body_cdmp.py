@@ -41,7 +41,8 @@ from drake_wbc.math.movement import (
     resolve_movement_file,
 )
 from drake_wbc.math.scalar_support import value_of
-from drake_wbc.math.validation import checked_instance, switch
+from drake_wbc.math.task_inputs import TASK_INPUTS
+from drake_wbc.math.validation import checked_instance
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.cdmp_base import ONE, AffineDynamics, CdmpStage
 from drake_wbc.stages.support import (
@@ -133,7 +134,8 @@ def WholeBodyCdmp_(T):
                 "params", params, cdmp.WholeBodyCdmpParameters,
                 cdmp.WholeBodyCdmpParameters)
             self._dimension = 6
-            self._default_switch = switch("phri_switch", phri_switch)
+            self._default_switch = TASK_INPUTS["phri_switch"].check_number(
+                "phri_switch", phri_switch)
             self.player = player or movement_player(params)
             num_inputs = (_DEVIATION.stop if self.player is None
                           else _FORCING.stop)
