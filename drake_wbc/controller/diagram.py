@@ -97,6 +97,7 @@ from drake_wbc.controller.parameters import (
     check_arm_limits,
     for_robot,
 )
+from drake_wbc.math.base_state import BASE_STATE_SIZE, BASE_YAW
 from drake_wbc.math.safety import MEASURED_POSITION_MARGIN
 from drake_wbc.math.task_inputs import TASK_INPUTS
 from drake_wbc.math.validation import checked_instance, validated_copy
@@ -232,7 +233,7 @@ def build_controller(params=None, robot=None):
         wrench=add("wrench", ExternalWrenchEstimator(
             arm, params.wrench, time_step=h)),
         base_yaw=add("base_yaw", MatrixGain(
-            np.array([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]]))),
+            np.eye(BASE_STATE_SIZE)[[BASE_YAW]])),
         whole_body_cdmp=add("whole_body_cdmp", WholeBodyCdmp(
             params.whole_body_cdmp, time_step=h, phri_switch=switch)),
         workspace=add("workspace", WorkspaceAdapter(
@@ -383,7 +384,7 @@ def _input_guard(params, arm):
                       upper=spec.upper, switch=spec.switch, **options)
 
     inputs = (
-        vector("base.state_estimated", 6),
+        vector("base.state_estimated", BASE_STATE_SIZE),
         vector("arm.position_measured", arm.num_joints, initial=arm.home,
                lower=float(np.min(arm.lower)) - MEASURED_POSITION_MARGIN,
                upper=float(np.max(arm.upper)) + MEASURED_POSITION_MARGIN),

@@ -29,6 +29,7 @@ from drake_wbc.math import (
     distribution,
     kernels,
 )
+from drake_wbc.math.base_state import BASE_STATE_SIZE, BASE_TWIST
 from drake_wbc.math.compensation import (
     PROJECTOR_TOLERANCE,
     RobustCompensatorParameters,
@@ -227,8 +228,9 @@ def RobustCompensator_(T):
         drake_wbc.math.compensation, "The base's motion"):
         - "command" (the paper's): V_b^flt is filtered_base_velocity, the
           command sent. Stateless.
-        - "measured": the odometry's twist, base_state[3:6].
-          Stateless; the output then feeds through from base_state.
+        - "measured": the odometry's twist, base_state's [vx, vy, wz]
+          (drake_wbc.math.base_state.BASE_TWIST). Stateless; the output
+          then feeds through from base_state.
         - "predicted": the command through eq. (base_lag), a first-order
           lag of time constant params.base_lag at the control period:
           one discrete state (3, the predicted base velocity V_b^pred in
@@ -269,7 +271,8 @@ def RobustCompensator_(T):
                 ("arm_velocity", 6), ("base_velocity", 3),
                 ("filtered_base_velocity", 3), ("end_effector_position", 3),
                 ("capability_gradient", 6), ("alpha", 1),
-                ("compensation_switch", 1), ("base_state", 6)))
+                ("compensation_switch", 1),
+                ("base_state", BASE_STATE_SIZE)))
             (self._V_a_port, self._V_b_port, self._V_b_flt_port,
              self._p_ee_port, self._gradient_port, self._alpha_port,
              self._switch_port, self._base_state_port) = (
@@ -304,7 +307,7 @@ def RobustCompensator_(T):
             return self._V_b_flt_port.Eval(context)
 
         def _measured(self, context):
-            return self._base_state_port.Eval(context)[3:6]
+            return self._base_state_port.Eval(context)[BASE_TWIST]
 
         def _predicted(self, context):
             return self._predict(
