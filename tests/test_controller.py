@@ -11,11 +11,8 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantValueSource, VectorLogSink
 
 from drake_wbc.controller import ControllerParameters, build_controller
-from drake_wbc.controller.diagram import (
-    HARDWARE_INPUTS,
-    STATION_INPUTS,
-    TASK_INPUTS,
-)
+from drake_wbc.controller.diagram import HARDWARE_INPUTS, STATION_INPUTS
+from drake_wbc.math.task_inputs import TASK_INPUTS
 from drake_wbc.robot.model import (
     HOME_ARM_POSITIONS,
     ArmKinematics,
@@ -37,7 +34,7 @@ def test_ports(arm):
     diagram = controller.diagram
     inputs = {diagram.get_input_port(i).get_name()
               for i in range(diagram.num_input_ports())}
-    assert inputs == set(STATION_INPUTS + TASK_INPUTS + HARDWARE_INPUTS)
+    assert inputs == set(STATION_INPUTS + tuple(TASK_INPUTS) + HARDWARE_INPUTS)
     for name in ("base.velocity_command", "arm.position_command",
                  "capability", "alpha", "sigma_xy", "sigma_phi",
                  "end_effector_deviation", "base_velocity",

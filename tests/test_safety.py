@@ -29,14 +29,11 @@ from drake_wbc.controller import (
     build_controller,
     load_controller_parameters,
 )
-from drake_wbc.controller.diagram import (
-    HARDWARE_INPUTS,
-    STATION_INPUTS,
-    TASK_INPUTS,
-)
+from drake_wbc.controller.diagram import HARDWARE_INPUTS, STATION_INPUTS
 from drake_wbc.math import command_limits, safety
 from drake_wbc.math.motion_mode import MotionMode
 from drake_wbc.math.safety import STATUS_FIELDS, Reason, SafetyParameters
+from drake_wbc.math.task_inputs import TASK_INPUTS
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.robot.model import (
     HOME_ARM_POSITIONS,
@@ -74,7 +71,7 @@ class Injection:
 
 def vector_injections():
     injections = []
-    sizes = dict(zip(STATION_INPUTS + TASK_INPUTS,
+    sizes = dict(zip(STATION_INPUTS + tuple(TASK_INPUTS),
                      (6, 6, 6, None, 6, 6, 1, 1, 1), strict=True))
     for port, size in sizes.items():
         if size is None:
@@ -199,7 +196,7 @@ def test_invalid_input_stops_holds_and_resumes(injected, k):
                   <= JOINT_ACCELERATION * (1 + 1e-6))
     # The status names the input, the reason, the entry.
     names = rig.controller.stages["guard"].input_names
-    assert sorted(names) == sorted(STATION_INPUTS + TASK_INPUTS
+    assert sorted(names) == sorted(STATION_INPUTS + tuple(TASK_INPUTS)
                                    + HARDWARE_INPUTS)
     expected_input = names.index(injection.port)
     fault = status[i0]

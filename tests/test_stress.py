@@ -210,7 +210,8 @@ def test_a_long_run_summarises_the_spread_and_lists_the_failures(serial):
     (("--cases", "0"), "^--cases = 0 is not allowed: must be 1 or greater$"),
     (("--cases", "1", "--workers", "0"),
      "^--workers = 0 is not allowed: must be 1 or greater$"),
-    (("--cases", "1", "--duration", "0"), "^--duration = 0.0 is not allowed"),
+    (("--cases", "1", "--duration", "0"),
+     r"^--duration = 0\.0 is not allowed: must be > 0 s$"),
     (("--cases", "1", "--seed", "-1"),
      "^--seed = -1 is not allowed: must be 0 or greater$"),
 ])

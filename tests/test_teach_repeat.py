@@ -187,6 +187,15 @@ def test_replay_command_builds_its_scenario():
             "movements/teach.yaml", "--duration", "0"]))
     assert teach_commands.replay_scenario(parser.parse_args([
         "movements/teach.yaml", "--duration", "2.5"])).duration == 2.5
+    # An option's error names it as it is typed, as every other one does.
+    with pytest.raises(ValueError, match=r"^--tau = 0\.0 is not allowed: "
+                       "must be greater than 0$"):
+        teach_commands.replay_scenario(parser.parse_args([
+            "movements/teach.yaml", "--tau", "0"]))
+    with pytest.raises(ValueError, match=r"^--start-time = -1\.0 is not "
+                       "allowed"):
+        teach_commands.replay_scenario(parser.parse_args([
+            "movements/teach.yaml", "--start-time", "-1"]))
 
 
 def test_the_replay_command_runs_and_writes_its_outputs(tmp_path, capsys):

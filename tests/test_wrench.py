@@ -154,6 +154,21 @@ def test_the_lever_from_the_plant_is_the_welded_one(arm, estimator):
             rtol=0, atol=1e-12)
 
 
+def test_the_lever_asks_the_plant_for_each_pose_once(arm, estimator,
+                                                      monkeypatch):
+    asked = []
+    frame_pose = arm.frame_pose
+
+    def counted(q_a, frame):
+        asked.append(frame.name())
+        return frame_pose(q_a, frame)
+
+    monkeypatch.setattr(arm, "frame_pose", counted)
+    estimator._estimate(np.r_[arm.home, np.zeros(6)])
+    assert sorted(asked) == sorted(
+        {arm.model.ft_measurement_frame.name(), arm.model.tcp_frame.name()})
+
+
 MOUNTS = {"turned": ArmMount(yaw=0.5 * np.pi),
           "tilted": ArmMount(yaw=-0.4, tilt=0.35)}
 

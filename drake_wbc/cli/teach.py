@@ -167,8 +167,16 @@ def replay_scenario(args):
             or MovementReplay(file=str(file)))
     start_time = (base.start_time if args.start_time is None
                   else args.start_time)
-    replay = MovementReplay(file=str(file), goal=args.goal, tau=args.tau,
-                            start_time=start_time, start=base.start)
+    try:
+        replay = MovementReplay(file=str(file), goal=args.goal,
+                                tau=args.tau, start_time=start_time,
+                                start=base.start)
+    except ValueError as error:
+        # Only the options can be wrong here (the file was read above,
+        # the scenario's start was checked when it was loaded): name the
+        # field as the option it came from (tau -> --tau).
+        field, rest = str(error).split(" ", 1)
+        raise ValueError(f"--{field.replace('_', '-')} {rest}") from None
     tau = movement.params.tau if args.tau is None else args.tau
     duration = args.duration
     if duration is None:

@@ -97,7 +97,9 @@ from drake_wbc.controller.parameters import (
     check_arm_limits,
     for_robot,
 )
+from drake_wbc.math.base_state import BASE_STATE_SIZE, BASE_YAW
 from drake_wbc.math.safety import MEASURED_POSITION_MARGIN
+from drake_wbc.math.task_inputs import TASK_INPUTS
 from drake_wbc.math.validation import checked_instance, validated_copy
 from drake_wbc.robot.model import arm_kinematics
 from drake_wbc.robot.tuning import RobotTuningWarning, check_tuning
@@ -125,16 +127,6 @@ STATION_INPUTS = (
     "lidar.obstacle_points",
 )
 """The controller's inputs from the station (simulated or LCM)."""
-
-TASK_INPUTS = (
-    "reference_velocity",
-    "desired_wrench",
-    "phri_switch",
-    "null_space_gain",
-    "compensation_switch",
-)
-"""The task's inputs; all but reference_velocity are optional (the stage's
-parameter is used while the port is not connected)."""
 
 HARDWARE_INPUTS = ("hardware.watchdog_tripped",)
 """Optional inputs from the LCM hardware interface (drake_wbc.hardware):
@@ -216,11 +208,11 @@ def build_controller(params=None, robot=None):
 
     Returns:
         Controller: the diagram with named ports (STATION_INPUTS,
-        TASK_INPUTS; outputs base.velocity_command, arm.position_command
-        and the diagnostics capability, alpha, sigma_xy, sigma_phi,
-        end_effector_deviation, base_velocity, filtered_base_velocity,
-        arm_velocity_command, arm_limited, base_saturation,
-        base_protective_stop,
+        drake_wbc.math.task_inputs.TASK_INPUTS, HARDWARE_INPUTS; outputs
+        base.velocity_command, arm.position_command and the diagnostics
+        capability, alpha, sigma_xy, sigma_phi, end_effector_deviation,
+        base_velocity, filtered_base_velocity, arm_velocity_command,
+        arm_limited, base_saturation, base_protective_stop,
         safety_status, safety_reason).
     """
     params = validated_copy(checked_instance(
@@ -241,7 +233,7 @@ def build_controller(params=None, robot=None):
         wrench=add("wrench", ExternalWrenchEstimator(
             arm, params.wrench, time_step=h)),
         base_yaw=add("base_yaw", MatrixGain(
-            np.array([[0.0, 0.0, 1.0, 0.0, 0.0, 0.0]]))),
+            np.eye(BASE_STATE_SIZE)[[BASE_YAW]])),
         whole_body_cdmp=add("whole_body_cdmp", WholeBodyCdmp(
             params.whole_body_cdmp, time_step=h, phri_switch=switch)),
         workspace=add("workspace", WorkspaceAdapter(
@@ -281,7 +273,7 @@ def build_controller(params=None, robot=None):
 
     # Every input enters through the guard, and only its outputs (the
     # inputs' last valid samples) reach the stages.
-    for name in STATION_INPUTS + TASK_INPUTS + HARDWARE_INPUTS:
+    for name in STATION_INPUTS + tuple(TASK_INPUTS) + HARDWARE_INPUTS:
         builder.ExportInput(s["guard"].GetInputPort(name), name)
     # Station measurements.
     connect("guard", "base.state_estimated", "base_yaw", "u0")
@@ -380,34 +372,36 @@ def build_controller(params=None, robot=None):
 def _input_guard(params, arm):
     """The InputGuard of every controller input: the task inputs' defaults
     are the stages' parameters (what the stages used while their port was
-    not connected), and their ranges those the stages accept; the arm's
+    not connected), and their sizes and ranges those of
+    drake_wbc.math.task_inputs.TASK_INPUTS; the arm's
     measured positions within the span of its joints' limits, give or
     take MEASURED_POSITION_MARGIN (one range for every entry)."""
-    inf = np.inf
     vector = GuardedInput
+
+    def task(name, outputs=(), **options):
+        spec = TASK_INPUTS[name]
+        return vector(name, spec.size, outputs, lower=spec.lower,
+                      upper=spec.upper, switch=spec.switch, **options)
+
     inputs = (
-        vector("base.state_estimated", 6),
+        vector("base.state_estimated", BASE_STATE_SIZE),
         vector("arm.position_measured", arm.num_joints, initial=arm.home,
                lower=float(np.min(arm.lower)) - MEASURED_POSITION_MARGIN,
                upper=float(np.max(arm.upper)) + MEASURED_POSITION_MARGIN),
         vector("wrist.wrench_measured", 6),
-        vector("reference_velocity", 6, zero_when_stopped=True),
-        vector("desired_wrench", 6,
-               (("desired_wrench", params.arm_cdmp.F_d),)),
-        # A switch, 0 or 1. While stopped: the admittance term of eq.
-        # (cdmp-wb) off (0), and so is the arm's force term of eq.
-        # (cdmp-arm) (1), so that neither DMP integrates a wrench.
-        vector("phri_switch", 1, (
+        task("reference_velocity", zero_when_stopped=True),
+        task("desired_wrench", (("desired_wrench", params.arm_cdmp.F_d),)),
+        # While stopped: the admittance term of eq. (cdmp-wb) off (0),
+        # and so is the arm's force term of eq. (cdmp-arm) (1), so that
+        # neither DMP integrates a wrench.
+        task("phri_switch", (
             ("phri_switch.whole_body", [params.phri_switch], [0.0]),
-            ("phri_switch.arm", [params.phri_switch], [1.0])),
-            switch=True),
-        vector("null_space_gain", 1, (
-            ("null_space_gain", [params.distributor.null_space_gain]),),
-            lower=0.0, upper=inf),
-        vector("compensation_switch", 1, (
+            ("phri_switch.arm", [params.phri_switch], [1.0]))),
+        task("null_space_gain", (
+            ("null_space_gain", [params.distributor.null_space_gain]),)),
+        task("compensation_switch", (
             ("compensation_switch",
-             [params.compensator.compensation_switch]),),
-            lower=0.0, upper=1.0),
+             [params.compensator.compensation_switch]),)),
         # The hardware's watchdog: any value but 0 is a stop (HARDWARE_INPUTS).
         vector("hardware.watchdog_tripped", 1, (
             ("hardware.watchdog_tripped", [0.0]),), lower=0.0, upper=0.0),

@@ -45,7 +45,8 @@ from drake_wbc.math.safety import (
     SafetyParameters,
     check_within_robot,
 )
-from drake_wbc.math.validation import positive, switch
+from drake_wbc.math.task_inputs import TASK_INPUTS
+from drake_wbc.math.validation import positive
 from drake_wbc.math.workspace import WorkspaceAdapterParameters
 from drake_wbc.math.wrench import WrenchEstimatorParameters
 
@@ -125,7 +126,8 @@ class ControllerParameters:
 
     def __post_init__(self):
         h = positive("time_step", self.time_step)
-        self.phri_switch = switch("phri_switch", self.phri_switch)
+        self.phri_switch = TASK_INPUTS["phri_switch"].check_number(
+            "phri_switch", self.phri_switch)
         for item in fields(self):
             if dataclasses.is_dataclass(item.type) and not isinstance(
                     getattr(self, item.name), item.type):

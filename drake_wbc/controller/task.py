@@ -2,7 +2,8 @@
 a station with them.
 
 A task input is a `Schedule` of values over time; `TaskInputs` holds one
-per task input port of the controller (controller.diagram.TASK_INPUTS).
+per task input port of the controller (drake_wbc.math.task_inputs, which
+gives each one's size and range).
 `add_controller` builds the controller, adds the task's sources and
 connects both to a station: the simulated station
 (drake_wbc.experiments.runner) or the LCM hardware interface
@@ -17,13 +18,8 @@ from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from drake_wbc.controller.diagram import STATION_INPUTS, build_controller
-from drake_wbc.math.validation import (
-    as_vector,
-    checked_instance,
-    in_closed_range,
-    non_negative,
-    selection,
-)
+from drake_wbc.math.task_inputs import TASK_INPUTS
+from drake_wbc.math.validation import as_vector, checked_instance
 
 INTERPOLATIONS = ("hold", "linear")
 
@@ -73,14 +69,9 @@ class Schedule:
         return len(self.values[0]) if self.values else 0
 
 
-TASK_SIZES = dict(reference_velocity=6, desired_wrench=6, phri_switch=1,
-                  null_space_gain=1, compensation_switch=1)
-"""The controller's task inputs and their sizes."""
-
-
 @dataclass
 class TaskInputs:
-    """The controller's task inputs over time (see controller.TASK_INPUTS).
+    """The controller's task inputs over time (math.task_inputs.TASK_INPUTS).
 
     Attributes:
         reference_velocity: V_ee^ref (6) in the world, [v; w]; zero when
@@ -98,27 +89,17 @@ class TaskInputs:
     compensation_switch: Schedule = field(default_factory=Schedule)
 
     def __post_init__(self):
-        for name, size in TASK_SIZES.items():
+        for name, spec in TASK_INPUTS.items():
             schedule = checked_instance(name, getattr(self, name), Schedule,
                                         Schedule)
             setattr(self, name, schedule)
-            if schedule.times and schedule.size() != size:
+            if schedule.times and schedule.size() != spec.size:
                 raise ValueError(
                     f"{name}.values = {schedule.values} is not allowed: "
-                    f"each value must have {size} entries")
+                    f"each value must have {spec.size} entries")
             for i, value in enumerate(schedule.values):
-                _check_task_value(f"{name}.values[{i}]", name, value)
-
-
-def _check_task_value(where, name, value):
-    """Checks one value of the schedule of task input `name`: S_hri is 0
-    or 1 (eq. (cdmp-wb)), s_c lies in [0, 1] and k_n >= 0 (eq. (wbccm))."""
-    if name == "phri_switch":
-        selection(where, value, 1)
-    elif name == "compensation_switch":
-        in_closed_range(where, value[0], 0.0, 1.0)
-    elif name == "null_space_gain":
-        non_negative(where, value[0])
+                for j, entry in enumerate(value):
+                    spec.check(f"{name}.values[{i}][{j}]", entry)
 
 
 def schedule_source(schedule, size):
@@ -172,11 +153,11 @@ def add_controller(builder, params, task, station, arm=None):
         builder.Connect(controller.diagram.GetOutputPort(name),
                         station.GetInputPort(name))
     sources = {}
-    for name, size in TASK_SIZES.items():
+    for name, spec in TASK_INPUTS.items():
         schedule = getattr(task, name)
         if name == "reference_velocity" or schedule.times:
             sources[name] = builder.AddNamedSystem(
-                f"task.{name}", schedule_source(schedule, size))
+                f"task.{name}", schedule_source(schedule, spec.size))
             builder.Connect(sources[name].get_output_port(),
                             controller.diagram.GetInputPort(name))
     player = controller.stages["whole_body_cdmp"].player
@@ -200,7 +181,8 @@ def _add_movement_tracking(builder, controller, sources, station, player):
         builder.Connect(station.GetOutputPort(name),
                         tracking.GetInputPort(name))
     adder = builder.AddNamedSystem("task.reference_velocity_sum",
-                                   Adder(2, 6))
+                                   Adder(2, TASK_INPUTS[
+                                       "reference_velocity"].size))
     reference = controller.diagram.GetInputPort("reference_velocity")
     builder.Disconnect(sources["reference_velocity"].get_output_port(),
                        reference)

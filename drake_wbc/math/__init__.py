@@ -40,6 +40,10 @@ Names say which is which, in every module:
 - movement, demonstration: a whole-body movement learned from
   demonstrations as a DMP (teach and repeat).
 - arm_control: the arm's Cartesian velocity controller (Sec. III-A).
+- base_state: the layout of the base's state (base.state_estimated),
+  [x, y, yaw, vx, vy, wz], by name.
+- task_inputs: the controller's task inputs, the size and range of
+  each (S_hri, k_n, s_c, ...), the one table every check of them reads.
 - safety, command_limits, separation, people, gating: the run-time
   checks, the command limits, the speed-and-separation rules, the people
   tracked between scans, and the stop switch of the couplings.

@@ -104,6 +104,7 @@ from drake_wbc.math.kinematics import (
     rotate_twist,
 )
 from drake_wbc.math.scalar_support import value_of
+from drake_wbc.math.task_inputs import TASK_INPUTS
 from drake_wbc.math.validation import (
     as_matrix,
     as_vector,
@@ -154,8 +155,8 @@ class RobustCompensatorParameters:
     base_lag: float = 0.2
 
     def __post_init__(self):
-        in_closed_range("compensation_switch", self.compensation_switch,
-                        0.0, 1.0)
+        TASK_INPUTS["compensation_switch"].check_number(
+            "compensation_switch", self.compensation_switch)
         if self.base_source not in BASE_SOURCES:
             allowed = ", ".join(repr(name) for name in BASE_SOURCES)
             raise ValueError(

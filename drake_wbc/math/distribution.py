@@ -99,6 +99,7 @@ from drake_wbc.math.kinematics import (
     whole_body_jacobian_of,
 )
 from drake_wbc.math.scalar_support import solve, value_of
+from drake_wbc.math.task_inputs import TASK_INPUTS
 from drake_wbc.math.validation import (
     as_matrix,
     as_vector,
@@ -543,7 +544,8 @@ def capability_null_velocity(grad_x_C_m, k_n):
             negative or not finite.
     """
     return capability_null_velocity_of(
-        as_vector("grad_x_C_m", grad_x_C_m, 6), non_negative("k_n", k_n))
+        as_vector("grad_x_C_m", grad_x_C_m, 6),
+        TASK_INPUTS["null_space_gain"].check_number("k_n", k_n))
 
 
 def distribute(
@@ -619,7 +621,8 @@ class MotionDistributorParameters:
         default_factory=SingularityDamping)
 
     def __post_init__(self):
-        non_negative("null_space_gain", self.null_space_gain)
+        TASK_INPUTS["null_space_gain"].check_number(
+            "null_space_gain", self.null_space_gain)
         if not isinstance(self.smooth_switch_off, bool):
             raise ValueError(
                 f"smooth_switch_off = {self.smooth_switch_off!r} is not "

@@ -217,18 +217,6 @@ def selection(name, value, size):
     return vector
 
 
-def switch(name, value):
-    """Returns `value` as the float 0.0 or 1.0 after checking that it is
-    exactly 0 or 1 (a switch such as S_hri of eqs. (cdmp-wb), (cdmp-arm)).
-
-    Raises:
-        ValueError: naming `name` and its value.
-    """
-    if value not in (0, 1):
-        raise ValueError(f"{name} = {value!r} is not allowed: must be 0 or 1")
-    return float(value)
-
-
 def whole_multiple(name, value, period_name, period, tolerance=1e-9):
     """Returns `value` as a float after checking that it is a whole
     multiple (1, 2, ...) of `period` > 0, to a relative `tolerance`.

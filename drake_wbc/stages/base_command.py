@@ -14,6 +14,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem_, ValueProducer
 
 from drake_wbc.math import safety
+from drake_wbc.math.base_state import BASE_STATE_SIZE
 from drake_wbc.math.command_limits import (
     limit_base_velocity,
 )
@@ -273,7 +274,8 @@ def BaseCommandLimiter_(T):
             self._envelope = self.DeclareVectorInputPort("envelope_scale", 1)
             self._points = self.DeclareAbstractInputPort(
                 "obstacle_points", AbstractValue.Make(np.zeros((0, 2))))
-            self._base_state = self.DeclareVectorInputPort("base_state", 6)
+            self._base_state = self.DeclareVectorInputPort(
+                "base_state", BASE_STATE_SIZE)
             self._people = params.people
             self._hold_time = params.hold_time
             # The signature of the points last summed (`_track`).
@@ -426,7 +428,7 @@ def BaseCommandLimiter_(T):
             (protective), into `state` (a LimiterState, in place)."""
             base = (value_of(self._base_state.Eval(context))
                     if self._base_state.HasValue(context)
-                    else np.zeros(6))
+                    else np.zeros(BASE_STATE_SIZE))
             tracker, people, inside = self._people_scan(
                 value_of(state.tracker), points, base,
                 float(value_of(context.get_time())), self.half_sizes,

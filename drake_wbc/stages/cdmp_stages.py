@@ -12,7 +12,8 @@ from pydrake.systems.framework import LeafSystem_, ValueProducer
 
 from drake_wbc.math import cdmp, repulsion
 from drake_wbc.math.kernels import body_for
-from drake_wbc.math.validation import checked_instance, robots_own, switch
+from drake_wbc.math.task_inputs import TASK_INPUTS
+from drake_wbc.math.validation import checked_instance, robots_own
 from drake_wbc.stages.cdmp_base import ONE, AffineDynamics, CdmpStage
 from drake_wbc.stages.support import define_stage, optional_input
 
@@ -166,7 +167,8 @@ def ArmCdmp_(T):
                 "params", params, cdmp.ArmCdmpParameters,
                 cdmp.ArmCdmpParameters)
             self._dimension = 6
-            self._default_switch = switch("phri_switch", phri_switch)
+            self._default_switch = TASK_INPUTS["phri_switch"].check_number(
+                "phri_switch", phri_switch)
             self._default_desired = params.F_d
             base = dict(k_p=params.k_p, k_d=params.k_d, k_f=params.k_f,
                         S_m=params.S_m, dmp=params.dmp)

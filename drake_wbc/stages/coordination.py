@@ -14,7 +14,9 @@ and compensation.arm_compensation, scalar-generic, in AutoDiffXd; their
 fast float kernels in double. Their parameters were checked where they
 entered (the dataclasses' checks, at load and build time); each tick
 checks only the input values that the ports' sizes cannot constrain
-(sigma, alpha, s_c, k_n).
+(sigma, alpha, and the task inputs s_c and k_n against their ranges in
+drake_wbc.math.task_inputs), so that a stage used alone raises on a bad
+one.
 """
 
 
@@ -27,12 +29,13 @@ from drake_wbc.math import (
     distribution,
     kernels,
 )
+from drake_wbc.math.base_state import BASE_STATE_SIZE, BASE_TWIST
 from drake_wbc.math.compensation import (
     PROJECTOR_TOLERANCE,
     RobustCompensatorParameters,
 )
 from drake_wbc.math.distribution import MotionDistributorParameters
-from drake_wbc.math.scalar_support import value_of
+from drake_wbc.math.task_inputs import TASK_INPUTS
 from drake_wbc.math.validation import (
     checked_instance,
     positive,
@@ -117,6 +120,7 @@ def MotionDistributor_(T):
             self._R_ba = (None if np.array_equal(self.R_ba, np.eye(3))
                           else self.R_ba)
             self._gain = self.params.null_space_gain
+            self._gain_range = TASK_INPUTS["null_space_gain"]
             self._band = (self.band.upper, self.band.lower)
             self._smooth = self.params.smooth_switch_off
             self._damping = self.params.damping
@@ -142,12 +146,8 @@ def MotionDistributor_(T):
         def null_space_gain(self, context):
             """The gain of eq. (wbccm) used in `context`: k_n (port, else
             parameter) times the switch-off at C_m (see the class)."""
-            k_n = optional_scalar(self._gain_port, context, self._gain)
-            if k_n < 0.0:
-                raise ValueError(
-                    f"null_space_gain = {float(value_of(k_n))!r} is not "
-                    "allowed: must be 0 or greater"
-                )
+            k_n = self._gain_range.check("null_space_gain", optional_scalar(
+                self._gain_port, context, self._gain))
             C_m = self._capability_port.Eval(context)[0]
             upper, lower = self._band
             if self._smooth:
@@ -228,8 +228,9 @@ def RobustCompensator_(T):
         drake_wbc.math.compensation, "The base's motion"):
         - "command" (the paper's): V_b^flt is filtered_base_velocity, the
           command sent. Stateless.
-        - "measured": the odometry's twist, base_state[3:6].
-          Stateless; the output then feeds through from base_state.
+        - "measured": the odometry's twist, base_state's [vx, vy, wz]
+          (drake_wbc.math.base_state.BASE_TWIST). Stateless; the output
+          then feeds through from base_state.
         - "predicted": the command through eq. (base_lag), a first-order
           lag of time constant params.base_lag at the control period:
           one discrete state (3, the predicted base velocity V_b^pred in
@@ -263,13 +264,15 @@ def RobustCompensator_(T):
             self._R_ba = (None if np.array_equal(self.R_ba, np.eye(3))
                           else np.ascontiguousarray(self.R_ba, float))
             self._switch = self.params.compensation_switch
+            self._switch_range = TASK_INPUTS["compensation_switch"]
             self._compensate = kernels.body_for(
                 compensation.arm_compensation, T)
             self._inputs = declare_inputs(self, (
                 ("arm_velocity", 6), ("base_velocity", 3),
                 ("filtered_base_velocity", 3), ("end_effector_position", 3),
                 ("capability_gradient", 6), ("alpha", 1),
-                ("compensation_switch", 1), ("base_state", 6)))
+                ("compensation_switch", 1),
+                ("base_state", BASE_STATE_SIZE)))
             (self._V_a_port, self._V_b_port, self._V_b_flt_port,
              self._p_ee_port, self._gradient_port, self._alpha_port,
              self._switch_port, self._base_state_port) = (
@@ -304,7 +307,7 @@ def RobustCompensator_(T):
             return self._V_b_flt_port.Eval(context)
 
         def _measured(self, context):
-            return self._base_state_port.Eval(context)[3:6]
+            return self._base_state_port.Eval(context)[BASE_TWIST]
 
         def _predicted(self, context):
             return self._predict(
@@ -322,10 +325,11 @@ def RobustCompensator_(T):
                 context.SetDiscreteState(np.asarray(velocity))
 
         def _calc(self, context):
-            s_c = optional_scalar(self._switch_port, context, self._switch)
+            s_c = self._switch_range.check(
+                "compensation_switch",
+                optional_scalar(self._switch_port, context, self._switch))
             alpha = self._alpha_port.Eval(context)[0]
-            if not (0.0 <= s_c <= 1.0 and 0.0 <= alpha <= 1.0):
-                unit_interval("compensation_switch", s_c)
+            if not 0.0 <= alpha <= 1.0:
                 unit_interval("alpha", alpha)
             return self._compensate(
                 self._V_a_port.Eval(context), self._V_b_port.Eval(context),

@@ -32,6 +32,7 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
 
 from drake_wbc.math import cdmp
+from drake_wbc.math.base_state import BASE_POSE, BASE_STATE_SIZE
 from drake_wbc.math.demonstration import TcpPose, tcp_pose_in_world
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.kinematics import twist_in_base, twist_in_world
@@ -41,7 +42,8 @@ from drake_wbc.math.movement import (
     resolve_movement_file,
 )
 from drake_wbc.math.scalar_support import value_of
-from drake_wbc.math.validation import checked_instance, switch
+from drake_wbc.math.task_inputs import TASK_INPUTS
+from drake_wbc.math.validation import checked_instance
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.cdmp_base import ONE, AffineDynamics, CdmpStage
 from drake_wbc.stages.support import (
@@ -133,7 +135,8 @@ def WholeBodyCdmp_(T):
                 "params", params, cdmp.WholeBodyCdmpParameters,
                 cdmp.WholeBodyCdmpParameters)
             self._dimension = 6
-            self._default_switch = switch("phri_switch", phri_switch)
+            self._default_switch = TASK_INPUTS["phri_switch"].check_number(
+                "phri_switch", phri_switch)
             self.player = player or movement_player(params)
             num_inputs = (_DEVIATION.stop if self.player is None
                           else _FORCING.stop)
@@ -304,7 +307,7 @@ def MovementTracking_(T):
             self._pose = TcpPose(arm)
             self._tcp_pose_in_world = body_for(tcp_pose_in_world, float)
             self._base = self.DeclareVectorInputPort(
-                "base.state_estimated", 6)
+                "base.state_estimated", BASE_STATE_SIZE)
             self._arm = self.DeclareVectorInputPort("arm.position_measured",
                                                     arm.num_joints)
             self.DeclareVectorOutputPort("reference_velocity", 6,
@@ -316,7 +319,7 @@ def MovementTracking_(T):
             if not (player.active(t) and K > 0.0):
                 output.SetFromVector(np.zeros(6))
                 return
-            base = value_of(self._base.Eval(context))[:3].tolist()
+            base = value_of(self._base.Eval(context))[BASE_POSE].tolist()
             pose = self._tcp_pose_in_world(base, self._pose.in_base(
                 value_of(self._arm.Eval(context))))
             x, y, z, yaw = [p - q for p, q in zip(

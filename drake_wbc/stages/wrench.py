@@ -197,12 +197,11 @@ def ExternalWrenchEstimator_(T):
             n, model = self._joints, self._arm.model
             q_a = inputs[:n]
             R_BM = self._rotation(q_a)
-            r_TM = (self._arm.frame_pose(q_a, model.ft_measurement_frame)
-                    .translation()
+            X_AM = self._arm.frame_pose(q_a, model.ft_measurement_frame)
+            r_TM = (X_AM.translation()
                     - self._arm.frame_pose(q_a, model.tcp_frame)
                     .translation())
-            R_AM = self._arm.frame_pose(
-                q_a, model.ft_measurement_frame).GetAsMatrix34()[:, :3]
+            R_AM = X_AM.GetAsMatrix34()[:, :3]
             return self._wrench(inputs[n:], R_BM, ToolPayload(
                 self._tool_mass, self._p_M_com, R_AM.T @ r_TM))
 
