@@ -2,12 +2,12 @@
 layer's (drake_wbc.math.capability and workspace) at the configurations
 that matter (joints at and beyond their limits, the wrist singularity,
 C_m in the band and on either side of it; the end effector on the arm
-base's axis, behind it, in the bands), the same for AutoDiffXd, and bad
-inputs are named."""
+base's axis, behind it, in the bands), the same for AutoDiffXd, and a
+joint angle that is not finite gives NaN."""
 
 import numpy as np
 import pytest
-from pydrake.autodiffutils import AutoDiffXd, ExtractValue
+from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue
 
 from drake_wbc.math import capability, workspace
 from drake_wbc.math.capability import ArmCapabilityParameters, CapabilityBand
@@ -134,15 +134,29 @@ def test_capability_stage_for_autodiff_gives_the_same_values(
                 err_msg=system.get_output_port(port).get_name())
 
 
-@pytest.mark.parametrize("bad", [np.nan, np.inf])
-def test_capability_stage_rejects_non_finite_positions(capability_stage,
-                                                       bad):
-    context = capability_stage.CreateDefaultContext()
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_capability_stage_gives_nan_for_non_finite_positions(
+        capability_stage, bad):
+    """A tick raises for no value: a joint angle that is not finite makes
+    every output NaN, for double and AutoDiffXd (values and derivatives),
+    and the next finite one gives the finite outputs again."""
     q = np.array(HOME_ARM_POSITIONS, dtype=float)
     q[3] = bad
-    capability_stage.get_input_port().FixValue(context, q)
-    with pytest.raises(ValueError, match="q_a"):
-        capability_stage.GetOutputPort("capability").Eval(context)
+    system = capability_stage
+    context = system.CreateDefaultContext()
+    system.get_input_port().FixValue(context, q)
+    for output in stage_outputs(system, context):
+        assert np.isnan(output).all()
+    converted = system.ToAutoDiffXd()
+    ad_context = converted.CreateDefaultContext()
+    converted.get_input_port().FixValue(ad_context, np.array(
+        [AutoDiffXd(x, np.eye(6)[i]) for i, x in enumerate(q)]))
+    for output in stage_outputs(converted, ad_context):
+        assert np.isnan(ExtractValue(output)).all()
+        assert np.isnan(ExtractGradient(output)).all()
+    system.get_input_port().FixValue(context, np.array(HOME_ARM_POSITIONS))
+    for output in stage_outputs(system, context):
+        assert np.isfinite(output).all()
 
 
 # --- WorkspaceAdapter ---------------------------------------------------------

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from pydrake.autodiffutils import (
+    AutoDiffXd,
     ExtractGradient,
     ExtractValue,
     InitializeAutoDiff,
@@ -70,6 +71,15 @@ def test_value_of():
     np.testing.assert_array_equal(value_of(x), [1.0, 2.0])
     assert value_of([1, 2]).dtype == float
     assert not is_autodiff(np.ones(2))
+
+
+def test_is_autodiff_looks_at_every_entry():
+    assert not is_autodiff(np.array([], dtype=object))
+    assert not is_autodiff(np.array([1.0, 2.0], dtype=object))
+    assert is_autodiff(np.array([1.0, AutoDiffXd(2.0)], dtype=object))
+    assert is_autodiff([0.5, AutoDiffXd(2.0)])
+    assert is_autodiff(AutoDiffXd(2.0))
+    assert not is_autodiff(2.0)
 
 
 @pytest.mark.parametrize("shape", [(3,), (2, 3)])

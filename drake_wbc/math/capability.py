@@ -43,7 +43,11 @@ from pydrake.autodiffutils import AutoDiffXd
 
 from drake_wbc.math.compiled import compiled
 from drake_wbc.math.kernels import fast_kernel
-from drake_wbc.math.scalar_support import constant_like, through_float_function
+from drake_wbc.math.scalar_support import (
+    constant_like,
+    is_autodiff,
+    through_float_function,
+)
 from drake_wbc.math.validation import (
     as_matrix,
     as_scalar,
@@ -179,12 +183,6 @@ def _expm1(x):
     return math.expm1(x)
 
 
-def _holds_autodiff(array):
-    array = np.asarray(array)
-    return array.dtype == object and any(
-        isinstance(v, AutoDiffXd) for v in array.flat)
-
-
 def _through_floats(count):
     """Lets a float-only body (one that takes an SVD) take AutoDiffXd in its
     first `count` arguments: their entries are stacked into one vector for
@@ -195,7 +193,7 @@ def _through_floats(count):
         @functools.wraps(body)
         def generic(*args):
             arrays, others = args[:count], args[count:]
-            if not any(_holds_autodiff(a) for a in arrays):
+            if not any(is_autodiff(a) for a in arrays):
                 return body(*args)
             shapes = [np.shape(a) for a in arrays]
             ends = np.cumsum([int(np.prod(s)) for s in shapes])[:-1]

@@ -38,6 +38,7 @@ import numpy as np
 
 from drake_wbc.math.compiled import compiled
 from drake_wbc.math.kernels import fast_kernel
+from drake_wbc.math.scalar_support import value_of
 
 REVOLUTE, PRISMATIC = 1.0, 0.0
 """The kinds of `SerialChain.revolute` (floats: the compiled kernel takes
@@ -93,7 +94,8 @@ def chain_kinematics_of(fixed, axes, revolute, q):
 
     Returns:
         (J, X_AE): J (6, n) the geometric Jacobian [v; w] of E's origin in
-        A, X_AE (4, 4) the pose of E in A.
+        A, X_AE (4, 4) the pose of E in A; both all NaN if an entry of q
+        or of the chain is not finite (E is nowhere known).
     """
     n = len(axes)
     X = np.asarray(fixed[0])
@@ -110,14 +112,19 @@ def chain_kinematics_of(fixed, axes, revolute, q):
             columns.append(np.concatenate([np.cross(w, p - origins[i]), w]))
         else:
             columns.append(np.concatenate([w, w * 0.0]))
-    return np.array(columns).T, X
+    J = np.array(columns).T
+    if not all(np.isfinite(value_of(a)).all()
+               for a in (fixed, axes, revolute, q)):
+        return J * math.nan, X * math.nan
+    return J, X
 
 
 @compiled
 def _chain_kinematics(fixed, axes, revolute, q):
     """The compiled loop of `chain_kinematics_float`: the product of the
     transforms in 3x3 and 3-vector arithmetic, the Jacobian's columns
-    beside it."""
+    beside it; both all NaN if an entry of q or of the chain is not
+    finite, as the reference."""
     n = axes.shape[0]
     R = np.empty((3, 3))
     p = np.empty(3)
@@ -191,6 +198,19 @@ def _chain_kinematics(fixed, axes, revolute, q):
         for c in range(3):
             X[r, c] = R[r, c]
     X[3, 3] = 1.0
+    finite = True
+    for i in range(n):
+        finite = finite and math.isfinite(q[i]) and math.isfinite(
+            revolute[i])
+        for c in range(3):
+            finite = finite and math.isfinite(axes[i, c])
+    for i in range(n + 1):
+        for r in range(4):
+            for c in range(4):
+                finite = finite and math.isfinite(fixed[i, r, c])
+    if not finite:
+        J[:, :] = math.nan
+        X[:, :] = math.nan
     return J, X
 
 
@@ -207,7 +227,9 @@ def _random_pose(rng):
 def _chain_sample(rng):
     """A random chain of 1 to 9 joints (revolute, and prismatic one time
     in four per joint), axes random or along a frame axis, at random q
-    (any turn for the revolute joints)."""
+    (any turn for the revolute joints); in one case in ten an entry of q,
+    or one time in four of those of a fixed transform or an axis, NaN or
+    infinite."""
     n = int(rng.integers(1, 10))
     fixed = np.array([_random_pose(rng) for _ in range(n + 1)])
     axes = rng.normal(size=(n, 3))
@@ -217,6 +239,12 @@ def _chain_sample(rng):
     revolute = np.where(rng.uniform(size=n) < 0.75, REVOLUTE, PRISMATIC)
     q = np.where(revolute == REVOLUTE, rng.uniform(-7.0, 7.0, n),
                  rng.uniform(-0.5, 0.5, n))
+    if rng.random() < 0.1:
+        spoilt = (q if rng.random() < 0.75
+                  else fixed if rng.random() < 0.5 else axes)
+        spoilt[np.unravel_index(rng.integers(spoilt.size),
+                                spoilt.shape)] = rng.choice(
+            [np.nan, np.inf, -np.inf])
     return fixed, axes, revolute, q
 
 

@@ -77,6 +77,8 @@ def tcp_pose_in_world(base_pose, X_BT):
         base_pose: (3,) [x, y, yaw] of T_b in the world (m, rad).
         X_BT: (3, 4) the TCP's pose [R_BT | p_BT] in T_b.
 
+    A yaw that is not finite has no heading: x, y and the yaw are NaN.
+
     Returns:
         (4,) [x, y, z, yaw] (float or AutoDiffXd).
     """
@@ -89,11 +91,17 @@ def tcp_pose_in_world(base_pose, X_BT):
 
 
 def _pose_inputs(rng):
-    """A random base pose (any heading) and a random TCP pose in T_b."""
+    """A random base pose (any heading) and a random TCP pose in T_b; in
+    one case in ten an entry of either NaN or infinite."""
     R = np.linalg.qr(rng.normal(size=(3, 3)))[0]
     R *= np.sign(np.linalg.det(R))
     X_BT = np.column_stack([R, rng.uniform(-1.0, 1.0, 3)])
-    return np.r_[rng.uniform(-5.0, 5.0, 2), rng.uniform(-10.0, 10.0)], X_BT
+    base_pose = np.r_[rng.uniform(-5.0, 5.0, 2), rng.uniform(-10.0, 10.0)]
+    if rng.random() < 0.1:
+        pose = base_pose if rng.random() < 0.5 else X_BT
+        pose[np.unravel_index(rng.integers(pose.size), pose.shape)] = (
+            rng.choice([np.nan, np.inf, -np.inf]))
+    return base_pose, X_BT
 
 
 @fast_kernel(tcp_pose_in_world, sample=_pose_inputs)
@@ -101,7 +109,10 @@ def tcp_pose_in_world_float(base_pose, X_BT):
     """`tcp_pose_in_world` in plain floats (math.cos, math.atan2), a
     list: the replay's tracking (MovementTracking), each control tick."""
     x, y, yaw = base_pose
-    c, s = math.cos(yaw), math.sin(yaw)
+    try:
+        c, s = math.cos(yaw), math.sin(yaw)
+    except ValueError:  # an infinite yaw: NaN, as np.cos gives
+        c = s = math.nan
     (r00, _, _, px), (r10, _, _, py), (_, _, _, pz) = np.asarray(
         X_BT).tolist()
     return [c * px - s * py + x, s * px + c * py + y, pz,

@@ -81,7 +81,8 @@ def whole_body_jacobian_of(J_a, p_ee_in_base, R_ba):
 def twist_in_world(twist, yaw):
     """Rz(yaw) [v; w]: a twist (6,) with components in T_b, in the world,
     for the base's yaw phi_b (the inverse of eq. (3)); float or
-    AutoDiffXd."""
+    AutoDiffXd. A yaw that is not finite has no heading: the x and y
+    components are NaN."""
     c, s = np.cos(yaw), np.sin(yaw)
     vx, vy, vz, wx, wy, wz = twist
     return np.array([c * vx - s * vy, s * vx + c * vy, vz,
@@ -90,7 +91,8 @@ def twist_in_world(twist, yaw):
 
 def twist_in_base(twist, yaw):
     """Rz(-yaw) [v; w] of eq. (3): a twist (6,) with components in the
-    world, in T_b; float or AutoDiffXd."""
+    world, in T_b; float or AutoDiffXd. A yaw that is not finite has no
+    heading: the x and y components are NaN."""
     c, s = np.cos(yaw), np.sin(yaw)
     vx, vy, vz, wx, wy, wz = twist
     return np.array([c * vx + s * vy, c * vy - s * vx, vz,
@@ -99,11 +101,18 @@ def twist_in_base(twist, yaw):
 
 def _twist_inputs(rng):
     """A twist (zero, or of any size) and a yaw (0, a right angle, any
-    turn)."""
+    turn); in one case in ten the yaw, or an entry of the twist, NaN or
+    infinite."""
     twist = 10.0 ** rng.uniform(-3, 3) * rng.normal(size=6)
     if rng.random() < 0.1:
         twist = np.zeros(6)
     yaw = float(rng.choice([0.0, np.pi / 2, -np.pi, rng.uniform(-20, 20)]))
+    if rng.random() < 0.1:
+        value = float(rng.choice([np.nan, np.inf, -np.inf]))
+        if rng.random() < 0.5:
+            yaw = value
+        else:
+            twist[rng.integers(6)] = value
     return twist, yaw
 
 
@@ -111,7 +120,10 @@ def _twist_inputs(rng):
 def twist_in_world_float(twist, yaw):
     """`twist_in_world` of a float array, in plain floats (math.cos), a
     list."""
-    c, s = math.cos(yaw), math.sin(yaw)
+    try:
+        c, s = math.cos(yaw), math.sin(yaw)
+    except ValueError:  # an infinite yaw: NaN, as np.cos gives
+        c = s = math.nan
     vx, vy, vz, wx, wy, wz = twist.tolist()
     return [c * vx - s * vy, s * vx + c * vy, vz,
             c * wx - s * wy, s * wx + c * wy, wz]
@@ -121,7 +133,10 @@ def twist_in_world_float(twist, yaw):
 def twist_in_base_float(twist, yaw):
     """`twist_in_base` of a float array, in plain floats (math.cos), a
     list."""
-    c, s = math.cos(yaw), math.sin(yaw)
+    try:
+        c, s = math.cos(yaw), math.sin(yaw)
+    except ValueError:  # an infinite yaw: NaN, as np.cos gives
+        c = s = math.nan
     vx, vy, vz, wx, wy, wz = twist.tolist()
     return [c * vx + s * vy, c * vy - s * vx, vz,
             c * wx + s * wy, c * wy - s * wx, wz]

@@ -28,9 +28,11 @@ CENTRAL_DIFFERENCE_STEP = 1e-6
 
 
 def is_autodiff(array):
-    """True if `array` holds AutoDiffXd scalars."""
+    """True if `array` (an array, a sequence or a scalar) holds an
+    AutoDiffXd scalar in any entry; False for an empty one."""
     array = np.asarray(array)
-    return array.dtype == object and isinstance(array.flat[0], AutoDiffXd)
+    return array.dtype == object and any(
+        isinstance(v, AutoDiffXd) for v in array.flat)
 
 
 def constant_like(like, constant):

@@ -161,9 +161,14 @@ def allowed_speeds(d, stop_distance, stop_time, timing):
         stop_distance: m >= 0.
         stop_time: s > 0.
         timing: ProtectiveTiming, the base's reaction, lag and braking.
+
+    Outside those ranges (not checked) a NaN or a stop_time of 0 gives
+    NaN, which the minimum passes on, and an infinite stop_distance 0.
     """
     gap = np.maximum(d - stop_distance, 0.0)
-    return np.minimum(gap / stop_time,
+    with np.errstate(divide="ignore", invalid="ignore"):  # stop_time 0
+        approach = gap / stop_time
+    return np.minimum(approach,
                       protective_speeds(d, 0.0, timing, stop_distance))
 
 
@@ -320,14 +325,20 @@ def _scan(rng, half_sizes, count):
 
 
 def _separation_state_inputs(rng):
+    """Random arguments of separation_state (`_scan`'s points); in one
+    case in ten the stop distance or the stop time NaN, 0 or infinite,
+    outside their checked ranges."""
     half_sizes = (float(rng.uniform(0.2, 0.6)), float(rng.uniform(0.2, 0.5)))
     count = int(rng.choice([1, 4, NEAREST_POINTS]))
     timing = ProtectiveTiming(float(rng.uniform(0.0, 0.2)),
                               float(rng.uniform(0.0, 0.5)),
                               float(rng.uniform(0.3, 3.0)))
-    return (_scan(rng, half_sizes, count), half_sizes,
-            float(rng.uniform(0.0, 0.3)), float(rng.uniform(0.1, 1.0)),
-            timing, count)
+    points = _scan(rng, half_sizes, count)
+    stop = [float(rng.uniform(0.0, 0.3)), float(rng.uniform(0.1, 1.0))]
+    if rng.random() < 0.1:
+        stop[rng.integers(2)] = float(rng.choice(
+            [np.nan, 0.0, np.inf, -np.inf]))
+    return (points, half_sizes, *stop, timing, count)
 
 
 @fast_kernel(separation_state, sample=_separation_state_inputs)
@@ -403,7 +414,9 @@ def _state_loop(near, d, nx, ny, stop_distance, stop_time, b,
         braking = deceleration * (
             np.sqrt(b * b + 2.0 * gap / deceleration) - b)
         approach = gap / stop_time
-        state[3 * count + k] = approach if approach < braking else braking
+        # The minimum as numpy's: a NaN of either side is the result.
+        state[3 * count + k] = (approach if approach < braking
+                                or approach != approach else braking)
     return state
 
 
@@ -690,7 +703,9 @@ def protective_speeds(d, human_speed, timing, margin):
     v_h = np.asarray(human_speed)
     b = v_h / a + reaction + lag
     k = d - margin - v_h * (reaction + SETTLING * lag)
-    k = np.where(value_of(k) > 0.0, k, 0.0 * k)
+    # max(K, 0), NaN staying NaN, its zero of d's type: 0 K would make an
+    # infinite margin's K = -inf a NaN (where K < 0, d is finite).
+    k = np.where(value_of(k) < 0.0, 0.0 * d, k)
     return a * (np.sqrt(b * b + 2.0 * k / a) - b)
 
 

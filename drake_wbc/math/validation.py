@@ -81,7 +81,34 @@ def as_float_array(name, value, shape):
     return as_matrix(name, value, shape)
 
 
+_NOT_NUMBERS = (str, bytes, bool, np.bool_)
+"""What numpy and float() take for numbers and a check must not: "15"
+and b"15" (a quoted number in a file), True and False."""
+
+
+def _holds_non_number(value):
+    """Whether `value`, a number or a (nested) sequence or array of them,
+    has a string or a boolean anywhere (np.asarray([1.0, True], float)
+    would take it for 1.0)."""
+    if isinstance(value, _NOT_NUMBERS):
+        return True
+    if isinstance(value, np.ndarray | np.generic):
+        if value.dtype.kind in "bSU":
+            return True
+        return value.dtype == object and any(
+            _holds_non_number(v) for v in np.ravel(value))
+    if isinstance(value, list | tuple):
+        return any(_holds_non_number(v) for v in value)
+    return False
+
+
 def _as_array(name, value, shape, kind):
+    # Arrays of numbers, the usual case, hold no string or boolean.
+    if not (type(value) is np.ndarray and value.dtype.kind in "fiu") and (
+            _holds_non_number(value)):
+        raise ValueError(
+            f"{name} = {value!r} is not allowed: must be a {kind} of "
+            "numbers (not strings or booleans)")
     try:
         array = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -111,8 +138,14 @@ def as_scalar(name, value):
     """Returns `value` as a finite float.
 
     Raises:
-        ValueError: naming `name` when the value is not one finite number.
+        ValueError: naming `name` when the value is not one finite number
+            (a string or a boolean is not one, whatever float() makes of
+            it).
     """
+    if _holds_non_number(value):
+        raise ValueError(
+            f"{name} = {value!r} is not allowed: must be a single number "
+            "(not a string or a boolean)")
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -164,8 +197,11 @@ def whole_number(name, value, minimum=0):
         ValueError: naming `name`, its value (a whole one as an integer)
             and what is allowed.
     """
+    if isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} = {value!r} is not allowed: must be a "
+                         "whole number")
     number = as_scalar(name, value)
-    if not number.is_integer() or isinstance(value, (bool, np.bool_)):
+    if not number.is_integer():
         raise ValueError(f"{name} = {value!r} is not allowed: must be a "
                          "whole number")
     if number < minimum:

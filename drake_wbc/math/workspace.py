@@ -129,6 +129,7 @@ from drake_wbc.math.capability import (
     transition_of,
 )
 from drake_wbc.math.kernels import fast_kernel
+from drake_wbc.math.kinematics import random_rotation
 from drake_wbc.math.motion_mode import MotionMode, fixed_weighting_factors
 from drake_wbc.math.scalar_support import constant_like, value_of
 from drake_wbc.math.validation import (
@@ -773,12 +774,6 @@ def _max_step(max_step):
 # The float kernel of the tick
 # ----------------------------------------------------------------------------
 
-def _random_rotation(rng):
-    Q, R = np.linalg.qr(rng.normal(size=(3, 3)))
-    Q = Q * np.sign(np.diag(R))
-    return Q if np.linalg.det(Q) > 0.0 else -Q
-
-
 def _weighting_sample(rng):
     """Random arguments of `adaptive_weighting_factors`: the end
     effector on the arm base's axis, straight ahead, straight behind
@@ -796,7 +791,7 @@ def _weighting_sample(rng):
                         extent_upper=rng.uniform(0.76, 0.9),
                         deflection_lower=np.radians(rng.uniform(5, 30)),
                         deflection_upper=np.radians(rng.uniform(31, 60)))
-    R = np.eye(3) if rng.uniform() < 0.5 else _random_rotation(rng)
+    R = np.eye(3) if rng.uniform() < 0.5 else random_rotation(rng)
     origin = rng.normal(size=3) * 0.3
     constants = AdaptiveWorkspace.of(
         upper, lower, ws, R, origin,

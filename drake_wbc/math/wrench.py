@@ -44,12 +44,14 @@ admittance in pHRI; the whole body's admittance lag,
 math.cdmp.admittance_filter_model, rolls that loop off instead).
 """
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from drake_wbc.math.compiled import compiled
 from drake_wbc.math.kernels import fast_kernel
+from drake_wbc.math.scalar_support import value_of
 from drake_wbc.math.validation import boolean, whole_number
 
 STANDARD_GRAVITY = 9.81
@@ -127,9 +129,13 @@ def external_wrench(reading, R_LM, payload, motion=None):
 
     Returns:
         (6,) F_ext = [force; torque] on the tool, at T, in L: the force
-        convention of drake_wbc.math.cdmp.
+        convention of drake_wbc.math.cdmp; all NaN if an entry of
+        reading, R_LM or motion is not finite (the lever and the rotation
+        mix the wrench's parts, so no part of it is known).
     """
     R_LM = np.asarray(R_LM)
+    finite = all(np.isfinite(value_of(x)).all() for x in (
+        reading, R_LM, () if motion is None else motion))
     if motion is None:
         weight = (-payload.mass * STANDARD_GRAVITY) * R_LM[2]
         spin = 0.0
@@ -140,7 +146,8 @@ def external_wrench(reading, R_LM, payload, motion=None):
     f_M = reading[:3] - weight
     tau_M = reading[3:] - _cross(payload.com_in_sensor, weight) + spin
     lever = _cross(payload.sensor_from_tcp, f_M)
-    return np.concatenate([R_LM @ f_M, R_LM @ (tau_M + lever)])
+    F_ext = np.concatenate([R_LM @ f_M, R_LM @ (tau_M + lever)])
+    return F_ext if finite else F_ext * math.nan
 
 
 def _vee_of_rotation(R):
@@ -177,7 +184,8 @@ def tool_motion(rotations, positions, payload, h):
 
 def _wrench_inputs(rng):
     """A reading (the tool's weight alone, or of any size), a rotation
-    and a payload (none, or of any mass and lever)."""
+    and a payload (none, or of any mass and lever); in one case in ten an
+    entry of the reading, the rotation or the motion NaN or infinite."""
     R_LM = np.linalg.qr(rng.normal(size=(3, 3)))[0]
     R_LM *= np.sign(np.linalg.det(R_LM))
     payload = ToolPayload(
@@ -189,6 +197,12 @@ def _wrench_inputs(rng):
                else 10.0 ** rng.uniform(-2, 3) * rng.normal(size=6))
     motion = (None if rng.random() < 0.4
               else 10.0 ** rng.uniform(-2, 2) * rng.normal(size=6))
+    if rng.random() < 0.1:
+        value = rng.choice([np.nan, np.inf, -np.inf])
+        spoilt = [reading, R_LM] + ([] if motion is None else [motion])
+        spoilt = spoilt[rng.integers(len(spoilt))]
+        spoilt[np.unravel_index(rng.integers(spoilt.size),
+                                spoilt.shape)] = value
     return reading, R_LM, payload, motion
 
 
@@ -196,7 +210,16 @@ def _wrench_inputs(rng):
 def _external_wrench(reading, R_LM, mass, weight_map, moment_map, lever_map,
                      moving, motion):
     """The compiled body of `external_wrench_float` (`motion` read only
-    when `moving`)."""
+    when `moving`); all NaN if an entry of reading, R_LM or motion is not
+    finite, as the reference."""
+    finite = True
+    for r in range(6):
+        finite = finite and math.isfinite(reading[r])
+        if moving:
+            finite = finite and math.isfinite(motion[r])
+    for r in range(3):
+        for c in range(3):
+            finite = finite and math.isfinite(R_LM[r, c])
     relieved = np.empty(6)
     if not moving:
         for r in range(6):
@@ -233,6 +256,8 @@ def _external_wrench(reading, R_LM, mass, weight_map, moment_map, lever_map,
             result[3 * half + r] = (in_M[3 * half] * R_LM[r, 0]
                                     + in_M[3 * half + 1] * R_LM[r, 1]
                                     + in_M[3 * half + 2] * R_LM[r, 2])
+    if not finite:
+        result[:] = math.nan
     return result
 
 

@@ -5,6 +5,8 @@ modes (Sec. IV-C). Their parameters and math are in
 drake_wbc.math.capability and drake_wbc.math.workspace; how the stages
 declare their ports and cache: stages/support.py."""
 
+import math
+
 import numpy as np
 from pydrake.systems.framework import LeafSystem_
 
@@ -63,7 +65,10 @@ def ArmCapability_(T):
 
         The arm's kinematics (J_a, p_ee) and C_m are evaluated once per
         context, in a cache entry that every output reads; all outputs
-        depend on arm_position only (direct feedthrough, stateless).
+        depend on arm_position only (direct feedthrough, stateless). A
+        joint angle that is not finite makes every output NaN (the arm is
+        nowhere known: what the chain kinematics and the kernels give
+        there), for both scalar types; nothing raises.
 
         The kinematics need a double MultibodyPlant, so the evaluation
         (`evaluate`) is in floats, with the float kernels of
@@ -111,13 +116,19 @@ def ArmCapability_(T):
             declare_slices(self, entry, _CAPABILITY_OUTPUTS)
 
         def evaluate(self, q_a):
-            """[p_ee (3), C_m, grad_x C_m (6), alpha] at float q_a (n,).
+            """[p_ee (3), C_m, grad_x C_m (6), alpha] at float q_a (n,);
+            all NaN if an entry of q_a is not finite.
 
-            One evaluation of the kinematics and one SVD of J_a; q_a is
-            checked (shape (n,), finite) by ArmKinematics.evaluate.
+            One evaluation of the kinematics and one SVD of J_a; q_a's
+            shape is checked by ArmKinematics.evaluate.
             """
-            values = self.arm.evaluate(q_a)
             q = np.ascontiguousarray(q_a, dtype=float)
+            # A sum of floats is finite only if every term is (one that
+            # overflows goes on to the entries).
+            if not (math.isfinite(sum(q.tolist()))
+                    or np.isfinite(q).all()):
+                return np.full(11, math.nan)
+            values = self.arm.evaluate(q_a)
             C_m, gradient = self._terms(values.J_a, q, *self._limits,
                                         *self._constants)
             result = np.empty(11)
