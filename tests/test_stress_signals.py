@@ -244,3 +244,40 @@ def test_a_stop_that_surfaces_through_compiled_code_is_a_stop():
     looped.__context__ = ValueError("b")
     looped.__context__.__context__ = looped
     assert stop_within(looped) is None
+
+
+def test_a_stop_while_the_workers_start_ends_them(monkeypatch):
+    """A SIGTERM while the worker pool starts is held until the pool
+    exists, and the stop then ends the pool's workers (they were once
+    left to the interpreter's exit, which printed a traceback)."""
+    import multiprocessing.context
+
+    from drake_wbc.stress.run import Stopped, run_cases, stopped_by_signals
+
+    pools = []
+    start = multiprocessing.context.SpawnContext.Pool
+
+    def start_then_stop(self, *args, **kwargs):
+        pool = start(self, *args, **kwargs)
+        pools.append(pool)
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.1)  # the handler runs here, held
+        return pool
+
+    monkeypatch.setattr(multiprocessing.context.SpawnContext, "Pool",
+                        start_then_stop)
+    handlers = {number: signal.getsignal(number)
+                for number in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with pytest.raises(Stopped, match="SIGTERM"):
+            with stopped_by_signals():
+                run_cases(0, 2, 0.1, workers=2)
+    finally:
+        for number, handler in handlers.items():
+            signal.signal(number, handler)
+    assert len(pools) == 1
+    try:
+        with pytest.raises(ValueError, match="Pool not running"):
+            pools[0].apply_async(int)
+    finally:
+        pools[0].terminate()

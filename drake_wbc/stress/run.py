@@ -219,12 +219,13 @@ def _in_processes(seed, indices, duration, workers, on_done, robot):
     # started, so it waits until the pool exists; and the workers are
     # born with SIGINT blocked (a terminal's Ctrl-C reaches them too, and
     # would interrupt their start-up with a traceback).
-    # Leaving the with block, by the end or by an exception (Stopped),
+    # Leaving the outer block, by the end or by an exception (Stopped),
     # terminates the workers: a stopped run does not wait for its cases.
-    with signals_held(), _ctrl_c_blocked_at_birth():
-        pool = context.Pool(workers, initializer=_start_worker,
-                            initargs=(os.getpid(),))
-    with pool:
+    # The pool is in it before a stop held during its start is raised.
+    with contextlib.ExitStack() as running:
+        with signals_held(), _ctrl_c_blocked_at_birth():
+            pool = running.enter_context(context.Pool(
+                workers, initializer=_start_worker, initargs=(os.getpid(),)))
         jobs = [(seed, index, duration, robot) for index in indices]
         for record in pool.imap_unordered(_run_job, jobs):
             records.append(record)
