@@ -300,19 +300,23 @@ def check_inputs_float(values, ranges):
     every entry present and of the ranges, the per-input detail only when
     one fails."""
     # A sum of floats is finite only if every term is (a sum that
-    # overflows only sends the values to the detailed checks).
+    # overflows only sends the values to the detailed checks). The
+    # entries as Python floats: min and max of a few of them cost a tenth
+    # of numpy's.
+    entries = [None if value is None else value.tolist()
+               for value in values]
     total = 0.0
-    for value in values:
-        if value is not None:
-            total += sum(value.tolist())
+    for listed in entries:
+        if listed is not None:
+            total += sum(listed)
     if math.isfinite(total):
-        for value, bounds in zip(values, ranges, strict=True):
-            if bounds is None or value is None:
+        for listed, bounds in zip(entries, ranges, strict=True):
+            if bounds is None or listed is None:
                 continue
             lower, upper, switch = bounds
-            if not (lower <= value.min() and value.max() <= upper) or (
+            if not (lower <= min(listed) and max(listed) <= upper) or (
                     switch and not all(v == 0.0 or v == 1.0
-                                       for v in value.tolist())):
+                                       for v in listed)):
                 break
         else:
             return (VALID,) * len(values)
