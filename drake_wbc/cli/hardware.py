@@ -98,10 +98,12 @@ def _add_common(parser):
 
 
 def _duration(value):
-    if value is not None and not value > 0:
-        raise ValueError(f"--duration = {value!r} is not allowed: must be "
-                         "> 0 s")
-    return value
+    """--duration, checked (None: the scenario's)."""
+    if value is None:
+        return None
+    from drake_wbc.math.validation import positive_duration
+
+    return positive_duration("--duration", value)
 
 
 def _realtime_rate(value):

@@ -149,9 +149,10 @@ def _run_run(args):
             print(f"{path.stem:{width}s}  {scenario.description}{marker}")
         return 0
     path = find_scenario(args.scenario or DEFAULT_SCENARIO)
-    if args.duration is not None and not args.duration > 0:
-        raise ValueError(f"--duration = {args.duration!r} is not allowed: "
-                         "must be > 0 s")
+    if args.duration is not None:
+        from drake_wbc.math.validation import positive_duration
+
+        positive_duration("--duration", args.duration)
     output = args.output or Path("out") / path.stem
     if args.sweep:
         from drake_wbc.analysis.base_sweep import run_sweep

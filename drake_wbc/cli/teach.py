@@ -152,12 +152,11 @@ def replay_scenario(args):
     )
     from drake_wbc.math.cdmp import MovementReplay
     from drake_wbc.math.movement import LearnedMovement, resolve_movement_file
-    from drake_wbc.math.validation import validate
+    from drake_wbc.math.validation import positive_duration, validate
     from drake_wbc.station.scene import CylinderObstacle
 
-    if args.duration is not None and not args.duration > 0:
-        raise ValueError(f"--duration = {args.duration!r} is not allowed: "
-                         "must be > 0 s")
+    if args.duration is not None:
+        positive_duration("--duration", args.duration)
     path = find_scenario(args.scenario)
     scenario = on_robot(load_scenario(path), args)
     file = resolve_movement_file(args.movement).resolve()

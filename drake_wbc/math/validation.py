@@ -293,6 +293,19 @@ def positive(name, value):
     return _above(name, value, strict=True)
 
 
+def positive_duration(name, value):
+    """Returns `value`, a duration in s, as a float after checking that
+    it is finite and > 0 (a command's --duration).
+
+    Raises:
+        ValueError: naming `name` and its value.
+    """
+    number = as_scalar(name, value)
+    if not number > 0.0:
+        raise ValueError(f"{name} = {number!r} is not allowed: must be > 0 s")
+    return number
+
+
 def non_negative(name, value):
     """Returns `value` as a float after checking that it is >= 0.
 

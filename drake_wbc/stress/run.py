@@ -64,7 +64,7 @@ from multiprocessing import resource_tracker
 from pathlib import Path
 
 from drake_wbc.experiments.scenario import robot_option_file
-from drake_wbc.math.validation import as_scalar, whole_number
+from drake_wbc.math.validation import positive_duration, whole_number
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.stress.cases import TIMING_KEYS, run_case, violations
 
@@ -197,10 +197,7 @@ def check_arguments(seed, cases, duration, workers, prefix=""):
     """
     seed = whole_number(f"{prefix}seed", seed)
     cases = whole_number(f"{prefix}cases", cases, 1)
-    duration = as_scalar(f"{prefix}duration", duration)
-    if not duration > 0.0:
-        raise ValueError(f"{prefix}duration = {duration!r} is not allowed: "
-                         "must be > 0 s")
+    duration = positive_duration(f"{prefix}duration", duration)
     if workers is None:
         workers = os.cpu_count() or 1
     return seed, cases, duration, whole_number(f"{prefix}workers", workers,
