@@ -91,14 +91,25 @@ def closed_loop(name, seconds):
     return timed(run)  # per simulated second
 
 
+def scenarios():
+    from drake_wbc.experiments.scenario import scenario_files
+
+    return [path.stem for path in scenario_files()]
+
+
 print("ready", flush=True)
 for line in sys.stdin:
     request = json.loads(line)
-    if request["kind"] == "tick":
-        print(json.dumps(timed(run_ticks)), flush=True)
-    else:
-        print(json.dumps(closed_loop(request["name"], request["seconds"])),
-              flush=True)
+    try:
+        if request["kind"] == "tick":
+            answer = timed(run_ticks)
+        elif request["kind"] == "scenarios":
+            answer = scenarios()
+        else:
+            answer = closed_loop(request["name"], request["seconds"])
+    except Exception as error:  # said by the parent, naming the checkout
+        answer = {"error": f"{type(error).__name__}: {error}"}
+    print(json.dumps(answer), flush=True)
 """
 
 
@@ -109,26 +120,44 @@ def start_worker(checkout, ticks):
         [sys.executable, "-c", WORKER, str(TICKER), str(ticks)],
         cwd=checkout, env=env, stdin=subprocess.PIPE,
         stdout=subprocess.PIPE, text=True)
+    worker.checkout = checkout
     if worker.stdout.readline().strip() != "ready":
         raise RuntimeError(f"the worker in {checkout} did not start")
     return worker
 
 
 def ask(worker, request):
-    """[wall-clock s, thread CPU s] per unit (a tick, or a simulated
-    second) of one timed request."""
+    """The worker's answer to `request`: [wall-clock s, thread CPU s] per
+    unit (a tick, or a simulated second) of one timed request, or the
+    names of its checkout's scenarios."""
     worker.stdin.write(json.dumps(request) + "\n")
     worker.stdin.flush()
-    return json.loads(worker.stdout.readline())
+    answer = json.loads(worker.stdout.readline())
+    if isinstance(answer, dict):
+        raise SystemExit(f"bench_against: the worker in {worker.checkout} "
+                         f"failed on {request}: {answer['error']}")
+    return answer
 
 
-def scenario_names(requested):
-    """The scenarios named by --scenarios (`all`: every scenario here)."""
+def scenario_names(requested, workers):
+    """The scenarios named by --scenarios that both checkouts have
+    (`all`: every scenario of both); a named one that either lacks is an
+    error, the ones `all` leaves out are said."""
+    known = {side: ask(worker, {"kind": "scenarios"})
+             for side, worker in workers.items()}
+    both = [name for name in known["here"]
+            if all(name in names for names in known.values())]
     if requested == ["all"]:
-        sys.path.insert(0, str(ROOT))
-        from drake_wbc.experiments.scenario import scenario_files
-
-        return [path.stem for path in scenario_files()]
+        left_out = sorted(set().union(*known.values()) - set(both))
+        if left_out:
+            print(f"bench_against: not in both checkouts, left out: "
+                  f"{', '.join(left_out)}")
+        return both
+    missing = [name for name in requested if name not in both]
+    if missing:
+        raise SystemExit(
+            f"bench_against: --scenarios {' '.join(missing)}: not a "
+            f"scenario of both checkouts; both have {', '.join(both)}")
     return requested
 
 
@@ -180,16 +209,11 @@ def main(argv=None):
     if args.rounds < 1 or args.ticks < 1 or not args.seconds > 0:
         parser.error("--rounds and --ticks must be at least 1, --seconds "
                      "positive")
-    names = scenario_names(args.scenarios)
-    if args.no_tick and not names:
+    if args.no_tick and not args.scenarios:
         parser.error("nothing to time: --no-tick without --scenarios")
     commit = subprocess.run(
         ["git", "rev-parse", "--short", args.against], cwd=ROOT,
         check=True, capture_output=True, text=True).stdout.strip()
-    parts = ([] if args.no_tick else [("tick", {"kind": "tick"})]) + [
-        (name, {"kind": "scenario", "name": name, "seconds": args.seconds})
-        for name in names]
-    times = {part: {"here": [], commit: []} for part, _ in parts}
     ticks = 0 if args.no_tick else args.ticks
     with tempfile.TemporaryDirectory() as scratch:
         other = Path(scratch) / f"at_{commit}"
@@ -198,6 +222,11 @@ def main(argv=None):
         try:
             workers = {"here": start_worker(ROOT, ticks),
                        commit: start_worker(other, ticks)}
+            parts = ([] if args.no_tick else [("tick", {"kind": "tick"})])
+            parts += [(name, {"kind": "scenario", "name": name,
+                              "seconds": args.seconds})
+                      for name in scenario_names(args.scenarios, workers)]
+            times = {part: {"here": [], commit: []} for part, _ in parts}
             for i in range(args.rounds):
                 for j, (part, request) in enumerate(parts):
                     order = list(workers)
