@@ -10,6 +10,7 @@ from pydrake.autodiffutils import (
 )
 
 from drake_wbc.math.scalar_support import (
+    all_finite,
     is_autodiff,
     solve,
     through_float_function,
@@ -87,3 +88,23 @@ def test_through_float_function_keeps_the_shape(shape):
     x = InitializeAutoDiff(np.array([0.5, 0.25])).ravel()
     y = through_float_function(lambda v: np.full(shape, v.sum()), x)
     assert y.shape == shape
+
+
+def test_all_finite_agrees_with_numpy_for_every_scalar_type():
+    """all_finite against np.isfinite(...).all() on arrays of floats and of
+    AutoDiffXd, of several shapes, with NaN, infinities and sums that
+    overflow though every term is finite."""
+    rng = np.random.default_rng(7)
+    specials = [np.nan, np.inf, -np.inf, 1e308, -1e308, 0.0]
+    for _ in range(300):
+        shape = [(0,), (1,), (3,), (6,), (2, 3)][rng.integers(5)]
+        values = rng.normal(size=shape)
+        for _ in range(rng.integers(0, 3)):
+            if values.size:
+                values.flat[rng.integers(values.size)] = rng.choice(specials)
+        expected = bool(np.isfinite(values).all())
+        assert all_finite(values) is expected, values
+        autodiff = InitializeAutoDiff(values.ravel()).reshape(shape)
+        assert all_finite(autodiff) is expected, values
+        assert all_finite(values.tolist()) is expected, values
+    assert all_finite(np.full(4, 1e308))  # an overflowing sum, all finite

@@ -27,6 +27,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from drake_wbc.hardware import messages
+from drake_wbc.math.base_state import BASE_STATE_SIZE
 from drake_wbc.math.validation import as_vector, non_negative, positive
 
 LOG = logging.getLogger("drake_wbc.hardware")
@@ -66,7 +67,8 @@ def message_formats(num_joints, max_points=None):
                       functools.partial(messages.decode_arm_command,
                                         num_joints=n), (("positions", n),)),
         MessageFormat("base_state", messages.encode_base_state,
-                      messages.decode_base_state, (("state", 6),)),
+                      messages.decode_base_state,
+                      (("state", BASE_STATE_SIZE),)),
         MessageFormat("arm_status", messages.encode_arm_status,
                       functools.partial(messages.decode_arm_status,
                                         num_joints=n),

@@ -47,6 +47,7 @@ state.
 
 import numpy as np
 
+from drake_wbc.math.base_state import BASE_POSE, BASE_TWIST, BASE_YAW
 from drake_wbc.math.compiled import compiled, float_array
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.repulsion import footprint_gap
@@ -98,7 +99,7 @@ def tracks_of(state):
 def to_world(points, pose):
     """(M, 2) points in T_b to the world, with the base's pose
     [x, y, yaw]."""
-    c, s = np.cos(pose[2]), np.sin(pose[2])
+    c, s = np.cos(pose[BASE_YAW]), np.sin(pose[BASE_YAW])
     return points @ np.array([[c, s], [-s, c]]) + [pose[0], pose[1]]
 
 
@@ -286,13 +287,13 @@ def _tracked(state, points, base, time, half_sizes, params, inside, starts,
         new[-1] = time
         return new, [], inside
     base = np.asarray(base, dtype=float)
-    pose = base[:3]
+    pose = base[BASE_POSE]
     world = to_world(centroids, pose) if len(centroids) else centroids
     new, match = track_scan(state, world, time, params, base)
     people = []
     moving = set(moving_tracks(new, time, params).tolist())
     if moving:
-        c, s = np.cos(pose[2]), np.sin(pose[2])
+        c, s = np.cos(pose[BASE_YAW]), np.sin(pose[BASE_YAW])
         tracks = tracks_of(new)
         for k in (match >= 0).nonzero()[0].tolist():
             slot = int(match[k])
@@ -327,7 +328,7 @@ def _walkers_scan(rng, walkers, time, pose, half_sizes):
     if rng.random() < 0.2:
         parts.append(rng.uniform(-4.0, 4.0, (1, 2)))
     world = np.concatenate(parts) if parts else np.zeros((0, 2))
-    c, s = np.cos(pose[2]), np.sin(pose[2])
+    c, s = np.cos(pose[BASE_YAW]), np.sin(pose[BASE_YAW])
     points = (world - pose[:2]) @ np.array([[c, -s], [s, c]])
     if rng.random() < 0.1:
         points = np.concatenate(
@@ -355,13 +356,13 @@ def _scan_inputs(rng):
         time += params.scan_period * float(rng.choice([1.0, 1.0, 1.0, 4.0]))
         for walker in walkers:
             walker[2] = rng.random() < 0.85
-        pose = base[:3] + base[3:] * time
+        pose = base[BASE_POSE] + base[BASE_TWIST] * time
         state, _, _ = people_scan(state, _walkers_scan(
             rng, walkers, time, pose, half_sizes), base, time, half_sizes,
             params)
     time += params.scan_period
-    points = _walkers_scan(rng, walkers, time, base[:3] + base[3:] * time,
-                           half_sizes)
+    pose = base[BASE_POSE] + base[BASE_TWIST] * time
+    points = _walkers_scan(rng, walkers, time, pose, half_sizes)
     if rng.random() < 0.05:
         points = points[:int(rng.integers(0, MIN_CLUSTER_POINTS))]
     return state, points, base, time, half_sizes, params

@@ -7,6 +7,8 @@ works for both; these helpers cover the rest:
 - `solve(M, b)`: a linear solve, exact for AutoDiffXd (the derivative of
   x = M^-1 b is M^-1 (db - dM x)), since np.linalg does not take object
   arrays.
+- `all_finite(values)`: whether every entry is finite, for any scalar
+  type (the stages' guard against a NaN or an infinity in a tick).
 - `through_float_function(function, x)`: evaluates a float-only function
   (one that needs a double MultibodyPlant or an SVD) at an AutoDiffXd
   argument and gives its result the chain-rule derivative, with the
@@ -14,6 +16,8 @@ works for both; these helpers cover the rest:
   the derivative carries the truncation error of central differences,
   about 1e-9 relative for smooth functions at the default step.
 """
+
+import math
 
 import numpy as np
 from pydrake.autodiffutils import (
@@ -51,6 +55,17 @@ def value_of(array):
     if array.dtype != object:
         return array.astype(float)
     return ExtractValue(array.ravel()).reshape(array.shape)
+
+
+def all_finite(values):
+    """Whether every entry of `values` (an array of any shape and scalar
+    type) is finite."""
+    array = np.asarray(values)
+    floats = (value_of(array) if array.dtype == object
+              else array).ravel().tolist()
+    # A sum of floats is finite only if every term is (one that overflows
+    # goes on to the entries).
+    return math.isfinite(sum(floats)) or all(map(math.isfinite, floats))
 
 
 def _gradient(array, size):

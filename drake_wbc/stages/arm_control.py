@@ -1,7 +1,6 @@
 """ArmCartesianVelocityController: the arm's twist to joint position
 commands as a Drake system."""
 
-import math
 from dataclasses import replace
 
 import numpy as np
@@ -13,7 +12,7 @@ from drake_wbc.math.arm_control import (
     twist_limits,
 )
 from drake_wbc.math.kernels import body_for
-from drake_wbc.math.scalar_support import through_float_function, value_of
+from drake_wbc.math.scalar_support import all_finite, through_float_function
 from drake_wbc.math.validation import as_vector, checked_instance, positive
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.support import define_stage, optional_scalar
@@ -195,7 +194,7 @@ def ArmCartesianVelocityController_(T):
             """The next state [q_cmd, q_dot, limited] from the state's
             parts and V_a (arrays of T); with `hold` (or a V_a that is not
             finite) the command brakes to rest as for a zero twist."""
-            finite = _all_finite(V_a)
+            finite = all_finite(V_a)
             limits = self._limits
             if hold or not finite:
                 V_a, limits = self._no_twist, self._hold_limits
@@ -246,13 +245,6 @@ def ArmCartesianVelocityController_(T):
             context.SetDiscreteState(state)
 
     return Impl
-
-
-def _all_finite(values):
-    """True when every entry of `values` (any scalar type) is finite."""
-    floats = value_of(values).tolist()
-    # A finite sum has finite terms; else check them one by one.
-    return math.isfinite(sum(floats)) or all(map(math.isfinite, floats))
 
 
 ArmCartesianVelocityController = ArmCartesianVelocityController_[None]

@@ -28,7 +28,7 @@ from drake_wbc.math.people import (
 )
 from drake_wbc.math.repulsion import LastPoints
 from drake_wbc.math.safety import SafetyParameters
-from drake_wbc.math.scalar_support import value_of
+from drake_wbc.math.scalar_support import all_finite, value_of
 from drake_wbc.math.separation import (
     FAR,
     NEAREST_POINTS,
@@ -123,12 +123,6 @@ def _signature_of(points):
 LOGGER = logging.getLogger("drake_wbc.math.safety")
 """The safety stages' logger: a protective stop is logged when it trips
 and when it clears."""
-
-
-def _all_finite(vector):
-    """Whether every entry of a float or AutoDiffXd vector is finite
-    (x - x is 0 exactly for a finite x, NaN for NaN and infinities)."""
-    return all(x - x == 0.0 for x in vector.tolist())
 
 
 @define_stage("BaseCommandLimiter_")
@@ -320,7 +314,7 @@ def BaseCommandLimiter_(T):
             their allowed speeds (MAX_TRACKS,) and the protective stop."""
             if stopped >= 0.5:
                 return np.array([0.0, 0.0, 0.0, 0.0, 1.0, 1.0])
-            if not _all_finite(desired):
+            if not all_finite(desired):
                 return np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
             scale = self._scale(desired, rows, allowed)
             if people is not None:

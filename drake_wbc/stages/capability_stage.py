@@ -16,7 +16,7 @@ from drake_wbc.math.capability import (
 )
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.motion_mode import MotionMode
-from drake_wbc.math.scalar_support import through_float_function
+from drake_wbc.math.scalar_support import all_finite, through_float_function
 from drake_wbc.math.validation import checked_instance, positive
 from drake_wbc.math.workspace import WorkspaceAdapterParameters
 from drake_wbc.robot.model import ArmKinematics
@@ -123,10 +123,7 @@ def ArmCapability_(T):
             shape is checked by ArmKinematics.evaluate.
             """
             q = np.ascontiguousarray(q_a, dtype=float)
-            # A sum of floats is finite only if every term is (one that
-            # overflows goes on to the entries).
-            if not (math.isfinite(sum(q.tolist()))
-                    or np.isfinite(q).all()):
+            if not all_finite(q):
                 return np.full(11, math.nan)
             values = self.arm.evaluate(q_a)
             C_m, gradient = self._terms(values.J_a, q, *self._limits,

@@ -2,12 +2,14 @@
 wrench F_ext that the coupled DMPs take (drake_wbc.math.wrench), in T_b
 for the whole body's and in T_a for the arm's."""
 
+import math
+
 import numpy as np
 from pydrake.systems.framework import LeafSystem_
 
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.kinematics import rotate_twist
-from drake_wbc.math.scalar_support import through_float_function
+from drake_wbc.math.scalar_support import all_finite, through_float_function
 from drake_wbc.math.validation import checked_instance, positive
 from drake_wbc.math.wrench import (
     ToolPayload,
@@ -125,7 +127,9 @@ def ExternalWrenchEstimator_(T):
         F_ext is math.wrench.external_wrench of the reading and R_BM (its
         float kernel in double). A tool that is not welded to the sensor
         has its lever from the plant too, and the whole estimate goes
-        through through_float_function.
+        through through_float_function. A reading or a joint angle that
+        is not finite makes F_ext non-finite (NaN in every entry for a
+        joint angle), for the checks downstream; nothing raises in a tick.
 
         Args:
             arm: an ArmKinematics of the robot (a new one of the shipped
@@ -188,7 +192,10 @@ def ExternalWrenchEstimator_(T):
                 "external_wrench", 6, self._output_in_arm, depends)
 
         def _rotation(self, q_a):
-            """R_BM (3, 3) at the arm's joints (float)."""
+            """R_BM (3, 3) at the arm's joints (float); NaN in every entry
+            for a joint angle that is not finite."""
+            if not all_finite(q_a):
+                return np.full((3, 3), math.nan)
             return sensor_rotation_in_base(self._arm, q_a)
 
         def _estimate(self, inputs):
@@ -196,6 +203,8 @@ def ExternalWrenchEstimator_(T):
             lever from the plant (a tool not welded to the sensor)."""
             n, model = self._joints, self._arm.model
             q_a = inputs[:n]
+            if not all_finite(q_a):
+                return np.full(6, math.nan)
             R_BM = self._rotation(q_a)
             X_AM = self._arm.frame_pose(q_a, model.ft_measurement_frame)
             r_TM = (X_AM.translation()
@@ -222,7 +231,10 @@ def ExternalWrenchEstimator_(T):
 
         def _pose_and_motion(self, positions):
             """[R_BM (9) at the reading's time; motion (6)] from [q(k);
-            q(k-1); q(k-2); q(k-3)] (4 n,), float."""
+            q(k-1); q(k-2); q(k-3)] (4 n,), float; NaN in every entry
+            for a joint angle that is not finite."""
+            if not all_finite(positions):
+                return np.full(15, math.nan)
             q = positions.reshape(4, self._joints)
             d = self.params.sensor_delay
             # The three samples around the reading's time k - d, oldest

@@ -18,6 +18,7 @@ from pydrake.symbolic import MakeVectorVariable
 from pydrake.systems.framework import LeafSystem, LeafSystem_, ValueProducer
 from pydrake.systems.primitives import SymbolicVectorSystem
 
+from drake_wbc.math.base_state import BASE_STATE_SIZE
 from drake_wbc.robot.model import (
     joint_position_indices,
     joint_velocity_indices,
@@ -97,7 +98,7 @@ def BaseOdometry_(T):
                 nq + nv)
             self._state = self.DeclareVectorInputPort("plant_state", nq + nv)
             self.DeclareVectorOutputPort("pose", 3, self._pose)
-            self.DeclareVectorOutputPort("state_estimated", 6,
+            self.DeclareVectorOutputPort("state_estimated", BASE_STATE_SIZE,
                                          self._state_estimated)
 
         def _construct_copy(self, other, converter=None):
