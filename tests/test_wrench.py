@@ -97,6 +97,7 @@ def test_the_weight_alone_is_removed_at_home(arm, estimator):
 @pytest.mark.parametrize("compensate", [False, True],
                          ids=["weight", "inertia"])
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
+@pytest.mark.filterwarnings("ignore:invalid value:RuntimeWarning")
 def test_bad_measurements(arm, estimator, compensate, bad):
     """A non-finite reading makes the wrench non-finite (the checks
     downstream see it); a non-finite joint angle makes every entry NaN,
