@@ -105,6 +105,33 @@ def test_a_compiled_function_computes_as_numpy_does():
     assert not compiled.is_compiled(lambda x: x)
 
 
+def test_float_array_gives_the_one_array_type_the_compiled_loops_take():
+    """A float64 C-contiguous aligned writeable array passes as it is;
+    anything else (read-only, strided, unaligned, big-endian, int, a
+    list) is copied into one, which a compiled function takes without
+    compiling a signature of its own."""
+    @compiled.compiled
+    def total(x):
+        return x.sum()
+
+    right = np.arange(6.0)
+    assert compiled.float_array(right) is right
+    read_only = np.arange(6.0)
+    read_only.flags.writeable = False
+    unaligned = np.zeros(6 * 8 + 1, np.uint8)[1:].view(np.float64)
+    unaligned[:] = right
+    others = [read_only, np.repeat(right, 2)[::2], unaligned,
+              right.astype(">f8"), np.arange(6), right.tolist()]
+    total(right)
+    signatures = list(total.signatures)
+    for other in others:
+        copy = compiled.float_array(other)
+        assert copy is not other
+        np.testing.assert_array_equal(copy, np.asarray(other, dtype=float))
+        assert total(copy) == total(right)
+    assert list(total.signatures) == signatures
+
+
 CLOSED_LOOP = """
 description: a person walking past the base, seen by both LIDARs
 duration: 1.5

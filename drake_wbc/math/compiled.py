@@ -45,11 +45,15 @@ def is_compiled(function):
     return isinstance(function, numba.core.registry.CPUDispatcher)
 
 
+_FLOAT64 = np.dtype(np.float64)
+
+
 def float_array(values):
-    """`values` as a C-contiguous, writeable float64 numpy array: the one
-    array type the compiled loops take (itself when it already is one, a
-    copy otherwise), so that no call compiles for a type of its own."""
-    if (type(values) is np.ndarray and values.dtype == np.float64
-            and values.flags.c_contiguous and values.flags.writeable):
+    """`values` as a C-contiguous, aligned, writeable float64 numpy array:
+    the one array type the compiled loops take (itself when it already is
+    one, a copy otherwise), so that no call compiles for a type of its
+    own."""
+    if (type(values) is np.ndarray and values.flags.carray
+            and (values.dtype is _FLOAT64 or values.dtype == _FLOAT64)):
         return values
     return np.array(values, dtype=np.float64, order="C")
