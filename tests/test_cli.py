@@ -76,6 +76,24 @@ def test_demo_of_a_robot_of_ones_own_proposes_its_tuning(tmp_path, capsys):
     assert "arm.joints" in capsys.readouterr().err
 
 
+def test_demo_aligns_the_columns_of_long_joint_names(tmp_path, capsys):
+    """A vendor's joint names (longer than the shipped robot's 12
+    characters) keep the joint table's columns aligned: the kind of
+    every joint starts in one column."""
+    path = write_omni_arm(tmp_path, 6)
+    for file in (path, tmp_path / "omni_arm.urdf"):
+        file.write_text(file.read_text().replace(
+            "j2", "shoulder_lift_joint"))
+    assert main(["demo", "--robot", str(path), "--output",
+                 str(tmp_path)]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines()
+            if re.match(r"^  (base|arm) ", line)]
+    assert any("shoulder_lift_joint" in row for row in rows)
+    starts = {re.search(r" (revolute|prismatic) ", row).start()
+              for row in rows}
+    assert len(rows) == 9 and len(starts) == 1
+
+
 def test_demo_rejects_a_bad_configuration(tmp_path, capsys):
     code = main(["demo", "--output", str(tmp_path), "--q-arm",
                  "0", "0", "nan", "0", "0", "0"])

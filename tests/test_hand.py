@@ -42,7 +42,7 @@ def run_station(hand, arm_offset=None, until=(1.5,)):
     station = SimulatedStation(options, Scene(hand=hand))
     builder = DiagramBuilder()
     diagram = builder.AddSystem(station.diagram)
-    q = np.asarray(options.initial_arm_positions, dtype=float)
+    q = np.asarray(station.options.initial_arm_positions, dtype=float)
     if arm_offset is not None:
         q = q + arm_offset
     for name, value in (("base.velocity_command", np.zeros(3)),

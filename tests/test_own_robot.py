@@ -299,6 +299,38 @@ def test_the_simulated_station_runs_that_robot(tmp_path):
     assert loop.controller.safety_reason(root) == ""
 
 
+def test_a_six_joint_robot_starts_at_its_own_home(tmp_path):
+    """A start is a configuration of one arm: the shipped Elfin5's home
+    (or a scenario's start written for it) puts another 6-joint arm
+    elsewhere. On a 6-joint URDF robot the arm starts at that robot's
+    home: a shipped scenario run with --robot (with_robot), a scenario
+    naming the robot without a start, and a station built with no start;
+    on the scenario's own robot the scenario's start stays."""
+    robot = write_omni_arm(tmp_path, 6)
+    home = load_robot_description(robot).arm.home
+    shipped_home = shipped_robot().arm.home
+    assert not np.allclose(home, shipped_home)
+    for name in ("trajectory_tracking", "wiping"):
+        on_six = with_robot(load_scenario(find_scenario(name)), robot,
+                            echo=None)
+        assert on_six.station.initial_arm_positions == list(home)
+    wiping = load_scenario(find_scenario("wiping"))
+    same = with_robot(wiping, find_scenario("trajectory_tracking_lbr")
+                      .parent.parent / "models" / "mcr.robot.yaml",
+                      echo=None)
+    assert (same.station.initial_arm_positions
+            == wiping.station.initial_arm_positions)
+    scenario_file = tmp_path / "no_start.yaml"
+    scenario_file.write_text(f"robot: {robot.name}\n")
+    assert load_scenario(scenario_file).station.initial_arm_positions == (
+        list(home))
+    assert load_scenario(text="duration: 1.0").station.initial_arm_positions \
+        == list(shipped_home)
+    station = SimulatedStation(StationOptions(time_step=0.005),
+                               robot=load_robot_description(robot))
+    assert station.options.initial_arm_positions == list(home)
+
+
 @pytest.mark.parametrize("part, suspension, mount", [
     ("suspension", SuspensionParameters(), ArmMount()),
     ("mount", None, ArmMount(yaw=0.3))])

@@ -103,6 +103,9 @@ def test_a_description_that_does_not_load_names_the_field(changes, message):
     ({"arm.base_frame": "nowhere::base_link"},
      r"arm.base_frame = 'nowhere::base_link' is not allowed: must be "
      r"scoped by one of the model's instances"),
+    ({"arm.base_frame": "elfin5::link3"},
+     r"arm.base_frame = 'elfin5::link3' is not allowed: must not be "
+     r"outboard of arm.joints\[0\] = 'elfin5::joint1'"),
     ({"base.joints": ["mcr_base::base_x", "mcr_base::base_yaw",
                       "mcr_base::base_y"]},
      r"base.joints\[1\] = 'mcr_base::base_yaw' is not allowed: it is a "

@@ -292,3 +292,29 @@ def test_the_cases_run_on_another_robot(tmp_path):
                 reach + cylinder.radius - 1e-12)
     record = run_case(3, 0, 0.3, lbr)
     assert not record.get("error") and violations(record) == []
+
+
+def test_the_base_command_is_checked_against_that_robots_own_limits():
+    """On the second shipped robot (its base's own 0.8 m/s, the
+    simulated drive's defaults 1 m/s) a base command of 0.9 m/s breaks
+    the invariant: its ratio is taken to the robot's own limit."""
+    import numpy as np
+
+    from drake_wbc.controller.run_log import RunLog
+    from drake_wbc.experiments.runner import build_closed_loop, simulate
+    from drake_wbc.robot.description import load_robot_description, models_dir
+    from drake_wbc.stress.cases import case_record
+
+    lbr = str(models_dir() / "lbr_omni.robot.yaml")
+    own = load_robot_description(lbr).base.velocity_limits
+    scenario = random_scenario(3, 0, 0.1, robot=lbr)
+    assert own[0] < scenario.station.base.velocity_limits[0]
+    log = simulate(build_closed_loop(scenario))
+    signals = dict(log.signals)
+    command = np.zeros_like(signals["base.velocity_command"])
+    command[:, 0] = 0.9
+    signals["base.velocity_command"] = command
+    record = case_record(3, 0, scenario, RunLog(log.time, signals,
+                                                log.columns))
+    assert record["max_base_command_ratio"] == pytest.approx(0.9 / own[0])
+    assert any("base velocity command" in v for v in violations(record))

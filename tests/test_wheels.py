@@ -176,7 +176,7 @@ def _base_step(options, speed, duration):
     station.set_initial_state(root)
     diagram = station.diagram
     diagram.GetInputPort("arm.position_command").FixValue(
-        root, np.array(options.initial_arm_positions))
+        root, np.array(station.options.initial_arm_positions))
     diagram.GetInputPort("base.velocity_command").FixValue(
         root, np.array([speed, 0.0, 0.0]))
     simulator.Initialize()

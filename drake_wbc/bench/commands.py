@@ -18,7 +18,7 @@ every part times that robot: the race on its arm's joints and mounting,
 the tick of its controller (its limits, footprint and tuning) against
 measurements near its home and obstacle points outside its footprint,
 and the scenarios on it (as `drake-wbc run SCENARIO --robot FILE`), those
-whose start does not fit it skipped. Without it, the shipped robot (and
+that do not apply to it skipped. Without it, the shipped robot (and
 each scenario's own), as before.
 """
 

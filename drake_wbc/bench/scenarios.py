@@ -13,8 +13,8 @@ its overall figure (simulated time over wall time, the build excluded).
 On another robot (a description's file, `drake-wbc bench --robot`), each
 scenario runs on that robot as `drake-wbc run SCENARIO --robot FILE`
 runs it (drake_wbc.experiments.scenario.with_robot); a scenario that does
-not apply to it (its start does not fit that robot: with_robot's
-ValueError) is reported as skipped, with the reason, and not run.
+not apply to it (with_robot's ValueError, e.g. a static obstacle on
+its footprint) is reported as skipped, with the reason, and not run.
 """
 
 import multiprocessing

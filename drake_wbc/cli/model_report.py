@@ -65,6 +65,10 @@ def describe_robot(q_a=None, k_j=None, description=None):
         ("mount", model.passive_joints),
         ("arm", model.arm_joints),
     )
+    # The names' column as wide as the longest (a vendor's joint names,
+    # e.g. `shoulder_lift_joint`, are longer than the shipped robot's).
+    width = max([12] + [len(j.name()) for _, joints in groups
+                        for j in joints])
     for group, joints in groups:
         for joint in joints:
             name = joint.name()
@@ -84,7 +88,7 @@ def describe_robot(q_a=None, k_j=None, description=None):
             )
             speed = f"{joint.velocity_upper_limits()[0]:5.2f} {unit}/s"
             lines.append(
-                f"  {group:5s} {name:12s} {joint.type_name():9s} "
+                f"  {group:5s} {name:{width}s} {joint.type_name():9s} "
                 f"{limits:24s} {speed:11s}  {effort}"
             )
 

@@ -1,7 +1,7 @@
 """The `--robot FILE` option of the commands that run a scenario: the
 scenario on the robot of a description YAML
 (drake_wbc.experiments.scenario.with_robot), its arm starting at that
-robot's home where the scenario's start does not fit it."""
+robot's home unless it is the scenario's own robot."""
 
 from pathlib import Path
 

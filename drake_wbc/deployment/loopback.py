@@ -119,7 +119,8 @@ def make_simulator(loop):
     simulator = Simulator(loop.diagram)
     root = simulator.get_mutable_context()
     loop.robot.set_initial_state(root)
-    loop.side.initialize(root, loop.scenario.station.initial_arm_positions)
+    loop.side.initialize(root,
+                         loop.robot.station.options.initial_arm_positions)
     return simulator
 
 

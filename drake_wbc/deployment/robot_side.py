@@ -112,7 +112,7 @@ class RobotSide:
         s["commands"] = receiver = builder.AddNamedSystem(
             "commands", CommandReceiver(
                 bus, (channels.base_command, channels.arm_command),
-                scenario.station.initial_arm_positions,
+                self.station.options.initial_arm_positions,
                 command_timeout_of(options, self.station.model.description
                                    .base),
                 options.sender_release_time,
@@ -125,7 +125,7 @@ class RobotSide:
             "arm_limiter", ArmCommandLimiter(
                 options.publish_period,
                 options.publish_offset + 0.5 * options.publish_period,
-                scenario.station.initial_arm_positions,
+                self.station.options.initial_arm_positions,
                 # The arm's own limits, joint by joint (the robot's
                 # driver does not take the controller side's tighter ones).
                 Limits.of_robot(replace(
@@ -183,7 +183,7 @@ class RobotSide:
         set_initial_state), the arm's command limiter at rest there."""
         self.station.set_initial_state(root_context)
         self.systems["arm_limiter"].set_positions(
-            root_context, self.scenario.station.initial_arm_positions)
+            root_context, self.station.options.initial_arm_positions)
 
     def set_time_offset(self, root_context, offset):
         """Stamps every message with 1e6 (t + offset) microseconds."""

@@ -41,7 +41,12 @@ from drake_wbc.math.validation import (
     positive,
     text,
 )
-from drake_wbc.robot.description import load_robot_description, shipped_robot
+from drake_wbc.robot.description import (
+    SHIPPED_ROBOT_FILE,
+    load_robot_description,
+    models_dir,
+    shipped_robot,
+)
 from drake_wbc.robot.footprint import check_start_is_free
 from drake_wbc.robot.model import ArmKinematics, ArmMount, shared_robot_plant
 from drake_wbc.station.scene import Scene
@@ -133,8 +138,8 @@ class Scenario:
         robot: the robot's description file (drake_wbc.robot.description;
             relative to the scenario's folder), or "" for the shipped
             robot. The controller, the simulated station and the LCM
-            interface take it; station.initial_arm_positions must then
-            give the start of its arm.
+            interface take it; station.initial_arm_positions gives the
+            start of its arm (its home where left out).
         arm_mount: the robot's arm mount (drake_wbc.robot.model.ArmMount:
             the arm's rotation about the base's vertical and its tilt),
             which the simulated station builds and the controller's
@@ -302,11 +307,23 @@ def robot_option_file(robot_file):
     return path
 
 
+def robot_file_of(scenario):
+    """The resolved Path of `scenario`'s robot description file (the
+    shipped robot's, models/mcr.robot.yaml, where it names none)."""
+    return Path(scenario.robot or models_dir() / SHIPPED_ROBOT_FILE
+                ).resolve()
+
+
 def with_robot(scenario, robot_file, echo=print):
     """A copy of `scenario` on the robot of the description `robot_file`
-    (a command line's --robot): its arm starts at the robot's home when
-    the scenario's start does not fit that arm (said through `echo`),
-    and the start is checked against it.
+    (a command line's --robot), its start checked against that robot.
+
+    A start is a configuration of one arm: the same joint angles put
+    another arm in another pose (the shipped Elfin5's home stretches a
+    UR-type arm's tool out of the local workspace). So on a robot other
+    than the scenario's own (another description file) the arm starts at
+    that robot's home, said through `echo`; on the scenario's own robot
+    it keeps the scenario's start.
 
     Raises:
         ValueError: naming --robot when its file does not exist, the file
@@ -316,14 +333,14 @@ def with_robot(scenario, robot_file, echo=print):
     robot_file = robot_option_file(robot_file).resolve()
     description = load_robot_description(robot_file)
     scenario = copy.deepcopy(scenario)
+    own = robot_file_of(scenario)
     scenario.robot = str(robot_file)
-    start = scenario.station.initial_arm_positions
-    if len(start) != len(description.arm.joints):
+    if robot_file != own:
         scenario.station.initial_arm_positions = list(description.arm.home)
         if echo is not None:
             echo(f"the arm starts at {description.name}'s home "
                  f"{list(description.arm.home)} (the scenario's start is "
-                 f"for {len(start)} joints)")
+                 f"for its own robot, {own.name})")
     check_on_robot(scenario)
     return scenario
 
@@ -333,7 +350,8 @@ def check_on_robot(scenario):
     of the scene's static obstacles at station.initial_base_pose,
     station.initial_arm_positions one value a joint, within its limits,
     and the hardware's timeouts within the robot's own
-    (drake_wbc.hardware.options.command_timeout_of)."""
+    (drake_wbc.hardware.options.command_timeout_of); a start left out
+    (None) is the robot's home, which its description checks."""
     base = scenario_robot(scenario).base
     check_start_is_free(scenario.scene, scenario.station.initial_base_pose,
                         base)
@@ -342,6 +360,8 @@ def check_on_robot(scenario):
             command_timeout_of(scenario.hardware, base)
         except ValueError as error:
             raise ValueError(f"hardware.{error}") from None
+    if scenario.station.initial_arm_positions is None:
+        return
     limits = shared_robot_plant(scenario_robot(scenario))[1].limits
     check_arm_start(scenario.station.initial_arm_positions, limits.lower,
                     limits.upper, "station.initial_arm_positions")
@@ -389,7 +409,8 @@ def find_scenario(name_or_path):
 
 
 def load_scenario(path=None, text=None):
-    """A Scenario from a YAML file or string, every field checked.
+    """A Scenario from a YAML file or string, every field checked; a
+    station.initial_arm_positions left out is its robot's home.
 
     Raises:
         ValueError: naming the file, the field's dotted path (e.g.
@@ -401,12 +422,14 @@ def load_scenario(path=None, text=None):
         # enters.
         scenario.robot = str((Path(path).resolve().parent
                               / scenario.robot).resolve())
+    try:
+        robot = scenario_robot(scenario)
+    except (OSError, ValueError) as error:
+        raise ValueError(f"{path or 'text'}: robot = "
+                         f"{scenario.robot!r}: {error}") from None
+    if scenario.station.initial_arm_positions is None:
+        scenario.station.initial_arm_positions = list(robot.arm.home)
     if scenario.robot:
-        try:
-            load_robot_description(scenario.robot)
-        except (OSError, ValueError) as error:
-            raise ValueError(f"{path or 'text'}: robot = "
-                             f"{scenario.robot!r}: {error}") from None
         try:
             check_on_robot(scenario)
         except ValueError as error:

@@ -221,7 +221,8 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
 
     Raises:
         ValueError: naming the description's field when a joint or frame
-            it names is not in the model, a joint is of the wrong kind, the
+            it names is not in the model, a joint is of the wrong kind,
+            T_a (arm.base_frame) is moved by the arm's joints, the
             TCP is not outboard of the arm, the sensor not between the
             flange and the TCP, or the arm's limits are missing or wider
             than the model's.
@@ -417,6 +418,14 @@ def _robot_model(plant, description):
                 f"arm.joints[{i + 1}] = {arm.joints[i + 1]!r} is not allowed:"
                 f" it is not outboard of arm.joints[{i}] = {arm.joints[i]!r}"
                 " (list the joints base to wrist)")
+    # T_a carries the arm's Jacobian (eq. (fk)): a frame moved by the
+    # arm's own joints would turn with them.
+    if _outboard(parents, frames["arm_base_frame"].body(),
+                 arm_joints[0].child_body()):
+        raise ValueError(
+            f"arm.base_frame = {arm.base_frame!r} is not allowed: must not "
+            f"be outboard of arm.joints[0] = {arm.joints[0]!r} (T_a stays "
+            "with the base; give the frame the arm is mounted on)")
     flange = frames["flange_frame"].body()
     sensor = sensor_joint.child_body()
     tcp = frames["tcp_frame"].body()

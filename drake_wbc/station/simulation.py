@@ -62,7 +62,6 @@ from drake_wbc.math.validation import (
 )
 from drake_wbc.robot.description import RobotDescription, shipped_robot
 from drake_wbc.robot.model import (
-    HOME_ARM_POSITIONS,
     ArmMount,
     add_robot,
     joint_position_indices,
@@ -175,8 +174,10 @@ class StationOptions:
         initial_base_pose: [x, y, yaw] of T_b in the world at the start.
         initial_arm_positions: the arm's configuration at the start (rad),
             one a joint, within the joints' limits (checked against the
-            robot when the station is built: `check_arm_start`); the
-            shipped robot's home by default.
+            robot when the station is built: `check_arm_start`); None (the
+            default): the home of the robot the station builds (its
+            description's arm.home), which the station's `options` then
+            hold.
 
     The drivers run at `time_step`: base.lag must be at least 10
     time_step, arm.command_period a whole multiple of it and
@@ -196,8 +197,7 @@ class StationOptions:
     lidar: LidarParameters = field(default_factory=LidarParameters)
     initial_base_pose: list[float] = field(
         default_factory=lambda: [0.0, 0.0, 0.0])
-    initial_arm_positions: list[float] = field(
-        default_factory=lambda: list(HOME_ARM_POSITIONS))
+    initial_arm_positions: list[float] | None = None
 
     def __post_init__(self):
         h = positive("time_step", self.time_step)
@@ -231,7 +231,8 @@ class StationOptions:
                     "stalls the simulation)")
         pose = as_vector("initial_base_pose", self.initial_base_pose, 3)
         within_site("initial_base_pose", self.initial_base_pose, pose[:2])
-        as_vector("initial_arm_positions", self.initial_arm_positions)
+        if self.initial_arm_positions is not None:
+            as_vector("initial_arm_positions", self.initial_arm_positions)
 
 
 def check_arm_start(positions, lower, upper, path="initial_arm_positions"):
@@ -352,7 +353,10 @@ class SimulatedStation:
             time_step=h, discrete_contact_approximation="sap",
             contact_model="hydroelastic_with_fallback",
             use_sampled_output_ports=False), builder)
-        # The start first: the gains below are sized at it.
+        # The start first: the gains below are sized at it. A start left
+        # out is this robot's home (a configuration belongs to one arm).
+        if options.initial_arm_positions is None:
+            options.initial_arm_positions = list(robot.arm.home)
         limits = shared_robot_plant(robot, mount=mount)[1].limits
         check_arm_start(options.initial_arm_positions, limits.lower,
                         limits.upper, "station.initial_arm_positions")

@@ -39,6 +39,7 @@ from drake_wbc.experiments.scenario import (
     controller_arm,
     controller_for,
     footprint_of,
+    scenario_robot,
 )
 from drake_wbc.math.validation import validate
 from drake_wbc.robot.description import load_robot_description, shipped_robot
@@ -246,7 +247,9 @@ def case_record(seed, index, scenario, log):
     dt = np.diff(log.time)[:, None]
     joint_speed = np.abs(np.diff(command, axis=0)) / dt
     base = np.abs(log["base.velocity_command"])
-    base_limits = np.asarray(scenario.station.base.velocity_limits)
+    # The robot's own (its description's), not the simulated drive's
+    # (station.base, whose defaults are the shipped base's 1 m/s).
+    base_limits = np.asarray(scenario_robot(scenario).base.velocity_limits)
     filtered = np.abs(log["filtered_base_velocity"])
     filter_limits = np.asarray(
         controller_for(scenario).safety.base_velocity_limits)

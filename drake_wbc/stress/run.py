@@ -14,8 +14,8 @@ The invariants checked on every case (drake_wbc.stress.cases.violations):
    controller);
 2. every logged signal is finite: the commands, the controller's
    diagnostics and the station's state (no NaN, no infinity);
-3. every base velocity command lies within the base's velocity limits
-   (station.base.velocity_limits);
+3. every base velocity command lies within the base's own velocity
+   limits (the robot description's base.velocity_limits);
 4. every joint position command moves each joint no faster than its
    velocity limit (the arm's own, from the robot's model and
    description): the change between two
