@@ -131,6 +131,18 @@ def test_bode_table_reports_the_contact_loop_margins(bode):
     assert f"{20 * np.log10(2 / 0.3):.2f}" in line.split()
 
 
+def test_bode_table_gives_an_integrator_no_dc_gain(bode):
+    """The force axis of the arm's CDMP and the whole body's admittance
+    are eq. (tf-admit), D_a / s: an infinite DC gain and no bandwidth
+    (not the gain at the grid's 0.01 Hz and 1.41 times that)."""
+    _, text, _, _ = bode
+    for row in ("arm CDMP, force axis", "whole-body CDMP, S_hri = 1",
+                "contact loop, admittance axis"):
+        line = next(x for x in text.splitlines() if x.startswith(row))
+        dc, bandwidth, peak, at = line[len(row):].split()[:4]
+        assert (dc, bandwidth, peak, at) == ("inf", "-", "inf", "0.000")
+
+
 def test_bode_rejects_an_unknown_scenario(tmp_path):
     args = _parse(commands.add_bode_arguments,
                   ["no_such_scenario", "--output", str(tmp_path)])

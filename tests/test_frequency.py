@@ -617,6 +617,47 @@ def test_bandwidth_and_peak_of_textbook_responses():
     assert np.isnan(bandwidth(omega, np.ones_like(omega)))
 
 
+@pytest.mark.parametrize("time_step", [0.0, H])
+def test_an_integrators_row_has_no_dc_gain_nor_bandwidth(time_step):
+    """Eq. (tf-admit), D_a / s (and its ZOH, D_a h / (z - 1)): its DC
+    gain and its peak are infinite, and it has no -3 dB bandwidth from
+    DC, whatever the grid's lowest frequency (the table once gave the
+    gain at 0.01 Hz as the DC gain, -15.96 dB for D_a = 0.01, and a
+    bandwidth of 0.014 Hz: sqrt(2) times the grid's start)."""
+    from drake_wbc.analysis.bode import summarize
+
+    for low in (0.01, 0.001):
+        hertz, omega = frequency_grid(low, 40.0, 60)
+        response = (closed_forms.tf_admit_response(0.01, omega)
+                    if time_step == 0.0 else
+                    closed_forms.tf_admit_zoh_response(0.01, time_step,
+                                                       omega))
+        row = summarize("integrator", hertz, response)
+        assert row.dc_gain_db == np.inf and row.peak_db == np.inf
+        assert row.peak_hz == 0.0
+        assert np.isnan(row.bandwidth_hz)
+
+
+def test_a_low_pass_rows_do_not_depend_on_the_grids_start():
+    """The base filter, eq. (filtering), on grids from 0.01 and 0.001 Hz:
+    the same DC gain (0 dB) and -3 dB bandwidth (sqrt(10^0.15 - 1) f_f
+    for zeta = 1); a high-pass s / (s + 1) has a zero at DC."""
+    from drake_wbc.analysis.bode import summarize
+
+    rows = []
+    for low in (0.01, 0.001):
+        hertz, omega = frequency_grid(low, 40.0, 400)
+        rows.append(summarize("filter", hertz,
+                              lowpass_response(2 * np.pi, 1.0, omega)))
+        high = summarize("high-pass", hertz,
+                         1j * omega / (1j * omega + 1.0))
+        assert high.dc_gain_db == -np.inf and np.isnan(high.bandwidth_hz)
+    for row in rows:
+        assert abs(row.dc_gain_db) < 1e-3
+        assert row.bandwidth_hz == pytest.approx(
+            np.sqrt(10**0.15 - 1.0), rel=1e-3)
+
+
 def test_bad_inputs_are_named():
     with pytest.raises(ValueError, match="high_hz"):
         frequency_grid(10.0, 1.0)

@@ -127,6 +127,53 @@ def phase_degrees(response, unwrap=True):
     return np.degrees(np.unwrap(angle, axis=0) if unwrap else angle)
 
 
+FLAT_POWER = 0.5
+"""|n| below which a response counts as flat at the grid's low end
+(`low_frequency_power`): its gain there is its DC gain."""
+
+
+def low_frequency_power(omega, response):
+    """n of the response's low-frequency asymptote |H| ~ omega^n: the
+    slope of log |H| over log omega between the grid's first two points
+    (-1 for an integrator, 0 for a response with a finite, nonzero DC
+    gain, 1 for a differentiator).
+
+    Args:
+        omega: (N,) increasing angular frequencies (rad/s), N >= 2.
+        response: (N,) complex response at `omega`.
+    """
+    omega = as_vector("omega", omega)
+    if omega.size < 2 or not 0.0 < omega[0] < omega[1]:
+        raise ValueError(f"omega = {omega!r} is not allowed: must hold 2 "
+                         "or more increasing frequencies > 0")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gain = np.log(np.abs(np.asarray(response)[:2]))
+        return float((gain[1] - gain[0])
+                     / (np.log(omega[1]) - np.log(omega[0])))
+
+
+def dc_gain(omega, response):
+    """|H| at DC, as the grid shows it: the gain at its lowest frequency
+    where the response is flat there (|low_frequency_power| <
+    FLAT_POWER), inf where it rises towards DC (a pole at DC: an
+    integrator such as eq. (tf-admit)'s D_a / s), 0 where it falls (a
+    zero at DC). A gain read at the grid's lowest frequency would
+    depend on where the grid starts for the last two.
+
+    Args:
+        omega: (N,) increasing angular frequencies (rad/s), N >= 2.
+        response: (N,) complex response at `omega`.
+    """
+    power = low_frequency_power(omega, response)
+    if np.isnan(power):  # zero at both points
+        return 0.0
+    if power <= -FLAT_POWER:
+        return float("inf")
+    if power >= FLAT_POWER:
+        return 0.0
+    return float(np.abs(np.asarray(response)[0]))
+
+
 def bandwidth(omega, response, reference=None, drop_db=3.0):
     """The -3 dB bandwidth: the lowest frequency at which the gain has
     fallen `drop_db` below `reference`, interpolated linearly in dB over
@@ -135,19 +182,25 @@ def bandwidth(omega, response, reference=None, drop_db=3.0):
     Args:
         omega: (N,) increasing angular frequencies (rad/s).
         response: (N,) complex response at `omega`.
-        reference: the gain it is measured from; by default the gain at
-            the lowest frequency (the DC gain of a low-pass).
+        reference: the gain it is measured from; by default the DC gain
+            (`dc_gain`) of a response flat at the grid's low end (a
+            low-pass); a response with a pole or a zero at DC has no
+            bandwidth from DC (nan).
         drop_db: how far the gain must fall, dB > 0.
 
     Returns:
         The bandwidth in rad/s, or nan if the gain never falls that far
-        on the grid (nor is already below at its start).
+        on the grid (nor is already below at its start), or there is no
+        DC gain to fall from.
     """
     omega = as_vector("omega", omega)
     gain = decibels(np.asarray(response))
     drop = positive("drop_db", drop_db)
-    level = (gain[0] if reference is None
-             else 20.0 * np.log10(positive("reference", reference))) - drop
+    if reference is None:
+        reference = dc_gain(omega, response)
+        if reference == 0.0 or np.isinf(reference):
+            return float("nan")
+    level = 20.0 * np.log10(positive("reference", reference)) - drop
     below = np.nonzero(gain < level)[0]
     if len(below) == 0 or below[0] == 0:
         return float("nan")
