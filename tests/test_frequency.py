@@ -114,20 +114,34 @@ def test_second_order_zoh_form_agrees_with_the_filters(zeta):
 
 @pytest.mark.parametrize("time_step", [0.0, H])
 @pytest.mark.parametrize("dmp", [DmpParameters(),
-                                 DmpParameters(alpha_z=20.0, beta_z=8.0)])
+                                 DmpParameters(alpha_z=20.0, beta_z=8.0),
+                                 DmpParameters(tau=0.6, alpha_z=30.0,
+                                               beta_z=5.0)])
 @pytest.mark.parametrize("k_d", [0.0, 0.4])
 def test_arm_stiffness_axis_matches_eq_lp_admit(scenario, time_step, dmp,
                                                 k_d):
+    """The arm's stiffness axis against eq. (lp-admit) with C_s entering
+    tau y_dot without the factor tau, as eq. (cdmp-arm) prints it
+    (velocity_scale 1): at tau = 0.6 it is not eq. (stiff-dmp)'s tau C_f
+    (with tau = 1 alone the two could not be told apart)."""
     arm = replace(scenario.controller.arm_cdmp, k_d=k_d, dmp=dmp)
     params = replace(scenario.controller, arm_cdmp=arm)
+    # Off the alias of DC, where the force axes' integrators C_a make
+    # zI - A singular.
+    omega = off_sampling_rate(time_step)
     response = linearize_dmp_force("stiffness", params, time_step,
-                                   axis=1).response(OMEGA)
+                                   axis=1).response(omega)
     args = (arm.k_p, k_d, dmp.tau, dmp.alpha_z, dmp.resolved_beta_z)
-    # tau = 1: the arm's C_s (no factor tau) is the paper's tau C_f.
-    expected = (closed_forms.lp_admit_response(*args, OMEGA)
+    expected = (closed_forms.lp_admit_response(*args, omega,
+                                               velocity_scale=1.0)
                 if time_step == 0.0 else
-                closed_forms.lp_admit_zoh_response(*args, time_step, OMEGA))
+                closed_forms.lp_admit_zoh_response(*args, time_step, omega,
+                                                   velocity_scale=1.0))
     assert relative_error(response, expected) < 1e-6
+    if dmp.tau != 1.0:
+        paper = closed_forms.lp_admit_response(*args, omega)
+        assert relative_error(closed_forms.lp_admit_response(
+            *args, omega, velocity_scale=1.0), paper) > 0.1
 
 
 @pytest.mark.parametrize("time_step", [0.0, H])
