@@ -192,6 +192,42 @@ def test_whole_body_cdmp_plays_the_dmp_core_rollout(tmp_path):
                                    system._models[(0, playing)].A_d)
 
 
+def test_a_faster_replay_is_the_same_path_sooner(tmp_path):
+    """Played at tau = tau_0 / 50, the player's reference is its own at
+    tau_0 with time 50 times faster (the exact temporal scaling of eqs.
+    (6), (7), drake_wbc.math.dmp): its rollouts take steps that resolve
+    the faster attractor (with the fixed 5 ms step, 0.25 of the
+    Runge-Kutta step's stability limit at tau_0, the reference grew to
+    1e49 m)."""
+    learned = mv.LearnedMovement.load(movement_file(tmp_path))
+    slow = mv.MovementPlayer(learned, cdmp.MovementReplay(file="m"))
+    fast = mv.MovementPlayer(learned, cdmp.MovementReplay(file="m",
+                                                          tau=0.02))
+    for u in np.linspace(0.0, 1.5, 31):
+        np.testing.assert_allclose(
+            fast.reference(u * fast.params.duration),
+            slow.reference(u * slow.params.duration), atol=1e-6)
+
+
+def test_a_replay_too_fast_or_too_long_is_refused(tmp_path):
+    """A tau or a movement's duration whose rollouts would take more
+    than MAX_ROLLOUT_STEPS steps is refused when the player is built,
+    naming the value (a tau of tau_0 / 1000 gave a reference of NaN; a
+    duration of 1e300 s, in a file, an error from numpy's arange)."""
+    learned = mv.LearnedMovement.load(movement_file(tmp_path))
+    with pytest.raises(ValueError, match=r"tau = 0\.001 is not allowed "
+                       r"for the movement m .*play it slower"):
+        mv.MovementPlayer(learned, cdmp.MovementReplay(file="m", tau=1e-3))
+    path = tmp_path / "long.yaml"
+    path.write_text(movement_file(tmp_path).read_text().replace(
+        "duration: 5.0", "duration: 1.0e+300"))
+    with pytest.raises(ValueError, match=r"long\.yaml: dmp\.duration = "
+                       r"1e\+300 s .*not allowed: a movement lasts at most "
+                       r"495 s"):
+        mv.MovementPlayer(mv.LearnedMovement.load(path),
+                          cdmp.MovementReplay(file=str(path)))
+
+
 def test_bad_movement_parameters_are_explained(tmp_path):
     with pytest.raises(ValueError, match=r"tau = -1.*greater than 0|tau"):
         cdmp.MovementReplay(file="m.yaml", tau=-1.0)

@@ -45,6 +45,18 @@ of a movement of several seconds)."""
 PLOT_PERIOD = 0.05
 """s: the sample period of the demonstrations kept in a movement file."""
 
+ROLLOUT_RESOLUTION = 0.25
+"""The largest step of a MovementPlayer's rollouts times the played DMP's
+fastest rate (dmp.fastest_rate): 0.125 at the default gains and tau = 1
+with the 5 ms step; Runge-Kutta's fourth order diverges from about 2.8,
+which a movement played 50 times faster than it was taught passed with
+the fixed 5 ms step (its reference grew to 1e49 m)."""
+
+MAX_ROLLOUT_STEPS = 100_000
+"""The most steps of each of a MovementPlayer's two rollouts (about 8 s
+each to build, at 12,000 steps/s): a movement of up to 495 s as played,
+or the shipped 6 s one played down to tau = tau_0 / 200."""
+
 
 @dataclass(frozen=True, eq=False)
 class LearnedMovement:
@@ -319,14 +331,38 @@ class MovementPlayer:
     Args:
         movement: a LearnedMovement.
         replay: a cdmp.MovementReplay (goal, tau, start_time, start).
-        dt: the step of the precomputed rollouts (progress, reference),
-            s.
+        dt: the longest step of the precomputed rollouts (progress,
+            reference), s; shorter where the played DMP is faster
+            (ROLLOUT_RESOLUTION).
+
+    Raises:
+        ValueError: naming the movement's duration or tau when the
+            rollouts would need more than MAX_ROLLOUT_STEPS steps.
     """
 
     def __init__(self, movement, replay, dt=0.005):
         self.movement, self.replay = movement, replay
         tau = movement.params.tau if replay.tau is None else replay.tau
         self.params = movement.params.with_tau(tau)
+        length = self.params.duration + 5.0
+        longest = positive("dt", dt)
+        dt = min(longest, ROLLOUT_RESOLUTION / dmp.fastest_rate(self.params))
+        if length / longest > MAX_ROLLOUT_STEPS:
+            raise ValueError(
+                f"{replay.file}: dmp.duration = "
+                f"{movement.params.duration:.6g} s (played at tau = {tau:g}: "
+                f"{self.params.duration:.6g} s) is not allowed: a movement "
+                f"lasts at most {MAX_ROLLOUT_STEPS * longest - 5.0:g} s as "
+                f"played (its rollouts take at most {MAX_ROLLOUT_STEPS} "
+                f"steps of {longest:g} s)")
+        if length / dt > MAX_ROLLOUT_STEPS:
+            raise ValueError(
+                f"tau = {tau!r} is not allowed for the movement "
+                f"{replay.file} (learned at tau = {movement.params.tau:g} "
+                f"over {movement.params.duration:.6g} s): played "
+                f"{movement.params.tau / tau:.3g} times faster, its rollouts "
+                f"would take {length / dt:.3g} steps of {dt:.3g} s, at most "
+                f"{MAX_ROLLOUT_STEPS}; play it slower (a larger tau)")
         self.start = movement.start if replay.start is None else np.asarray(
             replay.start, dtype=float)
         goal = movement.goal if replay.goal is None else np.asarray(
@@ -343,7 +379,6 @@ class MovementPlayer:
         self.start_time = float(replay.start_time)
         self.tracking_gain = float(replay.tracking_gain)
         self._cache = {}
-        length = self.params.duration + 5.0
         t, y, _ = dmp.rollout(self.params, np.zeros(4), learned, length, dt,
                               movement.weights)
         path = np.concatenate([[0.0], np.cumsum(np.linalg.norm(
