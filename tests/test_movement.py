@@ -4,6 +4,7 @@ and WholeBodyCdmp playing it against the DMP core's own integration."""
 
 import numpy as np
 import pytest
+import yaml
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import Linearize
@@ -226,6 +227,75 @@ def test_a_replay_too_fast_or_too_long_is_refused(tmp_path):
                        r"495 s"):
         mv.MovementPlayer(mv.LearnedMovement.load(path),
                           cdmp.MovementReplay(file=str(path)))
+
+
+BOMB = """dmp: {alpha_z: 25.0, duration: 5.0, num_basis: 2}
+start: [0, 0, 0, 0]
+goal: [0, 0, 0, 0]
+a: &a [0, 0, 0, 0, 0, 0, 0, 0, 0, 0]
+b: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a, *a]
+c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b, *b]
+d: &d [*c, *c, *c, *c, *c, *c, *c, *c, *c, *c]
+e: &e [*d, *d, *d, *d, *d, *d, *d, *d, *d, *d]
+weights: [*e, *e]
+"""
+"""Two million zeros in 60 aliases: each level more multiplies them by
+ten (nine levels would fill the memory)."""
+
+
+def test_a_hostile_movement_file_is_refused_before_it_is_built(tmp_path):
+    """A movement file is read as the scenarios are
+    (drake_wbc.math.loading): an alias bomb and a file over MAX_BYTES are
+    refused before anything is built (the weights of BOMB were expanded
+    into 2e6 numbers, 1 s and 80 MB, before their shape was refused; a
+    1.4 MB file was read), and what does not fit says which field (an
+    empty file said "'NoneType' object is not subscriptable", a
+    demonstration without tcp "'tcp'", a time that goes back printed
+    every time)."""
+    good = movement_file(tmp_path).read_text()
+
+    def refused(text, match):
+        path = tmp_path / "hostile.yaml"
+        path.write_text(text)
+        with pytest.raises(ValueError, match=match):
+            mv.LearnedMovement.load(path)
+
+    refused(BOMB, r"hostile\.yaml: line 8, .*aliases expanded")
+    refused(good + "# " + "x" * (1 << 20) + "\n",
+            r"more than 1048576 bytes is not allowed")
+    refused("", r"the document = None is not allowed: must be a mapping "
+            "of dimensions, dmp, start, goal, weights and demonstrations")
+    refused(good.replace("weights:", "weight:"), r"weights is missing")
+    refused(good.replace("dimensions: [x, y, z, yaw]",
+                         "dimensions: [yaw, x, y, z]"),
+            r"dimensions = \['yaw', 'x', 'y', 'z'\] is not allowed")
+    refused(good.replace("  tcp:", "  pose:"),
+            r"demonstrations\[0\] = \{time: .* is not allowed: must be a "
+            "mapping of time, tcp")
+    document = yaml.safe_load(good)
+    times = document["demonstrations"][0]["time"]
+    times[5] = times[2]
+    refused(yaml.safe_dump(document),
+            rf"demonstrations\[0\]\.time\[5\] = {times[2]!r} s is not "
+            rf"allowed: the times must increase strictly \(time\[4\] = "
+            rf"{times[4]!r} s; 1 of the {len(times)} samples do not\)")
+
+
+def test_a_long_demonstration_is_kept_within_what_the_loader_reads(
+        tmp_path):
+    """A demonstration of 600 s at 100 Hz is saved at a longer period
+    than PLOT_PERIOD, within MAX_KEPT_SAMPLES and its last sample kept,
+    so that the file loads (at PLOT_PERIOD it held 12,000 samples,
+    beyond the loader's MAX_NODES)."""
+    t = np.arange(60001) * 0.01
+    y = START + np.outer(0.5 - 0.5 * np.cos(np.pi * t / t[-1]),
+                         GOAL - START)
+    learned = mv.learn_movement(Demonstration(t, y), num_basis=20)
+    loaded = mv.LearnedMovement.load(learned.save(tmp_path / "long.yaml"))
+    demo = loaded.demonstrations[0]
+    assert 3000 < demo.time.size <= mv.MAX_KEPT_SAMPLES
+    assert demo.time[-1] == pytest.approx(600.0)
+    np.testing.assert_allclose(demo.tcp[-1], GOAL, atol=1e-5)
 
 
 def test_bad_movement_parameters_are_explained(tmp_path):

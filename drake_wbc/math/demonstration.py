@@ -47,9 +47,17 @@ class Demonstration:
 
     def __post_init__(self):
         time = as_vector("time", self.time)
-        if time.size < 3 or np.any(np.diff(time) <= 0.0):
-            raise ValueError(f"time = {self.time!r} is not allowed: must "
-                             "hold 3 or more strictly increasing times")
+        if time.size < 3:
+            raise ValueError(f"time = {time.tolist()!r} is not allowed: "
+                             "must hold 3 or more strictly increasing times")
+        back = np.nonzero(np.diff(time) <= 0.0)[0]
+        if back.size:
+            i = int(back[0]) + 1
+            raise ValueError(
+                f"time[{i}] = {float(time[i])!r} s is not allowed: the times "
+                f"must increase strictly (time[{i - 1}] = "
+                f"{float(time[i - 1])!r} s; "
+                f"{back.size} of the {time.size} samples do not)")
         object.__setattr__(self, "time", time)
         object.__setattr__(self, "tcp", as_matrix("tcp", self.tcp,
                                                   (time.size, 4)))

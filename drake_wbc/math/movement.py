@@ -32,6 +32,7 @@ import yaml
 from drake_wbc.math import dmp
 from drake_wbc.math.demonstration import DIMENSIONS, Demonstration
 from drake_wbc.math.kernels import fast_kernel
+from drake_wbc.math.loading import screened_data, short_value, shortened
 from drake_wbc.math.validation import as_matrix, as_vector, positive
 
 LEARNED_TWIST_INDICES = (0, 1, 2, 5)
@@ -44,6 +45,13 @@ of a movement of several seconds)."""
 
 PLOT_PERIOD = 0.05
 """s: the sample period of the demonstrations kept in a movement file."""
+
+MAX_KEPT_SAMPLES = 4000
+"""The most samples of all the demonstrations kept in a movement file,
+together (10 values each: 40,000 of the 50,000 that the loader reads,
+drake_wbc.math.loading.MAX_NODES, beside at most 5,000 weights): a
+demonstration longer than 200 s is kept at a longer period than
+PLOT_PERIOD."""
 
 ROLLOUT_RESOLUTION = 0.25
 """The largest step of a MovementPlayer's rollouts times the played DMP's
@@ -116,8 +124,9 @@ class LearnedMovement:
             "goal": _round(self.goal),
             "weights": [[float(f"{w:.6g}") for w in row]
                         for row in self.weights],
-            "demonstrations": [_demo_document(d)
-                               for d in self.demonstrations],
+            "demonstrations": [_demo_document(
+                d, max(MAX_KEPT_SAMPLES // len(self.demonstrations), 3))
+                for d in self.demonstrations],
         }
         header = (
             "# A whole-body movement learned as a DMP "
@@ -135,26 +144,64 @@ class LearnedMovement:
 
     @classmethod
     def load(cls, path):
-        """Reads a movement written by `save`.
+        """Reads a movement written by `save`, as the scenarios' loader
+        reads a file (drake_wbc.math.loading.screened_data: at most
+        MAX_BYTES, no alias bomb, no deep nesting).
 
         Raises:
-            ValueError: naming the file and what is wrong in it.
+            ValueError: naming the file, the field and what is wrong in
+                it.
         """
         path = Path(path)
         if not path.is_file():
             raise ValueError(f"file = {str(path)!r} is not allowed: no "
                              "such movement file")
         try:
-            document = yaml.safe_load(path.read_text(encoding="utf-8"))
-            params = dmp.DmpParameters(**document["dmp"])
-            demos = tuple(
-                Demonstration(d["time"], d["tcp"], d.get("base"))
-                for d in document.get("demonstrations") or [])
-            return cls(params, document["weights"], document["start"],
-                       document["goal"], demos)
-        except (yaml.YAMLError, KeyError, TypeError, ValueError) as error:
-            raise ValueError(f"{path}: not a learned movement: {error}") \
-                from None
+            document = screened_data(path)
+        except ValueError as error:
+            raise ValueError(f"{path}: {error}") from None
+        except yaml.YAMLError as error:
+            raise ValueError(f"{path}: not valid YAML: {error}") from None
+        try:
+            return cls._from_document(document)
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"{path}: not a learned movement: "
+                             f"{shortened(str(error))}") from None
+
+    @classmethod
+    def _from_document(cls, document):
+        """The LearnedMovement of a document (plain data) of `save`."""
+        keys = "dimensions, dmp, start, goal, weights and demonstrations"
+        if not isinstance(document, dict):
+            raise ValueError(f"the document = {short_value(document)} is not "
+                             f"allowed: must be a mapping of {keys}")
+        for key in ("dmp", "start", "goal", "weights"):
+            if key not in document:
+                raise ValueError(f"{key} is missing: a learned movement "
+                                 f"has {keys}")
+        dimensions = document.get("dimensions", list(DIMENSIONS))
+        if dimensions != list(DIMENSIONS):
+            raise ValueError(f"dimensions = {short_value(dimensions)} is not "
+                             f"allowed: must be {list(DIMENSIONS)}")
+        if not isinstance(document["dmp"], dict):
+            raise ValueError(f"dmp = {short_value(document['dmp'])} is not "
+                             "allowed: must be a mapping of DmpParameters' "
+                             "fields")
+        params = dmp.DmpParameters(**document["dmp"])
+        demos = []
+        for i, demo in enumerate(document.get("demonstrations") or []):
+            if not isinstance(demo, dict) or not {"time", "tcp"} <= set(demo):
+                raise ValueError(
+                    f"demonstrations[{i}] = {short_value(demo)} is not "
+                    "allowed: must be a mapping of time, tcp and (optional) "
+                    "base")
+            try:
+                demos.append(Demonstration(demo["time"], demo["tcp"],
+                                           demo.get("base")))
+            except ValueError as error:
+                raise ValueError(f"demonstrations[{i}].{error}") from None
+        return cls(params, document["weights"], document["start"],
+                   document["goal"], tuple(demos))
 
 
 def _round(value, decimals=7):
@@ -163,8 +210,11 @@ def _round(value, decimals=7):
     return [_round(v, decimals) for v in value]
 
 
-def _demo_document(demo):
-    step = max(int(round(PLOT_PERIOD / np.median(np.diff(demo.time)))), 1)
+def _demo_document(demo, most):
+    """`demo` as plain data, every PLOT_PERIOD (or fewer: at most `most`
+    samples, its last one kept)."""
+    step = max(int(round(PLOT_PERIOD / np.median(np.diff(demo.time)))), 1,
+               -(-(demo.time.size - 1) // (most - 1)))
     keep = np.unique(np.append(np.arange(0, demo.time.size, step),
                                demo.time.size - 1))
     document = {"time": _round(demo.time[keep], 4),
