@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from drake_wbc.cli import teach as teach_commands
+from drake_wbc.controller.run_log import RunLog
 from drake_wbc.experiments import repeat, teach
 from drake_wbc.experiments.runner import build_closed_loop, simulate
 from drake_wbc.experiments.scenario import (
@@ -105,6 +106,45 @@ def test_a_given_interval_must_lie_within_the_log(teach_run):
             teach.learn_from_log(scenario, log, start, stop)
     assert teach.learn_from_log(scenario, log, 0.0, 7.0).params.duration \
         == pytest.approx(7.0)
+
+
+def test_a_log_that_cannot_hold_a_demonstration_is_named(teach_run):
+    """An empty log, a log whose time goes back and a sample that is not
+    finite in the demonstration are refused naming the signal, the
+    sample's time and what is allowed (they ended in an IndexError, a
+    time indexed within the cut, and "arm_positions = [[...]]" with
+    neither the signal nor the time)."""
+    scenario, log = teach_run
+
+    def changed(time=None, **signals):
+        return RunLog(log.time if time is None else time,
+                      {**log.signals, **signals}, log.columns)
+
+    empty = RunLog(np.zeros(0), {k: v[:0] for k, v in log.signals.items()},
+                   log.columns)
+    with pytest.raises(ValueError, match=(
+            r"start = 1\.0 s, stop = 2\.0 s is not allowed: must be an "
+            r"interval of the log \(which holds no sample\)")):
+        teach.learn_from_log(scenario, empty, 1.0, 2.0)
+    time = log.time.copy()
+    time[400:] -= 2.0
+    with pytest.raises(ValueError, match=(
+            rf"the log's time\[400\] = {float(time[400])!r} s is not "
+            rf"allowed: a log's times must increase strictly "
+            rf"\(time\[399\] = {float(time[399])!r} s\)")):
+        teach.learn_from_log(scenario, changed(time))
+    joints = log["arm.position_measured"].copy()
+    k = int(np.searchsorted(log.time, 3.0))
+    joints[k, 2] = np.nan
+    with pytest.raises(ValueError, match=(
+            r"arm\.position_measured = \[.*nan.*\] at t = 3\.000 s is not "
+            r"allowed: a demonstration's samples must be finite \(1 of its "
+            r"\d+ are not\)")):
+        teach.learn_from_log(scenario, changed(**{
+            "arm.position_measured": joints}))
+    # Outside the demonstration the sample does not count.
+    teach.learn_from_log(scenario, changed(**{
+        "arm.position_measured": joints}), 3.5, 6.5)
 
 
 def test_the_teach_command_names_every_file_it_writes(tmp_path, capsys):
