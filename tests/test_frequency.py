@@ -672,6 +672,30 @@ def test_a_low_pass_rows_do_not_depend_on_the_grids_start():
             np.sqrt(10**0.15 - 1.0), rel=1e-3)
 
 
+def test_a_pole_near_the_grids_start_hides_the_dc_gain():
+    """A low-pass whose corner is at the grid's lowest frequency (as the
+    stiff hand's admittance loop, whose gain still rises at 0.01 Hz):
+    its DC gain, bandwidth and peak lie below the band and are not
+    reported (the table gave its gain at 0.01 Hz, 3 dB below its DC
+    gain, as the DC gain and the peak); with the corner a decade lower it
+    integrates as far as the band shows, a decade higher it is flat
+    enough to read."""
+    from drake_wbc.analysis.bode import summarize
+
+    hertz, omega = frequency_grid(0.01, 40.0, 60)
+    corner = 2 * np.pi * 0.01
+    row = summarize("hidden", hertz, 1.0 / (1j * omega / corner + 1.0))
+    assert np.isnan(row.dc_gain_db) and np.isnan(row.bandwidth_hz)
+    assert np.isnan(row.peak_db) and np.isnan(row.peak_hz)
+    below = summarize("below", hertz, 1.0 / (1j * omega / (0.1 * corner)
+                                            + 1.0))
+    assert below.dc_gain_db == np.inf and np.isnan(below.bandwidth_hz)
+    above = summarize("above", hertz, 1.0 / (1j * omega / (10 * corner)
+                                             + 1.0))
+    assert above.dc_gain_db == pytest.approx(0.0, abs=0.05)
+    assert above.bandwidth_hz == pytest.approx(0.1, rel=0.01)
+
+
 def test_bad_inputs_are_named():
     with pytest.raises(ValueError, match="high_hz"):
         frequency_grid(10.0, 1.0)

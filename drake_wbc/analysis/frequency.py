@@ -127,16 +127,22 @@ def phase_degrees(response, unwrap=True):
     return np.degrees(np.unwrap(angle, axis=0) if unwrap else angle)
 
 
-FLAT_POWER = 0.5
-"""|n| below which a response counts as flat at the grid's low end
-(`low_frequency_power`): its gain there is its DC gain."""
+POWER_TOLERANCE = 0.05
+"""How near a whole number n of `low_frequency_power` must be for the
+response to count as |H| ~ omega^n at the grid's low end: within 0.05
+of 0 its gain there is its DC gain to 0.25 dB (a first-order corner at
+least 4.4 times higher); within 0.05 of -1 it integrates (a pole at
+most a quarter of the lowest frequency, a time constant above about
+70 s at 0.01 Hz, which the band cannot tell from one at DC)."""
 
 
 def low_frequency_power(omega, response):
     """n of the response's low-frequency asymptote |H| ~ omega^n: the
     slope of log |H| over log omega between the grid's first two points
     (-1 for an integrator, 0 for a response with a finite, nonzero DC
-    gain, 1 for a differentiator).
+    gain, 1 for a differentiator; between whole numbers where a pole or
+    a zero lies near the grid's lowest frequency). NaN where the
+    response is zero at both.
 
     Args:
         omega: (N,) increasing angular frequencies (rad/s), N >= 2.
@@ -153,12 +159,16 @@ def low_frequency_power(omega, response):
 
 
 def dc_gain(omega, response):
-    """|H| at DC, as the grid shows it: the gain at its lowest frequency
-    where the response is flat there (|low_frequency_power| <
-    FLAT_POWER), inf where it rises towards DC (a pole at DC: an
-    integrator such as eq. (tf-admit)'s D_a / s), 0 where it falls (a
-    zero at DC). A gain read at the grid's lowest frequency would
-    depend on where the grid starts for the last two.
+    """|H| at DC, as far as the grid shows it (`low_frequency_power` n
+    within POWER_TOLERANCE of a whole number):
+
+    - n = 0 (flat at the grid's low end): the gain at its lowest
+      frequency;
+    - n = -1 (an integrator, such as eq. (tf-admit)'s D_a / s): inf;
+    - n = 1, or a response zero there: 0;
+    - otherwise (a pole or a zero near the grid's lowest frequency): nan,
+      the DC gain lies below the band; the gain at the grid's lowest
+      frequency would be a number of the grid, not of the system.
 
     Args:
         omega: (N,) increasing angular frequencies (rad/s), N >= 2.
@@ -167,11 +177,13 @@ def dc_gain(omega, response):
     power = low_frequency_power(omega, response)
     if np.isnan(power):  # zero at both points
         return 0.0
-    if power <= -FLAT_POWER:
+    if abs(power) < POWER_TOLERANCE:
+        return float(np.abs(np.asarray(response)[0]))
+    if abs(power + 1.0) < POWER_TOLERANCE:
         return float("inf")
-    if power >= FLAT_POWER:
+    if abs(power - 1.0) < POWER_TOLERANCE:
         return 0.0
-    return float(np.abs(np.asarray(response)[0]))
+    return float("nan")
 
 
 def bandwidth(omega, response, reference=None, drop_db=3.0):
@@ -184,8 +196,8 @@ def bandwidth(omega, response, reference=None, drop_db=3.0):
         response: (N,) complex response at `omega`.
         reference: the gain it is measured from; by default the DC gain
             (`dc_gain`) of a response flat at the grid's low end (a
-            low-pass); a response with a pole or a zero at DC has no
-            bandwidth from DC (nan).
+            low-pass); a response with a pole or a zero at or near DC
+            has no bandwidth from DC on the grid (nan).
         drop_db: how far the gain must fall, dB > 0.
 
     Returns:
@@ -198,7 +210,7 @@ def bandwidth(omega, response, reference=None, drop_db=3.0):
     drop = positive("drop_db", drop_db)
     if reference is None:
         reference = dc_gain(omega, response)
-        if reference == 0.0 or np.isinf(reference):
+        if not 0.0 < reference < np.inf:
             return float("nan")
     level = 20.0 * np.log10(positive("reference", reference)) - drop
     below = np.nonzero(gain < level)[0]
