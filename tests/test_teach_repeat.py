@@ -98,12 +98,16 @@ def test_a_given_interval_must_lie_within_the_log(teach_run):
     as a reversed interval is, not cut to the log in silence."""
     scenario, log = teach_run
     assert log.time[0] == 0.0 and log.time[-1] == pytest.approx(7.0)
-    for start, stop in ((0.0, 100.0), (-1.0, 5.0), (3.0, 1.0)):
+    for start, stop in ((0.0, 100.0), (-1.0, 5.0)):
         with pytest.raises(ValueError, match=(
                 rf"start = {start!r} s, stop = {stop!r} s is not allowed: "
                 r"must be an interval of the log \(from 0\.000 to 7\.000 "
                 r"s\)")):
             teach.learn_from_log(scenario, log, start, stop)
+    with pytest.raises(ValueError, match=(
+            r"start = 3\.0 s, stop = 1\.0 s is not allowed: the "
+            r"demonstration must end after it starts")):
+        teach.learn_from_log(scenario, log, 3.0, 1.0)
     assert teach.learn_from_log(scenario, log, 0.0, 7.0).params.duration \
         == pytest.approx(7.0)
 
@@ -172,6 +176,26 @@ def test_zero_basis_functions_are_refused_not_replaced(teach_run, tmp_path,
     assert capsys.readouterr().err == (
         "drake-wbc teach: --num-basis = 0 is not allowed: must be 1 to "
         f"{mv.dmp.MAX_BASIS}\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("markers, message", [
+    (["--start", "5", "--stop", "3"], "--start = 5.0 s, --stop = 3.0 s is "
+     "not allowed: the demonstration must end after it starts"),
+    (["--stop", "0.2"], "--start = 0.5 s, --stop = 0.2 s is not allowed: "
+     "the demonstration must end after it starts"),
+    (["--start", "nan"], "--start = nan s is not allowed: must be a finite "
+     "time")])
+def test_markers_that_cannot_be_are_refused_before_the_run(
+        markers, message, tmp_path, capsys):
+    """--start and --stop are checked against each other and the
+    scenario's markers before the teaching run is simulated (a stop
+    before the start was refused only after the run, its log written)."""
+    from drake_wbc.cli.main import main
+
+    assert main(["teach", "teach", *markers, "--output",
+                 str(tmp_path)]) == 2
+    assert capsys.readouterr().err == f"drake-wbc teach: {message}\n"
     assert list(tmp_path.iterdir()) == []
 
 

@@ -69,6 +69,11 @@ def run_teach(args, argv=None, echo=print):
                          f"must be 1 to {MAX_BASIS}")
     path = find_scenario(args.scenario)
     scenario = on_robot(load_scenario(path), args, echo)
+    try:  # the markers, before the run
+        teach.interval(scenario, args.start, args.stop)
+    except ValueError as error:
+        raise ValueError(str(error).replace("start = ", "--start = ")
+                         .replace("stop = ", "--stop = ")) from None
     output = args.output or Path("out") / f"teach_{path.stem}"
     output.mkdir(parents=True, exist_ok=True)
     written = []
