@@ -159,6 +159,38 @@ def test_admittance_couplings_match_eq_tf_admit(scenario, time_step, kind):
     assert relative_error(response, expected) < 1e-6
 
 
+def test_the_closed_forms_are_the_papers_printed_ones():
+    """Eqs. (lp-admit) and (tf-admit) as printed, term by term, at
+    tau != 1, and their ZOH forms against scipy's discretisation: the
+    other checks compare the closed forms with stages built on the same
+    reading of eq. (stiff-dmp), which a shared slip would pass."""
+    from scipy.signal import cont2discrete, freqz
+
+    k_p, k_d, tau, alpha_z, beta_z = 0.002, 0.3, 0.6, 30.0, 5.0
+    s = 1j * OMEGA
+    printed = ((k_p * (tau**2 + k_d) * s + k_p * tau * alpha_z)
+               / (tau**2 * s**2 + tau * alpha_z * s + alpha_z * beta_z))
+    args = (k_p, k_d, tau, alpha_z, beta_z)
+    assert relative_error(closed_forms.lp_admit_response(*args, OMEGA),
+                          printed) < 1e-12
+    assert relative_error(closed_forms.tf_admit_response(0.02, OMEGA),
+                          0.02 / s) < 1e-12
+    omega = off_sampling_rate(H)
+    for velocity_scale in (None, 1.0):
+        b1, b0, a2, a1, a0 = closed_forms.stiffness_coupled_coefficients(
+            *args, velocity_scale)
+        numerator, denominator, _ = cont2discrete(
+            ([b1, b0], [a2, a1, a0]), H, method="zoh")
+        _, expected = freqz(numerator.ravel(), denominator, worN=omega * H)
+        assert relative_error(closed_forms.lp_admit_zoh_response(
+            *args, H, omega, velocity_scale), expected) < 1e-8
+    numerator, denominator, _ = cont2discrete(([0.02], [1.0, 0.0]), H,
+                                              method="zoh")
+    _, expected = freqz(numerator.ravel(), denominator, worN=omega * H)
+    assert relative_error(closed_forms.tf_admit_zoh_response(0.02, H, omega),
+                          expected) < 1e-8
+
+
 def _math_layer_model(derivative, num_states, time_step):
     """(A, B) of a one-axis DMP of drake_wbc.math.cdmp from its derivative
     function (no Drake system)."""
