@@ -24,6 +24,13 @@ def window(log, start, end=np.inf):
     return (log.time >= start) & (log.time < end)
 
 
+def sample_period(log):
+    """The log's sample period in s: the median spacing of its times (a
+    simulated run's outputs.log_period; an lcm-logger log's is its
+    clock's, drake_wbc.deployment.lcm_logs)."""
+    return float(np.median(np.diff(log.time)))
+
+
 def schedule_values(schedule, times, default):
     """A task input's Schedule evaluated at `times`, as the runner plays it
     (drake_wbc.controller.task.schedule_source): (N, k) values, or `default`
@@ -173,7 +180,7 @@ def _safety_counts(log):
     if "safety_status" in log:
         trips = log["safety_status"][:, STATUS_FIELDS.index("trips")]
         counts["safety_trips"] = int(np.max(trips))
-    dt = float(np.median(np.diff(log.time)))
+    dt = sample_period(log)
     for name, key in (("base_saturation", "base_saturated_s"),
                       ("arm_limited", "arm_limited_s")):
         if name in log:

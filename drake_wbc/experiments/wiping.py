@@ -51,6 +51,7 @@ from drake_wbc.experiments.common import (
     integrated_deviation,
     new_figure,
     obstacle_distances,
+    sample_period,
     save_figure,
     schedule_values,
 )
@@ -212,7 +213,7 @@ def run_metrics(scenario, log):
         "deviation_integral_peak_m": float(np.max(np.abs(dist))),
         "person_min_distance_m": float(np.min(person)),
         "person_close_start_s": float(start),
-        "person_close_s": float(np.sum(close) * scenario.outputs.log_period),
+        "person_close_s": float(np.sum(close) * sample_period(log)),
         "force_error_rms_before_person_N": _rms(error[before]),
         "force_error_rms_person_close_N": _rms(error[close]),
         "force_error_peak_person_close_N": _peak(error[close]),
