@@ -284,6 +284,12 @@ def test_replay_command_builds_its_scenario():
                        "allowed"):
         teach_commands.replay_scenario(parser.parse_args([
             "movements/teach.yaml", "--start-time", "-1"]))
+    # A tau the movement cannot be played at is refused before the run
+    # (it was refused as "tau" when the controller was built).
+    with pytest.raises(ValueError, match=r"^--tau = 0\.001 is not allowed "
+                       r"for the movement .*teach\.yaml .*play it slower"):
+        teach_commands.replay_scenario(parser.parse_args([
+            "movements/teach.yaml", "--tau", "0.001"]))
 
 
 def test_the_replay_command_runs_and_writes_its_outputs(tmp_path, capsys):
