@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from drake_wbc.controller.run_log import RunLog
 from drake_wbc.experiments import phri
 from drake_wbc.experiments.reports import run_scenario
 from drake_wbc.experiments.scenario import find_scenario, load_scenario
@@ -133,3 +134,23 @@ def test_a_run_shorter_than_the_schedule_reports_the_stages_it_reached(
     assert summary["metrics"]["phri.stages"] == "A"
     assert summary["metrics"]["phri.A.end_s"] == 3.0
     assert summary["metrics"]["phri.A.arm_path_m"] > 0.01
+
+
+def test_the_hand_impulse_is_taken_at_the_logs_own_period():
+    """A log sampled every 20 ms (an lcm-logger log on a clock slower
+    than the scenario's outputs.log_period of 10 ms): 2 N held over a
+    stage of 1 s is an impulse of 2 N s (51 samples, 2.04), not half of
+    it (the scenario's log_period taken for the log's)."""
+    scenario = load_scenario(find_scenario("phri"))
+    assert scenario.outputs.log_period == 0.01
+    time = 0.02 * np.arange(101)
+    n = len(time)
+    force = np.zeros((n, 3))
+    force[:, 1] = 2.0
+    log = RunLog(time, {
+        "truth.base_pose": np.zeros((n, 3)), "truth.hand_force": force,
+        "sigma_xy": np.ones((n, 1)), "sigma_phi": np.ones((n, 1)),
+        "base.velocity_command": np.zeros((n, 3))}, {})
+    values = phri.stage_metrics(scenario, log, 0.0, 1.0, np.zeros((n, 3)),
+                                np.zeros(n), np.zeros(n), np.zeros(n))
+    assert values["hand_impulse_N_s"] == pytest.approx(2.04, rel=1e-12)

@@ -150,3 +150,29 @@ def test_schedule_values_play_schedules_as_the_runner():
     np.testing.assert_allclose(
         wiping.schedule_values(Schedule(), time, [-10.0, 0.0]),
         np.tile([-10.0, 0.0], (5, 1)))
+
+
+def test_the_commanded_path_and_the_deviation_are_integrated_as_held():
+    """The commanded path and x_dist, y_dist integrate what the
+    controller holds over each tick (the value at t_k until t_(k+1)), as
+    eq. (cdmp-wb-error)'s WholeBodyCdmp and the fixed-point experiment
+    do: a one-tick pulse of 1 m/s, 1 rad/s and 1 m/s of deviation at
+    t_k moves them by h at t_(k+1), not half of it then (the
+    trapezoid's, for the position and x_dist) or all of it at t_k (the
+    turn of the next sample's w)."""
+    h, k = 0.01, 3
+    time = h * np.arange(8)
+    pulse = np.zeros((8, 6))
+    pulse[k, [1, 5]] = 1.0
+    deviation = np.zeros((8, 6))
+    deviation[k, 0] = 1.0
+    log = RunLog(time, {"truth.end_effector_pose": np.zeros((8, 6)),
+                        "reference_velocity": pulse,
+                        "end_effector_deviation": deviation}, {})
+    position, angle, commanded = wiping.path_deviation(log)
+    held = np.where(time > time[k] + 1e-9, h, 0.0)
+    np.testing.assert_allclose(commanded[:, 1], held, atol=1e-15)
+    np.testing.assert_allclose(position[:, 1], -held, atol=1e-15)
+    np.testing.assert_allclose(angle, held, atol=1e-12)
+    np.testing.assert_allclose(wiping.integrated_deviation(log)[:, 0], held,
+                               atol=1e-15)

@@ -114,20 +114,34 @@ def test_second_order_zoh_form_agrees_with_the_filters(zeta):
 
 @pytest.mark.parametrize("time_step", [0.0, H])
 @pytest.mark.parametrize("dmp", [DmpParameters(),
-                                 DmpParameters(alpha_z=20.0, beta_z=8.0)])
+                                 DmpParameters(alpha_z=20.0, beta_z=8.0),
+                                 DmpParameters(tau=0.6, alpha_z=30.0,
+                                               beta_z=5.0)])
 @pytest.mark.parametrize("k_d", [0.0, 0.4])
 def test_arm_stiffness_axis_matches_eq_lp_admit(scenario, time_step, dmp,
                                                 k_d):
+    """The arm's stiffness axis against eq. (lp-admit) with C_s entering
+    tau y_dot without the factor tau, as eq. (cdmp-arm) prints it
+    (velocity_scale 1): at tau = 0.6 it is not eq. (stiff-dmp)'s tau C_f
+    (with tau = 1 alone the two could not be told apart)."""
     arm = replace(scenario.controller.arm_cdmp, k_d=k_d, dmp=dmp)
     params = replace(scenario.controller, arm_cdmp=arm)
+    # Off the alias of DC, where the force axes' integrators C_a make
+    # zI - A singular.
+    omega = off_sampling_rate(time_step)
     response = linearize_dmp_force("stiffness", params, time_step,
-                                   axis=1).response(OMEGA)
+                                   axis=1).response(omega)
     args = (arm.k_p, k_d, dmp.tau, dmp.alpha_z, dmp.resolved_beta_z)
-    # tau = 1: the arm's C_s (no factor tau) is the paper's tau C_f.
-    expected = (closed_forms.lp_admit_response(*args, OMEGA)
+    expected = (closed_forms.lp_admit_response(*args, omega,
+                                               velocity_scale=1.0)
                 if time_step == 0.0 else
-                closed_forms.lp_admit_zoh_response(*args, time_step, OMEGA))
+                closed_forms.lp_admit_zoh_response(*args, time_step, omega,
+                                                   velocity_scale=1.0))
     assert relative_error(response, expected) < 1e-6
+    if dmp.tau != 1.0:
+        paper = closed_forms.lp_admit_response(*args, omega)
+        assert relative_error(closed_forms.lp_admit_response(
+            *args, omega, velocity_scale=1.0), paper) > 0.1
 
 
 @pytest.mark.parametrize("time_step", [0.0, H])
@@ -143,6 +157,38 @@ def test_admittance_couplings_match_eq_tf_admit(scenario, time_step, kind):
                 if time_step == 0.0 else
                 closed_forms.tf_admit_zoh_response(gain, time_step, omega))
     assert relative_error(response, expected) < 1e-6
+
+
+def test_the_closed_forms_are_the_papers_printed_ones():
+    """Eqs. (lp-admit) and (tf-admit) as printed, term by term, at
+    tau != 1, and their ZOH forms against scipy's discretisation: the
+    other checks compare the closed forms with stages built on the same
+    reading of eq. (stiff-dmp), which a shared slip would pass."""
+    from scipy.signal import cont2discrete, freqz
+
+    k_p, k_d, tau, alpha_z, beta_z = 0.002, 0.3, 0.6, 30.0, 5.0
+    s = 1j * OMEGA
+    printed = ((k_p * (tau**2 + k_d) * s + k_p * tau * alpha_z)
+               / (tau**2 * s**2 + tau * alpha_z * s + alpha_z * beta_z))
+    args = (k_p, k_d, tau, alpha_z, beta_z)
+    assert relative_error(closed_forms.lp_admit_response(*args, OMEGA),
+                          printed) < 1e-12
+    assert relative_error(closed_forms.tf_admit_response(0.02, OMEGA),
+                          0.02 / s) < 1e-12
+    omega = off_sampling_rate(H)
+    for velocity_scale in (None, 1.0):
+        b1, b0, a2, a1, a0 = closed_forms.stiffness_coupled_coefficients(
+            *args, velocity_scale)
+        numerator, denominator, _ = cont2discrete(
+            ([b1, b0], [a2, a1, a0]), H, method="zoh")
+        _, expected = freqz(numerator.ravel(), denominator, worN=omega * H)
+        assert relative_error(closed_forms.lp_admit_zoh_response(
+            *args, H, omega, velocity_scale), expected) < 1e-8
+    numerator, denominator, _ = cont2discrete(([0.02], [1.0, 0.0]), H,
+                                              method="zoh")
+    _, expected = freqz(numerator.ravel(), denominator, worN=omega * H)
+    assert relative_error(closed_forms.tf_admit_zoh_response(0.02, H, omega),
+                          expected) < 1e-8
 
 
 def _math_layer_model(derivative, num_states, time_step):
@@ -615,6 +661,71 @@ def test_bandwidth_and_peak_of_textbook_responses():
                                  rel=1e-3)
     assert at == pytest.approx(w_n * np.sqrt(1 - 2 * zeta**2), rel=1e-2)
     assert np.isnan(bandwidth(omega, np.ones_like(omega)))
+
+
+@pytest.mark.parametrize("time_step", [0.0, H])
+def test_an_integrators_row_has_no_dc_gain_nor_bandwidth(time_step):
+    """Eq. (tf-admit), D_a / s (and its ZOH, D_a h / (z - 1)): its DC
+    gain and its peak are infinite, and it has no -3 dB bandwidth from
+    DC, whatever the grid's lowest frequency (the table once gave the
+    gain at 0.01 Hz as the DC gain, -15.96 dB for D_a = 0.01, and a
+    bandwidth of 0.014 Hz: sqrt(2) times the grid's start)."""
+    from drake_wbc.analysis.bode import summarize
+
+    for low in (0.01, 0.001):
+        hertz, omega = frequency_grid(low, 40.0, 60)
+        response = (closed_forms.tf_admit_response(0.01, omega)
+                    if time_step == 0.0 else
+                    closed_forms.tf_admit_zoh_response(0.01, time_step,
+                                                       omega))
+        row = summarize("integrator", hertz, response)
+        assert row.dc_gain_db == np.inf and row.peak_db == np.inf
+        assert row.peak_hz == 0.0
+        assert np.isnan(row.bandwidth_hz)
+
+
+def test_a_low_pass_rows_do_not_depend_on_the_grids_start():
+    """The base filter, eq. (filtering), on grids from 0.01 and 0.001 Hz:
+    the same DC gain (0 dB) and -3 dB bandwidth (sqrt(10^0.15 - 1) f_f
+    for zeta = 1); a high-pass s / (s + 1) has a zero at DC."""
+    from drake_wbc.analysis.bode import summarize
+
+    rows = []
+    for low in (0.01, 0.001):
+        hertz, omega = frequency_grid(low, 40.0, 400)
+        rows.append(summarize("filter", hertz,
+                              lowpass_response(2 * np.pi, 1.0, omega)))
+        high = summarize("high-pass", hertz,
+                         1j * omega / (1j * omega + 1.0))
+        assert high.dc_gain_db == -np.inf and np.isnan(high.bandwidth_hz)
+    for row in rows:
+        assert abs(row.dc_gain_db) < 1e-3
+        assert row.bandwidth_hz == pytest.approx(
+            np.sqrt(10**0.15 - 1.0), rel=1e-3)
+
+
+def test_a_pole_near_the_grids_start_hides_the_dc_gain():
+    """A low-pass whose corner is at the grid's lowest frequency (as the
+    stiff hand's admittance loop, whose gain still rises at 0.01 Hz):
+    its DC gain, bandwidth and peak lie below the band and are not
+    reported (the table gave its gain at 0.01 Hz, 3 dB below its DC
+    gain, as the DC gain and the peak); with the corner a decade lower it
+    integrates as far as the band shows, a decade higher it is flat
+    enough to read."""
+    from drake_wbc.analysis.bode import summarize
+
+    hertz, omega = frequency_grid(0.01, 40.0, 60)
+    corner = 2 * np.pi * 0.01
+    row = summarize("hidden", hertz, 1.0 / (1j * omega / corner + 1.0))
+    assert np.isnan(row.dc_gain_db) and np.isnan(row.bandwidth_hz)
+    assert np.isnan(row.peak_db) and np.isnan(row.peak_hz)
+    below = summarize("below", hertz, 1.0 / (1j * omega / (0.1 * corner)
+                                            + 1.0))
+    assert below.dc_gain_db == np.inf and np.isnan(below.bandwidth_hz)
+    above = summarize("above", hertz, 1.0 / (1j * omega / (10 * corner)
+                                             + 1.0))
+    assert above.dc_gain_db == pytest.approx(0.0, abs=0.05)
+    assert above.bandwidth_hz == pytest.approx(0.1, rel=0.01)
 
 
 def test_bad_inputs_are_named():

@@ -4,6 +4,7 @@ and WholeBodyCdmp playing it against the DMP core's own integration."""
 
 import numpy as np
 import pytest
+import yaml
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import Linearize
@@ -190,6 +191,111 @@ def test_whole_body_cdmp_plays_the_dmp_core_rollout(tmp_path):
             equilibrium_check_tolerance=1e9)
         np.testing.assert_allclose(linear.A(),
                                    system._models[(0, playing)].A_d)
+
+
+def test_a_faster_replay_is_the_same_path_sooner(tmp_path):
+    """Played at tau = tau_0 / 50, the player's reference is its own at
+    tau_0 with time 50 times faster (the exact temporal scaling of eqs.
+    (6), (7), drake_wbc.math.dmp): its rollouts take steps that resolve
+    the faster attractor (with the fixed 5 ms step, 0.25 of the
+    Runge-Kutta step's stability limit at tau_0, the reference grew to
+    1e49 m)."""
+    learned = mv.LearnedMovement.load(movement_file(tmp_path))
+    slow = mv.MovementPlayer(learned, cdmp.MovementReplay(file="m"))
+    fast = mv.MovementPlayer(learned, cdmp.MovementReplay(file="m",
+                                                          tau=0.02))
+    for u in np.linspace(0.0, 1.5, 31):
+        np.testing.assert_allclose(
+            fast.reference(u * fast.params.duration),
+            slow.reference(u * slow.params.duration), atol=1e-6)
+
+
+def test_a_replay_too_fast_or_too_long_is_refused(tmp_path):
+    """A tau or a movement's duration whose rollouts would take more
+    than MAX_ROLLOUT_STEPS steps is refused when the player is built,
+    naming the value (a tau of tau_0 / 1000 gave a reference of NaN; a
+    duration of 1e300 s, in a file, an error from numpy's arange)."""
+    learned = mv.LearnedMovement.load(movement_file(tmp_path))
+    with pytest.raises(ValueError, match=r"tau = 0\.001 is not allowed "
+                       r"for the movement m .*play it slower"):
+        mv.MovementPlayer(learned, cdmp.MovementReplay(file="m", tau=1e-3))
+    path = tmp_path / "long.yaml"
+    path.write_text(movement_file(tmp_path).read_text().replace(
+        "duration: 5.0", "duration: 1.0e+300"))
+    with pytest.raises(ValueError, match=r"long\.yaml: dmp\.duration = "
+                       r"1e\+300 s .*not allowed: a movement lasts at most "
+                       r"495 s"):
+        mv.MovementPlayer(mv.LearnedMovement.load(path),
+                          cdmp.MovementReplay(file=str(path)))
+
+
+BOMB = """dmp: {alpha_z: 25.0, duration: 5.0, num_basis: 2}
+start: [0, 0, 0, 0]
+goal: [0, 0, 0, 0]
+a: &a [0, 0, 0, 0, 0, 0, 0, 0, 0, 0]
+b: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a, *a]
+c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b, *b]
+d: &d [*c, *c, *c, *c, *c, *c, *c, *c, *c, *c]
+e: &e [*d, *d, *d, *d, *d, *d, *d, *d, *d, *d]
+weights: [*e, *e]
+"""
+"""Two million zeros in 60 aliases: each level more multiplies them by
+ten (nine levels would fill the memory)."""
+
+
+def test_a_hostile_movement_file_is_refused_before_it_is_built(tmp_path):
+    """A movement file is read as the scenarios are
+    (drake_wbc.math.loading): an alias bomb and a file over MAX_BYTES are
+    refused before anything is built (the weights of BOMB were expanded
+    into 2e6 numbers, 1 s and 80 MB, before their shape was refused; a
+    1.4 MB file was read), and what does not fit says which field (an
+    empty file said "'NoneType' object is not subscriptable", a
+    demonstration without tcp "'tcp'", a time that goes back printed
+    every time)."""
+    good = movement_file(tmp_path).read_text()
+
+    def refused(text, match):
+        path = tmp_path / "hostile.yaml"
+        path.write_text(text)
+        with pytest.raises(ValueError, match=match):
+            mv.LearnedMovement.load(path)
+
+    refused(BOMB, r"hostile\.yaml: line 8, .*aliases expanded")
+    refused(good + "# " + "x" * (1 << 20) + "\n",
+            r"more than 1048576 bytes is not allowed")
+    refused("", r"the document = None is not allowed: must be a mapping "
+            "of dimensions, dmp, start, goal, weights and demonstrations")
+    refused(good.replace("weights:", "weight:"), r"weights is missing")
+    refused(good.replace("dimensions: [x, y, z, yaw]",
+                         "dimensions: [yaw, x, y, z]"),
+            r"dimensions = \['yaw', 'x', 'y', 'z'\] is not allowed")
+    refused(good.replace("  tcp:", "  pose:"),
+            r"demonstrations\[0\] = \{time: .* is not allowed: must be a "
+            "mapping of time, tcp")
+    document = yaml.safe_load(good)
+    times = document["demonstrations"][0]["time"]
+    times[5] = times[2]
+    refused(yaml.safe_dump(document),
+            rf"demonstrations\[0\]\.time\[5\] = {times[2]!r} s is not "
+            rf"allowed: the times must increase strictly \(time\[4\] = "
+            rf"{times[4]!r} s; 1 of the {len(times)} samples do not\)")
+
+
+def test_a_long_demonstration_is_kept_within_what_the_loader_reads(
+        tmp_path):
+    """A demonstration of 600 s at 100 Hz is saved at a longer period
+    than PLOT_PERIOD, within MAX_KEPT_SAMPLES and its last sample kept,
+    so that the file loads (at PLOT_PERIOD it held 12,000 samples,
+    beyond the loader's MAX_NODES)."""
+    t = np.arange(60001) * 0.01
+    y = START + np.outer(0.5 - 0.5 * np.cos(np.pi * t / t[-1]),
+                         GOAL - START)
+    learned = mv.learn_movement(Demonstration(t, y), num_basis=20)
+    loaded = mv.LearnedMovement.load(learned.save(tmp_path / "long.yaml"))
+    demo = loaded.demonstrations[0]
+    assert 3000 < demo.time.size <= mv.MAX_KEPT_SAMPLES
+    assert demo.time[-1] == pytest.approx(600.0)
+    np.testing.assert_allclose(demo.tcp[-1], GOAL, atol=1e-5)
 
 
 def test_bad_movement_parameters_are_explained(tmp_path):

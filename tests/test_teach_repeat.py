@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from drake_wbc.cli import teach as teach_commands
+from drake_wbc.controller.run_log import RunLog
 from drake_wbc.experiments import repeat, teach
 from drake_wbc.experiments.runner import build_closed_loop, simulate
 from drake_wbc.experiments.scenario import (
@@ -97,14 +98,57 @@ def test_a_given_interval_must_lie_within_the_log(teach_run):
     as a reversed interval is, not cut to the log in silence."""
     scenario, log = teach_run
     assert log.time[0] == 0.0 and log.time[-1] == pytest.approx(7.0)
-    for start, stop in ((0.0, 100.0), (-1.0, 5.0), (3.0, 1.0)):
+    for start, stop in ((0.0, 100.0), (-1.0, 5.0)):
         with pytest.raises(ValueError, match=(
                 rf"start = {start!r} s, stop = {stop!r} s is not allowed: "
                 r"must be an interval of the log \(from 0\.000 to 7\.000 "
                 r"s\)")):
             teach.learn_from_log(scenario, log, start, stop)
+    with pytest.raises(ValueError, match=(
+            r"start = 3\.0 s, stop = 1\.0 s is not allowed: the "
+            r"demonstration must end after it starts")):
+        teach.learn_from_log(scenario, log, 3.0, 1.0)
     assert teach.learn_from_log(scenario, log, 0.0, 7.0).params.duration \
         == pytest.approx(7.0)
+
+
+def test_a_log_that_cannot_hold_a_demonstration_is_named(teach_run):
+    """An empty log, a log whose time goes back and a sample that is not
+    finite in the demonstration are refused naming the signal, the
+    sample's time and what is allowed (they ended in an IndexError, a
+    time indexed within the cut, and "arm_positions = [[...]]" with
+    neither the signal nor the time)."""
+    scenario, log = teach_run
+
+    def changed(time=None, **signals):
+        return RunLog(log.time if time is None else time,
+                      {**log.signals, **signals}, log.columns)
+
+    empty = RunLog(np.zeros(0), {k: v[:0] for k, v in log.signals.items()},
+                   log.columns)
+    with pytest.raises(ValueError, match=(
+            r"start = 1\.0 s, stop = 2\.0 s is not allowed: must be an "
+            r"interval of the log \(which holds no sample\)")):
+        teach.learn_from_log(scenario, empty, 1.0, 2.0)
+    time = log.time.copy()
+    time[400:] -= 2.0
+    with pytest.raises(ValueError, match=(
+            rf"the log's time\[400\] = {float(time[400])!r} s is not "
+            rf"allowed: a log's times must increase strictly "
+            rf"\(time\[399\] = {float(time[399])!r} s\)")):
+        teach.learn_from_log(scenario, changed(time))
+    joints = log["arm.position_measured"].copy()
+    k = int(np.searchsorted(log.time, 3.0))
+    joints[k, 2] = np.nan
+    with pytest.raises(ValueError, match=(
+            r"arm\.position_measured = \[.*nan.*\] at t = 3\.000 s is not "
+            r"allowed: a demonstration's samples must be finite \(1 of its "
+            r"\d+ are not\)")):
+        teach.learn_from_log(scenario, changed(**{
+            "arm.position_measured": joints}))
+    # Outside the demonstration the sample does not count.
+    teach.learn_from_log(scenario, changed(**{
+        "arm.position_measured": joints}), 3.5, 6.5)
 
 
 def test_the_teach_command_names_every_file_it_writes(tmp_path, capsys):
@@ -135,6 +179,26 @@ def test_zero_basis_functions_are_refused_not_replaced(teach_run, tmp_path,
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("markers, message", [
+    (["--start", "5", "--stop", "3"], "--start = 5.0 s, --stop = 3.0 s is "
+     "not allowed: the demonstration must end after it starts"),
+    (["--stop", "0.2"], "--start = 0.5 s, --stop = 0.2 s is not allowed: "
+     "the demonstration must end after it starts"),
+    (["--start", "nan"], "--start = nan s is not allowed: must be a finite "
+     "time")])
+def test_markers_that_cannot_be_are_refused_before_the_run(
+        markers, message, tmp_path, capsys):
+    """--start and --stop are checked against each other and the
+    scenario's markers before the teaching run is simulated (a stop
+    before the start was refused only after the run, its log written)."""
+    from drake_wbc.cli.main import main
+
+    assert main(["teach", "teach", *markers, "--output",
+                 str(tmp_path)]) == 2
+    assert capsys.readouterr().err == f"drake-wbc teach: {message}\n"
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_replay_reproduces_the_demonstrated_path_within_1_cm(demonstrated):
     """The issue's first test: time aligned through the phase."""
     assert demonstrated["path_rms_m"] < 0.01
@@ -147,6 +211,30 @@ def test_moved_goal_is_reached_within_5_mm_with_the_same_shape(moved_goal):
     assert moved_goal["goal_error_m"] < 0.005
     assert moved_goal["goal_yaw_error_rad"] < 0.005
     assert moved_goal["velocity_correlation"] > 0.9
+
+
+def test_the_speed_profiles_are_filtered_at_2_hz_of_time():
+    """velocity_correlation low-passes each speed profile at
+    SPEED_FILTER_HZ of its own clock: a demonstration whose speed
+    ripples at 1 Hz (10 mm) against a replay without the ripple
+    correlates as their exact speeds do (0.85, the filter keeping 94% of
+    the ripple's power), at any replay's tau (on normalised time the
+    filter sat at 2 cycles per movement, 0.33 Hz here, took the ripple
+    away and gave 0.99)."""
+    u = np.linspace(0.0, 1.0, 121)
+    t = 6.0 * u
+    x = 0.45 * (1.0 - np.cos(np.pi * t / 6.0))
+    ripple = 0.01 * np.sin(2 * np.pi * t)
+    speed = 0.45 * np.pi / 6.0 * np.sin(np.pi * t / 6.0)
+    exact = np.corrcoef(speed, np.abs(
+        speed + 0.02 * np.pi * np.cos(2 * np.pi * t)))[0, 1]
+    assert exact == pytest.approx(0.85, abs=0.01)
+    demonstrated = np.column_stack([x + ripple, 0 * t, 0 * t])
+    replayed = np.column_stack([x, 0 * t, 0 * t])
+    for duration in (6.0, 9.0):
+        assert repeat.velocity_correlation(
+            u, demonstrated, replayed, 6.0, duration) == pytest.approx(
+                exact, abs=0.03)
 
 
 def test_new_obstacle_is_avoided_and_the_goal_reached(obstacle):
@@ -196,6 +284,12 @@ def test_replay_command_builds_its_scenario():
                        "allowed"):
         teach_commands.replay_scenario(parser.parse_args([
             "movements/teach.yaml", "--start-time", "-1"]))
+    # A tau the movement cannot be played at is refused before the run
+    # (it was refused as "tau" when the controller was built).
+    with pytest.raises(ValueError, match=r"^--tau = 0\.001 is not allowed "
+                       r"for the movement .*teach\.yaml .*play it slower"):
+        teach_commands.replay_scenario(parser.parse_args([
+            "movements/teach.yaml", "--tau", "0.001"]))
 
 
 def test_the_replay_command_runs_and_writes_its_outputs(tmp_path, capsys):

@@ -15,7 +15,9 @@ import numpy as np
 
 from drake_wbc.analysis.frequency import (
     bandwidth,
+    dc_gain,
     decibels,
+    low_frequency_power,
     peak_gain,
     phase_degrees,
 )
@@ -164,10 +166,19 @@ class ResponseSummary:
 
     Attributes:
         name: the response's name.
-        dc_gain_db: the gain at the lowest frequency of the grid, dB.
+        dc_gain_db: the DC gain, dB (frequency.dc_gain: the gain at the
+            grid's lowest frequency where the response is flat there;
+            inf for a pole at DC, an integrator; -inf for a zero there;
+            nan where a pole or zero near the grid's lowest frequency
+            hides it).
         bandwidth_hz: where the gain has fallen 3 dB below it, Hz (nan if
-            it never does on the grid).
-        peak_db, peak_hz: the largest gain on the grid and where.
+            it never does on the grid, or the DC gain is not finite and
+            nonzero).
+        peak_db, peak_hz: the largest gain on the grid and where; inf at
+            0 Hz for a pole at DC, whose gain grows without bound
+            towards DC; nan where the gain still rises at the grid's
+            lowest frequency and is largest there (its peak lies below
+            the band).
         gain_margin_db, phase_margin_deg: of a loop (nan where no loop
             closes; inf where |L| or the phase never crosses).
         stable_gain: the largest stable value of a loop's gain (the
@@ -192,9 +203,15 @@ def summarize(name, hertz, response, margins=None, stable_gain=None):
     omega = TWO_PI * as_vector("hertz", hertz)
     response = np.asarray(response)
     peak, at = peak_gain(omega, response)
+    dc = dc_gain(omega, response)
+    if np.isinf(dc):
+        peak, at = dc, 0.0
+    elif np.isnan(dc) and at == omega[0] and low_frequency_power(
+            omega, response) < 0.0:
+        peak = at = float("nan")
     return ResponseSummary(
         name=name,
-        dc_gain_db=float(decibels(response[0])),
+        dc_gain_db=float(decibels(dc)),
         bandwidth_hz=bandwidth(omega, response) / TWO_PI,
         peak_db=float(decibels(peak)),
         peak_hz=at / TWO_PI,

@@ -127,6 +127,65 @@ def phase_degrees(response, unwrap=True):
     return np.degrees(np.unwrap(angle, axis=0) if unwrap else angle)
 
 
+POWER_TOLERANCE = 0.05
+"""How near a whole number n of `low_frequency_power` must be for the
+response to count as |H| ~ omega^n at the grid's low end: within 0.05
+of 0 its gain there is its DC gain to 0.25 dB (a first-order corner at
+least 4.4 times higher); within 0.05 of -1 it integrates (a pole at
+most a quarter of the lowest frequency, a time constant above about
+70 s at 0.01 Hz, which the band cannot tell from one at DC)."""
+
+
+def low_frequency_power(omega, response):
+    """n of the response's low-frequency asymptote |H| ~ omega^n: the
+    slope of log |H| over log omega between the grid's first two points
+    (-1 for an integrator, 0 for a response with a finite, nonzero DC
+    gain, 1 for a differentiator; between whole numbers where a pole or
+    a zero lies near the grid's lowest frequency). NaN where the
+    response is zero at both.
+
+    Args:
+        omega: (N,) increasing angular frequencies (rad/s), N >= 2.
+        response: (N,) complex response at `omega`.
+    """
+    omega = as_vector("omega", omega)
+    if omega.size < 2 or not 0.0 < omega[0] < omega[1]:
+        raise ValueError(f"omega = {omega!r} is not allowed: must hold 2 "
+                         "or more increasing frequencies > 0")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gain = np.log(np.abs(np.asarray(response)[:2]))
+        return float((gain[1] - gain[0])
+                     / (np.log(omega[1]) - np.log(omega[0])))
+
+
+def dc_gain(omega, response):
+    """|H| at DC, as far as the grid shows it (`low_frequency_power` n
+    within POWER_TOLERANCE of a whole number):
+
+    - n = 0 (flat at the grid's low end): the gain at its lowest
+      frequency;
+    - n = -1 (an integrator, such as eq. (tf-admit)'s D_a / s): inf;
+    - n = 1, or a response zero there: 0;
+    - otherwise (a pole or a zero near the grid's lowest frequency): nan,
+      the DC gain lies below the band; the gain at the grid's lowest
+      frequency would be a number of the grid, not of the system.
+
+    Args:
+        omega: (N,) increasing angular frequencies (rad/s), N >= 2.
+        response: (N,) complex response at `omega`.
+    """
+    power = low_frequency_power(omega, response)
+    if np.isnan(power):  # zero at both points
+        return 0.0
+    if abs(power) < POWER_TOLERANCE:
+        return float(np.abs(np.asarray(response)[0]))
+    if abs(power + 1.0) < POWER_TOLERANCE:
+        return float("inf")
+    if abs(power - 1.0) < POWER_TOLERANCE:
+        return 0.0
+    return float("nan")
+
+
 def bandwidth(omega, response, reference=None, drop_db=3.0):
     """The -3 dB bandwidth: the lowest frequency at which the gain has
     fallen `drop_db` below `reference`, interpolated linearly in dB over
@@ -135,19 +194,25 @@ def bandwidth(omega, response, reference=None, drop_db=3.0):
     Args:
         omega: (N,) increasing angular frequencies (rad/s).
         response: (N,) complex response at `omega`.
-        reference: the gain it is measured from; by default the gain at
-            the lowest frequency (the DC gain of a low-pass).
+        reference: the gain it is measured from; by default the DC gain
+            (`dc_gain`) of a response flat at the grid's low end (a
+            low-pass); a response with a pole or a zero at or near DC
+            has no bandwidth from DC on the grid (nan).
         drop_db: how far the gain must fall, dB > 0.
 
     Returns:
         The bandwidth in rad/s, or nan if the gain never falls that far
-        on the grid (nor is already below at its start).
+        on the grid (nor is already below at its start), or there is no
+        DC gain to fall from.
     """
     omega = as_vector("omega", omega)
     gain = decibels(np.asarray(response))
     drop = positive("drop_db", drop_db)
-    level = (gain[0] if reference is None
-             else 20.0 * np.log10(positive("reference", reference))) - drop
+    if reference is None:
+        reference = dc_gain(omega, response)
+        if not 0.0 < reference < np.inf:
+            return float("nan")
+    level = 20.0 * np.log10(positive("reference", reference)) - drop
     below = np.nonzero(gain < level)[0]
     if len(below) == 0 or below[0] == 0:
         return float("nan")

@@ -17,8 +17,9 @@ and CSV per figure, summary.csv, and the table it returns):
 - base_plant: the base's velocity command to its actual velocity and to
   the end effector's, through the driver and the plant (the servo and
   the mount's rocking mode), over the driver alone;
-- dmp_force: the coupled DMPs' force-to-position responses over eqs.
-  (lp-admit) and (tf-admit);
+- dmp_force: the coupled DMPs' force-to-position responses, discrete at
+  the control period, over the exact zero-order-hold equivalents of
+  eqs. (lp-admit) and (tf-admit);
 - contact_loops: the arm's CDMP against a contact spring K (the wiping
   pad's), with the loops' gain and phase margins;
 - filter_sweep, split_sweep: families of curves over omega_f and zeta;
@@ -219,14 +220,18 @@ def _dmp_plots(report, params, hertz, omega, h, stiffness):
         responses[kind] = linearize_dmp_force(kind, params).response(omega)
         plot.add(label, responses[kind])
         report.rows.append(summarize(label, hertz, responses[kind]))
-    plot.add("eq. (lp-admit)", closed_forms.lp_admit_response(
-        arm.k_p, arm.k_d, dmp.tau, dmp.alpha_z, dmp.resolved_beta_z, omega,
-        velocity_scale=1.0), True)
+    # The closed forms' exact zero-order-hold equivalents, as the stages
+    # run at h: the continuous forms part from them by the hold's half
+    # period of delay (18 degrees at 10 Hz at h = 0.01 s).
+    plot.add("eq. (lp-admit), ZOH", closed_forms.lp_admit_zoh_response(
+        arm.k_p, arm.k_d, dmp.tau, dmp.alpha_z, dmp.resolved_beta_z, h,
+        omega, velocity_scale=1.0), True)
     for name, gain in (("k_f", arm.k_f),
                        ("k_hri", params.whole_body_cdmp.k_hri)):
         if gain > 0.0:
-            plot.add(f"eq. (tf-admit), D_a = {name}",
-                     closed_forms.tf_admit_response(gain, omega), True)
+            plot.add(f"eq. (tf-admit), D_a = {name}, ZOH",
+                     closed_forms.tf_admit_zoh_response(gain, h, omega),
+                     True)
     report.plots[plot.name] = plot
 
     plot = BodePlot("contact_loops", f"arm CDMP against a contact of "

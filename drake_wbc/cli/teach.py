@@ -69,6 +69,11 @@ def run_teach(args, argv=None, echo=print):
                          f"must be 1 to {MAX_BASIS}")
     path = find_scenario(args.scenario)
     scenario = on_robot(load_scenario(path), args, echo)
+    try:  # the markers, before the run
+        teach.interval(scenario, args.start, args.stop)
+    except ValueError as error:
+        raise ValueError(str(error).replace("start = ", "--start = ")
+                         .replace("stop = ", "--stop = ")) from None
     output = args.output or Path("out") / f"teach_{path.stem}"
     output.mkdir(parents=True, exist_ok=True)
     written = []
@@ -151,7 +156,11 @@ def replay_scenario(args):
         load_scenario,
     )
     from drake_wbc.math.cdmp import MovementReplay
-    from drake_wbc.math.movement import LearnedMovement, resolve_movement_file
+    from drake_wbc.math.movement import (
+        LearnedMovement,
+        MovementPlayer,
+        resolve_movement_file,
+    )
     from drake_wbc.math.validation import positive_duration, validate
     from drake_wbc.station.scene import CylinderObstacle
 
@@ -170,11 +179,15 @@ def replay_scenario(args):
         replay = MovementReplay(file=str(file), goal=args.goal,
                                 tau=args.tau, start_time=start_time,
                                 start=base.start)
+        # A tau the movement cannot be played at, before the run.
+        MovementPlayer(movement, replay)
     except ValueError as error:
         # Only the options can be wrong here (the file was read above,
         # the scenario's start was checked when it was loaded): name the
         # field as the option it came from (tau -> --tau).
         field, rest = str(error).split(" ", 1)
+        if field not in ("goal", "tau", "start_time"):
+            raise
         raise ValueError(f"--{field.replace('_', '-')} {rest}") from None
     tau = movement.params.tau if args.tau is None else args.tau
     duration = args.duration

@@ -24,6 +24,49 @@ def window(log, start, end=np.inf):
     return (log.time >= start) & (log.time < end)
 
 
+def sample_period(log):
+    """The log's sample period in s: the median spacing of its times (a
+    simulated run's outputs.log_period; an lcm-logger log's is its
+    clock's, drake_wbc.deployment.lcm_logs)."""
+    return float(np.median(np.diff(log.time)))
+
+
+def schedule_values(schedule, times, default):
+    """A task input's Schedule evaluated at `times`, as the runner plays it
+    (drake_wbc.controller.task.schedule_source): (N, k) values, or `default`
+    (a number or a sequence) at every time when the schedule is empty."""
+    times = np.asarray(times, dtype=float)
+    if not schedule.times:
+        return np.tile(np.atleast_1d(np.asarray(default, dtype=float)),
+                       (len(times), 1))
+    knots = np.asarray(schedule.times, dtype=float)
+    values = np.asarray(schedule.values, dtype=float)
+    if schedule.interpolation == "linear":
+        return np.column_stack([np.interp(times, knots, values[:, j])
+                                for j in range(values.shape[1])])
+    index = np.clip(np.searchsorted(knots, times, side="right") - 1, 0,
+                    len(knots) - 1)
+    return values[index]
+
+
+def held_integral(time, rate):
+    """The running integral (N, k) from time[0] of `rate` (N, k) sampled at
+    `time` (N,) and held over each sample, as the controller holds what it
+    reads over a tick: I_0 = 0, I_k = sum over j < k of rate_j (t_(j+1) -
+    t_j)."""
+    rate = np.asarray(rate, dtype=float)
+    steps = rate[:-1] * np.diff(time)[:, None]
+    return np.vstack([np.zeros((1, rate.shape[1])), np.cumsum(steps, 0)])
+
+
+def integrated_deviation(log):
+    """x_dist, y_dist, z_dist: int delta_V_ee dt of eq. (deviation), (N, 3),
+    from the controller's end_effector_deviation held over each sample
+    (`held_integral`), as WholeBodyCdmp integrates it, eq.
+    (cdmp-wb-error)."""
+    return held_integral(log.time, log["end_effector_deviation"][:, :3])
+
+
 def band_rms(time, signal, band, mask=None, order=4):
     """RMS of `signal` (N,) band-passed to `band` (low, high) Hz with a
     zero-phase Butterworth filter, over the samples in `mask` (all if
@@ -137,7 +180,7 @@ def _safety_counts(log):
     if "safety_status" in log:
         trips = log["safety_status"][:, STATUS_FIELDS.index("trips")]
         counts["safety_trips"] = int(np.max(trips))
-    dt = float(np.median(np.diff(log.time)))
+    dt = sample_period(log)
     for name, key in (("base_saturation", "base_saturated_s"),
                       ("arm_limited", "arm_limited_s")):
         if name in log:

@@ -42,34 +42,17 @@ from dataclasses import replace
 import numpy as np
 
 from drake_wbc.experiments.common import (
+    integrated_deviation,
     metrics_of_each_run,
     new_figure,
     obstacle_distances,
     save_figure,
+    schedule_values,
 )
 from drake_wbc.experiments.scenario import controller_for, footprint_of
 
 APPROACH_GAP = 0.5
 """Approaches less than this many seconds apart are merged (s)."""
-
-
-def schedule_values(schedule, times, default):
-    """A task input's Schedule evaluated at `times`, as the runner plays it
-    (drake_wbc.controller.task.schedule_source): (N, k) values, or `default`
-    (a
-    number or a sequence) at every time when the schedule is empty."""
-    times = np.asarray(times, dtype=float)
-    if not schedule.times:
-        return np.tile(np.atleast_1d(np.asarray(default, dtype=float)),
-                       (len(times), 1))
-    knots = np.asarray(schedule.times, dtype=float)
-    values = np.asarray(schedule.values, dtype=float)
-    if schedule.interpolation == "linear":
-        return np.column_stack([np.interp(times, knots, values[:, j])
-                                for j in range(values.shape[1])])
-    index = np.clip(np.searchsorted(knots, times, side="right") - 1, 0,
-                    len(knots) - 1)
-    return values[index]
 
 
 def approach_intervals(time, distance, threshold, gap=APPROACH_GAP):
@@ -85,14 +68,6 @@ def approach_intervals(time, distance, threshold, gap=APPROACH_GAP):
         else:
             intervals.append((start, end))
     return intervals
-
-
-def integrated_deviation(log):
-    """x_dist, y_dist, z_dist: int delta_V_ee dt of eq. (deviation), (N, 3),
-    from the controller's end_effector_deviation held over each sample."""
-    dt = np.diff(log.time)[:, None]
-    steps = log["end_effector_deviation"][:-1, :3] * dt
-    return np.vstack([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
 
 
 def person_distances(scenario, log):

@@ -43,6 +43,7 @@ import numpy as np
 from drake_wbc.experiments.common import (
     new_figure,
     obstacle_distances,
+    sample_period,
     save_figure,
 )
 from drake_wbc.experiments.scenario import controller_arm, footprint_of
@@ -165,7 +166,7 @@ def stage_metrics(scenario, log, start, end, tcp_b, d, phi, distance):
     return {
         "start_s": float(start),
         "end_s": float(end),
-        "hand_impulse_N_s": float(np.sum(hand) * scenario.outputs.log_period),
+        "hand_impulse_N_s": float(np.sum(hand) * sample_period(log)),
         "base_dx_m": float(xy[-1, 0] - xy[0, 0]),
         "base_dy_m": float(xy[-1, 1] - xy[0, 1]),
         "base_rotation_rad": float(yaw[-1] - yaw[0]),

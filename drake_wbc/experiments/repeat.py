@@ -80,7 +80,10 @@ def replay_comparison(scenario, name, log):
     return movement, player, u, demo, replayed, target, tcp
 
 
-def _speed(time, positions):
+def speed_profile(time, positions):
+    """|v| (N,) of `positions` (N, 3) at `time` (N,) in s: differences
+    (np.gradient), low-passed at SPEED_FILTER_HZ (zero phase, second
+    order) where the samples resolve it."""
     from scipy.signal import butter, sosfiltfilt
 
     v = np.gradient(positions, time, axis=0)
@@ -91,13 +94,23 @@ def _speed(time, positions):
     return np.linalg.norm(v, axis=1)
 
 
+def velocity_correlation(u, demonstrated, replayed, demonstration_duration,
+                         replay_duration):
+    """The correlation coefficient of the TCP's speed profiles (module
+    docstring), each on its own clock: the samples at normalised times u
+    (N,) of the demonstration's (N, 3) and the replay's (N, 3) positions,
+    lasting `demonstration_duration` and `replay_duration` s (the filter
+    is at SPEED_FILTER_HZ of time, not of normalised time)."""
+    return float(np.corrcoef(
+        speed_profile(u * replay_duration, replayed),
+        speed_profile(u * demonstration_duration, demonstrated))[0, 1])
+
+
 def run_metrics(scenario, name, log):
     """The metrics of the module's docstring for one run."""
     movement, player, u, demo, replayed, target, tcp = replay_comparison(
         scenario, name, log)
     error = replayed - demo.tcp
-    replay_speed = _speed(u, replayed[:, :3])
-    demo_speed = _speed(u, demo.tcp[:, :3])
     people = log.signals.get("truth.people_positions")
     distance = obstacle_distances(scenario.scene, log["truth.base_pose"],
                                   footprint_of(scenario), people)
@@ -107,8 +120,9 @@ def run_metrics(scenario, name, log):
         "path_yaw_rms_rad": float(np.sqrt(np.mean(error[:, 3]**2))),
         "goal_error_m": float(np.linalg.norm(tcp[-1, :3] - target[:3])),
         "goal_yaw_error_rad": float(abs(tcp[-1, 3] - target[3])),
-        "velocity_correlation": float(np.corrcoef(replay_speed,
-                                                  demo_speed)[0, 1]),
+        "velocity_correlation": velocity_correlation(
+            u, demo.tcp[:, :3], replayed[:, :3], demo.duration,
+            player.params.duration),
         "min_obstacle_distance_m": float(np.min(distance)),
         "d_th_m": float(scenario.controller.base_cdmp.repulsion.d_th),
         "tau": float(player.params.tau),

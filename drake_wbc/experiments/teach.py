@@ -35,10 +35,16 @@ def interval(scenario, start=None, stop=None, log=None):
     scenario's task, each replaced by `start`/`stop` when given.
 
     Raises:
-        ValueError: a given `start` before the first time of `log` (a
+        ValueError: a given `start` or `stop` that is not a finite
+            number, a `stop` not after `start` (the markers'
+            included), a given `start` before the first time of `log` (a
             RunLog, when given) or a given `stop` past its last.
     """
     given_start, given_stop = start is not None, stop is not None
+    for name, value in (("start", start), ("stop", stop)):
+        if value is not None and not np.isfinite(float(value)):
+            raise ValueError(f"{name} = {float(value)!r} s is not allowed: "
+                             "must be a finite time")
     if start is None or stop is None:
         marked = teaching_interval(
             scenario.task.phri_switch, scenario.duration,
@@ -46,6 +52,10 @@ def interval(scenario, start=None, stop=None, log=None):
         start = marked[0] if start is None else start
         stop = marked[1] if stop is None else stop
     start, stop = float(start), float(stop)
+    if not stop > start:
+        raise ValueError(f"start = {start!r} s, stop = {stop!r} s is not "
+                         "allowed: the demonstration must end after it "
+                         "starts")
     if log is not None and len(log.time):
         first, last = float(log.time[0]), float(log.time[-1])
         if (given_start and start < first - 1e-9) or (

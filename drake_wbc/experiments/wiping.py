@@ -47,9 +47,13 @@ from pydrake.math import RollPitchYaw
 from scipy.spatial.transform import Rotation
 
 from drake_wbc.experiments.common import (
+    held_integral,
+    integrated_deviation,
     new_figure,
     obstacle_distances,
+    sample_period,
     save_figure,
+    schedule_values,
 )
 from drake_wbc.experiments.scenario import controller_arm, footprint_of
 from drake_wbc.stages.wrench import ExternalWrenchEstimator
@@ -101,21 +105,6 @@ def external_wrench(scenario, log, signal="wrist.wrench_measured"):
     return result
 
 
-def schedule_values(schedule, time, default):
-    """A scenario Schedule evaluated at `time` (N,), as the runner plays
-    it; `default` (k,) for an empty schedule. Returns (N, k)."""
-    if not schedule.times:
-        return np.tile(np.asarray(default, dtype=float), (len(time), 1))
-    times = np.asarray(schedule.times, dtype=float)
-    values = np.asarray(schedule.values, dtype=float)
-    if schedule.interpolation == "linear":
-        return np.column_stack([np.interp(time, times, v)
-                                for v in values.T])
-    index = np.clip(np.searchsorted(times, time, side="right") - 1, 0,
-                    len(times) - 1)
-    return values[index]
-
-
 def desired_force(scenario, log):
     """F_d,x (N,) over the log: the desired_wrench schedule, else the
     controller's arm_cdmp.F_d."""
@@ -138,26 +127,22 @@ def settling(time, force, error):
     return contact, np.nan
 
 
-def _integral(time, rate):
-    """The running integral of `rate` (N, k) from 0, trapezoidal."""
-    steps = 0.5 * (rate[1:] + rate[:-1]) * np.diff(time)[:, None]
-    return np.vstack([np.zeros((1, rate.shape[1])), np.cumsum(steps, 0)])
-
-
 def path_deviation(log):
     """The tool's deviation from its commanded path, in the world: (N, 3)
     position (true minus commanded) and (N,) the angle in rad between the
     true and the commanded orientation. The commanded path starts at the
-    true start pose and integrates the reference twist [v; w]."""
+    true start pose and integrates the reference twist [v; w] held over
+    each sample, as the controller reads it (`held_integral`; the turn of
+    each sample's w over the time to the next)."""
     pose = log["truth.end_effector_pose"]
     reference = log["reference_velocity"]
-    commanded = pose[0, :3] + _integral(log.time, reference[:, :3])
+    commanded = pose[0, :3] + held_integral(log.time, reference[:, :3])
     R = Rotation.from_matrix([RollPitchYaw(rpy).ToRotationMatrix().matrix()
                               for rpy in pose[:, 3:]])
-    dt = np.diff(log.time, prepend=log.time[0])
-    turns = Rotation.from_rotvec(reference[:, 3:] * dt[:, None])
+    turns = Rotation.from_rotvec(reference[:-1, 3:]
+                                 * np.diff(log.time)[:, None])
     R_cmd = [R[0]]
-    for turn in turns[1:]:
+    for turn in turns:
         R_cmd.append(turn * R_cmd[-1])
     angle = np.array([(c.inv() * r).magnitude()
                       for c, r in zip(R_cmd, R, strict=True)])
@@ -201,7 +186,7 @@ def run_metrics(scenario, log):
     after = t >= settled if np.isfinite(settled) else np.zeros(len(t), bool)
     deviation, angle, commanded = path_deviation(log)
     pose = log["truth.end_effector_pose"]
-    dist = _integral(t, log["end_effector_deviation"][:, :2])
+    dist = integrated_deviation(log)[:, :2]
     d_th = scenario.controller.base_cdmp.repulsion.d_th
     person = person_distance(scenario, log)
     close = after & (person <= d_th)
@@ -228,7 +213,7 @@ def run_metrics(scenario, log):
         "deviation_integral_peak_m": float(np.max(np.abs(dist))),
         "person_min_distance_m": float(np.min(person)),
         "person_close_start_s": float(start),
-        "person_close_s": float(np.sum(close) * scenario.outputs.log_period),
+        "person_close_s": float(np.sum(close) * sample_period(log)),
         "force_error_rms_before_person_N": _rms(error[before]),
         "force_error_rms_person_close_N": _rms(error[close]),
         "force_error_peak_person_close_N": _peak(error[close]),
@@ -272,7 +257,7 @@ def draw_figures(scenario, logs, folder):
         axes[1].plot(t, commanded[:, 1] - pose[0, 1], "k--", lw=0.8,
                      label="y commanded")
         axes[1].set_ylabel("$p_{ee}$ - start (m)")
-        dist = _integral(t, log["end_effector_deviation"][:, :2])
+        dist = integrated_deviation(log)[:, :2]
         axes[2].plot(t, 1e3 * dist[:, 0], label="$x_{dist}$")
         axes[2].plot(t, 1e3 * dist[:, 1], label="$y_{dist}$")
         axes[2].set_ylabel("deviation (mm)")

@@ -47,9 +47,17 @@ class Demonstration:
 
     def __post_init__(self):
         time = as_vector("time", self.time)
-        if time.size < 3 or np.any(np.diff(time) <= 0.0):
-            raise ValueError(f"time = {self.time!r} is not allowed: must "
-                             "hold 3 or more strictly increasing times")
+        if time.size < 3:
+            raise ValueError(f"time = {time.tolist()!r} is not allowed: "
+                             "must hold 3 or more strictly increasing times")
+        back = np.nonzero(np.diff(time) <= 0.0)[0]
+        if back.size:
+            i = int(back[0]) + 1
+            raise ValueError(
+                f"time[{i}] = {float(time[i])!r} s is not allowed: the times "
+                f"must increase strictly (time[{i - 1}] = "
+                f"{float(time[i - 1])!r} s; "
+                f"{back.size} of the {time.size} samples do not)")
         object.__setattr__(self, "time", time)
         object.__setattr__(self, "tcp", as_matrix("tcp", self.tcp,
                                                   (time.size, 4)))
@@ -169,19 +177,44 @@ def tcp_poses(base_pose, arm_positions, arm):
 def demonstration_from_log(log, start, stop, arm):
     """The demonstration in `log` (a RunLog) between `start` and `stop`
     (s, inclusive), from the measured joints and the base's odometry
-    through `arm`, the robot's ArmKinematics (module docstring)."""
+    through `arm`, the robot's ArmKinematics (module docstring).
+
+    Raises:
+        ValueError: for a log whose times do not increase strictly, an
+            interval that is not one of the log's with 3 or more samples,
+            or a sample in it that is not finite (naming the signal and
+            its time).
+    """
     start, stop = float(start), float(stop)
-    mask = (log.time >= start - 1e-9) & (log.time <= stop + 1e-9)
+    time = np.asarray(log.time, dtype=float)
+    back = np.nonzero(~(np.diff(time) > 0.0))[0]
+    if back.size:
+        i = int(back[0]) + 1
+        raise ValueError(
+            f"the log's time[{i}] = {float(time[i])!r} s is not allowed: a "
+            f"log's times must increase strictly (time[{i - 1}] = "
+            f"{float(time[i - 1])!r} s)")
+    mask = (time >= start - 1e-9) & (time <= stop + 1e-9)
     if not stop > start or np.count_nonzero(mask) < 3:
+        span = (f"from {time[0]:.3f} to {time[-1]:.3f} s" if time.size
+                else "which holds no sample")
         raise ValueError(
             f"start = {start!r} s, stop = {stop!r} s is not allowed: must "
-            "be an interval of the log (from "
-            f"{log.time[0]:.3f} to {log.time[-1]:.3f} s) with 3 or more "
-            "samples")
-    base = np.asarray(log["base.state_estimated"])[mask, :3]
-    joints = np.asarray(log["arm.position_measured"])[mask]
-    return Demonstration(np.asarray(log.time)[mask], tcp_poses(
-        base, joints, arm), base, joints)
+            f"be an interval of the log ({span}) with 3 or more samples")
+    base = np.asarray(log["base.state_estimated"], dtype=float)[mask, :3]
+    joints = np.asarray(log["arm.position_measured"], dtype=float)[mask]
+    for name, values in (("base.state_estimated", base),
+                         ("arm.position_measured", joints)):
+        bad = np.nonzero(~np.isfinite(values).all(axis=1))[0]
+        if bad.size:
+            k = int(bad[0])
+            raise ValueError(
+                f"{name} = {values[k].tolist()} at t = {time[mask][k]:.3f} s "
+                "is not allowed: a demonstration's samples must be finite "
+                f"({bad.size} of its {len(values)} are not); give a start "
+                "and stop around them")
+    return Demonstration(time[mask], tcp_poses(base, joints, arm), base,
+                         joints)
 
 
 def teaching_interval(schedule, duration, default_switch=0.0):

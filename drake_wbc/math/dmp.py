@@ -204,6 +204,19 @@ def canonical_phase_float(t, params):
     return math.exp(-params.resolved_alpha_s * t / params.tau)
 
 
+def fastest_rate(params):
+    """The largest rate, 1/s, of the linear dynamics of eqs. (6) and (7)
+    at DmpParameters `params`: the largest modulus of the roots of
+    tau^2 s^2 + tau alpha_z s + alpha_z beta_z (at most alpha_z / tau
+    while they are real, sqrt(alpha_z beta_z) / tau when complex) and of
+    the canonical system's -alpha_s / tau. A fixed-step integration of
+    the DMP resolves it with steps well below its inverse."""
+    params = _checked_parameters(params)
+    return max(params.alpha_z,
+               math.sqrt(params.alpha_z * params.resolved_beta_z),
+               params.resolved_alpha_s) / params.tau
+
+
 def canonical_derivative(s, params):
     """s_dot = -alpha_s s / tau of eq. (7) (float or AutoDiffXd)."""
     return -params.resolved_alpha_s * s / params.tau

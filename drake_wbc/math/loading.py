@@ -91,14 +91,15 @@ def load_typed(schema, path=None, text=None):
         OSError: if the file cannot be read.
     """
     if (path is None) == (text is None):
-        raise ValueError(f"path = {_short(path)} and text = {_short(text)} "
-                         "are not allowed: give exactly one of them")
+        raise ValueError(f"path = {short_value(path)} and text = "
+                         f"{short_value(text)} are not allowed: give exactly "
+                         "one of them")
     source = "" if path is None else f"{path}: "
     try:
         if path is not None:
             text = _read_text(path)
         elif not isinstance(text, str):
-            raise ValueError(f"text = {_short(text)} is not allowed: must "
+            raise ValueError(f"text = {short_value(text)} is not allowed: must "
                              "be a string of YAML")
         elif len(text.encode("utf-8", "surrogatepass")) > MAX_BYTES:
             raise ValueError(
@@ -110,8 +111,8 @@ def load_typed(schema, path=None, text=None):
             document, text = {}, "{}"
         if not isinstance(document, dict):
             raise ValueError(
-                f"the document = {_short(document)} is not allowed: must be "
-                f"a mapping of the fields of {schema.__name__} "
+                f"the document = {short_value(document)} is not allowed: "
+                f"must be a mapping of the fields of {schema.__name__} "
                 f"({_field_names(schema)})")
         try:
             params = yaml_load_typed(schema=schema, data=text)
@@ -125,6 +126,25 @@ def load_typed(schema, path=None, text=None):
         raise ValueError(f"{source}{error}") from None
     except yaml.YAMLError as error:
         raise ValueError(f"{source}not valid YAML: {error}") from None
+
+
+def screened_data(path):
+    """The plain data (mappings, lists, scalars) of the YAML file `path`,
+    read as `load_typed` reads one: at most MAX_BYTES bytes of UTF-8,
+    `screen`ed before PyYAML's safe loader builds it; for a file that is
+    not a parameters dataclass (a learned movement,
+    drake_wbc.math.movement).
+
+    Raises:
+        ValueError: for a file too large, not UTF-8, or that could hurt
+            the loader (the module's docstring), with the line and what
+            is allowed.
+        yaml.YAMLError: for text that is not YAML.
+        OSError: if the file cannot be read.
+    """
+    text = _read_text(path)
+    screen(text)
+    return yaml.safe_load(text)
 
 
 def _read_text(path):
@@ -284,7 +304,7 @@ def shortened(message):
             f"({len(value)} characters){message[end:]}")
 
 
-def _short(value, limit=SHORT):
+def short_value(value, limit=SHORT):
     """A rendering of `value` (plain data from YAML) of at most about
     `limit` characters, built without rendering what is cut (a shared
     structure is never expanded)."""
@@ -340,8 +360,8 @@ def _failing_key(document, schema, prefix):
         name = f"{prefix}{key}"
         if key not in hints:
             where = f"in {prefix[:-1]}" if prefix else "at the top level"
-            return (f"unknown key {_short(name)}; the keys allowed {where} "
-                    f"are {', '.join(hints)}")
+            return (f"unknown key {short_value(name)}; the keys allowed "
+                    f"{where} are {', '.join(hints)}")
         nested = _dataclass_in(hints[key])
         if nested is not None and isinstance(value, dict):
             inner = _failing_key(value, nested, f"{name}.")
@@ -366,7 +386,7 @@ def _failing_key(document, schema, prefix):
         elif nested is not None and not isinstance(value, dict):
             message = (f"must be a mapping of the fields of "
                        f"{nested.__name__} ({_field_names(nested)})")
-        return f"{name} = {_short(value)} is not allowed: {message}"
+        return f"{name} = {short_value(value)} is not allowed: {message}"
     return None
 
 

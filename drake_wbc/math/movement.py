@@ -32,6 +32,7 @@ import yaml
 from drake_wbc.math import dmp
 from drake_wbc.math.demonstration import DIMENSIONS, Demonstration
 from drake_wbc.math.kernels import fast_kernel
+from drake_wbc.math.loading import screened_data, short_value, shortened
 from drake_wbc.math.validation import as_matrix, as_vector, positive
 
 LEARNED_TWIST_INDICES = (0, 1, 2, 5)
@@ -44,6 +45,25 @@ of a movement of several seconds)."""
 
 PLOT_PERIOD = 0.05
 """s: the sample period of the demonstrations kept in a movement file."""
+
+MAX_KEPT_SAMPLES = 4000
+"""The most samples of all the demonstrations kept in a movement file,
+together (10 values each: 40,000 of the 50,000 that the loader reads,
+drake_wbc.math.loading.MAX_NODES, beside at most 5,000 weights): a
+demonstration longer than 200 s is kept at a longer period than
+PLOT_PERIOD."""
+
+ROLLOUT_RESOLUTION = 0.25
+"""The largest step of a MovementPlayer's rollouts times the played DMP's
+fastest rate (dmp.fastest_rate): 0.125 at the default gains and tau = 1
+with the 5 ms step; Runge-Kutta's fourth order diverges from about 2.8,
+which a movement played 50 times faster than it was taught passed with
+the fixed 5 ms step (its reference grew to 1e49 m)."""
+
+MAX_ROLLOUT_STEPS = 100_000
+"""The most steps of each of a MovementPlayer's two rollouts (about 8 s
+each to build, at 12,000 steps/s): a movement of up to 495 s as played,
+or the shipped 6 s one played down to tau = tau_0 / 200."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -104,8 +124,9 @@ class LearnedMovement:
             "goal": _round(self.goal),
             "weights": [[float(f"{w:.6g}") for w in row]
                         for row in self.weights],
-            "demonstrations": [_demo_document(d)
-                               for d in self.demonstrations],
+            "demonstrations": [_demo_document(
+                d, max(MAX_KEPT_SAMPLES // len(self.demonstrations), 3))
+                for d in self.demonstrations],
         }
         header = (
             "# A whole-body movement learned as a DMP "
@@ -123,26 +144,64 @@ class LearnedMovement:
 
     @classmethod
     def load(cls, path):
-        """Reads a movement written by `save`.
+        """Reads a movement written by `save`, as the scenarios' loader
+        reads a file (drake_wbc.math.loading.screened_data: at most
+        MAX_BYTES, no alias bomb, no deep nesting).
 
         Raises:
-            ValueError: naming the file and what is wrong in it.
+            ValueError: naming the file, the field and what is wrong in
+                it.
         """
         path = Path(path)
         if not path.is_file():
             raise ValueError(f"file = {str(path)!r} is not allowed: no "
                              "such movement file")
         try:
-            document = yaml.safe_load(path.read_text(encoding="utf-8"))
-            params = dmp.DmpParameters(**document["dmp"])
-            demos = tuple(
-                Demonstration(d["time"], d["tcp"], d.get("base"))
-                for d in document.get("demonstrations") or [])
-            return cls(params, document["weights"], document["start"],
-                       document["goal"], demos)
-        except (yaml.YAMLError, KeyError, TypeError, ValueError) as error:
-            raise ValueError(f"{path}: not a learned movement: {error}") \
-                from None
+            document = screened_data(path)
+        except ValueError as error:
+            raise ValueError(f"{path}: {error}") from None
+        except yaml.YAMLError as error:
+            raise ValueError(f"{path}: not valid YAML: {error}") from None
+        try:
+            return cls._from_document(document)
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"{path}: not a learned movement: "
+                             f"{shortened(str(error))}") from None
+
+    @classmethod
+    def _from_document(cls, document):
+        """The LearnedMovement of a document (plain data) of `save`."""
+        keys = "dimensions, dmp, start, goal, weights and demonstrations"
+        if not isinstance(document, dict):
+            raise ValueError(f"the document = {short_value(document)} is not "
+                             f"allowed: must be a mapping of {keys}")
+        for key in ("dmp", "start", "goal", "weights"):
+            if key not in document:
+                raise ValueError(f"{key} is missing: a learned movement "
+                                 f"has {keys}")
+        dimensions = document.get("dimensions", list(DIMENSIONS))
+        if dimensions != list(DIMENSIONS):
+            raise ValueError(f"dimensions = {short_value(dimensions)} is not "
+                             f"allowed: must be {list(DIMENSIONS)}")
+        if not isinstance(document["dmp"], dict):
+            raise ValueError(f"dmp = {short_value(document['dmp'])} is not "
+                             "allowed: must be a mapping of DmpParameters' "
+                             "fields")
+        params = dmp.DmpParameters(**document["dmp"])
+        demos = []
+        for i, demo in enumerate(document.get("demonstrations") or []):
+            if not isinstance(demo, dict) or not {"time", "tcp"} <= set(demo):
+                raise ValueError(
+                    f"demonstrations[{i}] = {short_value(demo)} is not "
+                    "allowed: must be a mapping of time, tcp and (optional) "
+                    "base")
+            try:
+                demos.append(Demonstration(demo["time"], demo["tcp"],
+                                           demo.get("base")))
+            except ValueError as error:
+                raise ValueError(f"demonstrations[{i}].{error}") from None
+        return cls(params, document["weights"], document["start"],
+                   document["goal"], tuple(demos))
 
 
 def _round(value, decimals=7):
@@ -151,8 +210,11 @@ def _round(value, decimals=7):
     return [_round(v, decimals) for v in value]
 
 
-def _demo_document(demo):
-    step = max(int(round(PLOT_PERIOD / np.median(np.diff(demo.time)))), 1)
+def _demo_document(demo, most):
+    """`demo` as plain data, every PLOT_PERIOD (or fewer: at most `most`
+    samples, its last one kept)."""
+    step = max(int(round(PLOT_PERIOD / np.median(np.diff(demo.time)))), 1,
+               -(-(demo.time.size - 1) // (most - 1)))
     keep = np.unique(np.append(np.arange(0, demo.time.size, step),
                                demo.time.size - 1))
     document = {"time": _round(demo.time[keep], 4),
@@ -319,14 +381,38 @@ class MovementPlayer:
     Args:
         movement: a LearnedMovement.
         replay: a cdmp.MovementReplay (goal, tau, start_time, start).
-        dt: the step of the precomputed rollouts (progress, reference),
-            s.
+        dt: the longest step of the precomputed rollouts (progress,
+            reference), s; shorter where the played DMP is faster
+            (ROLLOUT_RESOLUTION).
+
+    Raises:
+        ValueError: naming the movement's duration or tau when the
+            rollouts would need more than MAX_ROLLOUT_STEPS steps.
     """
 
     def __init__(self, movement, replay, dt=0.005):
         self.movement, self.replay = movement, replay
         tau = movement.params.tau if replay.tau is None else replay.tau
         self.params = movement.params.with_tau(tau)
+        length = self.params.duration + 5.0
+        longest = positive("dt", dt)
+        dt = min(longest, ROLLOUT_RESOLUTION / dmp.fastest_rate(self.params))
+        if length / longest > MAX_ROLLOUT_STEPS:
+            raise ValueError(
+                f"{replay.file}: dmp.duration = "
+                f"{movement.params.duration:.6g} s (played at tau = {tau:g}: "
+                f"{self.params.duration:.6g} s) is not allowed: a movement "
+                f"lasts at most {MAX_ROLLOUT_STEPS * longest - 5.0:g} s as "
+                f"played (its rollouts take at most {MAX_ROLLOUT_STEPS} "
+                f"steps of {longest:g} s)")
+        if length / dt > MAX_ROLLOUT_STEPS:
+            raise ValueError(
+                f"tau = {tau!r} is not allowed for the movement "
+                f"{replay.file} (learned at tau = {movement.params.tau:g} "
+                f"over {movement.params.duration:.6g} s): played "
+                f"{movement.params.tau / tau:.3g} times faster, its rollouts "
+                f"would take {length / dt:.3g} steps of {dt:.3g} s, at most "
+                f"{MAX_ROLLOUT_STEPS}; play it slower (a larger tau)")
         self.start = movement.start if replay.start is None else np.asarray(
             replay.start, dtype=float)
         goal = movement.goal if replay.goal is None else np.asarray(
@@ -343,7 +429,6 @@ class MovementPlayer:
         self.start_time = float(replay.start_time)
         self.tracking_gain = float(replay.tracking_gain)
         self._cache = {}
-        length = self.params.duration + 5.0
         t, y, _ = dmp.rollout(self.params, np.zeros(4), learned, length, dt,
                               movement.weights)
         path = np.concatenate([[0.0], np.cumsum(np.linalg.norm(
