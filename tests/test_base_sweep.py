@@ -19,7 +19,11 @@ from drake_wbc.analysis.base_sweep import (
 )
 from drake_wbc.experiments import trajectory_tracking
 from drake_wbc.experiments.runner import build_closed_loop, simulate
-from drake_wbc.experiments.scenario import find_scenario, load_scenario
+from drake_wbc.experiments.scenario import (
+    find_scenario,
+    load_scenario,
+    station_base,
+)
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +32,7 @@ def shaking():
 
 
 def _base(scenario):
-    base = scenario.station.base
+    base = station_base(scenario)
     return (base.lag, base.damping_ratio, *base.acceleration_limits,
             base.servo_time_constant, scenario.station.time_step)
 

@@ -25,7 +25,11 @@ from drake_wbc.controller import (
 )
 from drake_wbc.experiments import line_tracking
 from drake_wbc.experiments.runner import build_closed_loop, simulate
-from drake_wbc.experiments.scenario import find_scenario, load_scenario
+from drake_wbc.experiments.scenario import (
+    find_scenario,
+    load_scenario,
+    station_base,
+)
 from drake_wbc.math.compensation import (
     BASE_SOURCES,
     RobustCompensatorParameters,
@@ -303,7 +307,7 @@ def test_the_deviation_loop_closes_through_the_base_only_with_its_motion():
     line_tracking); alpha = 0 opens the loop."""
     scenario = load_scenario(find_scenario("fixed_point"))
     hertz, omega = frequency_grid(0.01, 49.9, 100)
-    driver = replace(scenario.station.base,
+    driver = replace(station_base(scenario),
                      time_step=scenario.station.time_step)
 
     def params_of(source):

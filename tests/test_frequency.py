@@ -34,6 +34,7 @@ from drake_wbc.experiments.scenario import (
     find_scenario,
     load_scenario,
     scenario_station,
+    station_base,
 )
 from drake_wbc.math import cdmp
 from drake_wbc.math.compensation import RobustCompensatorParameters
@@ -79,7 +80,7 @@ def point(scenario):
 
 @pytest.fixture(scope="module")
 def driver(scenario):
-    return replace(scenario.station.base,
+    return replace(station_base(scenario),
                    time_step=scenario.station.time_step)
 
 

@@ -294,6 +294,44 @@ def test_a_large_command_saturates_at_the_velocity_limit(station):
     assert measured[-1] == pytest.approx(limit, abs=1e-3)
 
 
+def test_the_base_loop_is_the_robots_own_where_the_options_give_none():
+    """The second shipped robot's simulated base is held to that base's
+    own limits (0.8 m/s, 0.5 m/s^2; the shipped base's are 1 and 1): a
+    3 m/s command ramps at 0.5 m/s^2 and levels off at 0.8 m/s. A robot
+    whose velocity_lag bound is below the typical 0.2 s gets that lag,
+    one the loop cannot take is refused naming the field, and a loop the
+    options give is kept."""
+    from dataclasses import replace
+
+    from drake_wbc.robot.description import (
+        load_robot_description,
+        models_dir,
+    )
+    from drake_wbc.station.drivers import BaseDriverParameters, own_base_loop
+
+    lbr = load_robot_description(models_dir() / "lbr_omni.robot.yaml")
+    station = SimulatedStation(StationOptions(time_step=0.005), robot=lbr)
+    base = station.options.base
+    assert base.velocity_limits == list(lbr.base.velocity_limits)
+    assert base.acceleration_limits == list(lbr.base.acceleration_limits)
+    assert base.lag == 0.2 and base.damping_ratio is None
+    run = Run(station)
+    run.command(base=[3.0, 0.0, 0.0])
+    run.advance(0.5)
+    assert run["truth.base_loop_velocity"][0] == pytest.approx(0.25,
+                                                               abs=1e-9)
+    run.advance(6.0)
+    assert run["truth.base_loop_velocity"][0] == pytest.approx(0.8,
+                                                               abs=1e-6)
+    assert own_base_loop(replace(lbr.base, velocity_lag=0.1)).lag == 0.1
+    with pytest.raises(ValueError, match="base.velocity_lag = 0.015"):
+        own_base_loop(replace(lbr.base, velocity_lag=0.015))
+    given = BaseDriverParameters(loop="ringing")
+    kept = SimulatedStation(StationOptions(time_step=0.001, base=given),
+                            robot=lbr).options.base
+    assert kept == replace(given, time_step=kept.time_step)
+
+
 def test_an_arm_step_is_tracked_within_a_milliradian(station):
     run = Run(station)
     start = run["arm.position_measured"]

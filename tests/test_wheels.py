@@ -263,7 +263,8 @@ def test_the_station_on_compliant_wheels_starts_at_rest():
                              PARAMS_DRIVE, strict=True):
         mass = rigid._gains[name].d * rigid.options.base.servo_time_constant
         assert station._gains[name].d == pytest.approx(
-            (mass + inertia) / options.base.servo_time_constant, rel=1e-12)
+            (mass + inertia) / station.options.base.servo_time_constant,
+            rel=1e-12)
     assert np.max(np.abs(com)) < 1e-6
     assert np.max(np.abs(odometry)) < 1e-6
 

@@ -34,6 +34,7 @@ import numpy as np
 
 from drake_wbc.experiments import trajectory_tracking
 from drake_wbc.experiments.runner import build_closed_loop, simulate
+from drake_wbc.experiments.scenario import station_base
 from drake_wbc.math.validation import validate
 from drake_wbc.robot.suspension import (
     HorizontalCompliance,
@@ -86,7 +87,7 @@ def point_scenario(scenario, sweep_map, x, y):
     """A copy of `scenario` with the base of map `sweep_map` at (x, y)."""
     scenario = copy.deepcopy(scenario)
     station = scenario.station
-    base = station.base
+    base = station_base(scenario)
     lag, zeta = base.lag, base.damping_ratio
     accel = list(base.acceleration_limits)
     suspension = station.suspension
@@ -222,7 +223,7 @@ def draw_sweep(maps, rows, path, scenario):
     fig, axes = plt.subplots(2, len(maps), figsize=(5.0 * len(maps), 8.0),
                              squeeze=False, layout="constrained")
     norm = LogNorm(vmin=0.5, vmax=2.0)
-    station = scenario.station
+    station, base = scenario.station, station_base(scenario)
     low, high = trajectory_tracking.SHAKING_BAND
     for row, (key, title) in enumerate((
             (_MAIN, f"{low:g} to {high:g} Hz"),
@@ -260,9 +261,9 @@ def draw_sweep(maps, rows, path, scenario):
     fig.suptitle(
         "Base filter's benefit, end effector's velocity error while the "
         "0.1 m/s step lasts: ground truth (measured as the paper)\n"
-        f"around: loop lag {station.base.lag:.3g} s, damping ratio "
-        f"{station.base.damping_ratio}, acceleration limit "
-        f"{station.base.acceleration_limits[0]:g} m/s^2; suspension "
+        f"around: loop lag {base.lag:.3g} s, damping ratio "
+        f"{base.damping_ratio}, acceleration limit "
+        f"{base.acceleration_limits[0]:g} m/s^2; suspension "
         + ("none" if susp is None else
            f"{susp.pitch_frequency:g} Hz, {susp.damping_ratio:g}")
         + ("" if wheels is None else

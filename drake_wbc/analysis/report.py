@@ -367,9 +367,9 @@ def compute_bode_report(scenario, points_per_decade=60,
     point = chains.operating_point(params,
                                    scenario.station.initial_arm_positions,
                                    controller_arm(scenario))
-    driver = replace(scenario.station.base,
-                     time_step=scenario.station.time_step)
     station = scenario_station(scenario)
+    driver = replace(station.options.base,
+                     time_step=scenario.station.time_step)
     report = BodeReport()
     f = replace(params.base_filter, enabled=True)
     plot = BodePlot("base_filter", "base filter, eq. (filtering): "

@@ -49,6 +49,7 @@ from drake_wbc.robot.description import (
 )
 from drake_wbc.robot.footprint import check_start_is_free
 from drake_wbc.robot.model import ArmKinematics, ArmMount, shared_robot_plant
+from drake_wbc.station.drivers import own_base_loop
 from drake_wbc.station.scene import Scene
 from drake_wbc.station.simulation import (
     SimulatedStation,
@@ -281,6 +282,14 @@ def scenario_station(scenario):
     its robot (`scenario_robot`) on its arm mount."""
     return SimulatedStation(scenario.station, scenario.scene,
                             scenario.arm_mount, scenario_robot(scenario))
+
+
+def station_base(scenario):
+    """The simulated base's velocity loop of `scenario`
+    (BaseDriverParameters): station.base, or its robot's own where it
+    gives none, as the station builds it."""
+    return scenario.station.base or own_base_loop(
+        scenario_robot(scenario).base)
 
 
 def controller_arm(scenario):

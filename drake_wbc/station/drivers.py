@@ -149,6 +149,32 @@ class BaseDriverParameters:
             setattr(self, name, copy.copy(value))
 
 
+def own_base_loop(base):
+    """The velocity loop of a robot's base as its description gives it
+    (`base`, a BaseDescription, drake_wbc.robot.description): first
+    order, held to its velocity and acceleration limits, with the lag of
+    BaseDriverParameters (0.2 s, a typical such base) or the robot's
+    velocity_lag where that bound is shorter; the simulated station's
+    loop where its options give none.
+
+    Raises:
+        ValueError: naming the robot's field where the loop cannot take
+            its value (a velocity_lag of at most twice the loop's
+            servo_time_constant).
+    """
+    lag = min(BaseDriverParameters.lag, base.velocity_lag)
+    try:
+        return BaseDriverParameters(
+            lag=lag,
+            velocity_limits=[float(v) for v in base.velocity_limits],
+            acceleration_limits=[float(a) for a in base.acceleration_limits])
+    except ValueError as error:
+        raise ValueError(
+            f"the robot's base.velocity_lag = {base.velocity_lag!r} s "
+            f"cannot be simulated ({error}); give the station's base loop "
+            "(station.base) instead") from None
+
+
 def _same(a, b):
     """Whether two field values (None, numbers or lists) are equal."""
     if a is None or b is None:

@@ -76,6 +76,7 @@ from drake_wbc.station.drivers import (
     BaseDriverParameters,
     check_arm_time_step,
     check_base_time_step,
+    own_base_loop,
 )
 from drake_wbc.station.force_torque import (
     ForceTorqueSensorParameters,
@@ -152,8 +153,11 @@ class StationOptions:
         scene_period: s, how often the scripted scene's hand wrench and
             the people's drawn poses are sampled (held in between); a
             whole multiple of time_step (0.01 s, the control period).
-        base: the base's velocity loop (BaseDriverParameters.loop:
-            smooth, the default, jerky or ringing).
+        base: the base's velocity loop (BaseDriverParameters: a named
+            loop, smooth, jerky or ringing, or its own values); None (the
+            default): the robot's own, a first-order loop of its
+            description's velocity_lag and limits (`own_base_loop`), which
+            the station's `options` then hold.
         suspension: None (the default: the chassis rigid on its wheels) or
             the suspension's modes between the wheels and the chassis
             (drake_wbc.robot.suspension: spring-damper joints in roll and
@@ -188,7 +192,7 @@ class StationOptions:
 
     time_step: float = 0.001
     scene_period: float = 0.01
-    base: BaseDriverParameters = field(default_factory=BaseDriverParameters)
+    base: BaseDriverParameters | None = None
     suspension: SuspensionParameters | None = None
     traction: TractionParameters | None = None
     arm: ArmDriverParameters = field(default_factory=ArmDriverParameters)
@@ -205,8 +209,9 @@ class StationOptions:
             raise ValueError(f"time_step = {h!r} s is not allowed: must be "
                              f"at least {MIN_TIME_STEP!r} s (10 us) and at "
                              f"most {MAX_TIME_STEP!r} s (5 ms)")
-        for name, kind in (("base", BaseDriverParameters),
-                           ("arm", ArmDriverParameters),
+        self.base = checked_instance("base", self.base,
+                                     BaseDriverParameters, lambda: None)
+        for name, kind in (("arm", ArmDriverParameters),
                            ("wrist", ForceTorqueSensorParameters),
                            ("lidar", LidarParameters)):
             setattr(self, name, checked_instance(name, getattr(self, name),
@@ -216,8 +221,10 @@ class StationOptions:
             lambda: None)
         self.traction = checked_instance(
             "traction", self.traction, TractionParameters, lambda: None)
-        # The drivers run at the plant's step, whatever their own.
-        check_base_time_step(self.base, "time_step", h, prefix="base.")
+        # The drivers run at the plant's step, whatever their own (the
+        # robot's own base loop is checked when the station builds it).
+        if self.base is not None:
+            check_base_time_step(self.base, "time_step", h, prefix="base.")
         check_arm_time_step(self.arm, "time_step", h, prefix="arm.")
         whole_multiple("scene_period", self.scene_period, "time_step", h)
         for name in ("wrist", "lidar"):
@@ -357,6 +364,12 @@ class SimulatedStation:
         # out is this robot's home (a configuration belongs to one arm).
         if options.initial_arm_positions is None:
             options.initial_arm_positions = list(robot.arm.home)
+        # The base's velocity loop: the robot's own where the options
+        # give none.
+        if options.base is None:
+            options.base = own_base_loop(robot.base)
+            check_base_time_step(options.base, "time_step", h,
+                                 prefix="the robot's own base loop's ")
         limits = shared_robot_plant(robot, mount=mount)[1].limits
         check_arm_start(options.initial_arm_positions, limits.lower,
                         limits.upper, "station.initial_arm_positions")

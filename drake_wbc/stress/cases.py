@@ -248,7 +248,7 @@ def case_record(seed, index, scenario, log):
     joint_speed = np.abs(np.diff(command, axis=0)) / dt
     base = np.abs(log["base.velocity_command"])
     # The robot's own (its description's), not the simulated drive's
-    # (station.base, whose defaults are the shipped base's 1 m/s).
+    # (station.base, which a scenario may give limits of its own).
     base_limits = np.asarray(scenario_robot(scenario).base.velocity_limits)
     filtered = np.abs(log["filtered_base_velocity"])
     filter_limits = np.asarray(
