@@ -21,7 +21,7 @@ from drake_wbc.math.dmp import DmpParameters
 from drake_wbc.math.filtering import BaseFilterParameters
 from drake_wbc.math.motion_mode import MotionMode
 from drake_wbc.math.validation import validate
-from drake_wbc.math.workspace import WorkspaceAdapterParameters
+from drake_wbc.math.workspace import LocalWorkspace, WorkspaceAdapterParameters
 from drake_wbc.stages import BaseVelocityFilter, WorkspaceAdapter
 
 CONTROLLER_FILE = Path(__file__).parents[1] / "diagrams" / "controller.yaml"
@@ -90,7 +90,7 @@ def test_every_field_type_survives_a_round_trip():
     params.capability_band = CapabilityBand(0.03, 0.04)
     params.capability.joint_limit_gain = 2.0e4
     params.workspace.mode = "intuitive-phri"
-    params.workspace.workspace.extent_upper = 0.85
+    params.workspace.workspace = LocalWorkspace(extent_upper=0.85)
     params.distributor.damping.threshold = 2.0e-4
     params.base_cdmp.repulsion.half_sizes = (0.5, 0.35)
     params.whole_body_cdmp.dmp.beta_z = 5.0

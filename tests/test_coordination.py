@@ -678,7 +678,8 @@ def test_defaults_are_the_papers():
     assert RobustCompensatorParameters().compensation_switch == 1.0
     params = WorkspaceAdapterParameters()
     assert (params.sigma_xy, params.sigma_phi) == (0.5, 0.5)
-    assert PHRI.workspace == LocalWorkspace()
+    assert PHRI.workspace is None  # the robot's: the paper's on ours
+    assert ARM.model.description.tuning.local_workspace == LocalWorkspace()
 
 
 @pytest.mark.parametrize("system, inputs, outputs", [

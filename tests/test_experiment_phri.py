@@ -10,7 +10,11 @@ import pytest
 from drake_wbc.controller.run_log import RunLog
 from drake_wbc.experiments import phri
 from drake_wbc.experiments.reports import run_scenario
-from drake_wbc.experiments.scenario import find_scenario, load_scenario
+from drake_wbc.experiments.scenario import (
+    controller_for,
+    find_scenario,
+    load_scenario,
+)
 from drake_wbc.station.scene import HandForce
 
 DURATION = 15.0
@@ -37,7 +41,8 @@ def test_the_paper_values_are_used():
     assert c.workspace.mode == "intuitive-phri"
     assert c.phri_switch == 1.0
     assert c.whole_body_cdmp.k_hri == 0.05
-    band = c.workspace.workspace
+    assert c.workspace.workspace is None  # the robot's: the paper's here
+    band = controller_for(scenario).workspace.workspace
     np.testing.assert_allclose(
         [band.extent_lower, band.extent_upper,
          np.degrees(band.deflection_lower), np.degrees(band.deflection_upper)],

@@ -1,6 +1,6 @@
-"""The tuning that depends on the robot (drake_wbc.robot.tuning): k_j and
-the capability band, checked and proposed for the shipped arm and for a
-7-joint arm the project did not model."""
+"""The tuning that depends on the robot (drake_wbc.robot.tuning): k_j, the
+capability band and the local workspace, checked and proposed for the
+shipped arm and for a 7-joint arm the project did not model."""
 
 import math
 import warnings
@@ -10,16 +10,20 @@ import pytest
 from omni_arm import write_omni_arm
 
 from drake_wbc.controller import ControllerParameters, build_controller
+from drake_wbc.controller.parameters import for_robot
 from drake_wbc.math import capability
 from drake_wbc.math.capability import CapabilityBand
+from drake_wbc.math.workspace import LocalWorkspace, extent
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.robot.model import ArmKinematics, make_robot_plant
 from drake_wbc.robot.tuning import (
     RobotTuningWarning,
     capability_at,
     check_tuning,
+    home_extent,
     mid_range_penalty,
     proposed_joint_limit_gain,
+    proposed_local_workspace,
     survey_capability,
 )
 
@@ -93,3 +97,60 @@ def test_a_seven_joint_arm_with_the_six_joint_tuning_is_warned_of(seven):
     with warnings.catch_warnings():
         warnings.simplefilter("error", RobotTuningWarning)
         build_controller(params, robot=seven)
+
+
+def test_the_local_workspace_is_proposed_and_checked_at_the_arms_home(
+        shipped, seven):
+    """The proposal is the paper's d^l, d^u on the shipped arm (its tool
+    0.736 m out at home) and scales with another arm's home extent (the
+    omni arm's, about 1 m, by the TCP's position in T_a); the paper's
+    extents on that arm, within its home, are a problem naming
+    extent_lower, warned of in the intuitive pHRI mode only."""
+    own = proposed_local_workspace(shipped)
+    assert (own.extent_lower, own.extent_upper) == pytest.approx(
+        (0.75, 0.8), abs=1e-4)
+    assert (own.deflection_lower, own.deflection_upper) == (
+        LocalWorkspace().deflection_lower, LocalWorkspace().deflection_upper)
+    band, k_j = CapabilityBand(), capability.DEFAULT_JOINT_LIMIT_GAIN
+    assert check_tuning(shipped, band, k_j, LocalWorkspace()) == []
+    d = extent(seven.evaluate(seven.home).pose[:3, 3])
+    assert home_extent(seven) == d > 0.8
+    proposal = proposed_local_workspace(seven)
+    assert proposal.extent_lower == pytest.approx(0.75 / 0.7358 * d)
+    assert proposal.extent_upper == pytest.approx(0.8 / 0.7358 * d)
+    k_j = proposed_joint_limit_gain(7)
+    band = survey_capability(seven, count=100).proposed_band()
+    problems = check_tuning(seven, band, k_j, LocalWorkspace())
+    assert len(problems) == 1
+    assert "workspace.workspace.extent_lower = 0.75 m" in problems[0]
+    assert f"d = {d:.4g} m" in problems[0]
+    assert check_tuning(seven, band, k_j, proposal) == []
+    params = ControllerParameters()
+    params.capability.joint_limit_gain, params.capability_band = k_j, band
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RobotTuningWarning)
+        build_controller(params, robot=seven)  # loco-manipulation
+    params.workspace.mode = "intuitive-phri"
+    with pytest.warns(RobotTuningWarning, match="extent_lower"):
+        build_controller(params, robot=seven)
+
+
+def test_a_descriptions_local_workspace_is_the_controllers(tmp_path):
+    """tuning.local_workspace in the description is what the controller's
+    parameters take where they give none; a given one is kept."""
+    path = write_omni_arm(tmp_path, 7)
+    path.write_text(path.read_text() + (
+        "tuning:\n  local_workspace: {extent_lower: 1.1, extent_upper: 1.2}"
+        "\n"))
+    robot = load_robot_description(path)
+    assert robot.tuning.local_workspace == LocalWorkspace(1.1, 1.2)
+    assert for_robot(ControllerParameters(), robot).workspace.workspace == (
+        LocalWorkspace(1.1, 1.2))
+    params = ControllerParameters()
+    params.workspace.workspace = LocalWorkspace(0.9, 1.0)
+    assert for_robot(params, robot).workspace.workspace == LocalWorkspace(
+        0.9, 1.0)
+    path.write_text(path.read_text().replace("extent_upper: 1.2",
+                                             "extent_upper: 1.0"))
+    with pytest.raises(ValueError, match="extent_upper"):
+        load_robot_description(path)

@@ -100,7 +100,8 @@ def _run_demo(args):
     print(report)
     print()
     print(describe_tuning(arm, params.capability_band,
-                          params.capability.joint_limit_gain))
+                          params.capability.joint_limit_gain,
+                          params.workspace.workspace))
     page = write_model_page(args.output / f"{description.name}_model.html",
                             q_arm, description=description)
     print(f"\nMeshcat page of the model (open it in a browser): {page}")

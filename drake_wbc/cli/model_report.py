@@ -24,8 +24,11 @@ from drake_wbc.robot.model import (
 )
 from drake_wbc.robot.tuning import (
     BAND_OVER_HOME,
+    EXTENT_OVER_HOME,
     check_tuning,
+    home_extent,
     mid_range_penalty,
+    proposed_local_workspace,
     survey_capability,
 )
 
@@ -147,15 +150,17 @@ def describe_robot(q_a=None, k_j=None, description=None):
     return "\n".join(lines)
 
 
-def describe_tuning(arm, band, k_j, count=2000):
-    """Returns a text report of what the capability band and k_j mean on
-    `arm` (ArmKinematics): C_m at home and over `count` random
-    configurations, with the given k_j and with the one proposed for the
-    arm, the band proposed there (drake_wbc.robot.tuning), and what is
-    wrong with the given tuning."""
+def describe_tuning(arm, band, k_j, local_workspace, count=2000):
+    """Returns a text report of what the capability band, k_j and the
+    local workspace (LocalWorkspace) mean on `arm` (ArmKinematics): C_m
+    at home and over `count` random configurations, with the given k_j
+    and with the one proposed for the arm, the band and the local
+    workspace proposed there (drake_wbc.robot.tuning), and what is wrong
+    with the given tuning."""
     given = survey_capability(arm, k_j, count)
     proposed = survey_capability(arm, None, count)
     band_there = proposed.proposed_band()
+    workspace_there = proposed_local_workspace(arm)
     percentiles = np.percentile(proposed.samples, [50, 90, 99])
     lines = [
         f"Tuning for this arm ({arm.num_joints} joints, {count} random "
@@ -175,8 +180,15 @@ def describe_tuning(arm, band, k_j, count=2000):
         f"the shipped arm; "
         f"{100 * proposed.fraction_below(band_there.upper):.1f}% of the "
         "configurations lie below it",
+        f"  proposed local_workspace (intuitive pHRI): extents "
+        f"({workspace_there.extent_lower:.3g}, "
+        f"{workspace_there.extent_upper:.3g}) m, at "
+        f"{EXTENT_OVER_HOME[0]:.3f} and {EXTENT_OVER_HOME[1]:.3f} of the "
+        f"tool's extent at home, {home_extent(arm):.4g} m, as the paper's "
+        f"on the shipped arm (given: ({local_workspace.extent_lower:.3g}, "
+        f"{local_workspace.extent_upper:.3g}) m)",
     ]
-    problems = check_tuning(arm, band, k_j)
+    problems = check_tuning(arm, band, k_j, local_workspace)
     lines += [f"  to change: {problem}" for problem in problems] or [
         "  the given tuning suits this arm"]
     return "\n".join(lines)

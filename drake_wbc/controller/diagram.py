@@ -98,6 +98,7 @@ from drake_wbc.controller.parameters import (
     for_robot,
 )
 from drake_wbc.math.base_state import BASE_STATE_SIZE, BASE_YAW
+from drake_wbc.math.motion_mode import MotionMode
 from drake_wbc.math.safety import MEASURED_POSITION_MARGIN
 from drake_wbc.math.task_inputs import TASK_INPUTS
 from drake_wbc.math.validation import checked_instance, validated_copy
@@ -202,9 +203,10 @@ def build_controller(params=None, robot=None):
         robot: the robot: a RobotDescription (drake_wbc.robot.description;
             the shipped robot if None), or the ArmKinematics of one, to
             share its plant. Every stage's ports are sized by its arm, and
-            the limits are checked against its own; a capability band or
-            joint-limit gain that does not suit the arm is warned of
-            (RobotTuningWarning, drake_wbc.robot.tuning.check_tuning).
+            the limits are checked against its own; a capability band,
+            joint-limit gain or (intuitive pHRI) local workspace that
+            does not suit the arm is warned of (RobotTuningWarning,
+            drake_wbc.robot.tuning.check_tuning).
 
     Returns:
         Controller: the diagram with named ports (STATION_INPUTS,
@@ -222,7 +224,10 @@ def build_controller(params=None, robot=None):
     h, band, switch = (params.time_step, params.capability_band,
                        params.phri_switch)
     check_arm_limits(params.arm_controller, arm)
-    for problem in check_tuning(arm, band, params.capability.joint_limit_gain):
+    phri = params.workspace.mode is MotionMode.INTUITIVE_PHRI
+    for problem in check_tuning(
+            arm, band, params.capability.joint_limit_gain,
+            params.workspace.workspace if phri else None):
         warnings.warn(problem, RobotTuningWarning, stacklevel=2)
     builder = DiagramBuilder()
     add = builder.AddNamedSystem

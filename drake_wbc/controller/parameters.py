@@ -222,9 +222,10 @@ def for_robot(params, robot):
       base's own where None; a given one at most the base's
       (drake_wbc.math.safety.check_within_robot); safety.base_lag: the
       base's velocity_lag where None, a given one at least it.
-    - capability_band and capability.joint_limit_gain: the robot's
-      tuning (its description's RobotTuning, the paper's where it gives
-      none) where None.
+    - capability_band, capability.joint_limit_gain and
+      workspace.workspace (the local workspace of the intuitive pHRI
+      mode): the robot's tuning (its description's RobotTuning, the
+      paper's where it gives none) where None.
     - base_cdmp.repulsion.half_sizes, the footprint the repulsive field
       and the separation keep clear: the base's own where None; a given
       one at least the base's along each axis (a footprint smaller than
@@ -267,6 +268,9 @@ def for_robot(params, robot):
         capability=dataclasses.replace(
             params.capability,
             joint_limit_gain=tuning.joint_limit_gain if k_j is None else k_j),
+        workspace=dataclasses.replace(
+            params.workspace,
+            workspace=params.workspace.workspace or tuning.local_workspace),
         safety=dataclasses.replace(
             safety, base_velocity_limits=velocity,
             base_acceleration_limits=acceleration,

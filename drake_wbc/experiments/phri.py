@@ -46,7 +46,11 @@ from drake_wbc.experiments.common import (
     sample_period,
     save_figure,
 )
-from drake_wbc.experiments.scenario import controller_arm, footprint_of
+from drake_wbc.experiments.scenario import (
+    controller_arm,
+    controller_for,
+    footprint_of,
+)
 from drake_wbc.math import workspace
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.station.scene import Scene
@@ -236,7 +240,7 @@ def draw_figures(scenario, logs, folder):
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle, Polygon
 
-    band = scenario.controller.workspace.workspace
+    band = controller_for(scenario).workspace.workspace
     windows = stages(scenario)
     paths = []
     arm = controller_arm(scenario)

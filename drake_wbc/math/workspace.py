@@ -117,7 +117,7 @@ functions of plain names check their arguments and call them;
 import math
 import numbers
 import operator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -219,8 +219,11 @@ class WorkspaceAdapterParameters:
             loco-manipulation mode, in (0, 1) there (checked in [0, 1] in
             the other modes, which do not use them). The default 0.5 is the
             paper's trajectory-tracking experiment.
-        workspace: the local workspace of the intuitive pHRI mode; the
-            paper's d^l = 0.75, d^u = 0.8 m, phi^l = 30, phi^u = 35 deg.
+        workspace: the LocalWorkspace of the intuitive pHRI mode; None
+            (the default): the robot's own (its description's tuning,
+            drake_wbc.robot.description.RobotTuning), for the shipped
+            robot the paper's d^l = 0.75, d^u = 0.8 m, phi^l = 30,
+            phi^u = 35 deg.
         deactivation_speed: v_h in m/s (rad/s where the gradient's test
             reads an angular part of V_ee), >= 0, finite: the hysteresis
             of the deactivation strategy (intuitive pHRI; see the
@@ -247,7 +250,7 @@ class WorkspaceAdapterParameters:
     mode: str = MotionMode.LOCO_MANIPULATION
     sigma_xy: float = 0.5
     sigma_phi: float = 0.5
-    workspace: LocalWorkspace = field(default_factory=LocalWorkspace)
+    workspace: LocalWorkspace | None = None
     deactivation_speed: float = 0.02
     max_rate: float = 10.0
 
@@ -256,7 +259,7 @@ class WorkspaceAdapterParameters:
         in_closed_range("sigma_xy", self.sigma_xy, 0.0, 1.0)
         in_closed_range("sigma_phi", self.sigma_phi, 0.0, 1.0)
         self.workspace = checked_instance(
-            "workspace", self.workspace, LocalWorkspace, LocalWorkspace)
+            "workspace", self.workspace, LocalWorkspace, lambda: None)
         self.deactivation_speed = non_negative("deactivation_speed",
                                                self.deactivation_speed)
         self.max_rate = positive("max_rate", self.max_rate)

@@ -37,6 +37,7 @@ from pathlib import Path
 from drake_wbc.math.capability import DEFAULT_JOINT_LIMIT_GAIN, CapabilityBand
 from drake_wbc.math.loading import load_typed
 from drake_wbc.math.validation import as_vector, non_negative, positive, text
+from drake_wbc.math.workspace import LocalWorkspace
 
 MIN_ARM_JOINTS = 6
 """The controller needs a 6-D task space from the arm alone (pHRI moves
@@ -323,20 +324,32 @@ class RobotTuning:
             (transition) (drake_wbc.math.capability.CapabilityBand);
             C_m carries the units of the arm's manipulability, so the
             band is the arm's. Default the paper's 0.035 and 0.04.
+        local_workspace: the local workspace of the intuitive pHRI mode
+            (drake_wbc.math.workspace.LocalWorkspace: d^l, d^u of the
+            tool's horizontal extent from the arm base's axis, and
+            phi^l, phi^u of its deflection); d^l sits just outside the
+            tool's extent at home, so the extents are the arm's. Default
+            the paper's 0.75 and 0.8 m, 30 and 35 deg.
 
-    `drake-wbc demo --robot FILE` surveys the arm and proposes both
+    `drake-wbc demo --robot FILE` surveys the arm and proposes the three
     (drake_wbc.robot.tuning).
     """
 
     joint_limit_gain: float = DEFAULT_JOINT_LIMIT_GAIN
     capability_band: CapabilityBand = field(default_factory=CapabilityBand)
+    local_workspace: LocalWorkspace = field(default_factory=LocalWorkspace)
 
     def __post_init__(self):
         positive("joint_limit_gain", self.joint_limit_gain)
-        if not isinstance(self.capability_band, CapabilityBand):
-            raise ValueError(
-                f"capability_band = {self.capability_band!r} is not "
-                "allowed: must be a CapabilityBand (lower, upper)")
+        for name, kind, what in (
+                ("capability_band", CapabilityBand, "(lower, upper)"),
+                ("local_workspace", LocalWorkspace,
+                 "(extent_lower, extent_upper, deflection_lower, "
+                 "deflection_upper)")):
+            if not isinstance(getattr(self, name), kind):
+                raise ValueError(
+                    f"{name} = {getattr(self, name)!r} is not allowed: "
+                    f"must be a {kind.__name__} {what}")
 
 
 @dataclass

@@ -1,5 +1,6 @@
-"""The tuning that depends on the robot: the joint-limit gain k_j of P_jnt
-and the capability band C_m^l < C_m < C_m^u of eq. (transition).
+"""The tuning that depends on the robot: the joint-limit gain k_j of P_jnt,
+the capability band C_m^l < C_m < C_m^u of eq. (transition) and the local
+workspace of the intuitive pHRI mode.
 
 Both were tuned for the shipped Elfin5 (drake_wbc.math.capability,
 DEFAULT_JOINT_LIMIT_GAIN): C_m = m P_jnt has the units of the arm's
@@ -15,13 +16,19 @@ mean there what the paper's mean on ours:
 - the band at the fractions BAND_OVER_HOME of C_m at the arm's home: on
   our arm the paper's 0.035 to 0.04 sit at 0.54 and 0.62 of the home's
   0.065 ("close to a constraint", where one joint nears its limit or the
-  elbow or wrist nears a singularity, see DEFAULT_JOINT_LIMIT_GAIN).
+  elbow or wrist nears a singularity, see DEFAULT_JOINT_LIMIT_GAIN);
+- the local workspace's extents d^l, d^u at the fractions
+  EXTENT_OVER_HOME of the tool's horizontal extent d at the arm's home
+  (`home_extent`): on our arm the paper's 0.75 and 0.8 m sit just outside
+  the home's 0.736 m, so that the intuitive pHRI mode starts with the arm
+  alone and hands the motion to the base as the tool reaches out; the
+  deflections phi^l, phi^u are angles, the paper's on any arm.
 
 `survey_capability` samples the arm's C_m (at home and over random
 configurations within its limits); `check_tuning` says, as sentences,
-what is wrong with a band and a k_j on an arm (empty when nothing is),
-which build_controller warns with and `drake-wbc demo --robot FILE`
-prints beside the proposal.
+what is wrong with a band, a k_j and a local workspace on an arm (empty
+when nothing is), which build_controller warns with and `drake-wbc demo
+--robot FILE` prints beside the proposal.
 """
 
 import math
@@ -32,6 +39,7 @@ import numpy as np
 from drake_wbc.math import capability
 from drake_wbc.math.capability import CapabilityBand
 from drake_wbc.math.validation import positive, whole_number
+from drake_wbc.math.workspace import LocalWorkspace, extent
 
 MID_RANGE_PENALTY = 1.0 - math.exp(-capability.DEFAULT_JOINT_LIMIT_GAIN
                                    / 4.0 ** 6)
@@ -41,6 +49,17 @@ MID_RANGE_PENALTY = 1.0 - math.exp(-capability.DEFAULT_JOINT_LIMIT_GAIN
 BAND_OVER_HOME = (0.035 / 0.0649, 0.04 / 0.0649)
 """The paper's band over C_m at the shipped arm's home (0.0649): (0.54,
 0.62), the fractions of an arm's home C_m where the proposed band sits."""
+
+
+SHIPPED_HOME_EXTENT = 0.7358
+"""m: the horizontal extent d of the shipped arm's tool centre point at
+its home, from the arm base's axis (drake_wbc.math.workspace.extent)."""
+
+EXTENT_OVER_HOME = (LocalWorkspace.extent_lower / SHIPPED_HOME_EXTENT,
+                    LocalWorkspace.extent_upper / SHIPPED_HOME_EXTENT)
+"""The paper's d^l = 0.75 and d^u = 0.8 m over the shipped arm's home
+extent: (1.019, 1.087), the fractions of an arm's home extent where the
+proposed local workspace sits."""
 
 
 class RobotTuningWarning(UserWarning):
@@ -102,12 +121,30 @@ def survey_capability(arm, k_j=None, count=2000, seed=0):
     return CapabilitySurvey(k_j, capability_at(arm, arm.home, k_j), samples)
 
 
-def check_tuning(arm, band, k_j):
-    """What is wrong with the capability `band` (CapabilityBand) and the
-    joint-limit gain `k_j` on `arm` (ArmKinematics), as sentences that say
-    what to change; empty when nothing is. Cheap (one evaluation at home):
-    it checks that the band is not active at the arm's home (alpha > 0
-    there) and that P_jnt can come near 1."""
+def home_extent(arm):
+    """d: the horizontal extent of `arm`'s (ArmKinematics) tool centre
+    point from the arm base's axis at its home, m."""
+    return float(extent(arm.evaluate(arm.home).pose[:3, 3]))
+
+
+def proposed_local_workspace(arm):
+    """The LocalWorkspace with d^l, d^u at EXTENT_OVER_HOME of `arm`'s
+    home extent and the paper's deflections: on the shipped arm the
+    paper's own, to the rounding of SHIPPED_HOME_EXTENT."""
+    d = home_extent(arm)
+    return LocalWorkspace(extent_lower=EXTENT_OVER_HOME[0] * d,
+                          extent_upper=EXTENT_OVER_HOME[1] * d)
+
+
+def check_tuning(arm, band, k_j, local_workspace=None):
+    """What is wrong with the capability `band` (CapabilityBand), the
+    joint-limit gain `k_j` and, if given, the `local_workspace`
+    (LocalWorkspace, of the intuitive pHRI mode) on `arm` (ArmKinematics),
+    as sentences that say what to change; empty when nothing is. Cheap
+    (one evaluation at home): it checks that the band is not active at
+    the arm's home (alpha > 0 there), that P_jnt can come near 1 and
+    that the tool at home is inside d^l (else the base moves from the
+    start)."""
     problems = []
     n = arm.num_joints
     best = mid_range_penalty(k_j, n)
@@ -129,4 +166,17 @@ def check_tuning(arm, band, k_j):
             f"below it, e.g. ({proposal.lower:.3g}, {proposal.upper:.3g}) "
             "in the controller's parameters or the robot description's "
             "tuning (drake-wbc demo --robot FILE surveys the arm)")
+    if local_workspace is not None:
+        d = home_extent(arm)
+        if d >= local_workspace.extent_lower:
+            proposal = proposed_local_workspace(arm)
+            problems.append(
+                f"workspace.workspace.extent_lower = "
+                f"{local_workspace.extent_lower!r} m is within the tool's "
+                f"extent at the robot's home, d = {d:.4g} m: in the "
+                "intuitive pHRI mode the base would take the motion from "
+                "the start; give extents beyond it, e.g. "
+                f"({proposal.extent_lower:.3g}, {proposal.extent_upper:.3g})"
+                " in the controller's parameters or the robot "
+                "description's tuning (local_workspace)")
     return problems

@@ -192,7 +192,8 @@ def WorkspaceAdapter_(T):
         Args:
             params: WorkspaceAdapterParameters (read here, when the stage
                 is built); loco-manipulation with sigma_xy = sigma_phi =
-                0.5 if None.
+                0.5 if None. Its local workspace, where None, the arm's
+                robot's (its description's tuning).
             arm: ArmKinematics whose R_ba and arm-base position define
                 T_a; our robot's if None.
             band: the CapabilityBand C_m^l, C_m^u of f_xy and f_phi
@@ -220,8 +221,10 @@ def WorkspaceAdapter_(T):
             p = self.params
             if p.mode is MotionMode.INTUITIVE_PHRI:
                 h = positive("time_step", time_step)
+                local = (p.workspace or self.arm.model.description.tuning
+                         .local_workspace)
                 self._constants = workspace.AdaptiveWorkspace.of(
-                    self.band.upper, self.band.lower, p.workspace, self.R_ba,
+                    self.band.upper, self.band.lower, local, self.R_ba,
                     self.arm_base_position, p.deactivation_speed,
                     p.max_rate * h)
                 self._factors = body_for(
