@@ -328,8 +328,8 @@ def with_robot(scenario, robot_file, echo=print):
     (a command line's --robot), its start checked against that robot.
 
     A start is a configuration of one arm: the same joint angles put
-    another arm in another pose (the shipped Elfin5's home stretches a
-    UR-type arm's tool out of the local workspace). So on a robot other
+    another arm in another pose (the shipped arm's home stretches a
+    longer arm's tool out of its local workspace). So on a robot other
     than the scenario's own (another description file) the arm starts at
     that robot's home, said through `echo`; on the scenario's own robot
     it keeps the scenario's start.
