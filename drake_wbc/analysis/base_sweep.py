@@ -25,7 +25,6 @@ step shrinks to lag / 10 where a short lag needs it.
 
 import copy
 import csv
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_wbc.experiments import trajectory_tracking
+from drake_wbc.experiments.reports import json_text
 from drake_wbc.experiments.runner import build_closed_loop, simulate
 from drake_wbc.experiments.scenario import station_base
 from drake_wbc.math.validation import validate
@@ -195,7 +195,7 @@ def run_sweep(scenario, output, maps=MAPS, echo=print):
         writer = csv.DictWriter(stream, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    (output / "sweep.json").write_text(json.dumps(rows, indent=2))
+    (output / "sweep.json").write_text(json_text(rows))
     draw_sweep(maps, rows, output / "sweep.png", scenario)
     return rows
 

@@ -5,9 +5,8 @@ returns: every time in microseconds as timing.summarize statistics
 (median, p10, p25, p75, p90, iqr, min, n).
 """
 
-import json
 
-from drake_wbc.experiments.reports import plain_values
+from drake_wbc.experiments.reports import json_text
 
 GOALS = (
     ("solve_vs_daqp",
@@ -77,7 +76,7 @@ def evaluate_goals(results):
 
 def write_json(results, path):
     """Writes `results` as JSON to `path`."""
-    path.write_text(json.dumps(plain_values(results), indent=2))
+    path.write_text(json_text(results))
     return path
 
 

@@ -17,7 +17,6 @@ writes what `drake-wbc run` writes, the figures of demonstration against
 replay included.
 """
 
-import json
 import shlex
 import sys
 from dataclasses import replace
@@ -60,7 +59,11 @@ def run_teach(args, argv=None, echo=print):
     import numpy as np
 
     from drake_wbc.experiments import teach
-    from drake_wbc.experiments.reports import format_summary, plain_values
+    from drake_wbc.experiments.reports import (
+        format_summary,
+        json_text,
+        plain_values,
+    )
     from drake_wbc.experiments.scenario import find_scenario, load_scenario
     from drake_wbc.math.dmp import MAX_BASIS
 
@@ -108,7 +111,7 @@ def run_teach(args, argv=None, echo=print):
                "metrics": plain_values(metrics),
                "files": [f.name for f in written + [figure]],
                "movement": str(file)}
-    (output / "summary.json").write_text(json.dumps(summary, indent=2))
+    (output / "summary.json").write_text(json_text(summary))
     if echo is not None:
         echo(format_summary(summary, output))
         echo(f"Movement written to {file}")

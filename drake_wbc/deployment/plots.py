@@ -14,7 +14,6 @@ into the output folder what `drake-wbc run` writes for a simulated run
 - `summary.json`.
 """
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +21,7 @@ import numpy as np
 from drake_wbc.deployment.lcm_logs import read_lcm_log
 from drake_wbc.experiments import experiment_module
 from drake_wbc.experiments.common import new_figure, run_metrics, save_figure
-from drake_wbc.experiments.reports import plain_values
+from drake_wbc.experiments.reports import json_text, plain_values
 from drake_wbc.experiments.scenario import (
     Scenario,
     find_scenario,
@@ -97,7 +96,7 @@ def plot_lcm_log(logfile, output, scenario=None, variant=None,
             summary[key] = plain_values(value)
     files.append(draw_hardware_figure(log, output, title=name))
     summary["files"] = [Path(f).name for f in files]
-    (output / "summary.json").write_text(json.dumps(summary, indent=2))
+    (output / "summary.json").write_text(json_text(summary))
     return summary
 
 

@@ -15,6 +15,7 @@ The summary is also printed.
 
 import copy
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -84,7 +85,7 @@ def run_scenario(scenario, output, name=None, duration=None, replay=None,
     if scenario.outputs.plots:
         files += module.draw_figures(scenario, logs, output)
     summary["files"] = [str(Path(f).name) for f in files]
-    (output / "summary.json").write_text(json.dumps(summary, indent=2))
+    (output / "summary.json").write_text(json_text(summary))
     if echo is not None:
         echo(format_summary(summary, output))
     summary["logs"] = logs
@@ -99,6 +100,26 @@ def plain_values(value):
         return [plain_values(v) for v in value]
     if isinstance(value, (np.floating, np.integer, np.bool_)):
         return value.item()
+    return value
+
+
+def json_text(value, indent=2):
+    """`value` (plain_values of it) as strict JSON text, with NaN and
+    +-inf, for which JSON has no number (and strict readers, jq's and
+    most languages', refuse Python's NaN), as the strings "nan", "inf"
+    and "-inf", which float() reads back."""
+    return json.dumps(_strict(plain_values(value)), indent=indent,
+                      allow_nan=False)
+
+
+def _strict(value):
+    """`value` (plain data) with its non-finite floats as strings."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_strict(v) for v in value]
     return value
 
 

@@ -53,7 +53,6 @@ whose parent is gone (killed with SIGKILL) ends itself within a second.
 import contextlib
 import csv
 import json
-import math
 import multiprocessing
 import os
 import signal
@@ -63,6 +62,7 @@ import time
 from multiprocessing import resource_tracker
 from pathlib import Path
 
+from drake_wbc.experiments.reports import json_text
 from drake_wbc.experiments.scenario import robot_option_file
 from drake_wbc.math.validation import positive_duration, whole_number
 from drake_wbc.robot.description import load_robot_description
@@ -417,10 +417,9 @@ class Journal:
         self.records = self._earlier(settings) if resume else []
         fresh = self.path.with_name(self.path.name + ".new")
         with fresh.open("w", encoding="utf-8") as stream:
-            stream.write(json.dumps(_json_ready(
-                {"settings": settings})) + "\n")
+            stream.write(json_text({"settings": settings}, None) + "\n")
             for record in self.records:
-                stream.write(json.dumps(_json_ready(record)) + "\n")
+                stream.write(json_text(record, None) + "\n")
         os.replace(fresh, self.path)
 
     def _earlier(self, settings):
@@ -459,7 +458,7 @@ class Journal:
     def append(self, record):
         """Appends `record` as one line, flushed to disk at once."""
         with self.path.open("a", encoding="utf-8") as stream:
-            stream.write(json.dumps(_json_ready(record)) + "\n")
+            stream.write(json_text(record, None) + "\n")
 
 
 def _record_from_line(line):
@@ -533,20 +532,8 @@ def _rows(records):
     return "\n".join(lines)
 
 
-def _json_ready(value):
-    """`value` with non-finite floats as the strings "nan", "inf", "-inf"
-    (strict JSON has no such numbers)."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return str(value)
-    if isinstance(value, dict):
-        return {k: _json_ready(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_json_ready(v) for v in value]
-    return value
-
-
 def _from_json(value):
-    """Inverse of `_json_ready` for a record's values."""
+    """Inverse of experiments.reports.json_text for a record's values."""
     if value in ("nan", "inf", "-inf"):
         return float(value)
     if isinstance(value, dict):
@@ -566,8 +553,7 @@ def write_results(folder, settings, records):
     document = dict(settings, failed=sum(bool(r["violations"]) for r in rows),
                     cases=rows)
     json_path = folder / "stress.json"
-    json_path.write_text(json.dumps(_json_ready(document), indent=1),
-                         encoding="utf-8")
+    json_path.write_text(json_text(document, 1), encoding="utf-8")
     keys = list(dict.fromkeys(k for record in records for k in record))
     csv_path = folder / "stress.csv"
     with csv_path.open("w", newline="", encoding="utf-8") as stream:
