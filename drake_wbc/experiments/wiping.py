@@ -256,11 +256,11 @@ def draw_figures(scenario, logs, folder):
             axes[1].plot(t, pose[:, i] - pose[0, i], label=axis_name)
         axes[1].plot(t, commanded[:, 1] - pose[0, 1], "k--", lw=0.8,
                      label="y commanded")
-        axes[1].set_ylabel("$p_{ee}$ - start (m)")
+        axes[1].set_ylabel("$p_{ee}$ - start,\nworld (m)")
         dist = integrated_deviation(log)[:, :2]
         axes[2].plot(t, 1e3 * dist[:, 0], label="$x_{dist}$")
         axes[2].plot(t, 1e3 * dist[:, 1], label="$y_{dist}$")
-        axes[2].set_ylabel("deviation (mm)")
+        axes[2].set_ylabel("deviation,\n$T_b$ (mm)")
         for i, label in enumerate(("$v_x$", "$v_y$", r"$\omega_z$")):
             axes[3].plot(t, log["base.velocity_command"][:, i], label=label)
         axes[3].set_ylabel("$V_b^{ref}$ (m/s, rad/s)")
