@@ -299,7 +299,7 @@ def test_the_base_loop_is_the_robots_own_where_the_options_give_none():
     own limits (0.8 m/s, 0.5 m/s^2; the shipped base's are 1 and 1): a
     3 m/s command ramps at 0.5 m/s^2 and levels off at 0.8 m/s. A robot
     whose velocity_lag bound is below the typical 0.2 s gets that lag,
-    one the loop cannot take is refused naming the field, and a loop the
+    one the loop cannot take (0 s) is refused naming the field, and a loop the
     options give is kept."""
     from dataclasses import replace
 
@@ -324,12 +324,39 @@ def test_the_base_loop_is_the_robots_own_where_the_options_give_none():
     assert run["truth.base_loop_velocity"][0] == pytest.approx(0.8,
                                                                abs=1e-6)
     assert own_base_loop(replace(lbr.base, velocity_lag=0.1)).lag == 0.1
-    with pytest.raises(ValueError, match="base.velocity_lag = 0.015"):
-        own_base_loop(replace(lbr.base, velocity_lag=0.015))
+    with pytest.raises(ValueError, match="base.velocity_lag = 0.0 s"):
+        own_base_loop(replace(lbr.base, velocity_lag=0.0))
     given = BaseDriverParameters(loop="ringing")
     kept = SimulatedStation(StationOptions(time_step=0.001, base=given),
                             robot=lbr).options.base
     assert kept == replace(given, time_step=kept.time_step)
+
+
+def test_a_robot_with_a_fast_base_loop_is_simulated_at_its_own_lag():
+    """A described velocity_lag of 15 ms (a stiff hub-motor loop, as the
+    "jerky" loop's 20 ms) is the simulated loop's own, its wheel servo
+    under it faster still: the loop's first-order response to a small
+    step (within the acceleration limit) reaches 1 - exp(-1) of it after
+    one lag, as the continuous loop does (h / lag = 1 / 15)."""
+    from dataclasses import replace
+
+    from drake_wbc.robot.description import (
+        load_robot_description,
+        models_dir,
+    )
+
+    lbr = load_robot_description(models_dir() / "lbr_omni.robot.yaml")
+    fast = replace(lbr, base=replace(lbr.base, velocity_lag=0.015))
+    station = SimulatedStation(StationOptions(time_step=0.001), robot=fast)
+    loop = station.options.base
+    assert loop.lag == 0.015
+    assert loop.servo_time_constant < 0.5 * loop.lag
+    step = 0.005  # m/s: step / lag = 0.33 m/s^2, below the 0.5 allowed.
+    run = Run(station)
+    run.command(base=[step, 0.0, 0.0])
+    run.advance(loop.lag)
+    assert run["truth.base_loop_velocity"][0] == pytest.approx(
+        step * (1.0 - np.exp(-1.0)), rel=0.05)
 
 
 def test_an_arm_step_is_tracked_within_a_milliradian(station):

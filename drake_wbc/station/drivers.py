@@ -155,17 +155,21 @@ def own_base_loop(base):
     order, held to its velocity and acceleration limits, with the lag of
     BaseDriverParameters (0.2 s, a typical such base) or the robot's
     velocity_lag where that bound is shorter; the simulated station's
-    loop where its options give none.
+    loop where its options give none. The wheel servo under it is
+    BaseDriverParameters' (10 ms) or, under a loop faster than 40 ms,
+    a quarter of the lag (the "jerky" loop's 5 ms under 20 ms), so that
+    the loop, not the servo, sets the base's bandwidth.
 
     Raises:
         ValueError: naming the robot's field where the loop cannot take
-            its value (a velocity_lag of at most twice the loop's
-            servo_time_constant).
+            its value (a velocity_lag of 0).
     """
     lag = min(BaseDriverParameters.lag, base.velocity_lag)
     try:
         return BaseDriverParameters(
             lag=lag,
+            servo_time_constant=min(BaseDriverParameters.servo_time_constant,
+                                    0.25 * lag),
             velocity_limits=[float(v) for v in base.velocity_limits],
             acceleration_limits=[float(a) for a in base.acceleration_limits])
     except ValueError as error:
