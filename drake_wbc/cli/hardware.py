@@ -16,7 +16,6 @@ The LCM URL and channels are the scenario's `hardware:` (its defaults
 when the scenario has none); --lcm-url overrides the URL.
 """
 
-import json
 import logging
 import math
 import signal
@@ -259,6 +258,7 @@ def run_plot(args):
     """Writes the figures, log and summary of an LCM log; returns the exit
     code."""
     from drake_wbc.deployment.plots import plot_lcm_log
+    from drake_wbc.experiments.reports import json_text
 
     if not args.logfile.is_file():
         raise ValueError(f"logfile = {str(args.logfile)!r} is not allowed: "
@@ -278,8 +278,7 @@ def run_plot(args):
             args)
     summary = plot_lcm_log(args.logfile, output, scenario=scenario,
                            variant=args.variant, deployment=args.deployment)
-    print(json.dumps({k: v for k, v in summary.items() if k != "runs"},
-                     indent=2))
+    print(json_text({k: v for k, v in summary.items() if k != "runs"}))
     print(f"Written to {output}/: "
           f"{', '.join(summary['files'] + ['summary.json'])}")
     return 0
