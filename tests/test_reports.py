@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from drake_wbc.experiments.reports import json_text
+from drake_wbc.experiments.reports import from_json_text, json_text
 
 
 def _refuse(constant):
@@ -25,3 +25,12 @@ def test_json_text_is_strict_and_reads_back():
     assert math.isnan(float(data["a"]))
     assert [float(v) for v in data["b"][:2]] == [math.inf, -math.inf]
     assert json_text([1.0, 2], None) == "[1.0, 2]"
+
+
+def test_from_json_text_reads_the_non_finite_numbers_back():
+    value = {"a": [math.nan, math.inf, -math.inf, 1.5, "text"],
+             "b": {"c": 2}}
+    back = from_json_text(json_text(value))
+    assert math.isnan(back["a"][0])
+    assert back["a"][1:] == [math.inf, -math.inf, 1.5, "text"]
+    assert back["b"] == {"c": 2}

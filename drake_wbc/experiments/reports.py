@@ -112,14 +112,37 @@ def json_text(value, indent=2):
                       allow_nan=False)
 
 
+def from_json_text(text):
+    """The plain data of JSON `text` written by `json_text`, its strings
+    "nan", "inf" and "-inf" read back as the floats they stand for.
+
+    Raises:
+        ValueError: for text that is not JSON.
+    """
+    return _mapped(json.loads(text), _NON_FINITE.get)
+
+
+_NON_FINITE = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
+"""The strings `json_text` writes for the floats JSON has no number for."""
+
+
 def _strict(value):
     """`value` (plain data) with its non-finite floats as strings."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return str(value)
+    return _mapped(value, lambda v: str(v) if isinstance(v, float)
+                   and not math.isfinite(v) else None)
+
+
+def _mapped(value, leaf):
+    """`value` (plain data) with each leaf v for which leaf(v) is not None
+    replaced by it (through mappings and lists)."""
     if isinstance(value, dict):
-        return {k: _strict(v) for k, v in value.items()}
+        return {k: _mapped(v, leaf) for k, v in value.items()}
     if isinstance(value, list):
-        return [_strict(v) for v in value]
+        return [_mapped(v, leaf) for v in value]
+    if isinstance(value, (str, float)):
+        replaced = leaf(value)
+        if replaced is not None:
+            return replaced
     return value
 
 

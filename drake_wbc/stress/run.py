@@ -62,7 +62,7 @@ import time
 from multiprocessing import resource_tracker
 from pathlib import Path
 
-from drake_wbc.experiments.reports import json_text
+from drake_wbc.experiments.reports import from_json_text, json_text
 from drake_wbc.experiments.scenario import robot_option_file
 from drake_wbc.math.validation import positive_duration, whole_number
 from drake_wbc.robot.description import load_robot_description
@@ -466,7 +466,7 @@ def _record_from_line(line):
     (cut short by a stopped run, or damaged): a JSON object with a whole
     case number >= 0."""
     try:
-        record = _from_json(json.loads(line))
+        record = from_json_text(line)
     except ValueError:
         return None
     if not isinstance(record, dict):
@@ -530,17 +530,6 @@ def _rows(records):
                        in zip(row[:-1], widths, strict=True)) + "  " + row[-1]
              for row in rows]
     return "\n".join(lines)
-
-
-def _from_json(value):
-    """Inverse of experiments.reports.json_text for a record's values."""
-    if value in ("nan", "inf", "-inf"):
-        return float(value)
-    if isinstance(value, dict):
-        return {k: _from_json(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_from_json(v) for v in value]
-    return value
 
 
 def write_results(folder, settings, records):
