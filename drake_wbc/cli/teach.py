@@ -72,11 +72,10 @@ def run_teach(args, argv=None, echo=print):
                          f"must be 1 to {MAX_BASIS}")
     path = find_scenario(args.scenario)
     scenario = on_robot(load_scenario(path), args, echo)
-    try:  # the markers, before the run
-        teach.interval(scenario, args.start, args.stop)
-    except ValueError as error:
-        raise ValueError(str(error).replace("start = ", "--start = ")
-                         .replace("stop = ", "--stop = ")) from None
+    options = ("--start", "--stop")
+    # The markers, before the run.
+    start, stop = teach.interval(scenario, args.start, args.stop,
+                                 names=options)
     output = args.output or Path("out") / f"teach_{path.stem}"
     output.mkdir(parents=True, exist_ok=True)
     written = []
@@ -97,8 +96,8 @@ def run_teach(args, argv=None, echo=print):
     argv = sys.argv[1:] if argv is None else argv
     source = "drake-wbc " + shlex.join(argv)
     movement = teach.learn_from_log(scenario, log, args.start, args.stop,
-                                    args.num_basis, source=source)
-    start, stop = teach.interval(scenario, args.start, args.stop)
+                                    args.num_basis, source=source,
+                                    names=options)
     file = movement.save(args.movement or output / "movement.yaml")
     figure = teach.draw_movement(movement, output, "teach",
                                  f"teach {path.stem}: demonstration "

@@ -30,9 +30,11 @@ from drake_wbc.math.demonstration import (
 )
 
 
-def interval(scenario, start=None, stop=None, log=None):
+def interval(scenario, start=None, stop=None, log=None,
+             names=("start", "stop")):
     """(start, stop) of the demonstration: the S_hri markers of the
-    scenario's task, each replaced by `start`/`stop` when given.
+    scenario's task, each replaced by `start`/`stop` when given; the
+    errors call them by `names` (e.g. a command's options).
 
     Raises:
         ValueError: a given `start` or `stop` that is not a finite
@@ -41,7 +43,8 @@ def interval(scenario, start=None, stop=None, log=None):
             RunLog, when given) or a given `stop` past its last.
     """
     given_start, given_stop = start is not None, stop is not None
-    for name, value in (("start", start), ("stop", stop)):
+    start_name, stop_name = names
+    for name, value in ((start_name, start), (stop_name, stop)):
         if value is not None and not np.isfinite(float(value)):
             raise ValueError(f"{name} = {float(value)!r} s is not allowed: "
                              "must be a finite time")
@@ -53,26 +56,27 @@ def interval(scenario, start=None, stop=None, log=None):
         stop = marked[1] if stop is None else stop
     start, stop = float(start), float(stop)
     if not stop > start:
-        raise ValueError(f"start = {start!r} s, stop = {stop!r} s is not "
-                         "allowed: the demonstration must end after it "
-                         "starts")
+        raise ValueError(f"{start_name} = {start!r} s, {stop_name} = "
+                         f"{stop!r} s is not allowed: the demonstration "
+                         "must end after it starts")
     if log is not None and len(log.time):
         first, last = float(log.time[0]), float(log.time[-1])
         if (given_start and start < first - 1e-9) or (
                 given_stop and stop > last + 1e-9):
             raise ValueError(
-                f"start = {start!r} s, stop = {stop!r} s is not allowed: "
-                f"must be an interval of the log (from {first:.3f} to "
-                f"{last:.3f} s)")
+                f"{start_name} = {start!r} s, {stop_name} = {stop!r} s is "
+                "not allowed: must be an interval of the log (from "
+                f"{first:.3f} to {last:.3f} s)")
     return start, stop
 
 
 def learn_from_log(scenario, log, start=None, stop=None, num_basis=None,
-                   source=""):
+                   source="", names=("start", "stop")):
     """The LearnedMovement of the demonstration in `log` (a RunLog),
     learned with the gains of the scenario's whole-body DMP (so that it
-    replays with the same attractor)."""
-    start, stop = interval(scenario, start, stop, log)
+    replays with the same attractor); `interval` takes start, stop and
+    names."""
+    start, stop = interval(scenario, start, stop, log, names)
     demo = demonstration_from_log(log, start, stop,
                                   controller_arm(scenario))
     dmp = scenario.controller.whole_body_cdmp.dmp
