@@ -478,9 +478,10 @@ def test_sigma_grid_boundaries_agree_with_nearby_interior():
 
 
 def test_a_strided_twist_compiles_nothing_new():
-    """The float kernel gives a strided view (a reversed twist) to its
-    compiled closed form as the C-contiguous array it was compiled for:
-    the same result, no new signature in the tick."""
+    """The float kernel gives a strided view (a reversed twist), a
+    read-only array or a list to its sealed closed form as the
+    C-contiguous array it was compiled for: the same result, no new
+    signature."""
     from drake_wbc.math import distribution, kernels
 
     kernel = next(k for k in kernels.registered_kernels()
@@ -495,7 +496,14 @@ def test_a_strided_twist_compiles_nothing_new():
         strided[index] = np.array(args[index][::-1])[::-1]
         assert not strided[index].flags.c_contiguous
         np.testing.assert_array_equal(kernel.fast(*strided), expected)
-    assert len(distribution._closed_form.signatures) == signatures
+        read_only = list(args)
+        read_only[index] = np.array(args[index])
+        read_only[index].flags.writeable = False
+        np.testing.assert_array_equal(kernel.fast(*read_only), expected)
+        listed = list(args)
+        listed[index] = list(args[index])
+        np.testing.assert_array_equal(kernel.fast(*listed), expected)
+    assert len(distribution._closed_form.signatures) == signatures == 1
 
 
 def test_without_damping_a_zero_jacobian_is_rejected_not_zero():

@@ -105,6 +105,28 @@ def test_a_compiled_function_computes_as_numpy_does():
     assert not compiled.is_compiled(lambda x: x)
 
 
+def test_a_sealed_function_refuses_other_arrays_instead_of_compiling():
+    """compiled_for compiles its one signature when it is made and never
+    again: other arrays raise TypeError (which its wrapper answers with
+    float_array copies), numbers convert to its scalars."""
+    @compiled.compiled_for("float64(float64[::1], float64)")
+    def weighted_sum(x, w):
+        return w * x.sum()
+
+    assert compiled.is_compiled(weighted_sum)
+    assert len(weighted_sum.signatures) == 1
+    x = np.arange(6.0)
+    assert weighted_sum(x, 2) == 30.0
+    read_only = x.copy()
+    read_only.flags.writeable = False
+    for other in (x[::2], read_only, list(x), x.astype(np.float32)):
+        with pytest.raises(TypeError):
+            weighted_sum(other, 1.0)
+        assert weighted_sum(compiled.float_array(other), 1.0) == \
+            float(np.sum(other, dtype=float))
+    assert len(weighted_sum.signatures) == 1
+
+
 def test_float_array_gives_the_one_array_type_the_compiled_loops_take():
     """A float64 C-contiguous aligned writeable array passes as it is;
     anything else (read-only, strided, unaligned, big-endian, int, a

@@ -22,6 +22,14 @@ is built (`kernels.warm`), so that no tick compiles
 signature). A read-only or strided array is a type of its own to numba:
 `float_array` gives the one type they take.
 
+Where those conversions would cost as much as the kernel's own work
+(the distribution's closed form runs in under a microsecond),
+`compiled_for` compiles a kernel for its one signature when its module
+loads (from the cache after the first run) and never again: a call with
+any other array type raises TypeError instead of compiling, so that its
+wrapper passes the stages' arrays as they are and makes `float_array`
+copies only when the call is refused.
+
 Numba's cache knows a compiled function by its own source file only: a
 compiled function that calls one of another module would keep that
 one's old machine code after the other module changes. So a compiled
@@ -38,6 +46,15 @@ def compiled(function):
     kernels' inner loops. Numeric code only: numpy arrays and scalars in,
     numpy arrays and scalars out."""
     return numba.njit(cache=True, error_model="numpy")(function)
+
+
+def compiled_for(signature):
+    """A decorator: `compiled` for exactly `signature` (numba's signature
+    string, e.g. "float64[::1](float64[::1], float64)"), compiled when the
+    module loads and sealed (see the module): numbers convert to its
+    scalars as numba converts them, and any other array type raises
+    TypeError."""
+    return numba.njit(signature, cache=True, error_model="numpy")
 
 
 def is_compiled(function):

@@ -92,7 +92,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from drake_wbc.math.compiled import compiled, float_array
+from drake_wbc.math.compiled import compiled_for, float_array
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.kinematics import (
     random_rotation,
@@ -312,7 +312,8 @@ def _whole_body_problems(rng):
             float(gain), DEFAULT_DAMPING if damped else None)
 
 
-@compiled
+@compiled_for("float64[::1](float64[::1], float64[::1], float64, float64, "
+              "float64[::1], float64, boolean, float64)")
 def _closed_form(V_ee, p_ee_in_base, s, p, capability_gradient, k, damped,
                  threshold):
     """The compiled closed form of `whole_body_distribution_float`: V_wb
@@ -404,20 +405,27 @@ def whole_body_distribution_float(V_ee, p_ee_in_base, R_ba, sigma_xy,
 
     Args:
         as whole_body_distribution; V_ee, p_ee_in_base and
-        capability_gradient go through `float_array` (themselves when
-        float64 C-contiguous writeable arrays, as the stages give them; a
-        copy otherwise, a strided view or a list), so that no call
-        compiles a signature of its own.
+        capability_gradient as float64 C-contiguous writeable arrays, as
+        the stages give them, go to the closed form as they are; any
+        other (a strided view, a list) is refused by the sealed closed
+        form (drake_wbc.math.compiled.compiled_for) and copied by
+        `float_array`.
 
     Returns:
         (9,) array V_wb.
     """
     if R_ba is None:
-        V_wb = _closed_form(
-            float_array(V_ee), float_array(p_ee_in_base), float(sigma_xy),
-            float(sigma_phi), float_array(capability_gradient),
-            float(null_space_gain), damping is not None,
-            0.0 if damping is None else damping.threshold)
+        damped = damping is not None
+        threshold = damping.threshold if damped else 0.0
+        try:
+            V_wb = _closed_form(V_ee, p_ee_in_base, sigma_xy, sigma_phi,
+                                capability_gradient, null_space_gain,
+                                damped, threshold)
+        except TypeError:  # not the arrays it is compiled for: copies
+            V_wb = _closed_form(
+                float_array(V_ee), float_array(p_ee_in_base), sigma_xy,
+                sigma_phi, float_array(capability_gradient),
+                null_space_gain, damped, threshold)
         if V_wb[0] == V_wb[0]:  # not NaN: the closed form holds
             return V_wb
     return whole_body_distribution(
