@@ -34,7 +34,7 @@ from drake_wbc.controller.parameters import for_robot
 from drake_wbc.controller.task import TaskInputs
 from drake_wbc.hardware.options import HardwareOptions, command_timeout_of
 from drake_wbc.math.cdmp import MovementReplay
-from drake_wbc.math.loading import load_typed
+from drake_wbc.math.loading import load_typed, screened_data
 from drake_wbc.math.validation import (
     boolean,
     checked_instance,
@@ -49,7 +49,7 @@ from drake_wbc.robot.description import (
 )
 from drake_wbc.robot.footprint import check_start_is_free
 from drake_wbc.robot.model import ArmKinematics, ArmMount, shared_robot_plant
-from drake_wbc.station.drivers import own_base_loop
+from drake_wbc.station.drivers import moved_base_loop, own_base_loop
 from drake_wbc.station.scene import Scene
 from drake_wbc.station.simulation import (
     SimulatedStation,
@@ -331,8 +331,10 @@ def with_robot(scenario, robot_file, echo=print):
     another arm in another pose (the shipped arm's home stretches a
     longer arm's tool out of its local workspace). So on a robot other
     than the scenario's own (another description file) the arm starts at
-    that robot's home, said through `echo`; on the scenario's own robot
-    it keeps the scenario's start.
+    that robot's home, said through `echo`, and a station.base keeps
+    what it sets apart from its own robot's loop, the rest that robot's
+    (drake_wbc.station.drivers.moved_base_loop); on the scenario's own
+    robot it keeps the scenario's start and base.
 
     Raises:
         ValueError: naming --robot when its file does not exist, the file
@@ -342,10 +344,13 @@ def with_robot(scenario, robot_file, echo=print):
     robot_file = robot_option_file(robot_file).resolve()
     description = load_robot_description(robot_file)
     scenario = copy.deepcopy(scenario)
-    own = robot_file_of(scenario)
+    own, own_base = robot_file_of(scenario), scenario_robot(scenario).base
     scenario.robot = str(robot_file)
     if robot_file != own:
         scenario.station.initial_arm_positions = list(description.arm.home)
+        if scenario.station.base is not None:
+            scenario.station.base = moved_base_loop(
+                scenario.station.base, own_base, description.base)
         if echo is not None:
             echo(f"the arm starts at {description.name}'s home "
                  f"{list(description.arm.home)} (the scenario's start is "
@@ -419,7 +424,9 @@ def find_scenario(name_or_path):
 
 def load_scenario(path=None, text=None):
     """A Scenario from a YAML file or string, every field checked; a
-    station.initial_arm_positions left out is its robot's home.
+    station.initial_arm_positions left out is its robot's home, and the
+    fields a station.base leaves out are its robot's own loop's
+    (drake_wbc.station.drivers.own_base_loop).
 
     Raises:
         ValueError: naming the file, the field's dotted path (e.g.
@@ -438,6 +445,18 @@ def load_scenario(path=None, text=None):
                          f"{scenario.robot!r}: {error}") from None
     if scenario.station.initial_arm_positions is None:
         scenario.station.initial_arm_positions = list(robot.arm.home)
+    if scenario.station.base is not None:
+        # Given in part, the fields left out are the robot's own loop's,
+        # not BaseDriverParameters' defaults (the shipped base's).
+        base = scenario.station.base
+        named = screened_data(path=path, text=text)["station"]["base"]
+        try:
+            scenario.station.base = own_base_loop(
+                robot.base, **{name: getattr(base, name)
+                               for name in named or {}})
+        except ValueError as error:
+            raise ValueError(f"{path or 'text'}: station.base: {error}"
+                             ) from None
     if scenario.robot:
         try:
             check_on_robot(scenario)
