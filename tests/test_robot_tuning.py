@@ -81,6 +81,36 @@ def test_a_band_active_at_home_says_what_to_change(shipped):
     assert f"{home:.4g}" in problems[0]
 
 
+def test_a_singular_home_is_named_and_no_band_is_proposed_there(
+        tmp_path, capsys):
+    """An arm whose home is stretched straight (every joint at 0: J_a
+    loses a rank, C_m = 0) is told to bend its home, instead of being
+    proposed the band (0, 0), which `drake-wbc demo` crashed on; a home
+    near it, where J_a keeps its rank, is not called singular."""
+    from drake_wbc.cli.main import main
+    from drake_wbc.robot.tuning import singular_home
+
+    path = write_omni_arm(tmp_path, 6)
+    text = path.read_text()
+    home = text[text.index("home: ["):].split("\n", 1)[0]
+    path.write_text(text.replace(home, "home: [0, 0, 0, 0, 0, 0]"))
+    arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
+    assert singular_home(arm)
+    assert capability_at(arm, arm.home, 1.5e4) < 1e-12
+    problems = check_tuning(arm, CapabilityBand(), 1.5e4)
+    assert len(problems) == 1
+    assert problems[0].startswith("arm.home = [0.0, 0.0, 0.0, 0.0, 0.0, "
+                                  "0.0] is singular")
+    assert main(["demo", "--robot", str(path), "--output",
+                 str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "proposed capability_band: none, the home is singular" in out
+    assert "arm.home = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0] is singular" in out
+    path.write_text(text.replace(home, "home: [0, 0.3, 0.3, 0, 0.3, 0]"))
+    assert not singular_home(
+        ArmKinematics(*make_robot_plant(load_robot_description(path))))
+
+
 def test_a_seven_joint_arm_with_the_six_joint_tuning_is_warned_of(seven):
     problems = check_tuning(seven, CapabilityBand(),
                             capability.DEFAULT_JOINT_LIMIT_GAIN)

@@ -25,7 +25,8 @@ mean there what the paper's mean on ours:
   deflections phi^l, phi^u are angles, the paper's on any arm.
 
 `survey_capability` samples the arm's C_m (at home and over random
-configurations within its limits); `check_tuning` says, as sentences,
+configurations within its limits); `singular_home` tells a home where
+no band can be proposed; `check_tuning` says, as sentences,
 what is wrong with a band, a k_j and a local workspace on an arm (empty
 when nothing is), which build_controller warns with and `drake-wbc demo
 --robot FILE` prints beside the proposal.
@@ -121,6 +122,14 @@ def survey_capability(arm, k_j=None, count=2000, seed=0):
     return CapabilitySurvey(k_j, capability_at(arm, arm.home, k_j), samples)
 
 
+def singular_home(arm):
+    """Whether `arm`'s (ArmKinematics) Jacobian J_a at its home has lost
+    a rank (a stretched or folded arm, C_m = 0 there): no band can sit
+    at fractions of the home's C_m, and the arm would start where its
+    tool cannot move in every direction."""
+    return bool(np.linalg.matrix_rank(arm.evaluate(arm.home).J_a) < 6)
+
+
 def home_extent(arm):
     """d: the horizontal extent of `arm`'s (ArmKinematics) tool centre
     point from the arm base's axis at its home, m."""
@@ -156,7 +165,15 @@ def check_tuning(arm, band, k_j, local_workspace=None):
             "(in the controller's parameters, or for every controller of "
             "this robot in its description's tuning)")
     home = capability_at(arm, arm.home, k_j)
-    if home <= band.upper:
+    if singular_home(arm):
+        problems.append(
+            f"arm.home = {[float(q) for q in arm.home]} is singular (J_a "
+            f"loses a rank there, C_m = {home:.3g}): the arm would start "
+            "where its tool cannot move in every direction, and no "
+            "capability band can be proposed at fractions of the home's "
+            "C_m; give a home with the elbow and the wrist bent in the "
+            "robot's description")
+    elif home <= band.upper:
         proposal = CapabilityBand(BAND_OVER_HOME[0] * home,
                                   BAND_OVER_HOME[1] * home)
         problems.append(
