@@ -29,7 +29,7 @@ from drake_wbc.robot.tuning import (
     home_extent,
     mid_range_penalty,
     proposed_local_workspace,
-    singular_home,
+    singular,
     survey_capability,
 )
 
@@ -160,7 +160,7 @@ def describe_tuning(arm, band, k_j, local_workspace, count=2000):
     with the given tuning."""
     given = survey_capability(arm, k_j, count)
     proposed = survey_capability(arm, None, count)
-    band_there = None if singular_home(arm) else proposed.proposed_band()
+    band_there = None if singular(arm) else proposed.proposed_band()
     workspace_there = proposed_local_workspace(arm)
     percentiles = np.percentile(proposed.samples, [50, 90, 99])
     lines = [

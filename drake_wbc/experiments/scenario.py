@@ -26,10 +26,12 @@ file's path or its name without `.yaml`.
 """
 
 import copy
+import warnings
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from drake_wbc.controller import ControllerParameters
+from drake_wbc.controller.diagram import tuning_problems
 from drake_wbc.controller.parameters import for_robot
 from drake_wbc.controller.task import TaskInputs
 from drake_wbc.hardware.options import HardwareOptions, command_timeout_of
@@ -49,6 +51,7 @@ from drake_wbc.robot.description import (
 )
 from drake_wbc.robot.footprint import check_start_is_free
 from drake_wbc.robot.model import ArmKinematics, ArmMount, shared_robot_plant
+from drake_wbc.robot.tuning import RobotTuningWarning
 from drake_wbc.station.drivers import moved_base_loop, own_base_loop
 from drake_wbc.station.scene import Scene
 from drake_wbc.station.simulation import (
@@ -356,6 +359,7 @@ def with_robot(scenario, robot_file, echo=print):
                  f"{list(description.arm.home)} (the scenario's start is "
                  f"for its own robot, {own.name})")
     check_on_robot(scenario)
+    warn_of_the_tuning_at_the_start(scenario)
     return scenario
 
 
@@ -379,6 +383,20 @@ def check_on_robot(scenario):
     limits = shared_robot_plant(scenario_robot(scenario))[1].limits
     check_arm_start(scenario.station.initial_arm_positions, limits.lower,
                     limits.upper, "station.initial_arm_positions")
+
+
+def warn_of_the_tuning_at_the_start(scenario):
+    """Warns (RobotTuningWarning) of what the controller's tuning does at
+    `scenario`'s start, where it is not its robot's home (build_controller
+    checks the home): a capability band active there, the tool beyond
+    d^l there in the intuitive pHRI mode, a singular start."""
+    start = scenario.station.initial_arm_positions
+    if start is None or list(start) == list(
+            scenario_robot(scenario).arm.home):
+        return
+    for problem in tuning_problems(controller_for(scenario),
+                                   controller_arm(scenario), start=start):
+        warnings.warn(problem, RobotTuningWarning, stacklevel=3)
 
 
 _PARTS = dict(controller=ControllerParameters, station=StationOptions,
@@ -462,4 +480,5 @@ def load_scenario(path=None, text=None):
             check_on_robot(scenario)
         except ValueError as error:
             raise ValueError(f"{path or 'text'}: {error}") from None
+    warn_of_the_tuning_at_the_start(scenario)
     return scenario
