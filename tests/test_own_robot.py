@@ -30,6 +30,7 @@ from drake_wbc.experiments.scenario import (
     controller_for,
     find_scenario,
     load_scenario,
+    robot_file_of,
     scenario_robot,
     with_robot,
 )
@@ -417,6 +418,53 @@ def test_the_controllers_base_defaults_are_that_robots_own():
             f"base_cdmp.repulsion.half_sizes[0] = 0.4 is not allowed: must "
             f"be at least the robot's own {a!r} m")):
         build_controller(smaller, robot=controller_arm(on_lbr))
+
+
+def test_a_base_loop_given_in_part_is_that_robots_own_elsewhere():
+    """A scenario's station.base given in part ({loop: ringing}, or a lag
+    alone) on the second shipped robot: the fields it leaves out are that
+    robot's (0.8 m/s; 0.5 m/s^2 where no named loop sets them), not the
+    shipped base's 1 m/s and 1 m/s^2; a lag alone brings a servo under
+    it; and moved to that robot by --robot, the shaking scenario keeps
+    its ringing loop with that robot's velocity limits."""
+    from drake_wbc.station.drivers import BASE_LOOPS, own_base_loop
+
+    lbr_file = (find_scenario("trajectory_tracking_lbr").parent.parent
+                / "models" / "lbr_omni.robot.yaml")
+    lbr = load_robot_description(lbr_file).base
+    text = find_scenario("trajectory_tracking_lbr").read_text()
+    assert "\n  base:" not in text
+    station_line = "\nstation:\n"
+    assert station_line in text
+
+    def with_base(base, time_step=0.005):
+        return load_scenario(text=text.replace(
+            station_line, f"{station_line}  base: {base}\n").replace(
+            "time_step: 0.005", f"time_step: {time_step}").replace(
+            "robot: ../models", f"robot: {lbr_file.parent}"))
+
+    ringing = with_base("{loop: ringing}").station.base
+    assert ringing.velocity_limits == list(lbr.velocity_limits)
+    assert ringing == own_base_loop(lbr, loop="ringing")
+    assert ringing.acceleration_limits == BASE_LOOPS["ringing"][
+        "acceleration_limits"]
+    assert ringing.damping_ratio == 0.15
+    lagging = with_base("{lag: 0.08}").station.base
+    assert lagging.lag == 0.08 and lagging.servo_time_constant == 0.01
+    assert lagging.velocity_limits == list(lbr.velocity_limits)
+    assert lagging.acceleration_limits == list(lbr.acceleration_limits)
+    quick = with_base("{lag: 0.03, velocity_limits: [0.5, 0.5, 0.5]}",
+                      time_step=0.002).station.base
+    assert quick.servo_time_constant == 0.25 * 0.03
+    assert quick.velocity_limits == [0.5, 0.5, 0.5]
+    assert quick.acceleration_limits == list(lbr.acceleration_limits)
+    shaking = load_scenario(find_scenario("trajectory_tracking_shaking"))
+    assert shaking.station.base.velocity_limits == [1.0, 1.0, 1.0]
+    moved = with_robot(shaking, lbr_file, echo=None).station.base
+    assert moved == ringing
+    back = with_robot(with_robot(shaking, lbr_file, echo=None),
+                      robot_file_of(shaking), echo=None).station.base
+    assert back == shaking.station.base
 
 
 def test_the_start_is_checked_against_the_robots_footprint():

@@ -81,6 +81,36 @@ def test_a_band_active_at_home_says_what_to_change(shipped):
     assert f"{home:.4g}" in problems[0]
 
 
+def test_a_singular_is_named_and_no_band_is_proposed_there(
+        tmp_path, capsys):
+    """An arm whose home is stretched straight (every joint at 0: J_a
+    loses a rank, C_m = 0) is told to bend its home, instead of being
+    proposed the band (0, 0), which `drake-wbc demo` crashed on; a home
+    near it, where J_a keeps its rank, is not called singular."""
+    from drake_wbc.cli.main import main
+    from drake_wbc.robot.tuning import singular
+
+    path = write_omni_arm(tmp_path, 6)
+    text = path.read_text()
+    home = text[text.index("home: ["):].split("\n", 1)[0]
+    path.write_text(text.replace(home, "home: [0, 0, 0, 0, 0, 0]"))
+    arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
+    assert singular(arm)
+    assert capability_at(arm, arm.home, 1.5e4) < 1e-12
+    problems = check_tuning(arm, CapabilityBand(), 1.5e4)
+    assert len(problems) == 1
+    assert problems[0].startswith("arm.home = [0.0, 0.0, 0.0, 0.0, 0.0, "
+                                  "0.0] is singular")
+    assert main(["demo", "--robot", str(path), "--output",
+                 str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "proposed capability_band: none, the home is singular" in out
+    assert "arm.home = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0] is singular" in out
+    path.write_text(text.replace(home, "home: [0, 0.3, 0.3, 0, 0.3, 0]"))
+    assert not singular(
+        ArmKinematics(*make_robot_plant(load_robot_description(path))))
+
+
 def test_a_seven_joint_arm_with_the_six_joint_tuning_is_warned_of(seven):
     problems = check_tuning(seven, CapabilityBand(),
                             capability.DEFAULT_JOINT_LIMIT_GAIN)
@@ -154,3 +184,30 @@ def test_a_descriptions_local_workspace_is_the_controllers(tmp_path):
                                              "extent_upper: 1.0"))
     with pytest.raises(ValueError, match="extent_upper"):
         load_robot_description(path)
+
+
+def test_a_scenario_starting_away_from_home_is_warned_of_its_start():
+    """The pHRI scenario started with the elbow opened 0.2 rad (the tool
+    0.765 m out, beyond d^l = 0.75) is warned that the base takes the
+    motion from the start, naming the start; started stretched straight
+    (singular), that its start is singular; at home, nothing."""
+    from drake_wbc.experiments.scenario import find_scenario, load_scenario
+
+    text = find_scenario("phri").read_text()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_scenario(text=text)
+    home = ArmKinematics().home.tolist()
+    opened = home[:2] + [home[2] - 0.2] + home[3:]
+    for start, expected in (
+            (opened, "workspace.workspace.extent_lower = 0.75 m is within "
+                     "the tool's extent at the start "
+                     "(station.initial_arm_positions), d = 0.7651 m"),
+            ([0.0] * 6, "station.initial_arm_positions = [0.0, 0.0, 0.0, "
+                        "0.0, 0.0, 0.0] is singular")):
+        with pytest.warns(RobotTuningWarning) as record:
+            load_scenario(text=text.replace(
+                "\nstation:\n",
+                f"\nstation:\n  initial_arm_positions: {start}\n"))
+        assert any(str(w.message).startswith(expected) for w in record), [
+            str(w.message) for w in record]

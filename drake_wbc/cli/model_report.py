@@ -29,6 +29,7 @@ from drake_wbc.robot.tuning import (
     home_extent,
     mid_range_penalty,
     proposed_local_workspace,
+    singular,
     survey_capability,
 )
 
@@ -159,7 +160,7 @@ def describe_tuning(arm, band, k_j, local_workspace, count=2000):
     with the given tuning."""
     given = survey_capability(arm, k_j, count)
     proposed = survey_capability(arm, None, count)
-    band_there = proposed.proposed_band()
+    band_there = None if singular(arm) else proposed.proposed_band()
     workspace_there = proposed_local_workspace(arm)
     percentiles = np.percentile(proposed.samples, [50, 90, 99])
     lines = [
@@ -174,6 +175,8 @@ def describe_tuning(arm, band, k_j, local_workspace, count=2000):
         f"joint mid-range): C_m at home {proposed.home:.4g}, median "
         f"{percentiles[0]:.3g}, 90th percentile {percentiles[1]:.3g}, 99th "
         f"{percentiles[2]:.3g}",
+        "  proposed capability_band: none, the home is singular (below)"
+        if band_there is None else
         f"  proposed capability_band: ({band_there.lower:.4g}, "
         f"{band_there.upper:.4g}), at {BAND_OVER_HOME[0]:.2f} and "
         f"{BAND_OVER_HOME[1]:.2f} of the home's C_m as the paper's band on "

@@ -160,10 +160,15 @@ def replay_scenario(args):
     from drake_wbc.math.cdmp import MovementReplay
     from drake_wbc.math.movement import (
         LearnedMovement,
-        MovementPlayer,
         resolve_movement_file,
+        rollout_step,
     )
-    from drake_wbc.math.validation import positive_duration, validate
+    from drake_wbc.math.validation import (
+        as_vector,
+        non_negative,
+        positive_duration,
+        validate,
+    )
     from drake_wbc.station.scene import CylinderObstacle
 
     if args.duration is not None:
@@ -175,22 +180,18 @@ def replay_scenario(args):
     base = (scenario.variants[0].movement
             or scenario.controller.whole_body_cdmp.movement
             or MovementReplay(file=str(file)))
+    # The options, where they enter: a tau the movement cannot be played
+    # at is refused before the run.
+    if args.goal is not None:
+        as_vector("--goal", args.goal, 4)
+    if args.tau is not None:
+        rollout_step(movement, args.tau, source=str(file), name="--tau")
+    if args.start_time is not None:
+        non_negative("--start-time", args.start_time)
     start_time = (base.start_time if args.start_time is None
                   else args.start_time)
-    try:
-        replay = MovementReplay(file=str(file), goal=args.goal,
-                                tau=args.tau, start_time=start_time,
-                                start=base.start)
-        # A tau the movement cannot be played at, before the run.
-        MovementPlayer(movement, replay)
-    except ValueError as error:
-        # Only the options can be wrong here (the file was read above,
-        # the scenario's start was checked when it was loaded): name the
-        # field as the option it came from (tau -> --tau).
-        field, rest = str(error).split(" ", 1)
-        if field not in ("goal", "tau", "start_time"):
-            raise
-        raise ValueError(f"--{field.replace('_', '-')} {rest}") from None
+    replay = MovementReplay(file=str(file), goal=args.goal, tau=args.tau,
+                            start_time=start_time, start=base.start)
     tau = movement.params.tau if args.tau is None else args.tau
     duration = args.duration
     if duration is None:

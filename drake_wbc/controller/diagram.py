@@ -191,6 +191,19 @@ class Controller:
         return "; ".join(reason for reason in reasons if reason)
 
 
+def tuning_problems(params, arm, start=None):
+    """What is wrong with the tuning of `params` (ControllerParameters on
+    its robot, for_robot) on `arm` (ArmKinematics), as sentences
+    (drake_wbc.robot.tuning.check_tuning): its capability band and
+    joint-limit gain, and its local workspace in the intuitive pHRI
+    mode, at the arm's home or at `start` (joint positions)."""
+    phri = params.workspace.mode is MotionMode.INTUITIVE_PHRI
+    return check_tuning(arm, params.capability_band,
+                        params.capability.joint_limit_gain,
+                        params.workspace.workspace if phri else None,
+                        start=start)
+
+
 def build_controller(params=None, robot=None):
     """Builds the CDMP-WBC controller Diagram.
 
@@ -224,10 +237,7 @@ def build_controller(params=None, robot=None):
     h, band, switch = (params.time_step, params.capability_band,
                        params.phri_switch)
     check_arm_limits(params.arm_controller, arm)
-    phri = params.workspace.mode is MotionMode.INTUITIVE_PHRI
-    for problem in check_tuning(
-            arm, band, params.capability.joint_limit_gain,
-            params.workspace.workspace if phri else None):
+    for problem in tuning_problems(params, arm):
         warnings.warn(problem, RobotTuningWarning, stacklevel=2)
     builder = DiagramBuilder()
     add = builder.AddNamedSystem

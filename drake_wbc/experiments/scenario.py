@@ -26,15 +26,17 @@ file's path or its name without `.yaml`.
 """
 
 import copy
+import warnings
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from drake_wbc.controller import ControllerParameters
+from drake_wbc.controller.diagram import tuning_problems
 from drake_wbc.controller.parameters import for_robot
 from drake_wbc.controller.task import TaskInputs
 from drake_wbc.hardware.options import HardwareOptions, command_timeout_of
 from drake_wbc.math.cdmp import MovementReplay
-from drake_wbc.math.loading import load_typed
+from drake_wbc.math.loading import load_typed, screened_data
 from drake_wbc.math.validation import (
     boolean,
     checked_instance,
@@ -49,7 +51,8 @@ from drake_wbc.robot.description import (
 )
 from drake_wbc.robot.footprint import check_start_is_free
 from drake_wbc.robot.model import ArmKinematics, ArmMount, shared_robot_plant
-from drake_wbc.station.drivers import own_base_loop
+from drake_wbc.robot.tuning import RobotTuningWarning
+from drake_wbc.station.drivers import moved_base_loop, own_base_loop
 from drake_wbc.station.scene import Scene
 from drake_wbc.station.simulation import (
     SimulatedStation,
@@ -331,8 +334,10 @@ def with_robot(scenario, robot_file, echo=print):
     another arm in another pose (the shipped arm's home stretches a
     longer arm's tool out of its local workspace). So on a robot other
     than the scenario's own (another description file) the arm starts at
-    that robot's home, said through `echo`; on the scenario's own robot
-    it keeps the scenario's start.
+    that robot's home, said through `echo`, and a station.base keeps
+    what it sets apart from its own robot's loop, the rest that robot's
+    (drake_wbc.station.drivers.moved_base_loop); on the scenario's own
+    robot it keeps the scenario's start and base.
 
     Raises:
         ValueError: naming --robot when its file does not exist, the file
@@ -342,15 +347,19 @@ def with_robot(scenario, robot_file, echo=print):
     robot_file = robot_option_file(robot_file).resolve()
     description = load_robot_description(robot_file)
     scenario = copy.deepcopy(scenario)
-    own = robot_file_of(scenario)
+    own, own_base = robot_file_of(scenario), scenario_robot(scenario).base
     scenario.robot = str(robot_file)
     if robot_file != own:
         scenario.station.initial_arm_positions = list(description.arm.home)
+        if scenario.station.base is not None:
+            scenario.station.base = moved_base_loop(
+                scenario.station.base, own_base, description.base)
         if echo is not None:
             echo(f"the arm starts at {description.name}'s home "
                  f"{list(description.arm.home)} (the scenario's start is "
                  f"for its own robot, {own.name})")
     check_on_robot(scenario)
+    warn_of_the_tuning_at_the_start(scenario)
     return scenario
 
 
@@ -374,6 +383,20 @@ def check_on_robot(scenario):
     limits = shared_robot_plant(scenario_robot(scenario))[1].limits
     check_arm_start(scenario.station.initial_arm_positions, limits.lower,
                     limits.upper, "station.initial_arm_positions")
+
+
+def warn_of_the_tuning_at_the_start(scenario):
+    """Warns (RobotTuningWarning) of what the controller's tuning does at
+    `scenario`'s start, where it is not its robot's home (build_controller
+    checks the home): a capability band active there, the tool beyond
+    d^l there in the intuitive pHRI mode, a singular start."""
+    start = scenario.station.initial_arm_positions
+    if start is None or list(start) == list(
+            scenario_robot(scenario).arm.home):
+        return
+    for problem in tuning_problems(controller_for(scenario),
+                                   controller_arm(scenario), start=start):
+        warnings.warn(problem, RobotTuningWarning, stacklevel=3)
 
 
 _PARTS = dict(controller=ControllerParameters, station=StationOptions,
@@ -419,7 +442,9 @@ def find_scenario(name_or_path):
 
 def load_scenario(path=None, text=None):
     """A Scenario from a YAML file or string, every field checked; a
-    station.initial_arm_positions left out is its robot's home.
+    station.initial_arm_positions left out is its robot's home, and the
+    fields a station.base leaves out are its robot's own loop's
+    (drake_wbc.station.drivers.own_base_loop).
 
     Raises:
         ValueError: naming the file, the field's dotted path (e.g.
@@ -438,9 +463,22 @@ def load_scenario(path=None, text=None):
                          f"{scenario.robot!r}: {error}") from None
     if scenario.station.initial_arm_positions is None:
         scenario.station.initial_arm_positions = list(robot.arm.home)
+    if scenario.station.base is not None:
+        # Given in part, the fields left out are the robot's own loop's,
+        # not BaseDriverParameters' defaults (the shipped base's).
+        base = scenario.station.base
+        named = screened_data(path=path, text=text)["station"]["base"]
+        try:
+            scenario.station.base = own_base_loop(
+                robot.base, **{name: getattr(base, name)
+                               for name in named or {}})
+        except ValueError as error:
+            raise ValueError(f"{path or 'text'}: station.base: {error}"
+                             ) from None
     if scenario.robot:
         try:
             check_on_robot(scenario)
         except ValueError as error:
             raise ValueError(f"{path or 'text'}: {error}") from None
+    warn_of_the_tuning_at_the_start(scenario)
     return scenario

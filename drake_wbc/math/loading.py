@@ -128,21 +128,26 @@ def load_typed(schema, path=None, text=None):
         raise ValueError(f"{source}not valid YAML: {error}") from None
 
 
-def screened_data(path):
-    """The plain data (mappings, lists, scalars) of the YAML file `path`,
-    read as `load_typed` reads one: at most MAX_BYTES bytes of UTF-8,
-    `screen`ed before PyYAML's safe loader builds it; for a file that is
-    not a parameters dataclass (a learned movement,
-    drake_wbc.math.movement).
+def screened_data(path=None, text=None):
+    """The plain data (mappings, lists, scalars) of the YAML file `path`
+    or of the YAML `text`, read as `load_typed` reads one: at most
+    MAX_BYTES bytes of UTF-8, `screen`ed before PyYAML's safe loader
+    builds it; for a file that is not a parameters dataclass (a learned
+    movement, drake_wbc.math.movement), or to see which keys a document
+    gives.
 
     Raises:
         ValueError: for a file too large, not UTF-8, or that could hurt
             the loader (the module's docstring), with the line and what
-            is allowed.
+            is allowed; or unless exactly one of path and text is given.
         yaml.YAMLError: for text that is not YAML.
         OSError: if the file cannot be read.
     """
-    text = _read_text(path)
+    if (path is None) == (text is None):
+        raise ValueError(f"path = {short_value(path)} and text = "
+                         f"{short_value(text)} are not allowed: give exactly "
+                         "one of them")
+    text = _read_text(path) if path is not None else text
     screen(text)
     return yaml.safe_load(text)
 

@@ -361,6 +361,52 @@ def resolve_movement_file(file):
                      f"file there (looked for {', '.join(tried)})")
 
 
+ROLLOUT_TAIL = 5.0
+"""s: a MovementPlayer's rollouts run this long past the played
+movement's duration (the DMP settling on its goal)."""
+
+
+def rollout_step(movement, tau, dt=0.005, source=None, name="tau"):
+    """The step of a MovementPlayer's rollouts of `movement` played at
+    `tau`: `dt`, or shorter where the played DMP is faster
+    (ROLLOUT_RESOLUTION / dmp.fastest_rate).
+
+    Args:
+        movement: a LearnedMovement.
+        tau: the tau it is played at (> 0).
+        dt: the longest step, s.
+        source: the movement's file, for the messages.
+        name: what the caller calls tau (a command's --tau).
+
+    Raises:
+        ValueError: naming the movement's duration or `name` when the
+            rollouts would need more than MAX_ROLLOUT_STEPS steps.
+    """
+    longest = positive("dt", dt)
+    played = movement.params.with_tau(positive(name, tau))
+    length = played.duration + ROLLOUT_TAIL
+    step = min(longest, ROLLOUT_RESOLUTION / dmp.fastest_rate(played))
+    if length / longest > MAX_ROLLOUT_STEPS:
+        raise ValueError(
+            f"{source or 'the movement'}: dmp.duration = "
+            f"{movement.params.duration:.6g} s (played at {name} = "
+            f"{tau:g}: {played.duration:.6g} s) is not allowed: a movement "
+            f"lasts at most "
+            f"{MAX_ROLLOUT_STEPS * longest - ROLLOUT_TAIL:g} s as played "
+            f"(its rollouts take at most {MAX_ROLLOUT_STEPS} steps of "
+            f"{longest:g} s)")
+    if length / step > MAX_ROLLOUT_STEPS:
+        raise ValueError(
+            f"{name} = {tau!r} is not allowed for the movement"
+            f"{'' if source is None else ' ' + str(source)} (learned at "
+            f"tau = {movement.params.tau:g} over "
+            f"{movement.params.duration:.6g} s): played "
+            f"{movement.params.tau / tau:.3g} times faster, its rollouts "
+            f"would take {length / step:.3g} steps of {step:.3g} s, at most "
+            f"{MAX_ROLLOUT_STEPS}; play it slower (a larger tau)")
+    return step
+
+
 class MovementPlayer:
     """The goal and forcing term that a learned movement adds to the
     whole-body DMP over time, and the pose it plays (pure numpy;
@@ -394,25 +440,8 @@ class MovementPlayer:
         self.movement, self.replay = movement, replay
         tau = movement.params.tau if replay.tau is None else replay.tau
         self.params = movement.params.with_tau(tau)
-        length = self.params.duration + 5.0
-        longest = positive("dt", dt)
-        dt = min(longest, ROLLOUT_RESOLUTION / dmp.fastest_rate(self.params))
-        if length / longest > MAX_ROLLOUT_STEPS:
-            raise ValueError(
-                f"{replay.file}: dmp.duration = "
-                f"{movement.params.duration:.6g} s (played at tau = {tau:g}: "
-                f"{self.params.duration:.6g} s) is not allowed: a movement "
-                f"lasts at most {MAX_ROLLOUT_STEPS * longest - 5.0:g} s as "
-                f"played (its rollouts take at most {MAX_ROLLOUT_STEPS} "
-                f"steps of {longest:g} s)")
-        if length / dt > MAX_ROLLOUT_STEPS:
-            raise ValueError(
-                f"tau = {tau!r} is not allowed for the movement "
-                f"{replay.file} (learned at tau = {movement.params.tau:g} "
-                f"over {movement.params.duration:.6g} s): played "
-                f"{movement.params.tau / tau:.3g} times faster, its rollouts "
-                f"would take {length / dt:.3g} steps of {dt:.3g} s, at most "
-                f"{MAX_ROLLOUT_STEPS}; play it slower (a larger tau)")
+        length = self.params.duration + ROLLOUT_TAIL
+        dt = rollout_step(movement, tau, dt, source=replay.file)
         self.start = movement.start if replay.start is None else np.asarray(
             replay.start, dtype=float)
         goal = movement.goal if replay.goal is None else np.asarray(

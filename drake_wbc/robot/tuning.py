@@ -25,7 +25,8 @@ mean there what the paper's mean on ours:
   deflections phi^l, phi^u are angles, the paper's on any arm.
 
 `survey_capability` samples the arm's C_m (at home and over random
-configurations within its limits); `check_tuning` says, as sentences,
+configurations within its limits); `singular` tells a home where no
+band can be proposed; `check_tuning` says, as sentences,
 what is wrong with a band, a k_j and a local workspace on an arm (empty
 when nothing is), which build_controller warns with and `drake-wbc demo
 --robot FILE` prints beside the proposal.
@@ -121,6 +122,15 @@ def survey_capability(arm, k_j=None, count=2000, seed=0):
     return CapabilitySurvey(k_j, capability_at(arm, arm.home, k_j), samples)
 
 
+def singular(arm, q=None):
+    """Whether `arm`'s (ArmKinematics) Jacobian J_a at joints `q` (its
+    home if None) has lost a rank (a stretched or folded arm, C_m = 0
+    there): the tool cannot move in every direction there, and at a
+    singular home no band can sit at fractions of the home's C_m."""
+    q = arm.home if q is None else q
+    return bool(np.linalg.matrix_rank(arm.evaluate(q).J_a) < 6)
+
+
 def home_extent(arm):
     """d: the horizontal extent of `arm`'s (ArmKinematics) tool centre
     point from the arm base's axis at its home, m."""
@@ -136,47 +146,81 @@ def proposed_local_workspace(arm):
                           extent_upper=EXTENT_OVER_HOME[1] * d)
 
 
-def check_tuning(arm, band, k_j, local_workspace=None):
+def check_tuning(arm, band, k_j, local_workspace=None, start=None):
     """What is wrong with the capability `band` (CapabilityBand), the
     joint-limit gain `k_j` and, if given, the `local_workspace`
     (LocalWorkspace, of the intuitive pHRI mode) on `arm` (ArmKinematics),
     as sentences that say what to change; empty when nothing is. Cheap
-    (one evaluation at home): it checks that the band is not active at
-    the arm's home (alpha > 0 there), that P_jnt can come near 1 and
-    that the tool at home is inside d^l (else the base moves from the
-    start)."""
+    (one evaluation at home): it checks that P_jnt can come near 1, that
+    the arm's home is not singular, that the band is not active there
+    (alpha > 0) and that the tool there is inside d^l (else the base
+    moves from the start).
+
+    Args:
+        arm, band, k_j, local_workspace: as above.
+        start: None, or the arm's joint positions where a run starts (a
+            scenario's station.initial_arm_positions, other than the
+            home): the home's checks at that start instead, said of it
+            (and not k_j's, which no place changes).
+    """
     problems = []
     n = arm.num_joints
     best = mid_range_penalty(k_j, n)
-    if best < 0.9:
+    if best < 0.9 and start is None:
         problems.append(
             f"capability.joint_limit_gain = {k_j!r} caps P_jnt at "
             f"{best:.2f} on this arm's {n} joints (even with every joint "
             f"mid-range): give about {proposed_joint_limit_gain(n):.3g} "
             "(in the controller's parameters, or for every controller of "
             "this robot in its description's tuning)")
-    home = capability_at(arm, arm.home, k_j)
-    if home <= band.upper:
+    at_home = start is None
+    q = np.asarray(arm.home if at_home else start, dtype=float)
+    if at_home:
+        name, place = "arm.home", "the robot's home"
+        bend = "give a home with the elbow and the wrist bent in the " \
+               "robot's description"
+    else:
+        name = "station.initial_arm_positions"
+        place = f"the start ({name})"
+        bend = "start with the elbow and the wrist bent"
+    value = capability_at(arm, q, k_j)
+    if singular(arm, q):
+        problems.append(
+            f"{name} = {q.tolist()} is singular (J_a loses a rank there, "
+            f"C_m = {value:.3g}): the arm would start where its tool "
+            "cannot move in every direction"
+            + (", and no capability band can be proposed at fractions of "
+               "the home's C_m" if at_home else "") + f"; {bend}")
+    elif value <= band.upper:
+        home = capability_at(arm, arm.home, k_j)
         proposal = CapabilityBand(BAND_OVER_HOME[0] * home,
                                   BAND_OVER_HOME[1] * home)
         problems.append(
             f"capability_band = ({band.lower!r}, {band.upper!r}) is active "
-            f"at the robot's home, where C_m = {home:.4g}: the compensation "
-            "would give way and k_n switch off from the start; give a band "
-            f"below it, e.g. ({proposal.lower:.3g}, {proposal.upper:.3g}) "
-            "in the controller's parameters or the robot description's "
+            f"at {place}, where C_m = {value:.4g}: the compensation would "
+            "give way and k_n switch off from the start; "
+            + ("give a band below it, e.g. " if at_home else
+               "start nearer the home or give a band below it (at the "
+               "home's fractions, ")
+            + f"({proposal.lower:.3g}, {proposal.upper:.3g})"
+            + ("" if at_home else ")")
+            + " in the controller's parameters or the robot description's "
             "tuning (drake-wbc demo --robot FILE surveys the arm)")
     if local_workspace is not None:
-        d = home_extent(arm)
+        d = float(extent(arm.evaluate(q).pose[:3, 3]))
         if d >= local_workspace.extent_lower:
             proposal = proposed_local_workspace(arm)
             problems.append(
                 f"workspace.workspace.extent_lower = "
                 f"{local_workspace.extent_lower!r} m is within the tool's "
-                f"extent at the robot's home, d = {d:.4g} m: in the "
-                "intuitive pHRI mode the base would take the motion from "
-                "the start; give extents beyond it, e.g. "
-                f"({proposal.extent_lower:.3g}, {proposal.extent_upper:.3g})"
-                " in the controller's parameters or the robot "
+                f"extent at {place}, d = {d:.4g} m: in the intuitive pHRI "
+                "mode the base would take the motion from the start; "
+                + ("give extents beyond it, e.g. " if at_home else
+                   "start nearer the home or give extents beyond it (at "
+                   "the home's fractions, ")
+                + f"({proposal.extent_lower:.3g}, "
+                f"{proposal.extent_upper:.3g})"
+                + ("" if at_home else ")")
+                + " in the controller's parameters or the robot "
                 "description's tuning (local_workspace)")
     return problems

@@ -22,7 +22,7 @@ drake_wbc.station.servo_gains.
 """
 
 import copy
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 from pydrake.systems.framework import LeafSystem_
@@ -149,7 +149,7 @@ class BaseDriverParameters:
             setattr(self, name, copy.copy(value))
 
 
-def own_base_loop(base):
+def own_base_loop(base, **given):
     """The velocity loop of a robot's base as its description gives it
     (`base`, a BaseDescription, drake_wbc.robot.description): first
     order, held to its velocity and acceleration limits, with the lag of
@@ -160,23 +160,53 @@ def own_base_loop(base):
     a quarter of the lag (the "jerky" loop's 5 ms under 20 ms), so that
     the loop, not the servo, sets the base's bandwidth.
 
+    Args:
+        base: the robot's BaseDescription.
+        **given: fields of BaseDriverParameters that replace the robot's
+            (a scenario's station.base, given in part): a named `loop`
+            sets its own fields (BASE_LOOPS), a `lag` its servo as above
+            unless servo_time_constant is given too; every field left
+            out is the robot's.
+
     Raises:
         ValueError: naming the robot's field where the loop cannot take
-            its value (a velocity_lag of 0).
+            its value (a velocity_lag of 0, or under 10 plant steps), or
+            the given field.
     """
-    lag = min(BaseDriverParameters.lag, base.velocity_lag)
+    named = BASE_LOOPS.get(given.get("loop"), {})
+    own_lag = min(BaseDriverParameters.lag, base.velocity_lag)
+    lag = given.get("lag", named.get("lag", own_lag))
+    own = {"lag": own_lag,
+           "servo_time_constant": min(
+               BaseDriverParameters.servo_time_constant, 0.25 * lag),
+           "velocity_limits": [float(v) for v in base.velocity_limits],
+           "acceleration_limits": [
+               float(a) for a in base.acceleration_limits]}
+    values = {name: value for name, value in own.items()
+              if name not in named}
+    values.update(given)
     try:
-        return BaseDriverParameters(
-            lag=lag,
-            servo_time_constant=min(BaseDriverParameters.servo_time_constant,
-                                    0.25 * lag),
-            velocity_limits=[float(v) for v in base.velocity_limits],
-            acceleration_limits=[float(a) for a in base.acceleration_limits])
+        return BaseDriverParameters(**values)
     except ValueError as error:
+        if "lag" in given or "lag" in named:
+            raise
         raise ValueError(
             f"the robot's base.velocity_lag = {base.velocity_lag!r} s "
             f"cannot be simulated ({error}); give the station's base loop "
             "(station.base) instead") from None
+
+
+def moved_base_loop(loop, base, other):
+    """The velocity loop `loop` of the robot with BaseDescription `base`
+    moved to the robot with BaseDescription `other` (a scenario run on
+    another robot): the fields where `loop` differs from `base`'s own
+    loop (own_base_loop, with `loop`'s named loop) are kept, every other
+    field is `other`'s own."""
+    own = own_base_loop(base, loop=loop.loop)
+    given = {f.name: getattr(loop, f.name) for f in fields(loop)
+             if f.name == "loop" or not _same(getattr(loop, f.name),
+                                                getattr(own, f.name))}
+    return own_base_loop(other, **given)
 
 
 def _same(a, b):
