@@ -12,7 +12,7 @@ from pydrake.systems.primitives import (
     Sine,
 )
 
-from drake_wbc.controller.run_log import RunLog, SignalLogger
+from drake_wbc.controller.run_log import RunLog, SignalLogger, advance_times
 from drake_wbc.robot.description import load_robot_description, models_dir
 
 
@@ -170,3 +170,31 @@ def test_names_that_do_not_fit_the_signal_are_refused():
     with pytest.raises(ValueError,
                        match=rf"SIGNALS\['alpha'\] = .* have {size} names"):
         SignalLogger(builder, {"alpha": source.get_output_port()}, 0.01)
+
+
+@pytest.mark.parametrize("duration, chunk", [
+    (47.0, 47.0 / 200), (11.0, 11.0 / 200), (0.1, 0.01), (1.0, 0.3),
+    (0.005, 0.01), (0.0, 0.01)])
+def test_a_run_advances_to_its_end_exactly(duration, chunk):
+    """The chunks' ends are k chunk, the last the duration itself; summed
+    instead, 200 chunks of 0.235 s end 8.5e-14 s short of 47 s (and
+    ten of 0.01 s short of 0.1 s)."""
+    times = advance_times(duration, chunk)
+    assert times[-1] == duration
+    assert all(np.diff(times) > 0.0)
+    assert times[:-1] == [k * chunk for k in range(1, len(times))]
+    assert len(times) == max(1, round(np.ceil(duration / chunk - 1e-9)))
+    with pytest.raises(ValueError, match="chunk = 0.0 is not allowed"):
+        advance_times(duration, 0.0)
+
+
+def test_a_runs_log_holds_its_last_sample():
+    """A 0.1 s run of a scenario logs its sample at 0.1 s (the run ended
+    1.4e-17 s short of it, and the log at 0.09)."""
+    from drake_wbc.experiments.runner import build_closed_loop, simulate
+    from drake_wbc.experiments.scenario import find_scenario, load_scenario
+
+    log = simulate(build_closed_loop(load_scenario(find_scenario(
+        "trajectory_tracking"))), duration=0.1)
+    assert log.time[-1] == pytest.approx(0.1, abs=1e-12)
+    assert log.time.size == 11

@@ -31,6 +31,7 @@ def _run_in_child(path, duration, chunk, robot=None):
     reason} when the scenario does not apply to `robot`)."""
     started = time.perf_counter()
 
+    from drake_wbc.controller.run_log import advance_times
     from drake_wbc.experiments.runner import build_closed_loop, start_simulator
     from drake_wbc.experiments.scenario import (
         load_scenario,
@@ -51,8 +52,7 @@ def _run_in_child(path, duration, chunk, robot=None):
     simulator = start_simulator(loop)
     built = time.perf_counter()
     factors, t = [], 0.0
-    while t < duration - 1e-12:
-        step_end = min(t + chunk, duration)
+    for step_end in advance_times(duration, chunk):
         wall = time.perf_counter()
         simulator.AdvanceTo(step_end)
         factors.append((step_end - t) / (time.perf_counter() - wall))

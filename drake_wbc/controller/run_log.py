@@ -4,13 +4,17 @@ they make.
 The same format for a simulated run (drake_wbc.experiments.runner), a
 deployment's loopback (drake_wbc.deployment.loopback) and a log of
 lcm-logger read back (drake_wbc.deployment.lcm_logs), so that the
-experiments' metrics and figures apply to each.
+experiments' metrics and figures apply to each; and the times a run
+advances to (`advance_times`), so that each log ends at its run's end.
 """
+
+import math
 
 import numpy as np
 from pydrake.systems.primitives import LogVectorOutput, Multiplexer
 
 from drake_wbc.math.safety import STATUS_FIELDS
+from drake_wbc.math.validation import non_negative, positive
 
 SIGNALS = {
     # station: what the robot's sensors report
@@ -79,6 +83,22 @@ def column_names(name, size, columns=None):
             f"{where}[{name!r}] = {names!r} is not allowed: must have "
             f"{size} names, one per entry of the signal")
     return tuple(names)
+
+
+def advance_times(duration, chunk):
+    """The times a run of `duration` s advances its Simulator to, a
+    `chunk` of s at a time: k chunk for k = 1, 2, ... and `duration`
+    itself last. Each is computed, not summed: a sum of 200 chunks of
+    0.235 s ends 8.5e-14 s short of 47 s, and the log's periodic sample
+    at the run's end with it.
+
+    Raises:
+        ValueError: unless duration >= 0 and chunk > 0, both finite.
+    """
+    duration = non_negative("duration", duration)
+    chunk = positive("chunk", chunk)
+    count = max(1, math.ceil(duration / chunk - 1e-9))
+    return [k * chunk for k in range(1, count)] + [duration]
 
 
 class SignalLogger:

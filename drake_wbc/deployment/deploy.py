@@ -22,7 +22,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_wbc.controller.diagram import HARDWARE_INPUTS
-from drake_wbc.controller.run_log import SIGNALS
+from drake_wbc.controller.run_log import SIGNALS, advance_times
 from drake_wbc.controller.task import add_controller
 from drake_wbc.experiments.scenario import (
     Scenario,
@@ -312,12 +312,10 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
         simulator.Initialize()
         if on_start is not None:
             on_start(held)
-        t = 0.0
-        while t < duration - 1e-12:
+        for t in advance_times(duration, chunk):
             if stop is not None and stop():
                 stopped = True
                 break
-            t = min(t + chunk, duration)
             simulator.AdvanceTo(t)
             held = guard.GetOutputPort("arm_position_command").Eval(
                 guard.GetMyContextFromRoot(root))

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_wbc.controller.run_log import SIGNALS, SignalLogger
+from drake_wbc.controller.run_log import SIGNALS, SignalLogger, advance_times
 from drake_wbc.controller.task import add_controller
 from drake_wbc.experiments.scenario import (
     Scenario,
@@ -147,10 +147,8 @@ def simulate(loop, duration=None, progress=False):
     meter = Progress(loop.variant.label or loop.variant.name, duration) \
         if progress else None
     chunk = max(duration / 200.0, loop.scenario.controller.time_step)
-    t = 0.0
     started = wall_clock.perf_counter()
-    while t < duration - 1e-12:
-        t = min(t + chunk, duration)
+    for t in advance_times(duration, chunk):
         simulator.AdvanceTo(t)
         if meter is not None:
             meter.update(t)
