@@ -74,7 +74,9 @@ def run_scenarios(checkout, names, output):
 
 def compare_run(ours, theirs, rtol, atol):
     """Differences beyond tolerance between two log files: a list of
-    (signal, column, max abs diff, max rel diff)."""
+    (signal, what differs, max abs diff, max rel diff). Logs of different
+    lengths differ, and their common samples are compared too (a
+    difference there is a second entry of the signal)."""
     a, b = np.load(ours), np.load(theirs)
     problems = []
     for key in sorted(set(a.files) | set(b.files)):
@@ -83,9 +85,17 @@ def compare_run(ours, theirs, rtol, atol):
             continue
         x, y = a[key], b[key]
         if x.shape != y.shape:
-            problems.append((key, f"shape {x.shape} vs {y.shape}",
+            if key == "header" or not x.ndim or x.shape[1:] != y.shape[1:]:
+                problems.append((key, f"shape {x.shape} vs {y.shape}",
+                                 np.inf, np.inf))
+                continue
+            # Logs of different lengths: the extra samples are a
+            # difference, and the common ones are compared below.
+            n = min(len(x), len(y))
+            problems.append((key, f"{len(x)} samples here, {len(y)} there "
+                                  f"(the first {n} compared)",
                              np.inf, np.inf))
-            continue
+            x, y = x[:n], y[:n]
         if key == "header":
             # The columns must agree; the prose (units, where SIGNALS
             # lives) may change with the code.
