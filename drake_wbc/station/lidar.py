@@ -126,7 +126,9 @@ def _circle_distances(origin, cos, sin, circles):
     A shape a row, the rays along it: every operation runs along the N
     rays (numpy is slow along a short last axis)."""
     m = origin - circles[:, :2]                                 # (K, 2)
-    b = np.ascontiguousarray((np.stack([cos, sin], axis=1) @ m.T).T)  # d.m
+    # d . m, (K, N): by the matrix product (N, 2) (2, K) the ranges were
+    # always computed with, so that they keep every bit.
+    b = np.ascontiguousarray((np.stack([cos, sin], axis=1) @ m.T).T)
     offset = cos * m[:, 1:] - sin * m[:, :1]
     r = circles[:, 2:]                                          # (K, 1)
     disc = r * r - offset * offset
