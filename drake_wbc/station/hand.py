@@ -136,8 +136,9 @@ class HandIntention(LeafSystem):
         self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0,
                                                 self._sample)
         held = {self.discrete_state_ticket(self._state), self.time_ticket()}
-        self.DeclareVectorOutputPort("desired_state", 6, self._calc_desired,
-                                     prerequisites_of_calc=held)
+        self._desired_state = self.DeclareVectorOutputPort(
+            "desired_state", 6, self._calc_desired,
+            prerequisites_of_calc=held)
         self.DeclareVectorOutputPort(
             "force", 6, self._calc_force,
             prerequisites_of_calc=held | {self.all_input_ports_ticket()})
@@ -174,7 +175,9 @@ class HandIntention(LeafSystem):
         output.SetFromVector(self._desired(context))
 
     def _calc_force(self, context, output):
-        desired, pv = self._desired(context), self._input.Eval(context)
+        # The desired state the plant reads at this time: computed once.
+        desired = self._desired_state.Eval(context)
+        pv = self._input.Eval(context)
         x = context.get_discrete_state(self._state).CopyToVector()
         f = self._k * (desired[:3] - pv[:3]) + self._d * (desired[3:]
                                                           - pv[3:])

@@ -117,36 +117,42 @@ def _rotation(yaw):
     return np.array([[c, -s], [s, c]])
 
 
-def _circle_distances(origin, directions, circles):
-    """(N, K) distance along each ray to each circle (inf: missed): the
+def _circle_distances(origin, cos, sin, circles):
+    """(K, N) distance along each ray to each circle (inf: missed): the
     first root of |m + t d|^2 = r^2, m = origin - centre, with the
     discriminant from the ray's perpendicular offset d x m (no
-    cancellation)."""
+    cancellation). The rays' directions d are [cos, sin], (N,) each.
+
+    A shape a row, the rays along it: every operation runs along the N
+    rays (numpy is slow along a short last axis)."""
     m = origin - circles[:, :2]                                 # (K, 2)
-    b = directions @ m.T                                        # (N, K)
-    offset = np.outer(directions[:, 0], m[:, 1]) - np.outer(
-        directions[:, 1], m[:, 0])
-    r = circles[:, 2]
+    # d . m, (K, N): by the matrix product (N, 2) (2, K) the ranges were
+    # always computed with, so that they keep every bit.
+    b = np.ascontiguousarray((np.stack([cos, sin], axis=1) @ m.T).T)
+    offset = cos * m[:, 1:] - sin * m[:, :1]
+    r = circles[:, 2:]                                          # (K, 1)
     disc = r * r - offset * offset
     t = -b - np.sqrt(np.maximum(disc, 0.0))
     distances = np.where((disc >= 0.0) & (t >= 0.0), t, np.inf)
-    inside = np.sum(m * m, axis=1) <= r * r
-    distances[:, inside] = 0.0
+    inside = np.sum(m * m, axis=1, keepdims=True) <= r * r
+    distances[inside[:, 0]] = 0.0
     return distances
 
 
-def _box_distances(origin, directions, boxes):
-    """(N, L) distance along each ray to each box (inf: missed), by the
-    slab method in each box's own frame, one axis at a time."""
-    yaw = boxes[:, 4]
-    c, s = np.cos(yaw), np.sin(yaw)
+def _box_distances(origin, cos, sin, boxes):
+    """(L, N) distance along each ray to each box (inf: missed), by the
+    slab method in each box's own frame, one axis at a time; a shape a
+    row, as `_circle_distances`."""
+    yaw = boxes[:, 4:]
+    c, s = np.cos(yaw), np.sin(yaw)                             # (L, 1)
     p = origin - boxes[:, :2]
-    local = (c * p[:, 0] + s * p[:, 1], -s * p[:, 0] + c * p[:, 1])
-    u, v = directions[:, :1], directions[:, 1:]  # the rays in each box's
-    along = (u * c + v * s, -u * s + v * c)     # frame, (N, L) each
+    px, py = p[:, :1], p[:, 1:]
+    local = (c * px + s * py, -s * px + c * py)
+    # The rays in each box's frame, (L, N) each.
+    along = (cos * c + sin * s, -cos * s + sin * c)
     enter, leave = None, None
-    for d, x, half in ((along[0], local[0], boxes[:, 2]),
-                       (along[1], local[1], boxes[:, 3])):
+    for d, x, half in ((along[0], local[0], boxes[:, 2:3]),
+                       (along[1], local[1], boxes[:, 3:4])):
         with np.errstate(divide="ignore", invalid="ignore"):
             t_low, t_high = (-half - x) / d, (half - x) / d
         low, high = np.minimum(t_low, t_high), np.maximum(t_low, t_high)
@@ -158,9 +164,9 @@ def _box_distances(origin, directions, boxes):
         enter = low if enter is None else np.maximum(enter, low)
         leave = high if leave is None else np.minimum(leave, high)
     distances = np.where((enter <= leave) & (leave >= 0.0), enter, np.inf)
-    inside = (np.abs(local[0]) <= boxes[:, 2]) & (
-        np.abs(local[1]) <= boxes[:, 3])
-    distances[:, inside] = 0.0
+    inside = (np.abs(local[0]) <= boxes[:, 2:3]) & (
+        np.abs(local[1]) <= boxes[:, 3:4])
+    distances[inside[:, 0]] = 0.0
     return distances
 
 
@@ -188,11 +194,13 @@ def cast_rays(origin, angles, circles, boxes, max_range):
 
 def _cast_rays(origin, angles, circles, boxes, max_range):
     """`cast_rays` of checked arguments."""
-    directions = np.stack([np.cos(angles), np.sin(angles)], axis=1)
-    candidates = [np.full((angles.size, 1), np.inf),
-                  _circle_distances(origin, directions, circles),
-                  _box_distances(origin, directions, boxes)]
-    ranges = np.concatenate(candidates, axis=1).min(axis=1)
+    cos, sin = np.cos(angles), np.sin(angles)
+    ranges = np.full(angles.size, np.inf)
+    for shapes, distances_to in ((circles, _circle_distances),
+                                 (boxes, _box_distances)):
+        if len(shapes):  # none: nothing to cast against
+            np.minimum(ranges, distances_to(origin, cos, sin, shapes).min(
+                axis=0), out=ranges)
     ranges[ranges > max_range] = np.inf
     return ranges
 
@@ -251,9 +259,13 @@ def scan_points(ranges, angles_in_scanner, mount):
         raise ValueError(
             f"ranges (shape {ranges.shape}) is not allowed: must be "
             f"{angles.size} numbers >= 0 or inf, one per angle")
-    mount = as_vector("mount", mount, 3)
+    return _scan_points(ranges, angles, as_vector("mount", mount, 3))
+
+
+def _scan_points(ranges, angles_in_scanner, mount):
+    """`scan_points` of checked arguments."""
     hit = np.isfinite(ranges)
-    r, a = ranges[hit], angles[hit]
+    r, a = ranges[hit], angles_in_scanner[hit]
     in_scanner = np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
     return mount[:2] + in_scanner @ _rotation(mount[2]).T
 
@@ -343,8 +355,8 @@ class PlanarLidar(SampledReading, LeafSystem):
     def _output_points(self, context, output):
         # Computed again only when the reading changes (its prerequisite):
         # once a scan, read-only for the stages that share it.
-        points = scan_points(self._stored_reading_view(context),
-                             self._beam_angles, self.mount)
+        points = _scan_points(self._stored_reading_view(context),
+                              self._beam_angles, self.mount)
         points.flags.writeable = False
         output.set_value(points)
 

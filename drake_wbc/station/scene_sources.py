@@ -109,7 +109,8 @@ class PeopleSource(LeafSystem):
         xy = context.get_discrete_state(self._drawn).CopyToVector()
         for frame_id, (x, y) in zip(self._frame_ids, xy.reshape(-1, 2),
                                     strict=True):
-            poses.set_value(frame_id, RigidTransform([x, y, 0.0]))
+            # By keyword: pybind11 tries the other constructors first.
+            poses.set_value(frame_id, RigidTransform(p=[x, y, 0.0]))
 
 
 def add_people(builder, scene_graph, people, period=0.01):
