@@ -81,34 +81,44 @@ def test_a_band_active_at_home_says_what_to_change(shipped):
     assert f"{home:.4g}" in problems[0]
 
 
-def test_a_singular_is_named_and_no_band_is_proposed_there(
+def test_a_singular_home_is_named_and_no_band_is_proposed_there(
         tmp_path, capsys):
     """An arm whose home is stretched straight (every joint at 0: J_a
-    loses a rank, C_m = 0) is told to bend its home, instead of being
-    proposed the band (0, 0), which `drake-wbc demo` crashed on; a home
-    near it, where J_a keeps its rank, is not called singular."""
+    loses a rank, C_m = 0), or 1e-8 rad from it, is told to bend its
+    home, instead of being proposed the band (0, 0), which `drake-wbc
+    demo` crashed on, or one of 1e-10; a home is singular for the tuning
+    where s_min of J_a is below the arm controller's damping threshold
+    (there its damped least squares gives way), by SVD."""
     from drake_wbc.cli.main import main
-    from drake_wbc.robot.tuning import singular
+    from drake_wbc.math.arm_control import DEFAULT_DAMPING_THRESHOLD
+    from drake_wbc.robot.tuning import singular, smallest_singular_value
 
     path = write_omni_arm(tmp_path, 6)
     text = path.read_text()
     home = text[text.index("home: ["):].split("\n", 1)[0]
-    path.write_text(text.replace(home, "home: [0, 0, 0, 0, 0, 0]"))
-    arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
-    assert singular(arm)
-    assert capability_at(arm, arm.home, 1.5e4) < 1e-12
-    problems = check_tuning(arm, CapabilityBand(), 1.5e4)
-    assert len(problems) == 1
-    assert problems[0].startswith("arm.home = [0.0, 0.0, 0.0, 0.0, 0.0, "
-                                  "0.0] is singular")
-    assert main(["demo", "--robot", str(path), "--output",
-                 str(tmp_path)]) == 0
-    out = capsys.readouterr().out
-    assert "proposed capability_band: none, the home is singular" in out
-    assert "arm.home = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0] is singular" in out
-    path.write_text(text.replace(home, "home: [0, 0.3, 0.3, 0, 0.3, 0]"))
-    assert not singular(
-        ArmKinematics(*make_robot_plant(load_robot_description(path))))
+    for stretched in ("[0, 0, 0, 0, 0, 0]", "[0, 0, 1.0e-8, 0, 0, 0]"):
+        path.write_text(text.replace(home, f"home: {stretched}"))
+        arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
+        assert singular(arm)
+        assert capability_at(arm, arm.home, 1.5e4) < 1e-9
+        problems = check_tuning(arm, CapabilityBand(), 1.5e4)
+        assert len(problems) == 1
+        assert problems[0].startswith(
+            f"arm.home = {arm.home.tolist()} is at or near a singularity")
+        assert main(["demo", "--robot", str(path), "--output",
+                     str(tmp_path)]) == 0
+        out = capsys.readouterr().out
+        assert ("proposed capability_band: none, the home is at or near a "
+                "singularity") in out
+        assert f"arm.home = {arm.home.tolist()} is at or near" in out
+    # The same arm at other joints: its usual home (s_min 0.15) is not
+    # singular; a slightly bent arm is what its s_min says.
+    good = np.array([0.0, 0.8, 1.1, -0.4, -1.2, 0.3])
+    assert not singular(arm, good)
+    for q in (good, np.array([0.0, 0.05, 0.05, 0.0, 0.05, 0.0])):
+        s_min = np.linalg.svd(arm.evaluate(q).J_a, compute_uv=False)[-1]
+        assert smallest_singular_value(arm, q) == s_min
+        assert singular(arm, q) == (s_min < DEFAULT_DAMPING_THRESHOLD)
 
 
 def test_a_seven_joint_arm_with_the_six_joint_tuning_is_warned_of(seven):
@@ -199,15 +209,35 @@ def test_a_scenario_starting_away_from_home_is_warned_of_its_start():
         load_scenario(text=text)
     home = ArmKinematics().home.tolist()
     opened = home[:2] + [home[2] - 0.2] + home[3:]
+    wider = home[:2] + [home[2] - 0.5] + home[3:]
     for start, expected in (
             (opened, "workspace.workspace.extent_lower = 0.75 m is within "
                      "the tool's extent at the start "
-                     "(station.initial_arm_positions), d = 0.7651 m"),
+                     "(station.initial_arm_positions), d = 0.7651 m: in "
+                     "the intuitive pHRI mode the base would take the "
+                     "motion from the start; start nearer the home, or "
+                     "give extents beyond it, e.g. (0.78, 0.832)"),
+            (wider, "capability_band = (0.035, 0.04) is active at the "
+                    "start (station.initial_arm_positions), where C_m = "
+                    "0.03305: the compensation would give way and k_n "
+                    "switch off from the start; start nearer the home, or "
+                    "give a band below it, e.g. (0.0178, 0.0204)"),
             ([0.0] * 6, "station.initial_arm_positions = [0.0, 0.0, 0.0, "
-                        "0.0, 0.0, 0.0] is singular")):
+                        "0.0, 0.0, 0.0] is at or near a singularity")):
         with pytest.warns(RobotTuningWarning) as record:
             load_scenario(text=text.replace(
                 "\nstation:\n",
                 f"\nstation:\n  initial_arm_positions: {start}\n"))
         assert any(str(w.message).startswith(expected) for w in record), [
             str(w.message) for w in record]
+    # Put on its own robot again (--robot with the shipped file), the
+    # scenario warns no more: it said so when it loaded.
+    from drake_wbc.experiments.scenario import robot_file_of, with_robot
+
+    with pytest.warns(RobotTuningWarning):
+        scenario = load_scenario(text=text.replace(
+            "\nstation:\n", f"\nstation:\n  initial_arm_positions: "
+            f"{opened}\n"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with_robot(scenario, robot_file_of(scenario), echo=None)

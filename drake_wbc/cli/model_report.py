@@ -175,7 +175,8 @@ def describe_tuning(arm, band, k_j, local_workspace, count=2000):
         f"joint mid-range): C_m at home {proposed.home:.4g}, median "
         f"{percentiles[0]:.3g}, 90th percentile {percentiles[1]:.3g}, 99th "
         f"{percentiles[2]:.3g}",
-        "  proposed capability_band: none, the home is singular (below)"
+        "  proposed capability_band: none, the home is at or near a "
+        "singularity (below)"
         if band_there is None else
         f"  proposed capability_band: ({band_there.lower:.4g}, "
         f"{band_there.upper:.4g}), at {BAND_OVER_HOME[0]:.2f} and "

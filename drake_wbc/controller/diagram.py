@@ -201,7 +201,9 @@ def tuning_problems(params, arm, start=None):
     return check_tuning(arm, params.capability_band,
                         params.capability.joint_limit_gain,
                         params.workspace.workspace if phri else None,
-                        start=start)
+                        start=start,
+                        damping_threshold=(
+                            params.arm_controller.damping_threshold))
 
 
 def build_controller(params=None, robot=None):

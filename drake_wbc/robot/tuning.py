@@ -38,6 +38,7 @@ from typing import NamedTuple
 import numpy as np
 
 from drake_wbc.math import capability
+from drake_wbc.math.arm_control import DEFAULT_DAMPING_THRESHOLD
 from drake_wbc.math.capability import CapabilityBand
 from drake_wbc.math.validation import positive, whole_number
 from drake_wbc.math.workspace import LocalWorkspace, extent
@@ -122,13 +123,24 @@ def survey_capability(arm, k_j=None, count=2000, seed=0):
     return CapabilitySurvey(k_j, capability_at(arm, arm.home, k_j), samples)
 
 
-def singular(arm, q=None):
-    """Whether `arm`'s (ArmKinematics) Jacobian J_a at joints `q` (its
-    home if None) has lost a rank (a stretched or folded arm, C_m = 0
-    there): the tool cannot move in every direction there, and at a
-    singular home no band can sit at fractions of the home's C_m."""
+def smallest_singular_value(arm, q=None):
+    """s_min of `arm`'s (ArmKinematics) Jacobian J_a at joints `q` (its
+    home if None): 0 where it has lost a rank (a stretched or folded
+    arm)."""
     q = arm.home if q is None else q
-    return bool(np.linalg.matrix_rank(arm.evaluate(q).J_a) < 6)
+    return float(np.linalg.svd(arm.evaluate(q).J_a, compute_uv=False)[-1])
+
+
+def singular(arm, q=None, threshold=DEFAULT_DAMPING_THRESHOLD):
+    """Whether `arm` (ArmKinematics) is at or near a singularity at
+    joints `q` (its home if None): s_min of J_a below `threshold`, where
+    the arm's damped least squares gives way (the arm controller's
+    damping_threshold, drake_wbc.math.arm_control.damping_rule; C_m is
+    small or 0 there). Its
+    tool cannot follow every direction there, and at such a home no
+    band can sit at fractions of the home's C_m."""
+    return smallest_singular_value(arm, q) < positive("threshold",
+                                                      threshold)
 
 
 def home_extent(arm):
@@ -146,22 +158,26 @@ def proposed_local_workspace(arm):
                           extent_upper=EXTENT_OVER_HOME[1] * d)
 
 
-def check_tuning(arm, band, k_j, local_workspace=None, start=None):
+def check_tuning(arm, band, k_j, local_workspace=None, start=None,
+                 damping_threshold=DEFAULT_DAMPING_THRESHOLD):
     """What is wrong with the capability `band` (CapabilityBand), the
     joint-limit gain `k_j` and, if given, the `local_workspace`
     (LocalWorkspace, of the intuitive pHRI mode) on `arm` (ArmKinematics),
     as sentences that say what to change; empty when nothing is. Cheap
     (one evaluation at home): it checks that P_jnt can come near 1, that
-    the arm's home is not singular, that the band is not active there
-    (alpha > 0) and that the tool there is inside d^l (else the base
-    moves from the start).
+    the arm's home is not at or near a singularity (`singular`), that
+    the band is not active there (alpha > 0) and that the tool there is
+    inside d^l (else the base moves from the start).
 
     Args:
         arm, band, k_j, local_workspace: as above.
         start: None, or the arm's joint positions where a run starts (a
             scenario's station.initial_arm_positions, other than the
-            home): the home's checks at that start instead, said of it
-            (and not k_j's, which no place changes).
+            home): the home's checks at that start instead, said of it,
+            their proposals at the start's own C_m and extent (and not
+            k_j's, which no place changes).
+        damping_threshold: the arm controller's threshold on s_min of
+            J_a (`singular`).
     """
     problems = []
     n = arm.num_joints
@@ -179,48 +195,44 @@ def check_tuning(arm, band, k_j, local_workspace=None, start=None):
         name, place = "arm.home", "the robot's home"
         bend = "give a home with the elbow and the wrist bent in the " \
                "robot's description"
+        change = "give {what} beyond it, e.g. "
     else:
         name = "station.initial_arm_positions"
         place = f"the start ({name})"
         bend = "start with the elbow and the wrist bent"
+        change = "start nearer the home, or give {what} beyond it, e.g. "
     value = capability_at(arm, q, k_j)
-    if singular(arm, q):
+    s_min = smallest_singular_value(arm, q)
+    if singular(arm, q, damping_threshold):
         problems.append(
-            f"{name} = {q.tolist()} is singular (J_a loses a rank there, "
-            f"C_m = {value:.3g}): the arm would start where its tool "
-            "cannot move in every direction"
+            f"{name} = {q.tolist()} is at or near a singularity (the "
+            f"smallest singular value of J_a is {s_min:.3g}, below the "
+            f"arm controller's damping threshold {damping_threshold:g}, "
+            f"where its damped least squares gives way; C_m = "
+            f"{value:.3g}): the tool cannot follow every direction there"
             + (", and no capability band can be proposed at fractions of "
                "the home's C_m" if at_home else "") + f"; {bend}")
     elif value <= band.upper:
-        home = capability_at(arm, arm.home, k_j)
-        proposal = CapabilityBand(BAND_OVER_HOME[0] * home,
-                                  BAND_OVER_HOME[1] * home)
         problems.append(
             f"capability_band = ({band.lower!r}, {band.upper!r}) is active "
             f"at {place}, where C_m = {value:.4g}: the compensation would "
             "give way and k_n switch off from the start; "
-            + ("give a band below it, e.g. " if at_home else
-               "start nearer the home or give a band below it (at the "
-               "home's fractions, ")
-            + f"({proposal.lower:.3g}, {proposal.upper:.3g})"
-            + ("" if at_home else ")")
-            + " in the controller's parameters or the robot description's "
-            "tuning (drake-wbc demo --robot FILE surveys the arm)")
+            + change.format(what="a band").replace("beyond", "below")
+            + f"({BAND_OVER_HOME[0] * value:.3g}, "
+            f"{BAND_OVER_HOME[1] * value:.3g}) in the controller's "
+            "parameters or the robot description's tuning (drake-wbc "
+            "demo --robot FILE surveys the arm)")
     if local_workspace is not None:
         d = float(extent(arm.evaluate(q).pose[:3, 3]))
         if d >= local_workspace.extent_lower:
-            proposal = proposed_local_workspace(arm)
             problems.append(
                 f"workspace.workspace.extent_lower = "
                 f"{local_workspace.extent_lower!r} m is within the tool's "
                 f"extent at {place}, d = {d:.4g} m: in the intuitive pHRI "
                 "mode the base would take the motion from the start; "
-                + ("give extents beyond it, e.g. " if at_home else
-                   "start nearer the home or give extents beyond it (at "
-                   "the home's fractions, ")
-                + f"({proposal.extent_lower:.3g}, "
-                f"{proposal.extent_upper:.3g})"
-                + ("" if at_home else ")")
-                + " in the controller's parameters or the robot "
-                "description's tuning (local_workspace)")
+                + change.format(what="extents")
+                + f"({EXTENT_OVER_HOME[0] * d:.3g}, "
+                f"{EXTENT_OVER_HOME[1] * d:.3g}) in the controller's "
+                "parameters or the robot description's tuning "
+                "(local_workspace)")
     return problems
