@@ -445,7 +445,7 @@ def test_a_base_loop_given_in_part_is_that_robots_own_elsewhere():
 
     ringing = with_base("{loop: ringing}").station.base
     assert ringing.velocity_limits == list(lbr.velocity_limits)
-    assert ringing == own_base_loop(lbr, loop="ringing")
+    assert ringing == own_base_loop(lbr, {"loop": "ringing"})
     assert ringing.acceleration_limits == BASE_LOOPS["ringing"][
         "acceleration_limits"]
     assert ringing.damping_ratio == 0.15
@@ -465,6 +465,56 @@ def test_a_base_loop_given_in_part_is_that_robots_own_elsewhere():
     back = with_robot(with_robot(shaking, lbr_file, echo=None),
                       robot_file_of(shaking), echo=None).station.base
     assert back == shaking.station.base
+
+
+def test_a_base_loop_filled_from_a_fast_robot_is_checked_at_load(tmp_path):
+    """On a robot whose base loop lags 30 ms (a copy of the shipped one),
+    a station.base given in part takes that lag, and is then checked
+    against the station's step at load, as one given in full is: 5 ms
+    is refused naming station.time_step and station.base.lag; a given
+    field that the robot's lag cannot take is named as given (it was
+    blamed on the robot's velocity_lag); and moved there by --robot, a
+    loop is checked the same way."""
+    shipped_file = robot_file_of(load_scenario(find_scenario(
+        "trajectory_tracking")))
+    fast = tmp_path / "fast.robot.yaml"
+    fast.write_text(shipped_file.read_text().replace(
+        "velocity_lag: 0.3", "velocity_lag: 0.03").replace(
+        "drake_wbc: .", f"drake_wbc: {shipped_file.parent}"))
+    text = find_scenario("trajectory_tracking").read_text()
+    station_line = "\nstation:\n"
+    assert station_line in text
+
+    def with_base(base, time_step):
+        return load_scenario(text=text.replace(
+            station_line, f"{station_line}  base: {base}\n").replace(
+            "time_step: 0.005", f"time_step: {time_step}")
+            + f"robot: {fast}\n")
+
+    assert with_base("{velocity_limits: [0.5, 0.5, 0.5]}", 0.002
+                     ).station.base.lag == 0.03
+    with pytest.raises(ValueError, match=re.escape(
+            "text: station.time_step = 0.005 s is not allowed with "
+            "station.base.lag = 0.03 s")):
+        with_base("{velocity_limits: [0.5, 0.5, 0.5]}", 0.005)
+    with pytest.raises(ValueError, match=re.escape(
+            "text: station.base.servo_time_constant = 0.02 s is not "
+            "allowed with lag = 0.03 s")):
+        with_base("{servo_time_constant: 0.02}", 0.002)
+    # On the shipped robot, a servo of 20 ms under its own 0.2 s lag; on
+    # the fast robot's 30 ms, too slow.
+    with pytest.raises(ValueError, match=re.escape(
+            f"--robot = {str(fast)!r}: station.base.servo_time_constant = "
+            "0.02 s is not allowed with lag = 0.03 s")):
+        with_robot(load_scenario(text=text.replace(
+            station_line, f"{station_line}  base: "
+            "{servo_time_constant: 0.02}\n")), fast, echo=None)
+    with pytest.raises(ValueError, match=re.escape(
+            f"--robot = {str(fast)!r}: station.time_step = 0.005 s is not "
+            "allowed with station.base.lag = 0.03 s")):
+        with_robot(load_scenario(text=text.replace(
+            station_line, f"{station_line}  base: "
+            "{velocity_limits: [0.5, 0.5, 0.5]}\n")), fast, echo=None)
 
 
 def test_the_start_is_checked_against_the_robots_footprint():

@@ -52,7 +52,11 @@ from drake_wbc.robot.description import (
 from drake_wbc.robot.footprint import check_start_is_free
 from drake_wbc.robot.model import ArmKinematics, ArmMount, shared_robot_plant
 from drake_wbc.robot.tuning import RobotTuningWarning
-from drake_wbc.station.drivers import moved_base_loop, own_base_loop
+from drake_wbc.station.drivers import (
+    check_base_time_step,
+    moved_base_loop,
+    own_base_loop,
+)
 from drake_wbc.station.scene import Scene
 from drake_wbc.station.simulation import (
     SimulatedStation,
@@ -352,15 +356,35 @@ def with_robot(scenario, robot_file, echo=print):
     if robot_file != own:
         scenario.station.initial_arm_positions = list(description.arm.home)
         if scenario.station.base is not None:
-            scenario.station.base = moved_base_loop(
-                scenario.station.base, own_base, description.base)
+            try:
+                scenario.station.base = checked_base(
+                    scenario, moved_base_loop(
+                        scenario.station.base, own_base, description.base,
+                        "station.base."))
+            except ValueError as error:
+                raise ValueError(f"--robot = {str(robot_file)!r}: "
+                                 f"{error}") from None
         if echo is not None:
             echo(f"the arm starts at {description.name}'s home "
                  f"{list(description.arm.home)} (the scenario's start is "
                  f"for its own robot, {own.name})")
     check_on_robot(scenario)
-    warn_of_the_tuning_at_the_start(scenario)
+    if robot_file != own:
+        warn_of_the_tuning_at_the_start(scenario)
     return scenario
+
+
+def checked_base(scenario, base):
+    """`base` (BaseDriverParameters), a loop that `scenario`'s
+    station.base becomes on its robot, checked against the station's
+    step as StationOptions checks a loop given in full.
+
+    Raises:
+        ValueError: naming station.time_step and station.base's lag.
+    """
+    check_base_time_step(base, "station.time_step",
+                         scenario.station.time_step, prefix="station.base.")
+    return base
 
 
 def check_on_robot(scenario):
@@ -469,12 +493,11 @@ def load_scenario(path=None, text=None):
         base = scenario.station.base
         named = screened_data(path=path, text=text)["station"]["base"]
         try:
-            scenario.station.base = own_base_loop(
-                robot.base, **{name: getattr(base, name)
-                               for name in named or {}})
+            scenario.station.base = checked_base(scenario, own_base_loop(
+                robot.base, {name: getattr(base, name)
+                             for name in named or {}}, "station.base."))
         except ValueError as error:
-            raise ValueError(f"{path or 'text'}: station.base: {error}"
-                             ) from None
+            raise ValueError(f"{path or 'text'}: {error}") from None
     if scenario.robot:
         try:
             check_on_robot(scenario)

@@ -149,7 +149,7 @@ class BaseDriverParameters:
             setattr(self, name, copy.copy(value))
 
 
-def own_base_loop(base, **given):
+def own_base_loop(base, given=None, prefix=""):
     """The velocity loop of a robot's base as its description gives it
     (`base`, a BaseDescription, drake_wbc.robot.description): first
     order, held to its velocity and acceleration limits, with the lag of
@@ -162,17 +162,21 @@ def own_base_loop(base, **given):
 
     Args:
         base: the robot's BaseDescription.
-        **given: fields of BaseDriverParameters that replace the robot's
-            (a scenario's station.base, given in part): a named `loop`
-            sets its own fields (BASE_LOOPS), a `lag` its servo as above
-            unless servo_time_constant is given too; every field left
-            out is the robot's.
+        given: None, or a dict of fields of BaseDriverParameters that
+            replace the robot's (a scenario's station.base, given in
+            part): a named `loop` sets its own fields (BASE_LOOPS), a
+            `lag` its servo as above unless servo_time_constant is given
+            too; every field left out is the robot's.
+        prefix: what the messages put before a given field's name (e.g.
+            "station.base.").
 
     Raises:
-        ValueError: naming the robot's field where the loop cannot take
-            its value (a velocity_lag of 0, or under 10 plant steps), or
-            the given field.
+        ValueError: naming the given field (after `prefix`) whose value
+            the loop cannot take, or the robot's field where nothing but
+            a loop's name is given (a velocity_lag of 0, or under 10
+            plant steps).
     """
+    given = given or {}
     named = BASE_LOOPS.get(given.get("loop"), {})
     own_lag = min(BaseDriverParameters.lag, base.velocity_lag)
     lag = given.get("lag", named.get("lag", own_lag))
@@ -188,25 +192,27 @@ def own_base_loop(base, **given):
     try:
         return BaseDriverParameters(**values)
     except ValueError as error:
-        if "lag" in given or "lag" in named:
-            raise
+        if named or set(given) - {"loop"}:  # a given value's error
+            raise ValueError(f"{prefix}{error}") from None
         raise ValueError(
             f"the robot's base.velocity_lag = {base.velocity_lag!r} s "
             f"cannot be simulated ({error}); give the station's base loop "
             "(station.base) instead") from None
 
 
-def moved_base_loop(loop, base, other):
+def moved_base_loop(loop, base, other, prefix=""):
     """The velocity loop `loop` of the robot with BaseDescription `base`
     moved to the robot with BaseDescription `other` (a scenario run on
     another robot): the fields where `loop` differs from `base`'s own
     loop (own_base_loop, with `loop`'s named loop) are kept, every other
-    field is `other`'s own."""
-    own = own_base_loop(base, loop=loop.loop)
+    field is `other`'s own (a field set to `base`'s own value too: the
+    loop keeps no record of what was written). Errors as own_base_loop's,
+    `prefix` before a field's name."""
+    own = own_base_loop(base, {"loop": loop.loop})
     given = {f.name: getattr(loop, f.name) for f in fields(loop)
              if f.name == "loop" or not _same(getattr(loop, f.name),
                                                 getattr(own, f.name))}
-    return own_base_loop(other, **given)
+    return own_base_loop(other, given, prefix)
 
 
 def _same(a, b):
