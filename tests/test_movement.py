@@ -227,6 +227,14 @@ def test_a_replay_too_fast_or_too_long_is_refused(tmp_path):
                        r"495 s"):
         mv.MovementPlayer(mv.LearnedMovement.load(path),
                           cdmp.MovementReplay(file=str(path)))
+    # Played 200 times slower, the 5 s movement would last 1000 s: the
+    # tau is what is refused, named as the caller calls it.
+    with pytest.raises(ValueError, match=r"^--tau = 200\.0 is not allowed "
+                       r"for the movement m \(learned at tau = 1 over 5 s\): "
+                       r"played 200 times slower, it would last 1000 s, at "
+                       r"most 495 s .*play it faster \(a smaller tau\)$"):
+        mv.rollout_step(learned, 200.0, source="m", name="--tau")
+    assert mv.rollout_step(learned, 1.0) == 0.005
 
 
 BOMB = """dmp: {alpha_z: 25.0, duration: 5.0, num_basis: 2}
