@@ -480,8 +480,8 @@ def test_sigma_grid_boundaries_agree_with_nearby_interior():
 def test_a_strided_twist_compiles_nothing_new():
     """The float kernel gives a strided view (a reversed twist), a
     read-only array or a list to its sealed closed form as the
-    C-contiguous array it was compiled for: the same result, no new
-    signature."""
+    C-contiguous array it was compiled for, and a 0-d array as a float:
+    the same result, no new signature."""
     from drake_wbc.math import distribution, kernels
 
     kernel = next(k for k in kernels.registered_kernels()
@@ -503,6 +503,10 @@ def test_a_strided_twist_compiles_nothing_new():
         listed = list(args)
         listed[index] = list(args[index])
         np.testing.assert_array_equal(kernel.fast(*listed), expected)
+    for index in (3, 4, 6):  # sigma_xy, sigma_phi, k_n as 0-d arrays
+        scalar = list(args)
+        scalar[index] = np.array(args[index])
+        np.testing.assert_array_equal(kernel.fast(*scalar), expected)
     assert len(distribution._closed_form.signatures) == signatures == 1
 
 

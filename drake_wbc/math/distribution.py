@@ -409,7 +409,9 @@ def whole_body_distribution_float(V_ee, p_ee_in_base, R_ba, sigma_xy,
         the stages give them, go to the closed form as they are; any
         other (a strided view, a list) is refused by the sealed closed
         form (drake_wbc.math.compiled.compiled_for) and copied by
-        `float_array`.
+        `float_array` (a scalar that numba refuses, a 0-d array, by
+        float). Their shapes are not checked: the stages' are right by
+        construction; a caller by hand has the checked `distribute`.
 
     Returns:
         (9,) array V_wb.
@@ -421,11 +423,12 @@ def whole_body_distribution_float(V_ee, p_ee_in_base, R_ba, sigma_xy,
             V_wb = _closed_form(V_ee, p_ee_in_base, sigma_xy, sigma_phi,
                                 capability_gradient, null_space_gain,
                                 damped, threshold)
-        except TypeError:  # not the arrays it is compiled for: copies
+        except TypeError:  # not the types it is compiled for: copies
             V_wb = _closed_form(
-                float_array(V_ee), float_array(p_ee_in_base), sigma_xy,
-                sigma_phi, float_array(capability_gradient),
-                null_space_gain, damped, threshold)
+                float_array(V_ee), float_array(p_ee_in_base),
+                float(sigma_xy), float(sigma_phi),
+                float_array(capability_gradient), float(null_space_gain),
+                damped, threshold)
         if V_wb[0] == V_wb[0]:  # not NaN: the closed form holds
             return V_wb
     return whole_body_distribution(
