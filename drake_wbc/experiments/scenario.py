@@ -491,11 +491,11 @@ def load_scenario(path=None, text=None):
         # Given in part, the fields left out are the robot's own loop's,
         # not BaseDriverParameters' defaults (the shipped base's).
         base = scenario.station.base
-        named = screened_data(path=path, text=text)["station"]["base"]
+        written = screened_data(path=path, text=text)["station"]["base"]
         try:
             scenario.station.base = checked_base(scenario, own_base_loop(
                 robot.base, {name: getattr(base, name)
-                             for name in named or {}}, "station.base."))
+                             for name in written or {}}, "station.base."))
         except ValueError as error:
             raise ValueError(f"{path or 'text'}: {error}") from None
     if scenario.robot:
