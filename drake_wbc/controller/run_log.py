@@ -86,9 +86,9 @@ def column_names(name, size, columns=None):
 
 
 def advance_times(duration, chunk):
-    """The times a run of `duration` s advances its Simulator to, a
-    `chunk` of s at a time: k chunk for k = 1, 2, ... and `duration`
-    itself last. Each is computed, not summed: a sum of 200 chunks of
+    """The times a run of `duration` s advances its Simulator to,
+    `chunk` s at a time: k chunk for k = 1, 2, ... and `duration` itself
+    last. Each is computed, not summed: a sum of 200 chunks of
     0.235 s ends 8.5e-14 s short of 47 s, and the log's periodic sample
     at the run's end with it.
 

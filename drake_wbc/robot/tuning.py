@@ -136,9 +136,8 @@ def singular(arm, q=None, threshold=DEFAULT_DAMPING_THRESHOLD):
     joints `q` (its home if None): s_min of J_a below `threshold`, where
     the arm's damped least squares gives way (the arm controller's
     damping_threshold, drake_wbc.math.arm_control.damping_rule; C_m is
-    small or 0 there). Its
-    tool cannot follow every direction there, and at such a home no
-    band can sit at fractions of the home's C_m."""
+    small or 0 there). Its tool cannot follow every direction there,
+    and at such a home no band can sit at fractions of the home's C_m."""
     return smallest_singular_value(arm, q) < positive("threshold",
                                                       threshold)
 
@@ -195,12 +194,12 @@ def check_tuning(arm, band, k_j, local_workspace=None, start=None,
         name, place = "arm.home", "the robot's home"
         bend = "give a home with the elbow and the wrist bent in the " \
                "robot's description"
-        change = "give {what} beyond it, e.g. "
+        change = "give {what} {side} it, e.g. "
     else:
         name = "station.initial_arm_positions"
         place = f"the start ({name})"
         bend = "start with the elbow and the wrist bent"
-        change = "start nearer the home, or give {what} beyond it, e.g. "
+        change = "start nearer the home, or give {what} {side} it, e.g. "
     value = capability_at(arm, q, k_j)
     s_min = smallest_singular_value(arm, q)
     if singular(arm, q, damping_threshold):
@@ -217,7 +216,7 @@ def check_tuning(arm, band, k_j, local_workspace=None, start=None,
             f"capability_band = ({band.lower!r}, {band.upper!r}) is active "
             f"at {place}, where C_m = {value:.4g}: the compensation would "
             "give way and k_n switch off from the start; "
-            + change.format(what="a band").replace("beyond", "below")
+            + change.format(what="a band", side="below")
             + f"({BAND_OVER_HOME[0] * value:.3g}, "
             f"{BAND_OVER_HOME[1] * value:.3g}) in the controller's "
             "parameters or the robot description's tuning (drake-wbc "
@@ -230,7 +229,7 @@ def check_tuning(arm, band, k_j, local_workspace=None, start=None,
                 f"{local_workspace.extent_lower!r} m is within the tool's "
                 f"extent at {place}, d = {d:.4g} m: in the intuitive pHRI "
                 "mode the base would take the motion from the start; "
-                + change.format(what="extents")
+                + change.format(what="extents", side="beyond")
                 + f"({EXTENT_OVER_HOME[0] * d:.3g}, "
                 f"{EXTENT_OVER_HOME[1] * d:.3g}) in the controller's "
                 "parameters or the robot description's tuning "
