@@ -294,3 +294,28 @@ def test_the_hardware_scenario_loads():
         is None
     with pytest.raises(ValueError, match="hardware.channels.truth"):
         load_scenario(text="hardware: {channels: {truth: ''}}")
+
+
+def test_a_signal_during_the_wait_for_messages_is_no_failure():
+    """A signal that lands while QueuedLcm waits for a message (Ctrl-C,
+    which robot-sim and deploy turn into a stop) made lcm give up with
+    -1, and the program end in an OSError with exit code 1 instead of
+    stopping (lcm's memq:// provider waits as udpm:// does): the wait is
+    made once more, and ends as a wait without messages does."""
+    import signal
+    import time
+
+    bus = codecs.QueuedLcm("memq://")
+    bus.Subscribe("CHANNEL", lambda data: None)
+    alarms = []
+    previous = signal.signal(signal.SIGALRM,
+                             lambda *_: alarms.append(time.monotonic()))
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.05)
+        started = time.monotonic()
+        assert bus.HandleSubscriptions(300) == 0
+        ended = time.monotonic()
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0.0)
+        signal.signal(signal.SIGALRM, previous)
+    assert len(alarms) == 1 and started < alarms[0] < ended

@@ -351,10 +351,22 @@ class QueuedLcm:
     def HandleSubscriptions(self, timeout_millis):  # noqa: N802
         """Delivers every message received; returns how many."""
         count = 0
-        while self._lcm.handle_timeout(timeout_millis if not count
-                                       else 0) > 0:
+        while self._handle(timeout_millis if not count else 0) > 0:
             count += 1
         return count
+
+    def _handle(self, timeout_millis):
+        """One message, if one comes within `timeout_millis`: 1, or 0.
+
+        A signal that lands while the wait runs (Ctrl-C, which the
+        programs turn into a stop) makes lcm give up with -1, as a
+        failure of its socket does: the wait is made once more, where a
+        failure raises again and an interruption is over.
+        """
+        try:
+            return self._lcm.handle_timeout(timeout_millis)
+        except OSError:
+            return self._lcm.handle_timeout(timeout_millis)
 
 
 def receiving_bus(lcm):
