@@ -386,18 +386,19 @@ def rollout_step(movement, tau, dt=0.005, source=None, name="tau"):
     played = movement.params.with_tau(positive(name, tau))
     length = played.duration + ROLLOUT_TAIL
     step = min(longest, ROLLOUT_RESOLUTION / dmp.fastest_rate(played))
+    refused = (f"{name} = {tau!r} is not allowed for the movement"
+               f"{'' if source is None else ' ' + str(source)} (learned at "
+               f"tau = {movement.params.tau:g} over "
+               f"{movement.params.duration:.6g} s): played ")
     if length / longest > MAX_ROLLOUT_STEPS:
         longest_played = MAX_ROLLOUT_STEPS * longest - ROLLOUT_TAIL
         if tau != movement.params.tau:  # played slower than it was learned
             raise ValueError(
-                f"{name} = {tau!r} is not allowed for the movement"
-                f"{'' if source is None else ' ' + str(source)} (learned at "
-                f"tau = {movement.params.tau:g} over "
-                f"{movement.params.duration:.6g} s): played "
-                f"{tau / movement.params.tau:.3g} times slower, it would "
-                f"last {played.duration:.6g} s, at most {longest_played:g} "
-                f"s (its rollouts take at most {MAX_ROLLOUT_STEPS} steps of "
-                f"{longest:g} s); play it faster (a smaller tau)")
+                f"{refused}{tau / movement.params.tau:.3g} times slower, it "
+                f"would last {played.duration:.6g} s, at most "
+                f"{longest_played:g} s (its rollouts take at most "
+                f"{MAX_ROLLOUT_STEPS} steps of {longest:g} s); play it "
+                "faster (a smaller tau)")
         raise ValueError(
             f"{source or 'the movement'}: dmp.duration = "
             f"{movement.params.duration:.6g} s is not allowed: a movement "
@@ -405,13 +406,9 @@ def rollout_step(movement, tau, dt=0.005, source=None, name="tau"):
             f"most {MAX_ROLLOUT_STEPS} steps of {longest:g} s)")
     if length / step > MAX_ROLLOUT_STEPS:
         raise ValueError(
-            f"{name} = {tau!r} is not allowed for the movement"
-            f"{'' if source is None else ' ' + str(source)} (learned at "
-            f"tau = {movement.params.tau:g} over "
-            f"{movement.params.duration:.6g} s): played "
-            f"{movement.params.tau / tau:.3g} times faster, its rollouts "
-            f"would take {length / step:.3g} steps of {step:.3g} s, at most "
-            f"{MAX_ROLLOUT_STEPS}; play it slower (a larger tau)")
+            f"{refused}{movement.params.tau / tau:.3g} times faster, its "
+            f"rollouts would take {length / step:.3g} steps of {step:.3g} "
+            f"s, at most {MAX_ROLLOUT_STEPS}; play it slower (a larger tau)")
     return step
 
 
