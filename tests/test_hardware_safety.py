@@ -600,6 +600,29 @@ def test_arm_commands_are_rate_and_position_limited():
     assert bench.diagnostics()["arm_command_saturated"] == 1.0
 
 
+def test_a_huge_finite_arm_command_never_turns_the_commands_into_nan():
+    """A controller's arm command that is finite but absurd (1e306 rad),
+    then a sane one: the target's rate between them overflows, and the
+    arm's commands once became NaN from then on (they were sent, and the
+    guard's state stayed NaN). Every command sent stays finite and within
+    the limits, and the arm gets to the sane command."""
+    bench = Bench()
+    limits = Limits.of_robot(bench.options)
+    bench.run(3)
+    bench.set_command(bench.arm, np.full(6, 1e306))
+    bench.run(1)
+    bench.set_command(bench.arm, HOME_ARM_POSITIONS)
+    bench.run(40)
+    q = np.array([command for _, command in bench.sent["arm"]])
+    assert np.all(np.isfinite(q))
+    assert np.all(q <= limits.upper) and np.all(q >= limits.lower)
+    rate = np.diff(q, axis=0) / H
+    assert np.all(np.abs(rate) <= limits.joint_speed + 1e-9)
+    assert np.all(np.abs(np.diff(rate, axis=0))
+                  <= limits.joint_acceleration * H + 1e-9)
+    np.testing.assert_allclose(q[-1], HOME_ARM_POSITIONS)
+
+
 def test_limits_wider_than_the_arms_own_are_refused():
     for name, value, own in (("joint_speed_limit", 100.0, "1.57 rad/s"),
                              ("joint_acceleration_limit", 1e6,
@@ -679,6 +702,22 @@ def test_follow_catches_a_moving_target_and_then_passes_it():
         q, v, limited = follow_arm_command(target, rate, q, v, h, LIMITS)
     assert not limited
     np.testing.assert_array_equal(q, target)
+
+
+def test_follow_stays_finite_for_any_finite_target():
+    """A target or a target rate near the largest float (a forged arm
+    command of 1e306 rad on the robot's side, then a genuine one) gives a
+    command within the limits, not NaN."""
+    h, q, v = 0.01, np.zeros(6), np.zeros(6)
+    taken = np.zeros(6)
+    for target in (np.full(6, 1e306), np.full(6, 0.1),
+                   np.full(6, -1.7e308), np.full(6, 0.1)):
+        q, v, limited = follow_arm_command(target, (target - taken) / h, q,
+                                           v, h, LIMITS)
+        taken = target
+        assert limited
+        assert np.all(np.isfinite(q)) and np.all(np.isfinite(v))
+        assert np.all(np.abs(v) <= 2.0) and np.all(np.abs(q) <= 5.0)
 
 
 def test_stop_arm_slows_down_at_the_limit():

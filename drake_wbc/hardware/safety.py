@@ -224,6 +224,14 @@ def brake_speed(distance, acceleration, period):
     return m * step + np.clip(f, 0.0, step)
 
 
+TARGET_RATE_BOUND = 1e150
+"""rad/s: the largest target rate `follow_arm_command` takes as it is.
+Any rate beyond it is far beyond every joint's limits (so the joint
+follows it at its limits, as it would the rate itself), and the target's
+distance and `brake_speed` computed from it stay finite: a finite target
+near the largest float (1e306 rad) once turned the commands into NaN."""
+
+
 def follow_arm_command(target, target_velocity, last, velocity, period,
                        limits):
     """The next arm position command towards `target` within the limits.
@@ -262,7 +270,11 @@ def follow_arm_command(target, target_velocity, last, velocity, period,
             and np.all(target <= limits.upper)):
         return np.array(target, dtype=float), step, False
     held = np.clip(target, limits.lower, limits.upper)
-    moving = np.where(held == target, target_velocity, 0.0)
+    # A rate beyond TARGET_RATE_BOUND (a target that jumped from near the
+    # largest float) is bounded, so that nothing below overflows to NaN;
+    # the joint follows it at its limits all the same.
+    moving = np.clip(np.where(held == target, target_velocity, 0.0),
+                     -TARGET_RATE_BOUND, TARGET_RATE_BOUND)
     # How far the target was ahead before it moved this period, and the
     # speed relative to it that stops on it.
     ahead = held - last - moving * period
