@@ -554,6 +554,44 @@ def test_the_final_stop_follows_the_runs_commands_on_the_robot():
         assert reception.rejected == 0
 
 
+def test_the_final_stop_brakes_a_moving_arm_within_its_limits():
+    """A deployment that ends while the arm moves at full speed (1.57
+    rad/s): the stop brakes it within 12.56 rad/s^2, one command a period
+    with the base at zero, and holds it where it comes to rest, every
+    command in sequence on the robot. (It was held at once: a step of 157
+    rad/s^2.)"""
+    bench = Bench()
+    limits = Limits.of_robot(bench.options)
+    bench.run(3)
+    bench.set_command(bench.arm, HOME_ARM_POSITIONS + 1.0)
+    bench.run(40)
+    guard = bench.hw.systems["guard"]
+    sent = guard.stored(guard.GetMyContextFromRoot(bench.root))
+    np.testing.assert_allclose(sent.arm_velocity, 1.57)
+    arms, bases = [], []
+    bench.lcm.Subscribe(bench.options.channels.arm_command, lambda data:
+                        arms.append(messages.decode_arm_command(data)))
+    bench.lcm.Subscribe(bench.options.channels.base_command, lambda data:
+                        bases.append(messages.decode_base_command(data)))
+    held = send_stop(bench.lcm, bench.options, sent.arm, bench.hw.sender,
+                     bench.hw.command_utime(bench.root) + 1,
+                     arm_velocity=sent.arm_velocity, limits=limits)
+    bench.lcm.HandleSubscriptions(0)
+    q = np.array([sent.arm - sent.arm_velocity * H, sent.arm]
+                 + [m.values[0] for m in arms])
+    rate = np.diff(q[:-STOP_REPEATS + 1], axis=0) / H
+    assert np.all(np.abs(np.diff(rate, axis=0))
+                  <= limits.joint_acceleration * H + 1e-9)
+    np.testing.assert_array_equal(rate[-1], 0.0)
+    np.testing.assert_array_equal(q[-STOP_REPEATS:], np.broadcast_to(
+        held, (STOP_REPEATS, 6)))
+    for m in bases:
+        np.testing.assert_array_equal(m.values[0], 0.0)
+    stamps = [m.utime for m in arms]
+    assert np.all(np.diff(stamps) > 0)
+    assert len(arms) == 13 + STOP_REPEATS  # 1.57 / (12.56 * 0.01) periods
+
+
 def test_a_flood_hides_no_genuine_message():
     """200 garbage messages a control period on every status channel
     (20,000 a second, after each genuine one): every genuine message is
