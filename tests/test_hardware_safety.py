@@ -21,6 +21,7 @@ from drake_wbc.hardware import codecs, messages
 from drake_wbc.hardware.interface import DIAGNOSTICS, HardwareInterface
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.hardware.safety import (
+    ArmCommandLimiter,
     Limits,
     WallClock,
     brake_speed,
@@ -659,6 +660,27 @@ def test_a_huge_finite_arm_command_never_turns_the_commands_into_nan():
     assert np.all(np.abs(np.diff(rate, axis=0))
                   <= limits.joint_acceleration * H + 1e-9)
     np.testing.assert_allclose(q[-1], HOME_ARM_POSITIONS)
+
+
+def test_an_arm_found_beyond_its_limits_is_refused_not_jumped_back():
+    """The robot's measured arm positions beyond a joint's limits (3.3 rad
+    on joint 0, limit 3.14): the guard's first command, held within the
+    limits, jumped 0.16 rad in one period (16 rad/s). The interface now
+    refuses to start from there, naming the joint and its limits."""
+    bench = Bench()
+    q0 = HOME_ARM_POSITIONS.copy()
+    q0[0] = 3.3
+    with pytest.raises(ValueError, match=re.escape(
+            "positions[0] = 3.3 is not allowed: must be within the joint's "
+            "limits [-3.14, 3.14] rad")):
+        bench.hw.set_arm_command(bench.root, q0)
+    with pytest.raises(ValueError, match=re.escape(
+            "initial_arm_positions[0] = 3.3 is not allowed")):
+        HardwareInterface(bench.options, bench.lcm, q0)
+    limits = Limits.of_robot(bench.options)
+    with pytest.raises(ValueError, match=re.escape(
+            "initial_positions[0] = 3.3 is not allowed")):
+        ArmCommandLimiter(H, 0.007, q0, limits)
 
 
 def test_limits_wider_than_the_arms_own_are_refused():

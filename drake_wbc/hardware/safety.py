@@ -287,6 +287,26 @@ def follow_arm_command(target, target_velocity, last, velocity, period,
     return command, (command - last) / period, True
 
 
+def within_joint_limits(name, positions, limits):
+    """`positions` (n,) as a float vector, checked within the joint
+    position limits of `limits`: the arm positions a command starts from
+    (the robot's measured ones). From one beyond them the first command,
+    held within them, would be a jump.
+
+    Raises:
+        ValueError: naming `name`, the joint, its value and the limits.
+    """
+    q = as_vector(name, positions, limits.lower.size)
+    for i in np.flatnonzero((q < limits.lower) | (q > limits.upper)):
+        raise ValueError(
+            f"{name}[{i}] = {float(q[i])!r} is not allowed: must be within "
+            f"the joint's limits [{float(limits.lower[i])!r}, "
+            f"{float(limits.upper[i])!r}] rad (the first command, held "
+            "within them, would jump there); move the arm within its "
+            "limits first")
+    return q
+
+
 def stop_arm(last, velocity, period, limits):
     """The next arm position command of a stop: each joint slows down from
     `velocity` at its acceleration limit and holds where it comes to rest
@@ -600,7 +620,8 @@ class CommandGuard(LeafSystem):
         options: HardwareOptions (periods, watchdog, limits).
         initial_arm_positions: (n,) the arm command held before the first
             command (the robot's measured positions; `set_arm_command`
-            sets it in a context); the robot's home if None.
+            sets it in a context), within the joint limits
+            (`within_joint_limits`); the robot's home if None.
         limits: Limits (Limits.of_robot(options), of the shipped robot,
             if None).
         wall_clock: the WallClock of a controller running in real time
@@ -618,9 +639,10 @@ class CommandGuard(LeafSystem):
         self.config = GuardConfig.of(options, limits)
         self.limits = self.config.limits
         self.num_joints = n = self.limits.lower.size
-        initial = as_vector("initial_arm_positions", HOME_ARM_POSITIONS
-                            if initial_arm_positions is None
-                            else initial_arm_positions, n)
+        initial = within_joint_limits(
+            "initial_arm_positions", HOME_ARM_POSITIONS
+            if initial_arm_positions is None else initial_arm_positions,
+            self.limits)
         self._checks_per_command = round(options.publish_period
                                          / options.watchdog_period)
         self._base_in = self.DeclareVectorInputPort("base_velocity_command", 3)
@@ -682,10 +704,11 @@ class CommandGuard(LeafSystem):
 
     def set_arm_command(self, context, positions):
         """Holds the arm at `positions` (and the base at rest) in `context`
-        (this system's or a root context holding it)."""
+        (this system's or a root context holding it); `positions` within
+        the joint limits (`within_joint_limits`)."""
         context = self.GetMyMutableContextFromRoot(context)
         context.SetAbstractState(self._state, GuardState.holding(
-            as_vector("positions", positions, self.num_joints)))
+            within_joint_limits("positions", positions, self.limits)))
 
     def _update(self, context, state):
         now = context.get_time()
@@ -771,7 +794,8 @@ class ArmCommandLimiter(LeafSystem):
     Args:
         period: the command period h, s (HardwareOptions.publish_period).
         offset: when the step is stored, s (publish_offset + h / 2).
-        initial_positions: (n,) the arm's command at the start.
+        initial_positions: (n,) the arm's command at the start, within
+            the joint limits (`within_joint_limits`).
         limits: Limits (the arm's own).
     """
 
@@ -780,7 +804,8 @@ class ArmCommandLimiter(LeafSystem):
         self.period = positive("period", period)
         self.limits = limits
         self.num_joints = n = limits.lower.size
-        initial = as_vector("initial_positions", initial_positions, n)
+        initial = within_joint_limits("initial_positions",
+                                      initial_positions, limits)
         self._in = self.DeclareVectorInputPort("positions", n)
         self._state = self.DeclareAbstractState(AbstractValue.Make(
             LimiterState(initial.copy(), np.zeros(n), initial.copy(), False)))
@@ -795,9 +820,10 @@ class ArmCommandLimiter(LeafSystem):
         return context.get_abstract_state(self._state).get_value()
 
     def set_positions(self, context, positions):
-        """Starts the limiter at rest at `positions` in `context`."""
+        """Starts the limiter at rest at `positions` (within the joint
+        limits) in `context`."""
         context = self.GetMyMutableContextFromRoot(context)
-        q = as_vector("positions", positions, self.num_joints)
+        q = within_joint_limits("positions", positions, self.limits)
         context.SetAbstractState(self._state, LimiterState(
             q.copy(), np.zeros(self.num_joints), q.copy(), False))
 
