@@ -277,6 +277,28 @@ def test_the_command_timeout_may_only_tighten_the_robots_own():
         command_timeout_of(HardwareOptions(sender_release_time=1.0), quick)
 
 
+def test_the_command_timeout_outlasts_a_command_period():
+    """A robot command timeout no longer than the command period stops
+    the base between every two commands (and left the command guard's
+    stall limit, the timeout less a period, below zero): refused, the
+    robot's own too."""
+    with pytest.raises(ValueError, match=re.escape(
+            "robot_command_timeout = 0.03 s is not allowed with "
+            "publish_period = 0.05 s: must be longer than it")):
+        Limits.of_robot(HardwareOptions(publish_period=0.05,
+                                        robot_command_timeout=0.03))
+    base = copy.deepcopy(shipped_robot().base)
+    base.command_timeout = 0.1
+    lidar = WatchdogLimits(obstacle_points=0.1)
+    with pytest.raises(ValueError, match=re.escape(
+            "robot_command_timeout = 0.1 s (the robot's own) is not allowed "
+            "with publish_period = 0.1 s")):
+        command_timeout_of(HardwareOptions(publish_period=0.1,
+                                           watchdog_limits=lidar), base)
+    assert command_timeout_of(HardwareOptions(
+        publish_period=0.05, watchdog_limits=lidar), base) == 0.1
+
+
 @pytest.mark.parametrize("stream", ["base_state", "arm_status",
                                     "wrist_wrench", "obstacle_points"])
 def test_a_watchdog_limit_cannot_disable_the_watchdog(stream):
