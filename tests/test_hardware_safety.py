@@ -780,6 +780,30 @@ def test_follow_stays_finite_for_any_finite_target():
         assert np.all(np.abs(v) <= 2.0) and np.all(np.abs(q) <= 5.0)
 
 
+def test_follow_brakes_before_a_position_limit():
+    """A target that speeds up to 2 rad/s and runs on past the 5 rad
+    limit: the joint brakes in time and comes to rest on the limit within
+    10 rad/s^2 (it was followed at full speed up to the limit and stopped
+    there within a period: 100 rad/s^2), and the commands before the
+    braking pass unchanged."""
+    h, q, v, taken = 0.01, np.zeros(6), np.zeros(6), np.zeros(6)
+    target, rate, path, passed = np.zeros(6), np.zeros(6), [q], 0
+    for _ in range(400):
+        rate = np.minimum(rate + 10.0 * h, 2.0)
+        target = target + rate * h
+        q, v, limited = follow_arm_command(target, (target - taken) / h, q,
+                                           v, h, LIMITS)
+        taken = target
+        passed += not limited
+        path.append(q)
+    path = np.array(path)
+    speeds = np.diff(path, axis=0) / h
+    assert np.all(np.abs(np.diff(speeds, axis=0)) <= 10.0 * h * (1 + 1e-9))
+    assert np.all(np.abs(speeds) <= 2.0 * (1 + 1e-9))
+    np.testing.assert_array_equal(path[-1], 5.0)
+    assert passed > 200  # 4 rad of the way: 0.2 s speeding up, 1.9 s at 2
+
+
 def test_stop_arm_slows_down_at_the_limit():
     h, q, v = 0.01, np.zeros(6), np.array([2.0, -2.0, 0.05, 0, 1.0, -0.3])
     for _ in range(25):

@@ -240,13 +240,15 @@ def follow_arm_command(target, target_velocity, last, velocity, period,
     (the last command sent, moving at `velocity`) is within the joint
     speed limits, differs from `velocity` and from `target_velocity` by
     no more than the acceleration limits allow in one period (so that the
-    joint can go on with the target, or stop with it), is sent as it is,
-    bit for bit. Otherwise each joint follows the target (held within the
+    joint can go on with the target, or stop with it), and towards each
+    position limit at no more than the `brake_speed` of the distance to
+    it (so that the joint can still stop there), is sent as it is, bit
+    for bit. Otherwise each joint follows the target (held within the
     position limits), which moves at `target_velocity`, as fast as the
     limits allow without overshooting it: relative to the target it
-    moves at `brake_speed` of the distance between them, its
-    speed is at most the speed limit and its change of speed at most the
-    acceleration limit.
+    moves at `brake_speed` of the distance between them, its speed is at
+    most the speed limit and the `brake_speed` towards each position
+    limit, and its change of speed at most the acceleration limit.
 
     Args:
         target: (n,) the command asked for, rad.
@@ -263,7 +265,14 @@ def follow_arm_command(target, target_velocity, last, velocity, period,
     speed, accel = limits.joint_speed, limits.joint_acceleration
     change = accel * period * (1.0 + ROUNDING)
     step = (target - last) / period
+    # The speeds towards the position limits from which the joint can
+    # still stop at them (a target running into a limit at full speed
+    # was followed there, and stopped at it within a period).
+    up = brake_speed(np.maximum(limits.upper - last, 0.0), accel, period)
+    down = brake_speed(np.maximum(last - limits.lower, 0.0), accel, period)
     if (np.all(np.abs(step) <= speed * (1.0 + ROUNDING))
+            and np.all(step <= up * (1.0 + ROUNDING))
+            and np.all(-step <= down * (1.0 + ROUNDING))
             and np.all(np.abs(step - velocity) <= change)
             and np.all(np.abs(step - target_velocity) <= change)
             and np.all(target >= limits.lower)
@@ -282,8 +291,8 @@ def follow_arm_command(target, target_velocity, last, velocity, period,
     closing = np.sign(ahead) * brake_speed(distance, accel, period)
     wanted = np.clip(moving + closing, velocity - accel * period,
                      velocity + accel * period)
-    command = np.clip(last + np.clip(wanted, -speed, speed) * period,
-                      limits.lower, limits.upper)
+    wanted = np.clip(np.clip(wanted, -speed, speed), -down, up)
+    command = np.clip(last + wanted * period, limits.lower, limits.upper)
     return command, (command - last) / period, True
 
 
