@@ -59,6 +59,23 @@ def test_round_trip(name, values):
         np.testing.assert_array_equal(got, sent)
 
 
+def test_points_of_another_shape_are_not_encoded():
+    """(M, 3) points (x, y, z) were reshaped into 3 M / 2 points of mixed
+    coordinates, an obstacle at (0.5, 3.0) among them; now refused,
+    naming the shape. No points, of any empty shape, are none."""
+    with pytest.raises(ValueError, match=re.escape(
+            "points has shape (2, 3), which is not allowed: must be "
+            "(M, 2)")):
+        messages.encode_obstacle_points(1, [[1.0, 2.0, 0.5],
+                                            [3.0, 4.0, 0.5]])
+    with pytest.raises(ValueError, match=re.escape("shape (4,)")):
+        messages.encode_obstacle_points(1, [1.0, 2.0, 3.0, 4.0])
+    for none in ([], np.zeros((0, 2)), np.zeros((0, 3))):
+        decoded = messages.decode_obstacle_points(
+            messages.encode_obstacle_points(1, none))
+        assert decoded.values[0].shape == (0, 2)
+
+
 def test_signal_bundle_round_trip():
     data = messages.encode_signal_bundle(
         7, 0.25, {"a": [1.0, 2.0], "b": [3.0], "none": []})
