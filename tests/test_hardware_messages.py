@@ -358,3 +358,24 @@ def test_a_signal_during_the_wait_for_messages_is_no_failure():
         signal.setitimer(signal.ITIMER_REAL, 0.0)
         signal.signal(signal.SIGALRM, previous)
     assert len(alarms) == 1 and started < alarms[0] < ended
+
+
+def test_a_flood_that_never_pauses_does_not_hold_the_poll():
+    """Messages arriving as fast as QueuedLcm delivers them (here each
+    delivery brings the next, 5 QUEUE_LIMIT of them): one poll delivered
+    until the flood paused, so a flood that never pauses held the
+    program's LcmPump, and with it the guard's checks, for good (787,845
+    messages in 2 s, and counting). A poll delivers at most QUEUE_LIMIT;
+    the next poll goes on."""
+    bus = codecs.QueuedLcm("memq://")
+    delivered = []
+
+    def handle(data):
+        delivered.append(data)
+        if len(delivered) < 5 * codecs.QUEUE_LIMIT:
+            bus._lcm.publish("FLOOD", b"garbage")
+
+    bus.Subscribe("FLOOD", handle)
+    bus._lcm.publish("FLOOD", b"garbage")
+    assert bus.HandleSubscriptions(0) == codecs.QUEUE_LIMIT
+    assert bus.HandleSubscriptions(0) == codecs.QUEUE_LIMIT
