@@ -512,6 +512,37 @@ def test_a_controller_that_missed_the_processor_stops_and_resumes_from_rest(
     assert bench.diagnostics()["watchdog_trips"] == 2.0
 
 
+def test_a_controller_too_slow_for_the_robots_timeout_stops(caplog):
+    """The controller slows down to 1/30 of real time while the base
+    moves (30 ms of wall clock each check, a flood of work, say): no two
+    checks are further apart than the stall limit (0.24 s), but two
+    commands are 0.3 s apart, longer than the robot's command timeout
+    (0.25 s), so the robot stops its base between every two of them, and
+    each command started it again with a step. It went on sending; now
+    it stops (the base's zero at the next check) and says why, and stays
+    stopped while it is that slow."""
+    caplog.set_level(logging.WARNING, logger="drake_wbc.hardware")
+    clock = SteppedClock()
+    bench = Bench(wall_clock=WallClock(clock=clock))
+    bench.run(60, extra=lambda _: setattr(clock, "now", clock.now + H))
+    _rows_equal(bench.commands("base", 0.45)[1], BASE_COMMAND)
+    slow = bench.tick * H
+    for _ in range(30):
+        bench.status()
+        for j in range(1, 11):
+            clock.now += 0.03
+            bench.simulator.AdvanceTo(bench.tick * H + j * 1e-3)
+        bench.tick += 1
+    diagnostics = bench.diagnostics()
+    assert diagnostics["watchdog_trips"] == 1.0
+    assert diagnostics["watchdog_tripped"] == 1.0
+    times, base = bench.commands("base", slow)
+    assert times[0] < slow + H  # the last command before is 0.24 s old
+    np.testing.assert_array_equal(base[1:], 0.0)
+    assert len(_records(caplog, "since the last command (limit 0.240 s)")) \
+        == 1
+
+
 def test_the_wall_clock_is_in_controller_seconds():
     """WallClock.now: the wall clock times the real-time rate."""
     clock = SteppedClock()

@@ -362,6 +362,8 @@ class GuardState(NamedTuple):
             seconds (WallClock.now; nan: none, on simulated time).
         check_interval: the wall clock's time between the last two
             checks, in controller seconds (0 on simulated time).
+        command_wall_time: the wall clock at the last command time, in
+            controller seconds (nan: none, on simulated time).
     """
 
     base: np.ndarray
@@ -382,6 +384,7 @@ class GuardState(NamedTuple):
     clock_jumps: tuple = (0,) * len(STATUS_CHANNELS)
     wall_time: float = math.nan
     check_interval: float = 0.0
+    command_wall_time: float = math.nan
 
     def __deepcopy__(self, memo):
         # Never changed in place (only replaced), so the copies that Drake
@@ -445,7 +448,10 @@ def guard_step(state, now, ages, base, arm, command_time, config,
     base on its own timeout meanwhile: every stream is stale at this
     check, so that the commands resume from rest after the recovery time
     (a shorter stall is as a late message: the robot still runs the last
-    command, and the commands go on from it). A stream of
+    command, and the commands go on from it). So, too, when the wall
+    clock ran longer than that since the last command time, however
+    short each check: a controller so slow that its commands come further
+    apart than the robot waits for one. A stream of
     FULL_STOP_STREAMS that does not count stops everything;
     obstacle_points stop the base. A stop that begins
     between command times zeroes the base at once (`urgent`). At a
@@ -477,7 +483,11 @@ def guard_step(state, now, ages, base, arm, command_time, config,
         int(count) for count in clock_jumps)
     interval = (0.0 if wall_time is None or math.isnan(state.wall_time)
                 else wall_time - state.wall_time)
-    lagging = interval > stall_limit(config) + AGE_TOLERANCE
+    since_command = (
+        0.0 if wall_time is None or math.isnan(state.command_wall_time)
+        else wall_time - state.command_wall_time)
+    stalled = interval > stall_limit(config) + AGE_TOLERANCE
+    lagging = stalled or since_command > stall_limit(config) + AGE_TOLERANCE
     fresh_since, recovering, counts, why = [], [], [], []
     for i, age in enumerate(ages):
         since, again = state.fresh_since[i], state.recovering[i]
@@ -505,7 +515,12 @@ def guard_step(state, now, ages, base, arm, command_time, config,
         f"every stream: {interval:.3f} s of wall clock passed since the "
         f"last check (limit {stall_limit(config):.3f} s): the controller's "
         "process missed the processor for longer than the robot waits for "
-        "a command")
+        "a command") if stalled else (
+        f"every stream: {since_command:.3f} s of wall clock passed since "
+        f"the last command (limit {stall_limit(config):.3f} s): the "
+        "controller runs too slowly for the robot, which stops its base "
+        "when no command comes for "
+        f"{config.limits.command_timeout:.3f} s")
     events = []
     tripped = full and not state.full_stop and state.started
     if tripped:
@@ -528,7 +543,10 @@ def guard_step(state, now, ages, base, arm, command_time, config,
         fresh_since=tuple(fresh_since), recovering=tuple(recovering),
         urgent=False, clock_jumps=jumps,
         wall_time=math.nan if wall_time is None else float(wall_time),
-        check_interval=float(interval))
+        check_interval=float(interval),
+        command_wall_time=(
+            (math.nan if wall_time is None else float(wall_time))
+            if command_time else state.command_wall_time))
     if not command_time:
         if (tripped or base_stopped) and np.any(state.base != 0.0):
             new = new._replace(base=np.zeros(3), urgent=True)
