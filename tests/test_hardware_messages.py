@@ -59,6 +59,23 @@ def test_round_trip(name, values):
         np.testing.assert_array_equal(got, sent)
 
 
+def test_points_of_another_shape_are_not_encoded():
+    """(M, 3) points (x, y, z) were reshaped into 3 M / 2 points of mixed
+    coordinates, an obstacle at (0.5, 3.0) among them; now refused,
+    naming the shape. No points, of any empty shape, are none."""
+    with pytest.raises(ValueError, match=re.escape(
+            "points has shape (2, 3), which is not allowed: must be "
+            "(M, 2)")):
+        messages.encode_obstacle_points(1, [[1.0, 2.0, 0.5],
+                                            [3.0, 4.0, 0.5]])
+    with pytest.raises(ValueError, match=re.escape("shape (4,)")):
+        messages.encode_obstacle_points(1, [1.0, 2.0, 3.0, 4.0])
+    for none in ([], np.zeros((0, 2)), np.zeros((0, 3))):
+        decoded = messages.decode_obstacle_points(
+            messages.encode_obstacle_points(1, none))
+        assert decoded.values[0].shape == (0, 2)
+
+
 def test_signal_bundle_round_trip():
     data = messages.encode_signal_bundle(
         7, 0.25, {"a": [1.0, 2.0], "b": [3.0], "none": []})
@@ -277,6 +294,28 @@ def test_the_command_timeout_may_only_tighten_the_robots_own():
         command_timeout_of(HardwareOptions(sender_release_time=1.0), quick)
 
 
+def test_the_command_timeout_outlasts_a_command_period():
+    """A robot command timeout no longer than the command period stops
+    the base between every two commands (and left the command guard's
+    stall limit, the timeout less a period, below zero): refused, the
+    robot's own too."""
+    with pytest.raises(ValueError, match=re.escape(
+            "robot_command_timeout = 0.03 s is not allowed with "
+            "publish_period = 0.05 s: must be longer than it")):
+        Limits.of_robot(HardwareOptions(publish_period=0.05,
+                                        robot_command_timeout=0.03))
+    base = copy.deepcopy(shipped_robot().base)
+    base.command_timeout = 0.1
+    lidar = WatchdogLimits(obstacle_points=0.1)
+    with pytest.raises(ValueError, match=re.escape(
+            "robot_command_timeout = 0.1 s (the robot's own) is not allowed "
+            "with publish_period = 0.1 s")):
+        command_timeout_of(HardwareOptions(publish_period=0.1,
+                                           watchdog_limits=lidar), base)
+    assert command_timeout_of(HardwareOptions(
+        publish_period=0.05, watchdog_limits=lidar), base) == 0.1
+
+
 @pytest.mark.parametrize("stream", ["base_state", "arm_status",
                                     "wrist_wrench", "obstacle_points"])
 def test_a_watchdog_limit_cannot_disable_the_watchdog(stream):
@@ -319,3 +358,24 @@ def test_a_signal_during_the_wait_for_messages_is_no_failure():
         signal.setitimer(signal.ITIMER_REAL, 0.0)
         signal.signal(signal.SIGALRM, previous)
     assert len(alarms) == 1 and started < alarms[0] < ended
+
+
+def test_a_flood_that_never_pauses_does_not_hold_the_poll():
+    """Messages arriving as fast as QueuedLcm delivers them (here each
+    delivery brings the next, 5 QUEUE_LIMIT of them): one poll delivered
+    until the flood paused, so a flood that never pauses held the
+    program's LcmPump, and with it the guard's checks, for good (787,845
+    messages in 2 s, and counting). A poll delivers at most QUEUE_LIMIT;
+    the next poll goes on."""
+    bus = codecs.QueuedLcm("memq://")
+    delivered = []
+
+    def handle(data):
+        delivered.append(data)
+        if len(delivered) < 5 * codecs.QUEUE_LIMIT:
+            bus._lcm.publish("FLOOD", b"garbage")
+
+    bus.Subscribe("FLOOD", handle)
+    bus._lcm.publish("FLOOD", b"garbage")
+    assert bus.HandleSubscriptions(0) == codecs.QUEUE_LIMIT
+    assert bus.HandleSubscriptions(0) == codecs.QUEUE_LIMIT

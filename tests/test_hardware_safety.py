@@ -21,6 +21,7 @@ from drake_wbc.hardware import codecs, messages
 from drake_wbc.hardware.interface import DIAGNOSTICS, HardwareInterface
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.hardware.safety import (
+    ArmCommandLimiter,
     Limits,
     WallClock,
     brake_speed,
@@ -511,6 +512,37 @@ def test_a_controller_that_missed_the_processor_stops_and_resumes_from_rest(
     assert bench.diagnostics()["watchdog_trips"] == 2.0
 
 
+def test_a_controller_too_slow_for_the_robots_timeout_stops(caplog):
+    """The controller slows down to 1/30 of real time while the base
+    moves (30 ms of wall clock each check, a flood of work, say): no two
+    checks are further apart than the stall limit (0.24 s), but two
+    commands are 0.3 s apart, longer than the robot's command timeout
+    (0.25 s), so the robot stops its base between every two of them, and
+    each command started it again with a step. It went on sending; now
+    it stops (the base's zero at the next check) and says why, and stays
+    stopped while it is that slow."""
+    caplog.set_level(logging.WARNING, logger="drake_wbc.hardware")
+    clock = SteppedClock()
+    bench = Bench(wall_clock=WallClock(clock=clock))
+    bench.run(60, extra=lambda _: setattr(clock, "now", clock.now + H))
+    _rows_equal(bench.commands("base", 0.45)[1], BASE_COMMAND)
+    slow = bench.tick * H
+    for _ in range(30):
+        bench.status()
+        for j in range(1, 11):
+            clock.now += 0.03
+            bench.simulator.AdvanceTo(bench.tick * H + j * 1e-3)
+        bench.tick += 1
+    diagnostics = bench.diagnostics()
+    assert diagnostics["watchdog_trips"] == 1.0
+    assert diagnostics["watchdog_tripped"] == 1.0
+    times, base = bench.commands("base", slow)
+    assert times[0] < slow + H  # the last command before is 0.24 s old
+    np.testing.assert_array_equal(base[1:], 0.0)
+    assert len(_records(caplog, "since the last command (limit 0.240 s)")) \
+        == 1
+
+
 def test_the_wall_clock_is_in_controller_seconds():
     """WallClock.now: the wall clock times the real-time rate."""
     clock = SteppedClock()
@@ -552,6 +584,44 @@ def test_the_final_stop_follows_the_runs_commands_on_the_robot():
         reception = codecs.take(reception, stop, now + 0.002 * (i + 1))
         assert reception.utime == stop.utime  # taken
         assert reception.rejected == 0
+
+
+def test_the_final_stop_brakes_a_moving_arm_within_its_limits():
+    """A deployment that ends while the arm moves at full speed (1.57
+    rad/s): the stop brakes it within 12.56 rad/s^2, one command a period
+    with the base at zero, and holds it where it comes to rest, every
+    command in sequence on the robot. (It was held at once: a step of 157
+    rad/s^2.)"""
+    bench = Bench()
+    limits = Limits.of_robot(bench.options)
+    bench.run(3)
+    bench.set_command(bench.arm, HOME_ARM_POSITIONS + 1.0)
+    bench.run(40)
+    guard = bench.hw.systems["guard"]
+    sent = guard.stored(guard.GetMyContextFromRoot(bench.root))
+    np.testing.assert_allclose(sent.arm_velocity, 1.57)
+    arms, bases = [], []
+    bench.lcm.Subscribe(bench.options.channels.arm_command, lambda data:
+                        arms.append(messages.decode_arm_command(data)))
+    bench.lcm.Subscribe(bench.options.channels.base_command, lambda data:
+                        bases.append(messages.decode_base_command(data)))
+    held = send_stop(bench.lcm, bench.options, sent.arm, bench.hw.sender,
+                     bench.hw.command_utime(bench.root) + 1,
+                     arm_velocity=sent.arm_velocity, limits=limits)
+    bench.lcm.HandleSubscriptions(0)
+    q = np.array([sent.arm - sent.arm_velocity * H, sent.arm]
+                 + [m.values[0] for m in arms])
+    rate = np.diff(q[:-STOP_REPEATS + 1], axis=0) / H
+    assert np.all(np.abs(np.diff(rate, axis=0))
+                  <= limits.joint_acceleration * H + 1e-9)
+    np.testing.assert_array_equal(rate[-1], 0.0)
+    np.testing.assert_array_equal(q[-STOP_REPEATS:], np.broadcast_to(
+        held, (STOP_REPEATS, 6)))
+    for m in bases:
+        np.testing.assert_array_equal(m.values[0], 0.0)
+    stamps = [m.utime for m in arms]
+    assert np.all(np.diff(stamps) > 0)
+    assert len(arms) == 13 + STOP_REPEATS  # 1.57 / (12.56 * 0.01) periods
 
 
 def test_a_flood_hides_no_genuine_message():
@@ -598,6 +668,50 @@ def test_arm_commands_are_rate_and_position_limited():
     assert q[-1][4] == pytest.approx(limits.upper[4])
     assert np.all(q <= limits.upper) and np.all(q >= limits.lower)
     assert bench.diagnostics()["arm_command_saturated"] == 1.0
+
+
+def test_a_huge_finite_arm_command_never_turns_the_commands_into_nan():
+    """A controller's arm command that is finite but absurd (1e306 rad),
+    then a sane one: the target's rate between them overflows, and the
+    arm's commands once became NaN from then on (they were sent, and the
+    guard's state stayed NaN). Every command sent stays finite and within
+    the limits, and the arm gets to the sane command."""
+    bench = Bench()
+    limits = Limits.of_robot(bench.options)
+    bench.run(3)
+    bench.set_command(bench.arm, np.full(6, 1e306))
+    bench.run(1)
+    bench.set_command(bench.arm, HOME_ARM_POSITIONS)
+    bench.run(40)
+    q = np.array([command for _, command in bench.sent["arm"]])
+    assert np.all(np.isfinite(q))
+    assert np.all(q <= limits.upper) and np.all(q >= limits.lower)
+    rate = np.diff(q, axis=0) / H
+    assert np.all(np.abs(rate) <= limits.joint_speed + 1e-9)
+    assert np.all(np.abs(np.diff(rate, axis=0))
+                  <= limits.joint_acceleration * H + 1e-9)
+    np.testing.assert_allclose(q[-1], HOME_ARM_POSITIONS)
+
+
+def test_an_arm_found_beyond_its_limits_is_refused_not_jumped_back():
+    """The robot's measured arm positions beyond a joint's limits (3.3 rad
+    on joint 0, limit 3.14): the guard's first command, held within the
+    limits, jumped 0.16 rad in one period (16 rad/s). The interface now
+    refuses to start from there, naming the joint and its limits."""
+    bench = Bench()
+    q0 = HOME_ARM_POSITIONS.copy()
+    q0[0] = 3.3
+    with pytest.raises(ValueError, match=re.escape(
+            "positions[0] = 3.3 is not allowed: must be within the joint's "
+            "limits [-3.14, 3.14] rad")):
+        bench.hw.set_arm_command(bench.root, q0)
+    with pytest.raises(ValueError, match=re.escape(
+            "initial_arm_positions[0] = 3.3 is not allowed")):
+        HardwareInterface(bench.options, bench.lcm, q0)
+    limits = Limits.of_robot(bench.options)
+    with pytest.raises(ValueError, match=re.escape(
+            "initial_positions[0] = 3.3 is not allowed")):
+        ArmCommandLimiter(H, 0.007, q0, limits)
 
 
 def test_limits_wider_than_the_arms_own_are_refused():
@@ -679,6 +793,46 @@ def test_follow_catches_a_moving_target_and_then_passes_it():
         q, v, limited = follow_arm_command(target, rate, q, v, h, LIMITS)
     assert not limited
     np.testing.assert_array_equal(q, target)
+
+
+def test_follow_stays_finite_for_any_finite_target():
+    """A target or a target rate near the largest float (a forged arm
+    command of 1e306 rad on the robot's side, then a genuine one) gives a
+    command within the limits, not NaN."""
+    h, q, v = 0.01, np.zeros(6), np.zeros(6)
+    taken = np.zeros(6)
+    for target in (np.full(6, 1e306), np.full(6, 0.1),
+                   np.full(6, -1.7e308), np.full(6, 0.1)):
+        q, v, limited = follow_arm_command(target, (target - taken) / h, q,
+                                           v, h, LIMITS)
+        taken = target
+        assert limited
+        assert np.all(np.isfinite(q)) and np.all(np.isfinite(v))
+        assert np.all(np.abs(v) <= 2.0) and np.all(np.abs(q) <= 5.0)
+
+
+def test_follow_brakes_before_a_position_limit():
+    """A target that speeds up to 2 rad/s and runs on past the 5 rad
+    limit: the joint brakes in time and comes to rest on the limit within
+    10 rad/s^2 (it was followed at full speed up to the limit and stopped
+    there within a period: 100 rad/s^2), and the commands before the
+    braking pass unchanged."""
+    h, q, v, taken = 0.01, np.zeros(6), np.zeros(6), np.zeros(6)
+    target, rate, path, passed = np.zeros(6), np.zeros(6), [q], 0
+    for _ in range(400):
+        rate = np.minimum(rate + 10.0 * h, 2.0)
+        target = target + rate * h
+        q, v, limited = follow_arm_command(target, (target - taken) / h, q,
+                                           v, h, LIMITS)
+        taken = target
+        passed += not limited
+        path.append(q)
+    path = np.array(path)
+    speeds = np.diff(path, axis=0) / h
+    assert np.all(np.abs(np.diff(speeds, axis=0)) <= 10.0 * h * (1 + 1e-9))
+    assert np.all(np.abs(speeds) <= 2.0 * (1 + 1e-9))
+    np.testing.assert_array_equal(path[-1], 5.0)
+    assert passed > 200  # 4 rad of the way: 0.2 s speeding up, 1.9 s at 2
 
 
 def test_stop_arm_slows_down_at_the_limit():

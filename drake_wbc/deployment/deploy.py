@@ -8,9 +8,9 @@ the controller's diagnostics for the logs. `deploy` runs it against the
 robot: it waits for the robot's first status, starts the controller from
 the measured arm positions on the arrival of a base state (so that its
 ticks follow the robot's status), paces the Simulator to the wall clock
-for the scenario's duration, and stops cleanly (zero base velocity and the arm
-held, sent before returning) at the end, on a stop request (Ctrl-C in
-`drake-wbc deploy`) or on an error.
+for the scenario's duration, and stops cleanly (zero base velocity, and
+the arm braked within its limits and held, sent before returning) at the
+end, on a stop request (Ctrl-C in `drake-wbc deploy`) or on an error.
 """
 
 import time
@@ -37,7 +37,7 @@ from drake_wbc.hardware.interface import (
     add_publisher,
 )
 from drake_wbc.hardware.options import STATUS_CHANNELS, HardwareOptions
-from drake_wbc.hardware.safety import WallClock
+from drake_wbc.hardware.safety import WallClock, stop_arm
 from drake_wbc.math.validation import checked_instance, positive
 
 COMMANDS = ("base.velocity_command", "arm.position_command")
@@ -217,23 +217,54 @@ def wait_for_next(lcm, channel, timeout):
     return bool(arrived)
 
 
-def send_stop(lcm, options, arm_positions, sender, utime):
+def send_stop(lcm, options, arm_positions, sender, utime,
+              arm_velocity=None, limits=None):
     """Sends zero base velocity and `arm_positions` (the arm held) on the
     command channels, from `sender`, STOP_REPEATS times, stamped utime,
     utime + 1, ...: `utime` later than the run's last command on the
     run's time base (HardwareInterface.command_utime), so that the robot
     takes each in sequence (a stamp of the wall clock is ahead of the
     run's by as much as the controller fell behind, and beyond the
-    protocol's clock_tolerance the robot rejects it)."""
+    protocol's clock_tolerance the robot rejects it).
+
+    An arm still moving is not held at once (that would ask its servo for
+    an unbounded deceleration): given `arm_velocity`, the rate of
+    `arm_positions` (the command guard's), and `limits` (its Limits), the
+    arm first slows down from it within its acceleration limit
+    (drake_wbc.hardware.safety.stop_arm), one command a publish period of
+    the wall clock, each with zero base velocity and stamped a period
+    after the one before, and is held where it comes to rest.
+
+    Returns:
+        (n,) the arm positions held.
+    """
     utime = int(utime)
+    held = np.array(arm_positions, dtype=float)
+    ramp = []
+    if arm_velocity is not None:
+        velocity = np.array(arm_velocity, dtype=float)
+        while np.any(velocity != 0.0):
+            held, velocity = stop_arm(held, velocity,
+                                      options.publish_period, limits)
+            ramp.append(held)
+    step = int(round(1e6 * options.publish_period))
+    for i, positions in enumerate(ramp):
+        if i:
+            time.sleep(options.publish_period)
+        _publish_stop(lcm, options, positions, sender, utime + i * step)
+    utime += len(ramp) * step
     for i in range(STOP_REPEATS):
-        lcm.Publish(options.channels.base_command,
-                    messages.encode_base_command(utime + i, np.zeros(3),
-                                                 sender))
-        lcm.Publish(options.channels.arm_command,
-                    messages.encode_arm_command(utime + i, arm_positions,
-                                                sender))
+        _publish_stop(lcm, options, held, sender, utime + i)
         time.sleep(0.002)
+    return held
+
+
+def _publish_stop(lcm, options, arm_positions, sender, utime):
+    """Sends zero base velocity and `arm_positions`, stamped `utime`."""
+    lcm.Publish(options.channels.base_command,
+                messages.encode_base_command(utime, np.zeros(3), sender))
+    lcm.Publish(options.channels.arm_command,
+                messages.encode_arm_command(utime, arm_positions, sender))
 
 
 @dataclass
@@ -317,12 +348,14 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
                 stopped = True
                 break
             simulator.AdvanceTo(t)
-            held = guard.GetOutputPort("arm_position_command").Eval(
-                guard.GetMyContextFromRoot(root))
     finally:
-        # Stamped after the run's last command, on its time base.
-        send_stop(lcm, options, held, side.hardware.sender,
-                  utime=side.hardware.command_utime(root) + 1)
+        # Stamped after the run's last command, on its time base; the
+        # arm brakes from the rate it was last sent.
+        sent = guard.stored(guard.GetMyContextFromRoot(root))
+        held = send_stop(lcm, options, sent.arm, side.hardware.sender,
+                         utime=side.hardware.command_utime(root) + 1,
+                         arm_velocity=sent.arm_velocity,
+                         limits=guard.limits)
     elapsed = time.perf_counter() - started
     values = side.hardware.diagram.GetOutputPort(
         "hardware.diagnostics").Eval(

@@ -349,9 +349,12 @@ class QueuedLcm:
         subscription.set_queue_capacity(QUEUE_LIMIT)
 
     def HandleSubscriptions(self, timeout_millis):  # noqa: N802
-        """Delivers every message received; returns how many."""
+        """Delivers the messages received, at most QUEUE_LIMIT (the rest
+        at the next poll: a flood that never pauses must not hold the
+        program here); returns how many."""
         count = 0
-        while self._handle(timeout_millis if not count else 0) > 0:
+        while count < QUEUE_LIMIT and self._handle(
+                timeout_millis if not count else 0) > 0:
             count += 1
         return count
 

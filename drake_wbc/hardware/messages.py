@@ -208,8 +208,20 @@ def decode_wrench(data):
 
 
 def encode_obstacle_points(utime, points):
-    """obstacle_points_t bytes for (M, 2) `points` in T_b."""
-    points = np.reshape(np.asarray(points, dtype=float), (-1, 2))
+    """obstacle_points_t bytes for (M, 2) `points` in T_b (no points: any
+    empty array).
+
+    Raises:
+        ValueError: for points of another shape (an (M, 3) array was read
+            as 3 M / 2 points of mixed coordinates).
+    """
+    points = np.asarray(points, dtype=float)
+    if not points.size:
+        points = np.zeros((0, 2))
+    if points.ndim != 2 or points.shape[1] != 2:
+        raise ValueError(f"points has shape {points.shape}, which is not "
+                         "allowed: must be (M, 2), the x and y of each "
+                         "point in T_b")
     message = obstacle_points_t()
     message.utime = _utime(utime)
     message.num_points = len(points)

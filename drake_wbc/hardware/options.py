@@ -308,7 +308,8 @@ def command_timeout_of(options, base):
     command timeout (a watchdog slower than the robot's would let the
     robot stop first, and uninformed), and options.sender_release_time
     at least the timeout (the base has stopped before another sender may
-    drive it).
+    drive it), and the timeout longer than options.publish_period (or the
+    base stops between two commands).
 
     Args:
         options: HardwareOptions.
@@ -329,6 +330,14 @@ def command_timeout_of(options, base):
     if timeout is None:
         timeout = own
     at_most("robot_command_timeout", timeout, own, "s")
+    if timeout <= options.publish_period:
+        whose = (" (the robot's own)" if options.robot_command_timeout is None
+                 else "")
+        raise ValueError(
+            f"robot_command_timeout = {timeout!r} s{whose} is not allowed "
+            f"with publish_period = {options.publish_period!r} s: must be "
+            "longer than it, or the robot stops its base between two "
+            "commands")
     if options.sender_release_time < timeout:
         raise ValueError(
             f"sender_release_time = {options.sender_release_time!r} s is "

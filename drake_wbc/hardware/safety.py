@@ -224,6 +224,14 @@ def brake_speed(distance, acceleration, period):
     return m * step + np.clip(f, 0.0, step)
 
 
+TARGET_RATE_BOUND = 1e150
+"""rad/s: the largest target rate `follow_arm_command` takes as it is.
+Any rate beyond it is far beyond every joint's limits (so the joint
+follows it at its limits, as it would the rate itself), and the target's
+distance and `brake_speed` computed from it stay finite: a finite target
+near the largest float (1e306 rad) once turned the commands into NaN."""
+
+
 def follow_arm_command(target, target_velocity, last, velocity, period,
                        limits):
     """The next arm position command towards `target` within the limits.
@@ -232,13 +240,15 @@ def follow_arm_command(target, target_velocity, last, velocity, period,
     (the last command sent, moving at `velocity`) is within the joint
     speed limits, differs from `velocity` and from `target_velocity` by
     no more than the acceleration limits allow in one period (so that the
-    joint can go on with the target, or stop with it), is sent as it is,
-    bit for bit. Otherwise each joint follows the target (held within the
+    joint can go on with the target, or stop with it), and towards each
+    position limit at no more than the `brake_speed` of the distance to
+    it (so that the joint can still stop there), is sent as it is, bit
+    for bit. Otherwise each joint follows the target (held within the
     position limits), which moves at `target_velocity`, as fast as the
     limits allow without overshooting it: relative to the target it
-    moves at `brake_speed` of the distance between them, its
-    speed is at most the speed limit and its change of speed at most the
-    acceleration limit.
+    moves at `brake_speed` of the distance between them, its speed is at
+    most the speed limit and the `brake_speed` towards each position
+    limit, and its change of speed at most the acceleration limit.
 
     Args:
         target: (n,) the command asked for, rad.
@@ -255,14 +265,25 @@ def follow_arm_command(target, target_velocity, last, velocity, period,
     speed, accel = limits.joint_speed, limits.joint_acceleration
     change = accel * period * (1.0 + ROUNDING)
     step = (target - last) / period
+    # The speeds towards the position limits from which the joint can
+    # still stop at them (a target running into a limit at full speed
+    # was followed there, and stopped at it within a period).
+    up = brake_speed(np.maximum(limits.upper - last, 0.0), accel, period)
+    down = brake_speed(np.maximum(last - limits.lower, 0.0), accel, period)
     if (np.all(np.abs(step) <= speed * (1.0 + ROUNDING))
+            and np.all(step <= up * (1.0 + ROUNDING))
+            and np.all(-step <= down * (1.0 + ROUNDING))
             and np.all(np.abs(step - velocity) <= change)
             and np.all(np.abs(step - target_velocity) <= change)
             and np.all(target >= limits.lower)
             and np.all(target <= limits.upper)):
         return np.array(target, dtype=float), step, False
     held = np.clip(target, limits.lower, limits.upper)
-    moving = np.where(held == target, target_velocity, 0.0)
+    # A rate beyond TARGET_RATE_BOUND (a target that jumped from near the
+    # largest float) is bounded, so that nothing below overflows to NaN;
+    # the joint follows it at its limits all the same.
+    moving = np.clip(np.where(held == target, target_velocity, 0.0),
+                     -TARGET_RATE_BOUND, TARGET_RATE_BOUND)
     # How far the target was ahead before it moved this period, and the
     # speed relative to it that stops on it.
     ahead = held - last - moving * period
@@ -270,9 +291,29 @@ def follow_arm_command(target, target_velocity, last, velocity, period,
     closing = np.sign(ahead) * brake_speed(distance, accel, period)
     wanted = np.clip(moving + closing, velocity - accel * period,
                      velocity + accel * period)
-    command = np.clip(last + np.clip(wanted, -speed, speed) * period,
-                      limits.lower, limits.upper)
+    wanted = np.clip(np.clip(wanted, -speed, speed), -down, up)
+    command = np.clip(last + wanted * period, limits.lower, limits.upper)
     return command, (command - last) / period, True
+
+
+def within_joint_limits(name, positions, limits):
+    """`positions` (n,) as a float vector, checked within the joint
+    position limits of `limits`: the arm positions a command starts from
+    (the robot's measured ones). From one beyond them the first command,
+    held within them, would be a jump.
+
+    Raises:
+        ValueError: naming `name`, the joint, its value and the limits.
+    """
+    q = as_vector(name, positions, limits.lower.size)
+    for i in np.flatnonzero((q < limits.lower) | (q > limits.upper)):
+        raise ValueError(
+            f"{name}[{i}] = {float(q[i])!r} is not allowed: must be within "
+            f"the joint's limits [{float(limits.lower[i])!r}, "
+            f"{float(limits.upper[i])!r}] rad (the first command, held "
+            "within them, would jump there); move the arm within its "
+            "limits first")
+    return q
 
 
 def stop_arm(last, velocity, period, limits):
@@ -321,6 +362,8 @@ class GuardState(NamedTuple):
             seconds (WallClock.now; nan: none, on simulated time).
         check_interval: the wall clock's time between the last two
             checks, in controller seconds (0 on simulated time).
+        command_wall_time: the wall clock at the last command time, in
+            controller seconds (nan: none, on simulated time).
     """
 
     base: np.ndarray
@@ -341,6 +384,7 @@ class GuardState(NamedTuple):
     clock_jumps: tuple = (0,) * len(STATUS_CHANNELS)
     wall_time: float = math.nan
     check_interval: float = 0.0
+    command_wall_time: float = math.nan
 
     def __deepcopy__(self, memo):
         # Never changed in place (only replaced), so the copies that Drake
@@ -404,7 +448,10 @@ def guard_step(state, now, ages, base, arm, command_time, config,
     base on its own timeout meanwhile: every stream is stale at this
     check, so that the commands resume from rest after the recovery time
     (a shorter stall is as a late message: the robot still runs the last
-    command, and the commands go on from it). A stream of
+    command, and the commands go on from it). So, too, when the wall
+    clock ran longer than that since the last command time, however
+    short each check: a controller so slow that its commands come further
+    apart than the robot waits for one. A stream of
     FULL_STOP_STREAMS that does not count stops everything;
     obstacle_points stop the base. A stop that begins
     between command times zeroes the base at once (`urgent`). At a
@@ -436,7 +483,11 @@ def guard_step(state, now, ages, base, arm, command_time, config,
         int(count) for count in clock_jumps)
     interval = (0.0 if wall_time is None or math.isnan(state.wall_time)
                 else wall_time - state.wall_time)
-    lagging = interval > stall_limit(config) + AGE_TOLERANCE
+    since_command = (
+        0.0 if wall_time is None or math.isnan(state.command_wall_time)
+        else wall_time - state.command_wall_time)
+    stalled = interval > stall_limit(config) + AGE_TOLERANCE
+    lagging = stalled or since_command > stall_limit(config) + AGE_TOLERANCE
     fresh_since, recovering, counts, why = [], [], [], []
     for i, age in enumerate(ages):
         since, again = state.fresh_since[i], state.recovering[i]
@@ -464,7 +515,12 @@ def guard_step(state, now, ages, base, arm, command_time, config,
         f"every stream: {interval:.3f} s of wall clock passed since the "
         f"last check (limit {stall_limit(config):.3f} s): the controller's "
         "process missed the processor for longer than the robot waits for "
-        "a command")
+        "a command") if stalled else (
+        f"every stream: {since_command:.3f} s of wall clock passed since "
+        f"the last command (limit {stall_limit(config):.3f} s): the "
+        "controller runs too slowly for the robot, which stops its base "
+        "when no command comes for "
+        f"{config.limits.command_timeout:.3f} s")
     events = []
     tripped = full and not state.full_stop and state.started
     if tripped:
@@ -487,7 +543,10 @@ def guard_step(state, now, ages, base, arm, command_time, config,
         fresh_since=tuple(fresh_since), recovering=tuple(recovering),
         urgent=False, clock_jumps=jumps,
         wall_time=math.nan if wall_time is None else float(wall_time),
-        check_interval=float(interval))
+        check_interval=float(interval),
+        command_wall_time=(
+            (math.nan if wall_time is None else float(wall_time))
+            if command_time else state.command_wall_time))
     if not command_time:
         if (tripped or base_stopped) and np.any(state.base != 0.0):
             new = new._replace(base=np.zeros(3), urgent=True)
@@ -588,7 +647,8 @@ class CommandGuard(LeafSystem):
         options: HardwareOptions (periods, watchdog, limits).
         initial_arm_positions: (n,) the arm command held before the first
             command (the robot's measured positions; `set_arm_command`
-            sets it in a context); the robot's home if None.
+            sets it in a context), within the joint limits
+            (`within_joint_limits`); the robot's home if None.
         limits: Limits (Limits.of_robot(options), of the shipped robot,
             if None).
         wall_clock: the WallClock of a controller running in real time
@@ -606,9 +666,10 @@ class CommandGuard(LeafSystem):
         self.config = GuardConfig.of(options, limits)
         self.limits = self.config.limits
         self.num_joints = n = self.limits.lower.size
-        initial = as_vector("initial_arm_positions", HOME_ARM_POSITIONS
-                            if initial_arm_positions is None
-                            else initial_arm_positions, n)
+        initial = within_joint_limits(
+            "initial_arm_positions", HOME_ARM_POSITIONS
+            if initial_arm_positions is None else initial_arm_positions,
+            self.limits)
         self._checks_per_command = round(options.publish_period
                                          / options.watchdog_period)
         self._base_in = self.DeclareVectorInputPort("base_velocity_command", 3)
@@ -670,10 +731,11 @@ class CommandGuard(LeafSystem):
 
     def set_arm_command(self, context, positions):
         """Holds the arm at `positions` (and the base at rest) in `context`
-        (this system's or a root context holding it)."""
+        (this system's or a root context holding it); `positions` within
+        the joint limits (`within_joint_limits`)."""
         context = self.GetMyMutableContextFromRoot(context)
         context.SetAbstractState(self._state, GuardState.holding(
-            as_vector("positions", positions, self.num_joints)))
+            within_joint_limits("positions", positions, self.limits)))
 
     def _update(self, context, state):
         now = context.get_time()
@@ -759,7 +821,8 @@ class ArmCommandLimiter(LeafSystem):
     Args:
         period: the command period h, s (HardwareOptions.publish_period).
         offset: when the step is stored, s (publish_offset + h / 2).
-        initial_positions: (n,) the arm's command at the start.
+        initial_positions: (n,) the arm's command at the start, within
+            the joint limits (`within_joint_limits`).
         limits: Limits (the arm's own).
     """
 
@@ -768,7 +831,8 @@ class ArmCommandLimiter(LeafSystem):
         self.period = positive("period", period)
         self.limits = limits
         self.num_joints = n = limits.lower.size
-        initial = as_vector("initial_positions", initial_positions, n)
+        initial = within_joint_limits("initial_positions",
+                                      initial_positions, limits)
         self._in = self.DeclareVectorInputPort("positions", n)
         self._state = self.DeclareAbstractState(AbstractValue.Make(
             LimiterState(initial.copy(), np.zeros(n), initial.copy(), False)))
@@ -783,9 +847,10 @@ class ArmCommandLimiter(LeafSystem):
         return context.get_abstract_state(self._state).get_value()
 
     def set_positions(self, context, positions):
-        """Starts the limiter at rest at `positions` in `context`."""
+        """Starts the limiter at rest at `positions` (within the joint
+        limits) in `context`."""
         context = self.GetMyMutableContextFromRoot(context)
-        q = as_vector("positions", positions, self.num_joints)
+        q = within_joint_limits("positions", positions, self.limits)
         context.SetAbstractState(self._state, LimiterState(
             q.copy(), np.zeros(self.num_joints), q.copy(), False))
 
