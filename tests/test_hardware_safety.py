@@ -714,6 +714,29 @@ def test_an_arm_found_beyond_its_limits_is_refused_not_jumped_back():
         ArmCommandLimiter(H, 0.007, q0, limits)
 
 
+def test_an_arm_resting_at_a_limit_with_an_encoders_noise_starts_there():
+    """An arm read a hair beyond a limit (at rest at it, with an encoder's
+    noise) starts at the limit: the first command's step is within what
+    the acceleration limit allows in one period (joint_acceleration h^2,
+    1.26e-3 rad here); beyond that it is refused."""
+    limits = Limits.of_robot(HardwareOptions())
+    slack = float(limits.joint_acceleration[0]) * H * H
+    q0 = HOME_ARM_POSITIONS.copy()
+    q0[0] = float(limits.upper[0]) + 0.9 * slack
+    limiter = ArmCommandLimiter(H, 0.007, q0, limits)
+    state = limiter.CreateDefaultContext().get_abstract_state(0).get_value()
+    assert state.command[0] == limits.upper[0]
+    bench = Bench()
+    bench.hw.set_arm_command(bench.root, q0)
+    guard = bench.hw.systems["guard"]
+    held = guard.stored(guard.GetMyContextFromRoot(bench.root)).arm
+    assert held[0] == limits.upper[0]
+    q0[0] = float(limits.upper[0]) + 1.1 * slack
+    with pytest.raises(ValueError, match=re.escape(
+            f"initial_positions[0] = {float(q0[0])!r} is not allowed")):
+        ArmCommandLimiter(H, 0.007, q0, limits)
+
+
 def test_limits_wider_than_the_arms_own_are_refused():
     for name, value, own in (("joint_speed_limit", 100.0, "1.57 rad/s"),
                              ("joint_acceleration_limit", 1e6,

@@ -296,24 +296,29 @@ def follow_arm_command(target, target_velocity, last, velocity, period,
     return command, (command - last) / period, True
 
 
-def within_joint_limits(name, positions, limits):
-    """`positions` (n,) as a float vector, checked within the joint
-    position limits of `limits`: the arm positions a command starts from
-    (the robot's measured ones). From one beyond them the first command,
-    held within them, would be a jump.
+def within_joint_limits(name, positions, limits, period):
+    """`positions` (n,) as a float vector within the joint position limits
+    of `limits`: the arm positions a command starts from (the robot's
+    measured ones). A position beyond a limit by no more than the step
+    the acceleration limit allows from rest in one `period`
+    (joint_acceleration period^2: an arm resting at its limit, read with
+    an encoder's noise) is taken as at the limit; from one further
+    beyond, the first command, held within the limits, would be a jump.
 
     Raises:
         ValueError: naming `name`, the joint, its value and the limits.
     """
     q = as_vector(name, positions, limits.lower.size)
-    for i in np.flatnonzero((q < limits.lower) | (q > limits.upper)):
+    slack = limits.joint_acceleration * period * period
+    for i in np.flatnonzero((q < limits.lower - slack)
+                            | (q > limits.upper + slack)):
         raise ValueError(
             f"{name}[{i}] = {float(q[i])!r} is not allowed: must be within "
             f"the joint's limits [{float(limits.lower[i])!r}, "
             f"{float(limits.upper[i])!r}] rad (the first command, held "
             "within them, would jump there); move the arm within its "
             "limits first")
-    return q
+    return np.clip(q, limits.lower, limits.upper)
 
 
 def stop_arm(last, velocity, period, limits):
@@ -669,7 +674,7 @@ class CommandGuard(LeafSystem):
         initial = within_joint_limits(
             "initial_arm_positions", HOME_ARM_POSITIONS
             if initial_arm_positions is None else initial_arm_positions,
-            self.limits)
+            self.limits, options.publish_period)
         self._checks_per_command = round(options.publish_period
                                          / options.watchdog_period)
         self._base_in = self.DeclareVectorInputPort("base_velocity_command", 3)
@@ -735,7 +740,8 @@ class CommandGuard(LeafSystem):
         the joint limits (`within_joint_limits`)."""
         context = self.GetMyMutableContextFromRoot(context)
         context.SetAbstractState(self._state, GuardState.holding(
-            within_joint_limits("positions", positions, self.limits)))
+            within_joint_limits("positions", positions, self.limits,
+                                self.config.period)))
 
     def _update(self, context, state):
         now = context.get_time()
@@ -832,7 +838,7 @@ class ArmCommandLimiter(LeafSystem):
         self.limits = limits
         self.num_joints = n = limits.lower.size
         initial = within_joint_limits("initial_positions",
-                                      initial_positions, limits)
+                                      initial_positions, limits, period)
         self._in = self.DeclareVectorInputPort("positions", n)
         self._state = self.DeclareAbstractState(AbstractValue.Make(
             LimiterState(initial.copy(), np.zeros(n), initial.copy(), False)))
@@ -850,7 +856,8 @@ class ArmCommandLimiter(LeafSystem):
         """Starts the limiter at rest at `positions` (within the joint
         limits) in `context`."""
         context = self.GetMyMutableContextFromRoot(context)
-        q = within_joint_limits("positions", positions, self.limits)
+        q = within_joint_limits("positions", positions, self.limits,
+                                self.period)
         context.SetAbstractState(self._state, LimiterState(
             q.copy(), np.zeros(self.num_joints), q.copy(), False))
 
