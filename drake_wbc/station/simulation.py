@@ -423,7 +423,7 @@ class SimulatedStation:
         n = model.num_arm_joints
         s["arm_state"] = add("arm_state", Demultiplexer([n, n]))
         s["weld_wrench"] = add("weld_wrench", WeldWrench(
-            plant, model.ft_sensor_joint))
+            plant, model.ft_sensor_joint, model.ft_measurement_frame))
         s["wrist"] = add("wrist", WristForceTorqueSensor(options.wrist))
         s["people"] = add_people(builder, scene_graph, scene.people,
                                  options.scene_period)
