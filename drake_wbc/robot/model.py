@@ -209,7 +209,8 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
         suspension: None (the chassis rigid on its planar joints, as the
             model has it) or the SuspensionGains of a suspension under the
             chassis (drake_wbc.robot.suspension), inserted into the
-            directives' first model, the base (model directives only);
+            base's model (the one of base.joints[2], its yaw joint; model
+            directives only);
             with a horizontal compliance, the base's actuators get the
             drive's reflected inertia (gains.drive_inertia).
         mount: the ArmMount of the arm on the base (None: as the model
@@ -267,11 +268,22 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
         else:
             # The base's file with the suspension's joints added, parsed
             # in its place (the other directives weld to it).
-            first = directives.directives[0].add_model
+            yaw = ScopedName.Parse(description.base.joints[2])
+            adds = [d.add_model for d in directives.directives
+                    if d.add_model is not None
+                    and d.add_model.name == yaw.get_namespace()]
+            if len(adds) != 1:
+                raise ValueError(
+                    f"suspension is not allowed on {description.name}: its "
+                    "model directives must add the model of base.joints[2] "
+                    f"= {description.base.joints[2]!r} exactly once "
+                    f"(found {len(adds)})")
+            first = adds[0]
             text = Path(package_map.ResolveUrl(first.file)).read_text()
             with tempfile.TemporaryDirectory() as folder:
                 suspended = Path(folder) / "base_suspended.sdf"
-                suspended.write_text(suspended_base_sdf(text, suspension))
+                suspended.write_text(suspended_base_sdf(
+                    text, suspension, yaw.get_element()))
                 first.file = f"file://{suspended}"
                 ProcessModelDirectives(directives, plant, parser)
     else:

@@ -87,7 +87,8 @@ SUSPENSION_JOINTS = ("suspension_roll", "suspension_pitch")
 """The suspension's spring-damper joints (unactuated), when it is built."""
 
 YAW_JOINT = "base_yaw"
-"""The base joint the chassis hangs from; the suspension goes below it."""
+"""The shipped bases' joint the chassis hangs from; the suspension goes
+below it (a robot's own is its description's base.joints[2])."""
 
 WHEELS_BODY = "suspension_wheels"
 """The massless body of the wheels, turned by the yaw joint (with a
@@ -210,10 +211,11 @@ class SuspensionGains(NamedTuple):
         return self.horizontal_stiffness is not None
 
 
-def suspended_base_sdf(sdf_text, gains):
+def suspended_base_sdf(sdf_text, gains, yaw_joint=YAW_JOINT):
     """The base's SDFormat `sdf_text` (models/mcr_base.sdf) with the
-    suspension of SuspensionGains `gains` between its yaw joint and the
-    chassis: the yaw joint turns the massless wheels body, which carries
+    suspension of SuspensionGains `gains` between its yaw joint (named
+    `yaw_joint` in the file) and the chassis: the yaw joint turns the
+    massless wheels body, which carries
     the chassis (`base_link`) through `suspension_roll` and
     `suspension_pitch`, each with its spring and damper. With a
     horizontal compliance the yaw joint turns the massless contact body
@@ -226,8 +228,14 @@ def suspended_base_sdf(sdf_text, gains):
     damping = as_vector("damping", gains.damping, 2)
     root = ElementTree.fromstring(sdf_text)
     model = root.find("model")
-    yaw = next(j for j in model.findall("joint")
-               if j.get("name") == YAW_JOINT)
+    yaw = None if model is None else next(
+        (j for j in model.findall("joint") if j.get("name") == yaw_joint),
+        None)
+    if yaw is None:
+        raise ValueError(
+            f"yaw_joint = {yaw_joint!r} is not allowed: the base's "
+            "SDFormat has no <model> with a <joint> of that name (the "
+            "suspension goes under the chassis, below its yaw joint)")
     chassis = yaw.find("child").text
     joint = ('<joint name="{name}" type="{kind}">'
              '<pose relative_to="{frame}"/>'
