@@ -132,14 +132,16 @@ def test_a_description_that_does_not_fit_its_model_names_the_field(
         _add(_shipped_text(**changes))
 
 
-@pytest.mark.parametrize("change", ["order", "axis"])
+@pytest.mark.parametrize("change", ["order", "axis", "floor"])
 def test_base_joints_that_are_not_the_bases_pose_are_refused(tmp_path,
                                                              change):
     """The station's odometry reads, and its drivers drive, the base's
-    joints as T_b's (x, y, yaw) in the world: a description listing them
-    in another order, or a model turning the base the other way, is
-    refused naming base.joints, not simulated with the base sliding
-    sideways or turning against its commands."""
+    joints as T_b's (x, y, yaw) in the world, T_b on the floor where the
+    scene stands: a description listing them in another order, or a
+    model turning the base the other way or holding T_b above the floor,
+    is refused naming base.joints, not simulated with the base sliding
+    sideways or turning against its commands (or its LIDARs slicing the
+    scene at the wrong height)."""
     path = write_omni_arm(tmp_path, 6)
     if change == "order":
         path.write_text(path.read_text().replace(
@@ -147,14 +149,19 @@ def test_base_joints_that_are_not_the_bases_pose_are_refused(tmp_path,
             "[omni_arm::base_y, omni_arm::base_x,"))
     else:
         urdf = tmp_path / "omni_arm.urdf"
-        urdf.write_text(urdf.read_text().replace(
-            "<child link='chassis'/><origin xyz='0 0 0'/><axis xyz='0 0 1'/>",
-            "<child link='chassis'/><origin xyz='0 0 0'/>"
-            "<axis xyz='0 0 -1'/>"))
+        old, new = {
+            "axis": ("<child link='chassis'/><origin xyz='0 0 0'/><axis "
+                     "xyz='0 0 1'/>", "<child link='chassis'/><origin "
+                     "xyz='0 0 0'/><axis xyz='0 0 -1'/>"),
+            "floor": ("<child link='world_x'/><origin xyz='0 0 0'/>",
+                      "<child link='world_x'/><origin xyz='0 0 0.1'/>")}[
+            change]
+        assert old in urdf.read_text()
+        urdf.write_text(urdf.read_text().replace(old, new))
     with pytest.raises(ValueError, match=(
             r"base.joints = \[.*\] with base.frame = 'omni_arm::chassis' "
             r"are not allowed: with the joints at \(x, y, yaw\) = "
-            r"\(0.3, -0.2, 0.5\), T_b lies at")):
+            r"\(.*\), T_b lies at")):
         make_robot_plant(load_robot_description(path))
 
 

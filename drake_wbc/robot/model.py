@@ -532,8 +532,9 @@ def check_planar_base(plant, model):
     """Checks that the base's planar joints (x, y, yaw) are T_b's pose in
     the world, as the simulated station's odometry and drivers read and
     drive them: with the joints at zero and at PLANAR_TEST_POSE (the
-    other joints at their defaults), T_b's origin lies at (x, y) and its
-    axes are the world's turned by yaw about z.
+    other joints at their defaults), T_b's origin lies at (x, y) on the
+    floor (z = 0, where the scene stands) and its axes are the world's
+    turned by yaw about z.
 
     Args:
         plant: a finalized plant holding the robot.
@@ -542,8 +543,8 @@ def check_planar_base(plant, model):
     Raises:
         ValueError: naming base.joints and base.frame, where T_b lies
             elsewhere (the joints listed in another order, an axis of
-            another direction or sign, or a base frame turned or offset
-            from the yaw joint's axis).
+            another direction or sign, or a base frame turned, offset
+            from the yaw joint's axis or above the floor).
     """
     context = plant.CreateDefaultContext()
     q = plant.GetPositions(context)
@@ -553,7 +554,7 @@ def check_planar_base(plant, model):
         plant.SetPositions(context, q)
         X_WB = model.base_frame.CalcPoseInWorld(context)
         expected = RotationMatrix.MakeZRotation(pose[2]).matrix()
-        if (np.allclose(X_WB.translation()[:2], pose[:2], rtol=0,
+        if (np.allclose(X_WB.translation(), (*pose[:2], 0.0), rtol=0,
                         atol=1e-9)
                 and np.allclose(X_WB.rotation().matrix(), expected, rtol=0,
                                 atol=1e-9)):
@@ -563,12 +564,12 @@ def check_planar_base(plant, model):
         raise ValueError(
             f"base.joints = {list(base.joints)} with base.frame = "
             f"{base.frame!r} are not allowed: with the joints at (x, y, "
-            f"yaw) = {pose}, T_b lies at (x, y) = "
-            f"{np.round(X_WB.translation()[:2], 6).tolist()} with (roll, "
+            f"yaw) = {pose}, T_b lies at (x, y, z) = "
+            f"{np.round(X_WB.translation(), 6).tolist()} with (roll, "
             f"pitch, yaw) = {np.round(rpy, 6).tolist()} in the world; the "
             "joints must be T_b's pose: prismatic along the world's x, "
             "then y, then revolute about z, in that order, and T_b on the "
-            "yaw axis, x forward and z up")
+            "yaw axis, on the floor, x forward and z up")
 
 
 _SHARED_PLANTS = {}
