@@ -122,6 +122,7 @@ from drake_wbc.station.symbolic_drivers import (
 )
 from drake_wbc.station.traction import (
     TractionParameters,
+    own_traction,
     set_traction_limits,
     traction_limits,
 )
@@ -370,6 +371,11 @@ class SimulatedStation:
             options.base = own_base_loop(robot.base)
             check_base_time_step(options.base, "time_step", h,
                                  prefix="the robot's own base loop's ")
+        # The wheels' lever where they slip: the robot's own where the
+        # options give none.
+        if options.traction is not None:
+            options.traction = own_traction(options.traction, robot.base,
+                                            prefix="traction.")
         limits = shared_robot_plant(robot, mount=mount)[1].limits
         check_arm_start(options.initial_arm_positions, limits.lower,
                         limits.upper, "station.initial_arm_positions")
