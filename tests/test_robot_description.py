@@ -165,6 +165,31 @@ def test_base_joints_that_are_not_the_bases_pose_are_refused(tmp_path,
         make_robot_plant(load_robot_description(path))
 
 
+def test_a_passive_joint_without_a_spring_is_refused(tmp_path):
+    """A passive joint of the base with nothing to hold it at rest (a URDF
+    joint: URDF has no springs) is refused naming the field, not left to
+    fail in the station's static equilibrium with a KeyError."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    old = ("<parent link='chassis'/><child link='link1'/>"
+           "<origin xyz='0.2 0 0.4'/>")
+    assert old in urdf.read_text()
+    urdf.write_text(urdf.read_text().replace(
+        old, "<parent link='mount'/><child link='link1'/>"
+        "<origin xyz='0 0 0.05'/>").replace(
+        "</robot>", "<link name='mount'/><joint name='mount_pitch' "
+        "type='revolute'><parent link='chassis'/><child link='mount'/>"
+        "<origin xyz='0.2 0 0.35'/><axis xyz='0 1 0'/><limit lower='-0.1' "
+        "upper='0.1' effort='0' velocity='1'/></joint>\n</robot>"))
+    path.write_text(path.read_text().replace(
+        "  velocity_lag: 0.2\n",
+        "  velocity_lag: 0.2\n  passive_joints: [omni_arm::mount_pitch]\n"))
+    with pytest.raises(ValueError, match=(
+            r"base.passive_joints\[0\] = 'omni_arm::mount_pitch' is not "
+            r"allowed: it has no spring")):
+        make_robot_plant(load_robot_description(path))
+
+
 def test_tighter_limits_are_the_robots_own():
     model = _add(_shipped_text(**{"arm.velocity_limits": [1.0] * 6,
                                   "arm.acceleration_limits": [5.0] * 6}))

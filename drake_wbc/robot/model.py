@@ -222,7 +222,8 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
 
     Raises:
         ValueError: naming the description's field when a joint or frame
-            it names is not in the model, a joint is of the wrong kind,
+            it names is not in the model, a joint is of the wrong kind
+            (or a passive one without a spring),
             T_a (arm.base_frame) is moved by the arm's joints, the
             TCP is not outboard of the arm, the sensor not between the
             flange and the TCP, or the arm's limits are missing or wider
@@ -408,6 +409,18 @@ def _robot_model(plant, description):
         joint(f"base.passive_joints[{i}]", name,
               ("revolute", "prismatic"))
         for i, name in enumerate(base.passive_joints))
+    # A passive joint is held at rest by its spring (the nominal
+    # kinematics, the station's static equilibrium); without one it is a
+    # free mechanism.
+    springs = spring_stiffnesses(plant)
+    for i, (name, found) in enumerate(zip(base.passive_joints,
+                                          passive_joints, strict=True)):
+        if not springs.get(found.index(), 0.0) > 0.0:
+            raise ValueError(
+                f"base.passive_joints[{i}] = {name!r} is not allowed: it "
+                "has no spring (a RevoluteSpring or PrismaticSpring of "
+                "stiffness > 0, e.g. SDFormat's <spring_stiffness>; URDF "
+                "has none) to hold it at rest")
     arm_joints = tuple(joint(f"arm.joints[{i}]", name, ("revolute",))
                        for i, name in enumerate(arm.joints))
     sensor_joint = joint("tool.ft_sensor_joint", tool.ft_sensor_joint,
