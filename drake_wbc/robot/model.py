@@ -89,8 +89,9 @@ class ArmMount:
     vertical, then its column tilted by `tilt` about its own y axis (a
     positive tilt leans the arm's z axis towards its own +x). The
     default, no rotation, is the robot as its model has it. It sets the
-    pose of the weld that mounts the arm in the model directives (the one
-    whose child is the description's arm.base_frame), given to
+    rotation of the weld that mounts the arm in the model directives (the
+    one whose child is the description's arm.base_frame; its translation,
+    the mount point, stays as the model has it), given to
     `add_robot` (and so to the station and to `ArmKinematics`): a scenario
     turns or tilts the arm of a described robot without another model.
 
@@ -261,9 +262,12 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
         path = package_map.ResolveUrl(url) if "://" in url else url
         directives = LoadModelDirectives(path)
         if not mount.is_identity:
-            _mount_weld(directives, description).X_PC = Transform(
-                RigidTransform(RollPitchYaw(RotationMatrix(
-                    mount.rotation())), np.zeros(3)))
+            # Turned about the point the model welds the arm at.
+            weld = _mount_weld(directives, description)
+            at = (np.zeros(3) if weld.X_PC is None
+                  else weld.X_PC.GetDeterministicValue().translation())
+            weld.X_PC = Transform(RigidTransform(RollPitchYaw(
+                RotationMatrix(mount.rotation())), at))
         if suspension is None:
             ProcessModelDirectives(directives, plant, parser)
         else:
