@@ -232,6 +232,30 @@ def test_a_model_without_acceleration_limits_asks_for_them(tmp_path):
         make_robot_plant(load_robot_description(path))
 
 
+def test_a_zero_speed_limit_in_the_model_is_none(tmp_path):
+    """A URDF joint's velocity='0' (what exporters write where nothing
+    was set) is no limit: the description must give the joint's speed
+    limit, and may, rather than the controller failing on a speed limit
+    of 0 that no description could raise."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    text = urdf.read_text()
+    start = text.index("<joint name='j1'")
+    at = text.index("velocity='2.0'", start)
+    urdf.write_text(text[:at] + "velocity='0'"
+                    + text[at + len("velocity='2.0'"):])
+    with pytest.raises(ValueError, match=(
+            r"arm.velocity_limits\[0\] is missing, which is not allowed: "
+            r"the model gives 'omni_arm::j1' none \(0.0\)")):
+        make_robot_plant(load_robot_description(path))
+    path.write_text(path.read_text().replace(
+        "  home:", "  velocity_limits: [1.5, 2.0, 2.0, 2.0, 2.0, 2.0]\n"
+        "  home:"))
+    plant, model = make_robot_plant(load_robot_description(path))
+    np.testing.assert_array_equal(model.limits.velocity,
+                                  [1.5, 2.0, 2.0, 2.0, 2.0, 2.0])
+
+
 def test_fewer_than_six_arm_joints_are_refused(tmp_path):
     assert MIN_ARM_JOINTS == 6
     path = write_omni_arm(tmp_path, 5, accelerations=False)

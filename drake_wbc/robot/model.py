@@ -496,6 +496,12 @@ def _arm_limits(arm, joints):
         velocity_limits=[float(j.velocity_upper_limits()[0]) for j in joints],
         acceleration_limits=[float(j.acceleration_upper_limits()[0])
                              for j in joints])
+    # A speed or acceleration limit of 0 in the model is none (a URDF's
+    # velocity='0', as exporters write it where nothing was set): the
+    # description gives it.
+    shown = {name: list(values) for name, values in model.items()}
+    for name in ("velocity_limits", "acceleration_limits"):
+        model[name] = [v if v > 0.0 else math.inf for v in model[name]]
     limits = {}
     for name, own in model.items():
         given = getattr(arm, name)
@@ -512,8 +518,9 @@ def _arm_limits(arm, joints):
             if not np.isfinite(value):
                 raise ValueError(
                     f"arm.{name}[{i}] is missing, which is not allowed: the "
-                    f"model gives {arm.joints[i]!r} none ({value!r}); give "
-                    f"arm.{name} in the description")
+                    f"model gives {arm.joints[i]!r} none "
+                    f"({shown[name][i]!r}); give arm.{name} in the "
+                    "description")
             values.append(float(value))
         limits[name] = np.array(values)
     for i, (q, lo, hi) in enumerate(zip(
