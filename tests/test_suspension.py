@@ -132,6 +132,28 @@ def test_the_suspension_is_sized_on_the_robot_it_carries():
                                rtol=0.01)
 
 
+def test_the_pivot_may_go_up_to_the_robots_own_deck():
+    """The suspension's pivot lies at most at the deck of the robot it is
+    sized on (its base.height), not the shipped base's 0.3 m: 0.33 m
+    under the second robot's 0.35 m deck is taken, 0.25 m above a 0.2 m
+    deck is refused naming both."""
+    robot = load_robot_description(models_dir() / "lbr_omni.robot.yaml")
+    home = np.asarray(robot.arm.home, dtype=float)
+    high = SuspensionParameters(pivot_height=0.33)
+    gains = suspension_gains(high, home, robot)
+    plant, model = make_robot_plant(robot, suspension=gains)
+    inertia, gravity = _inertia_and_gravity(plant, model, home)
+    np.testing.assert_allclose(
+        np.sqrt((gains.stiffness - gravity) / inertia) / (2 * np.pi),
+        [high.roll_frequency, high.pitch_frequency], rtol=1e-6)
+    robot.base.height = 0.2
+    with pytest.raises(ValueError, match=(
+            r"pivot_height = 0.25 m is not allowed: must be at most the "
+            r"robot's deck, base.height = 0.2 m")):
+        suspension_gains(SuspensionParameters(pivot_height=0.25), home,
+                         robot)
+
+
 def test_the_suspension_goes_under_a_base_of_the_users_own_names(tmp_path):
     """A base of the user's model, its yaw joint named otherwise than the
     shipped base's (base.joints[2] = 'my_base::base_theta', the base not

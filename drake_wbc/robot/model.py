@@ -955,7 +955,18 @@ def suspension_gains(params, arm_positions, description=None, mount=None):
     with the suspension (and k = I w^2, c = 2 zeta w I for the horizontal
     compliance's axes, from a plant with it): the robot of
     RobotDescription `description` (the shipped one if None), its arm
-    mounted by ArmMount `mount`."""
+    mounted by ArmMount `mount`.
+
+    Raises:
+        ValueError: naming pivot_height when it is above the robot's deck
+            (its description's base.height).
+    """
+    deck = checked_instance("description", description, RobotDescription,
+                            shipped_robot).base.height
+    if params.pivot_height > deck:
+        raise ValueError(
+            f"pivot_height = {params.pivot_height!r} m is not allowed: must "
+            f"be at most the robot's deck, base.height = {deck!r} m")
     unsprung = SuspensionGains(np.zeros(2), np.zeros(2), params.pivot_height)
     inertia, gravity = suspension_block(unsprung, arm_positions,
                                         description=description, mount=mount)

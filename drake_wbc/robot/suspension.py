@@ -81,6 +81,7 @@ from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
     in_closed_range,
+    non_negative,
 )
 
 SUSPENSION_JOINTS = ("suspension_roll", "suspension_pitch")
@@ -158,7 +159,9 @@ class SuspensionParameters:
         pitch_frequency: Hz, the pitch mode (4, EST).
         damping_ratio: of both modes (0.1, EST), in [0.01, 1].
         pivot_height: m above the floor of the roll and pitch axes (the
-            wheels' axles, 0.076 m), in [0, 0.3] (the deck).
+            wheels' axles, 0.076 m), >= 0 and at most the robot's deck
+            (its description's base.height, checked where the suspension
+            is sized on it: drake_wbc.robot.model.suspension_gains).
         horizontal: None (the default: the wheels rigid on the floor) or
             the HorizontalCompliance of the wheels on the floor, in series
             with the driven planar joints.
@@ -175,7 +178,7 @@ class SuspensionParameters:
             in_closed_range(name, getattr(self, name), MIN_FREQUENCY,
                             MAX_FREQUENCY)
         in_closed_range("damping_ratio", self.damping_ratio, 0.01, 1.0)
-        in_closed_range("pivot_height", self.pivot_height, 0.0, 0.3)
+        non_negative("pivot_height", self.pivot_height)
         self.horizontal = checked_instance(
             "horizontal", self.horizontal, HorizontalCompliance,
             lambda: None)
