@@ -5,6 +5,7 @@ the robot model."""
 import numpy as np
 import pytest
 from locked_robot import sensor_reading, settle_locked_robot
+from omni_arm import write_omni_arm
 from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.analysis import Simulator
@@ -13,17 +14,21 @@ from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from drake_wbc.math.validation import validate
+from drake_wbc.robot.description import load_robot_description
 from drake_wbc.robot.model import (
     HOME_ARM_POSITIONS,
+    ArmKinematics,
     add_robot,
     make_robot_plant,
 )
+from drake_wbc.stages.wrench import tool_weight_reading
 from drake_wbc.station.force_torque import (
     ForceTorqueSensorParameters,
     WeldWrench,
     WristForceTorqueSensor,
     measure,
 )
+from drake_wbc.station.simulation import SimulatedStation, StationOptions
 
 NOISELESS = dict(force_noise_std=0.0, torque_noise_std=0.0)
 
@@ -230,6 +235,49 @@ def test_weld_wrench_connects_to_the_plant():
         plant_context) * 9.81
     assert np.linalg.norm(output.Eval(sensor_context)[:3]) == pytest.approx(
         weight, rel=1e-3)
+
+
+def test_the_station_reads_the_wrench_in_the_described_sensor_frame(
+        tmp_path):
+    """A sensor whose measurement frame (tool.ft_sensor_frame) is turned
+    and offset from the child frame of its measuring weld
+    (tool.ft_sensor_joint), as a URDF's sensor frame often is: the
+    simulated station reads the wrench at and in the described frame,
+    the tool's weight as the controller expects it
+    (tool_weight_reading)."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    urdf.write_text(urdf.read_text().replace("</robot>", (
+        "<link name='ft_frame'/><joint name='ft_frame' type='fixed'>"
+        "<parent link='sensor'/><child link='ft_frame'/>"
+        "<origin xyz='0 0 0.03' rpy='0 0 1.5707963267948966'/></joint>"
+        "\n</robot>")))
+    path.write_text(path.read_text().replace(
+        "ft_sensor_frame: omni_arm::sensor",
+        "ft_sensor_frame: omni_arm::ft_frame").replace(
+        "ft_sensor_joint: omni_arm::sensor",
+        "ft_sensor_joint: omni_arm::tool"))
+    description = load_robot_description(path)
+    station = SimulatedStation(StationOptions(time_step=0.005),
+                               robot=description)
+    diagram = station.diagram
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    station.set_initial_state(context)
+    diagram.GetInputPort("base.velocity_command").FixValue(
+        context, np.zeros(3))
+    diagram.GetInputPort("arm.position_command").FixValue(
+        context, description.arm.home)
+    simulator.AdvanceTo(0.05)
+    q = diagram.GetOutputPort("arm.position_measured").Eval(context)
+    expected = tool_weight_reading(
+        ArmKinematics(*make_robot_plant(description)), q)
+    np.testing.assert_allclose(
+        diagram.GetOutputPort("truth.wrist_wrench").Eval(context), expected,
+        atol=1e-3 * np.abs(expected).max())
+    with pytest.raises(ValueError, match="frame = omni_arm::link1"):
+        WeldWrench(station.plant, station.model.ft_sensor_joint,
+                   station.plant.GetFrameByName("link1"))
 
 
 def test_parameters_and_arguments_are_checked():

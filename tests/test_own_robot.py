@@ -201,6 +201,20 @@ def test_the_hardware_guard_holds_the_commands_to_that_arms_own_limits(
     np.testing.assert_array_equal(command, slow)
 
 
+@pytest.mark.parametrize("n", [6, 7])
+def test_a_guard_of_that_robots_limits_asks_for_its_arms_start(tmp_path, n):
+    """A command guard given another robot's limits but no arm positions
+    to hold would hold the shipped Elfin5's home (a configuration of
+    another arm) on a six-joint arm, and fail on its size on seven: it
+    asks for the positions instead, naming the argument."""
+    path = write_omni_arm(tmp_path, n)
+    arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
+    limits = Limits.of_robot(HardwareOptions(), arm)
+    with pytest.raises(ValueError, match=(
+            r"initial_arm_positions = None is not allowed with limits")):
+        CommandGuard(HardwareOptions(), None, limits)
+
+
 def test_the_same_controller_deploys_over_lcm_to_that_robot(tmp_path):
     """The controller side of `drake-wbc deploy` for a scenario that names
     the 7-joint robot (`robot:`), over real LCM messages (memq://), with

@@ -132,6 +132,64 @@ def test_a_description_that_does_not_fit_its_model_names_the_field(
         _add(_shipped_text(**changes))
 
 
+@pytest.mark.parametrize("change", ["order", "axis", "floor"])
+def test_base_joints_that_are_not_the_bases_pose_are_refused(tmp_path,
+                                                             change):
+    """The station's odometry reads, and its drivers drive, the base's
+    joints as T_b's (x, y, yaw) in the world, T_b on the floor where the
+    scene stands: a description listing them in another order, or a
+    model turning the base the other way or holding T_b above the floor,
+    is refused naming base.joints, not simulated with the base sliding
+    sideways or turning against its commands (or its LIDARs slicing the
+    scene at the wrong height)."""
+    path = write_omni_arm(tmp_path, 6)
+    if change == "order":
+        path.write_text(path.read_text().replace(
+            "[omni_arm::base_x, omni_arm::base_y,",
+            "[omni_arm::base_y, omni_arm::base_x,"))
+    else:
+        urdf = tmp_path / "omni_arm.urdf"
+        old, new = {
+            "axis": ("<child link='chassis'/><origin xyz='0 0 0'/><axis "
+                     "xyz='0 0 1'/>", "<child link='chassis'/><origin "
+                     "xyz='0 0 0'/><axis xyz='0 0 -1'/>"),
+            "floor": ("<child link='world_x'/><origin xyz='0 0 0'/>",
+                      "<child link='world_x'/><origin xyz='0 0 0.1'/>")}[
+            change]
+        assert old in urdf.read_text()
+        urdf.write_text(urdf.read_text().replace(old, new))
+    with pytest.raises(ValueError, match=(
+            r"base.joints = \[.*\] with base.frame = 'omni_arm::chassis' "
+            r"are not allowed: with the joints at \(x, y, yaw\) = "
+            r"\(.*\), T_b lies at")):
+        make_robot_plant(load_robot_description(path))
+
+
+def test_a_passive_joint_without_a_spring_is_refused(tmp_path):
+    """A passive joint of the base with nothing to hold it at rest (a URDF
+    joint: URDF has no springs) is refused naming the field, not left to
+    fail in the station's static equilibrium with a KeyError."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    old = ("<parent link='chassis'/><child link='link1'/>"
+           "<origin xyz='0.2 0 0.4'/>")
+    assert old in urdf.read_text()
+    urdf.write_text(urdf.read_text().replace(
+        old, "<parent link='mount'/><child link='link1'/>"
+        "<origin xyz='0 0 0.05'/>").replace(
+        "</robot>", "<link name='mount'/><joint name='mount_pitch' "
+        "type='revolute'><parent link='chassis'/><child link='mount'/>"
+        "<origin xyz='0.2 0 0.35'/><axis xyz='0 1 0'/><limit lower='-0.1' "
+        "upper='0.1' effort='0' velocity='1'/></joint>\n</robot>"))
+    path.write_text(path.read_text().replace(
+        "  velocity_lag: 0.2\n",
+        "  velocity_lag: 0.2\n  passive_joints: [omni_arm::mount_pitch]\n"))
+    with pytest.raises(ValueError, match=(
+            r"base.passive_joints\[0\] = 'omni_arm::mount_pitch' is not "
+            r"allowed: it has no spring")):
+        make_robot_plant(load_robot_description(path))
+
+
 def test_tighter_limits_are_the_robots_own():
     model = _add(_shipped_text(**{"arm.velocity_limits": [1.0] * 6,
                                   "arm.acceleration_limits": [5.0] * 6}))
@@ -172,6 +230,30 @@ def test_a_model_without_acceleration_limits_asks_for_them(tmp_path):
             r"arm.acceleration_limits\[0\] is missing, which is not "
             r"allowed: the model gives 'omni_arm::j1' none \(inf\)")):
         make_robot_plant(load_robot_description(path))
+
+
+def test_a_zero_speed_limit_in_the_model_is_none(tmp_path):
+    """A URDF joint's velocity='0' (what exporters write where nothing
+    was set) is no limit: the description must give the joint's speed
+    limit, and may, rather than the controller failing on a speed limit
+    of 0 that no description could raise."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    text = urdf.read_text()
+    start = text.index("<joint name='j1'")
+    at = text.index("velocity='2.0'", start)
+    urdf.write_text(text[:at] + "velocity='0'"
+                    + text[at + len("velocity='2.0'"):])
+    with pytest.raises(ValueError, match=(
+            r"arm.velocity_limits\[0\] is missing, which is not allowed: "
+            r"the model gives 'omni_arm::j1' none \(0.0\)")):
+        make_robot_plant(load_robot_description(path))
+    path.write_text(path.read_text().replace(
+        "  home:", "  velocity_limits: [1.5, 2.0, 2.0, 2.0, 2.0, 2.0]\n"
+        "  home:"))
+    plant, model = make_robot_plant(load_robot_description(path))
+    np.testing.assert_array_equal(model.limits.velocity,
+                                  [1.5, 2.0, 2.0, 2.0, 2.0, 2.0])
 
 
 def test_fewer_than_six_arm_joints_are_refused(tmp_path):

@@ -445,6 +445,40 @@ def test_an_arm_mount_turns_the_arm_about_the_mount_point(robot, yaw, tilt):
                                    atol=1e-12)
 
 
+def test_an_arm_mount_keeps_the_offset_the_model_welds_the_arm_at(tmp_path):
+    """A robot whose model directives weld the arm at an offset from the
+    weld's parent frame (X_PC's translation): an ArmMount turns the arm
+    about that point, which stays where the model has it, rather than
+    moving the arm to the parent frame's origin."""
+    from drake_wbc.robot.description import (
+        load_robot_description,
+        models_dir,
+    )
+    from drake_wbc.stages.support import arm_mounting
+
+    offset = [0.1, 0.05, 0.02]
+    (tmp_path / "offset.dmd.yaml").write_text(
+        (models_dir() / "mcr.dmd.yaml").read_text().replace(
+            "child: elfin5::base_link\n",
+            "child: elfin5::base_link\n    X_PC:\n"
+            f"      translation: {offset}\n", 1))
+    (tmp_path / "offset.robot.yaml").write_text(
+        (models_dir() / "mcr.robot.yaml").read_text().replace(
+            "package://drake_wbc/mcr.dmd.yaml", "offset.dmd.yaml").replace(
+            "  packages:\n    drake_wbc: .\n", ""))
+    robot = load_robot_description(tmp_path / "offset.robot.yaml")
+    plain = ArmKinematics(*make_robot_plant(robot))
+    mount = ArmMount(yaw=0.5, tilt=0.2)
+    turned = ArmKinematics(*make_robot_plant(robot, mount=mount))
+    shipped = ArmKinematics(*make_robot_plant())
+    origin = {name: arm_mounting(arm)[1] for name, arm in (
+        ("plain", plain), ("turned", turned), ("shipped", shipped))}
+    np.testing.assert_allclose(origin["plain"], origin["shipped"] + offset,
+                               atol=1e-12)
+    np.testing.assert_allclose(origin["turned"], origin["plain"], atol=1e-12)
+    np.testing.assert_allclose(turned.R_ba, mount.rotation(), atol=1e-12)
+
+
 def test_the_shipped_mount_is_the_identity(robot):
     plant, model = robot
     assert model.mount == ArmMount() and model.mount.is_identity

@@ -13,7 +13,7 @@ from drake_wbc.controller import ControllerParameters, build_controller
 from drake_wbc.controller.parameters import for_robot
 from drake_wbc.math import capability
 from drake_wbc.math.capability import CapabilityBand
-from drake_wbc.math.workspace import LocalWorkspace, extent
+from drake_wbc.math.workspace import LocalWorkspace, deflection, extent
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.robot.model import ArmKinematics, make_robot_plant
 from drake_wbc.robot.tuning import (
@@ -173,6 +173,37 @@ def test_the_local_workspace_is_proposed_and_checked_at_the_arms_home(
     params.workspace.mode = "intuitive-phri"
     with pytest.warns(RobotTuningWarning, match="extent_lower"):
         build_controller(params, robot=seven)
+
+
+def test_an_arm_base_frame_facing_away_from_the_tool_is_warned_of(tmp_path):
+    """An arm whose base frame's x axis points away from where the arm
+    reaches at home (a UR's base_link, turned by pi from its base): the
+    tool at home lies beyond the local workspace's deflection, where the
+    intuitive pHRI mode hands all planar motion to the base from the
+    start; check_tuning says so, naming deflection_lower, even with
+    extents that suit the arm."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    urdf.write_text(urdf.read_text().replace(
+        "<parent link='chassis'/><child link='link1'/>"
+        "<origin xyz='0.2 0 0.4'/>",
+        "<parent link='arm_base'/><child link='link1'/>"
+        "<origin xyz='0 0 0.05' rpy='0 0 3.141592653589793'/>").replace(
+        "</robot>", "<link name='arm_base'/><joint name='arm_mount' "
+        "type='fixed'><parent link='chassis'/><child link='arm_base'/>"
+        "<origin xyz='0.2 0 0.35' rpy='0 0 3.141592653589793'/></joint>"
+        "\n</robot>"))
+    path.write_text(path.read_text().replace(
+        "  base_frame: omni_arm::chassis\n  flange_frame",
+        "  base_frame: omni_arm::arm_base\n  flange_frame"))
+    arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
+    assert deflection(arm.evaluate(arm.home).pose[:3, 3]) > 0.9 * math.pi
+    band = survey_capability(arm, count=100).proposed_band()
+    problems = check_tuning(arm, band, capability.DEFAULT_JOINT_LIMIT_GAIN,
+                            proposed_local_workspace(arm))
+    assert len(problems) == 1
+    assert "workspace.workspace.deflection_lower" in problems[0]
+    assert "arm.base_frame" in problems[0]
 
 
 def test_a_descriptions_local_workspace_is_the_controllers(tmp_path):

@@ -172,6 +172,25 @@ def test_names_that_do_not_fit_the_signal_are_refused():
         SignalLogger(builder, {"alpha": source.get_output_port()}, 0.01)
 
 
+@pytest.mark.parametrize("size", [1, 3])
+def test_a_bases_passive_joints_are_one_column_a_joint(size):
+    """A robot whose base has another number of passive joints than the
+    shipped mount's roll and pitch (base.passive_joints: one pitch
+    spring, or a suspension's three): its truth.mount_angles are logged
+    one column a joint, passive1, ..., rather than refused (which stopped
+    every run of that robot); the shipped two keep their names."""
+    builder = DiagramBuilder()
+    ports = {"truth.mount_angles": builder.AddSystem(ConstantVectorSource(
+        np.zeros(size))).get_output_port()}
+    log = SignalLogger(builder, ports, 0.01)
+    assert log.columns["truth.mount_angles"] == tuple(
+        f"passive{i}" for i in range(1, size + 1))
+    ports["truth.mount_angles"] = builder.AddSystem(ConstantVectorSource(
+        np.zeros(2))).get_output_port()
+    assert SignalLogger(builder, ports, 0.01).columns[
+        "truth.mount_angles"] == ("roll", "pitch")
+
+
 @pytest.mark.parametrize("duration, chunk", [
     (47.0, 47.0 / 200), (11.0, 11.0 / 200), (0.1, 0.01), (1.0, 0.3),
     (0.005, 0.01), (0.0, 0.01)])

@@ -132,6 +132,64 @@ def test_the_suspension_is_sized_on_the_robot_it_carries():
                                rtol=0.01)
 
 
+def test_the_pivot_may_go_up_to_the_robots_own_deck():
+    """The suspension's pivot lies at most at the deck of the robot it is
+    sized on (its base.height), not the shipped base's 0.3 m: 0.33 m
+    under the second robot's 0.35 m deck is taken, 0.25 m above a 0.2 m
+    deck is refused naming both."""
+    robot = load_robot_description(models_dir() / "lbr_omni.robot.yaml")
+    home = np.asarray(robot.arm.home, dtype=float)
+    high = SuspensionParameters(pivot_height=0.33)
+    gains = suspension_gains(high, home, robot)
+    plant, model = make_robot_plant(robot, suspension=gains)
+    inertia, gravity = _inertia_and_gravity(plant, model, home)
+    np.testing.assert_allclose(
+        np.sqrt((gains.stiffness - gravity) / inertia) / (2 * np.pi),
+        [high.roll_frequency, high.pitch_frequency], rtol=1e-6)
+    robot.base.height = 0.2
+    with pytest.raises(ValueError, match=(
+            r"pivot_height = 0.25 m is not allowed: must be at most the "
+            r"robot's deck, base.height = 0.2 m")):
+        suspension_gains(SuspensionParameters(pivot_height=0.25), home,
+                         robot)
+
+
+def test_the_suspension_goes_under_a_base_of_the_users_own_names(tmp_path):
+    """A base of the user's model, its yaw joint named otherwise than the
+    shipped base's (base.joints[2] = 'my_base::base_theta', the base not
+    the directives' first model): the suspension goes between that joint
+    and the chassis, with the modes asked for."""
+    (tmp_path / "package.xml").write_text(
+        "<?xml version='1.0'?><package format='2'><name>mine</name>"
+        "</package>")
+    (tmp_path / "my_base.sdf").write_text(
+        (models_dir() / "mcr_base.sdf").read_text().replace(
+            '"base_yaw"', '"base_theta"'))
+    directives = (models_dir() / "mcr.dmd.yaml").read_text().replace(
+        "mcr_base", "my_base").replace(
+        "package://drake_wbc/my_base.sdf", "package://mine/my_base.sdf")
+    arm = "- add_model:\n    name: elfin5\n    file: package://drake_wbc/elfin5.sdf\n"
+    directives = directives.replace(arm, "").replace(
+        "directives:\n", "directives:\n" + arm)
+    (tmp_path / "my.dmd.yaml").write_text(directives)
+    text = (models_dir() / "mcr.robot.yaml").read_text().replace(
+        "mcr_base::", "my_base::").replace(
+        "my_base::base_yaw", "my_base::base_theta").replace(
+        "package://drake_wbc/mcr.dmd.yaml", "my.dmd.yaml").replace(
+        "drake_wbc: .", "mine: .")
+    (tmp_path / "my.robot.yaml").write_text(text)
+    robot = load_robot_description(tmp_path / "my.robot.yaml")
+    home = np.asarray(robot.arm.home, dtype=float)
+    gains = suspension_gains(PARAMS, home, robot)
+    plant, model = make_robot_plant(robot, suspension=gains)
+    assert [j.name() for j in model.suspension_joints] == list(
+        SUSPENSION_JOINTS)
+    inertia, gravity = _inertia_and_gravity(plant, model, home)
+    np.testing.assert_allclose(
+        np.sqrt((gains.stiffness - gravity) / inertia) / (2 * np.pi),
+        [PARAMS.roll_frequency, PARAMS.pitch_frequency], rtol=1e-6)
+
+
 def test_the_chassis_rocks_at_the_suspensions_frequency_in_simulation(
         suspended):
     gains, _, _ = suspended

@@ -11,6 +11,11 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink
 from shipped_names import ARM_JOINTS, BASE_JOINTS, MOUNT_JOINTS
 
+from drake_wbc.robot.description import (
+    load_robot_description,
+    models_dir,
+    shipped_robot,
+)
 from drake_wbc.robot.model import (
     HOME_ARM_POSITIONS,
     add_robot,
@@ -209,7 +214,7 @@ def test_a_rapid_step_slips_the_wheels_at_mu_g():
     np.testing.assert_allclose(
         [station.plant.GetJointActuatorByName(n, station.model.base)
          .effort_limit() for n in BASE_JOINTS],
-        traction_limits(slipping.traction, mass, g), rtol=1e-9)
+        traction_limits(station.options.traction, mass, g), rtol=1e-9)
     times, com, odometry = _base_step(slipping, speed, 0.6)
     _, free_com, free_odometry = _base_step(options, speed, 0.6)
     # The floor's force on the robot is its momentum's rate: with the
@@ -230,6 +235,33 @@ def test_a_rapid_step_slips_the_wheels_at_mu_g():
     # And then it runs at the command's speed: slip is only while the
     # servo's demand exceeds the grip.
     assert odometry[-1] == pytest.approx(speed, abs=5e-3)
+
+
+def test_the_wheels_grip_about_z_with_the_robots_own_lever():
+    """The yaw torque the wheels can take is mu m g rho with rho the
+    robot's own wheel distance (its description's base.wheel_distance:
+    0.36 m on the shipped base), not the shipped base's on another robot;
+    a robot whose description gives none asks for it, naming the field."""
+    robot = load_robot_description(models_dir() / "lbr_omni.robot.yaml")
+    assert robot.base.wheel_distance is None
+    with pytest.raises(ValueError, match=(
+            r"traction.wheel_distance is missing, which is not allowed: "
+            r"the robot's description gives no base.wheel_distance")):
+        SimulatedStation(StationOptions(time_step=0.002,
+                                        traction=TractionParameters()),
+                         robot=robot)
+    robot.base.wheel_distance = 0.25
+    station = SimulatedStation(StationOptions(
+        time_step=0.002, traction=TractionParameters()), robot=robot)
+    plant, model = station.plant, station.model
+    mass = plant.CalcTotalMass(plant.CreateDefaultContext())
+    yaw = plant.get_joint_actuator(next(
+        i for i in plant.GetJointActuatorIndices()
+        if plant.get_joint_actuator(i).joint().index()
+        == model.base_joints[2].index()))
+    assert yaw.effort_limit() == pytest.approx(0.45 * mass * 9.81 * 0.25,
+                                               rel=1e-9)
+    assert shipped_robot().base.wheel_distance == 0.36
 
 
 @pytest.mark.parametrize("kind, fields, name", [

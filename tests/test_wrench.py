@@ -5,6 +5,7 @@ from the plant, the tool's weight alone, and bad measurements."""
 import numpy as np
 import pytest
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue
+from pydrake.math import RollPitchYaw, RotationMatrix
 
 from drake_wbc.math.wrench import (
     STANDARD_GRAVITY,
@@ -244,6 +245,47 @@ def test_a_mounted_arm_gives_the_wrench_in_each_dmps_frame(mount):
         np.testing.assert_allclose(
             estimator.GetOutputPort("external_wrench_in_base").Eval(context),
             0.0, atol=1e-12 * size)
+
+
+def test_an_arm_turned_in_its_own_model_gives_the_wrench_in_t_b(tmp_path):
+    """A robot whose own model directives weld the arm turned and tilted
+    on the base (no ArmMount: ^bR_a from the model, not the identity):
+    the estimate is the one of the same arm mounted so by an ArmMount,
+    F_ext in T_b and R_ba^T of it in T_a."""
+    from drake_wbc.robot.description import (
+        load_robot_description,
+        models_dir,
+    )
+    from drake_wbc.robot.model import make_robot_plant
+
+    mount = ArmMount(yaw=0.5 * np.pi, tilt=0.3)
+    rpy = RollPitchYaw(RotationMatrix(mount.rotation())).vector()
+    directives = (models_dir() / "mcr.dmd.yaml").read_text().replace(
+        "child: elfin5::base_link\n",
+        "child: elfin5::base_link\n    X_PC:\n      rotation: !Rpy\n"
+        f"        deg: {np.degrees(rpy).tolist()}\n", 1)
+    (tmp_path / "turned.dmd.yaml").write_text(directives)
+    text = (models_dir() / "mcr.robot.yaml").read_text().replace(
+        "package://drake_wbc/mcr.dmd.yaml", "turned.dmd.yaml")
+    (tmp_path / "turned.robot.yaml").write_text(text.replace(
+        "  packages:\n    drake_wbc: .\n", ""))
+    turned = ArmKinematics(*make_robot_plant(
+        load_robot_description(tmp_path / "turned.robot.yaml")))
+    mounted = ArmKinematics(mount=mount)
+    np.testing.assert_allclose(turned.R_ba, mounted.R_ba, atol=1e-12)
+    estimates = [ExternalWrenchEstimator(a) for a in (turned, mounted)]
+    contexts = [e.CreateDefaultContext() for e in estimates]
+    rng = np.random.default_rng(25)
+    for q in random_configurations(mounted, 3, 26):
+        reading = 10.0 * rng.normal(size=6)
+        for estimator, context in zip(estimates, contexts, strict=True):
+            estimator.GetInputPort("arm_position").FixValue(context, q)
+            estimator.GetInputPort("wrist_wrench").FixValue(context, reading)
+        for port in ("external_wrench_in_base", "external_wrench"):
+            np.testing.assert_allclose(
+                *(e.GetOutputPort(port).Eval(c)
+                  for e, c in zip(estimates, contexts, strict=True)),
+                atol=1e-9, err_msg=port)
 
 
 def test_the_shipped_robot_has_one_wrench_in_both_frames(arm, estimator):

@@ -240,7 +240,8 @@ def build_plant_part(station, hand):
     driver = add("arm_driver", PeriodicArmDriver(
         options.arm, model.num_arm_joints))
     base_hold = add("base_hold", ConstantVectorSource(np.zeros(6)))
-    weld = add("weld_wrench", WeldWrench(plant, model.ft_sensor_joint))
+    weld = add("weld_wrench", WeldWrench(
+        plant, model.ft_sensor_joint, model.ft_measurement_frame))
     sensor = add("wrist", ZeroOrderHold(1.0 / options.wrist.rate, 6))
     connect = builder.Connect
     add_desired_states(builder, plant, model, base_hold.get_output_port(),

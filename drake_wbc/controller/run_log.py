@@ -51,6 +51,12 @@ SIGNALS = {
 a prefix numbered from 1 for one column an entry (the arm's joints, as
 many as the robot has), or None (x0, y0, x1, ...). See `column_names`."""
 
+OTHER_ROBOTS = {"truth.mount_angles": "passive"}
+"""The names of the signals whose size is the robot's where it is not
+their SIGNALS names' (a prefix numbered from 1): the base's passive
+joints, in its description's order, of a robot whose are not the
+shipped mount's roll and pitch."""
+
 
 def column_names(name, size, columns=None):
     """The names of the `size` columns of signal `name`.
@@ -63,9 +69,10 @@ def column_names(name, size, columns=None):
             or that are to be named otherwise; None for none.
 
     Returns:
-        tuple of `size` names: columns[name], else SIGNALS[name]; a
-        prefix p gives p1, ..., p<size>; x0, y0, x1, ... where neither
-        names the signal.
+        tuple of `size` names: columns[name], else SIGNALS[name] (or
+        OTHER_ROBOTS[name] where SIGNALS' are not `size`); a prefix p
+        gives p1, ..., p<size>; x0, y0, x1, ... where neither names the
+        signal.
 
     Raises:
         ValueError: when the names given for the signal are not one per
@@ -73,6 +80,8 @@ def column_names(name, size, columns=None):
     """
     given = (columns or {}).get(name)
     names = given or SIGNALS.get(name)
+    if not given and name in OTHER_ROBOTS and len(names) != size:
+        names = OTHER_ROBOTS[name]
     if isinstance(names, str):
         return tuple(f"{names}{i}" for i in range(1, size + 1))
     if names is None:

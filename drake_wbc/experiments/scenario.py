@@ -63,6 +63,7 @@ from drake_wbc.station.simulation import (
     StationOptions,
     check_arm_start,
 )
+from drake_wbc.station.traction import own_traction
 
 EXPERIMENTS = ("generic", "trajectory_tracking", "fixed_point",
                "line_tracking", "wiping", "phri", "teach", "repeat")
@@ -389,7 +390,8 @@ def checked_base(scenario, base):
 
 def check_on_robot(scenario):
     """Checks the scenario against its robot: the base's footprint free
-    of the scene's static obstacles at station.initial_base_pose,
+    of the scene's static obstacles at station.initial_base_pose, the
+    wheels' lever of station.traction given by it or by the robot,
     station.initial_arm_positions one value a joint, within its limits,
     and the hardware's timeouts within the robot's own
     (drake_wbc.hardware.options.command_timeout_of); a start left out
@@ -397,6 +399,9 @@ def check_on_robot(scenario):
     base = scenario_robot(scenario).base
     check_start_is_free(scenario.scene, scenario.station.initial_base_pose,
                         base)
+    if scenario.station.traction is not None:
+        own_traction(scenario.station.traction, base,
+                     prefix="station.traction.")
     if scenario.hardware is not None:
         try:
             command_timeout_of(scenario.hardware, base)

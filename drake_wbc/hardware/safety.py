@@ -653,7 +653,8 @@ class CommandGuard(LeafSystem):
         initial_arm_positions: (n,) the arm command held before the first
             command (the robot's measured positions; `set_arm_command`
             sets it in a context), within the joint limits
-            (`within_joint_limits`); the robot's home if None.
+            (`within_joint_limits`); the shipped robot's home if None,
+            which only goes with limits None.
         limits: Limits (Limits.of_robot(options), of the shipped robot,
             if None).
         wall_clock: the WallClock of a controller running in real time
@@ -671,6 +672,12 @@ class CommandGuard(LeafSystem):
         self.config = GuardConfig.of(options, limits)
         self.limits = self.config.limits
         self.num_joints = n = self.limits.lower.size
+        if initial_arm_positions is None and limits is not None:
+            # The shipped robot's home is a configuration of its arm only.
+            raise ValueError(
+                "initial_arm_positions = None is not allowed with limits "
+                "given: pass the positions of the limits' arm to hold (its "
+                "measured positions, or its home)")
         initial = within_joint_limits(
             "initial_arm_positions", HOME_ARM_POSITIONS
             if initial_arm_positions is None else initial_arm_positions,

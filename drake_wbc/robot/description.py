@@ -196,6 +196,10 @@ class BaseDescription:
             slowest of its axes; where it is not known exactly, an upper
             bound): the separation rules brake allowing for it
             (drake_wbc.math.separation, eqs. (allowed), (protective)).
+        wheel_distance: optional, > 0, m: the wheels' distance from the
+            footprint's centre, the lever of their grip about z where the
+            simulated station's wheels slip (drake_wbc.station.traction);
+            None where not known.
     """
 
     frame: str = ""
@@ -207,6 +211,7 @@ class BaseDescription:
     height: float = math.nan
     command_timeout: float = math.nan
     velocity_lag: float = math.nan
+    wheel_distance: float | None = None
 
     def __post_init__(self):
         if _blank(self):
@@ -229,6 +234,9 @@ class BaseDescription:
         self.command_timeout = positive("command_timeout",
                                         self.command_timeout)
         self.velocity_lag = non_negative("velocity_lag", self.velocity_lag)
+        if self.wheel_distance is not None:
+            self.wheel_distance = positive("wheel_distance",
+                                           self.wheel_distance)
 
 
 @dataclass

@@ -89,8 +89,9 @@ class ArmMount:
     vertical, then its column tilted by `tilt` about its own y axis (a
     positive tilt leans the arm's z axis towards its own +x). The
     default, no rotation, is the robot as its model has it. It sets the
-    pose of the weld that mounts the arm in the model directives (the one
-    whose child is the description's arm.base_frame), given to
+    rotation of the weld that mounts the arm in the model directives (the
+    one whose child is the description's arm.base_frame; its translation,
+    the mount point, stays as the model has it), given to
     `add_robot` (and so to the station and to `ArmKinematics`): a scenario
     turns or tilts the arm of a described robot without another model.
 
@@ -209,7 +210,8 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
         suspension: None (the chassis rigid on its planar joints, as the
             model has it) or the SuspensionGains of a suspension under the
             chassis (drake_wbc.robot.suspension), inserted into the
-            directives' first model, the base (model directives only);
+            base's model (the one of base.joints[2], its yaw joint; model
+            directives only);
             with a horizontal compliance, the base's actuators get the
             drive's reflected inertia (gains.drive_inertia).
         mount: the ArmMount of the arm on the base (None: as the model
@@ -221,7 +223,8 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
 
     Raises:
         ValueError: naming the description's field when a joint or frame
-            it names is not in the model, a joint is of the wrong kind,
+            it names is not in the model, a joint is of the wrong kind
+            (or a passive one without a spring),
             T_a (arm.base_frame) is moved by the arm's joints, the
             TCP is not outboard of the arm, the sensor not between the
             flange and the TCP, or the arm's limits are missing or wider
@@ -259,19 +262,33 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
         path = package_map.ResolveUrl(url) if "://" in url else url
         directives = LoadModelDirectives(path)
         if not mount.is_identity:
-            _mount_weld(directives, description).X_PC = Transform(
-                RigidTransform(RollPitchYaw(RotationMatrix(
-                    mount.rotation())), np.zeros(3)))
+            # Turned about the point the model welds the arm at.
+            weld = _mount_weld(directives, description)
+            at = (np.zeros(3) if weld.X_PC is None
+                  else weld.X_PC.GetDeterministicValue().translation())
+            weld.X_PC = Transform(RigidTransform(RollPitchYaw(
+                RotationMatrix(mount.rotation())), at))
         if suspension is None:
             ProcessModelDirectives(directives, plant, parser)
         else:
             # The base's file with the suspension's joints added, parsed
             # in its place (the other directives weld to it).
-            first = directives.directives[0].add_model
+            yaw = ScopedName.Parse(description.base.joints[2])
+            adds = [d.add_model for d in directives.directives
+                    if d.add_model is not None
+                    and d.add_model.name == yaw.get_namespace()]
+            if len(adds) != 1:
+                raise ValueError(
+                    f"suspension is not allowed on {description.name}: its "
+                    "model directives must add the model of base.joints[2] "
+                    f"= {description.base.joints[2]!r} exactly once "
+                    f"(found {len(adds)})")
+            first = adds[0]
             text = Path(package_map.ResolveUrl(first.file)).read_text()
             with tempfile.TemporaryDirectory() as folder:
                 suspended = Path(folder) / "base_suspended.sdf"
-                suspended.write_text(suspended_base_sdf(text, suspension))
+                suspended.write_text(suspended_base_sdf(
+                    text, suspension, yaw.get_element()))
                 first.file = f"file://{suspended}"
                 ProcessModelDirectives(directives, plant, parser)
     else:
@@ -396,6 +413,18 @@ def _robot_model(plant, description):
         joint(f"base.passive_joints[{i}]", name,
               ("revolute", "prismatic"))
         for i, name in enumerate(base.passive_joints))
+    # A passive joint is held at rest by its spring (the nominal
+    # kinematics, the station's static equilibrium); without one it is a
+    # free mechanism.
+    springs = spring_stiffnesses(plant)
+    for i, (name, found) in enumerate(zip(base.passive_joints,
+                                          passive_joints, strict=True)):
+        if not springs.get(found.index(), 0.0) > 0.0:
+            raise ValueError(
+                f"base.passive_joints[{i}] = {name!r} is not allowed: it "
+                "has no spring (a RevoluteSpring or PrismaticSpring of "
+                "stiffness > 0, e.g. SDFormat's <spring_stiffness>; URDF "
+                "has none) to hold it at rest")
     arm_joints = tuple(joint(f"arm.joints[{i}]", name, ("revolute",))
                        for i, name in enumerate(arm.joints))
     sensor_joint = joint("tool.ft_sensor_joint", tool.ft_sensor_joint,
@@ -467,6 +496,12 @@ def _arm_limits(arm, joints):
         velocity_limits=[float(j.velocity_upper_limits()[0]) for j in joints],
         acceleration_limits=[float(j.acceleration_upper_limits()[0])
                              for j in joints])
+    # A speed or acceleration limit of 0 in the model is none (a URDF's
+    # velocity='0', as exporters write it where nothing was set): the
+    # description gives it.
+    shown = {name: list(values) for name, values in model.items()}
+    for name in ("velocity_limits", "acceleration_limits"):
+        model[name] = [v if v > 0.0 else math.inf for v in model[name]]
     limits = {}
     for name, own in model.items():
         given = getattr(arm, name)
@@ -483,8 +518,9 @@ def _arm_limits(arm, joints):
             if not np.isfinite(value):
                 raise ValueError(
                     f"arm.{name}[{i}] is missing, which is not allowed: the "
-                    f"model gives {arm.joints[i]!r} none ({value!r}); give "
-                    f"arm.{name} in the description")
+                    f"model gives {arm.joints[i]!r} none "
+                    f"({shown[name][i]!r}); give arm.{name} in the "
+                    "description")
             values.append(float(value))
         limits[name] = np.array(values)
     for i, (q, lo, hi) in enumerate(zip(
@@ -508,7 +544,56 @@ def make_robot_plant(description=None, time_step=0.0, suspension=None,
     model = add_robot(plant, description, suspension=suspension,
                       mount=mount)
     plant.Finalize()
+    check_planar_base(plant, model)
     return plant, model
+
+
+PLANAR_TEST_POSE = (0.3, -0.2, 0.5)
+"""(x, y, yaw), m, m, rad: where check_planar_base puts the base."""
+
+
+def check_planar_base(plant, model):
+    """Checks that the base's planar joints (x, y, yaw) are T_b's pose in
+    the world, as the simulated station's odometry and drivers read and
+    drive them: with the joints at zero and at PLANAR_TEST_POSE (the
+    other joints at their defaults), T_b's origin lies at (x, y) on the
+    floor (z = 0, where the scene stands) and its axes are the world's
+    turned by yaw about z.
+
+    Args:
+        plant: a finalized plant holding the robot.
+        model: its RobotModel.
+
+    Raises:
+        ValueError: naming base.joints and base.frame, where T_b lies
+            elsewhere (the joints listed in another order, an axis of
+            another direction or sign, or a base frame turned, offset
+            from the yaw joint's axis or above the floor).
+    """
+    context = plant.CreateDefaultContext()
+    q = plant.GetPositions(context)
+    indices = joint_position_indices(model.base_joints)
+    for pose in ((0.0, 0.0, 0.0), PLANAR_TEST_POSE):
+        q[indices] = pose
+        plant.SetPositions(context, q)
+        X_WB = model.base_frame.CalcPoseInWorld(context)
+        expected = RotationMatrix.MakeZRotation(pose[2]).matrix()
+        if (np.allclose(X_WB.translation(), (*pose[:2], 0.0), rtol=0,
+                        atol=1e-9)
+                and np.allclose(X_WB.rotation().matrix(), expected, rtol=0,
+                                atol=1e-9)):
+            continue
+        base = model.description.base
+        rpy = RollPitchYaw(X_WB.rotation()).vector()
+        raise ValueError(
+            f"base.joints = {list(base.joints)} with base.frame = "
+            f"{base.frame!r} are not allowed: with the joints at (x, y, "
+            f"yaw) = {pose}, T_b lies at (x, y, z) = "
+            f"{np.round(X_WB.translation(), 6).tolist()} with (roll, "
+            f"pitch, yaw) = {np.round(rpy, 6).tolist()} in the world; the "
+            "joints must be T_b's pose: prismatic along the world's x, "
+            "then y, then revolute about z, in that order, and T_b on the "
+            "yaw axis, on the floor, x forward and z up")
 
 
 _SHARED_PLANTS = {}
@@ -870,7 +955,18 @@ def suspension_gains(params, arm_positions, description=None, mount=None):
     with the suspension (and k = I w^2, c = 2 zeta w I for the horizontal
     compliance's axes, from a plant with it): the robot of
     RobotDescription `description` (the shipped one if None), its arm
-    mounted by ArmMount `mount`."""
+    mounted by ArmMount `mount`.
+
+    Raises:
+        ValueError: naming pivot_height when it is above the robot's deck
+            (its description's base.height).
+    """
+    deck = checked_instance("description", description, RobotDescription,
+                            shipped_robot).base.height
+    if params.pivot_height > deck:
+        raise ValueError(
+            f"pivot_height = {params.pivot_height!r} m is not allowed: must "
+            f"be at most the robot's deck, base.height = {deck!r} m")
     unsprung = SuspensionGains(np.zeros(2), np.zeros(2), params.pivot_height)
     inertia, gravity = suspension_block(unsprung, arm_positions,
                                         description=description, mount=mount)

@@ -81,13 +81,15 @@ from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
     in_closed_range,
+    non_negative,
 )
 
 SUSPENSION_JOINTS = ("suspension_roll", "suspension_pitch")
 """The suspension's spring-damper joints (unactuated), when it is built."""
 
 YAW_JOINT = "base_yaw"
-"""The base joint the chassis hangs from; the suspension goes below it."""
+"""The shipped bases' joint the chassis hangs from; the suspension goes
+below it (a robot's own is its description's base.joints[2])."""
 
 WHEELS_BODY = "suspension_wheels"
 """The massless body of the wheels, turned by the yaw joint (with a
@@ -157,7 +159,9 @@ class SuspensionParameters:
         pitch_frequency: Hz, the pitch mode (4, EST).
         damping_ratio: of both modes (0.1, EST), in [0.01, 1].
         pivot_height: m above the floor of the roll and pitch axes (the
-            wheels' axles, 0.076 m), in [0, 0.3] (the deck).
+            wheels' axles, 0.076 m), >= 0 and at most the robot's deck
+            (its description's base.height, checked where the suspension
+            is sized on it: drake_wbc.robot.model.suspension_gains).
         horizontal: None (the default: the wheels rigid on the floor) or
             the HorizontalCompliance of the wheels on the floor, in series
             with the driven planar joints.
@@ -174,7 +178,7 @@ class SuspensionParameters:
             in_closed_range(name, getattr(self, name), MIN_FREQUENCY,
                             MAX_FREQUENCY)
         in_closed_range("damping_ratio", self.damping_ratio, 0.01, 1.0)
-        in_closed_range("pivot_height", self.pivot_height, 0.0, 0.3)
+        non_negative("pivot_height", self.pivot_height)
         self.horizontal = checked_instance(
             "horizontal", self.horizontal, HorizontalCompliance,
             lambda: None)
@@ -210,10 +214,11 @@ class SuspensionGains(NamedTuple):
         return self.horizontal_stiffness is not None
 
 
-def suspended_base_sdf(sdf_text, gains):
+def suspended_base_sdf(sdf_text, gains, yaw_joint=YAW_JOINT):
     """The base's SDFormat `sdf_text` (models/mcr_base.sdf) with the
-    suspension of SuspensionGains `gains` between its yaw joint and the
-    chassis: the yaw joint turns the massless wheels body, which carries
+    suspension of SuspensionGains `gains` between its yaw joint (named
+    `yaw_joint` in the file) and the chassis: the yaw joint turns the
+    massless wheels body, which carries
     the chassis (`base_link`) through `suspension_roll` and
     `suspension_pitch`, each with its spring and damper. With a
     horizontal compliance the yaw joint turns the massless contact body
@@ -226,8 +231,14 @@ def suspended_base_sdf(sdf_text, gains):
     damping = as_vector("damping", gains.damping, 2)
     root = ElementTree.fromstring(sdf_text)
     model = root.find("model")
-    yaw = next(j for j in model.findall("joint")
-               if j.get("name") == YAW_JOINT)
+    yaw = None if model is None else next(
+        (j for j in model.findall("joint") if j.get("name") == yaw_joint),
+        None)
+    if yaw is None:
+        raise ValueError(
+            f"yaw_joint = {yaw_joint!r} is not allowed: the base's "
+            "SDFormat has no <model> with a <joint> of that name (the "
+            "suspension goes under the chassis, below its yaw joint)")
     chassis = yaw.find("child").text
     joint = ('<joint name="{name}" type="{kind}">'
              '<pose relative_to="{frame}"/>'

@@ -41,7 +41,7 @@ from drake_wbc.math import capability
 from drake_wbc.math.arm_control import DEFAULT_DAMPING_THRESHOLD
 from drake_wbc.math.capability import CapabilityBand
 from drake_wbc.math.validation import positive, whole_number
-from drake_wbc.math.workspace import LocalWorkspace, extent
+from drake_wbc.math.workspace import LocalWorkspace, deflection, extent
 
 MID_RANGE_PENALTY = 1.0 - math.exp(-capability.DEFAULT_JOINT_LIMIT_GAIN
                                    / 4.0 ** 6)
@@ -166,7 +166,7 @@ def check_tuning(arm, band, k_j, local_workspace=None, start=None,
     (one evaluation at home): it checks that P_jnt can come near 1, that
     the arm's home is not at or near a singularity (`singular`), that
     the band is not active there (alpha > 0) and that the tool there is
-    inside d^l (else the base moves from the start).
+    inside d^l and phi^l (else the base moves from the start).
 
     Args:
         arm, band, k_j, local_workspace: as above.
@@ -222,7 +222,8 @@ def check_tuning(arm, band, k_j, local_workspace=None, start=None,
             "parameters or the robot description's tuning (drake-wbc "
             "demo --robot FILE surveys the arm)")
     if local_workspace is not None:
-        d = float(extent(arm.evaluate(q).pose[:3, 3]))
+        p = arm.evaluate(q).pose[:3, 3]
+        d = float(extent(p))
         if d >= local_workspace.extent_lower:
             problems.append(
                 f"workspace.workspace.extent_lower = "
@@ -234,4 +235,18 @@ def check_tuning(arm, band, k_j, local_workspace=None, start=None,
                 f"{EXTENT_OVER_HOME[1] * d:.3g}) in the controller's "
                 "parameters or the robot description's tuning "
                 "(local_workspace)")
+        phi = float(deflection(p))
+        if phi >= local_workspace.deflection_lower:
+            problems.append(
+                f"workspace.workspace.deflection_lower = "
+                f"{math.degrees(local_workspace.deflection_lower):.4g} deg "
+                f"is within the tool's deflection at {place}, phi = "
+                f"{math.degrees(phi):.4g} deg from the x axis of T_a "
+                f"(arm.base_frame = {arm.model.description.arm.base_frame!r}"
+                "): in the intuitive pHRI mode the base would take the "
+                "motion from the start; "
+                + ("" if at_home else "start nearer the home, or ")
+                + "give as arm.base_frame a frame on the base whose x axis "
+                "points towards the tool at the robot's home (the local "
+                "workspace is the sector about that axis)")
     return problems

@@ -57,12 +57,18 @@ def _tool_inertia(arm):
     ).CopyToFullMatrix3()
 
 
+def _turned(arm):
+    """Whether T_a is turned in T_b (^bR_a is not the identity), by an
+    ArmMount or by the robot's own model."""
+    return not np.array_equal(arm.R_ba, np.eye(3))
+
+
 def sensor_rotation_in_base(arm, q_a):
     """R_BM (3, 3), the rotation of the sensor's measurement frame M in
     T_b at the arm's joints q_a (float): ^bR_a R_AM, nominal kinematics
     (base level, mount at rest)."""
     R_AM = arm.frame_matrix(q_a, arm.model.ft_measurement_frame)[:3, :3]
-    return R_AM if arm.mount.is_identity else arm.R_ba @ R_AM
+    return arm.R_ba @ R_AM if _turned(arm) else R_AM
 
 
 def tool_weight_reading(arm, q_a):
@@ -161,9 +167,10 @@ def ExternalWrenchEstimator_(T):
                 self._payload = ToolPayload(self._tool_mass,
                                             self._p_M_com, p_TM)
             self._wrench = body_for(external_wrench, T)
-            # R_ab = R_ba^T, None for the shipped robot's mount (R_ba = I).
-            self._R_ab = (None if self._arm.mount.is_identity
-                          else self._arm.R_ba.T.copy())
+            # R_ab = R_ba^T, None for an arm parallel to the base (R_ba =
+            # I, as the shipped robot's).
+            self._R_ab = (self._arm.R_ba.T.copy() if _turned(self._arm)
+                          else None)
             self._reading = self.DeclareVectorInputPort("wrist_wrench", 6)
             self._joints = n = self._arm.num_joints
             self._position = self.DeclareVectorInputPort("arm_position", n)

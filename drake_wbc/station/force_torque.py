@@ -21,6 +21,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.math import SpatialForce_
 from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import Frame
 from pydrake.systems.framework import LeafSystem, LeafSystem_
 
 from drake_wbc.math.validation import (
@@ -220,8 +221,8 @@ def WeldWrench_(T):
           at the joint's child frame, expressed in that frame.
         - wrench: (6) -[f; tau] of the weld's reaction: the wrench the
           child (the tool) exerts on the parent (the sensor), at and in
-          the weld's child frame (the measurement frame, for
-          `ft300_sensing`).
+          `frame` (the weld's child frame if None; the measurement frame
+          is that frame for `ft300_sensing`).
 
         Scalar-generic (double and AutoDiffXd, so that a plant's reading
         can be linearised, drake_wbc.analysis.admittance_loop).
@@ -230,9 +231,12 @@ def WeldWrench_(T):
             plant: the MultibodyPlant (double) holding the weld.
             weld_joint: the weld, e.g. plant.GetJointByName(
                 "ft300_sensing", model.tool).
+            frame: the sensor's measurement frame (RobotModel.
+                ft_measurement_frame), on a body welded to the weld's
+                child; None: the weld's child frame.
         """
 
-        def _construct(self, plant, weld_joint, converter=None):
+        def _construct(self, plant, weld_joint, frame=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             if not isinstance(plant, MultibodyPlant):
                 raise ValueError(f"plant = {plant!r} is not allowed: must be "
@@ -246,14 +250,15 @@ def WeldWrench_(T):
                 raise ValueError(
                     f"weld_joint = {weld_joint!r} is not allowed: must be a "
                     f"weld (it has {weld_joint.num_velocities()} velocities)")
-            self._declare(int(index()))
+            self._declare(int(index()), _to_frame(plant, weld_joint, frame))
 
         def _construct_copy(self, other, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self._declare(other.joint_index)
+            self._declare(other.joint_index, other.to_frame)
 
-        def _declare(self, joint_index):
+        def _declare(self, joint_index, to_frame):
             self.joint_index = joint_index
+            self.to_frame = to_frame
             self._reactions = self.DeclareAbstractInputPort(
                 "reaction_forces",
                 AbstractValue.Make([SpatialForce_[T](np.zeros(3),
@@ -268,10 +273,42 @@ def WeldWrench_(T):
                     "not allowed: must have one per joint of the plant (the "
                     f"weld's index is {self.joint_index})")
             reaction = reactions[self.joint_index]
-            output.SetFromVector(-np.concatenate(
-                [reaction.translational(), reaction.rotational()]))
+            wrench = -np.concatenate(
+                [reaction.translational(), reaction.rotational()])
+            output.SetFromVector(wrench if self.to_frame is None
+                                 else self.to_frame @ wrench)
 
     return Impl
+
+
+def _to_frame(plant, weld_joint, frame):
+    """(6, 6) the map of a wrench [f; tau] at and in the weld's child
+    frame J to the same wrench at and in `frame` M: f_M = R_MJ f_J,
+    tau_M = R_MJ (tau_J - p_JM x f_J); None where M is J (to rounding)
+    or `frame` is None."""
+    if frame is None:
+        return None
+    if (not isinstance(frame, Frame)
+            or int(frame.index()) >= plant.num_frames()
+            or plant.get_frame(frame.index()) is not frame):
+        raise ValueError(f"frame = {frame!r} is not allowed: must be a "
+                         "frame of plant")
+    child = weld_joint.child_body()
+    if frame.body().index() not in [b.index() for b in
+                                    plant.GetBodiesWeldedTo(child)]:
+        raise ValueError(
+            f"frame = {frame.scoped_name()} is not allowed: must be on a "
+            f"body welded to the weld's child {child.scoped_name()} (the "
+            "sensor's measurement frame)")
+    X_JM = frame.CalcPose(plant.CreateDefaultContext(),
+                          weld_joint.frame_on_child())
+    if np.allclose(X_JM.GetAsMatrix4(), np.eye(4), rtol=0, atol=1e-12):
+        return None
+    R_MJ = X_JM.rotation().matrix().T
+    p = X_JM.translation()
+    p_cross = np.array([[0.0, -p[2], p[1]], [p[2], 0.0, -p[0]],
+                        [-p[1], p[0], 0.0]])
+    return np.block([[R_MJ, np.zeros((3, 3))], [-R_MJ @ p_cross, R_MJ]])
 
 
 WeldWrench = WeldWrench_[None]

@@ -122,6 +122,7 @@ from drake_wbc.station.symbolic_drivers import (
 )
 from drake_wbc.station.traction import (
     TractionParameters,
+    own_traction,
     set_traction_limits,
     traction_limits,
 )
@@ -370,6 +371,11 @@ class SimulatedStation:
             options.base = own_base_loop(robot.base)
             check_base_time_step(options.base, "time_step", h,
                                  prefix="the robot's own base loop's ")
+        # The wheels' lever where they slip: the robot's own where the
+        # options give none.
+        if options.traction is not None:
+            options.traction = own_traction(options.traction, robot.base,
+                                            prefix="traction.")
         limits = shared_robot_plant(robot, mount=mount)[1].limits
         check_arm_start(options.initial_arm_positions, limits.lower,
                         limits.upper, "station.initial_arm_positions")
@@ -423,7 +429,7 @@ class SimulatedStation:
         n = model.num_arm_joints
         s["arm_state"] = add("arm_state", Demultiplexer([n, n]))
         s["weld_wrench"] = add("weld_wrench", WeldWrench(
-            plant, model.ft_sensor_joint))
+            plant, model.ft_sensor_joint, model.ft_measurement_frame))
         s["wrist"] = add("wrist", WristForceTorqueSensor(options.wrist))
         s["people"] = add_people(builder, scene_graph, scene.people,
                                  options.scene_period)

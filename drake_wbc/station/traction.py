@@ -37,7 +37,7 @@ and y, below the drives' own 900 N (models/mcr_base.sdf), about 4.4
 m/s^2; the wheels sit at (+-0.26, +-0.25) m, rho = 0.36 m.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -52,16 +52,20 @@ class TractionParameters:
         friction_coefficient: mu, Coulomb's, of the wheels on the floor
             (0.45, EST: 0.3 to 0.6), in [0.05, 1.5].
         wheel_distance: rho, m, the wheels' distance from the footprint's
-            centre, the lever of their friction about z (0.36, the shipped
-            base's), in (0, 2].
+            centre, the lever of their friction about z, in (0, 2]; None
+            (the default) for the robot's own, its description's
+            base.wheel_distance (0.36 m on the shipped base), which the
+            simulated station puts here (`own_traction`).
     """
 
     friction_coefficient: float = 0.45
-    wheel_distance: float = 0.36
+    wheel_distance: float | None = None
 
     def __post_init__(self):
         in_closed_range("friction_coefficient", self.friction_coefficient,
                         0.05, 1.5)
+        if self.wheel_distance is None:
+            return
         if positive("wheel_distance", self.wheel_distance) > 2.0:
             raise ValueError(
                 f"wheel_distance = {self.wheel_distance!r} m is not allowed:"
@@ -72,11 +76,34 @@ def traction_limits(params, mass, gravity):
     """(3,) the floor's largest force along x and y, N, and torque about
     z, N m: mu m g, mu m g, mu m g rho (the module's docstring), for
     TractionParameters `params`, the `mass` on the wheels (kg) and
-    `gravity` (m/s^2)."""
+    `gravity` (m/s^2); its wheel_distance given (`own_traction`)."""
+    if params.wheel_distance is None:
+        raise ValueError(
+            "wheel_distance = None is not allowed here: give the robot's "
+            "own (own_traction)")
     mass = positive("mass", as_scalar("mass", mass))
     gravity = positive("gravity", as_scalar("gravity", gravity))
     force = params.friction_coefficient * mass * gravity
     return np.array([force, force, force * params.wheel_distance])
+
+
+def own_traction(params, base, prefix=""):
+    """TractionParameters `params` with its wheel_distance the robot's
+    own (`base`, its BaseDescription: base.wheel_distance) where it gives
+    none.
+
+    Raises:
+        ValueError: naming the field (after `prefix`) when neither gives
+            one.
+    """
+    if params.wheel_distance is not None:
+        return params
+    if base.wheel_distance is None:
+        raise ValueError(
+            f"{prefix}wheel_distance is missing, which is not allowed: the "
+            "robot's description gives no base.wheel_distance (the wheels' "
+            "distance from the footprint's centre, m); give one of them")
+    return replace(params, wheel_distance=base.wheel_distance)
 
 
 def set_traction_limits(plant, model, limits):
