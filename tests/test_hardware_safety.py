@@ -624,6 +624,28 @@ def test_the_final_stop_brakes_a_moving_arm_within_its_limits():
     assert len(arms) == 13 + STOP_REPEATS  # 1.57 / (12.56 * 0.01) periods
 
 
+def test_the_final_stop_holds_an_arm_whose_rate_is_not_known():
+    """A rate that is not finite cannot be braked from (the ramp from NaN
+    never came to rest, and the stop hung): the joint is held at once,
+    the others brake as before."""
+    bench = Bench()
+    limits = Limits.of_robot(bench.options)
+    arms = []
+    bench.lcm.Subscribe(bench.options.channels.arm_command, lambda data:
+                        arms.append(messages.decode_arm_command(data)))
+    velocity = np.zeros(6)
+    velocity[0], velocity[1] = np.nan, 0.2
+    held = send_stop(bench.lcm, bench.options, HOME_ARM_POSITIONS,
+                     bench.hw.sender, 1, arm_velocity=velocity,
+                     limits=limits)
+    bench.lcm.HandleSubscriptions(0)
+    assert np.isfinite(held).all()
+    assert held[0] == HOME_ARM_POSITIONS[0]
+    assert held[1] > HOME_ARM_POSITIONS[1]
+    assert len(arms) == 2 + STOP_REPEATS  # 0.2 / (12.56 * 0.01) periods
+    assert all(np.isfinite(m.values[0]).all() for m in arms)
+
+
 def test_a_flood_hides_no_genuine_message():
     """200 garbage messages a control period on every status channel
     (20,000 a second, after each genuine one): every genuine message is

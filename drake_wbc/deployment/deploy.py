@@ -242,7 +242,10 @@ def send_stop(lcm, options, arm_positions, sender, utime,
     held = np.array(arm_positions, dtype=float)
     ramp = []
     if arm_velocity is not None:
+        # A rate not known (not finite) cannot be braked from: held at
+        # once (braking from NaN never came to rest, and the stop hung).
         velocity = np.array(arm_velocity, dtype=float)
+        velocity[~np.isfinite(velocity)] = 0.0
         while np.any(velocity != 0.0):
             held, velocity = stop_arm(held, velocity,
                                       options.publish_period, limits)
