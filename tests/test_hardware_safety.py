@@ -28,6 +28,7 @@ from drake_wbc.hardware.safety import (
     follow_arm_command,
     saturate_base_velocity,
     stop_arm,
+    target_rate,
 )
 from drake_wbc.robot.model import HOME_ARM_POSITIONS
 
@@ -848,8 +849,8 @@ def test_follow_stays_finite_for_any_finite_target():
     taken = np.zeros(6)
     for target in (np.full(6, 1e306), np.full(6, 0.1),
                    np.full(6, -1.7e308), np.full(6, 0.1)):
-        q, v, limited = follow_arm_command(target, (target - taken) / h, q,
-                                           v, h, LIMITS)
+        q, v, limited = follow_arm_command(
+            target, target_rate(target, taken, h), q, v, h, LIMITS)
         taken = target
         assert limited
         assert np.all(np.isfinite(q)) and np.all(np.isfinite(v))
@@ -867,8 +868,8 @@ def test_follow_brakes_before_a_position_limit():
     for _ in range(400):
         rate = np.minimum(rate + 10.0 * h, 2.0)
         target = target + rate * h
-        q, v, limited = follow_arm_command(target, (target - taken) / h, q,
-                                           v, h, LIMITS)
+        q, v, limited = follow_arm_command(
+            target, target_rate(target, taken, h), q, v, h, LIMITS)
         taken = target
         passed += not limited
         path.append(q)

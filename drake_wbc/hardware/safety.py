@@ -264,7 +264,7 @@ def follow_arm_command(target, target_velocity, last, velocity, period,
     """
     speed, accel = limits.joint_speed, limits.joint_acceleration
     change = accel * period * (1.0 + ROUNDING)
-    step = (target - last) / period
+    step = target_rate(target, last, period)
     # The speeds towards the position limits from which the joint can
     # still stop at them (a target running into a limit at full speed
     # was followed there, and stopped at it within a period).
@@ -294,6 +294,15 @@ def follow_arm_command(target, target_velocity, last, velocity, period,
     wanted = np.clip(np.clip(wanted, -speed, speed), -down, up)
     command = np.clip(last + wanted * period, limits.lower, limits.upper)
     return command, (command - last) / period, True
+
+
+def target_rate(target, before, period):
+    """(target - before) / period, the rate of an arm target between two
+    commands: +-inf where it overflows (a finite target near the largest
+    float, forged or not), without numpy's warning; follow_arm_command
+    bounds it (TARGET_RATE_BOUND)."""
+    with np.errstate(over="ignore"):
+        return (target - before) / period
 
 
 def within_joint_limits(name, positions, limits, period):
@@ -567,8 +576,8 @@ def guard_step(state, now, ages, base, arm, command_time, config,
             invalid=state.invalid + invalid), events
     arm = np.array(arm, dtype=float)
     q, v, arm_saturated = follow_arm_command(
-        arm, (arm - state.target) / h, state.arm, state.arm_velocity, h,
-        limits)
+        arm, target_rate(arm, state.target, h), state.arm,
+        state.arm_velocity, h, limits)
     if base_stop:
         sent, base_saturated = np.zeros(3), False
     else:
@@ -871,9 +880,9 @@ class ArmCommandLimiter(LeafSystem):
     def _step(self, context):
         command, velocity, taken, _ = self._stored(context)
         received = self._in.Eval(context)
-        return follow_arm_command(received, (received - taken) / self.period,
-                                  command, velocity, self.period,
-                                  self.limits), received
+        return follow_arm_command(
+            received, target_rate(received, taken, self.period), command,
+            velocity, self.period, self.limits), received
 
     def _positions(self, context, output):
         command, _, taken, _ = self._stored(context)
