@@ -140,6 +140,32 @@ def test_player_is_silent_before_start_and_moves_the_goal_with_progress(
         halfway - (learned.goal - learned.start)) < 0)
 
 
+@pytest.mark.parametrize("yaw", [
+    np.zeros(401),  # at rest: the fit's rounding is all the rollout moves
+    0.5 * np.sin(np.linspace(0.0, np.pi, 401)) + 0.01 * np.linspace(
+        0.0, 1.0, 401),  # a turn out and (nearly) back on the spot
+])
+def test_a_moved_goal_of_a_movement_on_the_spot_is_reached_monotonically(
+        yaw):
+    # The progress p(t) must run from 0 to 1: a demonstration that does not
+    # translate took it from the yaw's |y - y0| over its last value, which
+    # at rest was the fit's rounding over rounding and after a turn out and
+    # back peaked at 50, so the goal moved to 85 m and 10 m.
+    t = np.linspace(0.0, 4.0, 401)
+    tcp = np.column_stack([np.full(401, 1.0), np.full(401, 2.0),
+                           np.full(401, 0.8), 0.2 + yaw])
+    learned = mv.learn_movement(Demonstration(t, tcp))
+    moved = learned.goal + [0.2, 0.0, 0.0, 0.0]
+    player = mv.MovementPlayer(learned, cdmp.MovementReplay(
+        file="m", goal=list(moved)))
+    progress = np.asarray(player._progress) * np.ones(len(player._times))
+    assert progress.min() >= 0.0 and progress.max() <= 1.0 + 1e-12
+    assert np.all(np.diff(progress) >= 0.0)
+    x = [player.reference(s)[0] for s in np.linspace(0.0, 9.0, 91)]
+    assert max(x) < moved[0] + 1e-3
+    assert x[-1] == pytest.approx(moved[0], abs=1e-3)
+
+
 def test_whole_body_cdmp_plays_the_dmp_core_rollout(tmp_path):
     """Through its ports, WholeBodyCdmp with a movement (no coupling
     input) moves as dmp.rollout integrates the same DMP, from its

@@ -423,7 +423,9 @@ class MovementPlayer:
     before it both are zero. A moved goal is reached along the
     demonstration's own progress: g(t) = g_0 + p(t) (g - g_0), g_0 the
     learned goal and p(t) from 0 to 1 the fraction of the learned
-    rollout's path covered at t (a moving goal, which the absolute-units
+    rollout's path covered at t (its yaw's, turned either way, for a turn
+    on the spot; 1 throughout for a rollout that moves less than 1e-6 m
+    and rad) (a moving goal, which the absolute-units
     forcing allows, drake_wbc.math.dmp): the moved part of the motion then has
     the demonstration's velocity profile, and the start does not jump.
     The transformation system runs with the movement's alpha_z, beta_z
@@ -468,9 +470,13 @@ class MovementPlayer:
         path = np.concatenate([[0.0], np.cumsum(np.linalg.norm(
             np.diff(y[:, :3], axis=0), axis=1))])
         if path[-1] < 1e-6:  # a turn on the spot: the yaw's progress
-            path = np.abs(y[:, 3] - y[0, 3])
+            path = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(
+                y[:, 3])))])
         self._times = t
-        self._progress = path / path[-1] if path[-1] > 0.0 else 0.0 * t + 1
+        # Less than 1e-6 m and rad is a movement at rest (the fit's
+        # rounding): its goal moves at once.
+        self._progress = (path / path[-1] if path[-1] >= 1e-6
+                          else 0.0 * t + 1)
         # The per-tick path (`drive_terms`, `reference`) runs the float
         # kernels of eqs. (6), (7) and of the tables (plain floats and few
         # numpy calls): the tables as lists, the weights (in the learned
