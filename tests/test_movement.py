@@ -61,6 +61,21 @@ def test_zero_basis_functions_are_refused_not_replaced():
         mv.learn_movement(Demonstration(t, y), params, num_basis=0)
 
 
+def test_demonstrations_a_turn_apart_in_yaw_average_to_their_heading():
+    # Each demonstration's yaw is unwrapped from its own first sample, so
+    # two of one movement about the heading pi may start at 3.1 and
+    # -3.18 rad (the same heading): their mean, -0.04 rad, was a start
+    # and goal facing the other way.
+    params, _, t, y = synthetic()
+    turned = y - [0.0, 0.0, 0.0, 2.0 * np.pi]
+    learned = mv.learn_movement([Demonstration(t, y),
+                                 Demonstration(t, turned)], params,
+                                num_basis=40)
+    np.testing.assert_allclose(learned.start, y[0], atol=1e-12)
+    np.testing.assert_allclose(learned.goal, y[-1], atol=1e-12)
+    assert rollout_error(learned, t, y) < 1e-3
+
+
 def test_several_noisy_demonstrations_average():
     params, _, t, y = synthetic(seed=1)
     rng = np.random.default_rng(2)

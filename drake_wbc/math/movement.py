@@ -240,7 +240,9 @@ def learn_movement(demonstrations, params=None, num_basis=None,
         source: how it was made, kept in the file's header.
 
     Returns:
-        LearnedMovement, its start and goal the demonstrations' means.
+        LearnedMovement, its start and goal the demonstrations' means
+        (each demonstration's yaw turned by whole turns to start within pi
+        of the first's).
     """
     if isinstance(demonstrations, Demonstration):
         demonstrations = [demonstrations]
@@ -249,6 +251,14 @@ def learn_movement(demonstrations, params=None, num_basis=None,
             isinstance(d, Demonstration) for d in demonstrations):
         raise ValueError(f"demonstrations = {demonstrations!r} is not "
                          "allowed: must be one or more Demonstration")
+    # Each yaw is unwrapped from its own first sample: turned by whole
+    # turns to start within pi of the first demonstration's, so that the
+    # means of the starts and goals are of the same heading.
+    first = demonstrations[0].tcp[0, 3]
+    demonstrations = [
+        replace(d, tcp=d.tcp - [0.0, 0.0, 0.0, 2.0 * np.pi * np.round(
+            (d.tcp[0, 3] - first) / (2.0 * np.pi))])
+        for d in demonstrations]
     duration = float(np.mean([d.duration for d in demonstrations]))
     params = params or dmp.DmpParameters(num_basis=DEFAULT_NUM_BASIS)
     params = replace(params, duration=positive("duration", duration),
