@@ -2,6 +2,8 @@
 (drake_wbc.math.movement),
 and WholeBodyCdmp playing it against the DMP core's own integration."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import yaml
@@ -276,6 +278,13 @@ def test_a_replay_too_fast_or_too_long_is_refused(tmp_path):
                        r"most 495 s .*play it faster \(a smaller tau\)$"):
         mv.rollout_step(learned, 200.0, source="m", name="--tau")
     assert mv.rollout_step(learned, 1.0) == 0.005
+    # A 1000 s movement played twice as fast still lasts 500 s: faster,
+    # not "0.5 times slower".
+    long = replace(learned, params=replace(learned.params, duration=1000.0))
+    with pytest.raises(ValueError, match=r"^tau = 0\.5 is not allowed .*"
+                       r"played 2 times faster, it would last 500 s, at "
+                       r"most 495 s .*play it faster \(a smaller tau\)$"):
+        mv.rollout_step(long, 0.5)
 
 
 BOMB = """dmp: {alpha_z: 25.0, duration: 5.0, num_basis: 2}

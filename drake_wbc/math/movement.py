@@ -402,11 +402,13 @@ def rollout_step(movement, tau, dt=0.005, source=None, name="tau"):
                f"{movement.params.duration:.6g} s): played ")
     if length / longest > MAX_ROLLOUT_STEPS:
         longest_played = MAX_ROLLOUT_STEPS * longest - ROLLOUT_TAIL
-        if tau != movement.params.tau:  # played slower than it was learned
+        if tau != movement.params.tau:  # the tau it is played at counts
+            pace = (f"{tau / movement.params.tau:.3g} times slower"
+                    if tau > movement.params.tau else
+                    f"{movement.params.tau / tau:.3g} times faster")
             raise ValueError(
-                f"{refused}{tau / movement.params.tau:.3g} times slower, it "
-                f"would last {played.duration:.6g} s, at most "
-                f"{longest_played:g} s (its rollouts take at most "
+                f"{refused}{pace}, it would last {played.duration:.6g} s, "
+                f"at most {longest_played:g} s (its rollouts take at most "
                 f"{MAX_ROLLOUT_STEPS} steps of {longest:g} s); play it "
                 "faster (a smaller tau)")
         raise ValueError(
