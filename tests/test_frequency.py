@@ -649,6 +649,23 @@ def test_gain_margin_of_a_discrete_integrator_loop():
     assert margins.gain_margin == pytest.approx(2.0 / g, rel=1e-9)
 
 
+def test_a_discrete_loops_margins_are_read_below_its_nyquist_frequency():
+    # On the analysis' default band (to 100 Hz) a loop sampled at 100 Hz
+    # repeats itself mirrored above 50 Hz, L(2 pi / h - w) = conj L(w):
+    # its gain crossover's alias at 95.2 Hz gave the phase margin -81.4
+    # degrees of a loop whose margin is +81.4.
+    g = 0.3
+    _, omega = frequency_grid()
+    w_c = 2.0 / H * np.arcsin(g / 2.0)  # |e^(j w h) - 1| = g
+    margins = stability_margins(
+        lambda w: g / (np.exp(1j * w * H) - 1.0), omega, time_step=H)
+    assert margins.gain_crossover == pytest.approx(w_c, rel=1e-12)
+    assert margins.phase_margin == pytest.approx(
+        90.0 - np.degrees(w_c * H / 2.0), rel=1e-12)
+    assert margins.phase_crossover == pytest.approx(np.pi / H, rel=1e-12)
+    assert margins.gain_margin == pytest.approx(2.0 / g, rel=1e-12)
+
+
 def test_bandwidth_and_peak_of_textbook_responses():
     hertz, omega = frequency_grid(0.01, 100.0, 400)
     w_c = 5.0

@@ -275,7 +275,7 @@ def _crossings(function, omega, scale=None):
     return sorted(set(roots))
 
 
-def stability_margins(loop, omega):
+def stability_margins(loop, omega, time_step=0.0):
     """Gain and phase margins of the loop transfer function `loop`.
 
     The crossovers are bracketed on the grid `omega` and refined to
@@ -288,6 +288,11 @@ def stability_margins(loop, omega):
         loop: a callable, omega (rad/s, a float) -> L (complex), e.g.
             lambda w: frequency_response(A, B, C, D, w, h)[0, 0, 0].
         omega: (N,) increasing angular frequencies bracketing the band.
+        time_step: 0 for a continuous loop, else its period h in s: the
+            grid is then cut at the Nyquist frequency pi / h, which ends
+            it (above it a sampled loop repeats itself mirrored,
+            L(2 pi / h - w) = conj L(w), and its crossovers' aliases
+            would count, with the opposite phase margins).
 
     Returns:
         StabilityMargins.
@@ -296,6 +301,9 @@ def stability_margins(loop, omega):
         raise ValueError(f"loop = {loop!r} is not allowed: must be a "
                          "callable of omega returning a complex number")
     omega = as_vector("omega", omega)
+    h = non_negative("time_step", time_step)
+    if h > 0.0:
+        omega = np.append(omega[omega < np.pi / h], np.pi / h)
 
     def value(w):
         return complex(np.asarray(loop(w)).ravel()[0])
