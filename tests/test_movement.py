@@ -278,6 +278,12 @@ def test_a_replay_too_fast_or_too_long_is_refused(tmp_path):
                        r"most 495 s .*play it faster \(a smaller tau\)$"):
         mv.rollout_step(learned, 200.0, source="m", name="--tau")
     assert mv.rollout_step(learned, 1.0) == 0.005
+    # MAX_ROLLOUT_STEPS' bound for the shipped 6 s movement.
+    shipped = mv.LearnedMovement.load(mv.resolve_movement_file(
+        "movements/teach.yaml"))
+    assert mv.rollout_step(shipped, 1.0 / 198.0) > 0.0
+    with pytest.raises(ValueError, match="200 times faster"):
+        mv.rollout_step(shipped, 1.0 / 200.0)
     # A 1000 s movement played twice as fast still lasts 500 s: faster,
     # not "0.5 times slower".
     long = replace(learned, params=replace(learned.params, duration=1000.0))
