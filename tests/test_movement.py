@@ -123,6 +123,12 @@ def test_teaching_interval_is_where_s_hri_is_one():
     assert teaching_interval(Schedule(), 7.0, 1.0) == (0.0, 7.0)
     with pytest.raises(ValueError, match="never 1"):
         teaching_interval(Schedule(), 7.0, 0.0)
+    # Played linearly, S_hri passes 0.5 (on, for the stages) half way
+    # between the times: the worker guides the robot from 1 s to 7 s, not
+    # from 2 s to 8 s (which cut the demonstration's first second off).
+    ramps = Schedule(times=[0.0, 2.0, 6.0, 8.0],
+                     values=[[0], [1], [1], [0]], interpolation="linear")
+    assert teaching_interval(ramps, 10.0) == (1.0, 7.0)
 
 
 def movement_file(tmp_path):

@@ -219,18 +219,24 @@ def demonstration_from_log(log, start, stop, arm):
 
 def teaching_interval(schedule, duration, default_switch=0.0):
     """(start, stop) of the first interval where S_hri is 1 in a task
-    Schedule of phri_switch (hold interpolation, as the runner plays it;
-    an empty schedule is the parameter `default_switch` throughout),
-    clipped to [0, duration]."""
+    Schedule of phri_switch, as the runner plays it (hold: from the time
+    of a value 1 to that of the next 0; linear: S_hri >= 0.5 counts as 1,
+    half way between those times; an empty schedule is the parameter
+    `default_switch` throughout), clipped to [0, duration]."""
     times = list(schedule.times)
     values = [float(v[0]) for v in schedule.values]
     if not times:
         times, values = [0.0], [float(default_switch)]
     on = [v >= 0.5 for v in values]
+    share = 0.5 if schedule.interpolation == "linear" else 0.0
+
+    def change(j):  # where S_hri turns between times[j - 1] and times[j]
+        return times[j] - share * (times[j] - times[j - 1])
+
     for i, is_on in enumerate(on):
         if is_on:
-            start = 0.0 if i == 0 else times[i]
-            stop = next((times[j] for j in range(i + 1, len(on))
+            start = 0.0 if i == 0 else change(i)
+            stop = next((change(j) for j in range(i + 1, len(on))
                          if not on[j]), duration)
             return max(start, 0.0), min(stop, duration)
     raise ValueError(
