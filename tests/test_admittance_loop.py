@@ -4,6 +4,7 @@ nonlinear plant part simulated in double; its largest stable k_hri
 against the simulated station (short runs of stage A of `phri`)."""
 
 import copy
+import re
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -192,3 +193,15 @@ def test_the_report_says_where_the_search_ended(limit, frequency, says):
     result = SimpleNamespace(limit=limit, limit_frequency=frequency)
     assert says in al.limit_sentence(result)
     assert "nan" not in al.limit_sentence(result)
+
+
+def test_a_case_checks_the_settings_it_is_given():
+    """The time constant and the inertia compensation given to a case go
+    through the parameters' own checks (a time constant of 11 s, beyond
+    the 10 s allowed, was taken as it was)."""
+    shipped = load_scenario(find_scenario("phri"))
+    with pytest.raises(ValueError, match=re.escape(
+            "hri_time_constant = 11.0 s is not allowed: must be at most")):
+        al.AdmittanceCase(shipped, time_constant=11.0)
+    with pytest.raises(ValueError, match="hri_time_constant = -0.1"):
+        al.AdmittanceCase(shipped, time_constant=-0.1)

@@ -602,12 +602,16 @@ class AdmittanceCase:
     def __init__(self, scenario, hand=None, inertia_compensation=None,
                  time_constant=None, station=None, plant=None):
         self.scenario = scenario = operating_scenario(scenario)
-        self.params = controller_for(scenario)
-        wrench, whole_body = self.params.wrench, self.params.whole_body_cdmp
+        params = controller_for(scenario)
+        # Through `replace`, so that the parameters' own checks see them.
         if inertia_compensation is not None:
-            wrench.inertia_compensation = bool(inertia_compensation)
+            params = replace(params, wrench=replace(
+                params.wrench,
+                inertia_compensation=bool(inertia_compensation)))
         if time_constant is not None:
-            whole_body.hri_time_constant = float(time_constant)
+            params = replace(params, whole_body_cdmp=replace(
+                params.whole_body_cdmp, hri_time_constant=time_constant))
+        self.params = params
         self.hand = hand if hand is not None else (
             scenario.scene.hand.impedance or HandImpedance())
         if station is None:
