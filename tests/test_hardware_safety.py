@@ -8,6 +8,7 @@ every command sent is within the robot's limits."""
 
 import logging
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -16,7 +17,8 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from drake_wbc.deployment.deploy import STOP_REPEATS, send_stop
+from drake_wbc.deployment.deploy import STOP_REPEATS, deploy, send_stop
+from drake_wbc.experiments.scenario import find_scenario, load_scenario
 from drake_wbc.hardware import codecs, messages
 from drake_wbc.hardware.interface import DIAGNOSTICS, HardwareInterface
 from drake_wbc.hardware.options import HardwareOptions
@@ -645,6 +647,44 @@ def test_the_final_stop_holds_an_arm_whose_rate_is_not_known():
     assert held[1] > HOME_ARM_POSITIONS[1]
     assert len(arms) == 2 + STOP_REPEATS  # 0.2 / (12.56 * 0.01) periods
     assert all(np.isfinite(m.values[0]).all() for m in arms)
+
+
+def test_deploy_does_not_start_on_a_base_state_that_stopped():
+    """The robot sends each status once, then nothing: deploy waited for
+    the next base state, went on without it, and ran the controller on
+    the state heard last (commands went out until the watchdog tripped).
+    It now stops before the start, says why, and sends nothing."""
+    scenario = load_scenario(find_scenario("hardware"))
+    options = replace(scenario.hardware, lcm_url="memq://")
+    lcm = DrakeLcm("memq://")
+    channels = options.channels
+    sent = []
+    for channel in (channels.base_command, channels.arm_command):
+        lcm.Subscribe(channel, lambda data: sent.append(data))
+    statuses = [
+        (channels.base_state, messages.encode_base_state(1, np.zeros(6))),
+        (channels.arm_status, messages.encode_arm_status(
+            1, HOME_ARM_POSITIONS, np.zeros(6))),
+        (channels.wrist_wrench, messages.encode_wrench(1, np.zeros(6))),
+        (channels.obstacle_points,
+         messages.encode_obstacle_points(1, np.zeros((0, 2))))]
+    subscribed = []
+
+    def once():
+        """Polled while deploy waits (subscribed by then): the statuses,
+        the first time only."""
+        if not subscribed:
+            subscribed.append(True)
+            for channel, data in statuses:
+                lcm.Publish(channel, data)
+        return False
+
+    with pytest.raises(TimeoutError, match=re.escape(
+            f"no status on {channels.base_state} for "
+            f"{options.watchdog_limits.base_state:g} s")):
+        deploy(scenario, options=options, duration=0.2, lcm=lcm, stop=once)
+    lcm.HandleSubscriptions(0)
+    assert subscribed and not sent
 
 
 def test_a_flood_hides_no_genuine_message():

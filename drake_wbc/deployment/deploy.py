@@ -7,7 +7,8 @@ HardwareInterface in place of the simulated station, and a publisher of
 the controller's diagnostics for the logs. `deploy` runs it against the
 robot: it waits for the robot's first status, starts the controller from
 the measured arm positions on the arrival of a base state (so that its
-ticks follow the robot's status), paces the Simulator to the wall clock
+ticks follow the robot's status; none within its watchdog limit, and it
+starts nothing: TimeoutError), paces the Simulator to the wall clock
 for the scenario's duration, and stops cleanly (zero base velocity, and
 the arm braked within its limits and held, sent before returning) at the
 end, on a stop request (Ctrl-C in `drake-wbc deploy`) or on an error.
@@ -338,8 +339,14 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
     # Start the clock just after a base state arrives, so that each tick
     # follows the robot's status by a fraction of a period and the
     # commands reach the robot well before it samples them.
-    wait_for_next(lcm, options.channels.base_state,
-                  options.watchdog_limits.base_state)
+    limit = options.watchdog_limits.base_state
+    if not wait_for_next(lcm, options.channels.base_state, limit):
+        # Started anyway, the controller took the last state heard for a
+        # fresh one and sent commands until the watchdog tripped.
+        raise TimeoutError(
+            f"no status on {options.channels.base_state} for {limit:g} s "
+            "(its watchdog limit) after the first: the robot stopped "
+            "sending its base state before the start; nothing was sent")
     side.hardware.discard_pending()
     started = time.perf_counter()
     try:
