@@ -190,6 +190,30 @@ def test_a_passive_joint_without_a_spring_is_refused(tmp_path):
         make_robot_plant(load_robot_description(path))
 
 
+def test_a_sensor_frame_not_welded_to_the_sensing_weld_is_refused(
+        tmp_path):
+    """The wrist sensor measures at its weld (tool.ft_sensor_joint): a
+    tool.ft_sensor_frame that a joint of the tool moves against it is
+    refused naming the description's fields, not left to the station's
+    WeldWrench, whose error named its own argument `frame`."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    old = ("<joint name='tool' type='fixed'><parent link='sensor'/><child "
+           "link='tool'/><origin xyz='0 0 0.05'/>")
+    assert old in urdf.read_text()
+    urdf.write_text(urdf.read_text().replace(old, old.replace(
+        "fixed", "revolute") + "<axis xyz='0 0 1'/><limit lower='-1' "
+        "upper='1' effort='1' velocity='1'/>"))
+    path.write_text(path.read_text().replace(
+        "ft_sensor_frame: omni_arm::sensor",
+        "ft_sensor_frame: omni_arm::tool"))
+    with pytest.raises(ValueError, match=(
+            r"tool.ft_sensor_frame = 'omni_arm::tool' is not allowed: must "
+            r"be on a body welded to the child of tool.ft_sensor_joint = "
+            r"'omni_arm::sensor'")):
+        make_robot_plant(load_robot_description(path))
+
+
 def test_tighter_limits_are_the_robots_own():
     model = _add(_shipped_text(**{"arm.velocity_limits": [1.0] * 6,
                                   "arm.acceleration_limits": [5.0] * 6}))

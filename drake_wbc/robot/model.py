@@ -227,8 +227,8 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
             (or a passive one without a spring),
             T_a (arm.base_frame) is moved by the arm's joints, the
             TCP is not outboard of the arm, the sensor not between the
-            flange and the TCP, or the arm's limits are missing or wider
-            than the model's.
+            flange and the TCP (or its frame not welded to its weld), or
+            the arm's limits are missing or wider than the model's.
     """
     if plant.is_finalized():
         raise ValueError(
@@ -470,6 +470,15 @@ def _robot_model(plant, description):
         if not _outboard(parents, body, ancestor):
             raise ValueError(f"{where} = {name!r} is not allowed: must be "
                              f"outboard of {what}")
+    # The sensor reads its weld's reaction at its measurement frame: a
+    # joint between them would turn the reading against the frame.
+    if frames["ft_measurement_frame"].body().index() not in [
+            b.index() for b in plant.GetBodiesWeldedTo(sensor)]:
+        raise ValueError(
+            f"tool.ft_sensor_frame = {tool.ft_sensor_frame!r} is not "
+            "allowed: must be on a body welded to the child of "
+            f"tool.ft_sensor_joint = {tool.ft_sensor_joint!r} (no joint "
+            "between them)")
     return RobotModel(
         description=description,
         base=base_joints[0].model_instance(),
