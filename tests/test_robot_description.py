@@ -125,6 +125,9 @@ def test_a_description_that_does_not_load_names_the_field(changes, message):
      r"model's own -3.14"),
     ({"arm.position_lower": [-1.1] * 6, "arm.position_upper": [1.1] * 6},
      r"arm.home\[4\] = 1.15 is not allowed: must be inside"),
+    ({"lidar_frames": ["mcr_base::lidar_front_left", "elfin5::link3"]},
+     r"lidar_frames\[1\] = 'elfin5::link3' is not allowed: must be on a "
+     r"body welded to base.frame = 'mcr_base::base_link''s"),
 ])
 def test_a_description_that_does_not_fit_its_model_names_the_field(
         changes, message):

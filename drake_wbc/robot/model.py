@@ -227,8 +227,9 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
             (or a passive one without a spring),
             T_a (arm.base_frame) is moved by the arm's joints, the
             TCP is not outboard of the arm, the sensor not between the
-            flange and the TCP (or its frame not welded to its weld), or
-            the arm's limits are missing or wider than the model's.
+            flange and the TCP (or its frame not welded to its weld), a
+            LIDAR's frame not welded to the base's, or the arm's limits
+            are missing or wider than the model's.
     """
     if plant.is_finalized():
         raise ValueError(
@@ -479,6 +480,17 @@ def _robot_model(plant, description):
             "allowed: must be on a body welded to the child of "
             f"tool.ft_sensor_joint = {tool.ft_sensor_joint!r} (no joint "
             "between them)")
+    # The station's scanners are mounted at their pose in T_b with the
+    # model at rest: one that a joint moves would scan from elsewhere.
+    on_base = [b.index() for b in
+               plant.GetBodiesWeldedTo(frames["base_frame"].body())]
+    for i, (name, found) in enumerate(zip(description.lidar_frames,
+                                          lidar_frames, strict=True)):
+        if found.body().index() not in on_base:
+            raise ValueError(
+                f"lidar_frames[{i}] = {name!r} is not allowed: must be on a "
+                f"body welded to base.frame = {base.frame!r}'s (a scanner "
+                "fixed on the base, no joint between them)")
     return RobotModel(
         description=description,
         base=base_joints[0].model_instance(),
