@@ -283,6 +283,36 @@ def test_a_zero_speed_limit_in_the_model_is_none(tmp_path):
                                   [1.5, 2.0, 2.0, 2.0, 2.0, 2.0])
 
 
+def test_a_zero_position_range_in_the_model_is_none(tmp_path):
+    """A URDF joint's lower = upper = 0 (what exporters write where a
+    joint's range was not set) is no position limit: the description must
+    give the joint's limits, and may, rather than the home being refused
+    inside (0.0, 0.0) and the description's limits as wider than the
+    model's; the plant then has them (its joint is not held at 0)."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    text = urdf.read_text()
+    start = text.index("<joint name='j2'")
+    old = "<limit lower='-2.5' upper='2.5'"
+    at = text.index(old, start)
+    urdf.write_text(text[:at] + "<limit lower='0' upper='0'"
+                    + text[at + len(old):])
+    with pytest.raises(ValueError, match=(
+            r"arm.position_lower\[1\] is missing, which is not allowed: "
+            r"the model gives 'omni_arm::j2' none \(0.0\)")):
+        make_robot_plant(load_robot_description(path))
+    path.write_text(path.read_text().replace(
+        "  home:", "  position_lower: [-2.5, -2.0, -2.5, -2.5, -2.5, -2.5]\n"
+        "  position_upper: [2.5, 2.0, 2.5, 2.5, 2.5, 2.5]\n  home:"))
+    plant, model = make_robot_plant(load_robot_description(path))
+    np.testing.assert_array_equal(model.limits.lower[:2], [-2.5, -2.0])
+    np.testing.assert_array_equal(model.limits.upper[:2], [2.5, 2.0])
+    # In the plant too, which would otherwise hold the joint at 0.
+    joint = model.arm_joints[1]
+    assert (joint.position_lower_limits()[0],
+            joint.position_upper_limits()[0]) == (-2.0, 2.0)
+
+
 def test_fewer_than_six_arm_joints_are_refused(tmp_path):
     assert MIN_ARM_JOINTS == 6
     path = write_omni_arm(tmp_path, 5, accelerations=False)

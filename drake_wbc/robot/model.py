@@ -509,7 +509,9 @@ def _robot_model(plant, description):
 def _arm_limits(arm, joints):
     """The arm's own ArmLimits: the model's, tightened where the
     description gives tighter ones; a ValueError naming the field for a
-    limit that is missing or wider than the model's, or a home outside."""
+    limit that is missing or wider than the model's, or a home outside.
+    A joint whose model gives no position range (lower = upper = 0) gets
+    the description's in the plant."""
     n = len(joints)
     model = dict(
         position_lower=[float(j.position_lower_limits()[0]) for j in joints],
@@ -523,6 +525,14 @@ def _arm_limits(arm, joints):
     shown = {name: list(values) for name, values in model.items()}
     for name in ("velocity_limits", "acceleration_limits"):
         model[name] = [v if v > 0.0 else math.inf for v in model[name]]
+    # So is a position range of lower = upper = 0 (a URDF's lower='0'
+    # upper='0', likewise); the description's then go into the plant,
+    # whose joint would otherwise be held at 0.
+    unlimited = [i for i in range(n) if model["position_lower"][i]
+                 == model["position_upper"][i] == 0.0]
+    for i in unlimited:
+        model["position_lower"][i] = -math.inf
+        model["position_upper"][i] = math.inf
     limits = {}
     for name, own in model.items():
         given = getattr(arm, name)
@@ -551,6 +561,9 @@ def _arm_limits(arm, joints):
             raise ValueError(
                 f"arm.home[{i}] = {q!r} is not allowed: must be inside "
                 f"{arm.joints[i]!r}'s limits ({lo!r}, {hi!r})")
+    for i in unlimited:
+        joints[i].set_position_limits(limits["position_lower"][i:i + 1],
+                                      limits["position_upper"][i:i + 1])
     return ArmLimits(limits["position_lower"], limits["position_upper"],
                      limits["velocity_limits"],
                      limits["acceleration_limits"])
