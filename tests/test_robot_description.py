@@ -3,6 +3,8 @@ a robot the project did not model (a URDF written here, with 6 and 7 arm
 joints), and every way a description can be wrong, each an error naming
 the field."""
 
+import re
+
 import numpy as np
 import pytest
 import yaml
@@ -133,6 +135,34 @@ def test_a_description_that_does_not_fit_its_model_names_the_field(
         changes, message):
     with pytest.raises(ValueError, match=message):
         _add(_shipped_text(**changes))
+
+
+@pytest.mark.parametrize("given, message", [
+    ("file: omni_armX.urdf",
+     r"model.file = 'omni_armX.urdf' is not allowed: no such file "
+     r"'.*omni_armX.urdf'"),
+    ("directives: robot.dmd.yaml",
+     r"model.directives = 'robot.dmd.yaml' is not allowed: no such file "
+     r"'.*robot.dmd.yaml'"),
+    ("file: package://mine/arm.urdf\n  packages: {mine: .}",
+     r"model.file = 'package://mine/arm.urdf' is not allowed: no such file "
+     r"'.*arm.urdf'"),
+    ("file: package://mine/omni_arm.urdf\n  packages: {mine: nowhere}",
+     r"model.packages\['mine'\] = 'nowhere' is not allowed: no such folder "
+     r"'.*nowhere'"),
+])
+def test_a_missing_model_file_names_the_field_and_the_description(
+        tmp_path, given, message):
+    """A model file (or a package's folder) that is not there is an error
+    naming the description's file and field and where it was looked for,
+    not Drake's parser error naming the path alone."""
+    path = write_omni_arm(tmp_path, 6)
+    path.write_text(path.read_text().replace("file: omni_arm.urdf", given))
+    with pytest.raises(ValueError, match=(
+            f"^{re.escape(str(path))}: {message} \\(a relative path is "
+            f"relative to the description's folder "
+            f"{re.escape(repr(str(tmp_path)))}\\)$")):
+        load_robot_description(path)
 
 
 @pytest.mark.parametrize("change", ["order", "axis", "floor"])
@@ -342,7 +372,8 @@ def test_the_controllers_tuning_is_the_robots():
     assert values[3] == pytest.approx(capability_at(arm, arm.home, 6.0e4),
                                       rel=1e-12)
     assert values[3] > lbr.tuning.capability_band.upper and values[10] == 0
-    untuned = load_robot_description(text=_shipped_text(tuning=None))
+    untuned = load_robot_description(text=_shipped_text(tuning=None),
+                                     root=models_dir())
     assert untuned.tuning.joint_limit_gain == DEFAULT_JOINT_LIMIT_GAIN
     assert untuned.tuning.capability_band == CapabilityBand()
 
