@@ -198,6 +198,30 @@ def test_base_joints_that_are_not_the_bases_pose_are_refused(tmp_path,
         make_robot_plant(load_robot_description(path))
 
 
+@pytest.mark.parametrize("rpy, refused", [
+    ("0 0 0.7", False), ("1.5708 0 0", True), ("3.14159 0 0", True)])
+def test_a_lidar_frame_whose_z_is_not_up_is_refused(tmp_path, rpy, refused):
+    """A scanner scans in its frame's x-y plane, z up, and the station
+    simulates it so (at its height and heading in T_b): a frame turned
+    otherwise (an optical frame's z forward, or upside down) is refused
+    naming lidar_frames, not simulated scanning level."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    urdf.write_text(urdf.read_text().replace(
+        "</robot>", "<link name='scanner'/><joint name='scanner' "
+        "type='fixed'><parent link='chassis'/><child link='scanner'/>"
+        f"<origin xyz='0.4 0.3 0.2' rpy='{rpy}'/></joint>\n</robot>"))
+    path.write_text(path.read_text() + "lidar_frames: [omni_arm::scanner]\n")
+    description = load_robot_description(path)
+    if not refused:
+        make_robot_plant(description)
+        return
+    with pytest.raises(ValueError, match=(
+            r"lidar_frames\[0\] = 'omni_arm::scanner' is not allowed: its z "
+            r"axis is \[.*\] in T_b \(base.frame\), must be up")):
+        make_robot_plant(description)
+
+
 def test_a_passive_joint_without_a_spring_is_refused(tmp_path):
     """A passive joint of the base with nothing to hold it at rest (a URDF
     joint: URDF has no springs) is refused naming the field, not left to

@@ -579,6 +579,7 @@ def make_robot_plant(description=None, time_step=0.0, suspension=None,
                       mount=mount)
     plant.Finalize()
     check_planar_base(plant, model)
+    check_lidar_frames(plant, model)
     return plant, model
 
 
@@ -628,6 +629,38 @@ def check_planar_base(plant, model):
             "joints must be T_b's pose: prismatic along the world's x, "
             "then y, then revolute about z, in that order, and T_b on the "
             "yaw axis, on the floor, x forward and z up")
+
+
+LIDAR_TILT_TOLERANCE = 1e-3
+"""rad, the largest tilt of a LIDAR's z axis from T_b's that
+check_lidar_frames takes for level (a CAD export's rounding)."""
+
+
+def check_lidar_frames(plant, model):
+    """Checks that each LIDAR frame's z axis is T_b's z (up), as the
+    simulated station mounts the scanners: level, at their height and
+    heading in T_b, the scan in their x-y plane.
+
+    Args:
+        plant: a finalized plant holding the robot.
+        model: its RobotModel.
+
+    Raises:
+        ValueError: naming lidar_frames[i], where the frame's z axis is
+            tilted from T_b's by more than LIDAR_TILT_TOLERANCE (an
+            optical frame's z forward, or a frame upside down).
+    """
+    context = plant.CreateDefaultContext()
+    for i, (name, frame) in enumerate(zip(model.description.lidar_frames,
+                                          model.lidar_frames, strict=True)):
+        z = frame.CalcPose(context, model.base_frame).rotation().col(2)
+        if not z[2] >= math.cos(LIDAR_TILT_TOLERANCE):
+            raise ValueError(
+                f"lidar_frames[{i}] = {name!r} is not allowed: its z axis "
+                f"is {np.round(z, 6).tolist()} in T_b (base.frame), must "
+                "be up, [0, 0, 1], within LIDAR_TILT_TOLERANCE = "
+                f"{LIDAR_TILT_TOLERANCE!r} rad (a planar scanner scanning "
+                "level in its frame's x-y plane)")
 
 
 _SHARED_PLANTS = {}
