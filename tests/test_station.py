@@ -5,12 +5,14 @@ and what the ground truth, the LIDARs and the wrist sensor report."""
 import numpy as np
 import pytest
 from locked_robot import sensor_reading, settle_locked_robot
+from omni_arm import write_omni_arm
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.tree import ForceElementIndex, RevoluteSpring
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import MatrixGain
 from shipped_names import ARM_JOINTS, BASE_JOINTS, MOUNT_JOINTS, SCOPED
 
+from drake_wbc.robot.description import load_robot_description
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.station.force_torque import ForceTorqueSensorParameters
 from drake_wbc.station.scene import (
@@ -515,6 +517,37 @@ def test_wrist_at_rest_reads_the_tools_weight(station, rest):
         atol=1e-9)
     tilt = (X_WS.rotation().inverse() @ R_W_locked).ToAngleAxis().angle()
     assert tilt > 1e-3
+
+
+@pytest.mark.parametrize("frames, message", [
+    (("scanner", "lidar_scanner"),
+     r"lidar_frames\[1\] = 'omni_arm::lidar_scanner' is not allowed: its "
+     r"scanner's name 'scanner' .* is that of lidar_frames\[0\] = "
+     r"'omni_arm::scanner'"),
+    (("lidar_points",),
+     r"lidar_frames\[0\] = 'omni_arm::lidar_points' is not allowed: its "
+     r"scanner's name would be 'points'")])
+def test_scanners_of_one_name_are_refused_naming_their_frames(
+        tmp_path, frames, message):
+    """A scanner's systems and ports are named by its frame's name without
+    a leading lidar_: two frames of one such name ended the process when
+    the station was built (Drake's failed condition on unique subsystem
+    names, a SystemExit), and a frame named lidar_points failed on an
+    input port of the scanners' merger that it took for its own."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    urdf.write_text(urdf.read_text().replace("</robot>", "".join(
+        f"<link name='{name}'/><joint name='{name}' type='fixed'><parent "
+        f"link='chassis'/><child link='{name}'/><origin xyz='0.4 {y} "
+        "0.2'/></joint>" for name, y in zip(frames, (0.3, -0.3)[:len(frames)],
+                                           strict=True))
+        + "\n</robot>"))
+    path.write_text(path.read_text() + "lidar_frames: ["
+                    + ", ".join(f"omni_arm::{name}" for name in frames)
+                    + "]\n")
+    with pytest.raises(ValueError, match=message):
+        SimulatedStation(StationOptions(time_step=0.005),
+                         robot=load_robot_description(path))
 
 
 def test_the_plant_step_and_the_scene_period_are_checked():

@@ -144,6 +144,36 @@ def lidar_name(frame):
     return name[len("lidar_"):] if name.startswith("lidar_") else name
 
 
+def lidar_names(model):
+    """The `lidar_name`s of the scanners of RobotModel `model`, in its
+    description's order.
+
+    Raises:
+        ValueError: naming lidar_frames[i] when two frames give one name
+            (their ports and systems would be one), or a frame gives
+            `points` (the name of the scanners' merged points).
+    """
+    frames = model.description.lidar_frames
+    names = []
+    for i, frame in enumerate(model.lidar_frames):
+        name = lidar_name(frame)
+        if name == "points":
+            raise ValueError(
+                f"lidar_frames[{i}] = {frames[i]!r} is not allowed: its "
+                "scanner's name would be 'points', the name of the "
+                "scanners' merged points (lidar.obstacle_points); name the "
+                "frame otherwise")
+        if name in names:
+            j = names.index(name)
+            raise ValueError(
+                f"lidar_frames[{i}] = {frames[i]!r} is not allowed: its "
+                f"scanner's name {name!r} (the frame's name without a "
+                f"leading lidar_, as in lidar.{name}.ranges) is that of "
+                f"lidar_frames[{j}] = {frames[j]!r}; name the frames apart")
+        names.append(name)
+    return tuple(names)
+
+
 @dataclass
 class StationOptions:
     """How the simulated station is built (a scenario's `station:`).
@@ -400,7 +430,7 @@ class SimulatedStation:
             add_hand_body(plant, model, scene.hand.impedance))
         plant.Finalize()
         self.plant, self.scene_graph, self.model = plant, scene_graph, model
-        self.lidar_names = tuple(lidar_name(f) for f in model.lidar_frames)
+        self.lidar_names = lidar_names(model)
         add = builder.AddNamedSystem
         s = self.systems = {}
         # The odometry and the parts of the state read at every plant step
