@@ -550,6 +550,47 @@ def test_scanners_of_one_name_are_refused_naming_their_frames(
                          robot=load_robot_description(path))
 
 
+WHEEL = (
+    "<link name='wheel'><inertial><mass value='1'/><inertia ixx='0.01' "
+    "iyy='0.01' izz='0.01' ixy='0' ixz='0' iyz='0'/></inertial></link>"
+    "<joint name='wheel' type='continuous'><parent link='chassis'/><child "
+    "link='wheel'/><origin xyz='0.2 0.2 0.1'/><axis xyz='0 1 0'/></joint>"
+    "<transmission name='wheel_drive'><type>transmission_interface/"
+    "SimpleTransmission</type><joint name='wheel'><hardwareInterface>"
+    "EffortJointInterface</hardwareInterface></joint><actuator "
+    "name='wheel_motor'><mechanicalReduction>1</mechanicalReduction>"
+    "</actuator></transmission>")
+"""An actuated joint that is neither the base's nor the arm's."""
+
+
+@pytest.mark.parametrize("change, message", [
+    ("no actuator",
+     r"arm.joints\[2\] = 'omni_arm::j3' is not allowed in the simulated "
+     r"station: the model gives it no actuator"),
+    ("another actuator",
+     r"the actuator of 'omni_arm::wheel' is not allowed in the simulated "
+     r"station: it drives only base.joints and arm.joints")])
+def test_the_station_names_the_joints_its_drives_cannot_drive(
+        tmp_path, change, message):
+    """The station drives the base's and the arm's joints through the
+    model's actuators (a URDF's transmissions): an arm joint without one
+    failed with a bare KeyError of a joint index, and an actuator on
+    another joint (a wheel) with an error naming no joint."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    text = urdf.read_text()
+    if change == "no actuator":
+        start = text.index("<transmission name='j3_drive'>")
+        end = text.index("</transmission>", start) + len("</transmission>")
+        text = text[:start] + text[end:]
+    else:
+        text = text.replace("</robot>", WHEEL + "\n</robot>")
+    urdf.write_text(text)
+    with pytest.raises(ValueError, match=message):
+        SimulatedStation(StationOptions(time_step=0.005),
+                         robot=load_robot_description(path))
+
+
 def test_the_plant_step_and_the_scene_period_are_checked():
     StationOptions(time_step=0.005, scene_period=0.02)  # allowed
     with pytest.raises(ValueError, match=r"time_step = 0\.006 s .* at most "

@@ -301,9 +301,26 @@ def add_desired_states(builder, plant, model, base_desired, arm_desired):
     the systems it added, by name.
 
     Raises:
-        ValueError: a shared instance whose actuated joints are not
-            exactly the base's and the arm's.
+        ValueError: naming the joint of an actuator in the base's or the
+            arm's model instance that is not one of their joints (the
+            desired states drive those alone), or a shared instance
+            whose actuated joints are not exactly the base's and the
+            arm's.
     """
+    driven = {j.index() for j in model.base_joints + model.arm_joints}
+    for instance in dict.fromkeys((model.base, model.arm)):
+        for index in plant.GetJointActuatorIndices(instance):
+            joint = plant.get_joint_actuator(index).joint()
+            if joint.index() not in driven:
+                name = (f"{plant.GetModelInstanceName(instance)}::"
+                        f"{joint.name()}")
+                raise ValueError(
+                    f"the actuator of {name!r} is not allowed in the "
+                    "simulated station: it drives "
+                    "only base.joints and arm.joints, through their model "
+                    "instances' desired states; leave that joint without an "
+                    "actuator in the model (in a URDF, without a "
+                    "<transmission>)")
     if model.base != model.arm:
         builder.Connect(base_desired,
                         plant.get_desired_state_input_port(model.base))
