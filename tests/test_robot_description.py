@@ -271,6 +271,26 @@ def test_a_sensor_frame_not_welded_to_the_sensing_weld_is_refused(
         make_robot_plant(load_robot_description(path))
 
 
+def test_a_joint_in_what_the_sensor_carries_is_refused(tmp_path):
+    """The tool outboard of the sensor's weld is compensated as one rigid
+    body at the model's rest, and carries the TCP: a joint in it (a
+    gripper's, here moving the TCP) loaded, and the controller took the
+    tool's weight and the TCP where the joint's rest put them, while the
+    station let the joint move."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    old = ("<joint name='tool' type='fixed'><parent link='sensor'/><child "
+           "link='tool'/><origin xyz='0 0 0.05'/>")
+    urdf.write_text(urdf.read_text().replace(old, old.replace(
+        "fixed", "prismatic") + "<axis xyz='1 0 0'/><limit lower='-1' "
+        "upper='1' effort='0' velocity='1'/>"))
+    with pytest.raises(ValueError, match=(
+            r"tool.ft_sensor_joint = 'omni_arm::sensor' is not allowed with "
+            r"the prismatic joint 'omni_arm::tool' outboard of it: what the "
+            r"wrist sensor carries must be rigid")):
+        make_robot_plant(load_robot_description(path))
+
+
 def test_tighter_limits_are_the_robots_own():
     model = _add(_shipped_text(**{"arm.velocity_limits": [1.0] * 6,
                                   "arm.acceleration_limits": [5.0] * 6}))

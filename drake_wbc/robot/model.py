@@ -361,6 +361,13 @@ def _scoped(plant, field, name, find, kind):
             f"{element!r} in {instance_name!r}") from None
 
 
+def _joint_name(plant, joint):
+    """`joint`'s name scoped by its model instance, as a description
+    gives it."""
+    return (f"{plant.GetModelInstanceName(joint.model_instance())}::"
+            f"{joint.name()}")
+
+
 def _parents(plant):
     """child body index -> (joint, parent body) over every joint."""
     parents = {}
@@ -480,6 +487,19 @@ def _robot_model(plant, description):
             "allowed: must be on a body welded to the child of "
             f"tool.ft_sensor_joint = {tool.ft_sensor_joint!r} (no joint "
             "between them)")
+    # What the sensor carries is compensated as one rigid body at the
+    # model's rest (drake_wbc.stages.wrench), and is the TCP's.
+    for found in (plant.get_joint(JointIndex(i))
+                  for i in range(plant.num_joints())):
+        if (found.type_name() != "weld"
+                and _outboard(parents, found.child_body(), sensor)):
+            raise ValueError(
+                f"tool.ft_sensor_joint = {tool.ft_sensor_joint!r} is not "
+                f"allowed with the {found.type_name()} joint "
+                f"{_joint_name(plant, found)!r} outboard of it: what the "
+                "wrist sensor carries must be rigid (its weight is taken at "
+                "the model's rest, the TCP on it); weld that joint in the "
+                "model")
     # The station's scanners are mounted at their pose in T_b with the
     # model at rest: one that a joint moves would scan from elsewhere.
     on_base = [b.index() for b in
