@@ -8,7 +8,7 @@ import re
 import numpy as np
 import pytest
 import yaml
-from omni_arm import write_omni_arm
+from omni_arm import urdf_text, write_omni_arm
 from pydrake.multibody.plant import MultibodyPlant
 
 from drake_wbc.robot.description import (
@@ -385,6 +385,19 @@ def test_a_zero_position_range_in_the_model_is_none(tmp_path):
     joint = model.arm_joints[1]
     assert (joint.position_lower_limits()[0],
             joint.position_upper_limits()[0]) == (-2.0, 2.0)
+
+
+def test_an_arm_joint_left_out_of_the_description_is_refused(tmp_path):
+    """Six of a seven-joint arm's joints listed: the seventh loaded
+    silently, held at its rest in the controller's kinematics (and free
+    in the station); every joint between T_a and the TCP is the arm's."""
+    path = write_omni_arm(tmp_path, 6)
+    (tmp_path / "omni_arm.urdf").write_text(urdf_text(7))
+    with pytest.raises(ValueError, match=(
+            r"arm.joints = \['omni_arm::j1', .*'omni_arm::j6'\] is not "
+            r"allowed: the revolute joint 'omni_arm::j7' between "
+            r"arm.base_frame and tool.tcp_frame is not one of them")):
+        make_robot_plant(load_robot_description(path))
 
 
 def test_fewer_than_six_arm_joints_are_refused(tmp_path):

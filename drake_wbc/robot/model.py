@@ -500,6 +500,22 @@ def _robot_model(plant, description):
                 "wrist sensor carries must be rigid (its weight is taken at "
                 "the model's rest, the TCP on it); weld that joint in the "
                 "model")
+    # The controller's kinematics move the TCP by the arm's joints alone.
+    arm_base = frames["arm_base_frame"].body()
+    stop = (arm_base if _outboard(parents, tcp, arm_base)
+            else arm_joints[0].parent_body()).index()
+    listed = [j.index() for j in arm_joints]
+    index = tcp.index()
+    while index != stop and index in parents:
+        found = parents[index]
+        if found.type_name() != "weld" and found.index() not in listed:
+            raise ValueError(
+                f"arm.joints = {list(arm.joints)} is not allowed: the "
+                f"{found.type_name()} joint {_joint_name(plant, found)!r} "
+                "between arm.base_frame and tool.tcp_frame is not one of "
+                "them; list every joint of the arm, base to wrist (or weld "
+                "that joint in the model)")
+        index = found.parent_body().index()
     # The station's scanners are mounted at their pose in T_b with the
     # model at rest: one that a joint moves would scan from elsewhere.
     on_base = [b.index() for b in
