@@ -285,6 +285,14 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
                     f"= {description.base.joints[2]!r} exactly once "
                     f"(found {len(adds)})")
             first = adds[0]
+            if not first.file.lower().endswith(".sdf"):
+                raise ValueError(
+                    f"suspension is not allowed on {description.name}: the "
+                    "model of base.joints[2] = "
+                    f"{description.base.joints[2]!r} is {first.file!r}, "
+                    "not an SDFormat file (.sdf), which the suspension's "
+                    "joints are written into; give the base's model in "
+                    "SDFormat")
             text = Path(package_map.ResolveUrl(first.file)).read_text()
             with tempfile.TemporaryDirectory() as folder:
                 suspended = Path(folder) / "base_suspended.sdf"
