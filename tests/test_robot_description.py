@@ -165,6 +165,32 @@ def test_a_missing_model_file_names_the_field_and_the_description(
         load_robot_description(path)
 
 
+@pytest.mark.parametrize("file, message", [
+    ("package://mine/arm.urdf", r"resolved to '.*arm.urdf' which does not "
+     r"exist"),
+    ("package://other/omni_arm.urdf", r"refers to unknown package 'other'"),
+    ("omni_arm.urdf", r"is invalid")])
+def test_a_directives_file_that_does_not_resolve_names_the_field(
+        tmp_path, file, message):
+    """A file the model directives add that is not there (or a relative
+    path, which directives do not take) is an error naming
+    model.directives and the model, not Drake's parser error alone
+    (for a relative path: 'invalid when parsing a string instead of a
+    filename')."""
+    path = write_omni_arm(tmp_path, 6)
+    (tmp_path / "robot.dmd.yaml").write_text(
+        f"directives:\n- add_model: {{name: omni_arm, file: {file}}}\n")
+    path.write_text(path.read_text().replace(
+        "file: omni_arm.urdf",
+        "directives: robot.dmd.yaml\n  packages: {mine: .}"))
+    with pytest.raises(ValueError, match=(
+            r"model.directives = 'robot.dmd.yaml' is not allowed: its "
+            rf"add_model 'omni_arm' gives file = '{file}', which does not "
+            rf"resolve \(URI '{file}' {message}.*\); directives name files "
+            r"by package:// URLs")):
+        make_robot_plant(load_robot_description(path))
+
+
 @pytest.mark.parametrize("change", ["order", "axis", "floor"])
 def test_base_joints_that_are_not_the_bases_pose_are_refused(tmp_path,
                                                              change):

@@ -262,6 +262,19 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
         url = description.resolve(source.directives)
         path = package_map.ResolveUrl(url) if "://" in url else url
         directives = LoadModelDirectives(path)
+        for add in (d.add_model for d in directives.directives
+                    if d.add_model is not None):
+            try:
+                package_map.ResolveUrl(add.file)
+            except RuntimeError as error:
+                raise ValueError(
+                    f"model.directives = {source.directives!r} is not "
+                    f"allowed: its add_model {add.name!r} gives file = "
+                    f"{add.file!r}, which does not resolve "
+                    f"({str(error).removeprefix('error: ')}); directives "
+                    "name files by package:// URLs (of model.packages, or "
+                    "drake_wbc for the library's models) or file:// URLs"
+                ) from None
         if not mount.is_identity:
             # Turned about the point the model welds the arm at.
             weld = _mount_weld(directives, description)
