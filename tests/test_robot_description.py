@@ -128,8 +128,9 @@ def test_a_description_that_does_not_load_names_the_field(changes, message):
     ({"arm.position_lower": [-1.1] * 6, "arm.position_upper": [1.1] * 6},
      r"arm.home\[4\] = 1.15 is not allowed: must be inside"),
     ({"lidar_frames": ["mcr_base::lidar_front_left", "elfin5::link3"]},
-     r"lidar_frames\[1\] = 'elfin5::link3' is not allowed: must be on a "
-     r"body welded to base.frame = 'mcr_base::base_link''s"),
+     r"lidar_frames\[1\] = 'elfin5::link3' is not allowed: must be on "
+     r"the body of base.frame = 'mcr_base::base_link' or one joined to it "
+     r"by welds and base.passive_joints alone"),
 ])
 def test_a_description_that_does_not_fit_its_model_names_the_field(
         changes, message):
@@ -315,6 +316,16 @@ def test_a_joint_in_what_the_sensor_carries_is_refused(tmp_path):
             r"the prismatic joint 'omni_arm::tool' outboard of it: what the "
             r"wrist sensor carries must be rigid")):
         make_robot_plant(load_robot_description(path))
+
+
+def test_a_lidar_beyond_the_bases_passive_joints_is_on_the_base():
+    """A scanner on a body the base's passive joints carry (springs, at
+    rest in the nominal kinematics) is on the base, as one welded to it;
+    the arm's links are not (the description test above)."""
+    model = _add(_shipped_text(lidar_frames=["mcr_base::lidar_front_left",
+                                             "mcr_base::arm_mount"]))
+    assert [f.name() for f in model.lidar_frames] == ["lidar_front_left",
+                                                      "arm_mount"]
 
 
 def test_tighter_limits_are_the_robots_own():

@@ -389,6 +389,24 @@ def _joint_name(plant, joint):
             f"{joint.name()}")
 
 
+def _joined(plant, body, joints):
+    """The indices of `body` and of the bodies joined to it by welds and
+    `joints` alone, through either side of each."""
+    allowed = {j.index() for j in joints}
+    links = [plant.get_joint(JointIndex(i)) for i in range(plant.num_joints())]
+    links = [j for j in links
+             if j.type_name() == "weld" or j.index() in allowed]
+    joined, grown = {body.index()}, True
+    while grown:
+        grown = False
+        for joint in links:
+            ends = {joint.parent_body().index(), joint.child_body().index()}
+            if ends & joined and not ends <= joined:
+                joined |= ends
+                grown = True
+    return joined
+
+
 def _parents(plant):
     """child body index -> (joint, parent body) over every joint."""
     parents = {}
@@ -538,16 +556,17 @@ def _robot_model(plant, description):
                 "that joint in the model)")
         index = found.parent_body().index()
     # The station's scanners are mounted at their pose in T_b with the
-    # model at rest: one that a joint moves would scan from elsewhere.
-    on_base = [b.index() for b in
-               plant.GetBodiesWeldedTo(frames["base_frame"].body())]
+    # model at rest: one that a joint moves would scan from elsewhere (a
+    # passive joint's spring holds it at rest).
+    on_base = _joined(plant, frames["base_frame"].body(), passive_joints)
     for i, (name, found) in enumerate(zip(description.lidar_frames,
                                           lidar_frames, strict=True)):
         if found.body().index() not in on_base:
             raise ValueError(
-                f"lidar_frames[{i}] = {name!r} is not allowed: must be on a "
-                f"body welded to base.frame = {base.frame!r}'s (a scanner "
-                "fixed on the base, no joint between them)")
+                f"lidar_frames[{i}] = {name!r} is not allowed: must be on "
+                f"the body of base.frame = {base.frame!r} or one joined to "
+                "it by welds and base.passive_joints alone (a scanner on "
+                "the base)")
     return RobotModel(
         description=description,
         base=base_joints[0].model_instance(),
