@@ -166,6 +166,20 @@ def test_a_missing_model_file_names_the_field_and_the_description(
         load_robot_description(path)
 
 
+def test_a_model_file_changed_after_loading_is_checked_when_added(
+        tmp_path):
+    """A description changed in code after it was loaded (or made there)
+    is checked when added to a plant, naming the field, not left to
+    Drake's parser."""
+    description = load_robot_description(write_omni_arm(tmp_path, 6))
+    description.model.file = "gone.urdf"
+    with pytest.raises(ValueError, match=(
+            r"^model.file = 'gone.urdf' is not allowed: no such file "
+            r"'.*gone.urdf' \(a relative path is relative to the "
+            r"description's folder")):
+        make_robot_plant(description)
+
+
 @pytest.mark.parametrize("file, message", [
     ("package://mine/arm.urdf", r"resolved to '.*arm.urdf' which does not "
      r"exist"),

@@ -437,15 +437,16 @@ def load_robot_description(path=None, text=None, root=None):
     elif path is not None:
         description.root = str((Path(path).resolve().parent
                                 / description.root).resolve())
-    _check_model_files(description, "" if path is None else f"{path}: ")
+    check_model_files(description, "" if path is None else f"{path}: ")
     return description
 
 
-def _check_model_files(description, source):
-    """Raises naming the field (after `source`, the file's path and a
-    colon, or nothing) when a package folder or the model file of
-    `description` is not there: a path, or a `package://` URL of one of
-    its own packages (others are Drake's to find)."""
+def check_model_files(description, source=""):
+    """Raises a ValueError naming the field (after `source`, the
+    description file's path and a colon, or nothing) when a package
+    folder or the model file of `description` is not there: a path, or a
+    `package://` URL of one of its own packages (others are Drake's to
+    find)."""
     model = description.model
     where = (" (a relative path is relative to the description's folder "
              f"{description.root!r})")

@@ -61,6 +61,7 @@ from drake_wbc.math.validation import (
 )
 from drake_wbc.robot.description import (
     RobotDescription,
+    check_model_files,
     models_dir,
     shipped_robot,
 )
@@ -238,6 +239,7 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
         )
     description = checked_instance("description", description,
                                    RobotDescription, shipped_robot)
+    check_model_files(description)
     parser = parser or Parser(plant)
     package_map = parser.package_map()
     # The library's models (bases, tools) as package://drake_wbc/..., so a
