@@ -229,8 +229,12 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
             T_a (arm.base_frame) is moved by the arm's joints, the
             TCP is not outboard of the arm, the sensor not between the
             flange and the TCP (or its frame not welded to its weld), a
-            LIDAR's frame not welded to the base's, or the arm's limits
-            are missing or wider than the model's.
+            joint between T_a and the TCP is not one of arm.joints or one
+            outboard of the sensor's weld not a weld, a LIDAR's frame is
+            not on the base, the arm's limits are missing or wider than
+            the model's, a model file (model.file, model.directives, a
+            file the directives add) is not there, or a suspension is
+            asked of a base whose model is not SDFormat.
     """
     if plant.is_finalized():
         raise ValueError(
