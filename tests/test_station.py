@@ -591,6 +591,27 @@ def test_the_station_names_the_joints_its_drives_cannot_drive(
                          robot=load_robot_description(path))
 
 
+def test_a_urdf_bases_joint_limits_are_no_wall(tmp_path):
+    """A URDF's prismatic joint carries position limits (its schema asks
+    for them; tests/omni_arm.py's and examples/own_robot's base joints
+    have +-2.5 m): the base's planar joints are its pose on the floor, so
+    the station's base drives on past them, where it stopped at 2.5 m as
+    at a wall that is not there."""
+    description = load_robot_description(write_omni_arm(tmp_path, 6))
+    station = SimulatedStation(StationOptions(
+        time_step=0.005, initial_base_pose=[2.3, 0.0, 0.0]),
+        robot=description)
+    context = station.diagram.CreateDefaultContext()
+    station.set_initial_state(context)
+    station.diagram.GetInputPort("arm.position_command").FixValue(
+        context, description.arm.home)
+    station.diagram.GetInputPort("base.velocity_command").FixValue(
+        context, [0.5, 0.0, 0.0])
+    Simulator(station.diagram, context).AdvanceTo(1.5)
+    x = station.diagram.GetOutputPort("truth.base_pose").Eval(context)[0]
+    assert x > 2.7
+
+
 def test_the_plant_step_and_the_scene_period_are_checked():
     StationOptions(time_step=0.005, scene_period=0.02)  # allowed
     with pytest.raises(ValueError, match=r"time_step = 0\.006 s .* at most "

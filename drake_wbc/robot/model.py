@@ -462,6 +462,10 @@ def _robot_model(plant, description):
         joint(f"base.joints[{i}]", name, (kind,)) for i, (name, kind) in
         enumerate(zip(base.joints, ("prismatic", "prismatic", "revolute"),
                       strict=True)))
+    # They are the base's pose on the floor, which has no limits (a
+    # URDF's prismatic joint has some, by its schema: a wall in the plant).
+    for found in base_joints:
+        found.set_position_limits([-math.inf], [math.inf])
     passive_joints = tuple(
         joint(f"base.passive_joints[{i}]", name,
               ("revolute", "prismatic"))
