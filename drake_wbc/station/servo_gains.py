@@ -44,9 +44,9 @@ def _actuators(plant, model, parts=("base", "arm")):
                 raise ValueError(
                     f"{part}.joints[{i}] = {name!r} is not allowed in the "
                     "simulated station: the model gives it no actuator, "
-                    "which the station drives it through (in a URDF, a "
-                    "<transmission> of the joint; in SDFormat, an effort "
-                    "limit that is not 0)")
+                    "which the station drives it through (Drake makes one "
+                    "of a URDF's <transmission> of the joint, or of an "
+                    "SDFormat joint, where its effort limit is not 0)")
             actuators.append(by_joint[joint.index()])
     return actuators
 
