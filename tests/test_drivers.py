@@ -357,7 +357,7 @@ def test_arm_driver_interpolates_from_the_previous_command_to_the_new_one():
 
 
 def test_arm_driver_set_positions_holds_the_arm_there():
-    driver = ArmPositionDriver()
+    driver = ArmPositionDriver(initial_positions=HOME_ARM_POSITIONS)
     simulator = Simulator(driver)
     context = simulator.get_mutable_context()
     driver.get_input_port().FixValue(context, HOME_ARM_POSITIONS)
@@ -375,11 +375,32 @@ def test_arm_driver_set_positions_holds_the_arm_there():
                                    atol=1e-15)
 
 
+def test_the_arm_drivers_ask_for_the_arms_start():
+    """A start is a configuration of one arm: the drivers held the shipped
+    Elfin5's home when given none, so another six-joint arm's driver
+    started by pulling it there (and a seven-joint arm's had six
+    inputs); now they ask for it by name."""
+    message = r"initial_positions = None is not allowed: give the arm's start"
+    for make in (lambda: ArmPositionDriver(),
+                 lambda: ArmPositionDriver(ArmDriverParameters()),
+                 lambda: arm_interpolator_system(),
+                 lambda: arm_interpolator_state(np.zeros(6), 0.0)):
+        with pytest.raises(ValueError, match=message):
+            make()
+    q0 = np.full(7, 0.3)
+    driver = ArmPositionDriver(initial_positions=q0)
+    assert driver.get_input_port().size() == 7
+    np.testing.assert_array_equal(
+        driver.GetOutputPort("desired_state").Eval(
+            driver.CreateDefaultContext()), np.concatenate([q0, np.zeros(7)]))
+
+
 def test_arm_driver_in_autodiff_gives_the_same_desired_state():
     q0 = np.array(HOME_ARM_POSITIONS)
     q1 = q0 + 0.01 * np.arange(1, 7)
     values = []
-    for driver in (ArmPositionDriver(), ArmPositionDriver().ToAutoDiffXd()):
+    double = ArmPositionDriver(initial_positions=q0)
+    for driver in (double, double.ToAutoDiffXd()):
         context = driver.CreateDefaultContext()
         driver.get_input_port().FixValue(context, q1)
         state = driver.EvalUniquePeriodicDiscreteUpdate(context)

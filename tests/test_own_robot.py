@@ -364,6 +364,30 @@ def test_a_one_file_robot_says_what_cannot_be_added_to_it(
         SimulatedStation(options, mount=mount, robot=description)
 
 
+def test_a_suspension_under_a_urdf_base_is_refused_naming_its_file(
+        tmp_path):
+    """The suspension's joints go into the base's SDFormat file: under a
+    base whose model directives add a URDF, the station failed naming the
+    internal argument yaw_joint and "the base's SDFormat", which it was
+    not."""
+    path = write_omni_arm(tmp_path, 7)
+    (tmp_path / "robot.dmd.yaml").write_text(
+        "directives:\n- add_model: {name: omni_arm, file: "
+        "package://mine/omni_arm.urdf}\n")
+    path.write_text(path.read_text().replace(
+        "file: omni_arm.urdf",
+        "directives: robot.dmd.yaml\n  packages: {mine: .}"))
+    description = load_robot_description(path)
+    options = StationOptions(
+        initial_arm_positions=list(description.arm.home),
+        suspension=SuspensionParameters())
+    with pytest.raises(ValueError, match=(
+            r"^suspension is not allowed on omni_arm: the model of "
+            r"base.joints\[2\] = 'omni_arm::base_yaw' is "
+            r"'package://mine/omni_arm.urdf', not an SDFormat file")):
+        SimulatedStation(options, robot=description)
+
+
 def test_the_second_shipped_robot_tracks_the_papers_step():
     """The second shipped robot (models/lbr_omni.robot.yaml: a 7-joint
     LBR-class arm on a larger omni base, its own sensor and probe) in its

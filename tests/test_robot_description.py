@@ -3,10 +3,12 @@ a robot the project did not model (a URDF written here, with 6 and 7 arm
 joints), and every way a description can be wrong, each an error naming
 the field."""
 
+import re
+
 import numpy as np
 import pytest
 import yaml
-from omni_arm import write_omni_arm
+from omni_arm import urdf_text, write_omni_arm
 from pydrake.multibody.plant import MultibodyPlant
 
 from drake_wbc.robot.description import (
@@ -125,11 +127,83 @@ def test_a_description_that_does_not_load_names_the_field(changes, message):
      r"model's own -3.14"),
     ({"arm.position_lower": [-1.1] * 6, "arm.position_upper": [1.1] * 6},
      r"arm.home\[4\] = 1.15 is not allowed: must be inside"),
+    ({"lidar_frames": ["mcr_base::lidar_front_left", "elfin5::link3"]},
+     r"lidar_frames\[1\] = 'elfin5::link3' is not allowed: must be on "
+     r"the body of base.frame = 'mcr_base::base_link' or one joined to it "
+     r"by welds and base.passive_joints alone"),
 ])
 def test_a_description_that_does_not_fit_its_model_names_the_field(
         changes, message):
     with pytest.raises(ValueError, match=message):
         _add(_shipped_text(**changes))
+
+
+@pytest.mark.parametrize("given, message", [
+    ("file: omni_armX.urdf",
+     r"model.file = 'omni_armX.urdf' is not allowed: no such file "
+     r"'.*omni_armX.urdf'"),
+    ("directives: robot.dmd.yaml",
+     r"model.directives = 'robot.dmd.yaml' is not allowed: no such file "
+     r"'.*robot.dmd.yaml'"),
+    ("file: package://mine/arm.urdf\n  packages: {mine: .}",
+     r"model.file = 'package://mine/arm.urdf' is not allowed: no such file "
+     r"'.*arm.urdf'"),
+    ("file: package://mine/omni_arm.urdf\n  packages: {mine: nowhere}",
+     r"model.packages\['mine'\] = 'nowhere' is not allowed: no such folder "
+     r"'.*nowhere'"),
+])
+def test_a_missing_model_file_names_the_field_and_the_description(
+        tmp_path, given, message):
+    """A model file (or a package's folder) that is not there is an error
+    naming the description's file and field and where it was looked for,
+    not Drake's parser error naming the path alone."""
+    path = write_omni_arm(tmp_path, 6)
+    path.write_text(path.read_text().replace("file: omni_arm.urdf", given))
+    with pytest.raises(ValueError, match=(
+            f"^{re.escape(str(path))}: {message} \\(a relative path is "
+            f"relative to the description's folder "
+            f"{re.escape(repr(str(tmp_path)))}\\)$")):
+        load_robot_description(path)
+
+
+def test_a_model_file_changed_after_loading_is_checked_when_added(
+        tmp_path):
+    """A description changed in code after it was loaded (or made there)
+    is checked when added to a plant, naming the field, not left to
+    Drake's parser."""
+    description = load_robot_description(write_omni_arm(tmp_path, 6))
+    description.model.file = "gone.urdf"
+    with pytest.raises(ValueError, match=(
+            r"^model.file = 'gone.urdf' is not allowed: no such file "
+            r"'.*gone.urdf' \(a relative path is relative to the "
+            r"description's folder")):
+        make_robot_plant(description)
+
+
+@pytest.mark.parametrize("file, message", [
+    ("package://mine/arm.urdf", r"resolved to '.*arm.urdf' which does not "
+     r"exist"),
+    ("package://other/omni_arm.urdf", r"refers to unknown package 'other'"),
+    ("omni_arm.urdf", r"is invalid")])
+def test_a_directives_file_that_does_not_resolve_names_the_field(
+        tmp_path, file, message):
+    """A file the model directives add that is not there (or a relative
+    path, which directives do not take) is an error naming
+    model.directives and the model, not Drake's parser error alone
+    (for a relative path: 'invalid when parsing a string instead of a
+    filename')."""
+    path = write_omni_arm(tmp_path, 6)
+    (tmp_path / "robot.dmd.yaml").write_text(
+        f"directives:\n- add_model: {{name: omni_arm, file: {file}}}\n")
+    path.write_text(path.read_text().replace(
+        "file: omni_arm.urdf",
+        "directives: robot.dmd.yaml\n  packages: {mine: .}"))
+    with pytest.raises(ValueError, match=(
+            r"model.directives = 'robot.dmd.yaml' is not allowed: its "
+            rf"add_model 'omni_arm' gives file = '{file}', which does not "
+            rf"resolve \(URI '{file}' {message}.*\); directives name files "
+            r"by package:// URLs")):
+        make_robot_plant(load_robot_description(path))
 
 
 @pytest.mark.parametrize("change", ["order", "axis", "floor"])
@@ -165,6 +239,30 @@ def test_base_joints_that_are_not_the_bases_pose_are_refused(tmp_path,
         make_robot_plant(load_robot_description(path))
 
 
+@pytest.mark.parametrize("rpy, refused", [
+    ("0 0 0.7", False), ("1.5708 0 0", True), ("3.14159 0 0", True)])
+def test_a_lidar_frame_whose_z_is_not_up_is_refused(tmp_path, rpy, refused):
+    """A scanner scans in its frame's x-y plane, z up, and the station
+    simulates it so (at its height and heading in T_b): a frame turned
+    otherwise (an optical frame's z forward, or upside down) is refused
+    naming lidar_frames, not simulated scanning level."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    urdf.write_text(urdf.read_text().replace(
+        "</robot>", "<link name='scanner'/><joint name='scanner' "
+        "type='fixed'><parent link='chassis'/><child link='scanner'/>"
+        f"<origin xyz='0.4 0.3 0.2' rpy='{rpy}'/></joint>\n</robot>"))
+    path.write_text(path.read_text() + "lidar_frames: [omni_arm::scanner]\n")
+    description = load_robot_description(path)
+    if not refused:
+        make_robot_plant(description)
+        return
+    with pytest.raises(ValueError, match=(
+            r"lidar_frames\[0\] = 'omni_arm::scanner' is not allowed: its z "
+            r"axis is \[.*\] in T_b \(base.frame\), must be up")):
+        make_robot_plant(description)
+
+
 def test_a_passive_joint_without_a_spring_is_refused(tmp_path):
     """A passive joint of the base with nothing to hold it at rest (a URDF
     joint: URDF has no springs) is refused naming the field, not left to
@@ -188,6 +286,60 @@ def test_a_passive_joint_without_a_spring_is_refused(tmp_path):
             r"base.passive_joints\[0\] = 'omni_arm::mount_pitch' is not "
             r"allowed: it has no spring")):
         make_robot_plant(load_robot_description(path))
+
+
+def test_a_sensor_frame_not_welded_to_the_sensing_weld_is_refused(
+        tmp_path):
+    """The wrist sensor measures at its weld (tool.ft_sensor_joint): a
+    tool.ft_sensor_frame that a joint of the tool moves against it is
+    refused naming the description's fields, not left to the station's
+    WeldWrench, whose error named its own argument `frame`."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    old = ("<joint name='tool' type='fixed'><parent link='sensor'/><child "
+           "link='tool'/><origin xyz='0 0 0.05'/>")
+    assert old in urdf.read_text()
+    urdf.write_text(urdf.read_text().replace(old, old.replace(
+        "fixed", "revolute") + "<axis xyz='0 0 1'/><limit lower='-1' "
+        "upper='1' effort='1' velocity='1'/>"))
+    path.write_text(path.read_text().replace(
+        "ft_sensor_frame: omni_arm::sensor",
+        "ft_sensor_frame: omni_arm::tool"))
+    with pytest.raises(ValueError, match=(
+            r"tool.ft_sensor_frame = 'omni_arm::tool' is not allowed: must "
+            r"be on a body welded to the child of tool.ft_sensor_joint = "
+            r"'omni_arm::sensor'")):
+        make_robot_plant(load_robot_description(path))
+
+
+def test_a_joint_in_what_the_sensor_carries_is_refused(tmp_path):
+    """The tool outboard of the sensor's weld is compensated as one rigid
+    body at the model's rest, and carries the TCP: a joint in it (a
+    gripper's, here moving the TCP) loaded, and the controller took the
+    tool's weight and the TCP where the joint's rest put them, while the
+    station let the joint move."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    old = ("<joint name='tool' type='fixed'><parent link='sensor'/><child "
+           "link='tool'/><origin xyz='0 0 0.05'/>")
+    urdf.write_text(urdf.read_text().replace(old, old.replace(
+        "fixed", "prismatic") + "<axis xyz='1 0 0'/><limit lower='-1' "
+        "upper='1' effort='0' velocity='1'/>"))
+    with pytest.raises(ValueError, match=(
+            r"tool.ft_sensor_joint = 'omni_arm::sensor' is not allowed with "
+            r"the prismatic joint 'omni_arm::tool' outboard of it: what the "
+            r"wrist sensor carries must be rigid")):
+        make_robot_plant(load_robot_description(path))
+
+
+def test_a_lidar_beyond_the_bases_passive_joints_is_on_the_base():
+    """A scanner on a body the base's passive joints carry (springs, at
+    rest in the nominal kinematics) is on the base, as one welded to it;
+    the arm's links are not (the description test above)."""
+    model = _add(_shipped_text(lidar_frames=["mcr_base::lidar_front_left",
+                                             "mcr_base::arm_mount"]))
+    assert [f.name() for f in model.lidar_frames] == ["lidar_front_left",
+                                                      "arm_mount"]
 
 
 def test_tighter_limits_are_the_robots_own():
@@ -256,6 +408,49 @@ def test_a_zero_speed_limit_in_the_model_is_none(tmp_path):
                                   [1.5, 2.0, 2.0, 2.0, 2.0, 2.0])
 
 
+def test_a_zero_position_range_in_the_model_is_none(tmp_path):
+    """A URDF joint's lower = upper = 0 (what exporters write where a
+    joint's range was not set) is no position limit: the description must
+    give the joint's limits, and may, rather than the home being refused
+    inside (0.0, 0.0) and the description's limits as wider than the
+    model's; the plant then has them (its joint is not held at 0)."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    text = urdf.read_text()
+    start = text.index("<joint name='j2'")
+    old = "<limit lower='-2.5' upper='2.5'"
+    at = text.index(old, start)
+    urdf.write_text(text[:at] + "<limit lower='0' upper='0'"
+                    + text[at + len(old):])
+    with pytest.raises(ValueError, match=(
+            r"arm.position_lower\[1\] is missing, which is not allowed: "
+            r"the model gives 'omni_arm::j2' none \(0.0\)")):
+        make_robot_plant(load_robot_description(path))
+    path.write_text(path.read_text().replace(
+        "  home:", "  position_lower: [-2.5, -2.0, -2.5, -2.5, -2.5, -2.5]\n"
+        "  position_upper: [2.5, 2.0, 2.5, 2.5, 2.5, 2.5]\n  home:"))
+    plant, model = make_robot_plant(load_robot_description(path))
+    np.testing.assert_array_equal(model.limits.lower[:2], [-2.5, -2.0])
+    np.testing.assert_array_equal(model.limits.upper[:2], [2.5, 2.0])
+    # In the plant too, which would otherwise hold the joint at 0.
+    joint = model.arm_joints[1]
+    assert (joint.position_lower_limits()[0],
+            joint.position_upper_limits()[0]) == (-2.0, 2.0)
+
+
+def test_an_arm_joint_left_out_of_the_description_is_refused(tmp_path):
+    """Six of a seven-joint arm's joints listed: the seventh loaded
+    silently, held at its rest in the controller's kinematics (and free
+    in the station); every joint between T_a and the TCP is the arm's."""
+    path = write_omni_arm(tmp_path, 6)
+    (tmp_path / "omni_arm.urdf").write_text(urdf_text(7))
+    with pytest.raises(ValueError, match=(
+            r"arm.joints = \['omni_arm::j1', .*'omni_arm::j6'\] is not "
+            r"allowed: the revolute joint 'omni_arm::j7' between "
+            r"arm.base_frame and tool.tcp_frame is not one of them")):
+        make_robot_plant(load_robot_description(path))
+
+
 def test_fewer_than_six_arm_joints_are_refused(tmp_path):
     assert MIN_ARM_JOINTS == 6
     path = write_omni_arm(tmp_path, 5, accelerations=False)
@@ -285,7 +480,8 @@ def test_the_controllers_tuning_is_the_robots():
     assert values[3] == pytest.approx(capability_at(arm, arm.home, 6.0e4),
                                       rel=1e-12)
     assert values[3] > lbr.tuning.capability_band.upper and values[10] == 0
-    untuned = load_robot_description(text=_shipped_text(tuning=None))
+    untuned = load_robot_description(text=_shipped_text(tuning=None),
+                                     root=models_dir())
     assert untuned.tuning.joint_limit_gain == DEFAULT_JOINT_LIMIT_GAIN
     assert untuned.tuning.capability_band == CapabilityBand()
 

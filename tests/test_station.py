@@ -5,12 +5,14 @@ and what the ground truth, the LIDARs and the wrist sensor report."""
 import numpy as np
 import pytest
 from locked_robot import sensor_reading, settle_locked_robot
+from omni_arm import write_omni_arm
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.tree import ForceElementIndex, RevoluteSpring
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import MatrixGain
 from shipped_names import ARM_JOINTS, BASE_JOINTS, MOUNT_JOINTS, SCOPED
 
+from drake_wbc.robot.description import load_robot_description
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.station.force_torque import ForceTorqueSensorParameters
 from drake_wbc.station.scene import (
@@ -515,6 +517,99 @@ def test_wrist_at_rest_reads_the_tools_weight(station, rest):
         atol=1e-9)
     tilt = (X_WS.rotation().inverse() @ R_W_locked).ToAngleAxis().angle()
     assert tilt > 1e-3
+
+
+@pytest.mark.parametrize("frames, message", [
+    (("scanner", "lidar_scanner"),
+     r"lidar_frames\[1\] = 'omni_arm::lidar_scanner' is not allowed: its "
+     r"scanner's name 'scanner' .* is that of lidar_frames\[0\] = "
+     r"'omni_arm::scanner'"),
+    (("lidar_points",),
+     r"lidar_frames\[0\] = 'omni_arm::lidar_points' is not allowed: its "
+     r"scanner's name would be 'points'")])
+def test_scanners_of_one_name_are_refused_naming_their_frames(
+        tmp_path, frames, message):
+    """A scanner's systems and ports are named by its frame's name without
+    a leading lidar_: two frames of one such name ended the process when
+    the station was built (Drake's failed condition on unique subsystem
+    names, a SystemExit), and a frame named lidar_points failed on an
+    input port of the scanners' merger that it took for its own."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    urdf.write_text(urdf.read_text().replace("</robot>", "".join(
+        f"<link name='{name}'/><joint name='{name}' type='fixed'><parent "
+        f"link='chassis'/><child link='{name}'/><origin xyz='0.4 {y} "
+        "0.2'/></joint>" for name, y in zip(frames, (0.3, -0.3)[:len(frames)],
+                                           strict=True))
+        + "\n</robot>"))
+    path.write_text(path.read_text() + "lidar_frames: ["
+                    + ", ".join(f"omni_arm::{name}" for name in frames)
+                    + "]\n")
+    with pytest.raises(ValueError, match=message):
+        SimulatedStation(StationOptions(time_step=0.005),
+                         robot=load_robot_description(path))
+
+
+WHEEL = (
+    "<link name='wheel'><inertial><mass value='1'/><inertia ixx='0.01' "
+    "iyy='0.01' izz='0.01' ixy='0' ixz='0' iyz='0'/></inertial></link>"
+    "<joint name='wheel' type='continuous'><parent link='chassis'/><child "
+    "link='wheel'/><origin xyz='0.2 0.2 0.1'/><axis xyz='0 1 0'/></joint>"
+    "<transmission name='wheel_drive'><type>transmission_interface/"
+    "SimpleTransmission</type><joint name='wheel'><hardwareInterface>"
+    "EffortJointInterface</hardwareInterface></joint><actuator "
+    "name='wheel_motor'><mechanicalReduction>1</mechanicalReduction>"
+    "</actuator></transmission>")
+"""An actuated joint that is neither the base's nor the arm's."""
+
+
+@pytest.mark.parametrize("change, message", [
+    ("no actuator",
+     r"arm.joints\[2\] = 'omni_arm::j3' is not allowed in the simulated "
+     r"station: the model gives it no actuator"),
+    ("another actuator",
+     r"the actuator of 'omni_arm::wheel' is not allowed in the simulated "
+     r"station: it drives only base.joints and arm.joints")])
+def test_the_station_names_the_joints_its_drives_cannot_drive(
+        tmp_path, change, message):
+    """The station drives the base's and the arm's joints through the
+    model's actuators (a URDF's transmissions): an arm joint without one
+    failed with a bare KeyError of a joint index, and an actuator on
+    another joint (a wheel) with an error naming no joint."""
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    text = urdf.read_text()
+    if change == "no actuator":
+        start = text.index("<transmission name='j3_drive'>")
+        end = text.index("</transmission>", start) + len("</transmission>")
+        text = text[:start] + text[end:]
+    else:
+        text = text.replace("</robot>", WHEEL + "\n</robot>")
+    urdf.write_text(text)
+    with pytest.raises(ValueError, match=message):
+        SimulatedStation(StationOptions(time_step=0.005),
+                         robot=load_robot_description(path))
+
+
+def test_a_urdf_bases_joint_limits_are_no_wall(tmp_path):
+    """A URDF's prismatic joint carries position limits (its schema asks
+    for them; tests/omni_arm.py's and examples/own_robot's base joints
+    have +-2.5 m): the base's planar joints are its pose on the floor, so
+    the station's base drives on past them, where it stopped at 2.5 m as
+    at a wall that is not there."""
+    description = load_robot_description(write_omni_arm(tmp_path, 6))
+    station = SimulatedStation(StationOptions(
+        time_step=0.005, initial_base_pose=[2.3, 0.0, 0.0]),
+        robot=description)
+    context = station.diagram.CreateDefaultContext()
+    station.set_initial_state(context)
+    station.diagram.GetInputPort("arm.position_command").FixValue(
+        context, description.arm.home)
+    station.diagram.GetInputPort("base.velocity_command").FixValue(
+        context, [0.5, 0.0, 0.0])
+    Simulator(station.diagram, context).AdvanceTo(1.5)
+    x = station.diagram.GetOutputPort("truth.base_pose").Eval(context)[0]
+    assert x > 2.7
 
 
 def test_the_plant_step_and_the_scene_period_are_checked():

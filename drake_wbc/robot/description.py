@@ -421,7 +421,8 @@ def load_robot_description(path=None, text=None, root=None):
     Raises:
         ValueError: naming the file, the field's dotted path (e.g.
             `arm.joints = [...] is not allowed: must name at least 6`),
-            its value and what is allowed.
+            its value and what is allowed; also for a model file or a
+            package folder that is not there.
     """
     description = load_typed(RobotDescription, path=path, text=text)
     if _blank(description):
@@ -436,7 +437,40 @@ def load_robot_description(path=None, text=None, root=None):
     elif path is not None:
         description.root = str((Path(path).resolve().parent
                                 / description.root).resolve())
+    check_model_files(description, "" if path is None else f"{path}: ")
     return description
+
+
+def check_model_files(description, source=""):
+    """Raises a ValueError naming the field (after `source`, the
+    description file's path and a colon, or nothing) when a package
+    folder or the model file of `description` is not there: a path, or a
+    `package://` URL of one of its own packages (others are Drake's to
+    find)."""
+    model = description.model
+    where = (" (a relative path is relative to the description's folder "
+             f"{description.root!r})")
+    folders = {}
+    for name, folder in model.packages.items():
+        folders[name] = Path(description.resolve(folder))
+        if not folders[name].is_dir():
+            raise ValueError(
+                f"{source}model.packages[{name!r}] = {folder!r} is not "
+                f"allowed: no such folder {str(folders[name])!r}{where}")
+    field = "directives" if model.directives else "file"
+    url = getattr(model, field)
+    file = description.resolve(url)
+    if url.startswith("package://"):
+        name, _, rest = url[len("package://"):].partition("/")
+        if name not in folders:
+            return
+        file = str(folders[name] / rest)
+    elif "://" in url:
+        return
+    if not Path(file).is_file():
+        raise ValueError(
+            f"{source}model.{field} = {url!r} is not allowed: no such file "
+            f"{file!r}{where}")
 
 
 @functools.cache

@@ -61,6 +61,7 @@ from drake_wbc.math.validation import (
 )
 from drake_wbc.robot.description import (
     RobotDescription,
+    check_model_files,
     models_dir,
     shipped_robot,
 )
@@ -227,8 +228,13 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
             (or a passive one without a spring),
             T_a (arm.base_frame) is moved by the arm's joints, the
             TCP is not outboard of the arm, the sensor not between the
-            flange and the TCP, or the arm's limits are missing or wider
-            than the model's.
+            flange and the TCP (or its frame not welded to its weld), a
+            joint between T_a and the TCP is not one of arm.joints or one
+            outboard of the sensor's weld not a weld, a LIDAR's frame is
+            not on the base, the arm's limits are missing or wider than
+            the model's, a model file (model.file, model.directives, a
+            file the directives add) is not there, or a suspension is
+            asked of a base whose model is not SDFormat.
     """
     if plant.is_finalized():
         raise ValueError(
@@ -237,6 +243,7 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
         )
     description = checked_instance("description", description,
                                    RobotDescription, shipped_robot)
+    check_model_files(description)
     parser = parser or Parser(plant)
     package_map = parser.package_map()
     # The library's models (bases, tools) as package://drake_wbc/..., so a
@@ -261,6 +268,19 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
         url = description.resolve(source.directives)
         path = package_map.ResolveUrl(url) if "://" in url else url
         directives = LoadModelDirectives(path)
+        for add in (d.add_model for d in directives.directives
+                    if d.add_model is not None):
+            try:
+                package_map.ResolveUrl(add.file)
+            except RuntimeError as error:
+                raise ValueError(
+                    f"model.directives = {source.directives!r} is not "
+                    f"allowed: its add_model {add.name!r} gives file = "
+                    f"{add.file!r}, which does not resolve "
+                    f"({str(error).removeprefix('error: ')}); directives "
+                    "name files by package:// URLs (of model.packages, or "
+                    "drake_wbc for the library's models) or file:// URLs"
+                ) from None
         if not mount.is_identity:
             # Turned about the point the model welds the arm at.
             weld = _mount_weld(directives, description)
@@ -284,6 +304,14 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
                     f"= {description.base.joints[2]!r} exactly once "
                     f"(found {len(adds)})")
             first = adds[0]
+            if not first.file.lower().endswith(".sdf"):
+                raise ValueError(
+                    f"suspension is not allowed on {description.name}: the "
+                    "model of base.joints[2] = "
+                    f"{description.base.joints[2]!r} is {first.file!r}, "
+                    "not an SDFormat file (.sdf), which the suspension's "
+                    "joints are written into; give the base's model in "
+                    "SDFormat")
             text = Path(package_map.ResolveUrl(first.file)).read_text()
             with tempfile.TemporaryDirectory() as folder:
                 suspended = Path(folder) / "base_suspended.sdf"
@@ -360,6 +388,31 @@ def _scoped(plant, field, name, find, kind):
             f"{element!r} in {instance_name!r}") from None
 
 
+def _joint_name(plant, joint):
+    """`joint`'s name scoped by its model instance, as a description
+    gives it."""
+    return (f"{plant.GetModelInstanceName(joint.model_instance())}::"
+            f"{joint.name()}")
+
+
+def _joined(plant, body, joints):
+    """The indices of `body` and of the bodies joined to it by welds and
+    `joints` alone, through either side of each."""
+    allowed = {j.index() for j in joints}
+    links = [plant.get_joint(JointIndex(i)) for i in range(plant.num_joints())]
+    links = [j for j in links
+             if j.type_name() == "weld" or j.index() in allowed]
+    joined, grown = {body.index()}, True
+    while grown:
+        grown = False
+        for joint in links:
+            ends = {joint.parent_body().index(), joint.child_body().index()}
+            if ends & joined and not ends <= joined:
+                joined |= ends
+                grown = True
+    return joined
+
+
 def _parents(plant):
     """child body index -> (joint, parent body) over every joint."""
     parents = {}
@@ -409,6 +462,10 @@ def _robot_model(plant, description):
         joint(f"base.joints[{i}]", name, (kind,)) for i, (name, kind) in
         enumerate(zip(base.joints, ("prismatic", "prismatic", "revolute"),
                       strict=True)))
+    # They are the base's pose on the floor, which has no limits (a
+    # URDF's prismatic joint has some, by its schema: a wall in the plant).
+    for found in base_joints:
+        found.set_position_limits([-math.inf], [math.inf])
     passive_joints = tuple(
         joint(f"base.passive_joints[{i}]", name,
               ("revolute", "prismatic"))
@@ -470,6 +527,56 @@ def _robot_model(plant, description):
         if not _outboard(parents, body, ancestor):
             raise ValueError(f"{where} = {name!r} is not allowed: must be "
                              f"outboard of {what}")
+    # The sensor reads its weld's reaction at its measurement frame: a
+    # joint between them would turn the reading against the frame.
+    if frames["ft_measurement_frame"].body().index() not in [
+            b.index() for b in plant.GetBodiesWeldedTo(sensor)]:
+        raise ValueError(
+            f"tool.ft_sensor_frame = {tool.ft_sensor_frame!r} is not "
+            "allowed: must be on a body welded to the child of "
+            f"tool.ft_sensor_joint = {tool.ft_sensor_joint!r} (no joint "
+            "between them)")
+    # What the sensor carries is compensated as one rigid body at the
+    # model's rest (drake_wbc.stages.wrench), and is the TCP's.
+    for found in (plant.get_joint(JointIndex(i))
+                  for i in range(plant.num_joints())):
+        if (found.type_name() != "weld"
+                and _outboard(parents, found.child_body(), sensor)):
+            raise ValueError(
+                f"tool.ft_sensor_joint = {tool.ft_sensor_joint!r} is not "
+                f"allowed with the {found.type_name()} joint "
+                f"{_joint_name(plant, found)!r} outboard of it: what the "
+                "wrist sensor carries must be rigid (its weight is taken at "
+                "the model's rest, the TCP on it); weld that joint in the "
+                "model")
+    # The controller's kinematics move the TCP by the arm's joints alone.
+    arm_base = frames["arm_base_frame"].body()
+    stop = (arm_base if _outboard(parents, tcp, arm_base)
+            else arm_joints[0].parent_body()).index()
+    listed = [j.index() for j in arm_joints]
+    index = tcp.index()
+    while index != stop and index in parents:
+        found = parents[index]
+        if found.type_name() != "weld" and found.index() not in listed:
+            raise ValueError(
+                f"arm.joints = {list(arm.joints)} is not allowed: the "
+                f"{found.type_name()} joint {_joint_name(plant, found)!r} "
+                "between arm.base_frame and tool.tcp_frame is not one of "
+                "them; list every joint of the arm, base to wrist (or weld "
+                "that joint in the model)")
+        index = found.parent_body().index()
+    # The station's scanners are mounted at their pose in T_b with the
+    # model at rest: one that a joint moves would scan from elsewhere (a
+    # passive joint's spring holds it at rest).
+    on_base = _joined(plant, frames["base_frame"].body(), passive_joints)
+    for i, (name, found) in enumerate(zip(description.lidar_frames,
+                                          lidar_frames, strict=True)):
+        if found.body().index() not in on_base:
+            raise ValueError(
+                f"lidar_frames[{i}] = {name!r} is not allowed: must be on "
+                f"the body of base.frame = {base.frame!r} or one joined to "
+                "it by welds and base.passive_joints alone (a scanner on "
+                "the base)")
     return RobotModel(
         description=description,
         base=base_joints[0].model_instance(),
@@ -488,7 +595,9 @@ def _robot_model(plant, description):
 def _arm_limits(arm, joints):
     """The arm's own ArmLimits: the model's, tightened where the
     description gives tighter ones; a ValueError naming the field for a
-    limit that is missing or wider than the model's, or a home outside."""
+    limit that is missing or wider than the model's, or a home outside.
+    A joint whose model gives no position range (lower = upper = 0) gets
+    the description's in the plant."""
     n = len(joints)
     model = dict(
         position_lower=[float(j.position_lower_limits()[0]) for j in joints],
@@ -502,6 +611,14 @@ def _arm_limits(arm, joints):
     shown = {name: list(values) for name, values in model.items()}
     for name in ("velocity_limits", "acceleration_limits"):
         model[name] = [v if v > 0.0 else math.inf for v in model[name]]
+    # So is a position range of lower = upper = 0 (a URDF's lower='0'
+    # upper='0', likewise); the description's then go into the plant,
+    # whose joint would otherwise be held at 0.
+    unlimited = [i for i in range(n) if model["position_lower"][i]
+                 == model["position_upper"][i] == 0.0]
+    for i in unlimited:
+        model["position_lower"][i] = -math.inf
+        model["position_upper"][i] = math.inf
     limits = {}
     for name, own in model.items():
         given = getattr(arm, name)
@@ -530,6 +647,9 @@ def _arm_limits(arm, joints):
             raise ValueError(
                 f"arm.home[{i}] = {q!r} is not allowed: must be inside "
                 f"{arm.joints[i]!r}'s limits ({lo!r}, {hi!r})")
+    for i in unlimited:
+        joints[i].set_position_limits(limits["position_lower"][i:i + 1],
+                                      limits["position_upper"][i:i + 1])
     return ArmLimits(limits["position_lower"], limits["position_upper"],
                      limits["velocity_limits"],
                      limits["acceleration_limits"])
@@ -545,6 +665,7 @@ def make_robot_plant(description=None, time_step=0.0, suspension=None,
                       mount=mount)
     plant.Finalize()
     check_planar_base(plant, model)
+    check_lidar_frames(plant, model)
     return plant, model
 
 
@@ -594,6 +715,38 @@ def check_planar_base(plant, model):
             "joints must be T_b's pose: prismatic along the world's x, "
             "then y, then revolute about z, in that order, and T_b on the "
             "yaw axis, on the floor, x forward and z up")
+
+
+LIDAR_TILT_TOLERANCE = 1e-3
+"""rad, the largest tilt of a LIDAR's z axis from T_b's that
+check_lidar_frames takes for level (a CAD export's rounding)."""
+
+
+def check_lidar_frames(plant, model):
+    """Checks that each LIDAR frame's z axis is T_b's z (up), as the
+    simulated station mounts the scanners: level, at their height and
+    heading in T_b, the scan in their x-y plane.
+
+    Args:
+        plant: a finalized plant holding the robot.
+        model: its RobotModel.
+
+    Raises:
+        ValueError: naming lidar_frames[i], where the frame's z axis is
+            tilted from T_b's by more than LIDAR_TILT_TOLERANCE (an
+            optical frame's z forward, or a frame upside down).
+    """
+    context = plant.CreateDefaultContext()
+    for i, (name, frame) in enumerate(zip(model.description.lidar_frames,
+                                          model.lidar_frames, strict=True)):
+        z = frame.CalcPose(context, model.base_frame).rotation().col(2)
+        if not z[2] >= math.cos(LIDAR_TILT_TOLERANCE):
+            raise ValueError(
+                f"lidar_frames[{i}] = {name!r} is not allowed: its z axis "
+                f"is {np.round(z, 6).tolist()} in T_b (base.frame), must "
+                "be up, [0, 0, 1], within LIDAR_TILT_TOLERANCE = "
+                f"{LIDAR_TILT_TOLERANCE!r} rad (a planar scanner scanning "
+                "level in its frame's x-y plane)")
 
 
 _SHARED_PLANTS = {}

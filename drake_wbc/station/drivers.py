@@ -35,7 +35,6 @@ from drake_wbc.math.validation import (
     positive,
     whole_multiple,
 )
-from drake_wbc.robot.model import HOME_ARM_POSITIONS
 from drake_wbc.stages.support import define_stage
 from drake_wbc.station.driver_dynamics import (
     base_loop_size,
@@ -375,6 +374,18 @@ def BaseVelocityDriver_(T):
     return Impl
 
 
+def arm_start(initial_positions):
+    """The arm drivers' start, (n,) rad: `initial_positions`, which a
+    driver must be given (its ports are sized by it, and a start is a
+    configuration of one arm)."""
+    if initial_positions is None:
+        raise ValueError(
+            "initial_positions = None is not allowed: give the arm's start, "
+            "one angle a joint (e.g. its robot's home, RobotModel.home, its "
+            "description's arm.home)")
+    return as_vector("initial_positions", initial_positions)
+
+
 @define_stage("ArmPositionDriver_")
 def ArmPositionDriver_(T):
     class Impl(LeafSystem_[T]):
@@ -399,15 +410,16 @@ def ArmPositionDriver_(T):
 
         Args:
             params: ArmDriverParameters (the defaults if None).
-            initial_positions: the arm's configuration at the start.
+            initial_positions: the arm's configuration at the start
+                (required).
         """
 
-        def _construct(self, params=None,
-                       initial_positions=HOME_ARM_POSITIONS, converter=None):
+        def _construct(self, params=None, initial_positions=None,
+                       converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.params = params = checked_instance(
                 "params", params, ArmDriverParameters, ArmDriverParameters)
-            self._initial = as_vector("initial_positions", initial_positions)
+            self._initial = arm_start(initial_positions)
             n = self._initial.size
             self._command = self.DeclareVectorInputPort(
                 "position_command", n)

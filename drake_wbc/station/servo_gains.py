@@ -27,13 +27,28 @@ def _mass_matrix(description, arm_positions, mount):
     return plant.CalcMassMatrix(context), model
 
 
-def _actuators(plant, joints):
-    """The actuator of each of `joints` (one-dof, actuated)."""
+def _actuators(plant, model, parts=("base", "arm")):
+    """The actuator of each joint of RobotModel `model`'s `parts` (its
+    base's planar joints, its arm's), in that order; a ValueError naming
+    the description's field of a joint that has none."""
     by_joint = {}
     for index in plant.GetJointActuatorIndices():
         actuator = plant.get_joint_actuator(index)
         by_joint[actuator.joint().index()] = actuator
-    return [by_joint[j.index()] for j in joints]
+    actuators = []
+    for part in parts:
+        names = getattr(model.description, part).joints
+        for i, (name, joint) in enumerate(zip(
+                names, getattr(model, f"{part}_joints"), strict=True)):
+            if joint.index() not in by_joint:
+                raise ValueError(
+                    f"{part}.joints[{i}] = {name!r} is not allowed in the "
+                    "simulated station: the model gives it no actuator, "
+                    "which the station drives it through (Drake makes one "
+                    "of a URDF's <transmission> of the joint, or of an "
+                    "SDFormat joint, where its effort limit is not 0)")
+            actuators.append(by_joint[joint.index()])
+    return actuators
 
 
 def servo_gains(arm_positions, base, arm, description=None, mount=None,
@@ -97,9 +112,8 @@ def set_servo_gains(plant, model, gains):
     """Gives the robot's actuators in `plant` (not yet finalized) the PD
     gains of `servo_gains`."""
     names = model.description
-    joints = model.base_joints + model.arm_joints
     for name, actuator in zip(names.base.joints + names.arm.joints,
-                              _actuators(plant, joints), strict=True):
+                              _actuators(plant, model), strict=True):
         actuator.set_controller_gains(gains[name])
 
 
@@ -129,7 +143,7 @@ def set_drive_inertias(plant, model, inertias):
     """Gives the arm's actuators in `plant` (not yet finalized) the
     reflected inertias of `drive_inertias`."""
     for name, actuator in zip(model.description.arm.joints,
-                              _actuators(plant, model.arm_joints),
+                              _actuators(plant, model, ("arm",)),
                               strict=True):
         actuator.set_default_gear_ratio(1.0)
         actuator.set_default_rotor_inertia(inertias[name])

@@ -144,6 +144,36 @@ def lidar_name(frame):
     return name[len("lidar_"):] if name.startswith("lidar_") else name
 
 
+def lidar_names(model):
+    """The `lidar_name`s of the scanners of RobotModel `model`, in its
+    description's order.
+
+    Raises:
+        ValueError: naming lidar_frames[i] when two frames give one name
+            (their ports and systems would be one), or a frame gives
+            `points` (the name of the scanners' merged points).
+    """
+    frames = model.description.lidar_frames
+    names = []
+    for i, frame in enumerate(model.lidar_frames):
+        name = lidar_name(frame)
+        if name == "points":
+            raise ValueError(
+                f"lidar_frames[{i}] = {frames[i]!r} is not allowed: its "
+                "scanner's name would be 'points', the name of the "
+                "scanners' merged points (lidar.obstacle_points); name the "
+                "frame otherwise")
+        if name in names:
+            j = names.index(name)
+            raise ValueError(
+                f"lidar_frames[{i}] = {frames[i]!r} is not allowed: its "
+                f"scanner's name {name!r} (the frame's name without a "
+                f"leading lidar_, as in lidar.{name}.ranges) is that of "
+                f"lidar_frames[{j}] = {frames[j]!r}; name the frames apart")
+        names.append(name)
+    return tuple(names)
+
+
 @dataclass
 class StationOptions:
     """How the simulated station is built (a scenario's `station:`).
@@ -271,9 +301,26 @@ def add_desired_states(builder, plant, model, base_desired, arm_desired):
     the systems it added, by name.
 
     Raises:
-        ValueError: a shared instance whose actuated joints are not
-            exactly the base's and the arm's.
+        ValueError: naming the joint of an actuator in the base's or the
+            arm's model instance that is not one of their joints (the
+            desired states drive those alone), or a shared instance
+            whose actuated joints are not exactly the base's and the
+            arm's.
     """
+    driven = {j.index() for j in model.base_joints + model.arm_joints}
+    for instance in dict.fromkeys((model.base, model.arm)):
+        for index in plant.GetJointActuatorIndices(instance):
+            joint = plant.get_joint_actuator(index).joint()
+            if joint.index() not in driven:
+                name = (f"{plant.GetModelInstanceName(instance)}::"
+                        f"{joint.name()}")
+                raise ValueError(
+                    f"the actuator of {name!r} is not allowed in the "
+                    "simulated station: it drives "
+                    "only base.joints and arm.joints, through their model "
+                    "instances' desired states; leave that joint without an "
+                    "actuator in the model (in a URDF, without a "
+                    "<transmission>)")
     if model.base != model.arm:
         builder.Connect(base_desired,
                         plant.get_desired_state_input_port(model.base))
@@ -400,7 +447,7 @@ class SimulatedStation:
             add_hand_body(plant, model, scene.hand.impedance))
         plant.Finalize()
         self.plant, self.scene_graph, self.model = plant, scene_graph, model
-        self.lidar_names = tuple(lidar_name(f) for f in model.lidar_frames)
+        self.lidar_names = lidar_names(model)
         add = builder.AddNamedSystem
         s = self.systems = {}
         # The odometry and the parts of the state read at every plant step

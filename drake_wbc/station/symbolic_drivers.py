@@ -16,8 +16,9 @@ SymbolicVectorSystem they convert to AutoDiffXd.
 - `joint_rates_system()`: input [v (3); base pose [x, y, yaw] (3)],
   output the base's desired state [0 (3); R(yaw) v] (6), for the plant.
 - `arm_interpolator_system(params, initial_positions)`: state [q_from,
-  q_to, t_k] (13, positions relative to the initial ones), input q_cmd
-  (6), output [q_d; v_d] (12) at the context's time.
+  q_to, t_k] (2 n + 1, positions relative to the initial ones of the
+  arm's n joints), input q_cmd (n), output [q_d; v_d] (2 n) at the
+  context's time.
 """
 
 import numpy as np
@@ -28,14 +29,17 @@ from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
 )
-from drake_wbc.robot.model import HOME_ARM_POSITIONS
 from drake_wbc.station.driver_dynamics import (
     base_loop_size,
     base_loop_step,
     body_to_world_rates,
     interpolated_command,
 )
-from drake_wbc.station.drivers import ArmDriverParameters, BaseDriverParameters
+from drake_wbc.station.drivers import (
+    ArmDriverParameters,
+    BaseDriverParameters,
+    arm_start,
+)
 
 
 def _symbolic_numpy():
@@ -86,13 +90,13 @@ def arm_interpolator_system(params=None, initial_positions=None):
     context's time.
 
     The positions in its state are relative to `initial_positions` (n,)
-    (HOME_ARM_POSITIONS if None), so that its default state, zero, holds
+    (required), so that its default state, zero, holds
     the arm there from t = 0, like ArmPositionDriver's; set another start
     with `arm_interpolator_state`.
     """
     params = checked_instance("params", params, ArmDriverParameters,
                               ArmDriverParameters)
-    q0 = _initial(initial_positions)
+    q0 = arm_start(initial_positions)
     n = q0.size
     t = Variable("t")
     state = MakeVectorVariable(2 * n + 1, "s")
@@ -109,15 +113,9 @@ def arm_interpolator_system(params=None, initial_positions=None):
         time_period=params.command_period)
 
 
-def _initial(initial_positions):
-    if initial_positions is None:
-        return np.asarray(HOME_ARM_POSITIONS, dtype=float)
-    return as_vector("initial_positions", initial_positions)
-
-
 def arm_interpolator_state(positions, time, initial_positions=None):
     """The state of `arm_interpolator_system(params, initial_positions)`
     holding the arm at `positions` (n,) from `time` on."""
-    q0 = _initial(initial_positions)
+    q0 = arm_start(initial_positions)
     q = as_vector("positions", positions, q0.size) - q0
     return np.concatenate([q, q, [time]])
