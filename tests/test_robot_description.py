@@ -384,18 +384,22 @@ def test_a_model_without_acceleration_limits_asks_for_them(tmp_path):
         make_robot_plant(load_robot_description(path))
 
 
+def _edit_joint(urdf, joint, old, new):
+    """Replaces the first `old` after joint `joint`'s tag in file `urdf`
+    by `new`."""
+    text = urdf.read_text()
+    at = text.index(old, text.index(f"<joint name='{joint}'"))
+    urdf.write_text(text[:at] + new + text[at + len(old):])
+
+
 def test_a_zero_speed_limit_in_the_model_is_none(tmp_path):
     """A URDF joint's velocity='0' (what exporters write where nothing
     was set) is no limit: the description must give the joint's speed
     limit, and may, rather than the controller failing on a speed limit
     of 0 that no description could raise."""
     path = write_omni_arm(tmp_path, 6)
-    urdf = tmp_path / "omni_arm.urdf"
-    text = urdf.read_text()
-    start = text.index("<joint name='j1'")
-    at = text.index("velocity='2.0'", start)
-    urdf.write_text(text[:at] + "velocity='0'"
-                    + text[at + len("velocity='2.0'"):])
+    _edit_joint(tmp_path / "omni_arm.urdf", "j1", "velocity='2.0'",
+                "velocity='0'")
     with pytest.raises(ValueError, match=(
             r"arm.velocity_limits\[0\] is missing, which is not allowed: "
             r"the model gives 'omni_arm::j1' none \(0.0\)")):
@@ -415,13 +419,8 @@ def test_a_zero_position_range_in_the_model_is_none(tmp_path):
     inside (0.0, 0.0) and the description's limits as wider than the
     model's; the plant then has them (its joint is not held at 0)."""
     path = write_omni_arm(tmp_path, 6)
-    urdf = tmp_path / "omni_arm.urdf"
-    text = urdf.read_text()
-    start = text.index("<joint name='j2'")
-    old = "<limit lower='-2.5' upper='2.5'"
-    at = text.index(old, start)
-    urdf.write_text(text[:at] + "<limit lower='0' upper='0'"
-                    + text[at + len(old):])
+    _edit_joint(tmp_path / "omni_arm.urdf", "j2",
+                "<limit lower='-2.5' upper='2.5'", "<limit lower='0' upper='0'")
     with pytest.raises(ValueError, match=(
             r"arm.position_lower\[1\] is missing, which is not allowed: "
             r"the model gives 'omni_arm::j2' none \(0.0\)")):
