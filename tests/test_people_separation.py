@@ -445,3 +445,29 @@ controller:
             r"with station.lidar.rate = 15.0 Hz")):
         load_scenario(text=text)
     load_scenario(text=text.replace("0.05", "0.1"))
+
+
+def test_a_point_inside_is_seen_in_any_beam_of_a_scan():
+    """A base at rest in a room scans as many returns each time, the
+    first, middle and last beams on the walls: a person stepping into
+    another beam, inside the footprint, changes that scan alone, and is a
+    protective stop all the same."""
+    limiter = BaseCommandLimiter(SafetyParameters(**BASE_LIMITS), H, HALF)
+    context = limiter.CreateDefaultContext()
+    limiter.GetInputPort("velocity").FixValue(context, [0.0, 0.0, 0.0])
+    limiter.GetInputPort("stopped").FixValue(context, [0.0])
+    walls = np.column_stack([np.full(9, 3.0), np.linspace(-2.0, 2.0, 9)])
+    stepped_in = walls.copy()
+    stepped_in[2] = [0.1, 0.0]
+    stops = []
+    for k in range(30):
+        context.SetTime(k * H)
+        points = stepped_in if k >= 10 else walls
+        limiter.GetInputPort("obstacle_points").FixValue(
+            context, AbstractValue.Make(points.copy()))
+        context.SetDiscreteState(limiter.EvalUniquePeriodicDiscreteUpdate(
+            context).get_vector().CopyToVector())
+        stops.append(limiter.GetOutputPort("protective_stop").Eval(
+            context)[0])
+    assert stops[9] == 0.0
+    assert stops[10:] == [1.0] * 20
