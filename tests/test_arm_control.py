@@ -541,6 +541,28 @@ def test_controller_brakes_on_hold_and_on_a_twist_that_is_not_finite(arm):
     np.testing.assert_array_equal(state, np.r_[q0, np.zeros(6), 0.0])
 
 
+@pytest.mark.parametrize("V", [[1e308, 1e308, 0, 0, 0, 1e308],
+                               [1.7e308, 0, 0, 0, 0, 0],
+                               [1e308, -1e308, 1e308, -1e308, 1e308, 1e308]])
+def test_a_finite_twist_whose_rates_overflow_brakes(arm, V):
+    """A twist finite but so large that its joint rates overflow (a
+    reference of 1e308 m/s, which the input guard passes as finite)
+    brakes as one that is not finite (or is scaled into the limits where
+    it does not overflow): never a NaN in q_cmd, never a step beyond the
+    acceleration limit."""
+    system = ArmCartesianVelocityController(None, arm)
+    context = system.CreateDefaultContext()
+    previous = np.array([1.5, -1.2, 0.8, 0.3, -0.1, 0.0])
+    for q0 in (HOME_ARM_POSITIONS, 0.5 * (arm.lower + arm.upper) + 0.1):
+        state = controller_update(system, context, q0, previous,
+                                  np.array(V, dtype=float), 0.0)
+        assert np.isfinite(state).all()
+        change = state[6:12] - previous
+        assert np.abs(change).max() <= ROBOT_ACCELERATION_LIMIT * H * (
+            1 + 1e-12)
+        assert state[12] == 1.0
+
+
 # --- the system -------------------------------------------------------
 
 

@@ -198,9 +198,14 @@ def ArmCartesianVelocityController_(T):
             limits = self._limits
             if hold or not finite:
                 V_a, limits = self._no_twist, self._hold_limits
-            command = self._command(
-                through_float_function(self._jacobian, q), V_a, q, previous,
-                limits)
+            J_a = through_float_function(self._jacobian, q)
+            command = self._command(J_a, V_a, q, previous, limits)
+            if not all_finite(command.q_dot):
+                # A finite twist so large that the rates overflow (1e308
+                # m/s): braked as one that is not finite.
+                finite = False
+                command = self._command(J_a, self._no_twist, q, previous,
+                                        self._hold_limits)
             h = self._time_step
             # The bounds keep q in the band up to rounding; the clip makes
             # the joint limits exact.
