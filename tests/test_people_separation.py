@@ -471,3 +471,26 @@ def test_a_point_inside_is_seen_in_any_beam_of_a_scan():
             context)[0])
     assert stops[9] == 0.0
     assert stops[10:] == [1.0] * 20
+
+
+@pytest.mark.parametrize("hold_time", [1e-10, 1e-9])
+def test_a_point_inside_stops_the_base_whatever_the_hold_time(hold_time):
+    """SafetyParameters take any hold_time > 0: one of a nanosecond or
+    less still stops the base while a point is inside the footprint
+    (the tick itself counts, not only the time after it)."""
+    limiter = BaseCommandLimiter(
+        SafetyParameters(**BASE_LIMITS, hold_time=hold_time), H, HALF)
+    context = limiter.CreateDefaultContext()
+    limiter.set_previous(context, [0.5, 0.0, 0.0])
+    limiter.GetInputPort("velocity").FixValue(context, [0.5, 0.0, 0.0])
+    limiter.GetInputPort("stopped").FixValue(context, [0.0])
+    limiter.GetInputPort("obstacle_points").FixValue(
+        context, AbstractValue.Make(np.array([[0.1, 0.0], [5.0, 5.0]])))
+    for k in range(5):
+        context.SetTime(k * H)
+        context.SetDiscreteState(limiter.EvalUniquePeriodicDiscreteUpdate(
+            context).get_vector().CopyToVector())
+        assert limiter.GetOutputPort("protective_stop").Eval(
+            context)[0] == 1.0
+        assert limiter.GetOutputPort("velocity_command").Eval(
+            context)[0] == pytest.approx(0.5 - (k + 1) * H)

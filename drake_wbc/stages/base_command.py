@@ -412,7 +412,10 @@ def BaseCommandLimiter_(T):
             if inside >= 0.5:
                 last_inside = time
                 state.protective[1] = time
-            stopped = time - last_inside < self._hold_time - 1e-9
+            # A point inside now is a stop whatever the hold time (one of
+            # 1e-9 s or less would not count the tick itself).
+            stopped = (inside >= 0.5
+                       or time - last_inside < self._hold_time - 1e-9)
             if stopped == was:
                 return
             state.protective[0] = 1.0 if stopped else 0.0
