@@ -18,6 +18,7 @@ from drake_wbc.math import safety
 from drake_wbc.math.base_state import BASE_STATE_SIZE
 from drake_wbc.math.command_limits import (
     limit_base_velocity,
+    uniform_scale,
 )
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.people import (
@@ -464,11 +465,19 @@ def BaseCommandLimiter_(T):
 
         def set_previous(self, context, velocity):
             """Sets the previous command (3,), e.g. the base's measured
-            velocity when the controller takes over."""
+            velocity when the controller takes over; one beyond the
+            velocity limits is scaled as a whole into them (its direction
+            kept), since the command ramps from it: a base moving faster
+            than the limits when the controller takes over would
+            otherwise be sent commands beyond them until they had
+            ramped down."""
+            velocity = as_vector("velocity", velocity, safety.BASE_AXES)
+            scale = uniform_scale(velocity, self._velocity_limits)
+            if scale < 1.0:
+                velocity = scale * velocity
             vector = context.get_mutable_discrete_state_vector()
             state = vector.CopyToVector()
-            limiter_state(state).previous[:] = as_vector(
-                "velocity", velocity, safety.BASE_AXES)
+            limiter_state(state).previous[:] = velocity
             vector.SetFromVector(state)
 
     return Impl
