@@ -563,6 +563,30 @@ def test_a_finite_twist_whose_rates_overflow_brakes(arm, V):
         assert state[12] == 1.0
 
 
+def test_a_start_far_outside_the_limits_is_refused_not_jumped_to(arm):
+    """Joint limits tightened to exclude the arm's measured position: the
+    command would start on the limit, a jump of 0.95 rad for the servo;
+    set_arm_position (Controller.initialize) refuses it, naming the
+    joint. A reading past a limit by at most MEASURED_POSITION_MARGIN (an
+    encoder at its limit) still starts on the limit."""
+    lower = np.array(arm.lower, dtype=float)
+    lower[1] = 0.5
+    params = ArmControllerParameters(lower=lower.tolist(),
+                                     upper=list(arm.upper))
+    system = ArmCartesianVelocityController(params, arm)
+    context = system.CreateDefaultContext()
+    with pytest.raises(ValueError, match=(
+            r"q\[1\] = -0.45 is not allowed: must lie within the joint's "
+            r"limits \[0.5, 2.35\] rad give or take 0.1")):
+        system.set_arm_position(context, HOME_ARM_POSITIONS)
+    q = np.array(HOME_ARM_POSITIONS, dtype=float)
+    q[1] = 0.45
+    system.set_arm_position(context, q)
+    q[1] = 0.5
+    np.testing.assert_array_equal(system.GetOutputPort(
+        "arm_position_command").Eval(context), q)
+
+
 # --- the system -------------------------------------------------------
 
 
