@@ -494,3 +494,33 @@ def test_a_point_inside_stops_the_base_whatever_the_hold_time(hold_time):
             context)[0] == 1.0
         assert limiter.GetOutputPort("velocity_command").Eval(
             context)[0] == pytest.approx(0.5 - (k + 1) * H)
+
+
+def test_time_set_back_neither_makes_up_nor_forgets_a_protective_stop():
+    """A context whose time is set back (9 s) after a point inside the
+    footprint has gone: a stop that had cleared stays clear (it held the
+    base for 9.5 s, naming a point inside that was not there), and one
+    that still holds restarts its hold_time from the new time."""
+    params = SafetyParameters(**BASE_LIMITS)
+    far, inside = np.array([[5.0, 5.0]]), np.array([[0.1, 0.0]])
+    for cleared, resumes in ((True, 0), (False, 50)):
+        limiter = BaseCommandLimiter(params, H, HALF)
+        context = limiter.CreateDefaultContext()
+        limiter.GetInputPort("velocity").FixValue(context, [0.3, 0.0, 0.0])
+        limiter.GetInputPort("stopped").FixValue(context, [0.0])
+
+        def tick(time, points, limiter=limiter, context=context):
+            context.SetTime(time)
+            limiter.GetInputPort("obstacle_points").FixValue(
+                context, AbstractValue.Make(points))
+            context.SetDiscreteState(
+                limiter.EvalUniquePeriodicDiscreteUpdate(context)
+                .get_vector().CopyToVector())
+            return limiter.GetOutputPort("protective_stop").Eval(context)[0]
+
+        stops = [tick(10.0 + k * H, inside if k < 5 else far)
+                 for k in range(80 if cleared else 20)]
+        assert stops[-1] == (0.0 if cleared else 1.0)
+        stops = [tick(1.0 + k * H, far) for k in range(100)]
+        assert stops == [1.0] * resumes + [0.0] * (100 - resumes)
+        assert limiter.reason(context) == ""

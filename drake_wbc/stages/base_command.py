@@ -410,9 +410,14 @@ def BaseCommandLimiter_(T):
             if flags.dtype == object:
                 flags = value_of(flags)
             was, last_inside, inside = flags[0] >= 0.5, flags[1], flags[2]
-            if inside >= 0.5:
+            if inside >= 0.5 or (time < last_inside and was):
+                # (Time set back during a stop: its hold restarts now.)
                 last_inside = time
                 state.protective[1] = time
+            elif time < last_inside:
+                # Time set back after the stop cleared: it stays clear.
+                last_inside = NEVER
+                state.protective[1] = NEVER
             # A point inside now is a stop whatever the hold time (one of
             # 1e-9 s or less would not count the tick itself).
             stopped = (inside >= 0.5
