@@ -237,6 +237,39 @@ def test_walls_and_crates_are_not_people():
         assert found == []
 
 
+def test_the_tracker_starts_again_when_time_is_set_back():
+    """Eight pillars fill the tracker's slots; the time is then set 9 s
+    back and a person walks towards the base at 1.2 m/s: the tracks,
+    seen in the new time's future, neither followed a cluster nor ended,
+    and the person was never tracked (nor kept at the protective
+    separation) for those 9 s. It is taken for a person as soon as in a
+    tracker started afresh."""
+    params = PeopleSeparationParameters()
+    pillars = [[2.0 * math.cos(a), 2.0 * math.sin(a), 0.1]
+               for a in np.linspace(0.4, 2 * math.pi - 0.4, 8)]
+    pose = np.zeros(3)
+
+    def scans(state, start_time, person):
+        found = []
+        for k in range(25):
+            circles = list(pillars)
+            if person:
+                circles.append([4.5 - 1.2 * k * SCAN, 0.0, 0.25])
+            state, people, _ = tracking.people_scan(
+                state, scan_of(pose, circles), odometry(pose, [0, 0, 0]),
+                start_time + k * SCAN, HALF, params)
+            found.append(len(people))
+        return state, found
+
+    state, found = scans(tracking.initial_tracker(), 10.0, False)
+    assert found == [0] * 25
+    assert (tracking.tracks_of(state)[:, 4] > 0).sum() == tracking.MAX_TRACKS
+    _, after = scans(state, 1.0, True)
+    _, fresh = scans(tracking.initial_tracker(), 1.0, True)
+    assert fresh[-1] == 1
+    assert after == fresh
+
+
 # --- the limiter on an ideal robot ------------------------------------------
 
 
