@@ -541,6 +541,52 @@ def test_controller_brakes_on_hold_and_on_a_twist_that_is_not_finite(arm):
     np.testing.assert_array_equal(state, np.r_[q0, np.zeros(6), 0.0])
 
 
+@pytest.mark.parametrize("V", [[1e308, 1e308, 0, 0, 0, 1e308],
+                               [1.7e308, 0, 0, 0, 0, 0],
+                               [1e308, -1e308, 1e308, -1e308, 1e308, 1e308]])
+def test_a_finite_twist_whose_rates_overflow_brakes(arm, V):
+    """A twist finite but so large that its joint rates overflow (a
+    reference of 1e308 m/s, which the input guard passes as finite)
+    brakes as one that is not finite (or is scaled into the limits where
+    it does not overflow): never a NaN in q_cmd, never a step beyond the
+    acceleration limit."""
+    system = ArmCartesianVelocityController(None, arm)
+    context = system.CreateDefaultContext()
+    previous = np.array([1.5, -1.2, 0.8, 0.3, -0.1, 0.0])
+    for q0 in (HOME_ARM_POSITIONS, 0.5 * (arm.lower + arm.upper) + 0.1):
+        state = controller_update(system, context, q0, previous,
+                                  np.array(V, dtype=float), 0.0)
+        assert np.isfinite(state).all()
+        change = state[6:12] - previous
+        assert np.abs(change).max() <= ROBOT_ACCELERATION_LIMIT * H * (
+            1 + 1e-12)
+        assert state[12] == 1.0
+
+
+def test_a_start_far_outside_the_limits_is_refused_not_jumped_to(arm):
+    """Joint limits tightened to exclude the arm's measured position: the
+    command would start on the limit, a jump of 0.95 rad for the servo;
+    set_arm_position (Controller.initialize) refuses it, naming the
+    joint. A reading past a limit by at most MEASURED_POSITION_MARGIN (an
+    encoder at its limit) still starts on the limit."""
+    lower = np.array(arm.lower, dtype=float)
+    lower[1] = 0.5
+    params = ArmControllerParameters(lower=lower.tolist(),
+                                     upper=list(arm.upper))
+    system = ArmCartesianVelocityController(params, arm)
+    context = system.CreateDefaultContext()
+    with pytest.raises(ValueError, match=(
+            r"q\[1\] = -0.45 is not allowed: must lie within the joint's "
+            r"limits \[0.5, 2.35\] rad give or take 0.1")):
+        system.set_arm_position(context, HOME_ARM_POSITIONS)
+    q = np.array(HOME_ARM_POSITIONS, dtype=float)
+    q[1] = 0.45
+    system.set_arm_position(context, q)
+    q[1] = 0.5
+    np.testing.assert_array_equal(system.GetOutputPort(
+        "arm_position_command").Eval(context), q)
+
+
 # --- the system -------------------------------------------------------
 
 

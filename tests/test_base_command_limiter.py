@@ -226,6 +226,35 @@ def test_the_autodiff_limiter_differentiates_the_limits_exactly(limit):
                                atol=1e-15)
 
 
+@pytest.mark.parametrize("measured", [[2.0, 0.0, 0.0], [1.5, -3.0, 0.5]])
+def test_a_takeover_beyond_the_velocity_limits_sends_none_beyond(measured):
+    """The controller takes over a base moving faster than the velocity
+    limits (set_previous, from its measured velocity): the command stays
+    within them from the first tick, ramping from the measured velocity
+    scaled into them (its direction kept)."""
+    params = SafetyParameters(**BASE_LIMITS)
+    limits = np.array(params.base_velocity_limits)
+    system = BaseCommandLimiter(params, H, HALF_SIZES)
+    context = system.CreateDefaultContext()
+    system.set_previous(context, measured)
+    scaled = np.array(measured) / np.max(np.abs(measured) / limits)
+    np.testing.assert_allclose(limiter_state(
+        context.get_discrete_state_vector().CopyToVector()).previous,
+        scaled, rtol=1e-15)
+    system.GetInputPort("velocity").FixValue(context, measured)
+    system.GetInputPort("stopped").FixValue(context, [0.0])
+    for _ in range(5):
+        command = system.GetOutputPort("velocity_command").Eval(context)
+        assert np.all(np.abs(command) <= limits * (1 + 1e-15))
+        context.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(
+            context).get_vector().CopyToVector())
+    # Within the limits, the measured velocity is taken as it is.
+    system.set_previous(context, [0.5, -0.25, 0.125])
+    np.testing.assert_array_equal(limiter_state(
+        context.get_discrete_state_vector().CopyToVector()).previous,
+        [0.5, -0.25, 0.125])
+
+
 def test_bad_arguments_are_named():
     with pytest.raises(ValueError, match="time_step"):
         BaseCommandLimiter(time_step=0.0)

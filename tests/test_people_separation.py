@@ -237,6 +237,39 @@ def test_walls_and_crates_are_not_people():
         assert found == []
 
 
+def test_the_tracker_starts_again_when_time_is_set_back():
+    """Eight pillars fill the tracker's slots; the time is then set 9 s
+    back and a person walks towards the base at 1.2 m/s: the tracks,
+    seen in the new time's future, neither followed a cluster nor ended,
+    and the person was never tracked (nor kept at the protective
+    separation) for those 9 s. It is taken for a person as soon as in a
+    tracker started afresh."""
+    params = PeopleSeparationParameters()
+    pillars = [[2.0 * math.cos(a), 2.0 * math.sin(a), 0.1]
+               for a in np.linspace(0.4, 2 * math.pi - 0.4, 8)]
+    pose = np.zeros(3)
+
+    def scans(state, start_time, person):
+        found = []
+        for k in range(25):
+            circles = list(pillars)
+            if person:
+                circles.append([4.5 - 1.2 * k * SCAN, 0.0, 0.25])
+            state, people, _ = tracking.people_scan(
+                state, scan_of(pose, circles), odometry(pose, [0, 0, 0]),
+                start_time + k * SCAN, HALF, params)
+            found.append(len(people))
+        return state, found
+
+    state, found = scans(tracking.initial_tracker(), 10.0, False)
+    assert found == [0] * 25
+    assert (tracking.tracks_of(state)[:, 4] > 0).sum() == tracking.MAX_TRACKS
+    _, after = scans(state, 1.0, True)
+    _, fresh = scans(tracking.initial_tracker(), 1.0, True)
+    assert fresh[-1] == 1
+    assert after == fresh
+
+
 # --- the limiter on an ideal robot ------------------------------------------
 
 
@@ -445,3 +478,82 @@ controller:
             r"with station.lidar.rate = 15.0 Hz")):
         load_scenario(text=text)
     load_scenario(text=text.replace("0.05", "0.1"))
+
+
+def test_a_point_inside_is_seen_in_any_beam_of_a_scan():
+    """A base at rest in a room scans as many returns each time, the
+    first, middle and last beams on the walls: a person stepping into
+    another beam, inside the footprint, changes that scan alone, and is a
+    protective stop all the same."""
+    limiter = BaseCommandLimiter(SafetyParameters(**BASE_LIMITS), H, HALF)
+    context = limiter.CreateDefaultContext()
+    limiter.GetInputPort("velocity").FixValue(context, [0.0, 0.0, 0.0])
+    limiter.GetInputPort("stopped").FixValue(context, [0.0])
+    walls = np.column_stack([np.full(9, 3.0), np.linspace(-2.0, 2.0, 9)])
+    stepped_in = walls.copy()
+    stepped_in[2] = [0.1, 0.0]
+    stops = []
+    for k in range(30):
+        context.SetTime(k * H)
+        points = stepped_in if k >= 10 else walls
+        limiter.GetInputPort("obstacle_points").FixValue(
+            context, AbstractValue.Make(points.copy()))
+        context.SetDiscreteState(limiter.EvalUniquePeriodicDiscreteUpdate(
+            context).get_vector().CopyToVector())
+        stops.append(limiter.GetOutputPort("protective_stop").Eval(
+            context)[0])
+    assert stops[9] == 0.0
+    assert stops[10:] == [1.0] * 20
+
+
+@pytest.mark.parametrize("hold_time", [1e-10, 1e-9])
+def test_a_point_inside_stops_the_base_whatever_the_hold_time(hold_time):
+    """SafetyParameters take any hold_time > 0: one of a nanosecond or
+    less still stops the base while a point is inside the footprint
+    (the tick itself counts, not only the time after it)."""
+    limiter = BaseCommandLimiter(
+        SafetyParameters(**BASE_LIMITS, hold_time=hold_time), H, HALF)
+    context = limiter.CreateDefaultContext()
+    limiter.set_previous(context, [0.5, 0.0, 0.0])
+    limiter.GetInputPort("velocity").FixValue(context, [0.5, 0.0, 0.0])
+    limiter.GetInputPort("stopped").FixValue(context, [0.0])
+    limiter.GetInputPort("obstacle_points").FixValue(
+        context, AbstractValue.Make(np.array([[0.1, 0.0], [5.0, 5.0]])))
+    for k in range(5):
+        context.SetTime(k * H)
+        context.SetDiscreteState(limiter.EvalUniquePeriodicDiscreteUpdate(
+            context).get_vector().CopyToVector())
+        assert limiter.GetOutputPort("protective_stop").Eval(
+            context)[0] == 1.0
+        assert limiter.GetOutputPort("velocity_command").Eval(
+            context)[0] == pytest.approx(0.5 - (k + 1) * H)
+
+
+def test_time_set_back_neither_makes_up_nor_forgets_a_protective_stop():
+    """A context whose time is set back (9 s) after a point inside the
+    footprint has gone: a stop that had cleared stays clear (it held the
+    base for 9.5 s, naming a point inside that was not there), and one
+    that still holds restarts its hold_time from the new time."""
+    params = SafetyParameters(**BASE_LIMITS)
+    far, inside = np.array([[5.0, 5.0]]), np.array([[0.1, 0.0]])
+    for cleared, resumes in ((True, 0), (False, 50)):
+        limiter = BaseCommandLimiter(params, H, HALF)
+        context = limiter.CreateDefaultContext()
+        limiter.GetInputPort("velocity").FixValue(context, [0.3, 0.0, 0.0])
+        limiter.GetInputPort("stopped").FixValue(context, [0.0])
+
+        def tick(time, points, limiter=limiter, context=context):
+            context.SetTime(time)
+            limiter.GetInputPort("obstacle_points").FixValue(
+                context, AbstractValue.Make(points))
+            context.SetDiscreteState(
+                limiter.EvalUniquePeriodicDiscreteUpdate(context)
+                .get_vector().CopyToVector())
+            return limiter.GetOutputPort("protective_stop").Eval(context)[0]
+
+        stops = [tick(10.0 + k * H, inside if k < 5 else far)
+                 for k in range(80 if cleared else 20)]
+        assert stops[-1] == (0.0 if cleared else 1.0)
+        stops = [tick(1.0 + k * H, far) for k in range(100)]
+        assert stops == [1.0] * resumes + [0.0] * (100 - resumes)
+        assert limiter.reason(context) == ""

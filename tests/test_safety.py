@@ -372,6 +372,33 @@ def test_a_point_with_nan_is_dropped_not_a_fault(arm):
         np.testing.assert_array_equal(rig.log(name)[1], clean.log(name)[1])
 
 
+def test_a_reference_too_large_for_the_dmps_is_a_fault(arm):
+    """A finite reference of 1e16 m/s for 50 ms: the DMPs, integrating it
+    in double precision, lost their own values in it, and seven seconds
+    later the base still drove at its full speed against the reference
+    (-1 m/s for 0.1), with no input invalid. Beyond MAX_REFERENCE it is a
+    fault: a safe stop that names it, after which the robot resumes the
+    task as a run without it does."""
+    rig, clean = Rig(arm), Rig(arm)
+    bad = np.array(rig.valid["reference_velocity"], dtype=float)
+    bad[[0, 1, 5]] = 1e16
+    for run, value in ((rig, bad), (clean, rig.valid["reference_velocity"])):
+        run.advance(0.3)
+        run.set("reference_velocity", value)
+        run.advance(0.05)
+        if run is rig:
+            assert ("reference_velocity[0] = 1e+16 is out of the range"
+                    in rig.controller.safety_reason(rig.root_context))
+        run.set("reference_velocity", rig.valid["reference_velocity"])
+        run.advance(7.0)
+    _, status = rig.log("safety_status")
+    assert status[:, STATUS["trips"]].max() == 1.0
+    assert status[-1, STATUS["stopped"]] == 0.0
+    command = rig.log("base.velocity_command")[1][-1]
+    np.testing.assert_allclose(
+        command, clean.log("base.velocity_command")[1][-1], atol=1e-3)
+
+
 def test_commands_have_no_direct_feedthrough_from_inputs(arm):
     diagram = build_controller(robot=arm).diagram
     for output in ("base.velocity_command", "arm.position_command",

@@ -163,6 +163,11 @@ def track_scan(state, centroids, time, params, base=(0.0,) * 6):
     new = np.array(state, dtype=float)
     tracks = tracks_of(new)
     dt = time - new[-1]
+    if dt < 0.0:
+        # Time set back (a context whose time is set earlier): the tracks,
+        # seen in its future, would neither follow a candidate nor end,
+        # and would keep the slots from new ones; they start again.
+        tracks[:] = 0.0
     new[-1] = time
     centroids = np.asarray(centroids, dtype=float).reshape(-1, 2)
     match = np.full(len(centroids), -1)

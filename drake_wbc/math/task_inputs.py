@@ -2,7 +2,7 @@
 entries may take, in one table, TASK_INPUTS.
 
 - reference_velocity: V_ee^ref (6), the world-frame twist [v; w] of eq.
-  (cdmp-wb); any finite values.
+  (cdmp-wb); every entry within +-MAX_REFERENCE.
 - desired_wrench: F_d (6) of eq. (cdmp-arm); any finite values.
 - phri_switch: S_hri (1), 0 or 1 (eqs. (cdmp-wb), (cdmp-arm): "a pHRI
   mode switching variable with value of 0 or 1").
@@ -76,8 +76,19 @@ class TaskInput(NamedTuple):
         return self.check(name, as_scalar(name, value))
 
 
+MAX_REFERENCE = 1e3
+"""m/s and rad/s: the largest magnitude of an entry of reference_velocity,
+a thousand times what any mobile manipulator's end effector is meant to
+do (the commands saturate far below it). The DMPs integrate the
+reference in double precision, in which a value some 1e13 times their
+working values absorbs them: a reference of 1e16 m/s for 50 ms left the
+base driving at its full speed against a reference of 0.1 m/s seven
+seconds later, with no input invalid. A larger entry is a fault of the
+input (the InputGuard's safe stop)."""
+
 TASK_INPUTS = {
-    "reference_velocity": TaskInput(6),
+    "reference_velocity": TaskInput(6, lower=-MAX_REFERENCE,
+                                    upper=MAX_REFERENCE),
     "desired_wrench": TaskInput(6),
     "phri_switch": TaskInput(1, switch=True),
     "null_space_gain": TaskInput(1, lower=0.0),

@@ -12,6 +12,7 @@ from drake_wbc.math.arm_control import (
     twist_limits,
 )
 from drake_wbc.math.kernels import body_for
+from drake_wbc.math.safety import MEASURED_POSITION_MARGIN
 from drake_wbc.math.scalar_support import all_finite, through_float_function
 from drake_wbc.math.validation import as_vector, checked_instance, positive
 from drake_wbc.robot.model import ArmKinematics
@@ -74,7 +75,7 @@ def ArmCartesianVelocityController_(T):
         q_cmd never leaves the joint limits [lower, upper]: the update keeps
         it in the band [lower + margin, upper - margin] (a joint outside the
         band only moves back in), and `set_arm_position` clamps a start
-        outside the limits onto them.
+        just outside the limits onto them (and refuses one further out).
 
         One periodic discrete update at the control period h:
 
@@ -198,9 +199,14 @@ def ArmCartesianVelocityController_(T):
             limits = self._limits
             if hold or not finite:
                 V_a, limits = self._no_twist, self._hold_limits
-            command = self._command(
-                through_float_function(self._jacobian, q), V_a, q, previous,
-                limits)
+            J_a = through_float_function(self._jacobian, q)
+            command = self._command(J_a, V_a, q, previous, limits)
+            if not all_finite(command.q_dot):
+                # A finite twist so large that the rates overflow (1e308
+                # m/s): braked as one that is not finite.
+                finite = False
+                command = self._command(J_a, self._no_twist, q, previous,
+                                        self._hold_limits)
             h = self._time_step
             # The bounds keep q in the band up to rounding; the clip makes
             # the joint limits exact.
@@ -236,10 +242,27 @@ def ArmCartesianVelocityController_(T):
             the servo sees no jump. A joint outside the band
             [lower + margin, upper - margin] is kept where it is and is
             only prevented from moving further out; one outside the joint
-            limits [lower, upper] starts on the limit, so that the command
-            never leaves them."""
-            q = np.clip(as_vector("q", q, self.num_joints), self.lower,
-                        self.upper)
+            limits [lower, upper] by at most MEASURED_POSITION_MARGIN (an
+            encoder reading past a limit) starts on the limit, so that
+            the command never leaves them.
+
+            Raises:
+                ValueError: naming the first joint further outside its
+                    limits (e.g. limits tightened to exclude the arm's
+                    position: its command would jump onto them).
+            """
+            q = as_vector("q", q, self.num_joints)
+            beyond = np.maximum(self.lower - q, q - self.upper)
+            if np.any(beyond > MEASURED_POSITION_MARGIN):
+                i = int(np.flatnonzero(beyond > MEASURED_POSITION_MARGIN)[0])
+                raise ValueError(
+                    f"q[{i}] = {float(q[i])!r} is not allowed: must lie "
+                    f"within the joint's limits [{float(self.lower[i])!r}, "
+                    f"{float(self.upper[i])!r}] rad give or take "
+                    f"{MEASURED_POSITION_MARGIN!r} (the command would jump "
+                    "onto them); move the arm within them or widen "
+                    "arm_controller.lower and upper")
+            q = np.clip(q, self.lower, self.upper)
             state = np.zeros(self._state_size)
             state[self._q] = q
             context.SetDiscreteState(state)

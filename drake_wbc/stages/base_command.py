@@ -7,6 +7,7 @@ InputGuard, which decides the stop, and StopGate are in
 drake_wbc.stages.safety."""
 
 import logging
+import zlib
 from typing import NamedTuple
 
 import numpy as np
@@ -17,6 +18,7 @@ from drake_wbc.math import safety
 from drake_wbc.math.base_state import BASE_STATE_SIZE
 from drake_wbc.math.command_limits import (
     limit_base_velocity,
+    uniform_scale,
 )
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.people import (
@@ -62,7 +64,10 @@ point on or inside the footprint, whether the last scan had one]."""
 _SCAN = _PROTECTIVE + 3
 """The last scan's signature (`_signature_of`)."""
 
-_TRACKER = _SCAN + 7
+_SIGNATURE_SIZE = 8
+"""The size of a scan's signature (`_signature_of`)."""
+
+_TRACKER = _SCAN + _SIGNATURE_SIZE
 """Where the people tracker's state (TRACKER_SIZE) starts."""
 
 _SIZE = _TRACKER + TRACKER_SIZE
@@ -80,7 +85,7 @@ class LimiterState(NamedTuple):
             none).
         protective: [stopped, the last tick's time with a point on or
             inside the footprint, whether the last scan had one].
-        scan: the last scan's signature (7).
+        scan: the last scan's signature (_SIGNATURE_SIZE).
         tracker: the people tracker's state (TRACKER_SIZE).
     """
 
@@ -110,14 +115,18 @@ def _rows_and_allowed(separation):
 
 
 def _signature_of(points):
-    """A scan's signature: [points, its first, middle and last point] (0
-    for none): a new scan of a base or a scene that moves changes them
-    (a scan of a static scene from a base at rest is the same scan)."""
+    """A scan's signature: [points, the CRC-32 of all their coordinates,
+    its first, middle and last point] (0 for none): a new scan of a base
+    or a scene that moves changes it, wherever the change is (a person
+    stepping into a beam of a scanner at rest, its other beams the
+    same); a scan of a static scene from a base at rest is the same
+    scan. The points are a float (M, 2) array."""
     count = len(points)
     if not count:
-        return np.zeros(7)
-    return np.concatenate(((float(count),), points[0], points[count // 2],
-                           points[count - 1]))
+        return np.zeros(_SIGNATURE_SIZE)
+    crc = zlib.crc32(np.ascontiguousarray(points, dtype=float).data)
+    return np.concatenate(((float(count), float(crc)), points[0],
+                           points[count // 2], points[count - 1]))
 
 
 LOGGER = logging.getLogger("drake_wbc.math.safety")
@@ -206,8 +215,8 @@ def BaseCommandLimiter_(T):
         moving people's rows (3 MAX_TRACKS) and allowed speeds
         (MAX_TRACKS, FAR where none), the protective stop [stopped, the
         last time a point was inside, whether the last scan had one], the
-        last scan's signature (7: its size, first, middle and last point)
-        and the
+        last scan's signature (_SIGNATURE_SIZE: its size, the CRC-32 of
+        its coordinates, its first, middle and last point) and the
         tracker's state (drake_wbc.math.people.TRACKER_SIZE). The
         tracking is float-only and runs once a scan (when the signature
         changes: at 15 Hz, not every tick); without a moving person or a
@@ -302,7 +311,8 @@ def BaseCommandLimiter_(T):
             return np.concatenate([
                 np.zeros(safety.BASE_AXES),
                 self._separation(np.zeros((0, 2))), people,
-                [0.0, NEVER, 0.0], np.zeros(7), initial_tracker()])
+                [0.0, NEVER, 0.0], np.zeros(_SIGNATURE_SIZE),
+                initial_tracker()])
 
         def _limited(self, desired, previous, stopped, rows, allowed,
                      people=None):
@@ -400,10 +410,18 @@ def BaseCommandLimiter_(T):
             if flags.dtype == object:
                 flags = value_of(flags)
             was, last_inside, inside = flags[0] >= 0.5, flags[1], flags[2]
-            if inside >= 0.5:
+            if inside >= 0.5 or (time < last_inside and was):
+                # (Time set back during a stop: its hold restarts now.)
                 last_inside = time
                 state.protective[1] = time
-            stopped = time - last_inside < self._hold_time - 1e-9
+            elif time < last_inside:
+                # Time set back after the stop cleared: it stays clear.
+                last_inside = NEVER
+                state.protective[1] = NEVER
+            # A point inside now is a stop whatever the hold time (one of
+            # 1e-9 s or less would not count the tick itself).
+            stopped = (inside >= 0.5
+                       or time - last_inside < self._hold_time - 1e-9)
             if stopped == was:
                 return
             state.protective[0] = 1.0 if stopped else 0.0
@@ -452,11 +470,19 @@ def BaseCommandLimiter_(T):
 
         def set_previous(self, context, velocity):
             """Sets the previous command (3,), e.g. the base's measured
-            velocity when the controller takes over."""
+            velocity when the controller takes over; one beyond the
+            velocity limits is scaled as a whole into them (its direction
+            kept), since the command ramps from it: a base moving faster
+            than the limits when the controller takes over would
+            otherwise be sent commands beyond them until they had
+            ramped down."""
+            velocity = as_vector("velocity", velocity, safety.BASE_AXES)
+            scale = uniform_scale(velocity, self._velocity_limits)
+            if scale < 1.0:
+                velocity = scale * velocity
             vector = context.get_mutable_discrete_state_vector()
             state = vector.CopyToVector()
-            limiter_state(state).previous[:] = as_vector(
-                "velocity", velocity, safety.BASE_AXES)
+            limiter_state(state).previous[:] = velocity
             vector.SetFromVector(state)
 
     return Impl
