@@ -243,3 +243,18 @@ def test_the_summary_heads_a_single_run_without_its_name():
     summary["runs"]["other"] = {"m": 2.0}
     text = format_summary(summary, Path("out"))
     assert "Run run:\n  m " in text and "Run other:\n  m " in text
+
+
+def test_a_run_shorter_than_the_step_writes_its_files(tmp_path, capsys):
+    """`--duration` shorter than the step's start (1 s) leaves the step's
+    metrics without samples: they are NaN ("nan" in summary.json), and
+    the logs, the figure and the summary are still written."""
+    import json
+
+    assert main(["run", "trajectory_tracking", "--duration", "0.5",
+                 "--no-replay", "--output", str(tmp_path)]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    metrics = summary["metrics"]
+    assert metrics["filtered.error_rms_total_m_s"] == "nan"
+    assert metrics["unfiltered.peak_error_after_step_m_s"] == "nan"
+    assert (tmp_path / "trajectory_tracking.png").is_file()
