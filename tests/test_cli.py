@@ -258,3 +258,27 @@ def test_a_run_shorter_than_the_step_writes_its_files(tmp_path, capsys):
     assert metrics["filtered.error_rms_total_m_s"] == "nan"
     assert metrics["unfiltered.peak_error_after_step_m_s"] == "nan"
     assert (tmp_path / "trajectory_tracking.png").is_file()
+
+
+@pytest.mark.parametrize("argv", [
+    ["run", "--duration", "0.1", "--no-replay"], ["diagram"], ["demo"],
+    ["teach", "teach"]])
+def test_an_output_that_cannot_be_written_is_named(argv, tmp_path, capsys):
+    """An --output under a file is refused in one line naming the option,
+    its value and why (it was a traceback from mkdir)."""
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    output = blocker / "out"
+    assert main(argv + ["--output", str(output)]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"drake-wbc {argv[0]}: --output = {str(output)!r} is not "
+                   f"allowed: cannot write {str(output)!r} (Not a "
+                   "directory)\n")
+
+
+def test_demo_names_a_controller_file_that_is_not_there(tmp_path, capsys):
+    assert main(["demo", "--controller", str(tmp_path / "nosuch.yaml"),
+                 "--output", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == (
+        f"drake-wbc demo: --controller = {str(tmp_path / 'nosuch.yaml')!r} "
+        "is not allowed: no such file\n")
