@@ -185,7 +185,12 @@ def test_zero_basis_functions_are_refused_not_replaced(teach_run, tmp_path,
     (["--stop", "0.2"], "--start = 0.5 s, --stop = 0.2 s is not allowed: "
      "the demonstration must end after it starts"),
     (["--start", "nan"], "--start = nan s is not allowed: must be a finite "
-     "time")])
+     "time"),
+    (["--start", "-1"], "--start = -1.0 s, --stop = 6.5 s is not allowed: "
+     "must be an interval of the simulated run (from 0 to 7 s)"),
+    (["--start", "8", "--stop", "9"], "--start = 8.0 s, --stop = 9.0 s is "
+     "not allowed: must be an interval of the simulated run (from 0 to 7 "
+     "s)")])
 def test_markers_that_cannot_be_are_refused_before_the_run(
         markers, message, tmp_path, capsys):
     """--start and --stop are checked against each other and the

@@ -76,6 +76,14 @@ def run_teach(args, argv=None, echo=print):
     # The markers, before the run.
     start, stop = teach.interval(scenario, args.start, args.stop,
                                  names=options)
+    if args.log is None and (
+            (args.start is not None and start < 0.0)
+            or (args.stop is not None and stop > scenario.duration)):
+        # Known before the run, which would only be thrown away.
+        raise ValueError(
+            f"--start = {start!r} s, --stop = {stop!r} s is not allowed: "
+            "must be an interval of the simulated run (from 0 to "
+            f"{scenario.duration:g} s)")
     output = args.output or Path("out") / f"teach_{path.stem}"
     output.mkdir(parents=True, exist_ok=True)
     written = []
