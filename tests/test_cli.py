@@ -276,6 +276,29 @@ def test_an_output_that_cannot_be_written_is_named(argv, tmp_path, capsys):
                    "directory)\n")
 
 
+def test_an_output_whose_folder_is_a_file_is_named(tmp_path, capsys):
+    """The folder on the way to --movement is a file: the error names the
+    option too, and the exit code is a bad argument's."""
+    from drake_wbc.math import movement as mv
+
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    shipped = mv.LearnedMovement.load(
+        Path(__file__).resolve().parents[1] / "diagrams" / "movements"
+        / "teach.yaml")
+    with pytest.raises(OSError) as error:
+        shipped.save(blocker / "movement.yaml")
+    from drake_wbc.cli.main import _unwritable
+
+    args = make_parser().parse_args(
+        ["teach", "teach", "--movement", str(blocker / "movement.yaml")])
+    message, code = _unwritable(args, error.value)
+    assert code == 2
+    assert message.startswith(
+        f"--movement = {str(blocker / 'movement.yaml')!r} is not allowed: "
+        f"cannot write {str(blocker)!r}")
+
+
 def test_demo_names_a_controller_file_that_is_not_there(tmp_path, capsys):
     assert main(["demo", "--controller", str(tmp_path / "nosuch.yaml"),
                  "--output", str(tmp_path)]) == 2

@@ -293,14 +293,15 @@ OUTPUT_OPTIONS = ("output", "movement")
 def _unwritable(args, error):
     """The one-line message of `error`, an OSError a command met, and its
     exit code: 2 naming the option when it met it where an output option
-    (`OUTPUT_OPTIONS`) points, 1 otherwise."""
+    (`OUTPUT_OPTIONS`) points, in it or on the way to it, 1 otherwise."""
     reason = error.strerror or str(error)
     if error.filename is not None:
         failed = Path(os.fsdecode(error.filename))
         for option in OUTPUT_OPTIONS:
             given = getattr(args, option, None)
-            if given is not None and (failed == Path(given)
-                                      or Path(given) in failed.parents):
+            if given is not None and (
+                    failed == Path(given) or Path(given) in failed.parents
+                    or failed in Path(given).parents):
                 return (f"--{option} = {str(given)!r} is not allowed: "
                         f"cannot write {str(failed)!r} ({reason})"), 2
         return f"cannot write {str(failed)!r} ({reason})", 1
