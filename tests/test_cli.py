@@ -305,3 +305,16 @@ def test_demo_names_a_controller_file_that_is_not_there(tmp_path, capsys):
     assert capsys.readouterr().err == (
         f"drake-wbc demo: --controller = {str(tmp_path / 'nosuch.yaml')!r} "
         "is not allowed: no such file\n")
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["plot"], "logfile"), (["teach", "teach", "--log"], "--log")])
+def test_a_folder_given_as_an_lcm_log_is_named(argv, option, tmp_path,
+                                               capsys):
+    """A folder is not 'no such file': the error says what it is."""
+    assert main(argv + [str(tmp_path), "--output",
+                        str(tmp_path / "out")]) == 2
+    assert capsys.readouterr().err == (
+        f"drake-wbc {argv[0]}: {option} = {str(tmp_path)!r} is not "
+        "allowed: a folder, not an LCM log\n")
+    assert not (tmp_path / "out").exists()

@@ -262,7 +262,8 @@ def run_plot(args):
 
     if not args.logfile.is_file():
         raise ValueError(f"logfile = {str(args.logfile)!r} is not allowed: "
-                         "no such file")
+                         + ("a folder, not an LCM log"
+                            if args.logfile.is_dir() else "no such file"))
     output = args.output or Path("out") / args.logfile.stem
     scenario = args.scenario
     if args.robot is not None:

@@ -84,15 +84,16 @@ def run_teach(args, argv=None, echo=print):
             f"--start = {start!r} s, --stop = {stop!r} s is not allowed: "
             "must be an interval of the simulated run (from 0 to "
             f"{scenario.duration:g} s)")
+    if args.log is not None and not Path(args.log).is_file():
+        raise ValueError(f"--log = {str(args.log)!r} is not allowed: "
+                         + ("a folder, not an LCM log"
+                            if Path(args.log).is_dir() else "no such file"))
     output = args.output or Path("out") / f"teach_{path.stem}"
     output.mkdir(parents=True, exist_ok=True)
     written = []
     if args.log is not None:
         from drake_wbc.deployment.lcm_logs import read_lcm_log
 
-        if not Path(args.log).is_file():
-            raise ValueError(f"--log = {str(args.log)!r} is not allowed: "
-                             "no such file")
         log = read_lcm_log(args.log, scenario.hardware)
     else:
         from drake_wbc.experiments.runner import build_closed_loop, simulate
