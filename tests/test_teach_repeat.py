@@ -289,6 +289,11 @@ def test_replay_command_builds_its_scenario():
                        "allowed"):
         teach_commands.replay_scenario(parser.parse_args([
             "movements/teach.yaml", "--start-time", "-1"]))
+    with pytest.raises(ValueError, match=r"^--obstacle 0\.0 0\.0 -1\.0: "
+                       r"radius = -1\.0 is not allowed: must be greater "
+                       "than 0$"):
+        teach_commands.replay_scenario(parser.parse_args([
+            "movements/teach.yaml", "--obstacle", "0", "0", "-1"]))
     # A tau the movement cannot be played at is refused before the run
     # (it was refused as "tau" when the controller was built).
     with pytest.raises(ValueError, match=r"^--tau = 0\.001 is not allowed "

@@ -206,10 +206,15 @@ def replay_scenario(args):
     if duration is None:
         duration = (start_time + movement.params.duration * tau
                     / movement.params.tau + 1.5)
-    cylinders = list(scenario.scene.cylinders) + [
-        CylinderObstacle(name=f"obstacle_{i}", position=[x, y], radius=r,
-                         height=1.0)
-        for i, (x, y, r) in enumerate(args.obstacle or [])]
+    cylinders = list(scenario.scene.cylinders)
+    for i, (x, y, r) in enumerate(args.obstacle or []):
+        try:
+            cylinders.append(validate(CylinderObstacle(
+                name=f"obstacle_{i}", position=[x, y], radius=r,
+                height=1.0)))
+        except ValueError as error:
+            raise ValueError(f"--obstacle {x!r} {y!r} {r!r}: {error}"
+                             ) from None
     label = "replay" + (f", goal {list(args.goal)}" if args.goal else "") \
         + (f", tau {args.tau}" if args.tau else "")
     description = (
