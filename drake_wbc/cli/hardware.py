@@ -277,8 +277,14 @@ def run_plot(args):
             Scenario(description=f"LCM log {args.logfile.stem}")
             if scenario is None else load_scenario(find_scenario(scenario)),
             args)
-    summary = plot_lcm_log(args.logfile, output, scenario=scenario,
-                           variant=args.variant, deployment=args.deployment)
+    try:
+        summary = plot_lcm_log(args.logfile, output, scenario=scenario,
+                               variant=args.variant,
+                               deployment=args.deployment)
+    except ValueError as error:  # the options' errors, named as typed
+        if str(error).startswith(("variant = ", "deployment = ")):
+            raise ValueError(f"--{error}") from None
+        raise
     print(json_text({k: v for k, v in summary.items() if k != "runs"}))
     print(f"Written to {output}/: "
           f"{', '.join(summary['files'] + ['summary.json'])}")
