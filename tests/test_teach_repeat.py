@@ -289,6 +289,9 @@ def test_replay_command_builds_its_scenario():
                        "allowed"):
         teach_commands.replay_scenario(parser.parse_args([
             "movements/teach.yaml", "--start-time", "-1"]))
+    with pytest.raises(ValueError, match=r"^movement = 'nosuch\.yaml' is "
+                       "not allowed: no movement file there"):
+        teach_commands.replay_scenario(parser.parse_args(["nosuch.yaml"]))
     with pytest.raises(ValueError, match=r"^--obstacle 0\.0 0\.0 -1\.0: "
                        r"radius = -1\.0 is not allowed: must be greater "
                        "than 0$"):

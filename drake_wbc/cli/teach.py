@@ -184,7 +184,11 @@ def replay_scenario(args):
         positive_duration("--duration", args.duration)
     path = find_scenario(args.scenario)
     scenario = on_robot(load_scenario(path), args)
-    file = resolve_movement_file(args.movement).resolve()
+    try:
+        file = resolve_movement_file(args.movement).resolve()
+    except ValueError as error:  # named as the command line names it
+        raise ValueError(f"movement{str(error).removeprefix('file')}"
+                         ) from None
     movement = LearnedMovement.load(file)
     base = (scenario.variants[0].movement
             or scenario.controller.whole_body_cdmp.movement
