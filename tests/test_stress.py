@@ -176,6 +176,9 @@ def test_the_journal_keeps_each_case_and_resume_runs_only_the_rest(
                                         "--resume"))
     output = capsys.readouterr()
     assert "1 case(s) kept" in output.out
+    # --workers 1 runs the cases here, as its help says, and so the
+    # command says (it said "in 1 worker process(es)").
+    assert f"seed {SEED}, in this process;" in output.out
     assert "1 / 1 cases done" in output.err
     document = json.loads((tmp_path / "stress.json").read_text())
     assert [case["case"] for case in document["cases"]] == [0, 1]

@@ -589,7 +589,8 @@ def run_stress(args):
         args.seed, args.cases, args.duration, args.workers, prefix="--")
     checked_scheduler(args.scheduler)
     where = (f"on the Dask cluster at {args.scheduler}" if args.scheduler
-             else f"in {workers} worker process(es)")
+             else "in this process" if workers == 1
+             else f"in {workers} worker processes")
     robot = "" if args.robot is None else str(
         robot_option_file(args.robot).resolve())
     if robot:
