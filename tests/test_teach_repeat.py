@@ -347,3 +347,18 @@ def test_teach_and_repeat_use_the_scenarios_robot():
         else:
             *_, tcp = repeat.replay_comparison(scenario, variant.name, log)
             np.testing.assert_allclose(tcp[:, :3], truth, atol=0.01)
+
+
+def test_a_teaching_run_cut_before_the_demonstration_writes_its_files(
+        tmp_path, capsys):
+    """`drake-wbc run teach --duration 0.3` ends before S_hri turns 1 at
+    0.5 s: it failed after the run ('start = 0.5 s, stop = 0.3 s is not
+    allowed'); its logs and summary are written, with the start marker
+    alone and no figure."""
+    from drake_wbc.cli.main import main
+
+    assert main(["run", "teach", "--duration", "0.3", "--no-replay",
+                 "--output", str(tmp_path)]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["metrics"] == {"start_s": 0.5}
+    assert sorted(summary["files"]) == ["log_teach.csv", "log_teach.npz"]
