@@ -185,6 +185,7 @@ def run_deploy(args):
     import numpy as np
 
     from drake_wbc.deployment.deploy import deploy
+    from drake_wbc.experiments.runner import Progress
 
     _log_to_stderr()
     duration = _duration(args.duration)
@@ -196,21 +197,28 @@ def run_deploy(args):
           f"{options.lcm_url}: waiting for {channels.base_state}, "
           f"{channels.arm_status}, {channels.wrist_wrench} and "
           f"{channels.obstacle_points}", flush=True)
+    meter = []  # the run's progress line, from the controller's start
+
+    def started(arm_positions):
+        print("deploy: running from the arm at "
+              f"{np.array2string(arm_positions, precision=3)} rad (Ctrl-C "
+              "stops the robot)", flush=True)
+        meter.append(Progress(f"deploy {variant.name}",
+                              duration or scenario.duration, what="run"))
+
     with StopRequest() as stop:
         try:
             result = deploy(
                 scenario, variant, options, duration=duration, stop=stop,
-                realtime_rate=rate,
-                on_start=lambda q: print(
-                    "deploy: running from the arm at "
-                    f"{np.array2string(q, precision=3)} rad (Ctrl-C stops "
-                    "the robot)", flush=True))
+                realtime_rate=rate, on_start=started,
+                on_progress=lambda t: meter[0].update(t))
         except TimeoutError as error:
             print(f"drake-wbc deploy: {error}", file=sys.stderr)
             return 1
     if result is None:
         print("deploy: stopped before the robot answered", flush=True)
         return INTERRUPTED
+    meter[0].update(result.time, done=True)
     diagnostics = ", ".join(f"{k} {v:g}" for k, v in
                             result.diagnostics.items()
                             if not k.endswith("_age"))
