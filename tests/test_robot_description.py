@@ -331,3 +331,16 @@ def test_a_descriptions_package_wins_over_one_drake_knows(tmp_path):
     path.write_text(yaml.safe_dump(document))
     arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
     assert arm.num_joints == 7
+
+
+def test_a_model_file_that_is_not_there_names_the_field(tmp_path):
+    """A description whose model file is missing ended `drake-wbc demo
+    --robot` in a traceback from Drake's parser (XML_ERROR_FILE_NOT_FOUND);
+    it is refused naming model.file and where it was looked for."""
+    path = write_omni_arm(tmp_path, 6)
+    (tmp_path / "omni_arm.urdf").unlink()
+    description = load_robot_description(path)
+    with pytest.raises(ValueError, match=(
+            r"^model\.file = 'omni_arm\.urdf' is not allowed: no such file "
+            rf"\({tmp_path / 'omni_arm.urdf'}\)$")):
+        add_robot(MultibodyPlant(0.001), description)

@@ -257,6 +257,13 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
             f"suspension = {suspension!r} is not allowed: must be None or "
             "SuspensionGains (drake_wbc.robot.suspension)")
     mount = replace(checked_instance("mount", mount, ArmMount, ArmMount))
+    for kind in ("directives", "file"):
+        given = getattr(source, kind)
+        if given and "://" not in given and not Path(
+                description.resolve(given)).is_file():
+            raise ValueError(
+                f"model.{kind} = {given!r} is not allowed: no such file "
+                f"({description.resolve(given)})")
     if source.directives:
         url = description.resolve(source.directives)
         path = package_map.ResolveUrl(url) if "://" in url else url
