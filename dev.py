@@ -49,22 +49,32 @@ def ensure_installed():
     start = time.monotonic()
     if not _venv_bin("python").exists():
         print(f"dev.py: creating {VENV.relative_to(ROOT)} ...", flush=True)
-        venv.EnvBuilder(with_pip=True).create(VENV)
+        try:
+            venv.EnvBuilder(with_pip=True).create(VENV)
+        except subprocess.CalledProcessError as error:  # e.g. no ensurepip
+            sys.exit(
+                f"dev.py: creating {VENV.relative_to(ROOT)} failed: "
+                f"{' '.join(map(str, error.cmd))} exited "
+                f"{error.returncode} (on Debian or Ubuntu, install the "
+                "python3-venv package; then remove .venv and run again)."
+            )
     print(
         "dev.py: installing drake_wbc and its dependencies "
         "(drake, numpy, scipy, matplotlib, lcm; about a minute the first "
         "time) ...",
         flush=True,
     )
-    subprocess.run(
+    code = subprocess.run(
         [
             str(_venv_bin("python")), "-m", "pip", "install",
             "--disable-pip-version-check", "--quiet",
             "--editable", f".[{EXTRAS}]",
         ],
         cwd=ROOT,
-        check=True,
-    )
+    ).returncode
+    if code != 0:  # pip has said why (no network, no wheel for this Python)
+        sys.exit(f"dev.py: installing into {VENV.relative_to(ROOT)} failed "
+                 f"(pip exited {code}; its messages above say why).")
     STAMP.write_text(digest + "\n")
     print(f"dev.py: installed in {time.monotonic() - start:.0f} s", flush=True)
 

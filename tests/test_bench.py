@@ -506,3 +506,18 @@ def test_a_scenario_that_does_not_fit_the_robot_is_skipped(tmp_path):
     rows = [line for line in report.markdown(results).splitlines()
             if line.startswith("| post_ahead |")]
     assert len(rows) == 1 and "skipped: " in rows[0]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--seed", "-1"], "--seed = -1 is not allowed: must be 0 or greater"),
+    (["--repeats", "0"], "--repeats = 0 is not allowed: must be 1 or "
+     "greater")])
+def test_bad_options_are_named_before_the_bench_starts(argv, message,
+                                                       tmp_path, capsys):
+    """A negative --seed started the race and then failed with numpy's
+    'expected non-negative integer'."""
+    from drake_wbc.cli.main import main
+
+    assert main(["bench", "--quick", "--output", str(tmp_path), *argv]) == 2
+    out, err = capsys.readouterr()
+    assert err == f"drake-wbc bench: {message}\n" and out == ""

@@ -243,3 +243,78 @@ def test_the_summary_heads_a_single_run_without_its_name():
     summary["runs"]["other"] = {"m": 2.0}
     text = format_summary(summary, Path("out"))
     assert "Run run:\n  m " in text and "Run other:\n  m " in text
+
+
+def test_a_run_shorter_than_the_step_writes_its_files(tmp_path, capsys):
+    """`--duration` shorter than the step's start (1 s) leaves the step's
+    metrics without samples: they are NaN ("nan" in summary.json), and
+    the logs, the figure and the summary are still written."""
+    import json
+
+    assert main(["run", "trajectory_tracking", "--duration", "0.5",
+                 "--no-replay", "--output", str(tmp_path)]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    metrics = summary["metrics"]
+    assert metrics["filtered.error_rms_total_m_s"] == "nan"
+    assert metrics["unfiltered.peak_error_after_step_m_s"] == "nan"
+    assert (tmp_path / "trajectory_tracking.png").is_file()
+
+
+@pytest.mark.parametrize("argv", [
+    ["run", "--duration", "0.1", "--no-replay"], ["diagram"], ["demo"],
+    ["teach", "teach"]])
+def test_an_output_that_cannot_be_written_is_named(argv, tmp_path, capsys):
+    """An --output under a file is refused in one line naming the option,
+    its value and why (it was a traceback from mkdir)."""
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    output = blocker / "out"
+    assert main(argv + ["--output", str(output)]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"drake-wbc {argv[0]}: --output = {str(output)!r} is not "
+                   f"allowed: cannot write {str(output)!r} (Not a "
+                   "directory)\n")
+
+
+def test_an_output_whose_folder_is_a_file_is_named(tmp_path, capsys):
+    """The folder on the way to --movement is a file: the error names the
+    option too, and the exit code is a bad argument's."""
+    from drake_wbc.math import movement as mv
+
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    shipped = mv.LearnedMovement.load(
+        Path(__file__).resolve().parents[1] / "diagrams" / "movements"
+        / "teach.yaml")
+    with pytest.raises(OSError) as error:
+        shipped.save(blocker / "movement.yaml")
+    from drake_wbc.cli.main import _unwritable
+
+    args = make_parser().parse_args(
+        ["teach", "teach", "--movement", str(blocker / "movement.yaml")])
+    message, code = _unwritable(args, error.value)
+    assert code == 2
+    assert message.startswith(
+        f"--movement = {str(blocker / 'movement.yaml')!r} is not allowed: "
+        f"cannot write {str(blocker)!r}")
+
+
+def test_demo_names_a_controller_file_that_is_not_there(tmp_path, capsys):
+    assert main(["demo", "--controller", str(tmp_path / "nosuch.yaml"),
+                 "--output", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == (
+        f"drake-wbc demo: --controller = {str(tmp_path / 'nosuch.yaml')!r} "
+        "is not allowed: no such file\n")
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["plot"], "logfile"), (["teach", "teach", "--log"], "--log")])
+def test_a_folder_given_as_an_lcm_log_is_named(argv, option, tmp_path,
+                                               capsys):
+    """A folder is not 'no such file': the error says what it is."""
+    assert main(argv + [str(tmp_path), "--output",
+                        str(tmp_path / "out")]) == 2
+    assert capsys.readouterr().err == (
+        f"drake-wbc {argv[0]}: {option} = {str(tmp_path)!r} is not "
+        "allowed: a folder, not an LCM log\n")
+    assert not (tmp_path / "out").exists()

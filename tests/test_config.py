@@ -322,3 +322,15 @@ def test_validate_reaches_dataclasses_inside_lists():
     holder.items[1].size = -2.0
     with pytest.raises(ValueError, match=r"items\[1\]\.size = -2"):
         validate(holder)
+
+
+def test_the_hardware_scenario_lists_every_hardware_option():
+    """diagrams/hardware.yaml lists every HardwareOptions field at its
+    default, as drake_wbc/hardware/README.md says."""
+    from drake_wbc.experiments.scenario import find_scenario, load_scenario
+    from drake_wbc.hardware.options import HardwareOptions
+
+    path = find_scenario("hardware")
+    assert_every_field_written(yaml_load_file(str(path))["hardware"],
+                               HardwareOptions())
+    assert load_scenario(path).hardware == HardwareOptions()

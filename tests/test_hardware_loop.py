@@ -170,3 +170,16 @@ def test_plot_computes_the_metrics_on_the_robot_that_ran(tmp_path, capsys):
                  "--output", str(tmp_path / "shipped")]) != 0
     assert ("its robot mcr's arm has 6 joints, the log's 7; give the robot "
             "that ran (drake-wbc plot --robot FILE)") in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--scenario", "trajectory_tracking", "--variant", "nosuch"],
+     "--variant = 'nosuch' is not allowed: must be one of filtered, "
+     "unfiltered"),
+    (["--deployment", "3"], "--deployment = 3 is not allowed: the log holds "
+     "1 run(s) of the controller clock")])
+def test_plot_names_its_options_as_typed(runs, extra, message, tmp_path,
+                                         capsys):
+    assert main(["plot", str(runs["path"]), *extra, "--output",
+                 str(tmp_path)]) == 2
+    assert capsys.readouterr().err.startswith(f"drake-wbc plot: {message}")

@@ -157,6 +157,10 @@ def test_the_run_reaches_its_end_within_the_simulated_bounds(run):
     assert run["codes"]["deploy"] == 0, run["outputs"]["deploy"]
     assert "finished at t = 2.00 s" in run["outputs"]["deploy"]
     assert "rejected 0" in run["outputs"]["deploy"]
+    # A progress line while it runs (the run said nothing between its
+    # start and its end).
+    assert "deploy filtered: [" in run["outputs"]["deploy"]
+    assert "2.00 / 2.00 s run, real-time factor" in run["outputs"]["deploy"]
     scenario = run["scenario"]
     log = read_lcm_log(run["folder"] / "run.lcmlog", scenario.hardware)
     assert log.time[-1] == pytest.approx(scenario.duration)

@@ -69,7 +69,7 @@ def test_the_protective_separation_is_its_closed_form():
         expected = v_h * (t_r + t_s) + v_r * t_r + s_s + margin
         assert protective_separation(v_r, v_h, timing, margin) == \
             pytest.approx(expected, rel=1e-14)
-    # The figures of the README: 1.87 m from a base at rest, 4.36 m from
+    # The figures of the README: 1.86 m from a base at rest, 4.36 m from
     # one at full speed, for a person at 1.6 m/s.
     assert protective_separation(0.0, 1.6, timing, margin) == \
         pytest.approx(1.8647, abs=1e-4)

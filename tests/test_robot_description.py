@@ -526,3 +526,23 @@ def test_a_descriptions_package_wins_over_one_drake_knows(tmp_path):
     path.write_text(yaml.safe_dump(document))
     arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
     assert arm.num_joints == 7
+
+
+def test_a_model_drake_cannot_parse_names_the_field(tmp_path):
+    """A model file or directives that Drake's parser refuses is a
+    ValueError naming the description's field, with the parser's reason
+    (it was a RuntimeError from deep in pydrake)."""
+    path = write_omni_arm(tmp_path, 6)
+    (tmp_path / "omni_arm.urdf").write_text("<robot name='x'><link>")
+    with pytest.raises(ValueError, match=r"^model\.file = 'omni_arm\.urdf' "
+                       "is not allowed: .*Failed to parse XML"):
+        add_robot(MultibodyPlant(0.001), load_robot_description(path))
+    (tmp_path / "arm.dmd.yaml").write_text(
+        "directives:\n- add_model: {name: a, file: package://nosuch/a.urdf}\n")
+    text = path.read_text().replace("file: omni_arm.urdf",
+                                    "directives: arm.dmd.yaml")
+    assert "directives: arm.dmd.yaml" in text
+    path.write_text(text)
+    with pytest.raises(ValueError, match=r"^model\.directives = "
+                       "'arm.dmd.yaml' is not allowed: .*unknown package"):
+        add_robot(MultibodyPlant(0.001), load_robot_description(path))

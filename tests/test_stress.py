@@ -176,6 +176,9 @@ def test_the_journal_keeps_each_case_and_resume_runs_only_the_rest(
                                         "--resume"))
     output = capsys.readouterr()
     assert "1 case(s) kept" in output.out
+    # --workers 1 runs the cases here, as its help says, and so the
+    # command says (it said "in 1 worker process(es)").
+    assert f"seed {SEED}, in this process;" in output.out
     assert "1 / 1 cases done" in output.err
     document = json.loads((tmp_path / "stress.json").read_text())
     assert [case["case"] for case in document["cases"]] == [0, 1]
@@ -214,6 +217,10 @@ def test_a_long_run_summarises_the_spread_and_lists_the_failures(serial):
      r"^--duration = 0\.0 is not allowed: must be > 0 s$"),
     (("--cases", "1", "--seed", "-1"),
      "^--seed = -1 is not allowed: must be 0 or greater$"),
+    (("--cases", "1", "--scheduler", "10.0.0.5"),
+     "^--scheduler = '10.0.0.5' is not allowed: missing port number in "
+     "address '10.0.0.5' .must be a Dask scheduler's address, e.g. "
+     "tcp://10.0.0.5:8786.$"),
 ])
 def test_bad_arguments_leave_the_journal_untouched(tmp_path, bad, fragment):
     """A mistyped --cases 0 wiped the previous run's journal before the

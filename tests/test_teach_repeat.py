@@ -185,7 +185,12 @@ def test_zero_basis_functions_are_refused_not_replaced(teach_run, tmp_path,
     (["--stop", "0.2"], "--start = 0.5 s, --stop = 0.2 s is not allowed: "
      "the demonstration must end after it starts"),
     (["--start", "nan"], "--start = nan s is not allowed: must be a finite "
-     "time")])
+     "time"),
+    (["--start", "-1"], "--start = -1.0 s, --stop = 6.5 s is not allowed: "
+     "must be an interval of the simulated run (from 0 to 7 s)"),
+    (["--start", "8", "--stop", "9"], "--start = 8.0 s, --stop = 9.0 s is "
+     "not allowed: must be an interval of the simulated run (from 0 to 7 "
+     "s)")])
 def test_markers_that_cannot_be_are_refused_before_the_run(
         markers, message, tmp_path, capsys):
     """--start and --stop are checked against each other and the
@@ -284,6 +289,14 @@ def test_replay_command_builds_its_scenario():
                        "allowed"):
         teach_commands.replay_scenario(parser.parse_args([
             "movements/teach.yaml", "--start-time", "-1"]))
+    with pytest.raises(ValueError, match=r"^movement = 'nosuch\.yaml' is "
+                       "not allowed: no movement file there"):
+        teach_commands.replay_scenario(parser.parse_args(["nosuch.yaml"]))
+    with pytest.raises(ValueError, match=r"^--obstacle 0\.0 0\.0 -1\.0: "
+                       r"radius = -1\.0 is not allowed: must be greater "
+                       "than 0$"):
+        teach_commands.replay_scenario(parser.parse_args([
+            "movements/teach.yaml", "--obstacle", "0", "0", "-1"]))
     # A tau the movement cannot be played at is refused before the run
     # (it was refused as "tau" when the controller was built).
     with pytest.raises(ValueError, match=r"^--tau = 0\.001 is not allowed "
@@ -334,3 +347,18 @@ def test_teach_and_repeat_use_the_scenarios_robot():
         else:
             *_, tcp = repeat.replay_comparison(scenario, variant.name, log)
             np.testing.assert_allclose(tcp[:, :3], truth, atol=0.01)
+
+
+def test_a_teaching_run_cut_before_the_demonstration_writes_its_files(
+        tmp_path, capsys):
+    """`drake-wbc run teach --duration 0.3` ends before S_hri turns 1 at
+    0.5 s: it failed after the run ('start = 0.5 s, stop = 0.3 s is not
+    allowed'); its logs and summary are written, with the start marker
+    alone and no figure."""
+    from drake_wbc.cli.main import main
+
+    assert main(["run", "teach", "--duration", "0.3", "--no-replay",
+                 "--output", str(tmp_path)]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["metrics"] == {"start_s": 0.5}
+    assert sorted(summary["files"]) == ["log_teach.csv", "log_teach.npz"]

@@ -187,7 +187,8 @@ def show(title, unit, scale, entry, other, rounds):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(
+        description=" ".join(__doc__.split("\n\n")[0].split()))
     parser.add_argument("--against", required=True,
                         help="the other commit (any git revision)")
     parser.add_argument("--rounds", type=int, default=30,

@@ -92,7 +92,7 @@ def settings_from(args):
                                                  args.scenario_duration)
     settings["scenario_repeats"] = whole_number(
         "--scenario-repeats", args.scenario_repeats, 1)
-    settings["seed"] = args.seed
+    settings["seed"] = whole_number("--seed", args.seed)
     settings["quick"] = bool(args.quick)
     robot = getattr(args, "robot", None)
     if robot is not None:

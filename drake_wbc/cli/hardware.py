@@ -185,6 +185,7 @@ def run_deploy(args):
     import numpy as np
 
     from drake_wbc.deployment.deploy import deploy
+    from drake_wbc.experiments.runner import Progress
 
     _log_to_stderr()
     duration = _duration(args.duration)
@@ -196,21 +197,28 @@ def run_deploy(args):
           f"{options.lcm_url}: waiting for {channels.base_state}, "
           f"{channels.arm_status}, {channels.wrist_wrench} and "
           f"{channels.obstacle_points}", flush=True)
+    meter = []  # the run's progress line, from the controller's start
+
+    def started(arm_positions):
+        print("deploy: running from the arm at "
+              f"{np.array2string(arm_positions, precision=3)} rad (Ctrl-C "
+              "stops the robot)", flush=True)
+        meter.append(Progress(f"deploy {variant.name}",
+                              duration or scenario.duration, what="run"))
+
     with StopRequest() as stop:
         try:
             result = deploy(
                 scenario, variant, options, duration=duration, stop=stop,
-                realtime_rate=rate,
-                on_start=lambda q: print(
-                    "deploy: running from the arm at "
-                    f"{np.array2string(q, precision=3)} rad (Ctrl-C stops "
-                    "the robot)", flush=True))
+                realtime_rate=rate, on_start=started,
+                on_progress=lambda t: meter[0].update(t))
         except TimeoutError as error:
             print(f"drake-wbc deploy: {error}", file=sys.stderr)
             return 1
     if result is None:
         print("deploy: stopped before the robot answered", flush=True)
         return INTERRUPTED
+    meter[0].update(result.time, done=True)
     diagnostics = ", ".join(f"{k} {v:g}" for k, v in
                             result.diagnostics.items()
                             if not k.endswith("_age"))
@@ -262,7 +270,8 @@ def run_plot(args):
 
     if not args.logfile.is_file():
         raise ValueError(f"logfile = {str(args.logfile)!r} is not allowed: "
-                         "no such file")
+                         + ("a folder, not an LCM log"
+                            if args.logfile.is_dir() else "no such file"))
     output = args.output or Path("out") / args.logfile.stem
     scenario = args.scenario
     if args.robot is not None:
@@ -276,8 +285,14 @@ def run_plot(args):
             Scenario(description=f"LCM log {args.logfile.stem}")
             if scenario is None else load_scenario(find_scenario(scenario)),
             args)
-    summary = plot_lcm_log(args.logfile, output, scenario=scenario,
-                           variant=args.variant, deployment=args.deployment)
+    try:
+        summary = plot_lcm_log(args.logfile, output, scenario=scenario,
+                               variant=args.variant,
+                               deployment=args.deployment)
+    except ValueError as error:  # the options' errors, named as typed
+        if str(error).startswith(("variant = ", "deployment = ")):
+            raise ValueError(f"--{error}") from None
+        raise
     print(json_text({k: v for k, v in summary.items() if k != "runs"}))
     print(f"Written to {output}/: "
           f"{', '.join(summary['files'] + ['summary.json'])}")

@@ -81,6 +81,10 @@ def _run_demo(args):
     from drake_wbc.robot.model import ArmKinematics, make_robot_plant
 
     try:
+        if args.controller is not None and not args.controller.is_file():
+            raise ValueError(
+                f"--controller = {str(args.controller)!r} is not allowed: "
+                "no such file")
         description = (shipped_robot() if args.robot is None
                        else load_robot_description(
                            robot_option_file(args.robot)))
@@ -282,6 +286,28 @@ def make_parser():
     return parser
 
 
+OUTPUT_OPTIONS = ("output", "movement")
+"""The options that name where a command writes (a folder or a file)."""
+
+
+def _unwritable(args, error):
+    """The one-line message of `error`, an OSError a command met, and its
+    exit code: 2 naming the option when it met it where an output option
+    (`OUTPUT_OPTIONS`) points, in it or on the way to it, 1 otherwise."""
+    reason = error.strerror or str(error)
+    if error.filename is not None:
+        failed = Path(os.fsdecode(error.filename))
+        for option in OUTPUT_OPTIONS:
+            given = getattr(args, option, None)
+            if given is not None and (
+                    failed == Path(given) or Path(given) in failed.parents
+                    or failed in Path(given).parents):
+                return (f"--{option} = {str(given)!r} is not allowed: "
+                        f"cannot write {str(failed)!r} ({reason})"), 2
+        return f"cannot write {str(failed)!r} ({reason})", 1
+    return reason, 1
+
+
 def main(argv=None):
     """Runs `drake-wbc` with `argv` (the process's arguments if None)."""
     parser = make_parser()
@@ -303,6 +329,10 @@ def main(argv=None):
         # Python would flush stdout again at exit, into the closed pipe.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
+    except OSError as error:  # e.g. an --output that cannot be written
+        message, code = _unwritable(args, error)
+        print(f"drake-wbc {args.command}: {message}", file=sys.stderr)
+        return code
 
 
 if __name__ == "__main__":

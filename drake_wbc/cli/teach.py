@@ -76,15 +76,24 @@ def run_teach(args, argv=None, echo=print):
     # The markers, before the run.
     start, stop = teach.interval(scenario, args.start, args.stop,
                                  names=options)
+    if args.log is None and (
+            (args.start is not None and start < 0.0)
+            or (args.stop is not None and stop > scenario.duration)):
+        # Known before the run, which would only be thrown away.
+        raise ValueError(
+            f"--start = {start!r} s, --stop = {stop!r} s is not allowed: "
+            "must be an interval of the simulated run (from 0 to "
+            f"{scenario.duration:g} s)")
+    if args.log is not None and not Path(args.log).is_file():
+        raise ValueError(f"--log = {str(args.log)!r} is not allowed: "
+                         + ("a folder, not an LCM log"
+                            if Path(args.log).is_dir() else "no such file"))
     output = args.output or Path("out") / f"teach_{path.stem}"
     output.mkdir(parents=True, exist_ok=True)
     written = []
     if args.log is not None:
         from drake_wbc.deployment.lcm_logs import read_lcm_log
 
-        if not Path(args.log).is_file():
-            raise ValueError(f"--log = {str(args.log)!r} is not allowed: "
-                             "no such file")
         log = read_lcm_log(args.log, scenario.hardware)
     else:
         from drake_wbc.experiments.runner import build_closed_loop, simulate
@@ -175,7 +184,11 @@ def replay_scenario(args):
         positive_duration("--duration", args.duration)
     path = find_scenario(args.scenario)
     scenario = on_robot(load_scenario(path), args)
-    file = resolve_movement_file(args.movement).resolve()
+    try:
+        file = resolve_movement_file(args.movement).resolve()
+    except ValueError as error:  # named as the command line names it
+        raise ValueError(f"movement{str(error).removeprefix('file')}"
+                         ) from None
     movement = LearnedMovement.load(file)
     base = (scenario.variants[0].movement
             or scenario.controller.whole_body_cdmp.movement
@@ -197,10 +210,15 @@ def replay_scenario(args):
     if duration is None:
         duration = (start_time + movement.params.duration * tau
                     / movement.params.tau + 1.5)
-    cylinders = list(scenario.scene.cylinders) + [
-        CylinderObstacle(name=f"obstacle_{i}", position=[x, y], radius=r,
-                         height=1.0)
-        for i, (x, y, r) in enumerate(args.obstacle or [])]
+    cylinders = list(scenario.scene.cylinders)
+    for i, (x, y, r) in enumerate(args.obstacle or []):
+        try:
+            cylinders.append(validate(CylinderObstacle(
+                name=f"obstacle_{i}", position=[x, y], radius=r,
+                height=1.0)))
+        except ValueError as error:
+            raise ValueError(f"--obstacle {x!r} {y!r} {r!r}: {error}"
+                             ) from None
     label = "replay" + (f", goal {list(args.goal)}" if args.goal else "") \
         + (f", tau {args.tau}" if args.tau else "")
     description = (

@@ -291,7 +291,8 @@ class DeployResult:
 
 
 def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
-           stop=None, realtime_rate=1.0, chunk=0.05, on_start=None):
+           stop=None, realtime_rate=1.0, chunk=0.05, on_start=None,
+           on_progress=None):
     """Runs the controller against the robot over LCM (see the module).
 
     Args:
@@ -307,6 +308,8 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
         chunk: s of controller time between polls of `stop`.
         on_start: called with the measured arm positions when the
             controller starts.
+        on_progress: called with the controller's time every `chunk` s
+            of it.
 
     Returns:
         DeployResult, or None if stopped before the robot answered.
@@ -358,6 +361,8 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
                 stopped = True
                 break
             simulator.AdvanceTo(t)
+            if on_progress is not None:
+                on_progress(t)
     finally:
         # Stamped after the run's last command, on its time base; the
         # arm brakes from the rate it was last sent.

@@ -96,10 +96,11 @@ def build_closed_loop(scenario, variant=None, replay=False):
 
 class Progress:
     """Simulated time and real-time factor on one line of stderr (a new
-    line each tenth of the run when stderr is not a terminal)."""
+    line each tenth of the run when stderr is not a terminal); `what`
+    says what the time is (`drake-wbc deploy`: "run", on the robot)."""
 
-    def __init__(self, label, duration, stream=None):
-        self.label, self.duration = label, duration
+    def __init__(self, label, duration, stream=None, what="simulated"):
+        self.label, self.duration, self.what = label, duration, what
         self.stream = stream or sys.stderr
         self.start = wall_clock.perf_counter()
         self._next_line = 0.0
@@ -110,7 +111,7 @@ class Progress:
         width = 24
         filled = int(width * min(t / self.duration, 1.0))
         text = (f"{self.label}: [{'#' * filled}{'.' * (width - filled)}] "
-                f"{t:6.2f} / {self.duration:.2f} s simulated, "
+                f"{t:6.2f} / {self.duration:.2f} s {self.what}, "
                 f"real-time factor {rtf:4.2f}")
         if self.stream.isatty():
             self.stream.write("\r" + text + ("\n" if done else ""))

@@ -122,13 +122,31 @@ def _path(points):
     return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
 
 
+def recorded(scenario, log):
+    """Whether `log` (a RunLog of `scenario`) holds enough of the
+    demonstration to learn it (3 samples): a run cut short (`drake-wbc
+    run teach --duration 0.5`) may end before the demonstration starts."""
+    start, stop = teaching_interval(
+        scenario.task.phri_switch, scenario.duration,
+        scenario.controller.phri_switch)
+    inside = (log.time >= start - 1e-9) & (log.time <= stop + 1e-9)
+    return bool(stop > start and np.count_nonzero(inside) >= 3)
+
+
 def compute_metrics(scenario, logs):
-    """The metrics of the module's docstring, of each run."""
-    start, stop = interval(scenario)
+    """The metrics of the module's docstring, of each run; of a run that
+    ended before it recorded the demonstration (`recorded`), the
+    markers' start_s alone."""
     metrics = {}
     for name, log in logs.items():
-        values = movement_metrics(learn_from_log(scenario, log), start,
-                                  stop)
+        if recorded(scenario, log):
+            start, stop = interval(scenario)
+            values = movement_metrics(learn_from_log(scenario, log), start,
+                                      stop)
+        else:
+            values = {"start_s": teaching_interval(
+                scenario.task.phri_switch, np.inf,
+                scenario.controller.phri_switch)[0]}
         prefix = "" if len(logs) == 1 else f"{name}."
         metrics.update({prefix + k: v for k, v in values.items()})
     return metrics
@@ -176,8 +194,9 @@ def draw_movement(movement, folder, name, title=None):
 
 
 def draw_figures(scenario, logs, folder):
-    """`teach_<run>.png` of each run (module docstring)."""
+    """`teach_<run>.png` of each run that recorded the demonstration
+    (module docstring)."""
     return [draw_movement(learn_from_log(scenario, log), folder,
                           f"teach_{name}", f"teach: demonstration against "
                           f"the learned DMP ({name})")
-            for name, log in logs.items()]
+            for name, log in logs.items() if recorded(scenario, log)]

@@ -114,7 +114,10 @@ key)."""
 
 def error_metrics(time, error, mask):
     """The RMS of the error (N,) in each band and in total over `mask`,
-    by RATIO_KEYS."""
+    by RATIO_KEYS; NaN where `mask` holds no sample (a run that ends
+    before the step)."""
+    if not np.any(mask):
+        return dict.fromkeys(RATIO_KEYS, np.nan)
     return dict(zip(RATIO_KEYS, (
         band_rms(time, error, BASE_BAND, mask),
         band_rms(time, error, MOUNT_BAND, mask),
@@ -127,7 +130,9 @@ def compute_metrics(scenario, logs):
     lasts (in the ground truth and after the paper's processing), the
     peak of |e| from SETTLING after the step on, and the mount's largest
     rocking; then the ratios of the run without the filter to the run
-    with it (when both exist)."""
+    with it (when both exist). A metric whose window the run does not
+    reach (`drake-wbc run --duration` shorter than the step's start) is
+    NaN."""
     start, end = step_window(scenario)
     metrics = {"step_start_s": start, "step_end_s": end}
     for name, log in logs.items():
@@ -141,11 +146,13 @@ def compute_metrics(scenario, logs):
                                         mask).items():
             metrics[f"{name}.measured.{key}"] = value
         settled = window(log, start + SETTLING, end)
-        metrics[f"{name}.peak_error_after_step_m_s"] = float(np.max(np.abs(
-            error[settled])))
+        metrics[f"{name}.peak_error_after_step_m_s"] = (
+            float(np.max(np.abs(error[settled]))) if np.any(settled)
+            else np.nan)
         if mount is not None and mount.size:
-            metrics[f"{name}.mount_rocking_peak_rad"] = float(np.max(
-                np.abs(mount[mask] - mount[mask][0])))
+            metrics[f"{name}.mount_rocking_peak_rad"] = (
+                float(np.max(np.abs(mount[mask] - mount[mask][0])))
+                if np.any(mask) else np.nan)
     if {"filtered", "unfiltered"} <= logs.keys():
         for key in (*RATIO_KEYS, *(f"measured.{k}" for k in RATIO_KEYS)):
             metrics[f"ratio_unfiltered_to_filtered.{key}"] = (
@@ -193,8 +200,9 @@ def draw_figures(scenario, logs, folder):
     for axis in axes:
         axis.axvspan(start, end, color="0.9", zorder=0)
         axis.legend(loc="upper right", fontsize=7)
-    axes[-1].set_xlim(max(0.0, start - 0.5), min(scenario.duration,
-                                                 end + 1.5))
+    left, right = max(0.0, start - 0.5), min(scenario.duration, end + 1.5)
+    # A run that ends before the step (--duration) is shown whole.
+    axes[-1].set_xlim(left if left < right else 0.0, right)
     path = save_figure(fig, folder, "trajectory_tracking")
     plt.close(fig)
     return [path]

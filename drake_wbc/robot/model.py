@@ -267,7 +267,11 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
     if source.directives:
         url = description.resolve(source.directives)
         path = package_map.ResolveUrl(url) if "://" in url else url
-        directives = LoadModelDirectives(path)
+        try:
+            directives = LoadModelDirectives(path)
+        except RuntimeError as error:  # Drake's loader: one line of why
+            raise ValueError(f"model.directives = {source.directives!r} is "
+                             f"not allowed: {error}") from None
         for add in (d.add_model for d in directives.directives
                     if d.add_model is not None):
             try:
@@ -289,7 +293,12 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
             weld.X_PC = Transform(RigidTransform(RollPitchYaw(
                 RotationMatrix(mount.rotation())), at))
         if suspension is None:
-            ProcessModelDirectives(directives, plant, parser)
+            try:
+                ProcessModelDirectives(directives, plant, parser)
+            except RuntimeError as error:  # e.g. a model file not there
+                raise ValueError(
+                    f"model.directives = {source.directives!r} is not "
+                    f"allowed: {error}") from None
         else:
             # The base's file with the suspension's joints added, parsed
             # in its place (the other directives weld to it).
@@ -332,10 +341,14 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
                     "describe the robot by model.directives, or model "
                     f"{what} in its file")
         url = description.resolve(source.file)
-        if "://" in url:
-            parser.AddModelsFromUrl(url)
-        else:
-            parser.AddModels(url)
+        try:
+            if "://" in url:
+                parser.AddModelsFromUrl(url)
+            else:
+                parser.AddModels(url)
+        except RuntimeError as error:  # Drake's parser: one line of why
+            raise ValueError(f"model.file = {source.file!r} is not "
+                             f"allowed: {error}") from None
     model = replace(_robot_model(plant, description), mount=mount)
     if suspension is None:
         return model

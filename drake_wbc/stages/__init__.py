@@ -68,6 +68,10 @@ from drake_wbc.stages.whole_body_cdmp import (
     WholeBodyCdmp,
     WholeBodyCdmp_,
 )
+from drake_wbc.stages.wrench import (
+    ExternalWrenchEstimator,
+    ExternalWrenchEstimator_,
+)
 
 __all__ = [
     "AdmittanceFilter",
@@ -99,4 +103,6 @@ __all__ = [
     "RobustCompensator_",
     "WorkspaceAdapter",
     "WorkspaceAdapter_",
+    "ExternalWrenchEstimator",
+    "ExternalWrenchEstimator_",
 ]

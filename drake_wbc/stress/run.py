@@ -204,6 +204,29 @@ def check_arguments(seed, cases, duration, workers, prefix=""):
                                                1)
 
 
+def checked_scheduler(address):
+    """`address`, a command line's --scheduler, checked as the address of
+    a Dask scheduler (a tcp or tls one needs its port), before anything
+    is written; None stays None.
+
+    Raises:
+        ValueError: naming --scheduler, its value and what is allowed.
+    """
+    if address is None:
+        return None
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(address)
+        if scheme in ("tcp", "tls"):
+            parse_host_port(location)
+    except ValueError as error:
+        raise ValueError(
+            f"--scheduler = {address!r} is not allowed: {error} (must be a "
+            "Dask scheduler's address, e.g. tcp://10.0.0.5:8786)") from None
+    return address
+
+
 def _in_processes(seed, indices, duration, workers, on_done, robot):
     records = []
     if workers == 1:
@@ -564,8 +587,10 @@ def run_stress(args):
     """
     seed, cases, duration, workers = check_arguments(
         args.seed, args.cases, args.duration, args.workers, prefix="--")
+    checked_scheduler(args.scheduler)
     where = (f"on the Dask cluster at {args.scheduler}" if args.scheduler
-             else f"in {workers} worker process(es)")
+             else "in this process" if workers == 1
+             else f"in {workers} worker processes")
     robot = "" if args.robot is None else str(
         robot_option_file(args.robot).resolve())
     if robot:
