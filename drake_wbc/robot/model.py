@@ -401,9 +401,9 @@ def _scoped(plant, field, name, find, kind):
             f"{element!r} in {instance_name!r}") from None
 
 
-def _joint_name(plant, joint):
-    """`joint`'s name scoped by its model instance, as a description
-    gives it."""
+def scoped_joint_name(plant, joint):
+    """`joint`'s name scoped by its model instance in `plant`, as a
+    description gives it ("model::joint")."""
     return (f"{plant.GetModelInstanceName(joint.model_instance())}::"
             f"{joint.name()}")
 
@@ -558,7 +558,7 @@ def _robot_model(plant, description):
             raise ValueError(
                 f"tool.ft_sensor_joint = {tool.ft_sensor_joint!r} is not "
                 f"allowed with the {found.type_name()} joint "
-                f"{_joint_name(plant, found)!r} outboard of it: what the "
+                f"{scoped_joint_name(plant, found)!r} outboard of it: what the "
                 "wrist sensor carries must be rigid (its weight is taken at "
                 "the model's rest, the TCP on it); weld that joint in the "
                 "model")
@@ -573,7 +573,8 @@ def _robot_model(plant, description):
         if found.type_name() != "weld" and found.index() not in listed:
             raise ValueError(
                 f"arm.joints = {list(arm.joints)} is not allowed: the "
-                f"{found.type_name()} joint {_joint_name(plant, found)!r} "
+                f"{found.type_name()} joint "
+                f"{scoped_joint_name(plant, found)!r} "
                 "between arm.base_frame and tool.tcp_frame is not one of "
                 "them; list every joint of the arm, base to wrist (or weld "
                 "that joint in the model)")

@@ -66,6 +66,7 @@ from drake_wbc.robot.model import (
     add_robot,
     joint_position_indices,
     joint_velocity_indices,
+    scoped_joint_name,
     shared_robot_plant,
     spring_stiffnesses,
     suspension_gains,
@@ -312,10 +313,9 @@ def add_desired_states(builder, plant, model, base_desired, arm_desired):
         for index in plant.GetJointActuatorIndices(instance):
             joint = plant.get_joint_actuator(index).joint()
             if joint.index() not in driven:
-                name = (f"{plant.GetModelInstanceName(instance)}::"
-                        f"{joint.name()}")
                 raise ValueError(
-                    f"the actuator of {name!r} is not allowed in the "
+                    f"the actuator of {scoped_joint_name(plant, joint)!r} "
+                    "is not allowed in the "
                     "simulated station: it drives "
                     "only base.joints and arm.joints, through their model "
                     "instances' desired states; leave that joint without an "
