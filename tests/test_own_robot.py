@@ -17,6 +17,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 
+from drake_wbc.analysis.plant_chain import linearize_base_plant
 from drake_wbc.controller import ControllerParameters, build_controller
 from drake_wbc.controller.parameters import for_robot
 from drake_wbc.deployment.deploy import add_controller_side
@@ -312,6 +313,74 @@ def test_the_simulated_station_runs_that_robot(tmp_path):
     assert 0.6 * 0.02 < moved[2] < 1.4 * 0.02
     assert abs(moved[1]) < 0.01
     assert loop.controller.safety_reason(root) == ""
+
+
+def _add_finger(folder):
+    """Adds a finger to the omni arm's tool (a revolute joint whose link's
+    mass sits 5 cm off its axis, so that gravity swings it unless it is
+    held); returns the finger's joint name."""
+    urdf = folder / "omni_arm.urdf"
+    finger = (
+        "<link name='finger'><inertial><origin xyz='0.05 0 0'/>"
+        "<mass value='0.5'/><inertia ixx='0.001' iyy='0.001' izz='0.001' "
+        "ixy='0' ixz='0' iyz='0'/></inertial></link>"
+        "<joint name='finger' type='revolute'><parent link='tool'/>"
+        "<child link='finger'/><origin xyz='0 0.02 0.03'/>"
+        "<axis xyz='0 1 0'/><limit lower='-1.5' upper='1.5' effort='10' "
+        "velocity='1'/></joint>")
+    urdf.write_text(urdf.read_text().replace("</robot>",
+                                             finger + "</robot>"))
+    return "omni_arm::finger"
+
+
+def test_a_gripper_locked_in_the_station_is_carried_rigidly(tmp_path):
+    """A joint in what the wrist sensor carries (a gripper's finger) is
+    refused unless the description lists it in tool.locked_joints; then
+    the station holds it at its default position, so the sensor reads the
+    rigid tool the controller compensates: while the robot follows a world
+    twist, the true wrist wrench is the weight of the tool with its
+    finger as the controller's model computes it (tool_weight_reading),
+    and the controller runs without a stop. Unlocked, the finger swings
+    down."""
+    n = 7
+    robot = write_omni_arm(tmp_path, n)
+    finger = _add_finger(tmp_path)
+    with pytest.raises(ValueError, match="list it in tool.locked_joints"):
+        load_scenario(write_scenario(tmp_path, robot, 1.0))
+    robot.write_text(robot.read_text().replace(
+        "ft_sensor_joint: omni_arm::sensor",
+        f"ft_sensor_joint: omni_arm::sensor\n  locked_joints: [{finger}]"))
+    loop = build_closed_loop(load_scenario(write_scenario(tmp_path, robot,
+                                                          1.0)))
+    station = loop.station
+    plant = station.plant
+    joint = plant.GetJointByName("finger")
+    simulator = start_simulator(loop)
+    root = simulator.get_mutable_context()
+    plant_context = plant.GetMyContextFromRoot(root)
+    station_context = station.diagram.GetMyContextFromRoot(root)
+    simulator.AdvanceTo(1.0)
+    assert joint.is_locked(plant_context)
+    assert plant.GetPositions(plant_context)[joint.position_start()] == 0.0
+    arm = ArmKinematics(plant, station.model)
+    q_a = station.diagram.GetOutputPort("arm.position_measured").Eval(
+        station_context)
+    weight = tool_weight_reading(arm, q_a)
+    wrench = station.diagram.GetOutputPort("truth.wrist_wrench").Eval(
+        station_context)
+    # The weight of the sensor's far side, the tool and the finger.
+    assert np.linalg.norm(weight[:3]) == pytest.approx(1.1 * 9.81, rel=1e-3)
+    np.testing.assert_allclose(wrench, weight, atol=0.02 * 1.1 * 9.81)
+    assert loop.controller.safety_reason(root) == ""
+    # What held it: unlocked, gravity swings the finger away.
+    joint.Unlock(plant_context)
+    simulator.AdvanceTo(1.2)
+    assert abs(plant.GetPositions(plant_context)[joint.position_start()]) \
+        > 0.01
+    # The plant chain's linearisation cannot hold it: refused, by name.
+    with pytest.raises(ValueError, match=(
+            r"tool.locked_joints = \['omni_arm::finger'\] cannot be held")):
+        linearize_base_plant(station)
 
 
 def test_a_six_joint_robot_starts_at_its_own_home(tmp_path):

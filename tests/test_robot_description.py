@@ -13,6 +13,7 @@ from pydrake.multibody.plant import MultibodyPlant
 
 from drake_wbc.robot.description import (
     MIN_ARM_JOINTS,
+    ToolDescription,
     load_robot_description,
     models_dir,
     shipped_robot,
@@ -330,6 +331,33 @@ def test_a_joint_in_what_the_sensor_carries_is_refused(tmp_path):
             r"the prismatic joint 'omni_arm::tool' outboard of it: what the "
             r"wrist sensor carries must be rigid")):
         make_robot_plant(load_robot_description(path))
+
+
+@pytest.mark.parametrize("name, why", [
+    ("omni_arm::j6", "must be a joint that moves \\(not a weld\\) "
+     "outboard of tool.ft_sensor_joint"),
+    ("omni_arm::tool", "must be a joint that moves \\(not a weld\\)"),
+    ("omni_arm::thumb", "no joint"),
+])
+def test_a_locked_joint_must_move_in_what_the_sensor_carries(tmp_path, name,
+                                                             why):
+    """tool.locked_joints are the joints the station locks in the tool (a
+    gripper's): an arm joint there would freeze the arm in the station,
+    a weld is rigid already, and a name not in the model is a typo."""
+    path = write_omni_arm(tmp_path, 6)
+    path.write_text(path.read_text().replace(
+        "ft_sensor_joint: omni_arm::sensor",
+        f"ft_sensor_joint: omni_arm::sensor\n  locked_joints: [{name}]"))
+    with pytest.raises(ValueError, match=(
+            rf"tool.locked_joints\[0\] = '{name}' .*{why}")):
+        make_robot_plant(load_robot_description(path))
+
+
+def test_locked_joints_are_distinct_names():
+    with pytest.raises(ValueError, match=(
+            r"locked_joints\[1\] = 'a::f' is not allowed: named twice")):
+        ToolDescription(tcp_frame="a::t", ft_sensor_frame="a::s",
+                        ft_sensor_joint="a::w", locked_joints=["a::f", "a::f"])
 
 
 def test_a_lidar_beyond_the_bases_passive_joints_is_on_the_base():

@@ -42,7 +42,18 @@ def add_robot_plant(builder, station):
         station.options.time_step))
     plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
     plant.SetUseSampledOutputPorts(False)
-    return plant, station.add_robot_to(plant)
+    model = station.add_robot_to(plant)
+    if model.locked_joints:
+        # The period map's AutoDiffXd step of this plant with a locked
+        # joint and its servos' PD gains fails in Drake's SAP solver (a
+        # constraint's Jacobian of the wrong size; in double it steps),
+        # and unlocked the tool's joints would swing.
+        raise ValueError(
+            f"station is not allowed: its robot's tool.locked_joints = "
+            f"{list(model.description.tool.locked_joints)} cannot be held "
+            "in the plant chain's linearisation (AutoDiffXd); analyse a "
+            "copy of the robot's model with those joints welded")
+    return plant, model
 
 
 def add_station_plant(builder, station):

@@ -304,18 +304,27 @@ class ToolDescription:
         ft_sensor_joint: the weld joint on the sensor's measuring
             surface, whose reaction the simulated sensor reads: the wrench
             of everything outboard of it.
+        locked_joints: joints outboard of the sensor's weld that the
+            simulated station holds locked at their default positions
+            (a gripper's fingers, say): what the sensor carries is then
+            rigid, as the controller takes it (its weight at the model's
+            rest). Every other joint there is refused. Optional; on the
+            robot they are the tool's own business.
     """
 
     tcp_frame: str = ""
     ft_sensor_frame: str = ""
     ft_sensor_joint: str = ""
+    locked_joints: list[str] = field(default_factory=list)
 
     def __post_init__(self):
         if _blank(self):
             return
-        _check_given(self)
+        _check_given(self, optional=("locked_joints",))
         for name in ("tcp_frame", "ft_sensor_frame", "ft_sensor_joint"):
             setattr(self, name, _names(name, [getattr(self, name)])[0])
+        self.locked_joints = list(_names("locked_joints",
+                                         self.locked_joints))
 
 
 @dataclass

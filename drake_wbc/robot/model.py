@@ -169,6 +169,9 @@ class RobotModel:
         horizontal_joints: the horizontal compliance's joints of the
             wheels on the floor (x, y, yaw) when the suspension has one,
             else empty.
+        locked_joints: the joints of what the wrist sensor carries that
+            the station locks at their default positions (the
+            description's tool.locked_joints).
     """
 
     description: RobotDescription
@@ -190,6 +193,7 @@ class RobotModel:
     suspension_joints: tuple = ()
     mount: ArmMount = field(default_factory=ArmMount)
     horizontal_joints: tuple = ()
+    locked_joints: tuple = ()
 
     @property
     def num_arm_joints(self):
@@ -499,6 +503,10 @@ def _robot_model(plant, description):
                        for i, name in enumerate(arm.joints))
     sensor_joint = joint("tool.ft_sensor_joint", tool.ft_sensor_joint,
                          ("weld",))
+    locked_joints = tuple(
+        _scoped(plant, f"tool.locked_joints[{i}]", name,
+                plant.GetJointByName, "joint")
+        for i, name in enumerate(tool.locked_joints))
     frames = dict(
         base_frame=frame("base.frame", base.frame),
         arm_base_frame=frame("arm.base_frame", arm.base_frame),
@@ -550,10 +558,21 @@ def _robot_model(plant, description):
             f"tool.ft_sensor_joint = {tool.ft_sensor_joint!r} (no joint "
             "between them)")
     # What the sensor carries is compensated as one rigid body at the
-    # model's rest (drake_wbc.stages.wrench), and is the TCP's.
+    # model's rest (drake_wbc.stages.wrench), and is the TCP's: a joint
+    # there is a weld, or one the station locks at its default position.
+    for i, (name, found) in enumerate(zip(tool.locked_joints, locked_joints,
+                                          strict=True)):
+        if (found.type_name() == "weld"
+                or not _outboard(parents, found.child_body(), sensor)):
+            raise ValueError(
+                f"tool.locked_joints[{i}] = {name!r} is not allowed: must "
+                "be a joint that moves (not a weld) outboard of "
+                f"tool.ft_sensor_joint = {tool.ft_sensor_joint!r}, in what "
+                "the wrist sensor carries")
+    locked = {found.index() for found in locked_joints}
     for found in (plant.get_joint(JointIndex(i))
                   for i in range(plant.num_joints())):
-        if (found.type_name() != "weld"
+        if (found.type_name() != "weld" and found.index() not in locked
                 and _outboard(parents, found.child_body(), sensor)):
             raise ValueError(
                 f"tool.ft_sensor_joint = {tool.ft_sensor_joint!r} is not "
@@ -561,7 +580,9 @@ def _robot_model(plant, description):
                 f"{scoped_joint_name(plant, found)!r} outboard of it: what the "
                 "wrist sensor carries must be rigid (its weight is taken at "
                 "the model's rest, the TCP on it); weld that joint in the "
-                "model")
+                "model, or list it in tool.locked_joints (a gripper's "
+                "fingers: the station holds them at their default "
+                "positions)")
     # The controller's kinematics move the TCP by the arm's joints alone.
     arm_base = frames["arm_base_frame"].body()
     stop = (arm_base if _outboard(parents, tcp, arm_base)
@@ -603,6 +624,7 @@ def _robot_model(plant, description):
         ft_sensor_joint=sensor_joint,
         home=np.array(arm.home),
         limits=_arm_limits(arm, arm_joints),
+        locked_joints=locked_joints,
         **frames)
 
 

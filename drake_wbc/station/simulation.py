@@ -628,9 +628,17 @@ class SimulatedStation:
         q_cmd = np.asarray(options.initial_arm_positions, dtype=float)
         q[joint_position_indices(model.arm_joints)] = q_cmd
         q[joint_position_indices(self._compliant_joints())] = 0.0
+        for joint in model.locked_joints:
+            start = joint.position_start()
+            q[start:start + joint.num_positions()] = (
+                joint.default_positions())
         plant.SetPositions(plant_context, q)
         plant.SetVelocities(plant_context, np.zeros(plant.num_velocities()))
         self._settle_under_gravity(plant_context, q_cmd)
+        # What the wrist sensor carries is rigid: its joints (a gripper's)
+        # held where the model puts them at rest.
+        for joint in model.locked_joints:
+            joint.Lock(plant_context)
         if self.hand_body is not None:
             # The hand at rest on the tool centre point.
             p_tcp = model.tcp_frame.CalcPoseInWorld(
