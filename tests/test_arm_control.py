@@ -2,6 +2,7 @@
 and brute force, the Drake system through its ports, its scalar conversion
 and its linearisation."""
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -563,24 +564,36 @@ def test_a_finite_twist_whose_rates_overflow_brakes(arm, V):
         assert state[12] == 1.0
 
 
-def test_a_start_far_outside_the_limits_is_refused_not_jumped_to(arm):
+@pytest.mark.parametrize("acceleration_limit", [None, 3.0])
+def test_a_start_outside_the_limits_is_refused_not_jumped_to(
+        arm, acceleration_limit):
     """Joint limits tightened to exclude the arm's measured position: the
-    command would start on the limit, a jump of 0.95 rad for the servo;
-    set_arm_position (Controller.initialize) refuses it, naming the
-    joint. A reading past a limit by at most MEASURED_POSITION_MARGIN (an
-    encoder at its limit) still starts on the limit."""
+    command would start on the limit, a jump for the servo (0.95 rad, or
+    0.05 rad: 5 rad/s in one period); set_arm_position
+    (Controller.initialize) refuses it, naming the joint. A reading past
+    a limit by at most one period's step at the acceleration limit from
+    rest (a h^2: an encoder at its limit) starts on the limit: the rule of
+    the hardware's guard (start_within_limits), with the controller's
+    acceleration limit (the arm's own if not given)."""
     lower = np.array(arm.lower, dtype=float)
     lower[1] = 0.5
     params = ArmControllerParameters(lower=lower.tolist(),
-                                     upper=list(arm.upper))
+                                     upper=list(arm.upper),
+                                     acceleration_limit=acceleration_limit)
     system = ArmCartesianVelocityController(params, arm)
     context = system.CreateDefaultContext()
-    with pytest.raises(ValueError, match=(
-            r"q\[1\] = -0.45 is not allowed: must lie within the joint's "
-            r"limits \[0.5, 2.35\] rad give or take 0.1")):
-        system.set_arm_position(context, HOME_ARM_POSITIONS)
+    slack = (arm.acceleration_limits[1] if acceleration_limit is None
+             else acceleration_limit) * H * H
     q = np.array(HOME_ARM_POSITIONS, dtype=float)
-    q[1] = 0.45
+    for beyond in (0.95, 0.05, 1.01 * slack):
+        q[1] = 0.5 - beyond
+        value = re.escape(repr(float(q[1])))
+        with pytest.raises(ValueError, match=(
+                rf"q\[1\] = {value} is not allowed: must be within the "
+                r"joint's limits \[0.5, 2.35\] rad .*would jump there\); "
+                r"move the arm within them or widen arm_controller")):
+            system.set_arm_position(context, q)
+    q[1] = 0.5 - 0.99 * slack
     system.set_arm_position(context, q)
     q[1] = 0.5
     np.testing.assert_array_equal(system.GetOutputPort(

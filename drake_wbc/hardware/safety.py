@@ -41,6 +41,7 @@ from drake_wbc.hardware.options import (
     HardwareOptions,
     command_timeout_of,
 )
+from drake_wbc.math.arm_control import start_within_limits
 from drake_wbc.math.command_limits import limit_base_velocity
 from drake_wbc.math.validation import (
     as_vector,
@@ -303,31 +304,6 @@ def target_rate(target, before, period):
     bounds it (TARGET_RATE_BOUND)."""
     with np.errstate(over="ignore"):
         return (target - before) / period
-
-
-def within_joint_limits(name, positions, limits, period):
-    """`positions` (n,) as a float vector within the joint position limits
-    of `limits`: the arm positions a command starts from (the robot's
-    measured ones). A position beyond a limit by no more than the step
-    the acceleration limit allows from rest in one `period`
-    (joint_acceleration period^2: an arm resting at its limit, read with
-    an encoder's noise) is taken as at the limit; from one further
-    beyond, the first command, held within the limits, would be a jump.
-
-    Raises:
-        ValueError: naming `name`, the joint, its value and the limits.
-    """
-    q = as_vector(name, positions, limits.lower.size)
-    slack = limits.joint_acceleration * period * period
-    for i in np.flatnonzero((q < limits.lower - slack)
-                            | (q > limits.upper + slack)):
-        raise ValueError(
-            f"{name}[{i}] = {float(q[i])!r} is not allowed: must be within "
-            f"the joint's limits [{float(limits.lower[i])!r}, "
-            f"{float(limits.upper[i])!r}] rad (the first command, held "
-            "within them, would jump there); move the arm within its "
-            "limits first")
-    return np.clip(q, limits.lower, limits.upper)
 
 
 def stop_arm(last, velocity, period, limits):
@@ -662,7 +638,7 @@ class CommandGuard(LeafSystem):
         initial_arm_positions: (n,) the arm command held before the first
             command (the robot's measured positions; `set_arm_command`
             sets it in a context), within the joint limits
-            (`within_joint_limits`); the shipped robot's home if None,
+            (`start_within_limits`); the shipped robot's home if None,
             which only goes with limits None.
         limits: Limits (Limits.of_robot(options), of the shipped robot,
             if None).
@@ -687,10 +663,11 @@ class CommandGuard(LeafSystem):
                 "initial_arm_positions = None is not allowed with limits "
                 "given: pass the positions of the limits' arm to hold (its "
                 "measured positions, or its home)")
-        initial = within_joint_limits(
+        initial = start_within_limits(
             "initial_arm_positions", HOME_ARM_POSITIONS
             if initial_arm_positions is None else initial_arm_positions,
-            self.limits, options.publish_period)
+            self.limits.lower, self.limits.upper,
+            self.limits.joint_acceleration, options.publish_period)
         self._checks_per_command = round(options.publish_period
                                          / options.watchdog_period)
         self._base_in = self.DeclareVectorInputPort("base_velocity_command", 3)
@@ -753,11 +730,13 @@ class CommandGuard(LeafSystem):
     def set_arm_command(self, context, positions):
         """Holds the arm at `positions` (and the base at rest) in `context`
         (this system's or a root context holding it); `positions` within
-        the joint limits (`within_joint_limits`)."""
+        the joint limits (`start_within_limits`)."""
         context = self.GetMyMutableContextFromRoot(context)
         context.SetAbstractState(self._state, GuardState.holding(
-            within_joint_limits("positions", positions, self.limits,
-                                self.config.period)))
+            start_within_limits(
+                "positions", positions, self.limits.lower,
+                self.limits.upper, self.limits.joint_acceleration,
+                self.config.period)))
 
     def _update(self, context, state):
         now = context.get_time()
@@ -844,7 +823,7 @@ class ArmCommandLimiter(LeafSystem):
         period: the command period h, s (HardwareOptions.publish_period).
         offset: when the step is stored, s (publish_offset + h / 2).
         initial_positions: (n,) the arm's command at the start, within
-            the joint limits (`within_joint_limits`).
+            the joint limits (`start_within_limits`).
         limits: Limits (the arm's own).
     """
 
@@ -853,8 +832,9 @@ class ArmCommandLimiter(LeafSystem):
         self.period = positive("period", period)
         self.limits = limits
         self.num_joints = n = limits.lower.size
-        initial = within_joint_limits("initial_positions",
-                                      initial_positions, limits, period)
+        initial = start_within_limits(
+            "initial_positions", initial_positions, limits.lower,
+            limits.upper, limits.joint_acceleration, period)
         self._in = self.DeclareVectorInputPort("positions", n)
         self._state = self.DeclareAbstractState(AbstractValue.Make(
             LimiterState(initial.copy(), np.zeros(n), initial.copy(), False)))
@@ -872,8 +852,9 @@ class ArmCommandLimiter(LeafSystem):
         """Starts the limiter at rest at `positions` (within the joint
         limits) in `context`."""
         context = self.GetMyMutableContextFromRoot(context)
-        q = within_joint_limits("positions", positions, self.limits,
-                                self.period)
+        q = start_within_limits(
+            "positions", positions, self.limits.lower, self.limits.upper,
+            self.limits.joint_acceleration, self.period)
         context.SetAbstractState(self._state, LimiterState(
             q.copy(), np.zeros(self.num_joints), q.copy(), False))
 

@@ -385,6 +385,42 @@ def damped_solve(J, V, damping):
         return Vt.T @ (gains * (U.T @ value_of(V)))
 
 
+def start_within_limits(name, positions, lower, upper, acceleration,
+                        period, remedy="move the arm within them first"):
+    """`positions` (n,) as a float vector within [lower, upper]: the arm
+    positions a command starts from (the robot's measured ones). A
+    position beyond a limit by no more than the step its acceleration
+    limit allows from rest in one `period` (acceleration period^2: an arm
+    resting on its limit, read with an encoder's noise) is taken as on
+    the limit; from one further beyond, the first command, held within
+    the limits, would be a jump (a step beyond the acceleration limit).
+
+    Args:
+        name: the positions' name in the error.
+        positions: (n,) rad.
+        lower, upper: (n,) the joint position limits, rad.
+        acceleration: (n,) or scalar, the joint acceleration limits,
+            rad/s^2.
+        period: the command period h, s.
+        remedy: what the error proposes.
+
+    Raises:
+        ValueError: naming `name`, the first joint beyond, its value and
+            its limits.
+    """
+    lower = np.asarray(lower, dtype=float)
+    upper = np.asarray(upper, dtype=float)
+    q = as_vector(name, positions, lower.size)
+    slack = np.asarray(acceleration, dtype=float) * period * period
+    for i in np.flatnonzero((q < lower - slack) | (q > upper + slack)):
+        raise ValueError(
+            f"{name}[{i}] = {float(q[i])!r} is not allowed: must be within "
+            f"the joint's limits [{float(lower[i])!r}, "
+            f"{float(upper[i])!r}] rad (the first command, held within "
+            f"them, would jump there); {remedy}")
+    return np.clip(q, lower, upper)
+
+
 def braking_rate(distance, step, step_h):
     """The largest rate towards an edge `distance` away (>= 0) from which
     a joint can still stop at the edge, its rate changing by at most

@@ -9,12 +9,12 @@ from pydrake.systems.framework import BasicVector_, LeafSystem_
 from drake_wbc.math.arm_control import (
     ArmControllerParameters,
     joint_velocity_command,
+    start_within_limits,
     twist_limits,
 )
 from drake_wbc.math.kernels import body_for
-from drake_wbc.math.safety import MEASURED_POSITION_MARGIN
 from drake_wbc.math.scalar_support import all_finite, through_float_function
-from drake_wbc.math.validation import as_vector, checked_instance, positive
+from drake_wbc.math.validation import checked_instance, positive
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.support import define_stage, optional_scalar
 
@@ -153,6 +153,11 @@ def ArmCartesianVelocityController_(T):
                        kinematics.acceleration_limits)
                 if params.use_acceleration_limit else None,
                 params.self_motion_gain)
+            # A start beyond a limit by one period's step at this
+            # acceleration is an encoder's reading on the limit.
+            self._start_acceleration = np.asarray(own_or(
+                params.acceleration_limit, kinematics.acceleration_limits),
+                dtype=float)
             # A hold brakes to rest and stays: without the self-motion of
             # an arm of more than six joints, which would go on moving it.
             self._hold_limits = replace(self._limits, self_motion_gain=0.0)
@@ -242,27 +247,21 @@ def ArmCartesianVelocityController_(T):
             the servo sees no jump. A joint outside the band
             [lower + margin, upper - margin] is kept where it is and is
             only prevented from moving further out; one outside the joint
-            limits [lower, upper] by at most MEASURED_POSITION_MARGIN (an
-            encoder reading past a limit) starts on the limit, so that
-            the command never leaves them.
+            limits [lower, upper] by no more than one period's step at
+            the acceleration limit from rest (an encoder reading past a
+            limit) starts on the limit, so that the command never leaves
+            them (`start_within_limits`, the rule of the hardware's
+            guard too).
 
             Raises:
                 ValueError: naming the first joint further outside its
                     limits (e.g. limits tightened to exclude the arm's
                     position: its command would jump onto them).
             """
-            q = as_vector("q", q, self.num_joints)
-            beyond = np.maximum(self.lower - q, q - self.upper)
-            if np.any(beyond > MEASURED_POSITION_MARGIN):
-                i = int(np.flatnonzero(beyond > MEASURED_POSITION_MARGIN)[0])
-                raise ValueError(
-                    f"q[{i}] = {float(q[i])!r} is not allowed: must lie "
-                    f"within the joint's limits [{float(self.lower[i])!r}, "
-                    f"{float(self.upper[i])!r}] rad give or take "
-                    f"{MEASURED_POSITION_MARGIN!r} (the command would jump "
-                    "onto them); move the arm within them or widen "
-                    "arm_controller.lower and upper")
-            q = np.clip(q, self.lower, self.upper)
+            q = start_within_limits(
+                "q", q, self.lower, self.upper, self._start_acceleration,
+                self._time_step, remedy="move the arm within them or "
+                "widen arm_controller.lower and upper")
             state = np.zeros(self._state_size)
             state[self._q] = q
             context.SetDiscreteState(state)
