@@ -386,6 +386,68 @@ def test_capability_gradient_gives_the_rate_of_change_along_any_twist():
                 rtol=1e-9, atol=1e-12 * np.linalg.norm(g))
 
 
+def _near_constraints(rng, chain, lower, upper):
+    """Configurations of `chain` near its constraints: near a joint limit
+    (1e-3 rad inside it, each joint and each side in turn) and, for the
+    Elfin5, near its wrist (q_5 -> 0) and elbow (q_3 -> 0) singularities,
+    with s_min of J_a between 1.05 and 2 times the gradient's damping
+    threshold (the undamped side, where grad_x C_m is exact)."""
+    eps = cap.DEFAULT_DAMPING_THRESHOLD
+
+    def drawn(joint, value, s_max):
+        while True:
+            q = random_nonsingular_q(rng, chain, 0.8 * lower, 0.8 * upper,
+                                     s_min=0.1)
+            q[joint] = value()
+            s_min = np.linalg.svd(jacobian(chain, q), compute_uv=False)[-1]
+            if 1.05 * eps < s_min < s_max:
+                return q
+
+    found = [drawn(joint, lambda j=joint, edge=edge, i=inward: edge[j]
+                   + i * 1e-3, np.inf)
+             for joint in range(len(lower))
+             for edge, inward in ((lower, 1.0), (upper, -1.0))]
+    if chain is ELFIN5:
+        found += [drawn(joint, lambda: rng.choice([-1.0, 1.0])
+                        * rng.uniform(0.05, 0.2), 2.0 * eps)
+                  for joint in (4, 2)]
+    return found
+
+
+@pytest.mark.parametrize("body", [cap.capability_terms,
+                                  cap.capability_terms_float],
+                         ids=["reference", "kernel"])
+@pytest.mark.parametrize(("name", "chain", "lower", "upper"),
+                         [CHAINS[0], CHAINS[-1]], ids=[CHAIN_IDS[0],
+                                                       CHAIN_IDS[-1]])
+def test_capability_gradient_near_singularities_and_limits(body, name, chain,
+                                                           lower, upper):
+    """grad_x C_m (the null-space term of eq. (wbccm) and the direction of
+    eq. (wb_error)) against central differences of C_m along arm twists V
+    (qdot = J_a^+ V), where C_m changes fastest: 1e-3 rad from each joint
+    limit, and near the Elfin5's singularities just outside the damping;
+    the reference body and its kernel, on six and seven joints."""
+    rng = np.random.default_rng(19)
+
+    def capability(q):
+        return cap.capability(jacobian(chain, q), q, lower, upper, K_J)
+
+    for q in _near_constraints(rng, chain, lower, upper):
+        J = np.ascontiguousarray(jacobian(chain, q))
+        C_m, g = body(J, q, lower, upper, K_J, cap.DEFAULT_MAX_DAMPING,
+                      cap.DEFAULT_DAMPING_THRESHOLD)
+        assert C_m == pytest.approx(capability(q), rel=1e-12)
+        for _ in range(3):
+            V = rng.normal(size=6)
+            qdot = np.linalg.pinv(J) @ V
+            h = 1e-7
+            rate = (capability(q + h * qdot) - capability(q - h * qdot)) / (
+                2.0 * h)
+            assert g @ V == pytest.approx(
+                rate, rel=1e-5, abs=1e-6 * np.linalg.norm(g)
+                * np.linalg.norm(V))
+
+
 def test_capability_gradient_of_a_redundant_chain_is_least_squares():
     _, chain, lower, upper = CHAINS[-1]
     rng = np.random.default_rng(17)

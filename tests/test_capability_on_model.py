@@ -88,3 +88,19 @@ def test_default_k_j_places_the_band_between_home_and_constraints(
     q = HOME_ARM_POSITIONS.copy()
     q[0] = upper[0] - 0.20 * (upper[0] - lower[0])
     assert C_m(q) > BAND[1]
+
+
+@pytest.mark.parametrize(("joint", "slope"), [(4, 0.31), (2, 0.16)],
+                         ids=["wrist", "elbow"])
+def test_smallest_singular_value_near_the_singularities(kinematics, joint,
+                                                        slope):
+    """s_min of J_a about `slope` d within d rad of the wrist (q_5 = 0)
+    and elbow (q_3 = 0) singularities, from home: the slopes from which
+    the docstrings of the damping thresholds (capability's and
+    arm_control's DEFAULT_DAMPING_THRESHOLD) tell where each damps."""
+    for d in (0.01, 0.05, 0.1):
+        q = np.array(HOME_ARM_POSITIONS, dtype=float)
+        q[joint] = d
+        s_min = np.linalg.svd(kinematics.evaluate(q).J_a,
+                              compute_uv=False)[-1]
+        assert s_min / d == pytest.approx(slope, rel=0.03)

@@ -273,6 +273,31 @@ def test_repulsive_force_is_gradient_of_U_rep():
                                np.sum(0.005 * (1 / d - 2.0) ** 2))
 
 
+@pytest.mark.parametrize("force", [repulsive_force, repulsive_force_float])
+def test_repulsive_force_is_gradient_of_U_rep_at_the_switches(force):
+    """f_avoid = dU_rep/dp by central differences where U_rep's pieces
+    meet: 1e-4 m inside d_th and outside d_min, along a side and off a
+    corner, and 1e-4 m either side of the lines x = a and y = b that part
+    the sides' regions from the corners'."""
+    a, b = FIELD.half_sizes
+    points = []
+    for d in (FIELD.d_th - 1e-4, FIELD.d_min + 1e-4):
+        for angle in (0.0, 0.5 * np.pi, np.pi, 0.25 * np.pi, -0.75 * np.pi):
+            direction = np.array([np.cos(angle), np.sin(angle)])
+            corner = np.where(direction > 1e-12, [a, b],
+                              np.where(direction < -1e-12, [-a, -b],
+                                       [0.0, 0.0]))
+            points.append(corner + d * direction)
+    for side in (-1e-4, 1e-4):
+        points += [np.array([a + side, b + 0.2]),
+                   np.array([-a - 0.2, -b + side])]
+    for p in points:
+        numeric = central_differences(
+            lambda q: repulsive_potential(q[None], FIELD), p, h=1e-7)
+        np.testing.assert_allclose(force(p[None], FIELD), numeric,
+                                   rtol=1e-6, atol=1e-9, err_msg=p)
+
+
 def test_repulsive_force_zero_beyond_threshold_finite_inside():
     beyond = np.array([[0.91, 0.0], [0.0, -0.81], [0.8, 0.7], [3.0, 1.0]])
     np.testing.assert_array_equal(repulsive_force(beyond, FIELD), 0.0)

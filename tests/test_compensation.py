@@ -87,7 +87,7 @@ def test_alpha_zero_gives_the_required_compensation():
 
 
 def test_alpha_zero_cancels_the_base_deviation_at_the_end_effector():
-    """Whole-body identity from eq. (1): R6 dV_a^cmp + J_b dV_b = 0."""
+    """Whole-body identity from eq. (fk): R6 dV_a^cmp + J_b dV_b = 0."""
     rng = np.random.default_rng(34)
     for _ in range(N_CASES):
         dV_b, J_b, R, grad, _ = random_case(rng)
@@ -155,7 +155,7 @@ def test_base_deviation():
 def test_filtered_base_with_full_compensation_keeps_the_reference():
     """Distribution, then any filtering of V_b, then compensation with
     alpha = 0: the commands actually sent, [V_a + dV_a^cmp; V_b^flt], still
-    give the reference end-effector twist (eqs. (1), (wbccm),
+    give the reference end-effector twist (eqs. (fk), (wbccm),
     (compensation))."""
     rng = np.random.default_rng(38)
     for _ in range(50):

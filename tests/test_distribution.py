@@ -1,6 +1,6 @@
 """Tests of drake_wbc.math.distribution against independent formulations.
 
-J_wb is built here by hand as [R6, J_b] from its definition in eq. (1),
+J_wb is built here by hand as [R6, J_b] from its definition in eq. (fk),
 not with drake_wbc.math.kinematics, so that these tests stand on their own.
 """
 
@@ -34,7 +34,7 @@ def random_orthogonal(rng, n):
 
 
 def whole_body(R, p, J_a=None):
-    """[R6 J_a, J_b] of eq. (1), with J_b of eq. (2), written out; J_a = None
+    """[R6 J_a, J_b] of eq. (fk), with J_b of eq. (2), written out; J_a = None
     is the identity (Cartesian arm input)."""
     J_a = np.eye(6) if J_a is None else J_a
     J = np.zeros((6, 9))

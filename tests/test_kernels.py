@@ -2,8 +2,12 @@
 
 One parametrised test for all of them (drake_wbc.math.kernels): each
 kernel is evaluated beside its scalar-generic reference on random inputs
-drawn by its own sampler, and must give the same result to 1e-12 relative
-to the size of the result's finite entries (its NaNs and infinities
+drawn by its own sampler, and on the edge inputs of EDGES (the points
+where a piecewise body switches branch, which random draws reach only by
+chance: a value on a band's edge and one float either side of it, a norm
+at its tolerance, a distance at its threshold, a command at its limit, a
+force at its bound), and must give the same result to 1e-12 relative to
+the size of the result's finite entries (its NaNs and infinities
 exactly).
 """
 
@@ -39,20 +43,230 @@ def _name(kernel):
     return f"{kernel.reference.__module__}.{kernel.reference.__qualname__}"
 
 
+def _either_side(value):
+    """value and the floats just below and above it."""
+    return [np.nextafter(value, -np.inf), value, np.nextafter(value, np.inf)]
+
+
+def _transition_edges():
+    """alpha and its derivative on both edges of the band and a float
+    either side, at zero (of either sign) and at both infinities."""
+    bands = [(0.04, 0.035), (1.0, 0.0), (0.8, 0.75)]
+    return [(value, upper, lower) for upper, lower in bands
+            for value in (*_either_side(lower), *_either_side(upper), 0.0,
+                          -0.0, np.inf, -np.inf)]
+
+
+def _capability_edges():
+    """C_m and grad_x C_m with s_min on the damping threshold and a float
+    either side (where the damping sets in), at an exact singularity with
+    and without damping, J_a zero, and joints at both limits (P_jnt = 0)
+    or beyond them, for six and seven joints."""
+    rng = np.random.default_rng(3)
+    cases = []
+    for n in (6, 7):
+        U = np.linalg.qr(rng.normal(size=(6, 6)))[0]
+        V = np.linalg.qr(rng.normal(size=(n, n)))[0][:6]
+        lower, upper = -np.ones(n), np.full(n, 1.5)
+        configurations = [np.zeros(n), lower.copy(), upper.copy(),
+                          np.r_[lower[:1], upper[1:]], upper + 0.1]
+        for s_min in (0.02, 0.0):
+            J = np.ascontiguousarray(
+                (U * [1.5, 1.2, 1.0, 0.8, 0.5, s_min]) @ V)
+            s_true = np.linalg.svd(J, compute_uv=False)[-1]
+            for threshold in _either_side(max(s_true, 1e-3)):
+                for damping in (0.0, 0.02):
+                    cases += [(J, q, lower, upper, 1.5e4 * 4.0 ** (n - 6),
+                               damping, threshold)
+                              for q in configurations]
+        cases.append((np.zeros((6, n)), np.zeros(n), lower, upper, 1.5e4,
+                      0.02, 0.02))
+    return cases
+
+
+def _compensation_edges():
+    """The compensation with |grad_x C_m| on the projector's tolerance and
+    a float either side (where P_Cm switches to 0), a gradient of one
+    entry, alpha 0, 1 and between, no base deviation, both mountings."""
+    from drake_wbc.math.compensation import PROJECTOR_TOLERANCE
+    cases = []
+    for norm in _either_side(PROJECTOR_TOLERANCE):
+        for gradient in (np.full(6, norm / np.sqrt(6.0)),
+                         np.r_[norm, np.zeros(5)]):
+            for alpha in (0.0, 0.5, 1.0):
+                for R in (None, np.eye(3)):
+                    for V_b_filtered in ([0.1, 0.2, 0.3], [0.0, 0.0, 0.0]):
+                        cases.append((
+                            np.ones(6), np.zeros(3),
+                            np.array(V_b_filtered), np.array([0.5, 0.1, 0.3]),
+                            R, gradient.copy(), alpha,
+                            PROJECTOR_TOLERANCE))
+    return cases
+
+
+def _distribution_edges():
+    """The distribution at the corners of the weighting factors, with the
+    end effector on the base's axis and at reaches from 3 to 4 m (where
+    the closed form's certificate of no damping stops holding and the
+    reference takes over), the null-space term off and on."""
+    from drake_wbc.math.distribution import DEFAULT_DAMPING
+    V_ee = np.array([0.1, -0.2, 0.05, 0.1, 0.0, 0.2])
+    cases = []
+    for reach in (0.0, *np.linspace(3.0, 4.0, 11)):
+        for sigmas in ((0.0, 0.0), (1.0, 1.0), (0.0, 1.0), (1.0, 0.0),
+                       (0.5, 0.5)):
+            for gain in (0.0, 0.1):
+                for damping in (DEFAULT_DAMPING, None):
+                    cases.append((V_ee.copy(),
+                                  np.array([0.6 * reach, 0.8 * reach, 0.3]),
+                                  None, *sigmas, np.full(6, 0.01), gain,
+                                  damping))
+    return cases
+
+
+def _repulsion_points():
+    """Points on the edges of the field's branches around a 0.8 x 0.6 m
+    footprint with d_th = 0.5 m and d_min = 0.05 m (each distance a float
+    either side too): at d_th and d_min along a side and off a corner, on
+    a side, a corner, inside on the diagonal's tie |x| - a = |y| - b, at
+    the centre (of either sign), and none."""
+    a, b = 0.4, 0.3
+    points = [np.zeros((0, 2)), np.array([[0.0, 0.0]]),
+              np.array([[-0.0, -0.0]]), np.array([[0.1, 0.0]]),
+              np.array([[-0.2, -0.1]]), np.array([[a, b]]),
+              np.array([[-a, b]]), np.array([[a, 0.0]]),
+              np.array([[0.0, -b]])]
+    for distance in (0.5, 0.05):
+        for d in _either_side(distance):
+            points += [np.array([[a + d, 0.1]]), np.array([[-0.2, -b - d]]),
+                       np.array([[a + d / np.sqrt(2.0), b + d / np.sqrt(2.0)]])]
+    return points
+
+
+def _field(**changes):
+    from drake_wbc.math.repulsion import RepulsiveFieldParameters
+    values = dict(k_obs=0.01, d_th=0.5, half_sizes=(0.4, 0.3), d_min=0.05,
+                  max_force=80.0)
+    values.update(changes)
+    return RepulsiveFieldParameters(**values)
+
+
+def _footprint_edges():
+    return [(points, _field()) for points in _repulsion_points()]
+
+
+def _repulsion_edges():
+    """The force at the points of `_repulsion_points`, and one point's
+    force at the bound max_force exactly and a float either side (where
+    the force is scaled down)."""
+    from drake_wbc.math.repulsion import repulsive_force
+    point = np.array([[0.45, 0.0]])
+    push = float(np.hypot(*repulsive_force(point, _field(max_force=1e9))))
+    return [(points, _field()) for points in _repulsion_points()] + [
+        (point, _field(max_force=bound)) for bound in _either_side(push)]
+
+
+def _limit_edges():
+    """The base command at its velocity limit exactly and a float beyond,
+    its change at the acceleration limit exactly (a h = 0.01), from rest
+    and from itself, and with the separation's scale 0."""
+    limits, accelerations, h = (1.0, 0.5, 2.0), (1.0, 1.0, 1.0), 0.01
+    cases = []
+    for desired in ([1.0, 0.0, 0.0], [1.0, 0.5, 2.0],
+                    [np.nextafter(1.0, 2.0), 0.0, 0.0], [0.0, 0.0, 0.0]):
+        desired = np.array(desired)
+        for previous in (np.zeros(3), desired.copy(), desired - 0.01,
+                         desired - [0.01, 0.0, 0.0]):
+            for scale in (1.0, 0.0):
+                cases.append((desired.copy(), previous, limits,
+                              accelerations, h, scale))
+    return cases
+
+
+def _weighting_edges():
+    """The weighting factors of intuitive pHRI with the end effector on
+    the edges of the extent and deflection bands, on the arm base's axis,
+    straight behind it (phi = pi, from either side), C_m on the edges of
+    the capability band, the twist at rest, leading out and leading back
+    at the hysteresis' speed, from either side of the deactivation."""
+    from drake_wbc.math.workspace import AdaptiveWorkspace, LocalWorkspace
+    workspace = LocalWorkspace()
+    constants = AdaptiveWorkspace.of(0.04, 0.035, workspace, np.eye(3),
+                                     np.zeros(3), 0.02, 0.1)
+    positions = [np.array([0.0, 0.0, 0.3]), np.array([-0.7, 0.0, 0.3]),
+                 np.array([-0.7, -0.0, 0.3])]
+    for d in (0.75, 0.8):
+        for phi in (0.0, np.radians(30.0), np.radians(35.0)):
+            positions.append(np.array([d * np.cos(phi), d * np.sin(phi),
+                                       0.3]))
+    cases = []
+    for p in positions:
+        for C_m in (0.04, 0.035, 0.1):
+            for speed in (0.0, 0.02, -0.02):
+                for previous in ([1.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 1.0]):
+                    cases.append((np.array(previous), p.copy(),
+                                  np.r_[speed, np.zeros(5)], C_m,
+                                  np.array([0.01, 0.0, 0.0, 0.0, 0.0, 0.0]),
+                                  constants))
+    return cases
+
+
+def _twist_edges():
+    twist = np.arange(1.0, 7.0)
+    return [(twist, yaw) for yaw in (0.0, -0.0, np.pi, -np.pi, np.pi / 2)]
+
+
+def _forcing_edges():
+    """f(s) at the start and end of the phase, beyond both, at 0 of
+    either sign and at one basis function."""
+    from drake_wbc.math.dmp import DmpParameters
+    cases = []
+    for num_basis in (1, 10):
+        params = DmpParameters(num_basis=num_basis)
+        weights = np.linspace(-1.0, 1.0, 2 * num_basis).reshape(-1, 2)
+        for s in (1.0, 0.0, -0.0, 1e-300, 2.0, -1.0):
+            cases += [(s, weights, params, 1.0), (s, None, params, 1.0)]
+    return cases
+
+
+EDGES = {
+    "drake_wbc.math.capability.transition_of": _transition_edges,
+    "drake_wbc.math.capability.transition_derivative_of": _transition_edges,
+    "drake_wbc.math.capability.capability_terms": _capability_edges,
+    "drake_wbc.math.compensation.arm_compensation": _compensation_edges,
+    "drake_wbc.math.distribution.whole_body_distribution":
+        _distribution_edges,
+    "drake_wbc.math.repulsion.footprint_distance": _footprint_edges,
+    "drake_wbc.math.repulsion.repulsive_force": _repulsion_edges,
+    "drake_wbc.math.command_limits.limit_base_velocity": _limit_edges,
+    "drake_wbc.math.workspace.adaptive_weighting_factors": _weighting_edges,
+    "drake_wbc.math.kinematics.twist_in_base": _twist_edges,
+    "drake_wbc.math.kinematics.twist_in_world": _twist_edges,
+    "drake_wbc.math.dmp.forcing_term": _forcing_edges,
+}
+"""Edge inputs of the kernels (see the module), by the reference's
+name: each a function that returns a list of argument tuples."""
+
+
 @pytest.mark.parametrize("kernel", kernels.registered_kernels(), ids=_name)
 # Samples with entries NaN or infinite make references compute 0 * inf.
 @pytest.mark.filterwarnings("ignore:invalid value:RuntimeWarning")
 def test_the_kernel_gives_its_references_result(kernel):
     rng = np.random.default_rng(20261201)
-    for _ in range(SAMPLES):
-        args = kernel.sample(rng)
+    edges = EDGES.get(_name(kernel), lambda: [])()
+    for args in [kernel.sample(rng) for _ in range(SAMPLES)] + edges:
         expected = _flat(kernel.reference(*args))
         actual = _flat(kernel.fast(*args))
-        assert actual.shape == expected.shape
+        assert actual.shape == expected.shape, args
         scale = max(1.0, float(np.max(np.abs(expected), initial=0.0,
                                       where=np.isfinite(expected))))
         np.testing.assert_allclose(actual, expected, rtol=0.0,
-                                   atol=TOLERANCE * scale)
+                                   atol=TOLERANCE * scale, err_msg=args)
+
+
+def test_the_edge_inputs_name_registered_kernels():
+    names = {_name(kernel) for kernel in kernels.registered_kernels()}
+    assert set(EDGES) <= names, set(EDGES) - names
 
 
 def test_an_equation_has_at_most_one_kernel():

@@ -66,7 +66,7 @@ def test_twist_rotation_rotates_both_parts():
 
 
 def test_whole_body_jacobian_cartesian_arm_input():
-    """Bottom line of eq. (1): V_ee = R_ba V_a + J_b V_b, written out."""
+    """Bottom line of eq. (fk): V_ee = R_ba V_a + J_b V_b, written out."""
     rng = np.random.default_rng(3)
     for _ in range(N_CASES):
         R = random_rotation(rng)
@@ -97,7 +97,7 @@ def test_whole_body_jacobian_default_mounting_is_identity():
 
 
 def test_whole_body_jacobian_with_joint_jacobian():
-    """Top line of eq. (1): the arm columns are R_ba J_a."""
+    """Top line of eq. (fk): the arm columns are R_ba J_a."""
     rng = np.random.default_rng(4)
     for _ in range(50):
         R = random_rotation(rng)
@@ -118,7 +118,7 @@ def test_base_columns_match_finite_difference_of_world_motion():
     """The base moves with world-frame rates dq_b = [dx, dy, dphi] while the
     arm holds still; the end effector's world position is p_w = [x_b, y_b,
     0] + Rz(phi) ^b p_ee. Its finite-difference velocity, rotated into T_b
-    with eq. (3), equals J_b V_b with V_b = ^bR_w dq_b (eq. (1), top line).
+    with eq. (3), equals J_b V_b with V_b = ^bR_w dq_b (eq. (fk), top line).
     """
     rng = np.random.default_rng(5)
     dt = 1e-6

@@ -116,6 +116,37 @@ def test_penalized_capability_gradients_match_finite_differences():
     assert largest > 0.1  # the workspace's terms are there
 
 
+def test_penalized_capability_gradients_at_the_switches():
+    """grad C_m^d and grad C_m^phi by central differences where the
+    piecewise penalties switch: d and phi 1e-4 (in m and rad) either side
+    of each edge of their bands, the end effector straight ahead and
+    straight behind (y = 0, where phi has its kink and P_phi is flat) and
+    each with phi on the other side; C_m linear in the pose."""
+    rng = np.random.default_rng(5)
+    d_edges = (WS.extent_lower, WS.extent_upper)
+    phi_edges = (WS.deflection_lower, WS.deflection_upper)
+    points = [polar(d + side * 1e-4, azimuth)
+              for d in d_edges for side in (-1.0, 1.0)
+              for azimuth in (0.0, np.pi, 0.3, -2.0)]
+    points += [polar(d, sign * (phi + side * 1e-4))
+               for d in (0.6, 0.77, 0.9) for phi in phi_edges
+               for side in (-1.0, 1.0) for sign in (-1.0, 1.0)]
+    for p0 in points:
+        c0 = rng.uniform(0.03, 0.07)
+        g = rng.normal(size=6) * 0.01
+        result = workspace.penalized_capability(c0, g, p0, WS)
+        numeric = np.zeros((2, 6))
+        for i in range(6):
+            step = np.zeros(6)
+            step[i] = H
+            numeric[:, i] = (penalized_by_pose(c0, g, p0, step)
+                             - penalized_by_pose(c0, g, p0, -step)) / (2 * H)
+        np.testing.assert_allclose(result.gradient_d, numeric[0], atol=1e-8,
+                                   err_msg=p0)
+        np.testing.assert_allclose(result.gradient_phi, numeric[1],
+                                   atol=1e-8, err_msg=p0)
+
+
 def state(p, V=None, C_m=0.06, g=None):
     V = np.zeros(6) if V is None else V
     g = np.zeros(6) if g is None else g

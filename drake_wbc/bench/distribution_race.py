@@ -10,7 +10,7 @@ velocity V_n^0 = k_n [grad_x C_m; 0_3] of eq. (wbccm):
     min (V_wb - V_n^0)^T Q^-1 (V_wb - V_n^0)   s.t.   J_wb V_wb = V_ee,
 
 whose solution is eq. (wbsln) with the null-space term,
-V_wb = J^+ V_ee + (I - J^+ J_wb) V_n^0. J_wb = [R_ba, J_b] (eq. (1),
+V_wb = J^+ V_ee + (I - J^+ J_wb) V_n^0. J_wb = [R_ba, J_b] (eq. (fk),
 bottom line) needs p_ee from the arm's kinematics (ArmKinematics:
 the compiled chain read from the MultibodyPlant). The arm's input V_a is
 its 6-D twist in T_a whatever n (the arm controller maps it to the n
@@ -184,7 +184,7 @@ def make_problems(count, seed, arm):
 
 def problem_size(arm):
     """(variables, equalities) of the whole-body problem of `arm`: the
-    columns and rows of its J_wb = [R_ba, J_b] (eq. (1), bottom line),
+    columns and rows of its J_wb = [R_ba, J_b] (eq. (fk), bottom line),
     formed at the arm's home as `qp_data` forms it."""
     p_ee = arm.evaluate(arm.home).p_ee_in_base
     J = kinematics.whole_body_jacobian_of(None, p_ee,

@@ -1,6 +1,6 @@
 """Teaching by hand: a demonstration recorded in pHRI mode and the DMP
 learned from it (drake_wbc.math.movement; the paper's future work, Sec. VI,
-on its Sec. II-C and IV).
+on its Sec. III-C and IV).
 
 The demonstration of each run is the interval in which S_hri is 1
 (demonstration.teaching_interval of the task's phri_switch), from the measured

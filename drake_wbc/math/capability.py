@@ -87,9 +87,11 @@ within about 4% of a limit before the band is reached.
 
 DEFAULT_DAMPING_THRESHOLD = 0.02
 """Default threshold eps on the smallest singular value s_min of J_a, below
-which `capability_gradient` damps its solve. For the Elfin5, s_min is about
-0.2 d within d rad of the wrist singularity (q_5 = 0) and about 0.16 d near
-the stretched elbow (q_3 = 0): 0.02 damps roughly the last 0.1 rad."""
+which `capability_gradient` damps its solve. For the Elfin5 with its tool,
+s_min is about 0.31 d within d rad of the wrist singularity (q_5 = 0) and
+about 0.16 d near the stretched elbow (q_3 = 0) (as for
+drake_wbc.math.arm_control's threshold): 0.02 damps roughly the last
+0.065 rad before the first and the last 0.13 rad before the second."""
 
 DEFAULT_MAX_DAMPING = 0.02
 """Default damping lambda_max of `capability_gradient` (at s_min = 0). Equal

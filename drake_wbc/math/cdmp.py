@@ -1,4 +1,4 @@
-"""Coupling DMPs of the controller (paper Sec. II-C and IV-B).
+"""Coupling DMPs of the controller (paper Sec. III-C and IV-B).
 
 Each function returns the time derivatives of its state pieces, to be
 integrated by a Drake system whose output is the velocity y_dot, the

@@ -1,7 +1,7 @@
-"""Discrete Dynamic Movement Primitives (paper Sec. II-C, eqs. (6), (7)).
+"""Discrete Dynamic Movement Primitives (paper Sec. III-C, eqs. (6), (7)).
 
 The transformation system of eq. (6), with the generic coupling terms of
-Sec. II-C (C_acc at acceleration level, C_vel at velocity level),
+Sec. III-C (C_acc at acceleration level, C_vel at velocity level),
 
     tau z_dot = alpha_z (beta_z (g - y) - z) + f(s) + C_acc,
     tau y_dot = z + C_vel,

@@ -1,4 +1,4 @@
-"""Teach and repeat: a whole-body movement learned as a DMP (Sec. II-C).
+"""Teach and repeat: a whole-body movement learned as a DMP (Sec. III-C).
 
 The paper leaves the forcing term f(s) of eq. (6) at zero; here it is
 learned from demonstrations given by hand in pHRI mode (S_hri = 1,
