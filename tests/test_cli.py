@@ -318,3 +318,185 @@ def test_a_folder_given_as_an_lcm_log_is_named(argv, option, tmp_path,
         f"drake-wbc {argv[0]}: {option} = {str(tmp_path)!r} is not "
         "allowed: a folder, not an LCM log\n")
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("duration, allowed", [
+    ("1e300", "must be at most 3600 s (an hour)"),
+    ("3600.5", "must be at most 3600 s (an hour)"),
+    ("0.001", "must be at least the scenario's outputs.log_period, 0.01 s "
+              "(a shorter run logs its start alone)")])
+def test_run_refuses_a_duration_it_cannot_run(duration, allowed, tmp_path,
+                                              capsys):
+    """`run --duration 1e300` ran for ever without a word (its first
+    stretch of the Simulator was 5e297 s); 0.001 s ended in numpy's
+    'zero-size array' error. Both are refused in one line before
+    anything is written."""
+    output = tmp_path / "out"
+    assert main(["run", "--duration", duration, "--output",
+                 str(output)]) == 2
+    out, err = capsys.readouterr()
+    assert err == (f"drake-wbc run: --duration = {float(duration)!r} is not "
+                   f"allowed: {allowed}\n")
+    assert out == "" and not output.exists()
+
+
+def test_a_scenario_file_cannot_last_for_ever(tmp_path, capsys):
+    path = tmp_path / "long.yaml"
+    path.write_text("duration: 1.0e+300\n")
+    assert main(["run", str(path), "--output", str(tmp_path / "o")]) == 2
+    assert "duration = 1e+300 is not allowed: must be at most 3600 s" in (
+        capsys.readouterr().err)
+
+
+@pytest.mark.parametrize("argv", [
+    ["stress", "--cases", "1"], ["bench", "--quick", "--scenario"]])
+def test_every_duration_option_has_the_same_bound(argv, tmp_path, capsys):
+    option = "--duration" if argv[0] == "stress" else "--scenario-duration"
+    argv = [a for a in argv if a != "--scenario"]
+    assert main(argv + [option, "1e300", "--output",
+                        str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err == (
+        f"drake-wbc {argv[0]}: {option} = 1e+300 is not allowed: must be "
+        "at most 3600 s (an hour)\n")
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_long_run_shows_its_progress_and_time_left_at_once(tmp_path):
+    """The longest run allowed (an hour simulated) says how far it is and
+    how long it has left within its first simulated second: the
+    Simulator advances at most MAX_CHUNK (1 s) at a time (it was a
+    two-hundredth of the run, 18 s here and 5e297 s for 1e300)."""
+    import signal
+
+    process = subprocess.Popen(
+        [sys.executable, "-m", "drake_wbc.cli", "run", "--duration",
+         "3600", "--no-replay", "--output", str(tmp_path)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = process.stderr.readline()
+        assert line.startswith("with base filter: ["), line
+        # The first line: the first chunk, at most a second.
+        t = float(line.split("]")[1].split("/")[0])
+        assert 0.0 < t <= 1.0
+        assert "/ 3600.00 s simulated, real-time factor" in line
+        assert re.search(r", about (\d+ h \d+ min|\d+ min \d+ s) left$",
+                         line.strip()), line
+    finally:
+        process.send_signal(signal.SIGINT)
+        _, err = process.communicate(timeout=60)
+    assert process.returncode == 130, err
+    assert "Traceback" not in err
+
+
+def test_the_progress_line_tells_the_time_left_and_ends_once():
+    """Off a terminal: a line a tenth of the run with the time left, and
+    the last line once, saying how long the run took; a run until Ctrl-C
+    (no duration) has neither bar nor time left."""
+    import io
+
+    from drake_wbc.experiments.runner import Progress, wall_time_text
+
+    stream = io.StringIO()
+    meter = Progress("run", 10.0, stream=stream)
+    for t in (1.0, 1.5, 2.0, 10.0):
+        meter.update(t)
+    meter.update(10.0, done=True)
+    lines = stream.getvalue().splitlines()
+    assert len(lines) == 3  # 1.0, 2.0 (a tenth later) and 10.0, once
+    assert lines[0].startswith("run: [##......................]   1.00 / "
+                               "10.00 s simulated, real-time factor ")
+    assert lines[0].endswith(" left") and "about " in lines[0]
+    assert lines[2].startswith("run: [########################]  10.00")
+    stream = io.StringIO()
+    meter = Progress("robot-sim", None, stream=stream)
+    meter.update(0.05)
+    assert stream.getvalue().startswith("robot-sim:     0.05 s simulated, "
+                                        "real-time factor ")
+    assert stream.getvalue().endswith(" (Ctrl-C stops)\n")
+    assert [wall_time_text(s) for s in (0.42, 42, 200, 7500)] == [
+        "0.4 s", "42 s", "3 min 20 s", "2 h 5 min"]
+
+
+def test_a_long_progress_line_is_written_at_least_every_few_seconds(
+        monkeypatch):
+    """A long run off a terminal writes a line every LINE_INTERVAL s of
+    wall time even between two tenths of the run."""
+    import io
+
+    from drake_wbc.experiments.runner import Progress
+
+    monkeypatch.setattr(Progress, "LINE_INTERVAL", 0.0)
+    stream = io.StringIO()
+    meter = Progress("run", 3600.0, stream=stream)
+    for t in (1.0, 2.0, 3.0):
+        meter.update(t)
+    assert len(stream.getvalue().splitlines()) == 3
+
+
+def test_the_stress_progress_line_tells_the_time_left():
+    import io
+
+    from drake_wbc.stress.run import ProgressLine
+
+    sound = dict(all_finite=True, max_base_command_ratio=0.5,
+                 max_filter_state_ratio=0.5,
+                 max_joint_speed_command_ratio=0.5,
+                 min_command_joint_limit_margin_rad=0.1,
+                 min_static_obstacle_distance_m=None)
+    stream = io.StringIO()
+    line = ProgressLine(2, stream=stream)
+    line.update(dict(case=0, **sound))
+    line.update(dict(case=1, **sound))
+    first, last = stream.getvalue().splitlines()
+    assert re.fullmatch(r"stress: 1 / 2 cases done, 0 failed, about "
+                        r"[\d.]+ s left", first), first
+    assert re.fullmatch(r"stress: 2 / 2 cases done, 0 failed, took "
+                        r"[\d.]+ s", last), last
+
+
+def test_a_short_run_says_which_metrics_it_cannot_measure(tmp_path,
+                                                          capsys):
+    assert main(["run", "trajectory_tracking", "--duration", "0.05",
+                 "--no-replay", "--output", str(tmp_path)]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith(
+        "drake-wbc run trajectory_tracking: note: the run ends at 0.05 s, "
+        "before the step starts at 1 s: the step's metrics and the ratios "
+        "will be nan (give a --duration past it, e.g. 2 s)\n")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--duration", "0.5"],
+     "--duration = 0.5 is not allowed with --sweep: must be at least 1.11 "
+     "s (the step starts at 1 s and its error counts from 0.1 s later; a "
+     "shorter run's ratios are all nan)"),
+    (["fixed_point"],
+     "scenario = 'fixed_point' is not allowed with --sweep: must be a "
+     "trajectory-tracking scenario with the runs filtered and unfiltered "
+     "(e.g. trajectory_tracking)")])
+def test_a_sweep_it_cannot_measure_is_refused(argv, message, tmp_path,
+                                              capsys):
+    """`run --sweep --duration 0.5` ran every point of the maps for
+    minutes to write ratios that were all NaN, without saying why."""
+    assert main(["run", "--sweep", "--output", str(tmp_path / "o")]
+                + argv) == 2
+    out, err = capsys.readouterr()
+    assert err == f"drake-wbc run: {message}\n"
+    assert out == "" and not (tmp_path / "o").exists()
+
+
+def test_replay_refuses_a_start_that_makes_the_run_endless(tmp_path,
+                                                           capsys):
+    movement = (Path(__file__).resolve().parents[1] / "diagrams"
+                / "movements" / "teach.yaml")
+    assert main(["replay", str(movement), "--start-time", "1e300",
+                 "--output", str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err == (
+        "drake-wbc replay: the movement's run (--start-time = 1e+300) = "
+        "1e+300 is not allowed: must be at most 3600 s (an hour); give a "
+        "shorter --tau or --start-time, or a --duration\n")
+    assert main(["replay", str(movement), "--duration", "0.001",
+                 "--output", str(tmp_path / "o")]) == 2
+    assert "--duration = 0.001 is not allowed: must be at least" in (
+        capsys.readouterr().err)
+    assert not (tmp_path / "o").exists()

@@ -137,9 +137,10 @@ def _add_run_arguments(parser):
 
 
 def _run_run(args):
-    from drake_wbc.experiments.reports import run_scenario
+    from drake_wbc.experiments.reports import run_scenario, short_run_note
     from drake_wbc.experiments.scenario import (
         DEFAULT_SCENARIO,
+        checked_duration,
         find_scenario,
         load_scenario,
         scenario_files,
@@ -157,22 +158,38 @@ def _run_run(args):
     if args.duration is not None:
         from drake_wbc.math.validation import positive_duration
 
-        positive_duration("--duration", args.duration)
+        positive_duration("--duration", args.duration)  # before the load
     output = args.output or Path("out") / path.stem
+    scenario = on_robot(load_scenario(path), args)
+    if args.duration is not None:
+        checked_duration("--duration", args.duration, scenario)
     if args.sweep:
-        from drake_wbc.analysis.base_sweep import run_sweep
+        from drake_wbc.analysis.base_sweep import check_sweep, run_sweep
 
-        scenario = on_robot(load_scenario(path), args)
         if args.duration is not None:
             scenario.duration = args.duration
+        try:
+            check_sweep(scenario, "--duration" if args.duration is not None
+                        else f"duration (of {path.name})")
+        except ValueError as error:
+            if not str(error).startswith("experiment = "):
+                raise
+            raise ValueError(
+                f"scenario = {path.stem!r} is not allowed with --sweep: "
+                "must be a trajectory-tracking scenario with the runs "
+                "filtered and unfiltered (e.g. trajectory_tracking)"
+            ) from None
         print(f"drake-wbc run {path.stem} --sweep: writing to "
               f"{output / 'sweep'}/", flush=True)
         run_sweep(scenario, output / "sweep",
                   echo=lambda line: print(line, flush=True))
         return 0
-    scenario = path if args.robot is None else on_robot(load_scenario(path),
-                                                        args)
-    print(f"drake-wbc run {path.stem}: writing to {output}/")
+    output.mkdir(parents=True, exist_ok=True)  # an error before the note
+    note = short_run_note(scenario, args.duration)
+    if note is not None:
+        print(f"drake-wbc run {path.stem}: note: {note}", file=sys.stderr,
+              flush=True)
+    print(f"drake-wbc run {path.stem}: writing to {output}/", flush=True)
     run_scenario(scenario, output, name=path.stem, duration=args.duration,
                  replay=False if args.no_replay else None)
     return 0

@@ -163,6 +163,7 @@ def replay_scenario(args):
     described as this replay."""
     from drake_wbc.experiments.scenario import (
         Variant,
+        checked_duration,
         find_scenario,
         load_scenario,
     )
@@ -210,6 +211,16 @@ def replay_scenario(args):
     if duration is None:
         duration = (start_time + movement.params.duration * tau
                     / movement.params.tau + 1.5)
+        given = ", ".join(
+            f"{option} = {value!r}" for option, value in (
+                ("--tau", args.tau), ("--start-time", args.start_time))
+            if value is not None)
+        checked_duration(
+            "the movement's run" + (f" ({given})" if given else ""),
+            duration, scenario,
+            hint="; give a shorter --tau or --start-time, or a --duration")
+    else:
+        checked_duration("--duration", duration, scenario)
     cylinders = list(scenario.scene.cylinders)
     for i, (x, y, r) in enumerate(args.obstacle or []):
         try:

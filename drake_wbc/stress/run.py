@@ -63,6 +63,7 @@ from multiprocessing import resource_tracker
 from pathlib import Path
 
 from drake_wbc.experiments.reports import from_json_text, json_text
+from drake_wbc.experiments.runner import wall_time_text
 from drake_wbc.experiments.scenario import robot_option_file
 from drake_wbc.math.validation import positive_duration, whole_number
 from drake_wbc.robot.description import load_robot_description
@@ -121,19 +122,26 @@ def add_stress_arguments(parser):
 
 
 class ProgressLine:
-    """`stress: k / N cases done, f failed` on one line of `stream` (a new
-    line per case when `stream` is not a terminal)."""
+    """`stress: k / N cases done, f failed, about t left` on one line of
+    `stream` (a new line per case when `stream` is not a terminal)."""
 
     def __init__(self, total, stream=None):
         self.total, self.done, self.failed = total, 0, 0
         self.stream = stream or sys.stderr
+        self.start = time.perf_counter()
 
     def update(self, record):
         self.done += 1
         broken = violations(record)
         self.failed += bool(broken)
+        elapsed = time.perf_counter() - self.start
+        if self.done >= self.total:
+            left = f"took {wall_time_text(elapsed)}"
+        else:
+            rest = elapsed / self.done * (self.total - self.done)
+            left = f"about {wall_time_text(rest)} left"
         text = (f"stress: {self.done} / {self.total} cases done, "
-                f"{self.failed} failed")
+                f"{self.failed} failed, {left}")
         if broken:
             text = (f"stress: case {record['case']} broke "
                     f"{'; '.join(broken)}\n{text}")
