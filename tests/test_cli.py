@@ -485,6 +485,93 @@ def test_a_sweep_it_cannot_measure_is_refused(argv, message, tmp_path,
     assert out == "" and not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("argv, message", [
+    (["run", "--duration", "abc"],
+     "drake-wbc run: --duration = 'abc' is not allowed: must be a number "
+     "(see drake-wbc run --help)"),
+    (["stress", "--cases", "1.5"],
+     "drake-wbc stress: --cases = '1.5' is not allowed: must be a whole "
+     "number (see drake-wbc stress --help)"),
+    (["frob"],
+     "drake-wbc: command = 'frob' is not allowed: must be one of run, "
+     "bench, stress, teach, replay, bode, diagram, robot-sim, deploy, "
+     "plot, demo (see drake-wbc --help)"),
+    (["run", "--output", ""],
+     "drake-wbc run: --output = '' is not allowed: must be a file or "
+     "folder name (not empty) (see drake-wbc run --help)"),
+    (["demo", "--robot", " "],
+     "drake-wbc demo: --robot = ' ' is not allowed: must be a file or "
+     "folder name (not empty) (see drake-wbc demo --help)"),
+    (["replay", "m.yaml", "--goal", "1", "2"],
+     "drake-wbc replay: --goal: expected 4 arguments (see drake-wbc "
+     "replay --help)"),
+    (["run", ""],
+     "drake-wbc run: scenario = '' is not allowed: must be a scenario "
+     "file or one of "),
+])
+def test_a_command_line_that_does_not_parse_is_one_line(argv, message,
+                                                        tmp_path,
+                                                        monkeypatch,
+                                                        capsys):
+    """argparse's errors were a usage block and 'error: argument
+    --duration: invalid float value'; an empty --output was the current
+    folder and an empty scenario the default one. Each is now one line
+    naming the option, its value and what is allowed, exit code 2."""
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    out, err = capsys.readouterr()
+    assert err.startswith(message) and err.count("\n") == 1, err
+    assert out == "" and list(tmp_path.iterdir()) == []
+
+
+def test_help_and_version_still_exit_0(capsys):
+    assert main(["--version"]) == 0
+    assert main(["run", "--help"]) == 0
+    assert "usage: drake-wbc run" in capsys.readouterr().out
+
+
+def test_demo_names_its_page_after_a_robot_with_any_name(tmp_path, capsys):
+    """A description named "acme/arm: v2" wrote its page into a folder
+    acme that was not there (FileNotFoundError); the page's name keeps
+    what a file name can hold, in the --output folder."""
+    from drake_wbc.cli.main import file_stem
+
+    path = write_omni_arm(tmp_path, 6)
+    path.write_text(path.read_text().replace(
+        "name: omni_arm", 'name: "acme/arm: v2"', 1))
+    assert 'name: "acme/arm: v2"' in path.read_text()
+    output = tmp_path / "pages"
+    assert main(["demo", "--robot", str(path), "--output",
+                 str(output)]) == 0
+    out = capsys.readouterr().out
+    assert "drake_wbc robot model 'acme/arm: v2'" in out
+    assert [p.name for p in output.iterdir()] == ["acme_arm_v2_model.html"]
+    assert file_stem("../../etc/passwd") == "etc_passwd"
+    assert file_stem("..") == "robot" and file_stem("a" * 300) == "a" * 100
+    assert file_stem("Ünï code") == "n_code"
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["plot"], "logfile"), (["teach", "teach", "--log"], "--log")])
+def test_a_file_that_is_no_lcm_log_is_named_as_typed(argv, option,
+                                                     tmp_path, capsys):
+    """It was named 'path = ...', a name no option has."""
+    log = tmp_path / "notes.txt"
+    log.write_text("not an LCM log\n")
+    assert main(argv + [str(log), "--output", str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err.startswith(
+        f"drake-wbc {argv[0]}: {option} = {str(log)!r} is not allowed: the "
+        "log holds none of the channels")
+
+
+def test_demo_names_a_controller_folder(tmp_path, capsys):
+    assert main(["demo", "--controller", str(tmp_path), "--output",
+                 str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err == (
+        f"drake-wbc demo: --controller = {str(tmp_path)!r} is not allowed: "
+        "a folder, not a controller parameters file\n")
+
+
 def test_replay_refuses_a_start_that_makes_the_run_endless(tmp_path,
                                                            capsys):
     movement = (Path(__file__).resolve().parents[1] / "diagrams"

@@ -53,3 +53,12 @@ def test_robot_sim_shows_a_progress_line(capsys):
                                 "####]   0.30 / 0.30 s simulated")
     assert " took " in lines[-1]
     assert out.splitlines()[-1].startswith("robot-sim: 0.30 s simulated in ")
+
+
+@pytest.mark.parametrize("program", ["robot-sim", "deploy"])
+def test_a_bad_lcm_url_is_named_as_typed(program, capsys):
+    """It was named lcm_url, the scenario file's field, not the option."""
+    assert main([program, "hardware", "--lcm-url", "bogus://x"]) == 2
+    assert capsys.readouterr().err == (
+        f"drake-wbc {program}: --lcm-url = 'bogus://x' is not allowed: must "
+        "start with one of udpm://, memq://, file://\n")

@@ -79,7 +79,13 @@ def _scenario_and_options(args):
     scenario = on_robot(scenario, args)
     options = scenario.hardware or HardwareOptions()
     if args.lcm_url is not None:
-        options = validate(replace(options, lcm_url=args.lcm_url))
+        try:
+            options = validate(replace(options, lcm_url=args.lcm_url))
+        except ValueError as error:  # named as typed
+            if not str(error).startswith("lcm_url = "):
+                raise
+            raise ValueError(
+                f"--lcm-url{str(error).removeprefix('lcm_url')}") from None
     return path, scenario, options
 
 
@@ -299,6 +305,9 @@ def run_plot(args):
     except ValueError as error:  # the options' errors, named as typed
         if str(error).startswith(("variant = ", "deployment = ")):
             raise ValueError(f"--{error}") from None
+        if str(error).startswith("path = "):  # the log file's
+            raise ValueError(
+                f"logfile{str(error).removeprefix('path')}") from None
         raise
     print(json_text({k: v for k, v in summary.items() if k != "runs"}))
     print(f"Written to {output}/: "

@@ -94,7 +94,13 @@ def run_teach(args, argv=None, echo=print):
     if args.log is not None:
         from drake_wbc.deployment.lcm_logs import read_lcm_log
 
-        log = read_lcm_log(args.log, scenario.hardware)
+        try:
+            log = read_lcm_log(args.log, scenario.hardware)
+        except ValueError as error:  # the log file's, named as typed
+            if not str(error).startswith("path = "):
+                raise
+            raise ValueError(
+                f"--log{str(error).removeprefix('path')}") from None
     else:
         from drake_wbc.experiments.runner import build_closed_loop, simulate
 
