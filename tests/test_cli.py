@@ -587,3 +587,30 @@ def test_replay_refuses_a_start_that_makes_the_run_endless(tmp_path,
     assert "--duration = 0.001 is not allowed: must be at least" in (
         capsys.readouterr().err)
     assert not (tmp_path / "o").exists()
+
+
+def test_stress_refuses_more_cases_or_workers_than_it_can_run(tmp_path,
+                                                              capsys):
+    """`stress --cases 1e12` listed a trillion case numbers before it ran
+    one, and `--workers 1000` started a process a case, each loading
+    Drake, on a machine of two cores."""
+    import os
+
+    from drake_wbc.stress.run import MAX_CASES, WORKERS_PER_CORE
+
+    output = tmp_path / "o"
+    assert main(["stress", "--cases", "1000000000000", "--output",
+                 str(output)]) == 2
+    assert capsys.readouterr().err == (
+        "drake-wbc stress: --cases = 1000000000000 is not allowed: must be "
+        f"at most {MAX_CASES} (a case takes seconds; run more as several "
+        "runs of other seeds)\n")
+    cores = os.cpu_count() or 1
+    most = WORKERS_PER_CORE * cores
+    assert main(["stress", "--cases", "2", "--workers", str(most + 1),
+                 "--output", str(output)]) == 2
+    assert capsys.readouterr().err.startswith(
+        f"drake-wbc stress: --workers = {most + 1} is not allowed: must be "
+        f"at most {most} ({WORKERS_PER_CORE} a core, of this machine's "
+        f"{cores}; ")
+    assert not output.exists()

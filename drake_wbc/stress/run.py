@@ -72,6 +72,14 @@ from drake_wbc.stress.cases import TIMING_KEYS, run_case, violations
 DEFAULT_DURATION = 4.0
 """Simulated time of each case, s."""
 
+MAX_CASES = 100_000
+"""The most cases one run takes (at a few seconds a case, a day's work
+for a few dozen cores); `--cases 1e12` listed them all before it ran
+one."""
+
+WORKERS_PER_CORE = 4
+"""The most local worker processes a run starts, per core."""
+
 COLUMNS = (
     ("case", "case", "{:d}"),
     ("mode", "mode", "{}"),
@@ -205,11 +213,23 @@ def check_arguments(seed, cases, duration, workers, prefix=""):
     """
     seed = whole_number(f"{prefix}seed", seed)
     cases = whole_number(f"{prefix}cases", cases, 1)
+    if cases > MAX_CASES:
+        raise ValueError(
+            f"{prefix}cases = {cases} is not allowed: must be at most "
+            f"{MAX_CASES} (a case takes seconds; run more as several runs "
+            "of other seeds)")
     duration = positive_duration(f"{prefix}duration", duration)
+    cores = os.cpu_count() or 1
     if workers is None:
-        workers = os.cpu_count() or 1
-    return seed, cases, duration, whole_number(f"{prefix}workers", workers,
-                                               1)
+        workers = cores
+    workers = whole_number(f"{prefix}workers", workers, 1)
+    if workers > WORKERS_PER_CORE * cores:
+        raise ValueError(
+            f"{prefix}workers = {workers} is not allowed: must be at most "
+            f"{WORKERS_PER_CORE * cores} ({WORKERS_PER_CORE} a core, of "
+            f"this machine's {cores}; each worker process loads Drake "
+            "and runs a case at full speed)")
+    return seed, cases, duration, workers
 
 
 def checked_scheduler(address):
