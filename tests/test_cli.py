@@ -614,3 +614,17 @@ def test_stress_refuses_more_cases_or_workers_than_it_can_run(tmp_path,
         f"at most {most} ({WORKERS_PER_CORE} a core, of this machine's "
         f"{cores}; ")
     assert not output.exists()
+
+
+def test_replay_refuses_a_goal_off_the_site(tmp_path, capsys):
+    """`replay --goal 1e300 0 0 0` ran, tripped the controller's safety
+    stop and reported a goal error of inf, exit code 0."""
+    movement = (Path(__file__).resolve().parents[1] / "diagrams"
+                / "movements" / "teach.yaml")
+    assert main(["replay", str(movement), "--goal", "1e300", "0", "0", "0",
+                 "--output", str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err == (
+        "drake-wbc replay: --goal = [1e+300, 0.0, 0.0, 0.0] is not allowed: "
+        "every coordinate and size of a scene must lie within +-1000 m (the "
+        "site around the robot)\n")
+    assert not (tmp_path / "o").exists()

@@ -185,7 +185,7 @@ def replay_scenario(args):
         positive_duration,
         validate,
     )
-    from drake_wbc.station.scene import CylinderObstacle
+    from drake_wbc.station.scene import CylinderObstacle, within_site
 
     if args.duration is not None:
         positive_duration("--duration", args.duration)
@@ -204,6 +204,9 @@ def replay_scenario(args):
     # at is refused before the run.
     if args.goal is not None:
         as_vector("--goal", args.goal, 4)
+        # The goal's position is a point of the scene (1e300 m tripped
+        # the controller's safety stop and gave a goal error of inf).
+        within_site("--goal", list(args.goal), lengths=args.goal[:3])
     if args.tau is not None:
         rollout_step(movement, args.tau, source=str(file), name="--tau")
     if args.start_time is not None:
