@@ -150,6 +150,25 @@ def test_bode_rejects_an_unknown_scenario(tmp_path):
         commands.run_bode(args)
 
 
+@pytest.mark.parametrize("command", ["bode", "diagram"])
+def test_an_empty_scenario_or_output_is_refused(command, tmp_path,
+                                                monkeypatch, capsys):
+    """`bode ''` analysed the default scenario and `--output ''` wrote
+    into the current folder; both are refused in one line."""
+    from drake_wbc.cli.main import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main([command, ""]) == 2
+    assert capsys.readouterr().err.startswith(
+        f"drake-wbc {command}: scenario = '' is not allowed: must be a "
+        "scenario file or one of ")
+    assert main([command, "--output", ""]) == 2
+    assert capsys.readouterr().err == (
+        f"drake-wbc {command}: --output = '' is not allowed: must be a file "
+        f"or folder name (not empty) (see drake-wbc {command} --help)\n")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_diagram_writes_dot_and_says_when_graphviz_is_missing(
         tmp_path, monkeypatch):
     empty = tmp_path / "empty_path"

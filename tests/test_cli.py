@@ -318,3 +318,313 @@ def test_a_folder_given_as_an_lcm_log_is_named(argv, option, tmp_path,
         f"drake-wbc {argv[0]}: {option} = {str(tmp_path)!r} is not "
         "allowed: a folder, not an LCM log\n")
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("duration, allowed", [
+    ("1e300", "must be at most 3600 s (an hour)"),
+    ("3600.5", "must be at most 3600 s (an hour)"),
+    ("0.001", "must be at least the scenario's outputs.log_period, 0.01 s "
+              "(a shorter run logs its start alone)")])
+def test_run_refuses_a_duration_it_cannot_run(duration, allowed, tmp_path,
+                                              capsys):
+    """`run --duration 1e300` ran for ever without a word (its first
+    stretch of the Simulator was 5e297 s); 0.001 s ended in numpy's
+    'zero-size array' error. Both are refused in one line before
+    anything is written."""
+    output = tmp_path / "out"
+    assert main(["run", "--duration", duration, "--output",
+                 str(output)]) == 2
+    out, err = capsys.readouterr()
+    assert err == (f"drake-wbc run: --duration = {float(duration)!r} is not "
+                   f"allowed: {allowed}\n")
+    assert out == "" and not output.exists()
+
+
+def test_a_scenario_file_cannot_last_for_ever(tmp_path, capsys):
+    path = tmp_path / "long.yaml"
+    path.write_text("duration: 1.0e+300\n")
+    assert main(["run", str(path), "--output", str(tmp_path / "o")]) == 2
+    assert "duration = 1e+300 is not allowed: must be at most 3600 s" in (
+        capsys.readouterr().err)
+
+
+@pytest.mark.parametrize("argv", [
+    ["stress", "--cases", "1"], ["bench", "--quick", "--scenario"]])
+def test_every_duration_option_has_the_same_bound(argv, tmp_path, capsys):
+    option = "--duration" if argv[0] == "stress" else "--scenario-duration"
+    argv = [a for a in argv if a != "--scenario"]
+    assert main(argv + [option, "1e300", "--output",
+                        str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err == (
+        f"drake-wbc {argv[0]}: {option} = 1e+300 is not allowed: must be "
+        "at most 3600 s (an hour)\n")
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_long_run_shows_its_progress_and_time_left_at_once(tmp_path):
+    """The longest run allowed (an hour simulated) says how far it is and
+    how long it has left within its first simulated second: the
+    Simulator advances at most MAX_CHUNK (1 s) at a time (it was a
+    two-hundredth of the run, 18 s here and 5e297 s for 1e300)."""
+    import signal
+
+    process = subprocess.Popen(
+        [sys.executable, "-m", "drake_wbc.cli", "run", "--duration",
+         "3600", "--no-replay", "--output", str(tmp_path)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = process.stderr.readline()
+        assert line.startswith("with base filter: ["), line
+        # The first line: the first chunk, at most a second.
+        t = float(line.split("]")[1].split("/")[0])
+        assert 0.0 < t <= 1.0
+        assert "/ 3600.00 s simulated, real-time factor" in line
+        assert re.search(r", about (\d+ h \d+ min|\d+ min \d+ s) left$",
+                         line.strip()), line
+    finally:
+        process.send_signal(signal.SIGINT)
+        _, err = process.communicate(timeout=60)
+    assert process.returncode == 130, err
+    assert "Traceback" not in err
+
+
+def test_the_progress_line_tells_the_time_left_and_ends_once():
+    """Off a terminal: a line a tenth of the run with the time left, and
+    the last line once, saying how long the run took; a run until Ctrl-C
+    (no duration) has neither bar nor time left."""
+    import io
+
+    from drake_wbc.experiments.runner import Progress, wall_time_text
+
+    stream = io.StringIO()
+    meter = Progress("run", 10.0, stream=stream)
+    for t in (1.0, 1.5, 2.0, 10.0):
+        meter.update(t)
+    meter.update(10.0, done=True)
+    lines = stream.getvalue().splitlines()
+    assert len(lines) == 3  # 1.0, 2.0 (a tenth later) and 10.0, once
+    assert lines[0].startswith("run: [##......................]   1.00 / "
+                               "10.00 s simulated, real-time factor ")
+    assert lines[0].endswith(" left") and "about " in lines[0]
+    assert lines[2].startswith("run: [########################]  10.00")
+    stream = io.StringIO()
+    meter = Progress("robot-sim", None, stream=stream)
+    meter.update(0.05)
+    assert stream.getvalue().startswith("robot-sim:     0.05 s simulated, "
+                                        "real-time factor ")
+    assert stream.getvalue().endswith(" (Ctrl-C stops)\n")
+    assert [wall_time_text(s) for s in (0.42, 42, 200, 7500)] == [
+        "0.4 s", "42 s", "3 min 20 s", "2 h 5 min"]
+
+
+def test_a_long_progress_line_is_written_at_least_every_few_seconds(
+        monkeypatch):
+    """A long run off a terminal writes a line every LINE_INTERVAL s of
+    wall time even between two tenths of the run."""
+    import io
+
+    from drake_wbc.experiments.runner import Progress
+
+    monkeypatch.setattr(Progress, "LINE_INTERVAL", 0.0)
+    stream = io.StringIO()
+    meter = Progress("run", 3600.0, stream=stream)
+    for t in (1.0, 2.0, 3.0):
+        meter.update(t)
+    assert len(stream.getvalue().splitlines()) == 3
+
+
+def test_the_stress_progress_line_tells_the_time_left():
+    import io
+
+    from drake_wbc.stress.run import ProgressLine
+
+    sound = dict(all_finite=True, max_base_command_ratio=0.5,
+                 max_filter_state_ratio=0.5,
+                 max_joint_speed_command_ratio=0.5,
+                 min_command_joint_limit_margin_rad=0.1,
+                 min_static_obstacle_distance_m=None)
+    stream = io.StringIO()
+    line = ProgressLine(2, stream=stream)
+    line.update(dict(case=0, **sound))
+    line.update(dict(case=1, **sound))
+    first, last = stream.getvalue().splitlines()
+    assert re.fullmatch(r"stress: 1 / 2 cases done, 0 failed, about "
+                        r"[\d.]+ s left", first), first
+    assert re.fullmatch(r"stress: 2 / 2 cases done, 0 failed, took "
+                        r"[\d.]+ s", last), last
+
+
+def test_a_short_run_says_which_metrics_it_cannot_measure(tmp_path,
+                                                          capsys):
+    assert main(["run", "trajectory_tracking", "--duration", "0.05",
+                 "--no-replay", "--output", str(tmp_path)]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith(
+        "drake-wbc run trajectory_tracking: note: the run ends at 0.05 s, "
+        "before the step starts at 1 s: the step's metrics and the ratios "
+        "will be nan (give a --duration past it, e.g. 2 s)\n")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--duration", "0.5"],
+     "--duration = 0.5 is not allowed with --sweep: must be at least 1.11 "
+     "s (the step starts at 1 s and its error counts from 0.1 s later; a "
+     "shorter run's ratios are all nan)"),
+    (["fixed_point"],
+     "scenario = 'fixed_point' is not allowed with --sweep: must be a "
+     "trajectory-tracking scenario with the runs filtered and unfiltered "
+     "(e.g. trajectory_tracking)")])
+def test_a_sweep_it_cannot_measure_is_refused(argv, message, tmp_path,
+                                              capsys):
+    """`run --sweep --duration 0.5` ran every point of the maps for
+    minutes to write ratios that were all NaN, without saying why."""
+    assert main(["run", "--sweep", "--output", str(tmp_path / "o")]
+                + argv) == 2
+    out, err = capsys.readouterr()
+    assert err == f"drake-wbc run: {message}\n"
+    assert out == "" and not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["run", "--duration", "abc"],
+     "drake-wbc run: --duration = 'abc' is not allowed: must be a number "
+     "(see drake-wbc run --help)"),
+    (["stress", "--cases", "1.5"],
+     "drake-wbc stress: --cases = '1.5' is not allowed: must be a whole "
+     "number (see drake-wbc stress --help)"),
+    (["frob"],
+     "drake-wbc: command = 'frob' is not allowed: must be one of run, "
+     "bench, stress, teach, replay, bode, diagram, robot-sim, deploy, "
+     "plot, demo (see drake-wbc --help)"),
+    (["run", "--output", ""],
+     "drake-wbc run: --output = '' is not allowed: must be a file or "
+     "folder name (not empty) (see drake-wbc run --help)"),
+    (["demo", "--robot", " "],
+     "drake-wbc demo: --robot = ' ' is not allowed: must be a file or "
+     "folder name (not empty) (see drake-wbc demo --help)"),
+    (["replay", "m.yaml", "--goal", "1", "2"],
+     "drake-wbc replay: --goal: expected 4 arguments (see drake-wbc "
+     "replay --help)"),
+    (["run", ""],
+     "drake-wbc run: scenario = '' is not allowed: must be a scenario "
+     "file or one of "),
+])
+def test_a_command_line_that_does_not_parse_is_one_line(argv, message,
+                                                        tmp_path,
+                                                        monkeypatch,
+                                                        capsys):
+    """argparse's errors were a usage block and 'error: argument
+    --duration: invalid float value'; an empty --output was the current
+    folder and an empty scenario the default one. Each is now one line
+    naming the option, its value and what is allowed, exit code 2."""
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    out, err = capsys.readouterr()
+    assert err.startswith(message) and err.count("\n") == 1, err
+    assert out == "" and list(tmp_path.iterdir()) == []
+
+
+def test_help_and_version_still_exit_0(capsys):
+    assert main(["--version"]) == 0
+    assert main(["run", "--help"]) == 0
+    assert "usage: drake-wbc run" in capsys.readouterr().out
+
+
+def test_demo_names_its_page_after_a_robot_with_any_name(tmp_path, capsys):
+    """A description named "acme/arm: v2" wrote its page into a folder
+    acme that was not there (FileNotFoundError); the page's name keeps
+    what a file name can hold, in the --output folder."""
+    from drake_wbc.cli.main import file_stem
+
+    path = write_omni_arm(tmp_path, 6)
+    path.write_text(path.read_text().replace(
+        "name: omni_arm", 'name: "acme/arm: v2"', 1))
+    assert 'name: "acme/arm: v2"' in path.read_text()
+    output = tmp_path / "pages"
+    assert main(["demo", "--robot", str(path), "--output",
+                 str(output)]) == 0
+    out = capsys.readouterr().out
+    assert "drake_wbc robot model 'acme/arm: v2'" in out
+    assert [p.name for p in output.iterdir()] == ["acme_arm_v2_model.html"]
+    assert file_stem("../../etc/passwd") == "etc_passwd"
+    assert file_stem("..") == "robot" and file_stem("a" * 300) == "a" * 100
+    assert file_stem("Ünï code") == "n_code"
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["plot"], "logfile"), (["teach", "teach", "--log"], "--log")])
+def test_a_file_that_is_no_lcm_log_is_named_as_typed(argv, option,
+                                                     tmp_path, capsys):
+    """It was named 'path = ...', a name no option has."""
+    log = tmp_path / "notes.txt"
+    log.write_text("not an LCM log\n")
+    assert main(argv + [str(log), "--output", str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err.startswith(
+        f"drake-wbc {argv[0]}: {option} = {str(log)!r} is not allowed: the "
+        "log holds none of the channels")
+
+
+def test_demo_names_a_controller_folder(tmp_path, capsys):
+    assert main(["demo", "--controller", str(tmp_path), "--output",
+                 str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err == (
+        f"drake-wbc demo: --controller = {str(tmp_path)!r} is not allowed: "
+        "a folder, not a controller parameters file\n")
+
+
+def test_replay_refuses_a_start_that_makes_the_run_endless(tmp_path,
+                                                           capsys):
+    movement = (Path(__file__).resolve().parents[1] / "diagrams"
+                / "movements" / "teach.yaml")
+    assert main(["replay", str(movement), "--start-time", "1e300",
+                 "--output", str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err == (
+        "drake-wbc replay: the movement's run (--start-time = 1e+300) = "
+        "1e+300 is not allowed: must be at most 3600 s (an hour); give a "
+        "shorter --tau or --start-time, or a --duration\n")
+    assert main(["replay", str(movement), "--duration", "0.001",
+                 "--output", str(tmp_path / "o")]) == 2
+    assert "--duration = 0.001 is not allowed: must be at least" in (
+        capsys.readouterr().err)
+    assert not (tmp_path / "o").exists()
+
+
+def test_stress_refuses_more_cases_or_workers_than_it_can_run(tmp_path,
+                                                              capsys):
+    """`stress --cases 1e12` listed a trillion case numbers before it ran
+    one, and `--workers 1000` started a process a case, each loading
+    Drake, on a machine of two cores."""
+    import os
+
+    from drake_wbc.stress.run import MAX_CASES, WORKERS_PER_CORE
+
+    output = tmp_path / "o"
+    assert main(["stress", "--cases", "1000000000000", "--output",
+                 str(output)]) == 2
+    assert capsys.readouterr().err == (
+        "drake-wbc stress: --cases = 1000000000000 is not allowed: must be "
+        f"at most {MAX_CASES} (a case takes seconds; run more as several "
+        "runs of other seeds)\n")
+    cores = os.cpu_count() or 1
+    most = WORKERS_PER_CORE * cores
+    assert main(["stress", "--cases", "2", "--workers", str(most + 1),
+                 "--output", str(output)]) == 2
+    assert capsys.readouterr().err.startswith(
+        f"drake-wbc stress: --workers = {most + 1} is not allowed: must be "
+        f"at most {most} ({WORKERS_PER_CORE} a core, of this machine's "
+        f"{cores}; ")
+    assert not output.exists()
+
+
+def test_replay_refuses_a_goal_off_the_site(tmp_path, capsys):
+    """`replay --goal 1e300 0 0 0` ran, tripped the controller's safety
+    stop and reported a goal error of inf, exit code 0."""
+    movement = (Path(__file__).resolve().parents[1] / "diagrams"
+                / "movements" / "teach.yaml")
+    assert main(["replay", str(movement), "--goal", "1e300", "0", "0", "0",
+                 "--output", str(tmp_path / "o")]) == 2
+    assert capsys.readouterr().err == (
+        "drake-wbc replay: --goal = [1e+300, 0.0, 0.0, 0.0] is not allowed: "
+        "every coordinate and size of a scene must lie within +-1000 m (the "
+        "site around the robot)\n")
+    assert not (tmp_path / "o").exists()

@@ -24,3 +24,41 @@ def test_deploy_checks_its_rate_too():
     with pytest.raises(ValueError, match="realtime_rate = 0.0 is not "
                                          "allowed"):
         deploy(scenario, realtime_rate=0.0)
+
+
+@pytest.mark.parametrize("program, hint", [
+    ("robot-sim", "; leave --duration out to run until Ctrl-C"),
+    ("deploy", "")])
+def test_a_duration_beyond_an_hour_is_refused(program, hint, capsys):
+    """`--duration 1e300` ran (or waited) for ever without a word."""
+    assert main([program, "hardware", "--duration", "1e300"]) == 2
+    assert capsys.readouterr().err == (
+        f"drake-wbc {program}: --duration = 1e+300 is not allowed: must be "
+        f"at most 3600 s (an hour){hint}\n")
+
+
+def test_robot_sim_shows_a_progress_line(capsys):
+    """robot-sim said nothing from its first line to its last: it now
+    shows the simulated time, the real-time factor and the time left
+    (over LCM in memory, memq://, which nothing else hears)."""
+    assert main(["robot-sim", "hardware", "--duration", "0.3",
+                 "--lcm-url", "memq://", "--realtime-rate", "3"]) == 0
+    out, err = capsys.readouterr()
+    lines = [line for line in err.splitlines()
+             if line.startswith("robot-sim hardware: [")]
+    assert len(lines) >= 3, err
+    assert " / 0.30 s simulated, real-time factor " in lines[0]
+    assert lines[0].endswith(" left") and "about " in lines[0]
+    assert lines[-1].startswith("robot-sim hardware: [####################"
+                                "####]   0.30 / 0.30 s simulated")
+    assert " took " in lines[-1]
+    assert out.splitlines()[-1].startswith("robot-sim: 0.30 s simulated in ")
+
+
+@pytest.mark.parametrize("program", ["robot-sim", "deploy"])
+def test_a_bad_lcm_url_is_named_as_typed(program, capsys):
+    """It was named lcm_url, the scenario file's field, not the option."""
+    assert main([program, "hardware", "--lcm-url", "bogus://x"]) == 2
+    assert capsys.readouterr().err == (
+        f"drake-wbc {program}: --lcm-url = 'bogus://x' is not allowed: must "
+        "start with one of udpm://, memq://, file://\n")

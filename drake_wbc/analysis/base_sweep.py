@@ -151,6 +151,33 @@ def point_ratios(scenario):
             for m in ("", "measured.") for key in RATIOS}
 
 
+def check_sweep(scenario, name="duration"):
+    """Checks that `scenario` can be swept: a trajectory-tracking
+    scenario with the variants `filtered` and `unfiltered`, whose
+    duration (`name`: how the command line gives it) reaches past the
+    step's start and settling (a shorter one ran every point for
+    minutes to give nan ratios only).
+
+    Raises:
+        ValueError: naming what is not allowed and why.
+    """
+    if scenario.experiment != "trajectory_tracking" or {
+            v.name for v in scenario.variants} != {"filtered", "unfiltered"}:
+        raise ValueError(
+            f"experiment = {scenario.experiment!r} is not allowed for a "
+            "sweep: must be trajectory_tracking with the variants "
+            "filtered and unfiltered")
+    shortest = trajectory_tracking.sweep_shortest(scenario)
+    if scenario.duration < shortest - 1e-12:
+        start, _ = trajectory_tracking.step_window(scenario)
+        raise ValueError(
+            f"{name} = {scenario.duration!r} is not allowed with --sweep: "
+            f"must be at least {shortest:g} s (the step starts at "
+            f"{start:g} s and its error counts from "
+            f"{trajectory_tracking.SETTLING:g} s later; a shorter run's "
+            "ratios are all nan)")
+
+
 def run_sweep(scenario, output, maps=MAPS, echo=print):
     """Runs the sweep around `scenario` (a trajectory-tracking Scenario
     with `filtered` and `unfiltered` variants) and writes to `output`
@@ -159,12 +186,7 @@ def run_sweep(scenario, output, maps=MAPS, echo=print):
     Returns:
         list of dict: one per point (map, x, y and the ratios).
     """
-    if scenario.experiment != "trajectory_tracking" or {
-            v.name for v in scenario.variants} != {"filtered", "unfiltered"}:
-        raise ValueError(
-            f"experiment = {scenario.experiment!r} is not allowed for a "
-            "sweep: must be trajectory_tracking with the variants "
-            "filtered and unfiltered")
+    check_sweep(scenario)
     if scenario.station.suspension is None:
         # The wheels' compliance is the suspension's: no map around a
         # rigid chassis.

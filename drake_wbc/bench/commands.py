@@ -26,7 +26,7 @@ import warnings
 from pathlib import Path
 
 from drake_wbc.bench import report, timing
-from drake_wbc.math.validation import positive, whole_number
+from drake_wbc.math.validation import positive_duration, whole_number
 
 FULL = dict(repeats=30, problems=200, ticks=100, scaling_ticks=50,
             points=(100, 250, 500, 1000, 2000),
@@ -88,8 +88,8 @@ def settings_from(args):
     if args.repeats is not None:
         settings["repeats"] = whole_number("--repeats", args.repeats, 1)
     if args.scenario_duration is not None:
-        settings["scenario_duration"] = positive("--scenario-duration",
-                                                 args.scenario_duration)
+        settings["scenario_duration"] = positive_duration(
+            "--scenario-duration", args.scenario_duration)
     settings["scenario_repeats"] = whole_number(
         "--scenario-repeats", args.scenario_repeats, 1)
     settings["seed"] = whole_number("--seed", args.seed)

@@ -41,7 +41,8 @@ def _scenario(args, command):
         load_scenario,
     )
 
-    path = find_scenario(args.scenario or DEFAULT_SCENARIO)
+    path = find_scenario(DEFAULT_SCENARIO if args.scenario is None
+                         else args.scenario)
     output = args.output or Path("out") / command / path.stem
     return path.stem, on_robot(load_scenario(path), args), Path(output)
 

@@ -79,7 +79,13 @@ def _scenario_and_options(args):
     scenario = on_robot(scenario, args)
     options = scenario.hardware or HardwareOptions()
     if args.lcm_url is not None:
-        options = validate(replace(options, lcm_url=args.lcm_url))
+        try:
+            options = validate(replace(options, lcm_url=args.lcm_url))
+        except ValueError as error:  # named as typed
+            if not str(error).startswith("lcm_url = "):
+                raise
+            raise ValueError(
+                f"--lcm-url{str(error).removeprefix('lcm_url')}") from None
     return path, scenario, options
 
 
@@ -96,13 +102,14 @@ def _add_common(parser):
                        "limits bound the commands")
 
 
-def _duration(value):
-    """--duration, checked (None: the scenario's)."""
+def _duration(value, hint=""):
+    """--duration, checked (None: the scenario's); `hint` ends the message
+    of one too long."""
     if value is None:
         return None
     from drake_wbc.math.validation import positive_duration
 
-    return positive_duration("--duration", value)
+    return positive_duration("--duration", value, hint=hint)
 
 
 def _realtime_rate(value):
@@ -132,9 +139,11 @@ def run_robot_sim(args):
     from pydrake.systems.analysis import Simulator
 
     from drake_wbc.deployment.robot_side import RobotSide
+    from drake_wbc.experiments.runner import Progress
 
     _log_to_stderr()
-    duration = _duration(args.duration)
+    duration = _duration(args.duration, hint="; leave --duration out to "
+                         "run until Ctrl-C")
     rate = _realtime_rate(args.realtime_rate)
     path, scenario, options = _scenario_and_options(args)
     lcm = DrakeLcm(options.lcm_url)
@@ -151,12 +160,16 @@ def run_robot_sim(args):
           f"{channels.truth}; listening to {channels.base_command}, "
           f"{channels.arm_command}", flush=True)
     started = time.perf_counter()
+    meter = Progress(f"robot-sim {path.stem}", duration)
     with StopRequest() as stop:
         simulator.Initialize()
         t = 0.0
         while (duration is None or t < duration - 1e-12) and not stop():
             t = t + 0.05 if duration is None else min(t + 0.05, duration)
             simulator.AdvanceTo(t)
+            if duration is None or t < duration - 1e-12:
+                meter.update(t)
+    meter.update(root.get_time(), done=True)
     elapsed = time.perf_counter() - started
     print(f"robot-sim: {root.get_time():.2f} s simulated in {elapsed:.2f} s "
           f"(real-time factor {root.get_time() / max(elapsed, 1e-9):.2f})",
@@ -292,6 +305,9 @@ def run_plot(args):
     except ValueError as error:  # the options' errors, named as typed
         if str(error).startswith(("variant = ", "deployment = ")):
             raise ValueError(f"--{error}") from None
+        if str(error).startswith("path = "):  # the log file's
+            raise ValueError(
+                f"logfile{str(error).removeprefix('path')}") from None
         raise
     print(json_text({k: v for k, v in summary.items() if k != "runs"}))
     print(f"Written to {output}/: "

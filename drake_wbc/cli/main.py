@@ -8,6 +8,7 @@ the exit code. Heavy imports happen inside the runners, so that
 
 import argparse
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -65,6 +66,16 @@ def _checked_q_arm(q_arm, arm):
     return q
 
 
+def file_stem(name, fallback="robot"):
+    """`name` (a robot's, as its description gives it: any text) made fit
+    for a file's name on every system: each run of characters other than
+    letters, digits, '.', '_' and '-' becomes one '_', leading and
+    trailing dots and '_' go, and it is cut to 100 characters; `fallback`
+    where nothing is left. "acme/arm v2" gives "acme_arm_v2"."""
+    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._")[:100]
+    return stem.rstrip("._") or fallback
+
+
 def _run_demo(args):
     from drake_wbc.cli.model_report import (
         describe_robot,
@@ -84,7 +95,8 @@ def _run_demo(args):
         if args.controller is not None and not args.controller.is_file():
             raise ValueError(
                 f"--controller = {str(args.controller)!r} is not allowed: "
-                "no such file")
+                + ("a folder, not a controller parameters file"
+                   if args.controller.is_dir() else "no such file"))
         description = (shipped_robot() if args.robot is None
                        else load_robot_description(
                            robot_option_file(args.robot)))
@@ -106,8 +118,9 @@ def _run_demo(args):
     print(describe_tuning(arm, params.capability_band,
                           params.capability.joint_limit_gain,
                           params.workspace.workspace))
-    page = write_model_page(args.output / f"{description.name}_model.html",
-                            q_arm, description=description)
+    page = write_model_page(
+        args.output / f"{file_stem(description.name)}_model.html", q_arm,
+        description=description)
     print(f"\nMeshcat page of the model (open it in a browser): {page}")
     return 0
 
@@ -137,9 +150,10 @@ def _add_run_arguments(parser):
 
 
 def _run_run(args):
-    from drake_wbc.experiments.reports import run_scenario
+    from drake_wbc.experiments.reports import run_scenario, short_run_note
     from drake_wbc.experiments.scenario import (
         DEFAULT_SCENARIO,
+        checked_duration,
         find_scenario,
         load_scenario,
         scenario_files,
@@ -153,26 +167,43 @@ def _run_run(args):
             marker = " (default)" if path.stem == DEFAULT_SCENARIO else ""
             print(f"{path.stem:{width}s}  {scenario.description}{marker}")
         return 0
-    path = find_scenario(args.scenario or DEFAULT_SCENARIO)
+    path = find_scenario(DEFAULT_SCENARIO if args.scenario is None
+                         else args.scenario)
     if args.duration is not None:
         from drake_wbc.math.validation import positive_duration
 
-        positive_duration("--duration", args.duration)
+        positive_duration("--duration", args.duration)  # before the load
     output = args.output or Path("out") / path.stem
+    scenario = on_robot(load_scenario(path), args)
+    if args.duration is not None:
+        checked_duration("--duration", args.duration, scenario)
     if args.sweep:
-        from drake_wbc.analysis.base_sweep import run_sweep
+        from drake_wbc.analysis.base_sweep import check_sweep, run_sweep
 
-        scenario = on_robot(load_scenario(path), args)
         if args.duration is not None:
             scenario.duration = args.duration
+        try:
+            check_sweep(scenario, "--duration" if args.duration is not None
+                        else f"duration (of {path.name})")
+        except ValueError as error:
+            if not str(error).startswith("experiment = "):
+                raise
+            raise ValueError(
+                f"scenario = {path.stem!r} is not allowed with --sweep: "
+                "must be a trajectory-tracking scenario with the runs "
+                "filtered and unfiltered (e.g. trajectory_tracking)"
+            ) from None
         print(f"drake-wbc run {path.stem} --sweep: writing to "
               f"{output / 'sweep'}/", flush=True)
         run_sweep(scenario, output / "sweep",
                   echo=lambda line: print(line, flush=True))
         return 0
-    scenario = path if args.robot is None else on_robot(load_scenario(path),
-                                                        args)
-    print(f"drake-wbc run {path.stem}: writing to {output}/")
+    output.mkdir(parents=True, exist_ok=True)  # an error before the note
+    note = short_run_note(scenario, args.duration)
+    if note is not None:
+        print(f"drake-wbc run {path.stem}: note: {note}", file=sys.stderr,
+              flush=True)
+    print(f"drake-wbc run {path.stem}: writing to {output}/", flush=True)
     run_scenario(scenario, output, name=path.stem, duration=args.duration,
                  replay=False if args.no_replay else None)
     return 0
@@ -263,9 +294,63 @@ SUBCOMMANDS = (
 )
 
 
+_TYPE_NAMES = {"float": "a number", "int": "a whole number",
+               "path": "a file or folder name (not empty)"}
+"""What an argument of each type (argparse's name of it) must be."""
+
+
+def plain_error(message):
+    """argparse's `message` of a command line it cannot parse, in the
+    words of every other error: "argument --duration: invalid float
+    value: 'abc'" becomes "--duration = 'abc' is not allowed: must be a
+    number"."""
+    match = re.fullmatch(r"argument (\S+?)(?:/\S+)?: (.*)", message,
+                         re.S)
+    if match is None:
+        return message
+    option, reason = match.groups()
+    invalid = re.fullmatch(r"invalid (\w+) value: ('.*')", reason, re.S)
+    if invalid is not None and invalid[1] in _TYPE_NAMES:
+        return (f"{option} = {invalid[2]} is not allowed: must be "
+                f"{_TYPE_NAMES[invalid[1]]}")
+    choice = re.fullmatch(r"invalid choice: ('.*?') \(choose from (.*)\)",
+                          reason, re.S)
+    if choice is not None:
+        name = "command" if option == "COMMAND" else option
+        return (f"{name} = {choice[1]} is not allowed: must be one of "
+                f"{choice[2].replace(chr(39), '')}")
+    return f"{option}: {reason}"
+
+
+class CommandParser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are one line, as every other error
+    of the command: the option, its value and what is allowed, then
+    where to read more; exit code 2."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: {plain_error(message)} (see "
+                     f"{self.prog} --help)\n")
+
+
+def path(text):
+    """A path argument: any text but an empty one (Path("") is ".", the
+    current folder, which an empty --output or --robot never meant)."""
+    if not text.strip():
+        raise ValueError("an empty name")
+    return Path(text)
+
+
+def _checked_paths(parser):
+    """Makes every argument of `parser` read as a Path refuse an empty
+    string (`path`)."""
+    for action in parser._actions:
+        if action.type is Path:
+            action.type = path
+
+
 def make_parser():
     """Returns the argument parser of `drake-wbc`."""
-    parser = argparse.ArgumentParser(
+    parser = CommandParser(
         prog="drake-wbc",
         description=(
             "Whole-body control of velocity-controlled mobile collaborative "
@@ -282,6 +367,7 @@ def make_parser():
     for name, summary, add_arguments, run in SUBCOMMANDS:
         sub = commands.add_parser(name, help=summary, description=summary)
         add_arguments(sub)
+        _checked_paths(sub)
         sub.set_defaults(run=run)
     return parser
 
@@ -311,7 +397,10 @@ def _unwritable(args, error):
 def main(argv=None):
     """Runs `drake-wbc` with `argv` (the process's arguments if None)."""
     parser = make_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as done:  # --help, --version or a parse error
+        return done.code
     if args.command is None:
         parser.print_help()
         return 2

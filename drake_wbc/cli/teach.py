@@ -94,7 +94,13 @@ def run_teach(args, argv=None, echo=print):
     if args.log is not None:
         from drake_wbc.deployment.lcm_logs import read_lcm_log
 
-        log = read_lcm_log(args.log, scenario.hardware)
+        try:
+            log = read_lcm_log(args.log, scenario.hardware)
+        except ValueError as error:  # the log file's, named as typed
+            if not str(error).startswith("path = "):
+                raise
+            raise ValueError(
+                f"--log{str(error).removeprefix('path')}") from None
     else:
         from drake_wbc.experiments.runner import build_closed_loop, simulate
 
@@ -163,6 +169,7 @@ def replay_scenario(args):
     described as this replay."""
     from drake_wbc.experiments.scenario import (
         Variant,
+        checked_duration,
         find_scenario,
         load_scenario,
     )
@@ -178,7 +185,7 @@ def replay_scenario(args):
         positive_duration,
         validate,
     )
-    from drake_wbc.station.scene import CylinderObstacle
+    from drake_wbc.station.scene import CylinderObstacle, within_site
 
     if args.duration is not None:
         positive_duration("--duration", args.duration)
@@ -197,6 +204,9 @@ def replay_scenario(args):
     # at is refused before the run.
     if args.goal is not None:
         as_vector("--goal", args.goal, 4)
+        # The goal's position is a point of the scene (1e300 m tripped
+        # the controller's safety stop and gave a goal error of inf).
+        within_site("--goal", list(args.goal), lengths=args.goal[:3])
     if args.tau is not None:
         rollout_step(movement, args.tau, source=str(file), name="--tau")
     if args.start_time is not None:
@@ -210,6 +220,16 @@ def replay_scenario(args):
     if duration is None:
         duration = (start_time + movement.params.duration * tau
                     / movement.params.tau + 1.5)
+        given = ", ".join(
+            f"{option} = {value!r}" for option, value in (
+                ("--tau", args.tau), ("--start-time", args.start_time))
+            if value is not None)
+        checked_duration(
+            "the movement's run" + (f" ({given})" if given else ""),
+            duration, scenario,
+            hint="; give a shorter --tau or --start-time, or a --duration")
+    else:
+        checked_duration("--duration", duration, scenario)
     cylinders = list(scenario.scene.cylinders)
     for i, (x, y, r) in enumerate(args.obstacle or []):
         try:

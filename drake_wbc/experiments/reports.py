@@ -92,6 +92,20 @@ def run_scenario(scenario, output, name=None, duration=None, replay=None,
     return summary
 
 
+def short_run_note(scenario, duration=None):
+    """A sentence on the metrics that a run of `scenario` for `duration`
+    s (its own if None) will leave NaN because it is too short to
+    measure them (the experiment's `short_run_note`), or None."""
+    module = experiment_module(scenario.experiment)
+    note = getattr(module, "short_run_note", None)
+    if note is None:
+        return None
+    if duration is not None:
+        scenario = copy.copy(scenario)
+        scenario.duration = duration
+    return note(scenario)
+
+
 def plain_values(value):
     """`value` with numpy scalars and arrays as plain Python, for JSON."""
     if isinstance(value, dict):

@@ -30,6 +30,9 @@ from drake_wbc.experiments.scenario import (
 from drake_wbc.math.validation import checked_instance
 from drake_wbc.station.simulation import SimulatedStation
 
+MAX_CHUNK = 1.0
+"""s: the longest stretch `simulate` advances the Simulator at once."""
+
 
 @dataclass
 class ClosedLoop:
@@ -95,31 +98,77 @@ def build_closed_loop(scenario, variant=None, replay=False):
 
 
 class Progress:
-    """Simulated time and real-time factor on one line of stderr (a new
-    line each tenth of the run when stderr is not a terminal); `what`
-    says what the time is (`drake-wbc deploy`: "run", on the robot)."""
+    """Simulated time, real-time factor and the time left on one line of
+    stderr, redrawn in place on a terminal; elsewhere (a log file, a
+    pipe) a new line each tenth of the run and at least every
+    `LINE_INTERVAL` s of wall time, so that a long run is never silent.
+    `what` says what the time is (`drake-wbc deploy`: "run", on the
+    robot). With `duration` None (a run until Ctrl-C) the line has no
+    bar and no time left."""
+
+    LINE_INTERVAL = 10.0
+    """s of wall time between two lines at most, off a terminal."""
 
     def __init__(self, label, duration, stream=None, what="simulated"):
         self.label, self.duration, self.what = label, duration, what
         self.stream = stream or sys.stderr
         self.start = wall_clock.perf_counter()
         self._next_line = 0.0
+        self._last_line = None  # wall time of the last line written
+        self._last_t = None  # and its t
+        self._width = 0  # of the text drawn in place
 
-    def update(self, t, done=False):
-        elapsed = wall_clock.perf_counter() - self.start
+    def text(self, t, elapsed, done=False):
+        """The line at run time `t` after `elapsed` s of wall time."""
         rtf = t / elapsed if elapsed > 0.0 else 0.0
+        if self.duration is None:
+            return (f"{self.label}: {t:8.2f} s {self.what}, real-time "
+                    f"factor {rtf:4.2f} (Ctrl-C stops)")
         width = 24
         filled = int(width * min(t / self.duration, 1.0))
-        text = (f"{self.label}: [{'#' * filled}{'.' * (width - filled)}] "
+        if done:
+            left = f"took {wall_time_text(elapsed)}"
+        elif rtf > 0.0 and t > 0.0:
+            left = f"about {wall_time_text((self.duration - t) / rtf)} left"
+        else:
+            left = "time left not known yet"
+        return (f"{self.label}: [{'#' * filled}{'.' * (width - filled)}] "
                 f"{t:6.2f} / {self.duration:.2f} s {self.what}, "
-                f"real-time factor {rtf:4.2f}")
+                f"real-time factor {rtf:4.2f}, {left}")
+
+    def update(self, t, done=False):
+        now = wall_clock.perf_counter()
+        elapsed = now - self.start
+        rtf = t / elapsed if elapsed > 0.0 else 0.0
+        text = self.text(t, elapsed, done)
         if self.stream.isatty():
-            self.stream.write("\r" + text + ("\n" if done else ""))
-        elif done or t >= self._next_line:
+            padding = " " * max(0, self._width - len(text))
+            self._width = len(text)
+            self.stream.write("\r" + text + padding
+                              + ("\n" if done else ""))
+        elif (done and t != self._last_t) or (
+                self.duration is not None and t >= self._next_line) or (
+                self._last_line is None
+                or now - self._last_line >= self.LINE_INTERVAL):
             self.stream.write(text + "\n")
-            self._next_line = t + self.duration / 10.0
+            self._last_line, self._last_t = now, t
+            if self.duration is not None:
+                self._next_line = t + self.duration / 10.0
         self.stream.flush()
         return rtf
+
+
+def wall_time_text(seconds):
+    """A wall time for the progress line: "0.4 s", "42 s", "3 min 20 s",
+    "2 h 5 min"."""
+    if seconds < 9.95:
+        return f"{seconds:.1f} s"
+    seconds = round(seconds)
+    if seconds < 60:
+        return f"{seconds} s"
+    if seconds < 3600:
+        return f"{seconds // 60} min {seconds % 60} s"
+    return f"{seconds // 3600} h {seconds % 3600 // 60} min"
 
 
 def start_simulator(loop):
@@ -147,11 +196,14 @@ def simulate(loop, duration=None, progress=False):
     root = simulator.get_mutable_context()
     meter = Progress(loop.variant.label or loop.variant.name, duration) \
         if progress else None
-    chunk = max(duration / 200.0, loop.scenario.controller.time_step)
+    # Two hundred steps of the bar, none longer than a simulated second:
+    # the line moves (and Ctrl-C answers) every few seconds of wall time.
+    chunk = min(max(duration / 200.0, loop.scenario.controller.time_step),
+                MAX_CHUNK)
     started = wall_clock.perf_counter()
     for t in advance_times(duration, chunk):
         simulator.AdvanceTo(t)
-        if meter is not None:
+        if meter is not None and t < duration:
             meter.update(t)
     elapsed = wall_clock.perf_counter() - started
     if meter is not None:

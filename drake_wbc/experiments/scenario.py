@@ -41,6 +41,7 @@ from drake_wbc.math.validation import (
     boolean,
     checked_instance,
     positive,
+    positive_duration,
     text,
 )
 from drake_wbc.robot.description import (
@@ -198,6 +199,7 @@ class Scenario:
                 f"experiment = {self.experiment!r} is not allowed: must be "
                 f"one of {', '.join(EXPERIMENTS)}")
         positive("duration", self.duration)
+        checked_duration("duration", self.duration, self)
         if not self.variants:
             raise ValueError("variants = [] is not allowed: give at least "
                              "one run")
@@ -254,6 +256,26 @@ class Scenario:
                 "once a step; more frames repeat it and fill the memory)")
         if not self.robot:  # another robot's: where its file is loaded
             check_on_robot(self)
+
+
+def checked_duration(name, value, scenario, hint=""):
+    """`value`, a run's length in s for `scenario` (its `duration`, a
+    command's --duration), checked: finite, > 0, at most
+    drake_wbc.math.validation.LONGEST_RUN, and at least the scenario's
+    outputs.log_period (a shorter run logs its start alone, and every
+    metric needs two samples). `hint` ends the message of one too long.
+
+    Raises:
+        ValueError: naming `name`, its value and what is allowed.
+    """
+    number = positive_duration(name, value, hint=hint)
+    period = scenario.outputs.log_period
+    if number < period - 1e-12:
+        raise ValueError(
+            f"{name} = {number!r} is not allowed: must be at least the "
+            f"scenario's outputs.log_period, {period:g} s (a shorter run "
+            "logs its start alone)")
+    return number
 
 
 def controller_for(scenario, variant=None):

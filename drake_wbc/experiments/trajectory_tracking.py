@@ -67,6 +67,33 @@ def step_window(scenario):
                      "the trajectory-tracking experiment needs")
 
 
+def short_run_note(scenario):
+    """Why some of the metrics of `scenario` (its duration perhaps cut by
+    `drake-wbc run --duration`) will be NaN, in a sentence; None where
+    the run reaches far enough into the step for all of them."""
+    start, _ = step_window(scenario)
+    duration = scenario.duration
+    if duration <= start:
+        return (f"the run ends at {duration:g} s, before the step starts "
+                f"at {start:g} s: the step's metrics and the ratios will "
+                "be nan (give a --duration past it, e.g. "
+                f"{start + 1.0:g} s)")
+    if duration < start + SETTLING + scenario.outputs.log_period:
+        return (f"the run ends {duration - start:.3g} s into the step, "
+                f"before its peak error counts ({SETTLING:g} s after its "
+                f"start at {start:g} s): peak_error_after_step_m_s will "
+                "be nan")
+    return None
+
+
+def sweep_shortest(scenario):
+    """s: the shortest duration of `scenario` whose ratios a sweep
+    (drake_wbc.analysis.base_sweep) can take: past the step's start and
+    its settling, by one log sample."""
+    start, _ = step_window(scenario)
+    return start + SETTLING + scenario.outputs.log_period
+
+
 def velocity_error(log):
     """e = V_ee - V_ee^ref along x (world = T_b here), true velocities."""
     return (log["truth.end_effector_velocity"][:, 0]

@@ -293,9 +293,18 @@ def positive(name, value):
     return _above(name, value, strict=True)
 
 
-def positive_duration(name, value):
+LONGEST_RUN = 3600.0
+"""s: the longest simulated or deployed run a command accepts (an hour).
+A run keeps its logs in memory, about 80 kB a simulated second (100
+signals at 100 Hz), and simulates at a few times real time: an hour is
+some 300 MB of log and a quarter of an hour of waiting a run. A longer
+one (`--duration 1e300`) would run for ever and end out of memory."""
+
+
+def positive_duration(name, value, longest=LONGEST_RUN, hint=""):
     """Returns `value`, a duration in s, as a float after checking that
-    it is finite and > 0 (a command's --duration).
+    it is finite, > 0 and at most `longest` (a command's --duration, a
+    scenario's duration); `hint` ends the message of one too long.
 
     Raises:
         ValueError: naming `name` and its value.
@@ -303,7 +312,20 @@ def positive_duration(name, value):
     number = as_scalar(name, value)
     if not number > 0.0:
         raise ValueError(f"{name} = {number!r} is not allowed: must be > 0 s")
+    if number > longest:
+        raise ValueError(
+            f"{name} = {number!r} is not allowed: must be at most "
+            f"{longest:g} s ({_spoken(longest)}){hint}")
     return number
+
+
+def _spoken(seconds):
+    """`seconds` as a person says it: "an hour", "10 minutes"."""
+    if seconds == 3600.0:
+        return "an hour"
+    if seconds % 3600.0 == 0.0:
+        return f"{seconds / 3600.0:g} hours"
+    return f"{seconds / 60.0:g} minutes"
 
 
 def non_negative(name, value):

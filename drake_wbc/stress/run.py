@@ -63,6 +63,7 @@ from multiprocessing import resource_tracker
 from pathlib import Path
 
 from drake_wbc.experiments.reports import from_json_text, json_text
+from drake_wbc.experiments.runner import wall_time_text
 from drake_wbc.experiments.scenario import robot_option_file
 from drake_wbc.math.validation import positive_duration, whole_number
 from drake_wbc.robot.description import load_robot_description
@@ -70,6 +71,14 @@ from drake_wbc.stress.cases import TIMING_KEYS, run_case, violations
 
 DEFAULT_DURATION = 4.0
 """Simulated time of each case, s."""
+
+MAX_CASES = 100_000
+"""The most cases one run takes (at a few seconds a case, a day's work
+for a few dozen cores); `--cases 1e12` listed them all before it ran
+one."""
+
+WORKERS_PER_CORE = 4
+"""The most local worker processes a run starts, per core."""
 
 COLUMNS = (
     ("case", "case", "{:d}"),
@@ -121,19 +130,26 @@ def add_stress_arguments(parser):
 
 
 class ProgressLine:
-    """`stress: k / N cases done, f failed` on one line of `stream` (a new
-    line per case when `stream` is not a terminal)."""
+    """`stress: k / N cases done, f failed, about t left` on one line of
+    `stream` (a new line per case when `stream` is not a terminal)."""
 
     def __init__(self, total, stream=None):
         self.total, self.done, self.failed = total, 0, 0
         self.stream = stream or sys.stderr
+        self.start = time.perf_counter()
 
     def update(self, record):
         self.done += 1
         broken = violations(record)
         self.failed += bool(broken)
+        elapsed = time.perf_counter() - self.start
+        if self.done >= self.total:
+            left = f"took {wall_time_text(elapsed)}"
+        else:
+            rest = elapsed / self.done * (self.total - self.done)
+            left = f"about {wall_time_text(rest)} left"
         text = (f"stress: {self.done} / {self.total} cases done, "
-                f"{self.failed} failed")
+                f"{self.failed} failed, {left}")
         if broken:
             text = (f"stress: case {record['case']} broke "
                     f"{'; '.join(broken)}\n{text}")
@@ -197,11 +213,23 @@ def check_arguments(seed, cases, duration, workers, prefix=""):
     """
     seed = whole_number(f"{prefix}seed", seed)
     cases = whole_number(f"{prefix}cases", cases, 1)
+    if cases > MAX_CASES:
+        raise ValueError(
+            f"{prefix}cases = {cases} is not allowed: must be at most "
+            f"{MAX_CASES} (a case takes seconds; run more as several runs "
+            "of other seeds)")
     duration = positive_duration(f"{prefix}duration", duration)
+    cores = os.cpu_count() or 1
     if workers is None:
-        workers = os.cpu_count() or 1
-    return seed, cases, duration, whole_number(f"{prefix}workers", workers,
-                                               1)
+        workers = cores
+    workers = whole_number(f"{prefix}workers", workers, 1)
+    if workers > WORKERS_PER_CORE * cores:
+        raise ValueError(
+            f"{prefix}workers = {workers} is not allowed: must be at most "
+            f"{WORKERS_PER_CORE * cores} ({WORKERS_PER_CORE} a core, of "
+            f"this machine's {cores}; each worker process loads Drake "
+            "and runs a case at full speed)")
+    return seed, cases, duration, workers
 
 
 def checked_scheduler(address):
