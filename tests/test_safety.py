@@ -399,6 +399,67 @@ def test_a_reference_too_large_for_the_dmps_is_a_fault(arm):
         command, clean.log("base.velocity_command")[1][-1], atol=1e-3)
 
 
+@pytest.mark.parametrize("entry, value", [(2, 1e30), (4, -30.5)])
+def test_a_wrench_beyond_the_sensors_range_is_a_fault(arm, entry, value):
+    """A finite wrist reading beyond what the sensor can measure (its
+    range in the robot's description: the FT-300's 300 N and 30 N m) was
+    taken as a real force: 1e30 N on the wrist, passed to the admittance
+    and the arm's DMP. It is a fault of the stream: a safe stop that
+    names the entry, after which the robot resumes as a run without it;
+    a reading at the range itself (a saturated sensor) is not."""
+    rig, clean = Rig(arm), Rig(arm)
+    valid = np.array(rig.valid["wrist.wrench_measured"], dtype=float)
+    bad = valid.copy()
+    bad[entry] = value
+    at_range = valid.copy()
+    at_range[entry] = np.sign(value) * (300.0 if entry < 3 else 30.0)
+    for run in (rig, clean):
+        run.advance(0.3)
+        if run is rig:
+            run.set("wrist.wrench_measured", at_range)
+            run.advance(0.05)
+            assert rig.controller.safety_reason(rig.root_context) == ""
+            run.set("wrist.wrench_measured", bad)
+        run.advance(0.05)
+        if run is rig:
+            assert (f"wrist.wrench_measured[{entry}] = {value!r} is out of "
+                    "the range" in rig.controller.safety_reason(
+                        rig.root_context))
+        run.set("wrist.wrench_measured", valid)
+        run.advance(1.0)
+    _, status = rig.log("safety_status")
+    assert status[:, STATUS["trips"]].max() == 1.0
+    assert status[-1, STATUS["stopped"]] == 0.0
+    # Zero at the stop (the base's drive brakes), then from rest within
+    # the acceleration limits.
+    t, commands = rig.log("base.velocity_command")
+    stopped = status[:, STATUS["stopped"]] == 1.0
+    np.testing.assert_array_equal(commands[stopped], 0.0)
+    after = t > t[stopped][0]
+    steps = np.abs(np.diff(commands[after], axis=0)) / H
+    assert np.all(steps <= A_MAX * (1.0 + TOL))
+
+
+def test_an_arm_position_beyond_its_own_joints_limit_is_a_fault(arm):
+    """The arm's measured positions had one range for every joint, the
+    widest joint's (+-3.14 rad, give or take the margin): a status of
+    3.0 rad on the fifth joint, limited to +-2.56 rad, was taken as a
+    real position. Each joint has its own range now."""
+    rig = Rig(arm)
+    rig.advance(0.1)
+    q = np.array(rig.q)
+    q[4] = arm.upper[4] + safety.MEASURED_POSITION_MARGIN + 0.01
+    assert q[4] < np.max(arm.upper)
+    rig.set("arm.position_measured", q)
+    rig.advance(0.05)
+    assert ("arm.position_measured[4]" in
+            rig.controller.safety_reason(rig.root_context))
+    q[4] = arm.upper[4] + 0.5 * safety.MEASURED_POSITION_MARGIN
+    rig.set("arm.position_measured", q)
+    rig.advance(HOLD + 0.05)
+    assert rig.controller.safety_reason(rig.root_context) == ""
+
+
 def test_commands_have_no_direct_feedthrough_from_inputs(arm):
     diagram = build_controller(robot=arm).diagram
     for output in ("base.velocity_command", "arm.position_command",
@@ -696,6 +757,13 @@ def test_checks_in_closed_form():
             Reason.NOT_A_SWITCH, 1, bad)
     assert safety.check_vector([2.0], 0.0, 1.0, switch=True).reason is (
         Reason.OUT_OF_RANGE)
+    # A range per entry: the second entry's is the narrower.
+    assert safety.check_vector([5.0, 0.5], [-10.0, -1.0], [10.0, 1.0]).valid
+    assert safety.check_vector([5.0, 2.0], [-10.0, -1.0],
+                               [10.0, 1.0]) == (Reason.OUT_OF_RANGE, 1, 2.0)
+    assert safety.check_inputs_float(
+        [np.array([5.0, 2.0])], [((-10.0, -1.0), (10.0, 1.0), False)]) == (
+        (Reason.OUT_OF_RANGE, 1, 2.0),)
     kept, dropped, check = safety.check_points(
         [[1.0, 2.0], [np.nan, 0.0], [3.0, 4.0]])
     np.testing.assert_array_equal(kept, [[1.0, 2.0], [3.0, 4.0]])

@@ -38,7 +38,10 @@ no algebraic loop, and no direct feedthrough from any input to a command.
 
 Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
 - Every input enters through the InputGuard: a NaN, an infinite value, a
-  value out of range (k_n < 0, s_c outside [0, 1]) or a pHRI switch other
+  value out of range (k_n < 0, s_c outside [0, 1], an arm position
+  beyond its joint's limits by more than MEASURED_POSITION_MARGIN, a
+  wrist wrench beyond the sensor's range, tool.ft_sensor_range of the
+  robot's description) or a pHRI switch other
   than 0 or 1 never reaches a stage (the guard passes the last valid
   sample on) and triggers a safe stop. From that tick on the base command
   is zero (at once: the base's own drive brakes it within its limits, the
@@ -391,9 +394,13 @@ def _input_guard(params, arm):
     are the stages' parameters (what the stages used while their port was
     not connected), and their sizes and ranges those of
     drake_wbc.math.task_inputs.TASK_INPUTS; the arm's
-    measured positions within the span of its joints' limits, give or
-    take MEASURED_POSITION_MARGIN (one range for every entry)."""
+    measured positions each within its joint's limits, give or take
+    MEASURED_POSITION_MARGIN; the wrist's wrench each component within
+    the sensor's range (the robot's description's tool.ft_sensor_range:
+    a reading beyond what the sensor can measure is a broken or forged
+    message, not a force)."""
     vector = GuardedInput
+    sensor_range = np.asarray(arm.model.description.tool.ft_sensor_range)
 
     def task(name, outputs=(), **options):
         spec = TASK_INPUTS[name]
@@ -403,9 +410,10 @@ def _input_guard(params, arm):
     inputs = (
         vector("base.state_estimated", BASE_STATE_SIZE),
         vector("arm.position_measured", arm.num_joints, initial=arm.home,
-               lower=float(np.min(arm.lower)) - MEASURED_POSITION_MARGIN,
-               upper=float(np.max(arm.upper)) + MEASURED_POSITION_MARGIN),
-        vector("wrist.wrench_measured", 6),
+               lower=tuple(arm.lower - MEASURED_POSITION_MARGIN),
+               upper=tuple(arm.upper + MEASURED_POSITION_MARGIN)),
+        vector("wrist.wrench_measured", 6, lower=tuple(-sensor_range),
+               upper=tuple(sensor_range)),
         task("reference_velocity", zero_when_stopped=True),
         task("desired_wrench", (("desired_wrench", params.arm_cdmp.F_d),)),
         # While stopped: the admittance term of eq. (cdmp-wb) off (0),
