@@ -237,6 +237,52 @@ def test_walls_and_crates_are_not_people():
         assert found == []
 
 
+def test_a_long_moving_hold_makes_no_pillar_a_person():
+    """A track that never moved has its last moving time at NEVER
+    (-1e9 s): with moving_hold of 2e9 s (a person who stopped counts as
+    moving for that long) every pillar counted as a moving person from
+    its first scan, the base kept from it at a person's separation. A
+    track is a person only once it has moved."""
+    params = PeopleSeparationParameters(moving_hold=2e9)
+    state = tracking.initial_tracker()
+    for k in range(6):
+        state, found, _ = tracking.people_scan(
+            state, scan_of(np.zeros(3), [[1.5, 1.2, 0.15]]),
+            odometry(np.zeros(3), np.zeros(3)), k * SCAN, HALF, params)
+        assert found == []
+
+
+def test_a_long_hold_time_is_no_protective_stop_at_the_start(caplog):
+    """The protective stop held while t - (the last time a point was
+    inside) < hold_time, that last time NEVER (-1e9 s) before any: with a
+    hold time of 2e9 s (legal: the base stays stopped that long after a
+    point has gone) the base was in a protective stop from the start,
+    with no point anywhere near, its reason that a point was inside the
+    footprint. A point inside still stops it, and it then holds."""
+    limiter = BaseCommandLimiter(
+        SafetyParameters(**BASE_LIMITS, hold_time=2e9), H, HALF)
+    context = limiter.CreateDefaultContext()
+    limiter.GetInputPort("velocity").FixValue(context, [0.5, 0.0, 0.0])
+    limiter.GetInputPort("stopped").FixValue(context, [0.0])
+    far = np.array([[5.0, 5.0], [5.0, 5.1]])
+    inside = np.array([[0.1, 0.0], [5.0, 5.0]])
+    stops = []
+    for k in range(40):
+        context.SetTime(k * H)
+        limiter.GetInputPort("obstacle_points").FixValue(
+            context, AbstractValue.Make(inside if k == 20 else far))
+        context.SetDiscreteState(limiter.EvalUniquePeriodicDiscreteUpdate(
+            context).get_vector().CopyToVector())
+        stops.append(limiter.GetOutputPort("protective_stop").Eval(
+            context)[0])
+        if k == 10:
+            assert limiter.reason(context) == ""
+            assert limiter.GetOutputPort("velocity_command").Eval(
+                context)[0] > 0.0
+    assert stops[:20] == [0.0] * 20
+    assert stops[20:] == [1.0] * 20
+
+
 def test_the_tracker_starts_again_when_time_is_set_back():
     """Eight pillars fill the tracker's slots; the time is then set 9 s
     back and a person walks towards the base at 1.2 m/s: the tracks,
