@@ -17,6 +17,7 @@ from shipped_names import (
     BASE_VELOCITY_LIMITS,
 )
 
+from drake_wbc.controller import build_controller
 from drake_wbc.math import people as tracking
 from drake_wbc.math.repulsion import footprint_gap
 from drake_wbc.math.safety import (
@@ -33,6 +34,7 @@ from drake_wbc.math.separation import (
     protective_speeds,
     protective_timing,
 )
+from drake_wbc.robot.description import load_robot_description, models_dir
 from drake_wbc.stages import BaseCommandLimiter
 from drake_wbc.station.lidar import LidarParameters, scan, scan_points
 
@@ -603,3 +605,37 @@ def test_time_set_back_neither_makes_up_nor_forgets_a_protective_stop():
         stops = [tick(1.0 + k * H, far) for k in range(100)]
         assert stops == [1.0] * resumes + [0.0] * (100 - resumes)
         assert limiter.reason(context) == ""
+
+
+@pytest.mark.parametrize("people, message", [
+    (dict(tracked_range=3.0),
+     r"controller.safety.people.tracked_range = 3.0 is not allowed: must "
+     r"be at least 4.86 m"),
+    (dict(min_travel=2.0),
+     r"controller.safety.people.tracked_range = 6.0 is not allowed: must "
+     r"be at least 6.36 m"),
+    (dict(moving_scans=30),
+     r"controller.safety.people.tracked_range = 6.0 is not allowed: must "
+     r"be at least 7.56 m"),
+    (dict(gate=0.1), r"controller.safety.people.gate = 0.1 is not "
+     r"allowed: must be at least 0.133 m"),
+])
+def test_a_tracking_that_cannot_protect_a_walker_is_refused(people,
+                                                            message):
+    """Each value legal alone, the tracking could not protect a person
+    walking at the base: one seen from 3 m, or counted as moving only
+    after 2 m or 30 scans, is first a person where the base at its full
+    1 m/s cannot stop short any more (the protective separation 4.36 m,
+    eq. (protective)); a gate smaller than a person's step between two
+    scans loses every walker. They are refused when the scenario is
+    loaded, naming the field and the least that protects; the defaults
+    (6 m, 0.5 m) pass on both shipped robots."""
+    from drake_wbc.experiments.scenario import load_scenario
+
+    lines = "\n".join(f"      {k}: {v}" for k, v in people.items())
+    with pytest.raises(ValueError, match=message):
+        load_scenario(text=f"controller:\n  safety:\n    people:\n{lines}\n")
+    load_scenario(text="controller:\n  safety:\n    people:\n"
+                  "      tracked_range: 4.9\n")
+    build_controller(robot=load_robot_description(
+        models_dir() / "lbr_omni.robot.yaml"))
