@@ -460,6 +460,40 @@ def test_an_arm_position_beyond_its_own_joints_limit_is_a_fault(arm):
     assert rig.controller.safety_reason(rig.root_context) == ""
 
 
+def test_a_protective_stop_stops_the_arm_too(arm):
+    """A point inside the footprint (a person, or what the base struck)
+    while the robot follows 0.3 m/s ahead: the base braked to rest, and
+    the arm, compensating the braking and then carrying the whole
+    reference, went on moving the tool towards it at up to 0.29 rad/s a
+    joint for as long as the stop lasted. It brakes to rest within its
+    acceleration limit and holds, and after the stop the arm and the
+    base resume from rest within their acceleration limits."""
+    rig = Rig(arm)
+    rig.set("reference_velocity", [0.3, 0.0, 0.0, 0.0, 0.0, 0.0])
+    rig.advance(1.0)
+    rig.set("lidar.obstacle_points", np.array([[0.35, 0.0], [2.0, 0.0]]))
+    rig.advance(1.0)
+    rig.set("lidar.obstacle_points", rig.valid["lidar.obstacle_points"])
+    rig.advance(1.5)
+    t, stop = rig.log("base_protective_stop")
+    _, q = rig.log("arm.position_command")
+    rates = np.diff(q, axis=0) / H  # rates[k]: from tick k to k + 1
+    stopped = np.flatnonzero(stop[:, 0] == 1.0)
+    assert t[stopped[0]] == pytest.approx(1.01)
+    assert np.abs(rates[stopped[0] - 1]).max() > 0.1
+    # At rest within 0.125 s (1.57 rad/s at 12.56 rad/s^2) and a tick,
+    # then held.
+    rest = stopped[0] + 14
+    np.testing.assert_allclose(q[rest:stopped[-1] + 1] - q[rest], 0.0,
+                               atol=1e-12)
+    accelerations = np.abs(np.diff(rates, axis=0)) / H
+    assert np.all(accelerations <= JOINT_ACCELERATION * (1.0 + 1e-6))
+    assert np.abs(rates[-1]).max() > 0.05  # moving again
+    _, base = rig.log("base.velocity_command")
+    steps = np.abs(np.diff(base, axis=0)) / H
+    assert np.all(steps <= A_MAX * (1.0 + TOL))
+
+
 def test_commands_have_no_direct_feedthrough_from_inputs(arm):
     diagram = build_controller(robot=arm).diagram
     for output in ("base.velocity_command", "arm.position_command",

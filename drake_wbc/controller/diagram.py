@@ -26,7 +26,8 @@ One control tick, as wired here (design notes, "data flow of one tick")::
                           ▼
                        ArmCdmp ◄─ F_ext, F_d, S_hri
                           ▼
-             ArmCartesianVelocityController ◄─ stop (hold)
+             ArmCartesianVelocityController ◄─ stop or protective stop
+                                                (hold)
                           ▼
                  arm.position_command
 
@@ -79,7 +80,14 @@ Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
   limiter reads base.state_estimated too), and brakes the base to rest
   within its acceleration limits while a point is on or inside the
   footprint (a protective stop, on `base_protective_stop` and in
-  Controller.safety_reason); the compensator sees
+  Controller.safety_reason). A protective stop stops the arm too, as a
+  safe stop does: it brakes to rest within its acceleration limits and
+  holds, and the DMPs' couplings are held (their inputs gated). What is
+  inside the footprint is a person, or what the base has struck, within
+  the arm's reach; the compensation would otherwise make up with the
+  arm for the base's braking, moving the tool on towards it (0.3 m/s
+  of a 0.3 m/s reference, all of it the arm's once the base stood).
+  The compensator sees
   the command actually sent, so the arm makes up for what the limits take
   from the base (eq. (compensation)), or, by its `base_source`, the
   base's measured twist or that command through a model of the base's
@@ -93,7 +101,7 @@ import warnings
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import MatrixGain
+from pydrake.systems.primitives import Adder, MatrixGain
 
 from drake_wbc.controller.parameters import (
     ControllerParameters,
@@ -263,6 +271,9 @@ def build_controller(params=None, robot=None):
         base_cdmp=add("base_cdmp", BaseCdmp(params.base_cdmp, time_step=h)),
         base_gate=add("base_gate", StopGate(
             3, limits=params.safety.base_velocity_limits)),
+        # A safe stop or a protective stop (either >= 0.5): the arm's
+        # hold and the couplings' gates.
+        any_stop=add("any_stop", Adder(2, 1)),
         # The couplings' inputs held at zero while stopped.
         base_cdmp_gate=add("base_cdmp_gate", StopSwitch(3)),
         arm_cdmp_gate=add("arm_cdmp_gate", StopSwitch(6)),
@@ -311,12 +322,15 @@ def build_controller(params=None, robot=None):
     connect("guard", "null_space_gain", "distributor", "null_space_gain")
     connect("guard", "compensation_switch", "compensator",
             "compensation_switch")
-    # The safe stop.
+    # The safe stop; the protective stop (a point on or inside the
+    # footprint) holds the arm and the couplings as it does.
     connect("guard", "stop", "base_gate", "stop")
     connect("guard", "stopped", "base_limiter", "stopped")
-    connect("guard", "stop", "arm_controller", "hold")
+    connect("guard", "stop", "any_stop", "u0")
+    connect("base_limiter", "protective_stop", "any_stop", "u1")
+    connect("any_stop", "sum", "arm_controller", "hold")
     for gate in ("base_cdmp_gate", "arm_cdmp_gate", "deviation_gate"):
-        connect("guard", "stop", gate, "stop")
+        connect("any_stop", "sum", gate, "stop")
 
     connect("base_yaw", "y0", "whole_body_cdmp", "base_yaw")
     # F_ext in the frame of each DMP's velocity: T_b for the whole body's
