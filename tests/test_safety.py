@@ -440,6 +440,31 @@ def test_a_wrench_beyond_the_sensors_range_is_a_fault(arm, entry, value):
     assert np.all(steps <= A_MAX * (1.0 + TOL))
 
 
+@pytest.mark.parametrize("entry, value", [(3, 50.0), (2, 1e30),
+                                          (0, 1e30)])
+def test_an_odometry_no_base_can_read_is_a_fault(arm, entry, value):
+    """The base's state had no range: a forged or corrupted odometry of
+    1e30 rad of yaw turned the world-frame reference into an arbitrary
+    direction (the arm's joints at 0.74 rad/s instead of 0.4, no input
+    invalid), one of 1e30 m left the people tracker no precision, and a
+    twist of 50 m/s was taken as measured. A pose beyond MAX_ODOMETRY or
+    a twist beyond MEASURED_TWIST_FACTOR times the base's own limits is
+    a fault; five times its limit (a slipping wheel) is not."""
+    rig = Rig(arm)
+    rig.advance(0.3)
+    state = np.array(rig.valid["base.state_estimated"])
+    fast = state.copy()
+    fast[3] = 5.0 * V_MAX[0]
+    rig.set("base.state_estimated", fast)
+    rig.advance(0.05)
+    assert rig.controller.safety_reason(rig.root_context) == ""
+    state[entry] = value
+    rig.set("base.state_estimated", state)
+    rig.advance(0.05)
+    assert (f"base.state_estimated[{entry}] = {value!r} is out of the "
+            "range" in rig.controller.safety_reason(rig.root_context))
+
+
 def test_an_arm_position_beyond_its_own_joints_limit_is_a_fault(arm):
     """The arm's measured positions had one range for every joint, the
     widest joint's (+-3.14 rad, give or take the margin): a status of

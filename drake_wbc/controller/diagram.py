@@ -39,7 +39,9 @@ no algebraic loop, and no direct feedthrough from any input to a command.
 
 Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
 - Every input enters through the InputGuard: a NaN, an infinite value, a
-  value out of range (k_n < 0, s_c outside [0, 1], an arm position
+  value out of range (k_n < 0, s_c outside [0, 1], an odometry beyond
+  MAX_ODOMETRY or a base twist beyond MEASURED_TWIST_FACTOR times the
+  robot's velocity limits, an arm position
   beyond its joint's limits by more than MEASURED_POSITION_MARGIN, a
   wrist wrench beyond the sensor's range, tool.ft_sensor_range of the
   robot's description) or a pHRI switch other
@@ -110,7 +112,11 @@ from drake_wbc.controller.parameters import (
 )
 from drake_wbc.math.base_state import BASE_STATE_SIZE, BASE_YAW
 from drake_wbc.math.motion_mode import MotionMode
-from drake_wbc.math.safety import MEASURED_POSITION_MARGIN
+from drake_wbc.math.safety import (
+    MAX_ODOMETRY,
+    MEASURED_POSITION_MARGIN,
+    MEASURED_TWIST_FACTOR,
+)
 from drake_wbc.math.task_inputs import TASK_INPUTS
 from drake_wbc.math.validation import checked_instance, validated_copy
 from drake_wbc.robot.model import arm_kinematics
@@ -407,14 +413,20 @@ def _input_guard(params, arm):
     """The InputGuard of every controller input: the task inputs' defaults
     are the stages' parameters (what the stages used while their port was
     not connected), and their sizes and ranges those of
-    drake_wbc.math.task_inputs.TASK_INPUTS; the arm's
+    drake_wbc.math.task_inputs.TASK_INPUTS; the base's odometry pose
+    within +-MAX_ODOMETRY and its twist within MEASURED_TWIST_FACTOR
+    times the robot's own velocity limits; the arm's
     measured positions each within its joint's limits, give or take
     MEASURED_POSITION_MARGIN; the wrist's wrench each component within
     the sensor's range (the robot's description's tool.ft_sensor_range:
     a reading beyond what the sensor can measure is a broken or forged
     message, not a force)."""
     vector = GuardedInput
-    sensor_range = np.asarray(arm.model.description.tool.ft_sensor_range)
+    description = arm.model.description
+    sensor_range = np.asarray(description.tool.ft_sensor_range)
+    odometry = np.concatenate([
+        np.full(3, MAX_ODOMETRY),
+        MEASURED_TWIST_FACTOR * np.asarray(description.base.velocity_limits)])
 
     def task(name, outputs=(), **options):
         spec = TASK_INPUTS[name]
@@ -422,7 +434,8 @@ def _input_guard(params, arm):
                       upper=spec.upper, switch=spec.switch, **options)
 
     inputs = (
-        vector("base.state_estimated", BASE_STATE_SIZE),
+        vector("base.state_estimated", BASE_STATE_SIZE,
+               lower=tuple(-odometry), upper=tuple(odometry)),
         vector("arm.position_measured", arm.num_joints, initial=arm.home,
                lower=tuple(arm.lower - MEASURED_POSITION_MARGIN),
                upper=tuple(arm.upper + MEASURED_POSITION_MARGIN)),

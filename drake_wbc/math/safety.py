@@ -73,6 +73,21 @@ corrupted or forged status): the encoders of a joint held at its limit
 read a little past it, and no arm reads 0.1 rad past it."""
 
 
+MAX_ODOMETRY = 1e6
+"""m and rad: the largest magnitude of the base's odometry pose [x, y,
+yaw] that the controller takes as a measurement. An odometry of a
+thousand kilometres, or of 160,000 turns, is no robot's: it is a
+corrupted or forged state, whose yaw turns the world-frame reference
+into an arbitrary direction (sin and cos of 1e30 rad are noise) and
+whose position leaves the people tracker no precision to track with."""
+
+MEASURED_TWIST_FACTOR = 10.0
+"""How many times the base's own velocity limits its measured twist may
+read before the controller takes it for a fault: a pushed base or a
+slipping wheel reads beyond its command limit, no omnidirectional base
+reads ten times it (a forged 50 m/s)."""
+
+
 class Reason(IntEnum):
     """Why an input is not valid (the reason code of the safety status)."""
 
