@@ -361,7 +361,8 @@ def test_locked_joints_are_distinct_names():
     with pytest.raises(ValueError, match=(
             r"locked_joints\[1\] = 'a::f' is not allowed: named twice")):
         ToolDescription(tcp_frame="a::t", ft_sensor_frame="a::s",
-                        ft_sensor_joint="a::w", locked_joints=["a::f", "a::f"])
+                        ft_sensor_joint="a::w", ft_sensor_range=[1.0] * 6,
+                        locked_joints=["a::f", "a::f"])
 
 
 def test_a_lidar_beyond_the_bases_passive_joints_is_on_the_base():
