@@ -93,6 +93,7 @@ def description_text(n, extra=""):
           tcp_frame: omni_arm::tool
           ft_sensor_frame: omni_arm::sensor
           ft_sensor_joint: omni_arm::sensor
+          ft_sensor_range: [300.0, 300.0, 300.0, 30.0, 30.0, 30.0]
         """).replace("EXTRA\n", extra + "\n" if extra else "")
 
 

@@ -20,7 +20,9 @@ from drake_wbc.deployment.loopback import (
 from drake_wbc.experiments import trajectory_tracking
 from drake_wbc.experiments.runner import build_closed_loop, simulate
 from drake_wbc.experiments.scenario import find_scenario, load_scenario
+from drake_wbc.hardware import messages
 from drake_wbc.hardware.interface import DIAGNOSTICS, HardwareInterface
+from drake_wbc.math.safety import STATUS_FIELDS
 
 DURATION = 2.5
 """s: the robot at rest, then 1.5 s of the 0.1 m/s step."""
@@ -183,3 +185,52 @@ def test_plot_names_its_options_as_typed(runs, extra, message, tmp_path,
     assert main(["plot", str(runs["path"]), *extra, "--output",
                  str(tmp_path)]) == 2
     assert capsys.readouterr().err.startswith(f"drake-wbc plot: {message}")
+
+
+def test_a_forged_wrench_beyond_the_sensors_range_stops_the_robot(caplog):
+    """A forged (or broken) wrist message of 1e30 N, finite and stamped
+    in sequence with the genuine ones, went through the interface's
+    decoder and the controller's guard as a real force. Over LCM, against
+    the simulated robot: the controller stops safely and names it (the
+    base sent zero, the arm braking within its acceleration limits), and
+    resumes from rest within the limits once the genuine readings have
+    been valid for the hold time."""
+    scenario = load_scenario(find_scenario("trajectory_tracking"))
+    loop = build_loopback(scenario, scenario.variants[0])
+    simulator = make_simulator(loop)
+    root = simulator.get_context()
+    channel = loop.side.options.channels.wrist_wrench
+    genuine = []
+    loop.lcm.Subscribe(channel, lambda data: genuine.append(
+        messages.decode_wrench(data)))
+    simulator.Initialize()
+    simulator.AdvanceTo(1.0)
+    assert loop.side.controller.safety_reason(root) == ""
+    # For 20 ms, each millisecond a message 1 us after the robot's last.
+    for k in range(1, 21):
+        last = max(m.utime for m in genuine if m.values[0][2] < 1e3)
+        loop.lcm.Publish(channel, messages.encode_wrench(
+            last + 1, [0.0, 0.0, 1e30, 0.0, 0.0, 0.0]))
+        simulator.AdvanceTo(1.0 + 1e-3 * k)
+    simulator.AdvanceTo(1.05)
+    assert ("wrist.wrench_measured[2] = 1e+30 is out of the range"
+            in loop.side.controller.safety_reason(root))
+    simulator.AdvanceTo(2.5)
+    loop.lcm.HandleSubscriptions(0)
+    log = loop.logger.run_log(root, 1.0)
+    status = log["safety_status"]
+    stopped = status[:, STATUS_FIELDS.index("stopped")] == 1.0
+    assert stopped.any() and not stopped[-1]
+    assert status[-1, STATUS_FIELDS.index("trips")] == 1.0
+    base, arm = log["base.velocity_command"], log["arm.position_command"]
+    h = scenario.controller.time_step
+    tripped = int(np.flatnonzero(stopped)[0])
+    # Sent: zero at the stop, from rest within the acceleration limits
+    # after it; the arm within its acceleration limit throughout.
+    np.testing.assert_array_equal(base[tripped + 1:][stopped[
+        tripped + 1:]], 0.0)
+    limits = loop.side.hardware.systems["guard"].limits
+    steps = np.abs(np.diff(base[tripped + 1:], axis=0)) / h
+    assert np.all(steps <= limits.base_acceleration * (1.0 + 1e-9))
+    acceleration = np.abs(np.diff(arm, 2, axis=0)) / h ** 2
+    assert np.all(acceleration <= limits.joint_acceleration * (1.0 + 1e-9))

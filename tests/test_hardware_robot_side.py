@@ -145,3 +145,35 @@ def test_commands_within_the_limits_pass_unchanged():
     got = np.array([q for _, q in r.arm])
     np.testing.assert_array_equal(got, np.array(wave))
     assert r.port("arm_limiter", "limited")[0] == 0.0
+
+
+def test_the_robots_command_timeout_holds_when_its_clock_is_set_back():
+    """The robot stops its base when no command came for its command
+    timeout, judged on its own clock: with that clock set back 0.5 s
+    (a reset of the robot's clock, a restarted simulation), the last
+    command's age was negative, never beyond the timeout, and a base
+    whose controller had gone silent went on at its last command for
+    0.75 s. A command taken in after now has no age the clock can tell:
+    the base stops."""
+    from drake_wbc.hardware.codecs import CommandReceiver
+
+    lcm = DrakeLcm("memq://")
+    receiver = CommandReceiver(lcm, ("BASE", "ARM"), np.zeros(6),
+                               timeout=0.25, release_time=1.0)
+    simulator = Simulator(receiver)
+    context = simulator.get_mutable_context()
+    simulator.Initialize()
+    command = [0.3, 0.0, 0.1]
+    for k in range(1, 101):
+        lcm.Publish("BASE", messages.encode_base_command(
+            k * 10_000, command, sender=7))
+        lcm.HandleSubscriptions(0)
+        simulator.AdvanceTo(k * 0.01)
+    velocity = receiver.GetOutputPort("velocity")
+    np.testing.assert_array_equal(velocity.Eval(context), command)
+    simulator.AdvanceTo(1.3)
+    np.testing.assert_array_equal(velocity.Eval(context), 0.0)
+    context.SetTime(0.5)
+    simulator.Initialize()
+    simulator.AdvanceTo(0.6)
+    np.testing.assert_array_equal(velocity.Eval(context), 0.0)

@@ -928,3 +928,38 @@ def test_stop_arm_slows_down_at_the_limit():
     np.testing.assert_array_equal(v, 0.0)
     # Each joint travelled h^2 a m (m - 1) / 2 + ... : about v^2 / (2 a).
     np.testing.assert_allclose(q[:2], [0.19, -0.19], atol=0.011)
+
+
+def test_a_stream_stays_watched_when_the_controllers_time_is_set_back():
+    """A stream's age is the receiver's clock since its last message: with
+    the controller's time set back 0.5 s (a context reused for another
+    run, a simulator restarted at an earlier time), every age was
+    negative, within every watchdog limit, and a robot that had gone
+    silent was taken as fresh for 0.5 s, the commands going out as if it
+    were there. An age that the clock cannot tell (a message received
+    after now) is no fresh stream: the watchdog trips at once, and the
+    commands resume from rest after the recovery time once the robot is
+    heard again."""
+    bench = Bench()
+    bench.run(100)
+    assert bench.diagnostics()["watchdog_tripped"] == 0.0
+    bench.root.SetTime(0.5)
+    bench.tick = 50
+    bench.simulator.Initialize()
+    before = len(bench.sent["base"])
+    bench.run(5, status=False)
+    assert bench.diagnostics()["watchdog_tripped"] == 1.0
+    # The check at 0.501 s trips; from the command after it, zero.
+    times, base = (np.array(column) for column in zip(
+        *bench.sent["base"][before:], strict=True))
+    assert len(times) and np.all(base[times > 0.502] == 0.0)
+    assert np.any(times > 0.502)
+    bench.utime_offset = int(0.5e6)  # the robot's stamps go on
+    tripped = len(bench.sent["base"])
+    bench.run(80)
+    assert bench.diagnostics()["watchdog_tripped"] == 0.0
+    base = np.array([v for _, v in bench.sent["base"][tripped:]])
+    limits = bench.hw.systems["guard"].limits
+    assert np.all(np.abs(np.diff(base, axis=0))
+                  <= limits.base_acceleration * H * (1.0 + 1e-6))
+    assert base[-1, 0] > 0.0

@@ -410,3 +410,15 @@ def test_guard_still_linearises():
     np.testing.assert_array_equal(linear.D(), np.eye(3))
     np.testing.assert_array_equal(linear.B()[:3], np.eye(3))
     np.testing.assert_array_equal(linear.A(), np.zeros((14, 14)))
+
+
+@pytest.mark.parametrize("lower, upper, message", [
+    ([0.0, 1.0], 2.0, r"lower = \[0.0, 1.0\] is not allowed: must be a "
+     r"number or 3 numbers"),
+    ([0.0, 3.0, 0.0], [1.0, 2.0, 1.0], r"lower = .* must be at most upper"),
+    (float("nan"), 1.0, r"lower = nan is not allowed"),
+])
+def test_a_guarded_inputs_range_that_is_not_one_is_refused(lower, upper,
+                                                            message):
+    with pytest.raises(ValueError, match=message):
+        InputGuard([GuardedInput("u", 3, lower=lower, upper=upper)])

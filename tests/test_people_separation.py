@@ -17,6 +17,7 @@ from shipped_names import (
     BASE_VELOCITY_LIMITS,
 )
 
+from drake_wbc.controller import build_controller
 from drake_wbc.math import people as tracking
 from drake_wbc.math.repulsion import footprint_gap
 from drake_wbc.math.safety import (
@@ -33,6 +34,7 @@ from drake_wbc.math.separation import (
     protective_speeds,
     protective_timing,
 )
+from drake_wbc.robot.description import load_robot_description, models_dir
 from drake_wbc.stages import BaseCommandLimiter
 from drake_wbc.station.lidar import LidarParameters, scan, scan_points
 
@@ -235,6 +237,52 @@ def test_walls_and_crates_are_not_people():
             state, scan_of(pose, None, boxes),
             odometry(pose, [0.0, 0.0, 1.0]), t, HALF, params)
         assert found == []
+
+
+def test_a_long_moving_hold_makes_no_pillar_a_person():
+    """A track that never moved has its last moving time at NEVER
+    (-1e9 s): with moving_hold of 2e9 s (a person who stopped counts as
+    moving for that long) every pillar counted as a moving person from
+    its first scan, the base kept from it at a person's separation. A
+    track is a person only once it has moved."""
+    params = PeopleSeparationParameters(moving_hold=2e9)
+    state = tracking.initial_tracker()
+    for k in range(6):
+        state, found, _ = tracking.people_scan(
+            state, scan_of(np.zeros(3), [[1.5, 1.2, 0.15]]),
+            odometry(np.zeros(3), np.zeros(3)), k * SCAN, HALF, params)
+        assert found == []
+
+
+def test_a_long_hold_time_is_no_protective_stop_at_the_start(caplog):
+    """The protective stop held while t - (the last time a point was
+    inside) < hold_time, that last time NEVER (-1e9 s) before any: with a
+    hold time of 2e9 s (legal: the base stays stopped that long after a
+    point has gone) the base was in a protective stop from the start,
+    with no point anywhere near, its reason that a point was inside the
+    footprint. A point inside still stops it, and it then holds."""
+    limiter = BaseCommandLimiter(
+        SafetyParameters(**BASE_LIMITS, hold_time=2e9), H, HALF)
+    context = limiter.CreateDefaultContext()
+    limiter.GetInputPort("velocity").FixValue(context, [0.5, 0.0, 0.0])
+    limiter.GetInputPort("stopped").FixValue(context, [0.0])
+    far = np.array([[5.0, 5.0], [5.0, 5.1]])
+    inside = np.array([[0.1, 0.0], [5.0, 5.0]])
+    stops = []
+    for k in range(40):
+        context.SetTime(k * H)
+        limiter.GetInputPort("obstacle_points").FixValue(
+            context, AbstractValue.Make(inside if k == 20 else far))
+        context.SetDiscreteState(limiter.EvalUniquePeriodicDiscreteUpdate(
+            context).get_vector().CopyToVector())
+        stops.append(limiter.GetOutputPort("protective_stop").Eval(
+            context)[0])
+        if k == 10:
+            assert limiter.reason(context) == ""
+            assert limiter.GetOutputPort("velocity_command").Eval(
+                context)[0] > 0.0
+    assert stops[:20] == [0.0] * 20
+    assert stops[20:] == [1.0] * 20
 
 
 def test_the_tracker_starts_again_when_time_is_set_back():
@@ -557,3 +605,37 @@ def test_time_set_back_neither_makes_up_nor_forgets_a_protective_stop():
         stops = [tick(1.0 + k * H, far) for k in range(100)]
         assert stops == [1.0] * resumes + [0.0] * (100 - resumes)
         assert limiter.reason(context) == ""
+
+
+@pytest.mark.parametrize("people, message", [
+    (dict(tracked_range=3.0),
+     r"controller.safety.people.tracked_range = 3.0 is not allowed: must "
+     r"be at least 4.86 m"),
+    (dict(min_travel=2.0),
+     r"controller.safety.people.tracked_range = 6.0 is not allowed: must "
+     r"be at least 6.36 m"),
+    (dict(moving_scans=30),
+     r"controller.safety.people.tracked_range = 6.0 is not allowed: must "
+     r"be at least 7.56 m"),
+    (dict(gate=0.1), r"controller.safety.people.gate = 0.1 is not "
+     r"allowed: must be at least 0.133 m"),
+])
+def test_a_tracking_that_cannot_protect_a_walker_is_refused(people,
+                                                            message):
+    """Each value legal alone, the tracking could not protect a person
+    walking at the base: one seen from 3 m, or counted as moving only
+    after 2 m or 30 scans, is first a person where the base at its full
+    1 m/s cannot stop short any more (the protective separation 4.36 m,
+    eq. (protective)); a gate smaller than a person's step between two
+    scans loses every walker. They are refused when the scenario is
+    loaded, naming the field and the least that protects; the defaults
+    (6 m, 0.5 m) pass on both shipped robots."""
+    from drake_wbc.experiments.scenario import load_scenario
+
+    lines = "\n".join(f"      {k}: {v}" for k, v in people.items())
+    with pytest.raises(ValueError, match=message):
+        load_scenario(text=f"controller:\n  safety:\n    people:\n{lines}\n")
+    load_scenario(text="controller:\n  safety:\n    people:\n"
+                  "      tracked_range: 4.9\n")
+    build_controller(robot=load_robot_description(
+        models_dir() / "lbr_omni.robot.yaml"))

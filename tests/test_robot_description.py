@@ -82,6 +82,10 @@ def _add(text):
     ({"base.frame": None}, r"base.frame is missing"),
     ({"arm.home": None}, r"arm.home is missing"),
     ({"tool.ft_sensor_joint": None}, r"tool.ft_sensor_joint is missing"),
+    ({"tool.ft_sensor_range": None}, r"tool.ft_sensor_range is missing"),
+    ({"tool.ft_sensor_range": [300.0] * 3 + [30.0, 0.0, 30.0]},
+     r"tool.ft_sensor_range\[4\] = 0.0 is not allowed"),
+    ({"tool.ft_sensor_range": [300.0] * 3}, r"tool.ft_sensor_range"),
     ({"arm.position_lower": [0.0] * 6, "arm.position_upper": [0.0] * 6},
      r"arm.position_lower\[0\] = 0.0 is not allowed: must be below"),
     ({"arm.flange": "elfin5::flange"}, r"arm.flange"),
@@ -357,7 +361,8 @@ def test_locked_joints_are_distinct_names():
     with pytest.raises(ValueError, match=(
             r"locked_joints\[1\] = 'a::f' is not allowed: named twice")):
         ToolDescription(tcp_frame="a::t", ft_sensor_frame="a::s",
-                        ft_sensor_joint="a::w", locked_joints=["a::f", "a::f"])
+                        ft_sensor_joint="a::w", ft_sensor_range=[1.0] * 6,
+                        locked_joints=["a::f", "a::f"])
 
 
 def test_a_lidar_beyond_the_bases_passive_joints_is_on_the_base():

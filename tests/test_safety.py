@@ -399,6 +399,126 @@ def test_a_reference_too_large_for_the_dmps_is_a_fault(arm):
         command, clean.log("base.velocity_command")[1][-1], atol=1e-3)
 
 
+@pytest.mark.parametrize("entry, value", [(2, 1e30), (4, -30.5)])
+def test_a_wrench_beyond_the_sensors_range_is_a_fault(arm, entry, value):
+    """A finite wrist reading beyond what the sensor can measure (its
+    range in the robot's description: the FT-300's 300 N and 30 N m) was
+    taken as a real force: 1e30 N on the wrist, passed to the admittance
+    and the arm's DMP. It is a fault of the stream: a safe stop that
+    names the entry, after which the robot resumes as a run without it;
+    a reading at the range itself (a saturated sensor) is not."""
+    rig, clean = Rig(arm), Rig(arm)
+    valid = np.array(rig.valid["wrist.wrench_measured"], dtype=float)
+    bad = valid.copy()
+    bad[entry] = value
+    at_range = valid.copy()
+    at_range[entry] = np.sign(value) * (300.0 if entry < 3 else 30.0)
+    for run in (rig, clean):
+        run.advance(0.3)
+        if run is rig:
+            run.set("wrist.wrench_measured", at_range)
+            run.advance(0.05)
+            assert rig.controller.safety_reason(rig.root_context) == ""
+            run.set("wrist.wrench_measured", bad)
+        run.advance(0.05)
+        if run is rig:
+            assert (f"wrist.wrench_measured[{entry}] = {value!r} is out of "
+                    "the range" in rig.controller.safety_reason(
+                        rig.root_context))
+        run.set("wrist.wrench_measured", valid)
+        run.advance(1.0)
+    _, status = rig.log("safety_status")
+    assert status[:, STATUS["trips"]].max() == 1.0
+    assert status[-1, STATUS["stopped"]] == 0.0
+    # Zero at the stop (the base's drive brakes), then from rest within
+    # the acceleration limits.
+    t, commands = rig.log("base.velocity_command")
+    stopped = status[:, STATUS["stopped"]] == 1.0
+    np.testing.assert_array_equal(commands[stopped], 0.0)
+    after = t > t[stopped][0]
+    steps = np.abs(np.diff(commands[after], axis=0)) / H
+    assert np.all(steps <= A_MAX * (1.0 + TOL))
+
+
+@pytest.mark.parametrize("entry, value", [(3, 50.0), (2, 1e30),
+                                          (0, 1e30)])
+def test_an_odometry_no_base_can_read_is_a_fault(arm, entry, value):
+    """The base's state had no range: a forged or corrupted odometry of
+    1e30 rad of yaw turned the world-frame reference into an arbitrary
+    direction (the arm's joints at 0.74 rad/s instead of 0.4, no input
+    invalid), one of 1e30 m left the people tracker no precision, and a
+    twist of 50 m/s was taken as measured. A pose beyond MAX_ODOMETRY or
+    a twist beyond MEASURED_TWIST_FACTOR times the base's own limits is
+    a fault; five times its limit (a slipping wheel) is not."""
+    rig = Rig(arm)
+    rig.advance(0.3)
+    state = np.array(rig.valid["base.state_estimated"])
+    fast = state.copy()
+    fast[3] = 5.0 * V_MAX[0]
+    rig.set("base.state_estimated", fast)
+    rig.advance(0.05)
+    assert rig.controller.safety_reason(rig.root_context) == ""
+    state[entry] = value
+    rig.set("base.state_estimated", state)
+    rig.advance(0.05)
+    assert (f"base.state_estimated[{entry}] = {value!r} is out of the "
+            "range" in rig.controller.safety_reason(rig.root_context))
+
+
+def test_an_arm_position_beyond_its_own_joints_limit_is_a_fault(arm):
+    """The arm's measured positions had one range for every joint, the
+    widest joint's (+-3.14 rad, give or take the margin): a status of
+    3.0 rad on the fifth joint, limited to +-2.56 rad, was taken as a
+    real position. Each joint has its own range now."""
+    rig = Rig(arm)
+    rig.advance(0.1)
+    q = np.array(rig.q)
+    q[4] = arm.upper[4] + safety.MEASURED_POSITION_MARGIN + 0.01
+    assert q[4] < np.max(arm.upper)
+    rig.set("arm.position_measured", q)
+    rig.advance(0.05)
+    assert ("arm.position_measured[4]" in
+            rig.controller.safety_reason(rig.root_context))
+    q[4] = arm.upper[4] + 0.5 * safety.MEASURED_POSITION_MARGIN
+    rig.set("arm.position_measured", q)
+    rig.advance(HOLD + 0.05)
+    assert rig.controller.safety_reason(rig.root_context) == ""
+
+
+def test_a_protective_stop_stops_the_arm_too(arm):
+    """A point inside the footprint (a person, or what the base struck)
+    while the robot follows 0.3 m/s ahead: the base braked to rest, and
+    the arm, compensating the braking and then carrying the whole
+    reference, went on moving the tool towards it at up to 0.29 rad/s a
+    joint for as long as the stop lasted. It brakes to rest within its
+    acceleration limit and holds, and after the stop the arm and the
+    base resume from rest within their acceleration limits."""
+    rig = Rig(arm)
+    rig.set("reference_velocity", [0.3, 0.0, 0.0, 0.0, 0.0, 0.0])
+    rig.advance(1.0)
+    rig.set("lidar.obstacle_points", np.array([[0.35, 0.0], [2.0, 0.0]]))
+    rig.advance(1.0)
+    rig.set("lidar.obstacle_points", rig.valid["lidar.obstacle_points"])
+    rig.advance(1.5)
+    t, stop = rig.log("base_protective_stop")
+    _, q = rig.log("arm.position_command")
+    rates = np.diff(q, axis=0) / H  # rates[k]: from tick k to k + 1
+    stopped = np.flatnonzero(stop[:, 0] == 1.0)
+    assert t[stopped[0]] == pytest.approx(1.01)
+    assert np.abs(rates[stopped[0] - 1]).max() > 0.1
+    # At rest within 0.125 s (1.57 rad/s at 12.56 rad/s^2) and a tick,
+    # then held.
+    rest = stopped[0] + 14
+    np.testing.assert_allclose(q[rest:stopped[-1] + 1] - q[rest], 0.0,
+                               atol=1e-12)
+    accelerations = np.abs(np.diff(rates, axis=0)) / H
+    assert np.all(accelerations <= JOINT_ACCELERATION * (1.0 + 1e-6))
+    assert np.abs(rates[-1]).max() > 0.05  # moving again
+    _, base = rig.log("base.velocity_command")
+    steps = np.abs(np.diff(base, axis=0)) / H
+    assert np.all(steps <= A_MAX * (1.0 + TOL))
+
+
 def test_commands_have_no_direct_feedthrough_from_inputs(arm):
     diagram = build_controller(robot=arm).diagram
     for output in ("base.velocity_command", "arm.position_command",
@@ -699,6 +819,13 @@ def test_checks_in_closed_form():
             Reason.NOT_A_SWITCH, 1, bad)
     assert safety.check_vector([2.0], 0.0, 1.0, switch=True).reason is (
         Reason.OUT_OF_RANGE)
+    # A range per entry: the second entry's is the narrower.
+    assert safety.check_vector([5.0, 0.5], [-10.0, -1.0], [10.0, 1.0]).valid
+    assert safety.check_vector([5.0, 2.0], [-10.0, -1.0],
+                               [10.0, 1.0]) == (Reason.OUT_OF_RANGE, 1, 2.0)
+    assert safety.check_inputs_float(
+        [np.array([5.0, 2.0])], [((-10.0, -1.0), (10.0, 1.0), False)]) == (
+        (Reason.OUT_OF_RANGE, 1, 2.0),)
     kept, dropped, check = safety.check_points(
         [[1.0, 2.0], [np.nan, 0.0], [3.0, 4.0]])
     np.testing.assert_array_equal(kept, [[1.0, 2.0], [3.0, 4.0]])

@@ -26,7 +26,8 @@ One control tick, as wired here (design notes, "data flow of one tick")::
                           ▼
                        ArmCdmp ◄─ F_ext, F_d, S_hri
                           ▼
-             ArmCartesianVelocityController ◄─ stop (hold)
+             ArmCartesianVelocityController ◄─ stop or protective stop
+                                                (hold)
                           ▼
                  arm.position_command
 
@@ -38,7 +39,12 @@ no algebraic loop, and no direct feedthrough from any input to a command.
 
 Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
 - Every input enters through the InputGuard: a NaN, an infinite value, a
-  value out of range (k_n < 0, s_c outside [0, 1]) or a pHRI switch other
+  value out of range (k_n < 0, s_c outside [0, 1], an odometry beyond
+  MAX_ODOMETRY or a base twist beyond MEASURED_TWIST_FACTOR times the
+  robot's velocity limits, an arm position
+  beyond its joint's limits by more than MEASURED_POSITION_MARGIN, a
+  wrist wrench beyond the sensor's range, tool.ft_sensor_range of the
+  robot's description) or a pHRI switch other
   than 0 or 1 never reaches a stage (the guard passes the last valid
   sample on) and triggers a safe stop. From that tick on the base command
   is zero (at once: the base's own drive brakes it within its limits, the
@@ -76,7 +82,14 @@ Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
   limiter reads base.state_estimated too), and brakes the base to rest
   within its acceleration limits while a point is on or inside the
   footprint (a protective stop, on `base_protective_stop` and in
-  Controller.safety_reason); the compensator sees
+  Controller.safety_reason). A protective stop stops the arm too, as a
+  safe stop does: it brakes to rest within its acceleration limits and
+  holds, and the DMPs' couplings are held (their inputs gated). What is
+  inside the footprint is a person, or what the base has struck, within
+  the arm's reach; the compensation would otherwise make up with the
+  arm for the base's braking, moving the tool on towards it (0.3 m/s
+  of a 0.3 m/s reference, all of it the arm's once the base stood).
+  The compensator sees
   the command actually sent, so the arm makes up for what the limits take
   from the base (eq. (compensation)), or, by its `base_source`, the
   base's measured twist or that command through a model of the base's
@@ -90,7 +103,7 @@ import warnings
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import MatrixGain
+from pydrake.systems.primitives import Adder, MatrixGain
 
 from drake_wbc.controller.parameters import (
     ControllerParameters,
@@ -99,7 +112,11 @@ from drake_wbc.controller.parameters import (
 )
 from drake_wbc.math.base_state import BASE_STATE_SIZE, BASE_YAW
 from drake_wbc.math.motion_mode import MotionMode
-from drake_wbc.math.safety import MEASURED_POSITION_MARGIN
+from drake_wbc.math.safety import (
+    MAX_ODOMETRY,
+    MEASURED_POSITION_MARGIN,
+    MEASURED_TWIST_FACTOR,
+)
 from drake_wbc.math.task_inputs import TASK_INPUTS
 from drake_wbc.math.validation import checked_instance, validated_copy
 from drake_wbc.robot.model import arm_kinematics
@@ -260,6 +277,9 @@ def build_controller(params=None, robot=None):
         base_cdmp=add("base_cdmp", BaseCdmp(params.base_cdmp, time_step=h)),
         base_gate=add("base_gate", StopGate(
             3, limits=params.safety.base_velocity_limits)),
+        # A safe stop or a protective stop (either >= 0.5): the arm's
+        # hold and the couplings' gates.
+        any_stop=add("any_stop", Adder(2, 1)),
         # The couplings' inputs held at zero while stopped.
         base_cdmp_gate=add("base_cdmp_gate", StopSwitch(3)),
         arm_cdmp_gate=add("arm_cdmp_gate", StopSwitch(6)),
@@ -308,12 +328,15 @@ def build_controller(params=None, robot=None):
     connect("guard", "null_space_gain", "distributor", "null_space_gain")
     connect("guard", "compensation_switch", "compensator",
             "compensation_switch")
-    # The safe stop.
+    # The safe stop; the protective stop (a point on or inside the
+    # footprint) holds the arm and the couplings as it does.
     connect("guard", "stop", "base_gate", "stop")
     connect("guard", "stopped", "base_limiter", "stopped")
-    connect("guard", "stop", "arm_controller", "hold")
+    connect("guard", "stop", "any_stop", "u0")
+    connect("base_limiter", "protective_stop", "any_stop", "u1")
+    connect("any_stop", "sum", "arm_controller", "hold")
     for gate in ("base_cdmp_gate", "arm_cdmp_gate", "deviation_gate"):
-        connect("guard", "stop", gate, "stop")
+        connect("any_stop", "sum", gate, "stop")
 
     connect("base_yaw", "y0", "whole_body_cdmp", "base_yaw")
     # F_ext in the frame of each DMP's velocity: T_b for the whole body's
@@ -390,10 +413,20 @@ def _input_guard(params, arm):
     """The InputGuard of every controller input: the task inputs' defaults
     are the stages' parameters (what the stages used while their port was
     not connected), and their sizes and ranges those of
-    drake_wbc.math.task_inputs.TASK_INPUTS; the arm's
-    measured positions within the span of its joints' limits, give or
-    take MEASURED_POSITION_MARGIN (one range for every entry)."""
+    drake_wbc.math.task_inputs.TASK_INPUTS; the base's odometry pose
+    within +-MAX_ODOMETRY and its twist within MEASURED_TWIST_FACTOR
+    times the robot's own velocity limits; the arm's
+    measured positions each within its joint's limits, give or take
+    MEASURED_POSITION_MARGIN; the wrist's wrench each component within
+    the sensor's range (the robot's description's tool.ft_sensor_range:
+    a reading beyond what the sensor can measure is a broken or forged
+    message, not a force)."""
     vector = GuardedInput
+    description = arm.model.description
+    sensor_range = np.asarray(description.tool.ft_sensor_range)
+    odometry = np.concatenate([
+        np.full(3, MAX_ODOMETRY),
+        MEASURED_TWIST_FACTOR * np.asarray(description.base.velocity_limits)])
 
     def task(name, outputs=(), **options):
         spec = TASK_INPUTS[name]
@@ -401,11 +434,13 @@ def _input_guard(params, arm):
                       upper=spec.upper, switch=spec.switch, **options)
 
     inputs = (
-        vector("base.state_estimated", BASE_STATE_SIZE),
+        vector("base.state_estimated", BASE_STATE_SIZE,
+               lower=tuple(-odometry), upper=tuple(odometry)),
         vector("arm.position_measured", arm.num_joints, initial=arm.home,
-               lower=float(np.min(arm.lower)) - MEASURED_POSITION_MARGIN,
-               upper=float(np.max(arm.upper)) + MEASURED_POSITION_MARGIN),
-        vector("wrist.wrench_measured", 6),
+               lower=tuple(arm.lower - MEASURED_POSITION_MARGIN),
+               upper=tuple(arm.upper + MEASURED_POSITION_MARGIN)),
+        vector("wrist.wrench_measured", 6, lower=tuple(-sensor_range),
+               upper=tuple(sensor_range)),
         task("reference_velocity", zero_when_stopped=True),
         task("desired_wrench", (("desired_wrench", params.arm_cdmp.F_d),)),
         # While stopped: the admittance term of eq. (cdmp-wb) off (0),

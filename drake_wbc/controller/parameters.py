@@ -45,6 +45,10 @@ from drake_wbc.math.safety import (
     SafetyParameters,
     check_within_robot,
 )
+from drake_wbc.math.separation import (
+    check_people_coverage,
+    protective_timing,
+)
 from drake_wbc.math.task_inputs import TASK_INPUTS
 from drake_wbc.math.validation import positive
 from drake_wbc.math.workspace import WorkspaceAdapterParameters
@@ -226,6 +230,9 @@ def for_robot(params, robot):
       workspace.workspace (the local workspace of the intuitive pHRI
       mode): the robot's tuning (its description's RobotTuning, the
       paper's where it gives none) where None.
+    - safety.people: its tracking must cover a walker at the base's
+      speed (drake_wbc.math.separation.check_people_coverage:
+      tracked_range and gate).
     - base_cdmp.repulsion.half_sizes, the footprint the repulsive field
       and the separation keep clear: the base's own where None; a given
       one at least the base's along each axis (a footprint smaller than
@@ -261,6 +268,11 @@ def for_robot(params, robot):
         float(v) for v in base.velocity_limits)
     acceleration = safety.base_acceleration_limits or tuple(
         float(a) for a in base.acceleration_limits)
+    lag = base.velocity_lag if safety.base_lag is None else safety.base_lag
+    check_people_coverage(
+        safety.people, protective_timing(safety.people, params.time_step,
+                                         acceleration, lag),
+        max(velocity[0], velocity[1]))
     k_j = params.capability.joint_limit_gain
     return dataclasses.replace(
         params,
@@ -274,8 +286,7 @@ def for_robot(params, robot):
         safety=dataclasses.replace(
             safety, base_velocity_limits=velocity,
             base_acceleration_limits=acceleration,
-            base_lag=(base.velocity_lag if safety.base_lag is None
-                      else safety.base_lag)),
+            base_lag=lag),
         base_cdmp=dataclasses.replace(
             params.base_cdmp, repulsion=dataclasses.replace(
                 repulsion, half_sizes=repulsion.half_sizes or own)))

@@ -416,9 +416,16 @@ def check_on_robot(scenario):
     wheels' lever of station.traction given by it or by the robot,
     station.initial_arm_positions one value a joint, within its limits,
     and the hardware's timeouts within the robot's own
-    (drake_wbc.hardware.options.command_timeout_of); a start left out
-    (None) is the robot's home, which its description checks."""
+    (drake_wbc.hardware.options.command_timeout_of), the controller's
+    parameters on it (drake_wbc.controller.parameters.for_robot: limits
+    that only tighten the robot's, a people tracking that covers a
+    walker at its speed); a start left out (None) is the robot's home,
+    which its description checks."""
     base = scenario_robot(scenario).base
+    try:
+        for_robot(scenario.controller, scenario_robot(scenario))
+    except ValueError as error:
+        raise ValueError(f"controller.{error}") from None
     check_start_is_free(scenario.scene, scenario.station.initial_base_pose,
                         base)
     if scenario.station.traction is not None:

@@ -18,6 +18,7 @@ what the controller linearises.
 
 import functools
 import logging
+import math
 from collections import deque
 from typing import NamedTuple
 
@@ -156,6 +157,15 @@ class Reception(NamedTuple):
         # Never changed in place (only replaced), so the copies that Drake
         # makes of an abstract state at each update may share it.
         return self
+
+    def age(self, now):
+        """s of the receiver's clock since the last good message was taken
+        in, at `now` (inf: never). A message taken in after `now` (the
+        receiver's clock was set back since) has no age the clock can
+        tell: inf, a stale stream, not a fresh one until the clock
+        catches up with it."""
+        age = now - self.received
+        return age if age >= 0.0 else math.inf
 
 
 DEFAULT_RULES = ClockRules()
@@ -434,7 +444,8 @@ class MessageDecoder(LeafSystem):
       `velocities` of an arm status), the last good message's values;
       the defaults until one arrives.
     - age: (1) s since the last good message was taken in (inf before
-      the first), on the receiver's clock (the context's time).
+      the first, and while the receiver's clock is set back before it:
+      `Reception.age`), on the receiver's clock (the context's time).
     - rejected: (1) how many messages were rejected (see `receive`).
     - clock_jumps: (1) how many times the sender's clock was taken to
       have jumped (Reception.clock_jumps).
@@ -520,13 +531,12 @@ class MessageDecoder(LeafSystem):
     def _values(self, context):
         reception = self.reception(context)
         if (self.timeout is not None
-                and context.get_time() - reception.received > self.timeout):
+                and reception.age(context.get_time()) > self.timeout):
             return self.defaults
         return reception.values
 
     def _age(self, context, output):
-        output.SetAtIndex(0, context.get_time()
-                          - self.reception(context).received)
+        output.SetAtIndex(0, self.reception(context).age(context.get_time()))
 
     def _rejected(self, context, output):
         output.SetAtIndex(0, self.reception(context).rejected)
@@ -644,7 +654,7 @@ class CommandReceiver(LeafSystem):
 
     def _velocity(self, context, output):
         base = self.stored(context)[1]
-        stale = context.get_time() - base.received > self.timeout
+        stale = base.age(context.get_time()) > self.timeout
         output.SetFromVector(np.zeros(3) if stale else base.values[0])
 
     def _positions(self, context, output):

@@ -242,10 +242,12 @@ def _update_track(track, predicted, measured, dt, time, params, base):
 
 def moving_tracks(state, time, params):
     """The slots of the tracks that are moving people at `time`
-    (seen at the last scan and moving within moving_hold)."""
+    (seen at the last scan and moving within moving_hold; a track that
+    never moved is not, whatever moving_hold)."""
     tracks = tracks_of(state)
     return ((tracks[:, _SCANS] > 0)
             & (tracks[:, _SEEN] >= state[-1])
+            & (tracks[:, _MOVING] > NEVER)
             & (time - tracks[:, _MOVING] <= params.moving_hold + 1e-9)
             ).nonzero()[0]
 

@@ -73,6 +73,21 @@ corrupted or forged status): the encoders of a joint held at its limit
 read a little past it, and no arm reads 0.1 rad past it."""
 
 
+MAX_ODOMETRY = 1e6
+"""m and rad: the largest magnitude of the base's odometry pose [x, y,
+yaw] that the controller takes as a measurement. An odometry of a
+thousand kilometres, or of 160,000 turns, is no robot's: it is a
+corrupted or forged state, whose yaw turns the world-frame reference
+into an arbitrary direction (sin and cos of 1e30 rad are noise) and
+whose position leaves the people tracker no precision to track with."""
+
+MEASURED_TWIST_FACTOR = 10.0
+"""How many times the base's own velocity limits its measured twist may
+read before the controller takes it for a fault: a pushed base or a
+slipping wheel reads beyond its command limit, no omnidirectional base
+reads ten times it (a forged 50 m/s)."""
+
+
 class Reason(IntEnum):
     """Why an input is not valid (the reason code of the safety status)."""
 
@@ -211,6 +226,11 @@ def check_vector(value, lower=-math.inf, upper=math.inf, switch=False):
     """Checks an input vector: every entry finite and in [lower, upper],
     and with `switch` exactly 0 or 1.
 
+    The range is one for every entry (numbers) or one per entry
+    (sequences of the vector's size): the wrist's wrench, whose forces
+    and torques have ranges of their own (the sensor's, from the robot's
+    description), and the arm's measured positions, one range a joint.
+
     A switch (S_hri of eqs. (cdmp-wb) and (cdmp-arm): "a pHRI mode
     switching variable with value of 0 or 1") that is neither is a fault,
     not rounded: the stages would read 0.7 as 1 and -1 as 0, and a value
@@ -219,7 +239,8 @@ def check_vector(value, lower=-math.inf, upper=math.inf, switch=False):
 
     Args:
         value: a vector (any sequence of numbers).
-        lower, upper: the range allowed for every entry (numbers).
+        lower, upper: the range allowed for every entry (numbers), or for
+            each entry (sequences of the vector's size).
         switch: whether every entry must be 0 or 1.
 
     Returns:
@@ -239,7 +260,8 @@ def check_vector(value, lower=-math.inf, upper=math.inf, switch=False):
         reason = Reason.NOT_A_NUMBER
     elif not finite[i]:
         reason = Reason.INFINITE
-    elif not lower <= vector[i] <= upper:
+    elif not (np.broadcast_to(lower, vector.shape)[i] <= vector[i]
+              <= np.broadcast_to(upper, vector.shape)[i]):
         reason = Reason.OUT_OF_RANGE
     else:
         reason = Reason.NOT_A_SWITCH
@@ -254,7 +276,8 @@ def check_inputs(values, ranges):
             their values are checked), None for an input that is not
             connected.
         ranges: for each input, None for any finite value, or
-            (lower, upper, switch): the range allowed for every entry and
+            (lower, upper, switch): the range allowed for every entry
+            (floats) or for each (tuples of floats, the input's size) and
             whether each must be 0 or 1 (`check_vector`).
 
     Returns:
@@ -275,14 +298,20 @@ def _input_samples(rng):
     neither 0 nor 1."""
     values, ranges = [], []
     for _ in range(rng.integers(1, 9)):
+        size = int(rng.integers(1, 7))
         bounds = [None, (-math.inf, math.inf, False),
                   (0.0, math.inf, False), (0.0, 1.0, False),
-                  (0.0, 1.0, True)][rng.integers(5)]
+                  (0.0, 1.0, True),
+                  # One range an entry, some of them narrower than the
+                  # values drawn.
+                  (tuple(rng.choice([-math.inf, 0.0, 0.1], size).tolist()),
+                   tuple(rng.choice([math.inf, 1.0, 0.9], size).tolist()),
+                   False)][rng.integers(6)]
         ranges.append(bounds)
         if rng.uniform() < 0.15:
             values.append(None)
             continue
-        value = rng.uniform(0.05, 0.95, rng.integers(1, 7))
+        value = rng.uniform(0.05, 0.95, size)
         if bounds is not None and bounds[2]:
             value = rng.choice([0.0, 1.0], value.size)
         if rng.uniform() < 0.05:
@@ -297,8 +326,9 @@ def _input_samples(rng):
 @kernels.fast_kernel(check_inputs, sample=_input_samples)
 def check_inputs_float(values, ranges):
     """`check_inputs` of float vectors, for the control tick: one test of
-    every entry present and of the ranges, the per-input detail only when
-    one fails."""
+    every entry present and of the ranges (a range of every entry against
+    the smallest and largest entry, a range of each entry entry by entry),
+    the per-input detail only when one fails."""
     # A sum of floats is finite only if every term is (a sum that
     # overflows only sends the values to the detailed checks). The
     # entries as Python floats: min and max of a few of them cost a tenth
@@ -314,9 +344,13 @@ def check_inputs_float(values, ranges):
             if bounds is None or listed is None:
                 continue
             lower, upper, switch = bounds
-            if not (lower <= min(listed) and max(listed) <= upper) or (
-                    switch and not all(v == 0.0 or v == 1.0
-                                       for v in listed)):
+            if type(lower) is tuple:
+                if not all(lo <= v <= hi for v, lo, hi in zip(
+                        listed, lower, upper, strict=True)):
+                    break
+            elif not (lower <= min(listed) and max(listed) <= upper):
+                break
+            if switch and not all(v == 0.0 or v == 1.0 for v in listed):
                 break
         else:
             return (VALID,) * len(values)

@@ -304,6 +304,13 @@ class ToolDescription:
         ft_sensor_joint: the weld joint on the sensor's measuring
             surface, whose reaction the simulated sensor reads: the wrench
             of everything outboard of it.
+        ft_sensor_range: (6,) > 0, the largest magnitude of each
+            component of the sensor's reading [fx, fy, fz, tx, ty, tz],
+            N and N m: its measuring range (the FT-300's +-300 N and
+            +-30 N m), at which its output saturates. A reading beyond
+            it is not a force the sensor measured (a broken or forged
+            message): the controller's input guard takes it for a fault
+            of the wrist's stream and stops (drake_wbc.controller.diagram).
         locked_joints: joints outboard of the sensor's weld that the
             simulated station holds locked at their default positions
             (a gripper's fingers, say): what the sensor carries is then
@@ -315,6 +322,7 @@ class ToolDescription:
     tcp_frame: str = ""
     ft_sensor_frame: str = ""
     ft_sensor_joint: str = ""
+    ft_sensor_range: list[float] = field(default_factory=list)
     locked_joints: list[str] = field(default_factory=list)
 
     def __post_init__(self):
@@ -323,6 +331,8 @@ class ToolDescription:
         _check_given(self, optional=("locked_joints",))
         for name in ("tcp_frame", "ft_sensor_frame", "ft_sensor_joint"):
             setattr(self, name, _names(name, [getattr(self, name)])[0])
+        self.ft_sensor_range = _limits("ft_sensor_range",
+                                       self.ft_sensor_range, 6)
         self.locked_joints = list(_names("locked_joints",
                                          self.locked_joints))
 

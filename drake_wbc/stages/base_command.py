@@ -419,9 +419,13 @@ def BaseCommandLimiter_(T):
                 last_inside = NEVER
                 state.protective[1] = NEVER
             # A point inside now is a stop whatever the hold time (one of
-            # 1e-9 s or less would not count the tick itself).
-            stopped = (inside >= 0.5
-                       or time - last_inside < self._hold_time - 1e-9)
+            # 1e-9 s or less would not count the tick itself); none ever
+            # inside (NEVER) is none, whatever the hold time (one longer
+            # than NEVER is long would otherwise stop the base from the
+            # start, saying a point is inside).
+            stopped = inside >= 0.5 or (
+                last_inside > NEVER
+                and time - last_inside < self._hold_time - 1e-9)
             if stopped == was:
                 return
             state.protective[0] = 1.0 if stopped else 0.0

@@ -58,7 +58,10 @@ class GuardedInput(NamedTuple):
             what it carries during a safe stop instead of the input (e.g.
             a switch that turns an integrating term off). () means one
             output named like the input, required.
-        lower, upper: the range allowed for every entry.
+        lower, upper: the range allowed for every entry (numbers), or
+            for each entry (sequences of `size` numbers; e.g. the wrist
+            wrench's forces and torques, each within the sensor's own
+            range).
         zero_when_stopped: every output carries zeros during a safe stop
             (a reference that must not drive anything while stopped).
         initial: the value passed on if the very first sample is invalid
@@ -70,11 +73,44 @@ class GuardedInput(NamedTuple):
     name: str
     size: int
     outputs: tuple = ()
-    lower: float = -math.inf
-    upper: float = math.inf
+    lower: float | tuple = -math.inf
+    upper: float | tuple = math.inf
     zero_when_stopped: bool = False
     initial: tuple | None = None
     switch: bool = False
+
+
+def _range_of(spec):
+    """The range of the GuardedInput `spec` as check_inputs takes it: None
+    for any finite value, else (lower, upper, switch), lower and upper
+    floats when one range holds for every entry, tuples of `spec.size`
+    floats when each entry has its own.
+
+    Raises:
+        ValueError: naming the input, when a range is not a number or
+            `spec.size` of them, or an entry's lower bound is above its
+            upper one.
+    """
+    bounds = []
+    for side in ("lower", "upper"):
+        value = np.asarray(getattr(spec, side), dtype=float)
+        if np.isnan(value).any() or value.shape not in ((), (spec.size,)):
+            raise ValueError(
+                f"{spec.name}: {side} = {getattr(spec, side)!r} is not "
+                f"allowed: must be a number or {spec.size} numbers")
+        bounds.append(float(value) if value.ndim == 0
+                      else tuple(value.tolist()))
+    lower, upper = bounds
+    if np.any(np.asarray(lower) > np.asarray(upper)):
+        raise ValueError(f"{spec.name}: lower = {spec.lower!r} is not "
+                         f"allowed: must be at most upper = {spec.upper!r}")
+    if not (np.any(np.asarray(lower) > -math.inf)
+            or np.any(np.asarray(upper) < math.inf) or spec.switch):
+        return None
+    if isinstance(lower, tuple) or isinstance(upper, tuple):
+        lower, upper = (tuple(np.broadcast_to(bound, spec.size).tolist())
+                        for bound in (lower, upper))
+    return lower, upper, bool(spec.switch)
 
 
 class _Assessment(NamedTuple):
@@ -172,11 +208,7 @@ def InputGuard_(T):
             self._port_optional = tuple(
                 (port, any(entry[1] is not None for entry in spec.outputs))
                 for port, spec in zip(self._ports, self.inputs, strict=True))
-            self._ranges = tuple(
-                (float(spec.lower), float(spec.upper), bool(spec.switch))
-                if (spec.lower > -math.inf or spec.upper < math.inf
-                    or spec.switch) else None
-                for spec in self.inputs)
+            self._ranges = tuple(_range_of(spec) for spec in self.inputs)
             self._check_inputs = body_for(check_inputs, T)
             self._check_points = body_for(check_points, T)
             self._points = None
