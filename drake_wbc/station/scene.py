@@ -147,7 +147,8 @@ class WalkingPerson:
 
     Attributes:
         name: non-empty, unique in the scene.
-        radius, height: m, > 0.
+        radius, height: m, > 0; a LIDAR sees the person as a circle of
+            the radius if its scan plane is at most `height` high.
         times: [t0, t1, ...] s, strictly increasing.
         waypoints: [[x, y], ...] in the world, m, one per time.
         repeat: s; 0 walks the schedule once, a period of at least
@@ -414,6 +415,17 @@ def planar_shapes(scene, height):
              for b in scene.boxes if abs(z - b.center[2]) <= b.size[2] / 2]
     return (np.array(circles, dtype=float).reshape(-1, 3),
             np.array(boxes, dtype=float).reshape(-1, 5))
+
+
+def people_at_height(scene, height):
+    """The indices (in `scene.people`) of the people of the validated
+    `scene` whom a horizontal plane at `height` (m above the floor) cuts,
+    as `planar_shapes` cuts the cylinders: those whose height reaches it
+    (bounds included). A 2-D LIDAR at `height` sees them, as circles of
+    their radius; it scans over the heads of the others."""
+    z = as_scalar("height", height)
+    return [i for i, person in enumerate(scene.people)
+            if 0.0 <= z <= person.height]
 
 
 def add_static_obstacles(plant, scene):
