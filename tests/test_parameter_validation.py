@@ -188,6 +188,11 @@ CASES = [
      ["initial_arm_positions", "nan"]),
     (StationOptions, dict(initial_base_pose=[0.0, 0.0]),
      ["initial_base_pose has shape (2,)"]),
+    # A heading of 1e17 rad was accepted, and the base then could not
+    # turn: 1e17 + w h rounds to 1e17 (odometry's yaw frozen while its
+    # yaw rate said 0.4 rad/s).
+    (StationOptions, dict(initial_base_pose=[0.0, 0.0, 1e17]),
+     ["initial_base_pose[2] = 1e+17 rad", "within +-2 pi rad"]),
     (StationOptions, dict(base="fast"), ["base = 'fast'"]),
     (StationOptions, dict(time_step=0.0003),
      ["arm.command_period = 0.01", "time_step = 0.0003", "whole multiple"]),

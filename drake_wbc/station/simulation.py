@@ -209,7 +209,8 @@ class StationOptions:
             sensor by default; ForceTorqueSensorParameters.ideal() for
             none).
         lidar: the TiM571 model of both scanners.
-        initial_base_pose: [x, y, yaw] of T_b in the world at the start.
+        initial_base_pose: [x, y, yaw] of T_b in the world at the start,
+            yaw within +-2 pi rad.
         initial_arm_positions: the arm's configuration at the start (rad),
             one a joint, within the joints' limits (checked against the
             robot when the station is built: `check_arm_start`); None (the
@@ -272,6 +273,12 @@ class StationOptions:
                     "stalls the simulation)")
         pose = as_vector("initial_base_pose", self.initial_base_pose, 3)
         within_site("initial_base_pose", self.initial_base_pose, pose[:2])
+        if abs(pose[2]) > 2.0 * np.pi:
+            raise ValueError(
+                f"initial_base_pose[2] = {float(pose[2])!r} rad is not "
+                "allowed: the heading must lie within +-2 pi rad (one turn "
+                "either way); far beyond, a step of the yaw rate is lost "
+                "in the rounding of the angle and the base cannot turn")
         if self.initial_arm_positions is not None:
             as_vector("initial_arm_positions", self.initial_arm_positions)
 
