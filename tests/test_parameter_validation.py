@@ -176,6 +176,12 @@ CASES = [
      ["force_noise_std = -0.1"]),
     (ForceTorqueSensorParameters, dict(torque_range=INF),
      ["torque_range = inf"]),
+    # A resolution of the whole range was accepted: every reading within
+    # it rounded to 0 (or to the range), a sensor that reads nothing.
+    (ForceTorqueSensorParameters, dict(force_resolution=300.0),
+     ["force_resolution = 300.0", "force_range = 300.0", "below the range"]),
+    (ForceTorqueSensorParameters, dict(torque_resolution=50.0),
+     ["torque_resolution = 50.0", "torque_range = 30.0"]),
     (ForceTorqueSensorParameters, dict(seed=1.5),
      ["seed = 1.5", "whole number"]),
     (LidarParameters, dict(field_of_view=7.0), ["field_of_view = 7.0"]),
