@@ -177,6 +177,30 @@ def test_beams_of_the_tim571():
     np.testing.assert_allclose(np.diff(angles), params.beam_spacing)
 
 
+@pytest.mark.parametrize("num_beams", [4, 360, 811])
+def test_a_full_turn_scans_each_direction_once(num_beams):
+    # A 360 degree scanner's beams lie 2 pi / N apart; the first and the
+    # last were both at +-pi, one direction scanned twice, its return
+    # reported twice.
+    params = LidarParameters(field_of_view=2.0 * np.pi, num_beams=num_beams)
+    angles = params.beam_angles
+    assert params.beam_spacing == pytest.approx(2.0 * np.pi / num_beams)
+    np.testing.assert_allclose(np.diff(angles), params.beam_spacing)
+    assert angles[0] == pytest.approx(-np.pi)
+    gap = angles[0] + 2.0 * np.pi - angles[-1]
+    assert gap == pytest.approx(params.beam_spacing)
+    # A wall all around, a square of half side 2 m: one return a beam,
+    # each where the beam's ray meets the wall.
+    walls = [[0.0, 2.05, 3.0, 0.05, 0.0], [0.0, -2.05, 3.0, 0.05, 0.0],
+             [2.05, 0.0, 0.05, 3.0, 0.0], [-2.05, 0.0, 0.05, 3.0, 0.0]]
+    ranges = scan([0.0, 0.0, 0.0], [0.0, 0.0, 0.0], params, None, walls, 0)
+    expected = 2.0 / np.maximum(np.abs(np.cos(angles)),
+                                np.abs(np.sin(angles)))
+    np.testing.assert_allclose(ranges, expected, rtol=1e-12)
+    points = scan_points(ranges, angles, [0.0, 0.0, 0.0])
+    assert len(np.unique(np.round(points, 9), axis=0)) == num_beams
+
+
 def test_noise_is_a_function_of_seed_and_tick_only():
     params = LidarParameters(range_noise_std=0.01, seed=7)
     wall = [[3.0, 0.0, 0.1, 10.0, 0.0]]

@@ -176,6 +176,12 @@ CASES = [
      ["force_noise_std = -0.1"]),
     (ForceTorqueSensorParameters, dict(torque_range=INF),
      ["torque_range = inf"]),
+    # A resolution of the whole range was accepted: every reading within
+    # it rounded to 0 (or to the range), a sensor that reads nothing.
+    (ForceTorqueSensorParameters, dict(force_resolution=300.0),
+     ["force_resolution = 300.0", "force_range = 300.0", "below the range"]),
+    (ForceTorqueSensorParameters, dict(torque_resolution=50.0),
+     ["torque_resolution = 50.0", "torque_range = 30.0"]),
     (ForceTorqueSensorParameters, dict(seed=1.5),
      ["seed = 1.5", "whole number"]),
     (LidarParameters, dict(field_of_view=7.0), ["field_of_view = 7.0"]),
@@ -188,6 +194,11 @@ CASES = [
      ["initial_arm_positions", "nan"]),
     (StationOptions, dict(initial_base_pose=[0.0, 0.0]),
      ["initial_base_pose has shape (2,)"]),
+    # A heading of 1e17 rad was accepted, and the base then could not
+    # turn: 1e17 + w h rounds to 1e17 (odometry's yaw frozen while its
+    # yaw rate said 0.4 rad/s).
+    (StationOptions, dict(initial_base_pose=[0.0, 0.0, 1e17]),
+     ["initial_base_pose[2] = 1e+17 rad", "within +-2 pi rad"]),
     (StationOptions, dict(base="fast"), ["base = 'fast'"]),
     (StationOptions, dict(time_step=0.0003),
      ["arm.command_period = 0.01", "time_step = 0.0003", "whole multiple"]),

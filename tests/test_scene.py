@@ -165,6 +165,26 @@ def test_errors_in_a_loaded_scene_name_the_field(text, message):
         load(text)
 
 
+@pytest.mark.parametrize("text, message", [
+    ("hand: {times: [0, 1], forces: [[0, 0, 0], [0, 0, 1e20]]}",
+     "hand.forces[1][2] = 1e+20 N is not allowed: must lie within +-1000 N"),
+    ("hand: {times: [0, 1], forces: [[0, 0, 0], [0, 0, 0]],"
+     " torques: [[0, -150, 0], [0, 0, 0]]}",
+     "hand.torques[0][1] = -150.0 N m is not allowed: must lie within "
+     "+-100 N m"),
+])
+def test_a_hand_beyond_any_persons_strength_is_refused_when_loaded(
+        text, message):
+    # A push of 1e20 N loaded and then failed the run in Drake's contact
+    # solver ("The Hessian of the momentum cost ... is NaN").
+    with pytest.raises(ValueError, match=re.escape(message)):
+        load(text)
+    edge = HandForce(times=[0, 1], forces=[[0, 0, 0], [-1000, 0, 1000]],
+                     torques=[[0, 0, 0], [100, -100, 0]])
+    np.testing.assert_array_equal(hand_wrench(edge, 1.0),
+                                  [-1000, 0, 1000, 100, -100, 0])
+
+
 def test_errors_in_direct_construction_name_the_argument():
     with pytest.raises(ValueError, match=re.escape("radius = -1.0")):
         CylinderObstacle(radius=-1.0)

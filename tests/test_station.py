@@ -492,6 +492,30 @@ def test_lidar_points_lie_on_the_obstacles_and_the_walking_person(rest):
     assert not np.any(inside)
 
 
+def test_a_scanner_sees_only_the_people_as_tall_as_its_scan_plane():
+    # The scanners scan 0.2 m above the floor. A person 0.15 m high (a
+    # child crawling) in front of each is below both planes; one 1.75 m
+    # high in front of the rear scanner is a circle of its radius there.
+    low = [WalkingPerson(name=f"low_{i}", radius=0.2, height=0.15,
+                         waypoints=[xy]) for i, xy in enumerate(
+                             [[1.5, 1.4], [-1.5, -1.4]])]
+    tall = WalkingPerson(name="tall", radius=0.25, waypoints=[[-1.2, -2.0]])
+    station = SimulatedStation(StationOptions(time_step=0.005),
+                               Scene(people=[low[0], tall, low[1]]))
+    run = Run(station)
+    run.advance(0.1)
+    assert np.all(np.isinf(run["lidar.front_left.ranges"]))
+    ranges = run["lidar.rear_right.ranges"]
+    # The scanner at (-0.36, -0.26), facing -135 degrees: the nearest
+    # return is the person's distance less the radius.
+    origin = np.array([-0.36, -0.26])
+    nearest = np.linalg.norm(np.array([-1.2, -2.0]) - origin) - 0.25
+    assert np.min(ranges) == pytest.approx(nearest, abs=2e-3)
+    points = run["lidar.obstacle_points"]
+    np.testing.assert_allclose(
+        np.linalg.norm(points - [-1.2, -2.0], axis=1), 0.25, atol=1e-9)
+
+
 def test_wrist_at_rest_reads_the_tools_weight(station, rest):
     plant, model = station.plant, station.model
     reading = rest["wrist.wrench_measured"]

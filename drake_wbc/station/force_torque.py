@@ -47,9 +47,10 @@ class ForceTorqueSensorParameters:
         force_noise_std: N, >= 0, of a Gaussian error on each force
             component (0.1: the data sheet's RMS bound, taken as the RMS).
         torque_noise_std: N m, >= 0, the same for torques (0.005).
-        force_resolution: N, >= 0; forces are rounded to the nearest
-            multiple (0.01); 0: no quantisation.
-        torque_resolution: N m, >= 0, the same for torques (0.001).
+        force_resolution: N, >= 0 and below force_range; forces are
+            rounded to the nearest multiple (0.01); 0: no quantisation.
+        torque_resolution: N m, >= 0 and below torque_range, the same
+            for torques (0.001).
         force_range: N, > 0; each force component saturates at +-range
             (300).
         torque_range: N m, > 0, the same for torques (30).
@@ -74,6 +75,15 @@ class ForceTorqueSensorParameters:
             setattr(self, name, non_negative(name, getattr(self, name)))
         self.force_range = positive("force_range", self.force_range)
         self.torque_range = positive("torque_range", self.torque_range)
+        for kind in ("force", "torque"):
+            resolution = getattr(self, f"{kind}_resolution")
+            limit = getattr(self, f"{kind}_range")
+            if resolution >= limit:
+                raise ValueError(
+                    f"{kind}_resolution = {resolution!r} is not allowed with "
+                    f"{kind}_range = {limit!r}: must be below the range (a "
+                    "step as large as the range rounds every reading within "
+                    "it to 0 or the range itself)")
         self.seed = whole_number("seed", self.seed)
 
     @classmethod

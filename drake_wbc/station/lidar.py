@@ -44,7 +44,7 @@ class LidarParameters:
         field_of_view: rad, from the first beam to the last, in (0, 2 pi];
             270 degrees.
         num_beams: beams a scan, 1 to MAX_BEAMS, evenly spread (811:
-            0.333 degree).
+            0.333 degree; over a whole turn, 2 pi / num_beams apart).
         min_range: m, >= 0; closer objects give no return (0.05).
         max_range: m, > min_range; farther objects give no return (25).
         rate: scans a second, Hz, > 0 (15).
@@ -83,16 +83,29 @@ class LidarParameters:
         self.seed = whole_number("seed", self.seed)
 
     @property
+    def full_turn(self):
+        """Whether the field of view is a whole turn (2 pi): its first
+        and last beams are then neighbours, not one direction twice."""
+        return self.field_of_view >= 2.0 * np.pi
+
+    @property
     def beam_angles(self):
         """(num_beams,) beam directions in the scanner frame, rad, evenly
         from -field_of_view / 2 to +field_of_view / 2 about its x axis (a
-        single beam points along x)."""
+        single beam points along x); over a whole turn, from -pi on at
+        beam_spacing, so that no direction is scanned twice."""
+        if self.full_turn and self.num_beams > 1:
+            return -np.pi + self.beam_spacing * np.arange(self.num_beams)
         half = 0.5 * self.field_of_view if self.num_beams > 1 else 0.0
         return np.linspace(-half, half, self.num_beams)
 
     @property
     def beam_spacing(self):
-        """Angle between neighbouring beams, rad (0 for a single beam)."""
+        """Angle between neighbouring beams, rad (0 for a single beam):
+        field_of_view / (num_beams - 1), or 2 pi / num_beams over a whole
+        turn."""
+        if self.full_turn:
+            return self.field_of_view / self.num_beams
         return self.field_of_view / max(self.num_beams - 1, 1)
 
 

@@ -147,7 +147,8 @@ class WalkingPerson:
 
     Attributes:
         name: non-empty, unique in the scene.
-        radius, height: m, > 0.
+        radius, height: m, > 0; a LIDAR sees the person as a circle of
+            the radius if its scan plane is at most `height` high.
         times: [t0, t1, ...] s, strictly increasing.
         waypoints: [[x, y], ...] in the world, m, one per time.
         repeat: s; 0 walks the schedule once, a period of at least
@@ -193,6 +194,18 @@ HAND_MASS = 0.2
 fingers; the forearm's share (0.5 to 2 kg of endpoint inertia, Tsuji et
 al. 1995) moves behind the soft tissue of the grip and is left out."""
 
+MAX_HAND_FORCE = 1000.0
+"""N, the largest push of a hand a schedule may give, per component: a
+person's strongest push, braced and with both hands, is about 0.5 kN;
+the wrist sensor saturates at 300 N. Drake's contact solver fails on a
+force of 1e20 N in the middle of a run, which this check refuses when
+the scene is made."""
+
+MAX_HAND_TORQUE = 100.0
+"""N m, the largest twist of a hand a schedule may give, per component:
+a person's strongest wrist twist is about 10 to 20 N m; the wrist sensor
+saturates at 30 N m."""
+
 HAND_REACTION_TIME = 0.3
 """s, how fast the hand's intention follows the tool it guides: a
 person's voluntary reaction, 0.15 to 0.3 s; slower changes of the tool's
@@ -231,6 +244,20 @@ class HandImpedance:
         self.reaction_time = positive("reaction_time", self.reaction_time)
 
 
+def _within(name, rows, limit, unit, what):
+    """Checks that every entry of `rows` (a list of lists) lies within
+    +-`limit`; a ValueError naming the first entry that does not."""
+    if not rows:
+        return
+    values = np.asarray(rows, dtype=float)
+    bad = np.argwhere(np.abs(values) > limit)
+    if bad.size:
+        i, j = (int(k) for k in bad[0])
+        raise ValueError(
+            f"{name}[{i}][{j}] = {float(values[i, j])!r} {unit} is not "
+            f"allowed: must lie within +-{limit:g} {unit} ({what})")
+
+
 @dataclass
 class HandForce:
     """A person's hand on the tool: a force at the tool centre point, and
@@ -241,9 +268,11 @@ class HandForce:
 
     Attributes:
         times: [t0, t1, ...] s, strictly increasing; empty for no hand.
-        forces: [[fx, fy, fz], ...] N in the world frame, one per time.
+        forces: [[fx, fy, fz], ...] N in the world frame, one per time,
+            each within +-MAX_HAND_FORCE.
         torques: [[tx, ty, tz], ...] N m in the world frame about the tool
-            centre point, one per time; empty (the default) for none.
+            centre point, one per time, each within +-MAX_HAND_TORQUE;
+            empty (the default) for none.
         impedance: None (the default) for a pure force source, the
             scheduled forces applied whatever the tool does; a
             HandImpedance for a hand that holds the tool (throughout the
@@ -262,6 +291,10 @@ class HandForce:
                        as_matrix("forces", self.forces, rows).tolist())
         self.torques = ([] if _empty(self.torques) else
                         as_matrix("torques", self.torques, rows).tolist())
+        _within("forces", self.forces, MAX_HAND_FORCE, "N",
+                "MAX_HAND_FORCE, more than any person's push")
+        _within("torques", self.torques, MAX_HAND_TORQUE, "N m",
+                "MAX_HAND_TORQUE, more than any person's twist")
         if self.impedance is not None:
             self.impedance = checked_instance(
                 "impedance", self.impedance, HandImpedance, HandImpedance)
@@ -382,6 +415,17 @@ def planar_shapes(scene, height):
              for b in scene.boxes if abs(z - b.center[2]) <= b.size[2] / 2]
     return (np.array(circles, dtype=float).reshape(-1, 3),
             np.array(boxes, dtype=float).reshape(-1, 5))
+
+
+def people_at_height(scene, height):
+    """The indices (in `scene.people`) of the people of the validated
+    `scene` whom a horizontal plane at `height` (m above the floor) cuts,
+    as `planar_shapes` cuts the cylinders: those whose height reaches it
+    (bounds included). A 2-D LIDAR at `height` sees them, as circles of
+    their radius; it scans over the heads of the others."""
+    z = as_scalar("height", height)
+    return [i for i, person in enumerate(scene.people)
+            if 0.0 <= z <= person.height]
 
 
 def add_static_obstacles(plant, scene):

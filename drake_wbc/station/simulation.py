@@ -19,8 +19,9 @@ scene's static obstacles; the base's velocity loop and the arm's position
 servo (the math of drake_wbc.station.driver_dynamics, run as C++
 SymbolicVectorSystems, drake_wbc.station.symbolic_drivers); the FT-300 on
 the weld `ft300_sensing`; two TiM571 LIDARs that see the static obstacles
-and the walking people; the person's hand on the tool. The ports named
-like the LCM hardware interface's are all the controller may read;
+and the walking people at their scan plane; the person's hand on the
+tool. The ports named like the LCM hardware interface's are all the
+controller may read;
 `truth.*` are for metrics and plots, `query_object` for visualisation.
 
 What runs at every plant step is C++ (the plant, the drivers, the base
@@ -97,6 +98,7 @@ from drake_wbc.station.lidar import (
 from drake_wbc.station.scene import (
     Scene,
     add_static_obstacles,
+    people_at_height,
     planar_shapes,
     within_site,
 )
@@ -207,7 +209,8 @@ class StationOptions:
             sensor by default; ForceTorqueSensorParameters.ideal() for
             none).
         lidar: the TiM571 model of both scanners.
-        initial_base_pose: [x, y, yaw] of T_b in the world at the start.
+        initial_base_pose: [x, y, yaw] of T_b in the world at the start,
+            yaw within +-2 pi rad.
         initial_arm_positions: the arm's configuration at the start (rad),
             one a joint, within the joints' limits (checked against the
             robot when the station is built: `check_arm_start`); None (the
@@ -270,6 +273,12 @@ class StationOptions:
                     "stalls the simulation)")
         pose = as_vector("initial_base_pose", self.initial_base_pose, 3)
         within_site("initial_base_pose", self.initial_base_pose, pose[:2])
+        if abs(pose[2]) > 2.0 * np.pi:
+            raise ValueError(
+                f"initial_base_pose[2] = {float(pose[2])!r} rad is not "
+                "allowed: the heading must lie within +-2 pi rad (one turn "
+                "either way); far beyond, a step of the yaw rate is lost "
+                "in the rounding of the angle and the base cannot turn")
         if self.initial_arm_positions is not None:
             as_vector("initial_arm_positions", self.initial_arm_positions)
 
@@ -554,11 +563,10 @@ class SimulatedStation:
 
     def _add_lidars(self, builder, scene):
         """The robot's scanners (its description's lidar_frames), each
-        seeing the static obstacles at its height and the people, and the
+        seeing the static obstacles and the people at its height, and the
         merger of their points."""
         plant, model, s = self.plant, self.model, self.systems
         context = plant.CreateDefaultContext()
-        radii = [person.radius for person in scene.people]
         if not self.lidar_names:  # a robot without scanners sees nothing
             s["lidar_points"] = builder.AddNamedSystem(
                 "lidar_points", ConstantValueSource(
@@ -574,16 +582,28 @@ class SimulatedStation:
             X_BL = frame.CalcPose(context, model.base_frame)
             yaw = np.arctan2(X_BL.rotation().matrix()[1, 0],
                              X_BL.rotation().matrix()[0, 0])
-            circles, boxes = planar_shapes(scene, X_BL.translation()[2])
+            height = X_BL.translation()[2]
+            circles, boxes = planar_shapes(scene, height)
+            # The people it sees: those as tall as its scan plane.
+            seen = people_at_height(scene, height)
             lidar = s[f"lidar_{name}"] = builder.AddNamedSystem(
                 f"lidar_{name}", PlanarLidar(
                     self.options.lidar,
                     mount=(*X_BL.translation()[:2], yaw),
-                    circles=circles, boxes=boxes, moving_radii=radii))
+                    circles=circles, boxes=boxes,
+                    moving_radii=[scene.people[j].radius for j in seen]))
             builder.Connect(s["base_pose"].get_output_port(),
                             lidar.GetInputPort("base_pose"))
-            if radii:
-                builder.Connect(s["people"].GetOutputPort("positions"),
+            positions = s["people"].GetOutputPort("positions")
+            if seen and len(seen) < len(scene.people):
+                select = s[f"lidar_{name}_people"] = builder.AddNamedSystem(
+                    f"lidar_{name}_people", MatrixGain(selection_matrix(
+                        [k for j in seen for k in (2 * j, 2 * j + 1)],
+                        2 * len(scene.people))))
+                builder.Connect(positions, select.get_input_port())
+                positions = select.get_output_port()
+            if seen:
+                builder.Connect(positions,
                                 lidar.GetInputPort("moving_positions"))
             builder.Connect(lidar.GetOutputPort("points"),
                             s["lidar_points"].GetInputPort(f"points_{i}"))
