@@ -30,6 +30,7 @@ from drake_wbc.analysis.frequency import (
     stability_margins,
 )
 from drake_wbc.analysis.period_map import linearize_period_map
+from drake_wbc.analysis.report import base_share_gain, compute_bode_report
 from drake_wbc.experiments.scenario import (
     find_scenario,
     load_scenario,
@@ -43,6 +44,7 @@ from drake_wbc.math.filtering import (
     BaseFilterParameters,
     lowpass_response,
     lowpass_zoh_response,
+    zero_order_hold,
 )
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.stages.cdmp_stages import AffineDynamics
@@ -746,14 +748,75 @@ def test_a_pole_near_the_grids_start_hides_the_dc_gain():
     assert above.bandwidth_hz == pytest.approx(0.1, rel=0.01)
 
 
-def test_bad_inputs_are_named():
-    with pytest.raises(ValueError, match="high_hz"):
-        frequency_grid(10.0, 1.0)
-    with pytest.raises(ValueError, match="kind = 'spring'"):
-        linearize_dmp_force("spring")
-    with pytest.raises(ValueError, match="loop"):
-        stability_margins(3.0, OMEGA)
-    with pytest.raises(ValueError, match="axis = 7"):
-        linearize_dmp_force("stiffness", axis=7)
-    with pytest.raises(ValueError, match="station = None"):
-        plant_chain.linearize_base_plant(None)
+@pytest.mark.parametrize("call, message", [
+    (lambda: frequency_grid(10.0, 1.0), "high_hz"),
+    (lambda: frequency_grid(1.0, 10.0, 0.3),
+     r"points_per_decade = 0.3 is not allowed: must be at least 1"),
+    (lambda: linearize_dmp_force("spring"), "kind = 'spring'"),
+    (lambda: stability_margins(3.0, OMEGA), "loop"),
+    (lambda: linearize_dmp_force("stiffness", axis=7), "axis = 7"),
+    (lambda: plant_chain.linearize_base_plant(None), "station = None"),
+    # A, B, C, D of inconsistent shapes (an IndexError, or with D a
+    # response of the wrong size).
+    (lambda: frequency_response(np.eye(2), np.ones((3, 1)), np.ones((1, 2)),
+                                np.zeros((1, 1)), OMEGA),
+     r"B has shape \(3, 1\), which is not allowed: must have shape "
+     r"\(2, any\)"),
+    (lambda: frequency_response(np.eye(2), np.ones((2, 1)), np.ones((1, 3)),
+                                np.zeros((1, 1)), OMEGA),
+     r"C has shape \(1, 3\), which is not allowed: must have shape "
+     r"\(any, 2\)"),
+    (lambda: frequency_response(np.eye(2), np.ones((2, 1)), np.ones((1, 2)),
+                                np.zeros((2, 2)), OMEGA),
+     r"D has shape \(2, 2\), which is not allowed: must have shape "
+     r"\(1, 1\)"),
+    (lambda: frequency_response(np.ones((1, 2)), np.ones((1, 1)),
+                                np.ones((1, 2)), np.zeros((1, 1)), OMEGA),
+     r"A has shape \(1, 2\), which is not allowed: must be square"),
+    # A response that is not one value a frequency of its grid (a
+    # bandwidth of nan, or an IndexError).
+    (lambda: bandwidth(OMEGA, np.ones(3)),
+     r"response has shape \(3,\), which is not allowed: must have one "
+     r"value for each of the \d+ frequencies of omega"),
+    (lambda: peak_gain(OMEGA[:2], np.ones(3)), r"response has shape \(3,\)"),
+    # A grid that is not increasing frequencies > 0 (margins read off an
+    # unsorted grid, a ZeroDivisionError at -1 rad/s, inf from none).
+    (lambda: stability_margins(lambda w: 2.0 / (1j * w),
+                               np.array([3.0, 1.0, 2.0])),
+     r"omega = .* is not allowed: must hold 2 or more increasing "
+     r"frequencies > 0"),
+    (lambda: stability_margins(lambda w: 2.0 / (1j * w),
+                               np.array([-1.0, 3.0])), "omega = "),
+    (lambda: stability_margins(lambda w: 2.0 / (1j * w), np.zeros(0)),
+     "omega = "),
+    # The closed forms' coefficients and the hold's matrices (a NaN
+    # response; with B taller than A a wrong one, A broadcast).
+    (lambda: closed_forms.second_order_zoh_response(
+        1.0, float("nan"), 1.0, 1.0, 1.0, H, OMEGA),
+     r"b0 = nan is not allowed: must be finite"),
+    (lambda: closed_forms.second_order_zoh_response(
+        "1", 1.0, 1.0, 1.0, 1.0, H, OMEGA), r"b1 = '1' is not allowed"),
+    (lambda: zero_order_hold(np.eye(1), np.ones((2, 1)), H),
+     r"B has shape \(2, 1\), which is not allowed: must have shape "
+     r"\(1, any\)"),
+    # An operating point beyond the arm's limits (the input guard passed
+    # the home's C_m on under q_a = 3.3 rad).
+    (lambda: chains.operating_point(None, [3.3, -0.45, 1.0, 0.0, 1.15,
+                                           0.0]),
+     r"arm_positions\[0\] = 3.3 is not allowed: must lie within the "
+     r"joint's limits \[-3.14, 3.14\] rad"),
+    (lambda: base_share_gain(chains.operating_point(), 9),
+     r"axis = 9 is not allowed: must be 0 to 5"),
+    (lambda: compute_bode_report(load_scenario(find_scenario(
+        "trajectory_tracking")), contact_stiffness=-3e3),
+     r"contact_stiffness = -3000.0 is not allowed: must be greater than 0"),
+], ids=["grid-order", "grid-density", "dmp-kind", "loop", "dmp-axis",
+        "station", "B", "C", "D", "A", "bandwidth-response",
+        "peak-response", "unsorted-grid", "negative-grid", "empty-grid",
+        "zoh-coefficient", "zoh-coefficient-type", "hold-shapes",
+        "operating-point", "share-axis", "contact-stiffness"])
+def test_bad_inputs_are_named(call, message):
+    """Each bad argument is refused with a ValueError naming it, its value
+    (or shape) and what is allowed."""
+    with pytest.raises(ValueError, match=message):
+        call()

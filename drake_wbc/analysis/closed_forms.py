@@ -19,7 +19,7 @@ that discretises the systems, so that the two check each other.
 
 import numpy as np
 
-from drake_wbc.math.validation import non_negative, positive
+from drake_wbc.math.validation import as_scalar, non_negative, positive
 
 
 def stiffness_coupled_coefficients(k_p, k_d, tau, alpha_z, beta_z,
@@ -96,6 +96,8 @@ def second_order_zoh_response(b1, b0, a2, a1, a0, time_step, omega):
     to about 1e-9 for a relative separation above 1e-3.
     """
     h = positive("time_step", time_step)
+    b1, b0, a1, a0 = (as_scalar(name, value) for name, value in (
+        ("b1", b1), ("b0", b0), ("a1", a1), ("a0", a0)))
     a2 = positive("a2", a2)
     if a0 == 0.0:
         raise ValueError("a0 = 0.0 is not allowed: a pole at s = 0 needs "

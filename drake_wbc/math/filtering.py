@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-from drake_wbc.math.validation import non_negative, positive
+from drake_wbc.math.validation import as_matrix, non_negative, positive
 
 
 @dataclass
@@ -107,9 +107,24 @@ def zero_order_hold(A, B, time_step):
     an input held constant over each period `time_step`.
 
     Both come from one matrix exponential of [[A, B], [0, 0]] h.
+
+    Args:
+        A: (n, n) finite.
+        B: (n, m) finite.
+        time_step: h > 0, s.
+
+    Raises:
+        ValueError: naming the argument whose shape or value is not
+            allowed.
     """
     h = positive("time_step", time_step)
-    n, m = B.shape
+    A = as_matrix("A", A, (None, None))
+    n = A.shape[0]
+    if A.shape != (n, n):
+        raise ValueError(f"A has shape {A.shape}, which is not allowed: "
+                         "must be square (n, n)")
+    B = as_matrix("B", B, (n, None))
+    m = B.shape[1]
     augmented = np.zeros((n + m, n + m))
     augmented[:n, :n] = A
     augmented[:n, n:] = B
