@@ -48,6 +48,7 @@ from drake_wbc.math.filtering import (
 )
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.stages.cdmp_stages import AffineDynamics
+from drake_wbc.station.drivers import BaseVelocityDriver
 from drake_wbc.station.simulation import SimulatedStation, StationOptions
 
 HERTZ, OMEGA = frequency_grid(0.01, 100.0, 40)
@@ -748,6 +749,19 @@ def test_a_pole_near_the_grids_start_hides_the_dc_gain():
     assert above.bandwidth_hz == pytest.approx(0.1, rel=0.01)
 
 
+def driver_period_map(period):
+    """The period map of the station's base driver (its 1 ms step) at
+    rest over `period`."""
+    driver = BaseVelocityDriver()
+    driver.set_name("driver")
+    context = driver.CreateDefaultContext()
+    driver.GetInputPort("base_pose").FixValue(context, np.zeros(3))
+    command = driver.GetInputPort("velocity_command")
+    command.FixValue(context, np.zeros(3))
+    return linearize_period_map(driver, context, period, command,
+                                driver.GetOutputPort("velocity"))
+
+
 @pytest.mark.parametrize("call, message", [
     (lambda: frequency_grid(10.0, 1.0), "high_hz"),
     (lambda: frequency_grid(1.0, 10.0, 0.3),
@@ -810,11 +824,19 @@ def test_a_pole_near_the_grids_start_hides_the_dc_gain():
     (lambda: compute_bode_report(load_scenario(find_scenario(
         "trajectory_tracking")), contact_stiffness=-3e3),
      r"contact_stiffness = -3000.0 is not allowed: must be greater than 0"),
+    # A period map over a span that is not a whole number of the
+    # updates' periods (its A, 1 update of the driver's 1 ms, was
+    # labelled 0.5 ms; 2 of them 1.5 ms).
+    (lambda: driver_period_map(0.0005),
+     r"period = 0.0005 s is not allowed: must be a whole multiple of every "
+     r"update period of the system \('driver' updates every 0.001 s\)"),
+    (lambda: driver_period_map(0.0015), r"period = 0.0015 s"),
 ], ids=["grid-order", "grid-density", "dmp-kind", "loop", "dmp-axis",
         "station", "B", "C", "D", "A", "bandwidth-response",
         "peak-response", "unsorted-grid", "negative-grid", "empty-grid",
         "zoh-coefficient", "zoh-coefficient-type", "hold-shapes",
-        "operating-point", "share-axis", "contact-stiffness"])
+        "operating-point", "share-axis", "contact-stiffness",
+        "map-period-short", "map-period-between"])
 def test_bad_inputs_are_named(call, message):
     """Each bad argument is refused with a ValueError naming it, its value
     (or shape) and what is allowed."""

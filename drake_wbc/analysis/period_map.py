@@ -66,6 +66,44 @@ def to_autodiff(system):
     return converted
 
 
+def update_periods(system):
+    """{name: period in s} of the periodic discrete update of every leaf
+    system inside `system` (a Diagram's, recursively; `system` itself if
+    it is a leaf) that has one."""
+    if isinstance(system, Diagram):
+        periods = {}
+        for child in system.GetSystems():
+            periods.update(update_periods(child))
+        return periods
+    attribute = system.GetUniquePeriodicDiscreteUpdateAttribute()
+    if attribute is None:
+        return {}
+    return {system.get_name(): attribute.period_sec()}
+
+
+def check_map_period(system, period):
+    """`period` (s) as a float after checking that it is > 0 and a whole
+    multiple of every periodic discrete update's period in `system`
+    (update_periods): over another span the map would take a whole
+    number of updates all the same and be labelled with a period they
+    do not fill.
+
+    Raises:
+        ValueError: naming period, its value and the update it does not
+            fit.
+    """
+    h = positive("period", period)
+    for name, step in update_periods(system).items():
+        updates = h / step
+        if round(updates) < 1 or abs(updates - round(updates)) > 1e-9 * max(
+                1.0, updates):
+            raise ValueError(
+                f"period = {h!r} s is not allowed: must be a whole multiple "
+                f"of every update period of the system ({name!r} updates "
+                f"every {step!r} s)")
+    return h
+
+
 def linearize_period_map(system, context, period, input_port, output_port,
                          drop_clocks=False):
     """Linearises a discrete multi-rate `system` over one `period`, by
@@ -91,7 +129,7 @@ def linearize_period_map(system, context, period, input_port, output_port,
         context: its Context at the operating point, time 0; its other
             vector inputs fixed.
         period: the map's period in s, a whole multiple of every
-            group's period.
+            group's period (checked: check_map_period).
         input_port, output_port: the vector ports of u and y.
         drop_clocks: whether state entries that count time (e.g. the
             InputGuard's valid_time) may move over the period: an entry
@@ -105,7 +143,7 @@ def linearize_period_map(system, context, period, input_port, output_port,
     Returns:
         LinearSystem(A, B, C, D, period).
     """
-    h = positive("period", period)
+    h = check_map_period(system, period)
     if context.num_continuous_states() or context.num_abstract_states():
         raise ValueError(
             f"system = {system.get_name()!r} is not allowed: must have "
