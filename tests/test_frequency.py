@@ -17,7 +17,12 @@ from pydrake.systems.primitives import (
     Sine,
 )
 
-from drake_wbc.analysis import chains, closed_forms, plant_chain
+from drake_wbc.analysis import (
+    admittance_loop,
+    chains,
+    closed_forms,
+    plant_chain,
+)
 from drake_wbc.analysis.dmp_force_response import linearize_dmp_force
 from drake_wbc.analysis.frequency import (
     bandwidth,
@@ -667,6 +672,18 @@ def test_a_discrete_loops_margins_are_read_below_its_nyquist_frequency():
         90.0 - np.degrees(w_c * H / 2.0), rel=1e-12)
     assert margins.phase_crossover == pytest.approx(np.pi / H, rel=1e-12)
     assert margins.gain_margin == pytest.approx(2.0 / g, rel=1e-12)
+    # The same loop on every axis of an admittance loop's result (L_i =
+    # -(R P C R^T)_ii of a 6 by 6 loop C (zI - A)^-1 B, here -g / (z - 1)
+    # each): its margins too are read below the Nyquist frequency (they
+    # were the alias's, -81.4 degrees, on this grid).
+    result = admittance_loop.LoopResult(
+        label="integrators", hand=None, inertia_compensation=False,
+        time_constant=0.0, k_hri=0.05, loop=LinearSystem(
+            np.eye(6), np.eye(6), -g * np.eye(6), np.zeros((6, 6)), H),
+        rotation=np.eye(6), spectral_radius=1.0, limit=np.nan,
+        limit_frequency=np.nan, margins={})
+    for axis in admittance_loop.AXES:
+        assert result.axis_margins(axis, omega) == margins
 
 
 def test_bandwidth_and_peak_of_textbook_responses():

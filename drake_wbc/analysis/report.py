@@ -247,7 +247,7 @@ def _dmp_plots(report, params, hertz, omega, h, stiffness):
         def loop(w, linear=linear):
             return stiffness * linear.response(np.atleast_1d(w))[0]
 
-        margins = stability_margins(loop, omega)
+        margins = stability_margins(loop, omega, h)
         plot.add(f"{kind} axis", stiffness * responses[kind])
         report.rows.append(summarize(f"contact loop, {kind} axis", hertz,
                                      stiffness * responses[kind], margins))
