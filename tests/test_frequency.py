@@ -109,14 +109,54 @@ def test_base_filter_matches_eq_filtering(zeta, time_step):
     assert np.abs(off_axis).max() < 1e-12
 
 
-@pytest.mark.parametrize("zeta", [1.0, 0.7, 1.6])
-def test_second_order_zoh_form_agrees_with_the_filters(zeta):
-    w = 3.0
-    general = closed_forms.second_order_zoh_response(0.0, w * w, 1.0,
-                                                     2 * zeta * w, w * w, H,
-                                                     OMEGA)
-    assert relative_error(general, lowpass_zoh_response(w, zeta, H,
-                                                        OMEGA)) < 1e-9
+def state_space_zoh_response(b1, b0, a2, a1, a0, time_step, omega):
+    """(b1 s + b0) / (a2 s^2 + a1 s + a0) held over `time_step`, from the
+    matrix exponential of its companion form (filtering.zero_order_hold),
+    independently of the partial fractions of the closed forms."""
+    A = np.array([[0.0, 1.0], [-a0 / a2, -a1 / a2]])
+    A_d, B_d = zero_order_hold(A, np.array([[0.0], [1.0]]), time_step)
+    return frequency_response(A_d, B_d, [[b0 / a2, b1 / a2]], [[0.0]],
+                              omega, time_step)[:, 0, 0]
+
+
+FILTER_ZETAS = (1.0, 0.7, 1.6, 1.0 + 1e-6, 1.0 + 1e-13, 1.0 - 4e-12)
+"""Damping ratios of eq. (filtering) (w = 3 rad/s): the paper's double
+pole, two pairs apart, and pairs a rounding apart."""
+
+DMP_TAUS = (1.0, 1.1, 1.3, 1.5, 2.3, 3.1)
+"""tau of the critically damped DMPs (beta_z = alpha_z / 4, the
+default) of eq. (lp-admit): for most tau a1^2 - 4 a2 a0 rounds to
++-1e-13 rather than 0."""
+
+
+@pytest.mark.parametrize("kind, value", [
+    *(("filter", zeta) for zeta in FILTER_ZETAS),
+    *(("dmp", tau) for tau in DMP_TAUS)])
+def test_second_order_zoh_form_agrees_with_the_filters(kind, value):
+    """The closed forms of a held second order, eq. (filtering)'s and
+    the general one (eq. (lp-admit)'s), against the hold of its state
+    space to 1e-10 of the response's peak (the gain near the Nyquist
+    frequency is 1e-4 of it), also with poles a rounding apart, where
+    the partial fractions' residues 1 / (p_1 - p_2) lost half the digits
+    (1e-6 off for the DMP at tau = 3.1, alpha_z = 10)."""
+    if kind == "filter":
+        w = 3.0
+        cases = [(0.0, w * w, 1.0, 2 * value * w, w * w)]
+    else:
+        cases = [closed_forms.stiffness_coupled_coefficients(
+            5e-4, 0.2, value, alpha_z, alpha_z / 4.0, velocity_scale=1.0)
+            for alpha_z in (25.0, 10.0, 7.3)]
+
+    def error(actual, expected):
+        return np.abs(actual - expected).max() / np.abs(expected).max()
+
+    for coefficients in cases:
+        exact = state_space_zoh_response(*coefficients, H, OMEGA)
+        assert error(closed_forms.second_order_zoh_response(
+            *coefficients, H, OMEGA), exact) < 1e-10
+    if kind == "filter":
+        assert error(lowpass_zoh_response(3.0, value, H, OMEGA),
+                     exact) < 1e-10
 
 
 # The coupled DMPs, eqs. (lp-admit) and (tf-admit).
