@@ -7,10 +7,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from omni_arm import write_omni_arm
+from pydrake.common.value import AbstractValue
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import (
     ConstantVectorSource,
+    Linearize,
     LinearSystem,
     LogVectorOutput,
     MatrixGain,
@@ -51,7 +53,9 @@ from drake_wbc.math.filtering import (
     lowpass_zoh_response,
     zero_order_hold,
 )
+from drake_wbc.math.repulsion import RepulsiveFieldParameters
 from drake_wbc.robot.description import load_robot_description
+from drake_wbc.stages import BaseCdmp
 from drake_wbc.stages.cdmp_stages import AffineDynamics
 from drake_wbc.station.drivers import BaseVelocityDriver
 from drake_wbc.station.simulation import SimulatedStation, StationOptions
@@ -342,14 +346,37 @@ def test_period_map_refuses_a_point_that_moves_beside_a_large_state(rate):
             linearize()
 
 
-def test_period_map_equals_linearize_at_one_rate(scenario, point):
-    diagram = chains.build_split_diagram(scenario.controller, point)
-    context = diagram.CreateDefaultContext()
-    source = diagram.GetInputPort("end_effector_velocity")
-    source.FixValue(context, np.zeros(6))
-    lifted = chains.linearize_period_map(
-        diagram, context, H, source, diagram.GetOutputPort("shares"))
-    direct = chains.linearize_split(scenario.controller, point)
+@pytest.mark.parametrize("system", ["split", "obstacles"])
+def test_period_map_equals_linearize_at_one_rate(scenario, point, system):
+    """The period map of a system of one rate is Drake's Linearize: the
+    split, and BaseCdmp pushed aside by two obstacle points 0.3 m from
+    its footprint, at its equilibrium (its abstract input, which the
+    map once tried to convert entry by entry into AutoDiffXd, a
+    TypeError)."""
+    if system == "split":
+        diagram = chains.build_split_diagram(scenario.controller, point)
+        context = diagram.CreateDefaultContext()
+        source = diagram.GetInputPort("end_effector_velocity")
+        output = diagram.GetOutputPort("shares")
+        source.FixValue(context, np.zeros(6))
+        direct = chains.linearize_split(scenario.controller, point)
+    else:
+        diagram = BaseCdmp(cdmp.BaseCdmpParameters(
+            repulsion=RepulsiveFieldParameters(half_sizes=(0.4, 0.3))),
+            time_step=H)
+        context = diagram.CreateDefaultContext()
+        source = diagram.GetInputPort("base_velocity")
+        output = diagram.GetOutputPort("avoiding_base_velocity")
+        source.FixValue(context, np.zeros(3))
+        diagram.GetInputPort("obstacle_points").FixValue(
+            context, AbstractValue.Make(np.array([[0.7, 0.1], [0.7, -0.2]])))
+        Simulator(diagram, context).AdvanceTo(20.0)
+        context.SetTime(0.0)
+        force = diagram.repulsive_force(context)
+        assert np.abs(force).max() > 1e-3
+        direct = Linearize(diagram, context, source.get_index(),
+                           output.get_index())
+    lifted = chains.linearize_period_map(diagram, context, H, source, output)
     for name in ("A", "B", "C", "D"):
         assert np.allclose(getattr(lifted, name)(), getattr(direct, name)(),
                            rtol=0.0, atol=1e-12)

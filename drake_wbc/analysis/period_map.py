@@ -24,7 +24,7 @@ from pydrake.autodiffutils import (
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JointActuatorIndex
 from pydrake.systems.analysis import Simulator_
-from pydrake.systems.framework import Diagram
+from pydrake.systems.framework import Diagram, PortDataType
 from pydrake.systems.primitives import LinearSystem
 
 from drake_wbc.math.validation import positive
@@ -127,7 +127,8 @@ def linearize_period_map(system, context, period, input_port, output_port,
             MultibodyPlant inside without sampled output ports, whose
             samples are abstract state).
         context: its Context at the operating point, time 0; its other
-            vector inputs fixed.
+            inputs fixed (an abstract one, such as obstacle points,
+            passes to the AutoDiffXd system as it is).
         period: the map's period in s, a whole multiple of every
             group's period (checked: check_map_period).
         input_port, output_port: the vector ports of u and y.
@@ -170,9 +171,13 @@ def linearize_period_map(system, context, period, input_port, output_port,
             ad_port = ad_system.get_input_port(i)
             if i == input_port.get_index():
                 ad_port.FixValue(new, seeded[n:])
-            elif port.HasValue(context):
+            elif not port.HasValue(context):
+                continue
+            elif port.get_data_type() == PortDataType.kVectorValued:
                 ad_port.FixValue(new, np.array(
                     [AutoDiffXd(v) for v in port.Eval(context)]))
+            else:  # e.g. obstacle points: the same value in both
+                ad_port.FixValue(new, port.EvalAbstract(context).Clone())
         return new
 
     start = ad_context()
