@@ -109,14 +109,15 @@ class BodeReport:
 def base_share_gain(point, axis=AXIS):
     """k_b: the base's share of V_ee along `axis` at DC, (J_b V_b)_axis
     for a unit V_ee on that axis, from the math layer's eq. (wbccm)
-    (drake_wbc.math.distribution, k_n = 0); `axis` 0 to 5."""
+    (drake_wbc.math.distribution, k_n = 0, J_wb with the arm's mounting
+    ^bR_a); `axis` 0 to 5."""
     axis = whole_number("axis", axis)
     if axis > 5:
         raise ValueError(f"axis = {axis!r} is not allowed: must be 0 to 5 "
                          "(an entry of the twist [v; w])")
     J_b = kinematics.base_jacobian(point.end_effector_position)
     J_wb = kinematics.whole_body_jacobian(None, point.end_effector_position,
-                                          np.eye(3))
+                                          point.arm.R_ba)
     V_wb = distribution.distribute(J_wb, np.eye(6)[axis], point.sigma_xy,
                                    point.sigma_phi)
     return float((J_b @ V_wb[6:])[axis])
