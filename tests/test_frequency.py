@@ -921,8 +921,8 @@ def driver_period_map(period):
     # updates' periods (its A, 1 update of the driver's 1 ms, was
     # labelled 0.5 ms; 2 of them 1.5 ms).
     (lambda: driver_period_map(0.0005),
-     r"period = 0.0005 s is not allowed: must be a whole multiple of every "
-     r"update period of the system \('driver' updates every 0.001 s\)"),
+     r"period = 0.0005 s is not allowed with the update period of "
+     r"'driver' = 0.001 s: must be a whole multiple \(1, 2, ...\) of it"),
     (lambda: driver_period_map(0.0015), r"period = 0.0015 s"),
 ], ids=["grid-order", "grid-density", "dmp-kind", "loop", "dmp-axis",
         "station", "B", "C", "D", "A", "bandwidth-response",

@@ -27,7 +27,7 @@ from pydrake.systems.analysis import Simulator_
 from pydrake.systems.framework import Diagram, PortDataType
 from pydrake.systems.primitives import LinearSystem
 
-from drake_wbc.math.validation import positive
+from drake_wbc.math.validation import positive, whole_multiple
 
 EQUILIBRIUM_TOLERANCE = 1e-9
 """How far a state entry x_i may move over the period at an operating
@@ -94,13 +94,7 @@ def check_map_period(system, period):
     """
     h = positive("period", period)
     for name, step in update_periods(system).items():
-        updates = h / step
-        if round(updates) < 1 or abs(updates - round(updates)) > 1e-9 * max(
-                1.0, updates):
-            raise ValueError(
-                f"period = {h!r} s is not allowed: must be a whole multiple "
-                f"of every update period of the system ({name!r} updates "
-                f"every {step!r} s)")
+        whole_multiple("period", h, f"the update period of {name!r}", step)
     return h
 
 
