@@ -50,7 +50,7 @@ def response_function(A, B, C, D, time_step=0.0):
     Args:
         A, B, C, D, time_step: as for `frequency_response`.
     """
-    A, B, C, D = state_space("A", A, "B", B, "C", C, "D", D)
+    A, B, C, D = state_space(A, B, C, D)
     h = non_negative("time_step", time_step)
     keep = coupled_states(A, B, C) if A.size else np.zeros(0, dtype=int)
     A, B, C = A[np.ix_(keep, keep)], B[keep], C[:, keep]
@@ -68,26 +68,23 @@ def response_function(A, B, C, D, time_step=0.0):
     return response
 
 
-def state_space(*named):
-    """The matrices (A, B, C, D) of a state-space system, given as
-    ("A", A, "B", B, "C", C, "D", D), as finite float matrices of
-    consistent shapes: A (n, n), B (n, m), C (p, n), D (p, m) (a vector
-    or a number taken as a matrix of one row).
+def state_space(A, B, C, D):
+    """The matrices A, B, C, D of a state-space system as finite float
+    matrices of consistent shapes: A (n, n), B (n, m), C (p, n), D (p, m)
+    (a vector or a number taken as a matrix of one row).
 
     Raises:
         ValueError: naming the matrix, its shape and the shape it must
-            have, or its first entry that is not finite.
+            have, or its entries that are not finite.
     """
-    (a, A), (b, B), (c, C), (d, D) = zip(named[::2], named[1::2],
-                                         strict=True)
-    A = as_matrix(a, np.atleast_2d(A), (None, None))
+    A = as_matrix("A", np.atleast_2d(A), (None, None))
     n = A.shape[0]
     if A.shape != (n, n):
-        raise ValueError(f"{a} has shape {A.shape}, which is not allowed: "
+        raise ValueError(f"A has shape {A.shape}, which is not allowed: "
                          "must be square (n, n)")
-    B = as_matrix(b, np.atleast_2d(B), (n, None))
-    C = as_matrix(c, np.atleast_2d(C), (None, n))
-    D = as_matrix(d, np.atleast_2d(D), (C.shape[0], B.shape[1]))
+    B = as_matrix("B", np.atleast_2d(B), (n, None))
+    C = as_matrix("C", np.atleast_2d(C), (None, n))
+    D = as_matrix("D", np.atleast_2d(D), (C.shape[0], B.shape[1]))
     return A, B, C, D
 
 
