@@ -20,6 +20,7 @@ from drake_wbc.math.validation import (
     as_vector,
     non_negative,
     positive,
+    square_matrix,
 )
 
 DEFAULT_BAND_HZ = (0.01, 100.0)
@@ -77,11 +78,8 @@ def state_space(A, B, C, D):
         ValueError: naming the matrix, its shape and the shape it must
             have, or its entries that are not finite.
     """
-    A = as_matrix("A", np.atleast_2d(A), (None, None))
+    A = square_matrix("A", np.atleast_2d(A))
     n = A.shape[0]
-    if A.shape != (n, n):
-        raise ValueError(f"A has shape {A.shape}, which is not allowed: "
-                         "must be square (n, n)")
     B = as_matrix("B", np.atleast_2d(B), (n, None))
     C = as_matrix("C", np.atleast_2d(C), (None, n))
     D = as_matrix("D", np.atleast_2d(D), (C.shape[0], B.shape[1]))

@@ -23,7 +23,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-from drake_wbc.math.validation import as_matrix, non_negative, positive
+from drake_wbc.math.validation import (
+    as_matrix,
+    non_negative,
+    positive,
+    square_matrix,
+)
 
 
 @dataclass
@@ -118,11 +123,8 @@ def zero_order_hold(A, B, time_step):
             allowed.
     """
     h = positive("time_step", time_step)
-    A = as_matrix("A", A, (None, None))
+    A = square_matrix("A", A)
     n = A.shape[0]
-    if A.shape != (n, n):
-        raise ValueError(f"A has shape {A.shape}, which is not allowed: "
-                         "must be square (n, n)")
     B = as_matrix("B", B, (n, None))
     m = B.shape[1]
     augmented = np.zeros((n + m, n + m))
