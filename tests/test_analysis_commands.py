@@ -127,8 +127,17 @@ def test_bode_table_reports_the_contact_loop_margins(bode):
     line = next(x for x in text.splitlines()
                 if x.startswith("contact loop, admittance axis"))
     # The discrete integrator K k_f h / (z - 1) with K k_f h = 0.3: gain
-    # margin 2 / 0.3 at the Nyquist frequency.
+    # margin 2 / 0.3 at the Nyquist frequency; |L| = 1 where
+    # 2 sin(w h / 2) = 0.3, with the phase margin 90 - w h / 2 degrees.
     assert f"{20 * np.log10(2 / 0.3):.2f}" in line.split()
+    assert f"{90 - np.degrees(np.arcsin(0.15)):.1f}" in line.split()
+    # The base filter, eq. (filtering), critically damped at 1 Hz: 3 dB
+    # down at sqrt(10^0.15 - 1) Hz, continuous and held alike (to the
+    # table's three decimals).
+    for row in ("base filter, h = 0.01 s", "base filter, continuous"):
+        line = next(x for x in text.splitlines() if x.startswith(row))
+        assert line[len(row):].split()[:2] == [
+            "-0.00", f"{np.sqrt(10**0.15 - 1):.3f}"]
 
 
 def test_bode_table_gives_an_integrator_no_dc_gain(bode):

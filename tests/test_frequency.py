@@ -7,17 +7,24 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from omni_arm import write_omni_arm
+from pydrake.common.value import AbstractValue
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import (
     ConstantVectorSource,
+    Linearize,
     LinearSystem,
     LogVectorOutput,
     MatrixGain,
     Sine,
 )
 
-from drake_wbc.analysis import chains, closed_forms, plant_chain
+from drake_wbc.analysis import (
+    admittance_loop,
+    chains,
+    closed_forms,
+    plant_chain,
+)
 from drake_wbc.analysis.dmp_force_response import linearize_dmp_force
 from drake_wbc.analysis.frequency import (
     bandwidth,
@@ -30,6 +37,7 @@ from drake_wbc.analysis.frequency import (
     stability_margins,
 )
 from drake_wbc.analysis.period_map import linearize_period_map
+from drake_wbc.analysis.report import base_share_gain, compute_bode_report
 from drake_wbc.experiments.scenario import (
     find_scenario,
     load_scenario,
@@ -43,9 +51,14 @@ from drake_wbc.math.filtering import (
     BaseFilterParameters,
     lowpass_response,
     lowpass_zoh_response,
+    zero_order_hold,
 )
+from drake_wbc.math.repulsion import RepulsiveFieldParameters
 from drake_wbc.robot.description import load_robot_description
+from drake_wbc.robot.model import ArmKinematics, ArmMount
+from drake_wbc.stages import BaseCdmp
 from drake_wbc.stages.cdmp_stages import AffineDynamics
+from drake_wbc.station.drivers import BaseVelocityDriver
 from drake_wbc.station.simulation import SimulatedStation, StationOptions
 
 HERTZ, OMEGA = frequency_grid(0.01, 100.0, 40)
@@ -101,14 +114,54 @@ def test_base_filter_matches_eq_filtering(zeta, time_step):
     assert np.abs(off_axis).max() < 1e-12
 
 
-@pytest.mark.parametrize("zeta", [1.0, 0.7, 1.6])
-def test_second_order_zoh_form_agrees_with_the_filters(zeta):
-    w = 3.0
-    general = closed_forms.second_order_zoh_response(0.0, w * w, 1.0,
-                                                     2 * zeta * w, w * w, H,
-                                                     OMEGA)
-    assert relative_error(general, lowpass_zoh_response(w, zeta, H,
-                                                        OMEGA)) < 1e-9
+def state_space_zoh_response(b1, b0, a2, a1, a0, time_step, omega):
+    """(b1 s + b0) / (a2 s^2 + a1 s + a0) held over `time_step`, from the
+    matrix exponential of its companion form (filtering.zero_order_hold),
+    independently of the partial fractions of the closed forms."""
+    A = np.array([[0.0, 1.0], [-a0 / a2, -a1 / a2]])
+    A_d, B_d = zero_order_hold(A, np.array([[0.0], [1.0]]), time_step)
+    return frequency_response(A_d, B_d, [[b0 / a2, b1 / a2]], [[0.0]],
+                              omega, time_step)[:, 0, 0]
+
+
+FILTER_ZETAS = (1.0, 0.7, 1.6, 1.0 + 1e-6, 1.0 + 1e-13, 1.0 - 4e-12)
+"""Damping ratios of eq. (filtering) (w = 3 rad/s): the paper's double
+pole, two pairs apart, and pairs a rounding apart."""
+
+DMP_TAUS = (1.0, 1.1, 1.3, 1.5, 2.3, 3.1)
+"""tau of the critically damped DMPs (beta_z = alpha_z / 4, the
+default) of eq. (lp-admit): for most tau a1^2 - 4 a2 a0 rounds to
++-1e-13 rather than 0."""
+
+
+@pytest.mark.parametrize("kind, value", [
+    *(("filter", zeta) for zeta in FILTER_ZETAS),
+    *(("dmp", tau) for tau in DMP_TAUS)])
+def test_second_order_zoh_form_agrees_with_the_filters(kind, value):
+    """The closed forms of a held second order, eq. (filtering)'s and
+    the general one (eq. (lp-admit)'s), against the hold of its state
+    space to 1e-10 of the response's peak (the gain near the Nyquist
+    frequency is 1e-4 of it), also with poles a rounding apart, where
+    the partial fractions' residues 1 / (p_1 - p_2) lost half the digits
+    (1e-6 off for the DMP at tau = 3.1, alpha_z = 10)."""
+    if kind == "filter":
+        w = 3.0
+        cases = [(0.0, w * w, 1.0, 2 * value * w, w * w)]
+    else:
+        cases = [closed_forms.stiffness_coupled_coefficients(
+            5e-4, 0.2, value, alpha_z, alpha_z / 4.0, velocity_scale=1.0)
+            for alpha_z in (25.0, 10.0, 7.3)]
+
+    def error(actual, expected):
+        return np.abs(actual - expected).max() / np.abs(expected).max()
+
+    for coefficients in cases:
+        exact = state_space_zoh_response(*coefficients, H, OMEGA)
+        assert error(closed_forms.second_order_zoh_response(
+            *coefficients, H, OMEGA), exact) < 1e-10
+    if kind == "filter":
+        assert error(lowpass_zoh_response(3.0, value, H, OMEGA),
+                     exact) < 1e-10
 
 
 # The coupled DMPs, eqs. (lp-admit) and (tf-admit).
@@ -237,7 +290,16 @@ def test_math_layer_dmps_match_the_paper_for_any_tau(time_step):
 
 # The split of the end-effector command.
 
-def test_ideal_split_sums_to_unity(scenario, point):
+@pytest.mark.parametrize("mount", [None, ArmMount(yaw=0.6, tilt=0.3)],
+                         ids=["shipped", "turned-and-tilted"])
+def test_ideal_split_sums_to_unity(scenario, point, mount):
+    """The split with ideal actuators reproduces V_ee on every axis, the
+    base's share k_b (report.base_share_gain) times the discrete filter,
+    also on an arm turned and tilted on its base (k_b once took ^bR_a for
+    the identity: 0.521 for the split's 0.514)."""
+    if mount is not None:
+        point = chains.operating_point(scenario.controller, None,
+                                       ArmKinematics(mount=mount))
     assert point.alpha == 0.0
     response = linear_system_response(
         chains.linearize_split(scenario.controller, point), OMEGA)
@@ -250,10 +312,9 @@ def test_ideal_split_sums_to_unity(scenario, point):
     # The base's share is k_b times the discrete filter, the arm's the
     # rest.
     f = scenario.controller.base_filter
-    from drake_wbc.analysis.report import base_share_gain
-
     k_b = base_share_gain(point)
-    assert k_b == pytest.approx(0.5, abs=1e-3)  # sigma_xy = 0.5
+    if mount is None:
+        assert k_b == pytest.approx(0.5, abs=1e-3)  # sigma_xy = 0.5
     base = k_b * lowpass_zoh_response(f.omega_f, f.zeta, H, OMEGA)
     assert relative_error(response[:, 0, 0], base) < 1e-6
     assert relative_error(response[:, 6, 0], 1.0 - base) < 1e-6
@@ -294,14 +355,37 @@ def test_period_map_refuses_a_point_that_moves_beside_a_large_state(rate):
             linearize()
 
 
-def test_period_map_equals_linearize_at_one_rate(scenario, point):
-    diagram = chains.build_split_diagram(scenario.controller, point)
-    context = diagram.CreateDefaultContext()
-    source = diagram.GetInputPort("end_effector_velocity")
-    source.FixValue(context, np.zeros(6))
-    lifted = chains.linearize_period_map(
-        diagram, context, H, source, diagram.GetOutputPort("shares"))
-    direct = chains.linearize_split(scenario.controller, point)
+@pytest.mark.parametrize("system", ["split", "obstacles"])
+def test_period_map_equals_linearize_at_one_rate(scenario, point, system):
+    """The period map of a system of one rate is Drake's Linearize: the
+    split, and BaseCdmp pushed aside by two obstacle points 0.3 m from
+    its footprint, at its equilibrium (its abstract input, which the
+    map once tried to convert entry by entry into AutoDiffXd, a
+    TypeError)."""
+    if system == "split":
+        diagram = chains.build_split_diagram(scenario.controller, point)
+        context = diagram.CreateDefaultContext()
+        source = diagram.GetInputPort("end_effector_velocity")
+        output = diagram.GetOutputPort("shares")
+        source.FixValue(context, np.zeros(6))
+        direct = chains.linearize_split(scenario.controller, point)
+    else:
+        diagram = BaseCdmp(cdmp.BaseCdmpParameters(
+            repulsion=RepulsiveFieldParameters(half_sizes=(0.4, 0.3))),
+            time_step=H)
+        context = diagram.CreateDefaultContext()
+        source = diagram.GetInputPort("base_velocity")
+        output = diagram.GetOutputPort("avoiding_base_velocity")
+        source.FixValue(context, np.zeros(3))
+        diagram.GetInputPort("obstacle_points").FixValue(
+            context, AbstractValue.Make(np.array([[0.7, 0.1], [0.7, -0.2]])))
+        Simulator(diagram, context).AdvanceTo(20.0)
+        context.SetTime(0.0)
+        force = diagram.repulsive_force(context)
+        assert np.abs(force).max() > 1e-3
+        direct = Linearize(diagram, context, source.get_index(),
+                           output.get_index())
+    lifted = chains.linearize_period_map(diagram, context, H, source, output)
     for name in ("A", "B", "C", "D"):
         assert np.allclose(getattr(lifted, name)(), getattr(direct, name)(),
                            rtol=0.0, atol=1e-12)
@@ -664,6 +748,18 @@ def test_a_discrete_loops_margins_are_read_below_its_nyquist_frequency():
         90.0 - np.degrees(w_c * H / 2.0), rel=1e-12)
     assert margins.phase_crossover == pytest.approx(np.pi / H, rel=1e-12)
     assert margins.gain_margin == pytest.approx(2.0 / g, rel=1e-12)
+    # The same loop on every axis of an admittance loop's result (L_i =
+    # -(R P C R^T)_ii of a 6 by 6 loop C (zI - A)^-1 B, here -g / (z - 1)
+    # each): its margins too are read below the Nyquist frequency (they
+    # were the alias's, -81.4 degrees, on this grid).
+    result = admittance_loop.LoopResult(
+        label="integrators", hand=None, inertia_compensation=False,
+        time_constant=0.0, k_hri=0.05, loop=LinearSystem(
+            np.eye(6), np.eye(6), -g * np.eye(6), np.zeros((6, 6)), H),
+        rotation=np.eye(6), spectral_radius=1.0, limit=np.nan,
+        limit_frequency=np.nan, margins={})
+    for axis in admittance_loop.AXES:
+        assert result.axis_margins(axis, omega) == margins
 
 
 def test_bandwidth_and_peak_of_textbook_responses():
@@ -746,14 +842,96 @@ def test_a_pole_near_the_grids_start_hides_the_dc_gain():
     assert above.bandwidth_hz == pytest.approx(0.1, rel=0.01)
 
 
-def test_bad_inputs_are_named():
-    with pytest.raises(ValueError, match="high_hz"):
-        frequency_grid(10.0, 1.0)
-    with pytest.raises(ValueError, match="kind = 'spring'"):
-        linearize_dmp_force("spring")
-    with pytest.raises(ValueError, match="loop"):
-        stability_margins(3.0, OMEGA)
-    with pytest.raises(ValueError, match="axis = 7"):
-        linearize_dmp_force("stiffness", axis=7)
-    with pytest.raises(ValueError, match="station = None"):
-        plant_chain.linearize_base_plant(None)
+def driver_period_map(period):
+    """The period map of the station's base driver (its 1 ms step) at
+    rest over `period`."""
+    driver = BaseVelocityDriver()
+    driver.set_name("driver")
+    context = driver.CreateDefaultContext()
+    driver.GetInputPort("base_pose").FixValue(context, np.zeros(3))
+    command = driver.GetInputPort("velocity_command")
+    command.FixValue(context, np.zeros(3))
+    return linearize_period_map(driver, context, period, command,
+                                driver.GetOutputPort("velocity"))
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: frequency_grid(10.0, 1.0), "high_hz"),
+    (lambda: frequency_grid(1.0, 10.0, 0.3),
+     r"points_per_decade = 0.3 is not allowed: must be at least 1"),
+    (lambda: linearize_dmp_force("spring"), "kind = 'spring'"),
+    (lambda: stability_margins(3.0, OMEGA), "loop"),
+    (lambda: linearize_dmp_force("stiffness", axis=7), "axis = 7"),
+    (lambda: plant_chain.linearize_base_plant(None), "station = None"),
+    # A, B, C, D of inconsistent shapes (an IndexError, or with D a
+    # response of the wrong size).
+    (lambda: frequency_response(np.eye(2), np.ones((3, 1)), np.ones((1, 2)),
+                                np.zeros((1, 1)), OMEGA),
+     r"B has shape \(3, 1\), which is not allowed: must have shape "
+     r"\(2, any\)"),
+    (lambda: frequency_response(np.eye(2), np.ones((2, 1)), np.ones((1, 3)),
+                                np.zeros((1, 1)), OMEGA),
+     r"C has shape \(1, 3\), which is not allowed: must have shape "
+     r"\(any, 2\)"),
+    (lambda: frequency_response(np.eye(2), np.ones((2, 1)), np.ones((1, 2)),
+                                np.zeros((2, 2)), OMEGA),
+     r"D has shape \(2, 2\), which is not allowed: must have shape "
+     r"\(1, 1\)"),
+    (lambda: frequency_response(np.ones((1, 2)), np.ones((1, 1)),
+                                np.ones((1, 2)), np.zeros((1, 1)), OMEGA),
+     r"A has shape \(1, 2\), which is not allowed: must be square"),
+    # A response that is not one value a frequency of its grid (a
+    # bandwidth of nan, or an IndexError).
+    (lambda: bandwidth(OMEGA, np.ones(3)),
+     r"response has shape \(3,\), which is not allowed: must have one "
+     r"value for each of the \d+ frequencies of omega"),
+    (lambda: peak_gain(OMEGA[:2], np.ones(3)), r"response has shape \(3,\)"),
+    # A grid that is not increasing frequencies > 0 (margins read off an
+    # unsorted grid, a ZeroDivisionError at -1 rad/s, inf from none).
+    (lambda: stability_margins(lambda w: 2.0 / (1j * w),
+                               np.array([3.0, 1.0, 2.0])),
+     r"omega = .* is not allowed: must hold 2 or more increasing "
+     r"frequencies > 0"),
+    (lambda: stability_margins(lambda w: 2.0 / (1j * w),
+                               np.array([-1.0, 3.0])), "omega = "),
+    (lambda: stability_margins(lambda w: 2.0 / (1j * w), np.zeros(0)),
+     "omega = "),
+    # The closed forms' coefficients and the hold's matrices (a NaN
+    # response; with B taller than A a wrong one, A broadcast).
+    (lambda: closed_forms.second_order_zoh_response(
+        1.0, float("nan"), 1.0, 1.0, 1.0, H, OMEGA),
+     r"b0 = nan is not allowed: must be finite"),
+    (lambda: closed_forms.second_order_zoh_response(
+        "1", 1.0, 1.0, 1.0, 1.0, H, OMEGA), r"b1 = '1' is not allowed"),
+    (lambda: zero_order_hold(np.eye(1), np.ones((2, 1)), H),
+     r"B has shape \(2, 1\), which is not allowed: must have shape "
+     r"\(1, any\)"),
+    # An operating point beyond the arm's limits (the input guard passed
+    # the home's C_m on under q_a = 3.3 rad).
+    (lambda: chains.operating_point(None, [3.3, -0.45, 1.0, 0.0, 1.15,
+                                           0.0]),
+     r"arm_positions\[0\] = 3.3 is not allowed: must lie within the "
+     r"joint's limits \[-3.14, 3.14\] rad"),
+    (lambda: base_share_gain(chains.operating_point(), 9),
+     r"axis = 9 is not allowed: must be 0 to 5"),
+    (lambda: compute_bode_report(load_scenario(find_scenario(
+        "trajectory_tracking")), contact_stiffness=-3e3),
+     r"contact_stiffness = -3000.0 is not allowed: must be greater than 0"),
+    # A period map over a span that is not a whole number of the
+    # updates' periods (its A, 1 update of the driver's 1 ms, was
+    # labelled 0.5 ms; 2 of them 1.5 ms).
+    (lambda: driver_period_map(0.0005),
+     r"period = 0.0005 s is not allowed with the update period of "
+     r"'driver' = 0.001 s: must be a whole multiple \(1, 2, ...\) of it"),
+    (lambda: driver_period_map(0.0015), r"period = 0.0015 s"),
+], ids=["grid-order", "grid-density", "dmp-kind", "loop", "dmp-axis",
+        "station", "B", "C", "D", "A", "bandwidth-response",
+        "peak-response", "unsorted-grid", "negative-grid", "empty-grid",
+        "zoh-coefficient", "zoh-coefficient-type", "hold-shapes",
+        "operating-point", "share-axis", "contact-stiffness",
+        "map-period-short", "map-period-between"])
+def test_bad_inputs_are_named(call, message):
+    """Each bad argument is refused with a ValueError naming it, its value
+    (or shape) and what is allowed."""
+    with pytest.raises(ValueError, match=message):
+        call()

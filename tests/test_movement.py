@@ -7,7 +7,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import yaml
-from pydrake.autodiffutils import AutoDiffXd
+from pydrake.autodiffutils import (
+    AutoDiffXd,
+    ExtractGradient,
+    InitializeAutoDiff,
+)
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import Linearize
 
@@ -513,6 +517,39 @@ def test_movement_tracking(player_stage):
         converted.GetInputPort(name).FixValue(ad_context, value)
     np.testing.assert_allclose([v.value() for v in converted.get_output_port(
         0).Eval(ad_context)], expected, rtol=1e-12, atol=1e-11)
+    # Its derivatives, while playing: the AutoDiffXd copy's w.r.t. the
+    # base's state and the arm's joints, and Drake's Linearize (D), both
+    # against central differences of the double system (the copy once
+    # gave the error without derivatives: no feedback of the TCP's pose
+    # in a linearisation of the replay).
+    context.SetTime(1.7)
+    ad_context.SetTime(AutoDiffXd(1.7))
+    inputs = dict(base=base, q=q)
+    step = 1e-6
+    for name, key in (("base.state_estimated", "base"),
+                      ("arm.position_measured", "q")):
+        port = system.GetInputPort(name)
+        value = inputs[key]
+        columns = []
+        for e in np.eye(value.size):
+            ends = []
+            for sign in (1.0, -1.0):
+                port.FixValue(context, value + sign * step * e)
+                ends.append(system.get_output_port(0).Eval(context).copy())
+            columns.append((ends[0] - ends[1]) / (2 * step))
+        port.FixValue(context, value)
+        central = np.column_stack(columns)
+        assert np.abs(central).max() > 0.1
+        seeded = InitializeAutoDiff(value).ravel()
+        converted.GetInputPort(name).FixValue(ad_context, seeded)
+        np.testing.assert_allclose(ExtractGradient(
+            converted.get_output_port(0).Eval(ad_context)), central,
+            atol=1e-6)
+        converted.GetInputPort(name).FixValue(ad_context, value)
+        linear = Linearize(system, context, input_port_index=port.get_index(),
+                           output_port_index=system.get_output_port(
+                               0).get_index())
+        np.testing.assert_allclose(linear.D(), central, atol=1e-6)
 
 
 def test_tcp_pose_is_the_plants():

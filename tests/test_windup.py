@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from controller_rig import Rig
-from pydrake.systems.framework import InputPortIndex, OutputPortIndex
+from pydrake.systems.framework import InputPortIndex
 from pydrake.systems.primitives import Linearize
 from shipped_names import BASE_VELOCITY_LIMITS, FOOTPRINT
 
@@ -76,22 +76,54 @@ def test_the_gate_scales_as_a_whole_into_its_envelope():
         StopGate(3, limits=[1.0, -1.0, 1.0])
 
 
-def test_the_gate_converts_and_linearises_to_the_identity_inside():
+@pytest.mark.parametrize("value", [
+    [0.2, -0.1, 0.05],     # within the limits: the identity
+    [3.0, -1.0, 0.5],      # beyond on x: scaled as a whole
+    [0.1, 0.2, -2.0],      # beyond on the yaw rate
+], ids=["inside", "beyond-x", "beyond-yaw"])
+def test_the_gate_converts_and_linearises_to_its_jacobian(value):
+    """Drake's Linearize of the gate (through its AutoDiffXd copy) is the
+    Jacobian of what it sends: the identity within the limits; beyond
+    them, where the k-th entry binds, g(v) = s v with s = L_k / |v_k|,
+    so dg/dv = s (I - v e_k^T / v_k) and ds/dv = -s e_k^T / v_k (the
+    scale's own derivative once dropped, which gave D = s I: 0.33 on the
+    binding entry, whose sent value L_k does not move, and 0 off the
+    diagonal), held to central differences of the double gate too."""
+    value = np.array(value)
     gate = StopGate(3, limits=V_MAX).ToAutoDiffXd()
     assert gate.limits == tuple(V_MAX)
     context = gate.CreateDefaultContext()
-    gate.GetInputPort("value").FixValue(context, [0.2, -0.1, 0.05])
+    gate.GetInputPort("value").FixValue(context, value)
     gate.GetInputPort("stop").FixValue(context, [0.0])
-    np.testing.assert_array_equal(
+    np.testing.assert_allclose(
         [x.value() for x in gate.GetOutputPort("gated").Eval(context)],
-        [0.2, -0.1, 0.05])
+        gate_output(StopGate(3, limits=V_MAX), value), rtol=1e-15)
     double = StopGate(3, limits=V_MAX)
     context = double.CreateDefaultContext()
-    double.GetInputPort("value").FixValue(context, [0.2, -0.1, 0.05])
+    double.GetInputPort("value").FixValue(context, value)
     double.GetInputPort("stop").FixValue(context, [0.0])
-    linear = Linearize(double, context, input_port_index=InputPortIndex(0),
-                       output_port_index=OutputPortIndex(0))
-    np.testing.assert_allclose(linear.D(), np.eye(3), atol=1e-9)
+    ratios = V_MAX / np.abs(value)
+    k = int(np.argmin(ratios))
+    s = min(1.0, ratios[k])
+    expected = np.eye(3) if s == 1.0 else s * (
+        np.eye(3) - np.outer(value, np.eye(3)[k]) / value[k])
+    step = 1e-7
+    central = np.column_stack([
+        (gate_output(double, value + step * e)
+         - gate_output(double, value - step * e)) / (2 * step)
+        for e in np.eye(3)])
+    np.testing.assert_allclose(central, expected, atol=1e-7)
+    # (The scale within the limits is the constant 1, with no derivative:
+    # Drake's Linearize cannot take an output that depends on neither the
+    # state nor the input, so it is linearised beyond them only.)
+    outputs = [("gated", expected)] + ([] if s == 1.0 else [
+        ("scale", -s * np.eye(3)[[k]] / value[k])])
+    for output, jacobian in outputs:
+        linear = Linearize(double, context,
+                           input_port_index=InputPortIndex(0),
+                           output_port_index=double.GetOutputPort(
+                               output).get_index())
+        np.testing.assert_allclose(linear.D(), jacobian, atol=1e-12)
 
 
 @pytest.fixture(scope="module")

@@ -465,6 +465,14 @@ class LoopResult:
             (R @ lin.D() @ R.T)[i:i + 1, i:i + 1], lin.time_period())
         return lambda omega: -response(omega)[:, 0, 0]
 
+    def axis_margins(self, axis, omega):
+        """The StabilityMargins of `axis_loop(axis)` on the grid `omega`
+        (rad/s), read below the loop's Nyquist frequency (the loop is
+        sampled: frequency.stability_margins with its period, so that a
+        grid beyond pi / h does not count the crossovers' aliases)."""
+        return stability_margins(self.axis_loop(axis), omega,
+                                 self.loop.time_period())
+
 
 DRIFT_TOLERANCE = 1e-4
 """|z - 1| below which a closed-loop eigenvalue counts as a drift, not an
@@ -691,7 +699,6 @@ class AdmittanceCase:
             spectral_radius=radius, limit=limit,
             limit_frequency=frequency, margins={})
         for axis in AXES:
-            result.margins[axis] = stability_margins(
-                result.axis_loop(axis), omega)
+            result.margins[axis] = result.axis_margins(axis, omega)
         return result
 

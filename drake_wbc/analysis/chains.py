@@ -54,6 +54,7 @@ from drake_wbc.analysis.plant_chain import (
 from drake_wbc.controller import ControllerParameters, build_controller
 from drake_wbc.math import kinematics
 from drake_wbc.math.filtering import BaseFilterParameters
+from drake_wbc.math.safety import MEASURED_POSITION_MARGIN
 from drake_wbc.math.validation import as_vector, checked_instance
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages import (
@@ -103,15 +104,30 @@ def operating_point(params=None, arm_positions=None, arm=None):
     """The OperatingPoint of a controller with `params` (the paper's if
     None) on `arm` (an ArmKinematics; the shipped robot's if None) with
     the arm at `arm_positions` (its home if None), from the controller's
-    own stages."""
+    own stages.
+
+    Raises:
+        ValueError: naming the first joint of `arm_positions` further
+            than MEASURED_POSITION_MARGIN outside its limits (the
+            controller's input guard would not take it as a
+            measurement, and its stages would see the last valid one).
+    """
     arm = checked_instance("arm", arm, ArmKinematics, ArmKinematics)
+    q_a = as_vector("arm_positions", arm.home
+                    if arm_positions is None else arm_positions,
+                    arm.num_joints)
+    beyond = np.maximum(arm.lower - q_a, q_a - arm.upper)
+    if np.any(beyond > MEASURED_POSITION_MARGIN):
+        i = int(np.flatnonzero(beyond > MEASURED_POSITION_MARGIN)[0])
+        raise ValueError(
+            f"arm_positions[{i}] = {float(q_a[i])!r} is not allowed: must "
+            f"lie within the joint's limits [{float(arm.lower[i])!r}, "
+            f"{float(arm.upper[i])!r}] rad give or take "
+            f"{MEASURED_POSITION_MARGIN!r}")
     controller = build_controller(checked_instance(
         "params", params, ControllerParameters, ControllerParameters),
         robot=arm)
     context = controller.diagram.CreateDefaultContext()
-    q_a = as_vector("arm_positions", arm.home
-                    if arm_positions is None else arm_positions,
-                    arm.num_joints)
     diagram = controller.diagram
     diagram.GetInputPort("arm.position_measured").FixValue(context, q_a)
     for name in ("reference_velocity", "wrist.wrench_measured"):

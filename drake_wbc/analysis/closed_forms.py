@@ -17,9 +17,12 @@ The discrete forms are derived here from partial fractions of H(s)/s
 that discretises the systems, so that the two check each other.
 """
 
+import math
+
 import numpy as np
 
-from drake_wbc.math.validation import non_negative, positive
+from drake_wbc.math.filtering import MERGED_POLES
+from drake_wbc.math.validation import as_scalar, non_negative, positive
 
 
 def stiffness_coupled_coefficients(k_p, k_d, tau, alpha_z, beta_z,
@@ -86,16 +89,21 @@ def second_order_zoh_response(b1, b0, a2, a1, a0, time_step, omega):
     - p_1 != p_2: G = r_0/s + sum_i r_i/(s - p_i), r_0 = b0 / a0,
       r_i = (b1 p_i + b0) / (a2 p_i (p_i - p_j)), and
       H_d = r_0 + sum_i r_i (z - 1)/(z - q_i);
-    - a double pole p (discriminant a1^2 - 4 a2 a0 = 0):
+    - a double pole p (discriminant a1^2 - 4 a2 a0 = 0, or within
+      drake_wbc.math.filtering.MERGED_POLES a1^2 of it, where the first
+      form loses the digits that this one keeps; p^2 = a0 / a2):
       G = r_0/s + c_1/(s - p) + c_2/(s - p)^2, c_1 = -r_0,
       c_2 = (b1 p + b0)/(a2 p), and, since Z{t e^(pt)} = h q z/(z - q)^2,
       H_d = r_0 + c_1 (z - 1)/(z - q) + c_2 h q (z - 1)/(z - q)^2.
     For b1 = 0, b0 = a0 = omega_f^2 this is eq. (filtering)'s
     drake_wbc.math.filtering.lowpass_zoh_response. The first form loses
-    digits as the poles merge (residues ~ 1 / (p_1 - p_2)); it is exact
-    to about 1e-9 for a relative separation above 1e-3.
+    digits as the poles merge (residues ~ 1 / (p_1 - p_2)), the second
+    is exact to O(a1^2 - 4 a2 a0) (relative): each is taken where it is
+    the better, exact to about 1e-10 of the response's peak.
     """
     h = positive("time_step", time_step)
+    b1, b0, a1, a0 = (as_scalar(name, value) for name, value in (
+        ("b1", b1), ("b0", b0), ("a1", a1), ("a0", a0)))
     a2 = positive("a2", a2)
     if a0 == 0.0:
         raise ValueError("a0 = 0.0 is not allowed: a pole at s = 0 needs "
@@ -103,8 +111,10 @@ def second_order_zoh_response(b1, b0, a2, a1, a0, time_step, omega):
     z = np.exp(1j * np.asarray(omega, dtype=float) * h)
     r_0 = b0 / a0
     discriminant = a1 * a1 - 4.0 * a2 * a0
-    if discriminant == 0.0:
-        p = -a1 / (2.0 * a2)
+    if abs(discriminant) <= MERGED_POLES * a1 * a1:
+        # The double pole of the same a0 / a2 = p^2 (so that H(0), r_0,
+        # stays exact), on the side of -a1 / (2 a2).
+        p = -math.copysign(math.sqrt(a0 / a2), a1)
         q = np.exp(p * h)
         c_2 = (b1 * p + b0) / (a2 * p)
         return (r_0 - r_0 * (z - 1.0) / (z - q)

@@ -15,7 +15,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
-from drake_wbc.math.validation import as_vector, non_negative, positive
+from drake_wbc.math.validation import (
+    as_matrix,
+    as_vector,
+    non_negative,
+    positive,
+    square_matrix,
+)
 
 DEFAULT_BAND_HZ = (0.01, 100.0)
 """The frequency band of the analysis in Hz: 0.01 to 100 Hz."""
@@ -45,8 +51,7 @@ def response_function(A, B, C, D, time_step=0.0):
     Args:
         A, B, C, D, time_step: as for `frequency_response`.
     """
-    A, B = np.atleast_2d(A), np.atleast_2d(B)
-    C, D = np.atleast_2d(C), np.atleast_2d(D)
+    A, B, C, D = state_space(A, B, C, D)
     h = non_negative("time_step", time_step)
     keep = coupled_states(A, B, C) if A.size else np.zeros(0, dtype=int)
     A, B, C = A[np.ix_(keep, keep)], B[keep], C[:, keep]
@@ -62,6 +67,23 @@ def response_function(A, B, C, D, time_step=0.0):
                          for p in points])
 
     return response
+
+
+def state_space(A, B, C, D):
+    """The matrices A, B, C, D of a state-space system as finite float
+    matrices of consistent shapes: A (n, n), B (n, m), C (p, n), D (p, m)
+    (a vector or a number taken as a matrix of one row).
+
+    Raises:
+        ValueError: naming the matrix, its shape and the shape it must
+            have, or its entries that are not finite.
+    """
+    A = square_matrix("A", np.atleast_2d(A))
+    n = A.shape[0]
+    B = as_matrix("B", np.atleast_2d(B), (n, None))
+    C = as_matrix("C", np.atleast_2d(C), (None, n))
+    D = as_matrix("D", np.atleast_2d(D), (C.shape[0], B.shape[1]))
+    return A, B, C, D
 
 
 def coupled_states(A, B, C):
@@ -109,9 +131,43 @@ def frequency_grid(low_hz=DEFAULT_BAND_HZ[0], high_hz=DEFAULT_BAND_HZ[1],
         raise ValueError(f"high_hz = {high!r} is not allowed with low_hz = "
                          f"{low!r}: must be greater")
     density = positive("points_per_decade", points_per_decade)
+    if density < 1.0:
+        raise ValueError(f"points_per_decade = {points_per_decade!r} is not "
+                         "allowed: must be at least 1")
     count = max(2, int(np.ceil(density * np.log10(high / low))) + 1)
     hertz = np.logspace(np.log10(low), np.log10(high), count)
     return hertz, 2.0 * np.pi * hertz
+
+
+def checked_grid(omega, minimum=2):
+    """`omega` as a float vector of `minimum` or more increasing angular
+    frequencies > 0 (rad/s), the grid of a response.
+
+    Raises:
+        ValueError: naming omega, its value and what is allowed.
+    """
+    omega = as_vector("omega", omega)
+    if omega.size < minimum or not (
+            omega[0] > 0.0 and np.all(np.diff(omega) > 0.0)):
+        raise ValueError(f"omega = {omega!r} is not allowed: must hold "
+                         f"{minimum} or more increasing frequencies > 0")
+    return omega
+
+
+def checked_response(omega, response):
+    """`response` as a complex vector, one value for each frequency of
+    `omega` (a checked grid).
+
+    Raises:
+        ValueError: naming response, its shape and the one it must have.
+    """
+    array = np.asarray(response)
+    if array.shape != omega.shape:
+        raise ValueError(
+            f"response has shape {array.shape}, which is not allowed: must "
+            f"have one value for each of the {omega.size} frequencies of "
+            f"omega, shape {omega.shape}")
+    return array
 
 
 def decibels(response):
@@ -148,12 +204,10 @@ def low_frequency_power(omega, response):
         omega: (N,) increasing angular frequencies (rad/s), N >= 2.
         response: (N,) complex response at `omega`.
     """
-    omega = as_vector("omega", omega)
-    if omega.size < 2 or not 0.0 < omega[0] < omega[1]:
-        raise ValueError(f"omega = {omega!r} is not allowed: must hold 2 "
-                         "or more increasing frequencies > 0")
+    omega = checked_grid(omega)
+    response = checked_response(omega, response)
     with np.errstate(divide="ignore", invalid="ignore"):
-        gain = np.log(np.abs(np.asarray(response)[:2]))
+        gain = np.log(np.abs(response[:2]))
         return float((gain[1] - gain[0])
                      / (np.log(omega[1]) - np.log(omega[0])))
 
@@ -205,8 +259,8 @@ def bandwidth(omega, response, reference=None, drop_db=3.0):
         on the grid (nor is already below at its start), or there is no
         DC gain to fall from.
     """
-    omega = as_vector("omega", omega)
-    gain = decibels(np.asarray(response))
+    omega = checked_grid(omega)
+    gain = decibels(checked_response(omega, response))
     drop = positive("drop_db", drop_db)
     if reference is None:
         reference = dc_gain(omega, response)
@@ -224,10 +278,12 @@ def bandwidth(omega, response, reference=None, drop_db=3.0):
 
 def peak_gain(omega, response):
     """(the largest |response| on the grid, the frequency in rad/s where
-    it is reached)."""
-    magnitude = np.abs(np.asarray(response))
+    it is reached), on the grid `omega` (increasing frequencies > 0,
+    rad/s) of `response`."""
+    omega = checked_grid(omega, minimum=1)
+    magnitude = np.abs(checked_response(omega, response))
     i = int(np.argmax(magnitude))
-    return float(magnitude[i]), float(np.asarray(omega)[i])
+    return float(magnitude[i]), float(omega[i])
 
 
 @dataclass
@@ -300,7 +356,7 @@ def stability_margins(loop, omega, time_step=0.0):
     if not callable(loop):
         raise ValueError(f"loop = {loop!r} is not allowed: must be a "
                          "callable of omega returning a complex number")
-    omega = as_vector("omega", omega)
+    omega = checked_grid(omega)
     h = non_negative("time_step", time_step)
     if h > 0.0:
         omega = np.append(omega[omega < np.pi / h], np.pi / h)

@@ -24,10 +24,10 @@ from pydrake.autodiffutils import (
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JointActuatorIndex
 from pydrake.systems.analysis import Simulator_
-from pydrake.systems.framework import Diagram
+from pydrake.systems.framework import Diagram, PortDataType
 from pydrake.systems.primitives import LinearSystem
 
-from drake_wbc.math.validation import positive
+from drake_wbc.math.validation import positive, whole_multiple
 
 EQUILIBRIUM_TOLERANCE = 1e-9
 """How far a state entry x_i may move over the period at an operating
@@ -66,6 +66,38 @@ def to_autodiff(system):
     return converted
 
 
+def update_periods(system):
+    """{name: period in s} of the periodic discrete update of every leaf
+    system inside `system` (a Diagram's, recursively; `system` itself if
+    it is a leaf) that has one."""
+    if isinstance(system, Diagram):
+        periods = {}
+        for child in system.GetSystems():
+            periods.update(update_periods(child))
+        return periods
+    attribute = system.GetUniquePeriodicDiscreteUpdateAttribute()
+    if attribute is None:
+        return {}
+    return {system.get_name(): attribute.period_sec()}
+
+
+def check_map_period(system, period):
+    """`period` (s) as a float after checking that it is > 0 and a whole
+    multiple of every periodic discrete update's period in `system`
+    (update_periods): over another span the map would take a whole
+    number of updates all the same and be labelled with a period they
+    do not fill.
+
+    Raises:
+        ValueError: naming period, its value and the update it does not
+            fit.
+    """
+    h = positive("period", period)
+    for name, step in update_periods(system).items():
+        whole_multiple("period", h, f"the update period of {name!r}", step)
+    return h
+
+
 def linearize_period_map(system, context, period, input_port, output_port,
                          drop_clocks=False):
     """Linearises a discrete multi-rate `system` over one `period`, by
@@ -89,9 +121,10 @@ def linearize_period_map(system, context, period, input_port, output_port,
             MultibodyPlant inside without sampled output ports, whose
             samples are abstract state).
         context: its Context at the operating point, time 0; its other
-            vector inputs fixed.
+            inputs fixed (an abstract one, such as obstacle points,
+            passes to the AutoDiffXd system as it is).
         period: the map's period in s, a whole multiple of every
-            group's period.
+            group's period (checked: check_map_period).
         input_port, output_port: the vector ports of u and y.
         drop_clocks: whether state entries that count time (e.g. the
             InputGuard's valid_time) may move over the period: an entry
@@ -105,7 +138,7 @@ def linearize_period_map(system, context, period, input_port, output_port,
     Returns:
         LinearSystem(A, B, C, D, period).
     """
-    h = positive("period", period)
+    h = check_map_period(system, period)
     if context.num_continuous_states() or context.num_abstract_states():
         raise ValueError(
             f"system = {system.get_name()!r} is not allowed: must have "
@@ -132,9 +165,13 @@ def linearize_period_map(system, context, period, input_port, output_port,
             ad_port = ad_system.get_input_port(i)
             if i == input_port.get_index():
                 ad_port.FixValue(new, seeded[n:])
-            elif port.HasValue(context):
+            elif not port.HasValue(context):
+                continue
+            elif port.get_data_type() == PortDataType.kVectorValued:
                 ad_port.FixValue(new, np.array(
                     [AutoDiffXd(v) for v in port.Eval(context)]))
+            else:  # e.g. obstacle points: the same value in both
+                ad_port.FixValue(new, port.EvalAbstract(context).Clone())
         return new
 
     start = ad_context()

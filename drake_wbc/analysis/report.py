@@ -64,7 +64,7 @@ from drake_wbc.math.filtering import (
     lowpass_response,
     lowpass_zoh_response,
 )
-from drake_wbc.math.validation import positive
+from drake_wbc.math.validation import positive, whole_number
 
 CONTACT_STIFFNESS = 3.0e3
 """K of the contact loops, N/m: a soft sponge pressed against a wall
@@ -109,10 +109,15 @@ class BodeReport:
 def base_share_gain(point, axis=AXIS):
     """k_b: the base's share of V_ee along `axis` at DC, (J_b V_b)_axis
     for a unit V_ee on that axis, from the math layer's eq. (wbccm)
-    (drake_wbc.math.distribution, k_n = 0)."""
+    (drake_wbc.math.distribution, k_n = 0, J_wb with the arm's mounting
+    ^bR_a); `axis` 0 to 5."""
+    axis = whole_number("axis", axis)
+    if axis > 5:
+        raise ValueError(f"axis = {axis!r} is not allowed: must be 0 to 5 "
+                         "(an entry of the twist [v; w])")
     J_b = kinematics.base_jacobian(point.end_effector_position)
     J_wb = kinematics.whole_body_jacobian(None, point.end_effector_position,
-                                          np.eye(3))
+                                          point.arm.R_ba)
     V_wb = distribution.distribute(J_wb, np.eye(6)[axis], point.sigma_xy,
                                    point.sigma_phi)
     return float((J_b @ V_wb[6:])[axis])
@@ -243,7 +248,7 @@ def _dmp_plots(report, params, hertz, omega, h, stiffness):
         def loop(w, linear=linear):
             return stiffness * linear.response(np.atleast_1d(w))[0]
 
-        margins = stability_margins(loop, omega)
+        margins = stability_margins(loop, omega, h)
         plot.add(f"{kind} axis", stiffness * responses[kind])
         report.rows.append(summarize(f"contact loop, {kind} axis", hertz,
                                      stiffness * responses[kind], margins))
@@ -359,6 +364,7 @@ def compute_bode_report(scenario, points_per_decade=60,
         if progress is not None:
             progress(text)
 
+    contact_stiffness = positive("contact_stiffness", contact_stiffness)
     say("the base filter and the operating point")
     params = scenario.controller
     h = params.time_step

@@ -23,7 +23,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-from drake_wbc.math.validation import non_negative, positive
+from drake_wbc.math.validation import (
+    as_matrix,
+    non_negative,
+    positive,
+    square_matrix,
+)
 
 
 @dataclass
@@ -107,9 +112,21 @@ def zero_order_hold(A, B, time_step):
     an input held constant over each period `time_step`.
 
     Both come from one matrix exponential of [[A, B], [0, 0]] h.
+
+    Args:
+        A: (n, n) finite.
+        B: (n, m) finite.
+        time_step: h > 0, s.
+
+    Raises:
+        ValueError: naming the argument whose shape or value is not
+            allowed.
     """
     h = positive("time_step", time_step)
-    n, m = B.shape
+    A = square_matrix("A", A)
+    n = A.shape[0]
+    B = as_matrix("B", B, (n, None))
+    m = B.shape[1]
     augmented = np.zeros((n + m, n + m))
     augmented[:n, :n] = A
     augmented[:n, n:] = B
@@ -160,6 +177,19 @@ def lowpass_response(omega_f, zeta, omega):
     return w * w / (s * s + 2.0 * z * w * s + w * w)
 
 
+MERGED_POLES = 1e-10
+"""|a1^2 - 4 a2 a0| / a1^2 at or below which the held second order's
+closed forms take its poles for a double pole: there the partial
+fractions of two poles p_1, p_2 lose digits as 1 / (p_1 - p_2) (half
+of them when the discriminant is a rounding away from 0, as a
+critically damped DMP's is at most tau), and the double pole's form
+(of the same a0 / a2) is exact to O(a1^2 - 4 a2 a0) (relative). Each is
+taken on its own side: either way the response is exact to about 1e-10
+of its peak (zeta swept through 1 +- 1e-14 to 1e-2; where the gain is
+small, towards the Nyquist frequency, the error relative to the gain
+there is larger)."""
+
+
 def lowpass_zoh_response(omega_f, zeta, time_step, omega):
     """Frequency response of the exact zero-order-hold equivalent of
     eq. (filtering) at angular frequencies `omega` (rad/s), z = e^(j omega h).
@@ -170,13 +200,15 @@ def lowpass_zoh_response(omega_f, zeta, time_step, omega):
     - zeta != 1 (poles p_1 != p_2, residues r_i = omega_f^2 /
       (p_i (p_i - p_j)) of H(s)/s): H_d = 1 + sum_i r_i (z - 1)/(z - e^(p_i h)).
     The second form loses digits as zeta approaches 1 (the residues grow
-    as 1 / (p_1 - p_2)); it is exact to about 1e-9 for |zeta - 1| > 1e-3.
+    as 1 / (p_1 - p_2)), so the first is taken for |zeta^2 - 1| <=
+    MERGED_POLES zeta^2 too, where it is the better of the two: exact to
+    about 1e-10 of the response's peak for every zeta.
     """
     w = positive("omega_f", omega_f)
     z_ratio = positive("zeta", zeta)
     h = positive("time_step", time_step)
     z = np.exp(1j * np.asarray(omega, dtype=float) * h)
-    if z_ratio == 1.0:
+    if abs(z_ratio * z_ratio - 1.0) <= MERGED_POLES * z_ratio * z_ratio:
         q = np.exp(-w * h)
         return 1.0 - (z - 1.0) / (z - q) - w * h * q * (z - 1.0) / (z - q) ** 2
     root = np.sqrt(complex(z_ratio * z_ratio - 1.0))

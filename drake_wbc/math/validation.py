@@ -56,6 +56,20 @@ def as_matrix(name, value, shape):
     return _as_array(name, value, shape, "matrix")
 
 
+def square_matrix(name, value):
+    """Returns `value` as a finite float matrix of shape (n, n).
+
+    Raises:
+        ValueError: naming `name` when it is not square, or an entry is
+            not finite.
+    """
+    matrix = as_matrix(name, value, (None, None))
+    if matrix.shape[0] != matrix.shape[1]:
+        raise ValueError(f"{name} has shape {matrix.shape}, which is not "
+                         "allowed: must be square (n, n)")
+    return matrix
+
+
 def as_float_array(name, value, shape):
     """as_vector / as_matrix for a value that is usually right already:
     a float64 ndarray of exactly `shape` with finite entries is returned

@@ -443,9 +443,12 @@ def StopGate_(T):
         DMPs' couplings with StopSwitch (drake_wbc.stages.stop_switch),
         the same in Drake's C++ systems.
 
-        The scale is computed on the values, so in AutoDiffXd the gate is
-        exact where no limit acts (the identity) and treats the scale as
-        a constant where one does.
+        In AutoDiffXd the scale is computed on the AutoDiffXd value
+        (uniform_scale takes any scalar type), so the gate's derivatives
+        are those of what it sends: the identity where no limit acts,
+        and where the k-th entry binds, gated = s value with
+        s = limit_k / |value_k|, the Jacobian s (I - value e_k^T /
+        value_k), for `Linearize` of a saturated base command.
 
         Args:
             size: the signal's size, a whole number >= 1.
@@ -469,7 +472,7 @@ def StopGate_(T):
         def _scale(self, value):
             if self.limits is None:
                 return 1.0
-            return uniform_scale(value_of(value), self.limits)
+            return uniform_scale(value, self.limits)
 
         def _output(self, context, output):
             if self._stopped(context):

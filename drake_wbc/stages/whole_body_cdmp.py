@@ -41,7 +41,7 @@ from drake_wbc.math.movement import (
     MovementPlayer,
     resolve_movement_file,
 )
-from drake_wbc.math.scalar_support import value_of
+from drake_wbc.math.scalar_support import through_float_function
 from drake_wbc.math.task_inputs import TASK_INPUTS
 from drake_wbc.math.validation import checked_instance
 from drake_wbc.robot.model import ArmKinematics
@@ -289,9 +289,13 @@ def MovementTracking_(T):
         It enters the whole-body CDMP as the coupling C of eq. (cdmp-wb)
         (C_dot = V_ee^ref), an integral action of gain K on the TCP's
         error: the TCP follows the played pose with no steady error on a
-        ramp and ends on the goal. Evaluated on values in every scalar
-        type (no gradient through the kinematics in AutoDiffXd), by the
-        float kernel of demonstration.tcp_pose_in_world.
+        ramp and ends on the goal. The error is evaluated in floats (the
+        nominal kinematics need a double plant; the float kernel of
+        demonstration.tcp_pose_in_world), in AutoDiffXd through
+        scalar_support.through_float_function: the values are exact and
+        the derivatives w.r.t. the base's pose and the arm's joints come
+        from central differences, so that `Linearize` of a replay sees
+        the tracking's feedback.
 
         Args:
             player: the movement.MovementPlayer of the WholeBodyCdmp.
@@ -319,12 +323,21 @@ def MovementTracking_(T):
             if not (player.active(t) and K > 0.0):
                 output.SetFromVector(np.zeros(6))
                 return
-            base = value_of(self._base.Eval(context))[BASE_POSE].tolist()
-            pose = self._tcp_pose_in_world(base, self._pose.in_base(
-                value_of(self._arm.Eval(context))))
-            x, y, z, yaw = [p - q for p, q in zip(
-                player.reference(t).tolist(), pose, strict=True)]
-            yaw = (yaw + math.pi) % (2.0 * math.pi) - math.pi
+            reference = player.reference(t).tolist()
+
+            def error(measured):
+                """p* - p [x, y, z, yaw], the yaw wrapped into [-pi, pi),
+                from the float [base pose (3), arm joints (n)]."""
+                pose = self._tcp_pose_in_world(
+                    measured[:3].tolist(), self._pose.in_base(measured[3:]))
+                x, y, z, yaw = [p - q for p, q in zip(reference, pose,
+                                                      strict=True)]
+                return np.array(
+                    [x, y, z, (yaw + math.pi) % (2.0 * math.pi) - math.pi])
+
+            x, y, z, yaw = through_float_function(error, np.concatenate((
+                self._base.Eval(context)[BASE_POSE],
+                self._arm.Eval(context))))
             output.SetFromVector([K * x, K * y, K * z, 0.0, 0.0, K * yaw])
 
     return Impl
