@@ -63,6 +63,41 @@ def test_readings_saturate_at_the_range():
                                   [10, -10, 10, 1, -1, 1])
 
 
+def test_the_range_is_the_robots_own_sensors(tmp_path):
+    """The simulated sensor saturates where the robot's description says
+    its sensor does (tool.ft_sensor_range, which the controller's input
+    guard reads too), not at the FT-300's range: a 200 N / 20 N m sensor
+    read 250 N, which its controller refuses as beyond the range, and
+    the simulation then stopped where the robot would not. A range the
+    parameters give still wins, and a resolution not below the range it
+    meets is refused."""
+    path = write_omni_arm(tmp_path, 6)
+    path.write_text(path.read_text().replace(
+        "[300.0, 300.0, 300.0, 30.0, 30.0, 30.0]",
+        "[200.0, 200.0, 250.0, 20.0, 20.0, 25.0]"))
+    robot = load_robot_description(path)
+    station = SimulatedStation(StationOptions(
+        wrist=ForceTorqueSensorParameters.ideal()), robot=robot)
+    np.testing.assert_array_equal(station.systems["wrist"].limits,
+                                  robot.tool.ft_sensor_range)
+    wrench = [450.0, -201.0, 240.0, 31.0, -100.0, 24.0]
+    np.testing.assert_array_equal(
+        measure(wrench, ForceTorqueSensorParameters.ideal(), 0,
+                robot.tool.ft_sensor_range),
+        [200.0, -200.0, 240.0, 20.0, -20.0, 24.0])
+    np.testing.assert_array_equal(
+        measure(wrench, ForceTorqueSensorParameters.ideal(force_range=100.0),
+                0, robot.tool.ft_sensor_range),
+        [100.0, -100.0, 100.0, 20.0, -20.0, 24.0])
+    with pytest.raises(ValueError, match=(
+            r"torque_resolution = 20.0 is not allowed with the sensor's "
+            r"torque range 20.0: must be below it")):
+        WristForceTorqueSensor(ForceTorqueSensorParameters(
+            torque_resolution=20.0), robot.tool.ft_sensor_range)
+    with pytest.raises(ValueError, match=r"sensor_range\[4\] = -20.0"):
+        WristForceTorqueSensor(None, [200.0, 200.0, 250.0, 20.0, -20.0, 25.0])
+
+
 def test_ideal_sensor_passes_the_wrench_through_exactly():
     ideal = ForceTorqueSensorParameters.ideal()
     assert ideal.force_resolution == 0.0 and ideal.torque_noise_std == 0.0

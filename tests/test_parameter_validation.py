@@ -178,9 +178,11 @@ CASES = [
      ["torque_range = inf"]),
     # A resolution of the whole range was accepted: every reading within
     # it rounded to 0 (or to the range), a sensor that reads nothing.
-    (ForceTorqueSensorParameters, dict(force_resolution=300.0),
+    (ForceTorqueSensorParameters, dict(force_range=300.0,
+                                       force_resolution=300.0),
      ["force_resolution = 300.0", "force_range = 300.0", "below the range"]),
-    (ForceTorqueSensorParameters, dict(torque_resolution=50.0),
+    (ForceTorqueSensorParameters, dict(torque_range=30.0,
+                                       torque_resolution=50.0),
      ["torque_resolution = 50.0", "torque_range = 30.0"]),
     (ForceTorqueSensorParameters, dict(seed=1.5),
      ["seed = 1.5", "whole number"]),

@@ -10,6 +10,7 @@ from pydrake.math import RollPitchYaw
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
+from drake_wbc.robot.description import shipped_robot
 from drake_wbc.robot.model import add_robot
 from drake_wbc.station.force_torque import (
     ForceTorqueSensorParameters,
@@ -33,7 +34,11 @@ def reference_measure(wrench, params, tick):
     """The measurement as first written: noise, np.minimum/np.maximum,
     np.round, np.where."""
     std = _per_axis(params.force_noise_std, params.torque_noise_std)
-    limit = _per_axis(params.force_range, params.torque_range)
+    own = shipped_robot().tool.ft_sensor_range  # the robot's own range
+    limit = _per_axis(own[0] if params.force_range is None
+                      else params.force_range,
+                      own[3] if params.torque_range is None
+                      else params.torque_range)
     resolution = _per_axis(params.force_resolution, params.torque_resolution)
     reading = np.asarray(wrench, dtype=float)
     if np.any(std > 0.0):

@@ -622,8 +622,8 @@ class MotionDistributorParameters:
             none; default the values of DEFAULT_DAMPING.
 
     The band C_m^l, C_m^u (k_n is off at and above C_m^u with the smooth
-    switch-off, above it with the step) is the stage's `band` argument (one CapabilityBand for every stage that looks at
-    C_m).
+    switch-off, above it with the step) is the stage's `band` argument
+    (one CapabilityBand for every stage that looks at C_m).
     """
 
     null_space_gain: float = 0.0

@@ -31,6 +31,7 @@ from drake_wbc.math.validation import (
     positive,
     whole_number,
 )
+from drake_wbc.robot.description import shipped_robot
 from drake_wbc.stages.support import define_stage
 from drake_wbc.station.sampling import SampledReading
 
@@ -40,7 +41,8 @@ WRENCH_SIZE = 6
 
 @dataclass
 class ForceTorqueSensorParameters:
-    """Parameters of the wrist F/T sensor; the defaults are the FT-300's.
+    """Parameters of the wrist F/T sensor; the defaults are the FT-300's,
+    its range the robot's own.
 
     Attributes:
         rate: readings a second, Hz, > 0 (100).
@@ -51,9 +53,12 @@ class ForceTorqueSensorParameters:
             rounded to the nearest multiple (0.01); 0: no quantisation.
         torque_resolution: N m, >= 0 and below torque_range, the same
             for torques (0.001).
-        force_range: N, > 0; each force component saturates at +-range
-            (300).
-        torque_range: N m, > 0, the same for torques (30).
+        force_range: N, > 0; each force component saturates at +-range;
+            None (the default): the robot's own sensor's range, its
+            description's tool.ft_sensor_range (300 on the shipped
+            robot).
+        torque_range: N m, > 0 or None, the same for torques (30 on the
+            shipped robot).
         seed: a whole number >= 0. The noise of reading k is drawn from
             np.random.default_rng([seed, k]): it never depends on what was
             computed before.
@@ -64,8 +69,8 @@ class ForceTorqueSensorParameters:
     torque_noise_std: float = 0.005
     force_resolution: float = 0.01
     torque_resolution: float = 0.001
-    force_range: float = 300.0
-    torque_range: float = 30.0
+    force_range: float | None = None
+    torque_range: float | None = None
     seed: int = 0
 
     def __post_init__(self):
@@ -73,11 +78,13 @@ class ForceTorqueSensorParameters:
         for name in ("force_noise_std", "torque_noise_std",
                      "force_resolution", "torque_resolution"):
             setattr(self, name, non_negative(name, getattr(self, name)))
-        self.force_range = positive("force_range", self.force_range)
-        self.torque_range = positive("torque_range", self.torque_range)
         for kind in ("force", "torque"):
+            name = f"{kind}_range"
+            if getattr(self, name) is None:
+                continue
+            setattr(self, name, positive(name, getattr(self, name)))
             resolution = getattr(self, f"{kind}_resolution")
-            limit = getattr(self, f"{kind}_range")
+            limit = getattr(self, name)
             if resolution >= limit:
                 raise ValueError(
                     f"{kind}_resolution = {resolution!r} is not allowed with "
@@ -89,7 +96,8 @@ class ForceTorqueSensorParameters:
     @classmethod
     def ideal(cls, **overrides):
         """An ideal sensor for tests: no noise, no quantisation (the rate
-        and the ranges stay the FT-300's unless overridden)."""
+        stays the FT-300's and the ranges the robot's unless
+        overridden)."""
         fields = dict(force_noise_std=0.0, torque_noise_std=0.0,
                       force_resolution=0.0, torque_resolution=0.0)
         fields.update(overrides)
@@ -101,7 +109,36 @@ def _per_axis(force_value, torque_value):
     return np.repeat([float(force_value), float(torque_value)], 3)
 
 
-def measure(wrench, params, tick):
+def sensor_limits(params, sensor_range=None):
+    """(6,) the saturation of each component of a reading: the robot's own
+    sensor's range `sensor_range` ((6,) > 0, its description's
+    tool.ft_sensor_range; the shipped robot's if None), where `params`
+    gives no force_range or torque_range of its own.
+
+    Raises:
+        ValueError: naming sensor_range, or a resolution of `params` not
+            below the range it is taken with.
+    """
+    own = shipped_robot().tool.ft_sensor_range if sensor_range is None \
+        else sensor_range
+    limits = as_vector("sensor_range", own, WRENCH_SIZE).copy()
+    for i, value in enumerate(limits):
+        positive(f"sensor_range[{i}]", value)
+    for part, kind in ((slice(0, 3), "force"), (slice(3, 6), "torque")):
+        given = getattr(params, f"{kind}_range")
+        if given is not None:
+            limits[part] = given
+        resolution = getattr(params, f"{kind}_resolution")
+        if resolution >= limits[part].min():
+            raise ValueError(
+                f"{kind}_resolution = {resolution!r} is not allowed with "
+                f"the sensor's {kind} range {float(limits[part].min())!r}: "
+                "must be below it (a step as large as the range rounds every "
+                "reading within it to 0 or the range itself)")
+    return limits
+
+
+def measure(wrench, params, tick, sensor_range=None):
     """What the sensor reads for a true wrench.
 
     Gaussian noise first, then saturation at +-range, then rounding to the
@@ -112,6 +149,8 @@ def measure(wrench, params, tick):
         params: ForceTorqueSensorParameters (FT-300 defaults if None).
         tick: the reading's index, a whole number >= 0; with `params.seed`
             it fixes the noise.
+        sensor_range: (6,) the robot's own sensor's range (`sensor_limits`;
+            the shipped robot's if None).
 
     Returns:
         (6,) the reading [f; tau].
@@ -120,7 +159,8 @@ def measure(wrench, params, tick):
                               ForceTorqueSensorParameters)
     reading = as_vector("wrench", wrench, WRENCH_SIZE)
     tick = whole_number("tick", tick)
-    return _Measurement(params)(reading, tick)
+    return _Measurement(params, sensor_limits(params, sensor_range))(
+        reading, tick)
 
 
 class _Measurement:
@@ -134,11 +174,11 @@ class _Measurement:
     readings are `measure`'s, bit for bit.
     """
 
-    def __init__(self, params):
+    def __init__(self, params, limit):
         self.seed = params.seed
         self.std = _per_axis(params.force_noise_std, params.torque_noise_std)
         self.noisy = bool(np.any(self.std > 0.0))
-        self.limit = _per_axis(params.force_range, params.torque_range)
+        self.limit = limit
         self.negative_limit = -self.limit
         resolution = _per_axis(params.force_resolution,
                                params.torque_resolution)
@@ -193,14 +233,18 @@ class WristForceTorqueSensor(SampledReading, LeafSystem):
 
     Args:
         params: ForceTorqueSensorParameters (FT-300 defaults if None).
+        sensor_range: (6,) the robot's own sensor's range, its
+            description's tool.ft_sensor_range (the shipped robot's if
+            None), where `params` gives none (`sensor_limits`).
     """
 
-    def __init__(self, params=None):
+    def __init__(self, params=None, sensor_range=None):
         super().__init__()
         self.params = checked_instance("params", params,
                                        ForceTorqueSensorParameters,
                                        ForceTorqueSensorParameters)
-        self._measure = _Measurement(self.params)
+        self.limits = sensor_limits(self.params, sensor_range)
+        self._measure = _Measurement(self.params, self.limits)
         self._wrench = self.DeclareVectorInputPort("wrench", WRENCH_SIZE)
         reading = self._declare_sampling(np.zeros(WRENCH_SIZE),
                                          self.params.rate)

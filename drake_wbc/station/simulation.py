@@ -486,7 +486,8 @@ class SimulatedStation:
         s["arm_state"] = add("arm_state", Demultiplexer([n, n]))
         s["weld_wrench"] = add("weld_wrench", WeldWrench(
             plant, model.ft_sensor_joint, model.ft_measurement_frame))
-        s["wrist"] = add("wrist", WristForceTorqueSensor(options.wrist))
+        s["wrist"] = add("wrist", WristForceTorqueSensor(
+            options.wrist, robot.tool.ft_sensor_range))
         s["people"] = add_people(builder, scene_graph, scene.people,
                                  options.scene_period)
         if self.hand_body is None:
