@@ -89,6 +89,18 @@ def penalized_by_pose(c0, g, p0, x):
     return np.array([C_m * P_d * P_phi, C_m * P_phi])
 
 
+def central_differences(c0, g, p0):
+    """(2, 6) [grad C_m^d; grad C_m^phi] by central differences of
+    `penalized_by_pose` at the pose p0, step H."""
+    numeric = np.zeros((2, 6))
+    for i in range(6):
+        step = np.zeros(6)
+        step[i] = H
+        numeric[:, i] = (penalized_by_pose(c0, g, p0, step)
+                         - penalized_by_pose(c0, g, p0, -step)) / (2 * H)
+    return numeric
+
+
 def test_penalized_capability_gradients_match_finite_differences():
     """grad C_m^d and grad C_m^phi by central differences of the math
     functions, with C_m linear in the pose; points inside both bands."""
@@ -101,12 +113,7 @@ def test_penalized_capability_gradients_match_finite_differences():
         c0 = rng.uniform(0.03, 0.07)
         g = rng.normal(size=6) * 0.01
         result = workspace.penalized_capability(c0, g, p0, WS)
-        numeric = np.zeros((2, 6))
-        for i in range(6):
-            step = np.zeros(6)
-            step[i] = H
-            numeric[:, i] = (penalized_by_pose(c0, g, p0, step)
-                             - penalized_by_pose(c0, g, p0, -step)) / (2 * H)
+        numeric = central_differences(c0, g, p0)
         np.testing.assert_allclose(result.gradient_d, numeric[0], atol=1e-8)
         np.testing.assert_allclose(result.gradient_phi, numeric[1],
                                    atol=1e-8)
@@ -135,12 +142,7 @@ def test_penalized_capability_gradients_at_the_switches():
         c0 = rng.uniform(0.03, 0.07)
         g = rng.normal(size=6) * 0.01
         result = workspace.penalized_capability(c0, g, p0, WS)
-        numeric = np.zeros((2, 6))
-        for i in range(6):
-            step = np.zeros(6)
-            step[i] = H
-            numeric[:, i] = (penalized_by_pose(c0, g, p0, step)
-                             - penalized_by_pose(c0, g, p0, -step)) / (2 * H)
+        numeric = central_differences(c0, g, p0)
         np.testing.assert_allclose(result.gradient_d, numeric[0], atol=1e-8,
                                    err_msg=p0)
         np.testing.assert_allclose(result.gradient_phi, numeric[1],
