@@ -83,7 +83,7 @@ the initial one (time 0; its state is already the initialized one)."""
 
 MEASUREMENT_SETS = 100
 """Measurement sets a ControllerTicker cycles through (a new one each
-tick; ArmKinematics remembers 4 configurations)."""
+tick)."""
 
 
 def robot_of(arm):
@@ -239,14 +239,14 @@ class ControllerTicker(DiagramTicker):
         time_step: control period h in s (0.01 s: 100 Hz, the paper's).
         num_points: number of obstacle points on lidar.obstacle_points.
         measurement_sets: how many different measurement sets the ticks
-            cycle through (>= 5, more than the kinematics memo holds).
+            cycle through (>= 2: a new one every tick).
     """
 
     def __init__(self, arm, time_step=0.01, num_points=300,
                  measurement_sets=MEASUREMENT_SETS):
         time_step = positive("time_step", time_step)
         count = whole_number("measurement_sets", measurement_sets,
-                             minimum=ArmKinematics.MEMO_SIZE + 1)
+                             minimum=2)
         params = ControllerParameters(time_step=time_step)
         self.controller = build_controller(params, arm)
         super().__init__(

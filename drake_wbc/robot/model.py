@@ -920,17 +920,12 @@ class ArmKinematics:
             np.array([3, 4, 5, 0, 1, 2])[:, None] * plant.num_velocities()
             + np.asarray(self._v_indices)[None, :]).ravel()
         self._q_a_key = None
-        self._memo = {}
         self._frame_chains = {}
         self.chain = serial_chain(plant, self._context, self._arm_base,
                                   self._end_effector, model.arm_joints)
         self._chain_kinematics = body_for(chain_kinematics_of, float)
         if self.chain is not None:
             self._chain_arrays = tuple(self.chain)
-
-    MEMO_SIZE = 4
-    """Configurations whose values `evaluate` remembers (the stages of a
-    control tick ask for the same few: measured and commanded)."""
 
     def _set_arm_positions(self, q_a, key=None):
         """Puts q_a (n,) into the private context; a no-op when it is
@@ -967,27 +962,16 @@ class ArmKinematics:
         return self._chain_kinematics(*chain, q_a)[1]
 
     def evaluate(self, q_a):
-        """Returns the ArmKinematicsValues at arm configuration `q_a` (n,).
+        """Returns the ArmKinematicsValues at arm configuration `q_a` (n,),
+        arrays of the caller's own.
 
-        The last few configurations' values are remembered (the same q_a
-        gives the same values, as fresh copies)."""
+        Nothing is remembered between calls: the stages of a control tick
+        ask at different configurations (the capability at the measured
+        one, the arm's controller at its command), each once a tick, and
+        a memo's key and copies cost more than they saved."""
         q_a = as_float_array("q_a", q_a, (self.num_joints,))
-        key = q_a.tobytes()
-        values = self._memo.get(key)
-        if values is None:
-            values = self._evaluate(q_a, key)
-            if len(self._memo) >= self.MEMO_SIZE:
-                del self._memo[next(iter(self._memo))]
-            self._memo[key] = values
-        return ArmKinematicsValues(values.J_a.copy(),
-                                   values.p_ee_in_base.copy(),
-                                   values.pose.copy())
-
-    def _evaluate(self, q_a, key):
-        """J_a, p_ee (T_b) and X_AE (4, 4) at the checked q_a (n,): by the
-        compiled chain, or by the plant (see the class)."""
         if self.chain is None:
-            self._set_arm_positions(q_a, key)
+            self._set_arm_positions(q_a)
             return self._evaluate_here()
         J_a, X_AE = self._chain_kinematics(*self._chain_arrays, q_a)
         return ArmKinematicsValues(J_a, origin_in(self._R_BA, self._p_BA,
