@@ -12,9 +12,19 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
+from drake_wbc.controller.run_log import RunLog
+from drake_wbc.experiments.common import run_metrics
+from drake_wbc.experiments.runner import (
+    build_closed_loop,
+    fault_message,
+    simulate,
+    start_simulator,
+)
+from drake_wbc.experiments.scenario import find_scenario, load_scenario
 from drake_wbc.math.arm_servo import arm_command_violation, brake_arm
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.station.simulation import SimulatedStation, StationOptions
+from drake_wbc.stress.cases import case_record, violations
 
 H = 0.01  # the arm's command period, s
 ARM = ArmKinematics()
@@ -250,3 +260,33 @@ def test_a_stream_at_the_limits_does_not_fault(caplog):
     np.testing.assert_allclose(run["q"][-1, [0, 5]], [UPPER[0], LOWER[5]],
                                atol=1e-3)
 
+
+def test_a_run_that_faults_the_arm_says_so_in_its_summary(tmp_path):
+    """A controller started 0.05 rad away from the station's arm sends a
+    first command that jumps there: the arm faults at t = 0, and the
+    run's log, its summary's metrics and the stress check say so; a run
+    started where the arm is does not fault."""
+    scenario = load_scenario(find_scenario("trajectory_tracking"))
+    clean = simulate(build_closed_loop(scenario), duration=0.2)
+    assert clean.arm_fault == "none"
+    assert run_metrics(scenario, clean)["arm_fault"] == "none"
+
+    loop = build_closed_loop(scenario)
+    simulator = start_simulator(loop)
+    root = simulator.get_mutable_context()
+    away = np.array(scenario.station.initial_arm_positions) + along(0, 0.05)
+    loop.controller.initialize(root, arm_position=away)
+    simulator.AdvanceTo(0.2)
+    log = loop.logger.run_log(root, arm_fault=fault_message(loop.station,
+                                                            root))
+    assert log.arm_fault.startswith(
+        "arm fault at t = 0.000 s: joint 1 (elfin5::joint1)'s command "
+        "moves at 5 rad/s, beyond its 1.57 rad/s limit")
+    assert run_metrics(scenario, log)["arm_fault"] == log.arm_fault
+    assert RunLog.load(log.save(tmp_path / "log")).arm_fault == log.arm_fault
+    # (the jump breaks the stress check's own speed limit of the logged
+    # commands too)
+    found = violations(case_record(0, 0, scenario, log))
+    assert f"the arm faulted: {log.arm_fault}" in found
+    assert f"the arm faulted: {log.arm_fault}" not in violations(
+        case_record(0, 0, scenario, clean))
