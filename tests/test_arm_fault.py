@@ -21,8 +21,13 @@ from drake_wbc.experiments.runner import (
     start_simulator,
 )
 from drake_wbc.experiments.scenario import find_scenario, load_scenario
-from drake_wbc.math.arm_servo import arm_command_violation, brake_arm
+from drake_wbc.math.arm_servo import (
+    ArmLimitViolation,
+    arm_command_violation,
+    brake_arm,
+)
 from drake_wbc.robot.model import ArmKinematics
+from drake_wbc.station.arm_supervisor import ArmFault
 from drake_wbc.station.simulation import SimulatedStation, StationOptions
 from drake_wbc.stress.cases import case_record, violations
 
@@ -100,6 +105,20 @@ def test_the_stop_slows_at_the_acceleration_limit_and_holds():
     np.testing.assert_allclose(rates, expected, atol=1e-12)
     np.testing.assert_allclose(q - HOME, a * H * H * k * (k - 1) / 2,
                                rtol=1e-12)
+
+
+def test_the_fault_says_which_joint_broke_which_limit():
+    stop = ("; the arm brakes to rest within its acceleration limits and "
+            "stays stopped")
+    for violation, what in (
+            (ArmLimitViolation(1, "position", -2.5, -2.35),
+             "joint 2 (j2)'s command -2.5 rad is beyond its lower limit "
+             "-2.35 rad"),
+            (ArmLimitViolation(3, "position", np.nan, 3.14),
+             "joint 4 (j4)'s command is not a number")):
+        name = f"j{violation.joint + 1}"
+        assert ArmFault(1.5, violation, name).message() == (
+            f"arm fault at t = 1.500 s: {what}{stop}")
 
 
 @pytest.fixture(scope="module")

@@ -60,12 +60,12 @@ class ArmFault(NamedTuple):
         """The fault in one sentence, as the station's log says it."""
         v = self.violation
         joint = f"joint {v.joint + 1} ({self.joint_name})"
-        if v.kind == "position":
+        if v.kind == "position" and np.isnan(v.value):
+            what = f"{joint}'s command is not a number"
+        elif v.kind == "position":
             side = "lower" if v.value < v.limit else "upper"
             what = (f"{joint}'s command {v.value:.6g} rad is beyond its "
                     f"{side} limit {v.limit:.6g} rad")
-            if np.isnan(v.value):
-                what = f"{joint}'s command is not a number"
         elif v.kind == "speed":
             what = (f"{joint}'s command moves at {v.value:.6g} rad/s, "
                     f"beyond its {v.limit:.6g} rad/s limit")
