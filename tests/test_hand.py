@@ -8,7 +8,8 @@ import pytest
 from pydrake.common.yaml import yaml_load_typed
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource
+from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
 
 from drake_wbc.station.scene import HandForce, HandImpedance, Scene
 from drake_wbc.station.simulation import SimulatedStation, StationOptions
@@ -34,21 +35,30 @@ def test_the_impedance_comes_from_yaml_and_needs_a_schedule():
         HandForce(impedance=HandImpedance())
 
 
+ARM_MOVE_TIME = 0.5
+"""s: how long the arm takes to its offset (a cubic from rest to rest,
+within its speed and acceleration limits: its servo refuses a step)."""
+
+
 def run_station(hand, arm_offset=None, until=(1.5,)):
     """The station (5 ms) holding its arm at the initial positions plus
-    `arm_offset`, the base still; [(hand force, TCP position)] at the
-    times `until`, and the TCP's position at the start."""
+    `arm_offset` (moved there in ARM_MOVE_TIME), the base still; [(hand
+    force, TCP position)] at the times `until`, and the TCP's position at
+    the start."""
     options = StationOptions(time_step=0.005)
     station = SimulatedStation(options, Scene(hand=hand))
     builder = DiagramBuilder()
     diagram = builder.AddSystem(station.diagram)
     q = np.asarray(station.options.initial_arm_positions, dtype=float)
-    if arm_offset is not None:
-        q = q + arm_offset
-    for name, value in (("base.velocity_command", np.zeros(3)),
-                        ("arm.position_command", q)):
-        builder.Connect(builder.AddSystem(ConstantVectorSource(value))
-                        .get_output_port(), diagram.GetInputPort(name))
+    offset = np.zeros(q.size) if arm_offset is None else arm_offset
+    move = PiecewisePolynomial.CubicHermite(
+        [0.0, ARM_MOVE_TIME], np.column_stack([q, q + offset]),
+        np.zeros((q.size, 2)))
+    for name, source in (
+            ("base.velocity_command", ConstantVectorSource(np.zeros(3))),
+            ("arm.position_command", TrajectorySource(move))):
+        builder.Connect(builder.AddSystem(source).get_output_port(),
+                        diagram.GetInputPort(name))
     simulator = Simulator(builder.Build())
     root = simulator.get_mutable_context()
     station.set_initial_state(root)

@@ -69,6 +69,12 @@ class Robot:
         return system.GetOutputPort(name).Eval(
             system.GetMyContextFromRoot(self.root))
 
+    def arm_fault(self):
+        """The station's arm.fault (1 once its arm faulted)."""
+        diagram = self.robot.diagram
+        return diagram.GetOutputPort("arm.fault").Eval(
+            diagram.GetMyContextFromRoot(self.root))[0]
+
     def status(self):
         return dict(zip(COMMAND_STATUS, self.port("commands", "status"),
                         strict=True))
@@ -105,6 +111,23 @@ def test_a_forged_packet_neither_jerks_the_arm_nor_locks_it_out():
     assert excursion < 0.05
     np.testing.assert_array_equal(q[-1], r.home)
     assert r.status()["arm_command_rejected"] >= 1
+    # The station's arm, which refuses what the real one would, took it.
+    assert r.arm_fault() == 0.0
+
+
+def test_the_robots_limiter_keeps_its_arm_from_faulting():
+    """The controller itself jumps 0.3 rad on every joint: the station's
+    arm would fault on that (tests/test_arm_fault.py), but the robot
+    side's limiter leads it there within its limits, and it arrives."""
+    r = Robot()
+    r.run(5, r.home)
+    r.run(150, r.home + 0.3)
+    assert r.arm_fault() == 0.0
+    q = np.array([q for _, q in r.arm])
+    np.testing.assert_array_equal(q[-1], r.home + 0.3)
+    measured = r.robot.diagram.GetOutputPort("arm.position_measured").Eval(
+        r.robot.diagram.GetMyContextFromRoot(r.root))
+    np.testing.assert_allclose(measured, r.home + 0.3, atol=2e-3)
 
 
 def test_a_second_sender_is_refused_until_the_first_falls_quiet():

@@ -148,15 +148,17 @@ class SignalLogger:
             name: column_names(name, port.size(), columns)
             for name, port in ports.items()}
 
-    def run_log(self, root_context, real_time_factor=np.nan):
-        """The RunLog of the samples taken in `root_context`."""
+    def run_log(self, root_context, real_time_factor=np.nan,
+                arm_fault=None):
+        """The RunLog of the samples taken in `root_context` (and the
+        run's `arm_fault`, see RunLog)."""
         log = self.sink.FindLog(root_context)
         data = log.data().T
         n = min(len(log.sample_times()), len(data))
         signals = {name: data[:n, part].copy()
                    for name, part in self.slices.items()}
         return RunLog(np.asarray(log.sample_times()[:n]), signals,
-                      dict(self.columns), real_time_factor)
+                      dict(self.columns), real_time_factor, arm_fault)
 
 
 class RunLog:
@@ -168,11 +170,17 @@ class RunLog:
         signals: dict name -> (N, k) array.
         columns: dict name -> tuple of column names.
         real_time_factor: simulated over wall-clock time of the run.
+        arm_fault: what the simulated station said of its arm in the
+            run: its fault in one sentence (drake_wbc.station.
+            arm_supervisor), or "none"; None where it is not known (a log
+            of the robot's LCM streams, or one written before).
     """
 
-    def __init__(self, time, signals, columns, real_time_factor=np.nan):
+    def __init__(self, time, signals, columns, real_time_factor=np.nan,
+                 arm_fault=None):
         self.time, self.signals, self.columns = time, signals, columns
         self.real_time_factor = real_time_factor
+        self.arm_fault = arm_fault
 
     def __getitem__(self, name):
         return self.signals[name]
@@ -182,9 +190,10 @@ class RunLog:
 
     def save(self, path):
         """Writes the log as NPZ (arrays `time` and one per signal, and
-        `header`, a JSON description of the columns and units and the
-        real-time factor, null if unknown) and as CSV next to it (one
-        column per signal's component)."""
+        `header`, a JSON description of the columns and units, the
+        real-time factor and the arm's fault, each null if unknown) and
+        as CSV next to it (one column per signal's
+        component)."""
         import json
 
         factor = float(self.real_time_factor)
@@ -194,6 +203,7 @@ class RunLog:
             "units": "SI: m, rad, s, N, N m; twists [v; w]; see "
                      "drake_wbc.controller.run_log.SIGNALS",
             "real_time_factor": None if np.isnan(factor) else factor,
+            "arm_fault": self.arm_fault,
         })
         np.savez_compressed(path.with_suffix(".npz"), time=self.time,
                             header=header, **self.signals)
@@ -207,7 +217,7 @@ class RunLog:
     @classmethod
     def load(cls, path):
         """Reads a log written by `save` (the .npz file); its real-time
-        factor is NaN if the log does not know it."""
+        factor is NaN if the log does not know it, its arm_fault None."""
         import json
 
         with np.load(path) as data:
@@ -216,4 +226,5 @@ class RunLog:
             columns = {k: tuple(v) for k, v in header["signals"].items()}
             factor = header.get("real_time_factor")
             return cls(data["time"], signals, columns,
-                       np.nan if factor is None else factor)
+                       np.nan if factor is None else factor,
+                       header.get("arm_fault"))

@@ -33,6 +33,7 @@ from drake_wbc.deployment.deploy import (
     add_controller_side,
 )
 from drake_wbc.deployment.robot_side import RobotSide
+from drake_wbc.experiments.runner import fault_message
 from drake_wbc.experiments.scenario import Scenario
 from drake_wbc.hardware.interface import DIAGNOSTICS
 from drake_wbc.hardware.options import HardwareOptions
@@ -147,5 +148,6 @@ def simulate_loopback(loop, duration=None, simulator=None):
     # Deliver what was sent at the last instant to the in-process
     # subscribers (the Diagram's own would take it at the next step).
     loop.lcm.HandleSubscriptions(0)
-    return loop.logger.run_log(root, duration / max(elapsed, 1e-9))
+    return loop.logger.run_log(root, duration / max(elapsed, 1e-9),
+                               fault_message(loop.robot.station, root))
 

@@ -26,7 +26,9 @@ codecs), which obeys one sender at a time and judges the time stamps as
 the controller side does, and the arm's through an ArmCommandLimiter
 (drake_wbc.hardware.safety) with the arm model's own joint speed and
 acceleration limits: what drake_wbc/hardware/README.md asks of a real
-robot's driver ("What the robot does itself"). The base's own velocity
+robot's driver ("What the robot does itself"). Behind it the station's
+arm, which faults on a command beyond those limits as a real arm's servo
+does (drake_wbc.station.arm_supervisor), never faults. The base's own velocity
 loop (the station's base driver) keeps its speed and acceleration within
 the base's limits. Like the real base, the robot side stops the base
 when no base command came for `robot_command_timeout` (the robot's own

@@ -3,7 +3,9 @@
 `compute_metrics` and `draw_figures` here are those of the `generic`
 experiment: per run, the closest approach of the base to any obstacle or
 person, the capability of movement, the largest commands and the joint
-limit margins, all from ground truth; and one overview figure.
+limit margins, all from ground truth, and the arm's fault where the log
+knows it (`arm_fault`: the station's sentence, or "none"); and one
+overview figure.
 """
 
 from pathlib import Path
@@ -170,6 +172,9 @@ def run_metrics(scenario, log):
         "max_arm_joint_speed_command_rad_s": float(np.max(arm_speed)),
         "min_joint_limit_margin_rad": float(np.min(margin)),
         **_safety_counts(log),
+        # What the simulated station said of its arm (a log of the
+        # robot's streams does not know).
+        **({} if log.arm_fault is None else {"arm_fault": log.arm_fault}),
     }
 
 

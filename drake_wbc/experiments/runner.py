@@ -189,7 +189,8 @@ def simulate(loop, duration=None, progress=False):
     scenario's if None).
 
     Returns:
-        RunLog: the logged signals.
+        RunLog: the logged signals, and what the station said of its
+        arm (`fault_message`).
     """
     duration = loop.scenario.duration if duration is None else duration
     simulator = start_simulator(loop)
@@ -208,4 +209,12 @@ def simulate(loop, duration=None, progress=False):
     elapsed = wall_clock.perf_counter() - started
     if meter is not None:
         meter.update(duration, done=True)
-    return loop.logger.run_log(root, real_time_factor=duration / elapsed)
+    return loop.logger.run_log(root, real_time_factor=duration / elapsed,
+                               arm_fault=fault_message(loop.station, root))
+
+
+def fault_message(station, root):
+    """The SimulatedStation `station`'s arm fault in the root context
+    `root`, in one sentence, or "none" (RunLog.arm_fault)."""
+    fault = station.arm_fault(root)
+    return "none" if fault is None else fault.message()

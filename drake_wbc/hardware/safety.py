@@ -42,7 +42,8 @@ from drake_wbc.hardware.options import (
     command_timeout_of,
 )
 from drake_wbc.math.arm_control import start_within_limits
-from drake_wbc.math.command_limits import limit_base_velocity
+from drake_wbc.math.arm_servo import brake_arm
+from drake_wbc.math.command_limits import ROUNDING, limit_base_velocity
 from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
@@ -54,10 +55,6 @@ LOG = logging.getLogger("drake_wbc.hardware")
 
 AGE_TOLERANCE = 1e-9
 """s: an age equal to the watchdog limit up to rounding is not over it."""
-
-ROUNDING = 1e-9
-"""Relative: a command within a limit up to rounding is within it (and
-passes unchanged, bit for bit)."""
 
 FULL_STOP_STREAMS = ("base_state", "arm_status", "wrist_wrench")
 """The streams whose staleness stops everything: no base motion without
@@ -309,15 +306,14 @@ def target_rate(target, before, period):
 def stop_arm(last, velocity, period, limits):
     """The next arm position command of a stop: each joint slows down from
     `velocity` at its acceleration limit and holds where it comes to rest
-    (within the position limits).
+    (within the position limits), as the arm's own servo stops on a fault
+    (drake_wbc.math.arm_servo.brake_arm, with `limits`, a Limits).
 
     Returns:
         (command (n,), its rate (n,)).
     """
-    slower = np.sign(velocity) * np.maximum(
-        np.abs(velocity) - limits.joint_acceleration * period, 0.0)
-    command = np.clip(last + slower * period, limits.lower, limits.upper)
-    return command, (command - last) / period
+    return brake_arm(last, velocity, period, limits.joint_acceleration,
+                     limits.lower, limits.upper)
 
 
 class GuardState(NamedTuple):

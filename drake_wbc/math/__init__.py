@@ -40,6 +40,8 @@ Names say which is which, in every module:
 - movement, demonstration: a whole-body movement learned from
   demonstrations as a DMP (teach and repeat).
 - arm_control: the arm's Cartesian velocity controller (Sec. III-A).
+- arm_servo: what a cobot's position servo refuses (a command beyond a
+  joint's position, speed or acceleration limit) and its stop.
 - base_state: the layout of the base's state (base.state_estimated),
   [x, y, yaw, vx, vy, wz], by name.
 - task_inputs: the controller's task inputs, the size and range of

@@ -24,6 +24,12 @@ import numpy as np
 from drake_wbc.math.compiled import compiled, float_array
 from drake_wbc.math.kernels import fast_kernel
 
+ROUNDING = 1e-9
+"""Relative: a command within a limit up to rounding is within it (the
+robot's own checks, drake_wbc.hardware.safety and
+drake_wbc.math.arm_servo; a command within passes unchanged, bit for
+bit)."""
+
 
 def uniform_scale(vector, limits):
     """The largest factor s in [0, 1] with |s vector_i| <= limits_i for

@@ -12,7 +12,10 @@ filter (Sec. IV-A), so the station models both honestly:
 - `ArmPositionDriver`: the arm's position servo. It samples the position
   command at the control period and interpolates linearly towards it over
   the next period, as industrial arm drivers do, feeding the plant's PD
-  controller with a consistent position and velocity.
+  controller with a consistent position and velocity. In the station it
+  takes what the arm's servo interface passes on
+  (drake_wbc.station.arm_supervisor), which faults the arm on a command
+  beyond its limits.
 
 Both are TemplateSystems (double and AutoDiffXd, for linearisation)
 over the step math of drake_wbc.station.driver_dynamics; the station runs

@@ -6,6 +6,7 @@
     base.velocity_command ───►│                   ├──► base.state_estimated
     arm.position_command ────►│                   ├──► arm.position_measured
                               │                   ├──► arm.velocity_estimated
+                              │                   ├──► arm.fault
                               │ SimulatedStation  ├──► wrist.wrench_measured
                               │                   ├──► lidar.obstacle_points
                               │                   ├──► lidar.<scanner>.ranges
@@ -17,16 +18,21 @@ Inside: a discrete MultibodyPlant (SAP, StationOptions.time_step: 1 ms
 by default, 5 ms in the scenarios) of the robot of models/ and the
 scene's static obstacles; the base's velocity loop and the arm's position
 servo (the math of drake_wbc.station.driver_dynamics, run as C++
-SymbolicVectorSystems, drake_wbc.station.symbolic_drivers); the FT-300 on
+SymbolicVectorSystems, drake_wbc.station.symbolic_drivers), behind the
+arm's servo interface, which faults the arm on a command beyond its own
+joint limits as the real arm's does (drake_wbc.station.arm_supervisor:
+it brakes to rest and stays; `arm.fault` 1, `SimulatedStation.arm_fault`
+says why); the FT-300 on
 the weld `ft300_sensing`; two TiM571 LIDARs that see the static obstacles
 and the walking people at their scan plane; the person's hand on the
 tool. The ports named like the LCM hardware interface's are all the
-controller may read;
-`truth.*` are for metrics and plots, `query_object` for visualisation.
+controller may read; `arm.fault` and `truth.*` are for metrics and
+plots, `query_object` for visualisation.
 
 What runs at every plant step is C++ (the plant, the drivers, the base
 pose's selection); the Python systems run at their sensors' rates (the
-FT-300 at 100 Hz, the LIDARs at 15 Hz), the scripted scene every
+FT-300 at 100 Hz, the LIDARs at 15 Hz), the arm's servo interface at its
+command period (100 Hz), the scripted scene every
 `scene_period`, and the ground truth only when read.
 
     station = SimulatedStation(StationOptions(), scene)
@@ -73,6 +79,7 @@ from drake_wbc.robot.model import (
     suspension_gains,
 )
 from drake_wbc.robot.suspension import SuspensionParameters
+from drake_wbc.station.arm_supervisor import ArmCommandSupervisor
 from drake_wbc.station.drivers import (
     ArmDriverParameters,
     BaseDriverParameters,
@@ -432,7 +439,8 @@ class SimulatedStation:
         if options.traction is not None:
             options.traction = own_traction(options.traction, robot.base,
                                             prefix="traction.")
-        limits = shared_robot_plant(robot, mount=mount)[1].limits
+        self._arm_limits = limits = shared_robot_plant(
+            robot, mount=mount)[1].limits
         check_arm_start(options.initial_arm_positions, limits.lower,
                         limits.upper, "station.initial_arm_positions")
         self._robot, self._mount = robot, mount
@@ -482,6 +490,11 @@ class SimulatedStation:
         s["arm_driver"] = add("arm_driver", arm_interpolator_system(
             replace(options.arm, time_step=h),
             options.initial_arm_positions))
+        # The arm's servo interface before it: a command beyond the
+        # arm's own limits faults it (in Python, once a command period).
+        s["arm_supervisor"] = add("arm_supervisor", ArmCommandSupervisor(
+            options.arm.command_period, options.initial_arm_positions,
+            self._arm_limits, robot.arm.joints))
         n = model.num_arm_joints
         s["arm_state"] = add("arm_state", Demultiplexer([n, n]))
         s["weld_wrench"] = add("weld_wrench", WeldWrench(
@@ -513,6 +526,8 @@ class SimulatedStation:
         connect(state, s["base_pose"].get_input_port())
         if model.passive_joints:
             connect(state, s["mount_angles"].get_input_port())
+        connect(s["arm_supervisor"].GetOutputPort("position_command"),
+                s["arm_driver"].get_input_port())
         connect(s["base_driver"].get_output_port(),
                 s["base_rates_input"].get_input_port(0))
         connect(s["base_pose"].get_output_port(),
@@ -534,7 +549,8 @@ class SimulatedStation:
         export_in, export_out = builder.ExportInput, builder.ExportOutput
         export_in(s["base_driver"].get_input_port(),
                   "base.velocity_command")
-        export_in(s["arm_driver"].get_input_port(), "arm.position_command")
+        export_in(s["arm_supervisor"].GetInputPort("position_command"),
+                  "arm.position_command")
         outputs = (
             (s["odometry"].get_output_port(),
              "base.state_estimated"),
@@ -556,6 +572,7 @@ class SimulatedStation:
             (hand_force, "truth.hand_force"),
             (s["people"].GetOutputPort("positions"), "truth.people_positions"),
             (scene_graph.get_query_output_port(), "query_object"),
+            (s["arm_supervisor"].GetOutputPort("fault"), "arm.fault"),
         )
         for port, name in outputs:
             export_out(port, name)
@@ -675,6 +692,17 @@ class SimulatedStation:
         of(self.systems["arm_driver"]).SetDiscreteState(
             arm_interpolator_state(q_cmd, own.get_time(),
                                    options.initial_arm_positions))
+        self.systems["arm_supervisor"].set_positions(of(
+            self.systems["arm_supervisor"]), q_cmd)
+
+    def arm_fault(self, context):
+        """The arm's fault (an ArmFault, drake_wbc.station.arm_supervisor:
+        when, which joint, which limit; its `message()`) in `context` (a
+        root context holding the station, or the station's own), or None
+        while the arm has not faulted."""
+        supervisor = self.systems["arm_supervisor"]
+        return supervisor.fault(self.diagram.GetSubsystemContext(
+            supervisor, self._own_context(context)))
 
     def _own_context(self, context):
         """The station diagram's own context in `context`: the root

@@ -278,6 +278,7 @@ def case_record(seed, index, scenario, log):
             metrics["max_arm_joint_speed_command_rad_s"],
         "max_joint_speed_command_ratio": float(
             np.max(joint_speed / joint_speed_limits)),
+        "arm_fault": metrics.get("arm_fault"),  # None: not known
         "error": "",
         "wall_time_s": float("nan"),
         "real_time_factor": metrics["real_time_factor"],
@@ -330,6 +331,8 @@ def violations(record):
             found.append(f"{key} = {value!r}: not finite")
     if not record["all_finite"]:
         found.append("a logged signal is NaN or infinite")
+    if record.get("arm_fault") not in (None, "none"):
+        found.append(f"the arm faulted: {record['arm_fault']}")
     checks = (
         ("max_base_command_ratio", "a base velocity command exceeds the "
          "base's velocity limit", lambda x: x <= 1.0 + TOLERANCE),

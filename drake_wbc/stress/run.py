@@ -26,7 +26,10 @@ The invariants checked on every case (drake_wbc.stress.cases.violations):
 7. every number of the case's record is finite;
 8. the base filter's output V_b^flt stays within the base's velocity
    limits (no wind-up: the controller's StopGate keeps the filter's input
-   within them, and a filter with zeta >= 1 does not overshoot).
+   within them, and a filter with zeta >= 1 does not overshoot);
+9. the simulated arm never faults: no position command breaks the
+   arm's own position, speed or acceleration limits as its servo
+   samples them (drake_wbc.station.arm_supervisor).
 
 Recorded but not an invariant: the least C_m, the least margin of the
 measured joint positions to their limits, the closest approach of a

@@ -1,0 +1,119 @@
+"""What a cobot's position servo takes from a stream of joint position
+commands, and how it stops.
+
+A real arm's servo interface samples the position commands at its command
+period h and checks each against the joint's own limits: the command
+within the joint position limits, its step from the one before within the
+joint speed limit, and the change of that step's rate within the
+acceleration limit (the first command's step is from the position the arm
+holds, at rest). A command beyond any of them is a fault: the arm brakes
+to rest within its acceleration limits and stays stopped
+(`arm_command_violation`, `brake_arm`). The simulated station runs these
+(drake_wbc.station.arm_supervisor), and the robot side's own limiter
+brakes with the same step (drake_wbc.hardware.safety.stop_arm).
+
+Plain float functions (a fault is an event, not a signal to
+differentiate).
+"""
+
+from typing import NamedTuple
+
+import numpy as np
+
+from drake_wbc.math.command_limits import ROUNDING
+
+LIMIT_KINDS = ("position", "speed", "acceleration")
+"""The limits a position command is checked against, in the order they
+are checked (ArmLimitViolation.kind)."""
+
+
+class ArmLimitViolation(NamedTuple):
+    """One joint's command beyond one of its limits.
+
+    Attributes:
+        joint: the joint's index in the arm (0 the first).
+        kind: which limit, one of LIMIT_KINDS.
+        value: the command's position (rad), the magnitude of its rate
+            (rad/s) or the magnitude of the change of its rate (rad/s^2);
+            NaN for a command that is not a number.
+        limit: the limit it is beyond: the position limit on the side it
+            left (rad), or the speed (rad/s) or acceleration (rad/s^2)
+            limit.
+    """
+
+    joint: int
+    kind: str
+    value: float
+    limit: float
+
+
+def arm_command_violation(command, last, velocity, period, lower, upper,
+                          speed, acceleration):
+    """The first limit that the position command `command` breaks, or None.
+
+    Checked in the order of LIMIT_KINDS, each over the joints in order,
+    with rounding allowed (ROUNDING relative): the command within
+    [lower, upper]; its rate (command - last) / period within +-speed;
+    the change of that rate from `velocity` within +-acceleration period.
+    A command that is not a number (NaN) is beyond its position limits;
+    an infinite one too.
+
+    Args:
+        command: (n,) the command received, rad.
+        last: (n,) the last command taken (at the start: the position the
+            arm holds), rad.
+        velocity: (n,) the rate of `last` (at the start: 0), rad/s.
+        period: h, the command period, s.
+        lower, upper: (n,) the joint position limits, rad.
+        speed: (n,) the joint speed limits, rad/s.
+        acceleration: (n,) the joint acceleration limits, rad/s^2.
+
+    Returns:
+        ArmLimitViolation, or None when the command is within every limit.
+    """
+    command = np.asarray(command, dtype=float)
+    lower = np.asarray(lower, dtype=float)
+    upper = np.asarray(upper, dtype=float)
+    within = ((command >= lower - ROUNDING * np.abs(lower))
+              & (command <= upper + ROUNDING * np.abs(upper)))
+    for i in np.flatnonzero(~within):
+        side = lower[i] if command[i] < lower[i] else upper[i]
+        return ArmLimitViolation(int(i), "position", float(command[i]),
+                                 float(side))
+    with np.errstate(over="ignore", invalid="ignore"):
+        rate = (command - last) / period
+        change = np.abs(rate - velocity)
+    speed = np.asarray(speed, dtype=float)
+    for i in np.flatnonzero(~(np.abs(rate) <= speed * (1.0 + ROUNDING))):
+        return ArmLimitViolation(int(i), "speed", float(abs(rate[i])),
+                                 float(speed[i]))
+    # As the robot side's limiter compares them (hardware.safety.
+    # follow_arm_command): the change of rate against a h.
+    acceleration = np.asarray(acceleration, dtype=float)
+    for i in np.flatnonzero(~(change <= acceleration * period
+                              * (1.0 + ROUNDING))):
+        return ArmLimitViolation(int(i), "acceleration",
+                                 float(change[i] / period),
+                                 float(acceleration[i]))
+    return None
+
+
+def brake_arm(last, velocity, period, acceleration, lower, upper):
+    """The next position command of an arm that stops: each joint slows
+    down from `velocity` at its acceleration limit and holds where it
+    comes to rest (within the position limits).
+
+    Args:
+        last: (n,) the last command, rad.
+        velocity: (n,) its rate, rad/s.
+        period: h, s between commands.
+        acceleration: (n,) the joint acceleration limits, rad/s^2.
+        lower, upper: (n,) the joint position limits, rad.
+
+    Returns:
+        (command (n,), its rate (n,)).
+    """
+    slower = np.sign(velocity) * np.maximum(
+        np.abs(velocity) - acceleration * period, 0.0)
+    command = np.clip(last + slower * period, lower, upper)
+    return command, (command - last) / period
