@@ -187,7 +187,7 @@ def add_deploy_arguments(parser):
         help="the scenario's run to deploy (default: its first)")
     parser.add_argument(
         "--duration", type=float, default=None,
-        help="controller time in s, at most a week (default: the "
+        help="controller time in s, at most a day (default: the "
              "scenario's)")
     parser.add_argument(
         "--realtime-rate", type=float, default=1.0,

@@ -98,7 +98,7 @@ def column_names(name, size, columns=None):
 def advance_times(duration, chunk):
     """The times a run of `duration` s advances its Simulator to,
     `chunk` s at a time: k chunk for k = 1, 2, ... and `duration` itself
-    last, one at a time (a week's deployment in 0.05 s chunks is twelve
+    last, one at a time (a day's deployment in 0.05 s chunks is 1.7
     million of them). Each is computed, not summed: a sum of 200 chunks
     of 0.235 s ends 8.5e-14 s short of 47 s, and the log's periodic
     sample at the run's end with it.
