@@ -26,15 +26,34 @@ def test_deploy_checks_its_rate_too():
         deploy(scenario, realtime_rate=0.0)
 
 
-@pytest.mark.parametrize("program, hint", [
-    ("robot-sim", "; leave --duration out to run until Ctrl-C"),
-    ("deploy", "")])
-def test_a_duration_beyond_an_hour_is_refused(program, hint, capsys):
+@pytest.mark.parametrize("program, longest", [
+    ("robot-sim", "3600 s (an hour); leave --duration out to run until "
+                  "Ctrl-C"),
+    ("deploy", "86400 s (a day)")])
+def test_a_duration_beyond_the_longest_is_refused(program, longest, capsys):
     """`--duration 1e300` ran (or waited) for ever without a word."""
     assert main([program, "hardware", "--duration", "1e300"]) == 2
     assert capsys.readouterr().err == (
         f"drake-wbc {program}: --duration = 1e+300 is not allowed: must be "
-        f"at most 3600 s (an hour){hint}\n")
+        f"at most {longest}\n")
+
+
+def test_a_deployment_may_last_a_working_day(tmp_path, capsys):
+    """A deployment keeps no log of its own (its diagnostics go out over
+    LCM), so it is not held to a simulated run's hour: a shift of eight
+    hours was refused. Here it is taken and waits for the robot, which
+    does not answer (LCM in memory, memq://)."""
+    path = tmp_path / "scenario.yaml"
+    text = find_scenario("hardware").read_text()
+    assert "  startup_timeout: 10.0 " in text
+    path.write_text(text.replace("  startup_timeout: 10.0 ",
+                                 "  startup_timeout: 0.2 "))
+    assert main(["deploy", str(path), "--duration", "28800",
+                 "--lcm-url", "memq://"]) == 1
+    assert "no status" in capsys.readouterr().err
+    with pytest.raises(ValueError, match=r"duration = 1e\+300 is not "
+                                         r"allowed: must be at most 86400"):
+        deploy(load_scenario(find_scenario("hardware")), duration=1e300)
 
 
 def test_robot_sim_shows_a_progress_line(capsys):

@@ -618,3 +618,30 @@ def test_the_shared_plant_is_made_once_per_description_and_mount():
     ours, theirs = ArmKinematics(), ArmKinematics(*make_robot_plant())
     np.testing.assert_array_equal(ours.evaluate(q).J_a,
                                   theirs.evaluate(q).J_a)
+
+
+BUILT_UNDER_TRACEMALLOC = """
+import tracemalloc
+tracemalloc.start(10)
+from pydrake.lcm import DrakeLcm
+from drake_wbc.deployment.deploy import deploy
+from drake_wbc.experiments.scenario import find_scenario, load_scenario
+print(deploy(load_scenario(find_scenario("hardware")), lcm=DrakeLcm("memq://"),
+             stop=lambda: True))
+"""
+"""A deployment built with Python's allocations traced (another heap):
+it stops at once, before the robot answers (None)."""
+
+
+def test_the_lidar_check_reads_no_freed_memory():
+    """The LIDARs' level check read each frame's z axis through
+    RotationMatrix.col of a pose already freed: built under tracemalloc,
+    whose heap reuses that memory at once, the shipped robot was refused
+    with an axis of [0, 1.7e178, 0]."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", BUILT_UNDER_TRACEMALLOC],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == "None"

@@ -198,13 +198,29 @@ def test_a_run_advances_to_its_end_exactly(duration, chunk):
     """The chunks' ends are k chunk, the last the duration itself; summed
     instead, 200 chunks of 0.235 s end 8.5e-14 s short of 47 s (and
     ten of 0.01 s short of 0.1 s)."""
-    times = advance_times(duration, chunk)
+    times = list(advance_times(duration, chunk))
     assert times[-1] == duration
     assert all(np.diff(times) > 0.0)
     assert times[:-1] == [k * chunk for k in range(1, len(times))]
     assert len(times) == max(1, round(np.ceil(duration / chunk - 1e-9)))
     with pytest.raises(ValueError, match="chunk = 0.0 is not allowed"):
         advance_times(duration, 0.0)
+
+
+def test_a_days_times_are_made_one_at_a_time():
+    """A day in 0.01 s chunks is 8.6 million times: they were made as one
+    list (about 300 MB) before the run's first step."""
+    import itertools
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        first = list(itertools.islice(advance_times(86400.0, 0.01), 3))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert first == [0.01, 0.02, 0.03]
+    assert peak < 1e6
 
 
 def test_a_runs_log_holds_its_last_sample():

@@ -102,14 +102,16 @@ def _add_common(parser):
                        "limits bound the commands")
 
 
-def _duration(value, hint=""):
-    """--duration, checked (None: the scenario's); `hint` ends the message
-    of one too long."""
+def _duration(value, hint="", longest=None):
+    """--duration, checked (None: the scenario's): at most `longest` s
+    (drake_wbc.math.validation.LONGEST_RUN if None); `hint` ends the
+    message of one too long."""
     if value is None:
         return None
-    from drake_wbc.math.validation import positive_duration
+    from drake_wbc.math.validation import LONGEST_RUN, positive_duration
 
-    return positive_duration("--duration", value, hint=hint)
+    return positive_duration("--duration", value,
+                             longest=longest or LONGEST_RUN, hint=hint)
 
 
 def _realtime_rate(value):
@@ -185,7 +187,8 @@ def add_deploy_arguments(parser):
         help="the scenario's run to deploy (default: its first)")
     parser.add_argument(
         "--duration", type=float, default=None,
-        help="controller time in s (default: the scenario's)")
+        help="controller time in s, at most a day (default: the "
+             "scenario's)")
     parser.add_argument(
         "--realtime-rate", type=float, default=1.0,
         help="target real-time rate, > 0 (default: %(default)s; below 1 "
@@ -197,11 +200,11 @@ def run_deploy(args):
     code."""
     import numpy as np
 
-    from drake_wbc.deployment.deploy import deploy
+    from drake_wbc.deployment.deploy import LONGEST_DEPLOYMENT, deploy
     from drake_wbc.experiments.runner import Progress
 
     _log_to_stderr()
-    duration = _duration(args.duration)
+    duration = _duration(args.duration, longest=LONGEST_DEPLOYMENT)
     rate = _realtime_rate(args.realtime_rate)
     path, scenario, options = _scenario_and_options(args)
     variant = _variant(scenario, args.variant)

@@ -39,10 +39,24 @@ from drake_wbc.hardware.interface import (
 )
 from drake_wbc.hardware.options import STATUS_CHANNELS, HardwareOptions
 from drake_wbc.hardware.safety import WallClock, stop_arm
-from drake_wbc.math.validation import checked_instance, positive
+from drake_wbc.math.validation import (
+    checked_instance,
+    positive,
+    positive_duration,
+)
 
 COMMANDS = ("base.velocity_command", "arm.position_command")
 """The controller's outputs that go to the robot."""
+
+LONGEST_DEPLOYMENT = 24 * 3600.0
+"""s: the longest deployment `deploy` accepts (a day). A deployment keeps
+no log of its own, unlike a simulated run (its diagnostics go out over
+LCM, for an lcm-logger beside it to write to disk;
+drake_wbc.math.validation.LONGEST_RUN bounds a simulated run's logs):
+measured against `drake-wbc robot-sim` over 200 to 900 s, its process
+grew by about 1 kB a second of run and kept the same Python objects,
+some 90 MB a day. The bound catches a duration that is no length of a
+robot's work (a typo of 1e300 s)."""
 
 STOP_REPEATS = 3
 """How many times the stop commands are sent (UDP may drop one)."""
@@ -299,7 +313,8 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
         scenario: a Scenario.
         variant: one of its variants (the first if None).
         options: HardwareOptions (the scenario's, or the defaults).
-        duration: controller time to run, s (the scenario's if None).
+        duration: controller time to run, s, at most LONGEST_DEPLOYMENT
+            (the scenario's if None).
         lcm: a DrakeLcmInterface (a DrakeLcm of options.lcm_url if None).
         stop: a callable polled every `chunk` s of controller time; True
             ends the run there (the stop commands are then sent at once).
@@ -316,8 +331,8 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
     """
     options = checked_instance("options", options or scenario.hardware,
                                HardwareOptions, HardwareOptions)
-    duration = scenario.duration if duration is None else positive(
-        "duration", duration)
+    duration = scenario.duration if duration is None else positive_duration(
+        "duration", duration, longest=LONGEST_DEPLOYMENT)
     realtime_rate = positive("realtime_rate", realtime_rate)
     lcm = lcm or DrakeLcm(options.lcm_url)
     wall_clock = WallClock(realtime_rate)

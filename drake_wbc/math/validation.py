@@ -308,11 +308,13 @@ def positive(name, value):
 
 
 LONGEST_RUN = 3600.0
-"""s: the longest simulated or deployed run a command accepts (an hour).
+"""s: the longest simulated run a command accepts (an hour).
 A run keeps its logs in memory, about 80 kB a simulated second (100
 signals at 100 Hz), and simulates at a few times real time: an hour is
 some 300 MB of log and a quarter of an hour of waiting a run. A longer
-one (`--duration 1e300`) would run for ever and end out of memory."""
+one (`--duration 1e300`) would run for ever and end out of memory. A
+deployment keeps no log of its own and has a bound of its own
+(drake_wbc.deployment.deploy.LONGEST_DEPLOYMENT)."""
 
 
 def positive_duration(name, value, longest=LONGEST_RUN, hint=""):
@@ -334,9 +336,12 @@ def positive_duration(name, value, longest=LONGEST_RUN, hint=""):
 
 
 def _spoken(seconds):
-    """`seconds` as a person says it: "an hour", "10 minutes"."""
+    """`seconds` as a person says it: "an hour", "7 days", "10 minutes"."""
     if seconds == 3600.0:
         return "an hour"
+    if seconds % 86400.0 == 0.0:
+        days = seconds / 86400.0
+        return "a day" if days == 1.0 else f"{days:g} days"
     if seconds % 3600.0 == 0.0:
         return f"{seconds / 3600.0:g} hours"
     return f"{seconds / 60.0:g} minutes"

@@ -775,7 +775,10 @@ def check_lidar_frames(plant, model):
     context = plant.CreateDefaultContext()
     for i, (name, frame) in enumerate(zip(model.description.lidar_frames,
                                           model.lidar_frames, strict=True)):
-        z = frame.CalcPose(context, model.base_frame).rotation().col(2)
+        # A copy of the rotation, held: RotationMatrix.col's array would
+        # read the memory of a pose already freed (a LIDAR of a valid
+        # robot was refused with a garbage axis).
+        z = frame.CalcPose(context, model.base_frame).rotation().matrix()[:, 2]
         if not z[2] >= math.cos(LIDAR_TILT_TOLERANCE):
             raise ValueError(
                 f"lidar_frames[{i}] = {name!r} is not allowed: its z axis "
