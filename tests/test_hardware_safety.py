@@ -800,6 +800,52 @@ def test_an_arm_resting_at_a_limit_with_an_encoders_noise_starts_there():
         ArmCommandLimiter(H, 0.007, q0, limits)
 
 
+def test_a_stalled_controllers_bunched_commands_do_not_fault_the_arm():
+    """A controller that stalls for five periods and then sends the five
+    commands it owes together (each one period on from the one before, at
+    1 rad/s): the robot side's limiter took each command at once on
+    arrival, so two of them on both sides of its update were two steps
+    within one period of the arm's servo, which faulted the arm (its rate
+    changed at 37 rad/s^2, limit 12.56). Now the arm gets one step a
+    period, and the servo (the station's, checking the arm's own limits)
+    takes every one."""
+    from drake_wbc.robot.model import ArmKinematics
+    from drake_wbc.station.arm_supervisor import ArmCommandSupervisor
+
+    arm = ArmKinematics()
+    limits = Limits.of_robot(HardwareOptions())
+    q0 = arm.home.copy()
+    builder = DiagramBuilder()
+    limiter = builder.AddSystem(ArmCommandLimiter(H, 0.007, q0, limits))
+    servo = builder.AddSystem(ArmCommandSupervisor(
+        H, q0, arm.model.limits, arm.model.description.arm.joints))
+    builder.Connect(limiter.get_output_port(0), servo.get_input_port(0))
+    simulator = Simulator(builder.Build())
+    root = simulator.get_mutable_context()
+    context = limiter.GetMyMutableContextFromRoot(root)
+    limiter.get_input_port(0).FixValue(context, q0)
+    simulator.Initialize()
+    arrivals = []
+    for k in range(1, 60):
+        q = q0.copy()
+        q[0] += min(k, 50) * H  # 1 rad/s, then at rest
+        # Sent 2 ms after each tick, but those of ticks 20 to 24 late,
+        # together, just before the servo's sample at 0.25 s.
+        at = (k * H + 0.002 if not 20 <= k <= 24
+              else 0.248 + 0.0003 * (k - 20))
+        arrivals.append((at, q))
+    taken = []
+    for at, q in sorted(arrivals, key=lambda arrival: arrival[0]):
+        simulator.AdvanceTo(at)
+        limiter.get_input_port(0).FixValue(context, q)
+    for k in range(int(round(at / H)) + 1, 80):
+        simulator.AdvanceTo(k * H)
+        taken.append(servo.get_output_port(0).Eval(
+            servo.GetMyContextFromRoot(root))[0])
+    assert servo.fault(servo.GetMyContextFromRoot(root)) is None
+    assert taken[-1] == pytest.approx(q0[0] + 0.5, abs=1e-12)
+
+
 def test_limits_wider_than_the_arms_own_are_refused():
     for name, value, own in (("joint_speed_limit", 100.0, "1.57 rad/s"),
                              ("joint_acceleration_limit", 1e6,

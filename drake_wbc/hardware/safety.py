@@ -808,11 +808,17 @@ class ArmCommandLimiter(LeafSystem):
 
     - positions: (n) the arm command received (CommandReceiver's), n
       the size of the limits.
-    - positions (output): the command the arm gets; a new command
-      received is taken at once (one step of `follow_arm_command` from
-      the last stored command); the step is stored by a periodic update
-      in the middle of the command period, and the arm goes on towards
-      the last command, period by period, when no new one comes.
+    - positions (output): the command the arm gets: one step of
+      `follow_arm_command` a period, from the last stored command towards
+      the newest one received, stored by a periodic update in the middle
+      of the command period (after the commands sent on time have
+      arrived, before the arm's servo samples); the arm goes on towards
+      the last command, period by period, when no new one comes. So the
+      arm's servo, sampling once a period, sees one step within the
+      limits between two samples, however the commands arrive: taken at
+      once on arrival, two commands of a stalled controller arriving
+      together on both sides of an update were two steps within one of
+      the servo's periods, twice the rate (37 rad/s^2 against 12.56).
     - limited: (1) the limits changed the last stored step (0/1).
 
     Args:
@@ -836,10 +842,13 @@ class ArmCommandLimiter(LeafSystem):
             LimiterState(initial.copy(), np.zeros(n), initial.copy(), False)))
         self.DeclarePeriodicUnrestrictedUpdateEvent(self.period, offset,
                                                     self._update)
-        self.DeclareVectorOutputPort("positions", n, self._positions)
+        stored = {self.abstract_state_ticket(self._state)}
+        self.DeclareVectorOutputPort("positions", n, self._positions,
+                                     prerequisites_of_calc=stored)
         self.DeclareVectorOutputPort(
             "limited", 1, lambda c, o: o.SetAtIndex(
-                0, float(self._stored(c)[3])))
+                0, float(self._stored(c)[3])),
+            prerequisites_of_calc=stored)
 
     def _stored(self, context):
         return context.get_abstract_state(self._state).get_value()
@@ -854,22 +863,14 @@ class ArmCommandLimiter(LeafSystem):
         context.SetAbstractState(self._state, LimiterState(
             q.copy(), np.zeros(self.num_joints), q.copy(), False))
 
-    def _step(self, context):
-        command, velocity, taken, _ = self._stored(context)
-        received = self._in.Eval(context)
-        return follow_arm_command(
-            received, target_rate(received, taken, self.period), command,
-            velocity, self.period, self.limits), received
-
     def _positions(self, context, output):
-        command, _, taken, _ = self._stored(context)
-        received = self._in.Eval(context)
-        if np.array_equal(received, taken):
-            output.SetFromVector(command)
-        else:
-            output.SetFromVector(self._step(context)[0][0])
+        output.SetFromVector(self._stored(context).command)
 
     def _update(self, context, state):
-        (command, velocity, limited), received = self._step(context)
+        command, velocity, taken, _ = self._stored(context)
+        received = np.array(self._in.Eval(context))
+        command, velocity, limited = follow_arm_command(
+            received, target_rate(received, taken, self.period), command,
+            velocity, self.period, self.limits)
         state.get_mutable_abstract_state(self._state).set_value(
-            LimiterState(command, velocity, np.array(received), limited))
+            LimiterState(command, velocity, received, limited))
