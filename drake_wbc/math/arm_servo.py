@@ -76,23 +76,27 @@ def arm_command_violation(command, last, velocity, period, lower, upper,
     upper = np.asarray(upper, dtype=float)
     within = ((command >= lower - ROUNDING * np.abs(lower))
               & (command <= upper + ROUNDING * np.abs(upper)))
-    for i in np.flatnonzero(~within):
+    if not within.all():
+        i = int(np.flatnonzero(~within)[0])
         side = lower[i] if command[i] < lower[i] else upper[i]
-        return ArmLimitViolation(int(i), "position", float(command[i]),
+        return ArmLimitViolation(i, "position", float(command[i]),
                                  float(side))
-    with np.errstate(over="ignore", invalid="ignore"):
-        rate = (command - last) / period
-        change = np.abs(rate - velocity)
+    # Within the position limits, so finite: no rate below overflows.
+    rate = (command - last) / period
     speed = np.asarray(speed, dtype=float)
-    for i in np.flatnonzero(~(np.abs(rate) <= speed * (1.0 + ROUNDING))):
-        return ArmLimitViolation(int(i), "speed", float(abs(rate[i])),
+    fast = ~(np.abs(rate) <= speed * (1.0 + ROUNDING))
+    if fast.any():
+        i = int(np.flatnonzero(fast)[0])
+        return ArmLimitViolation(i, "speed", float(abs(rate[i])),
                                  float(speed[i]))
     # As the robot side's limiter compares them (hardware.safety.
     # follow_arm_command): the change of rate against a h.
+    change = np.abs(rate - velocity)
     acceleration = np.asarray(acceleration, dtype=float)
-    for i in np.flatnonzero(~(change <= acceleration * period
-                              * (1.0 + ROUNDING))):
-        return ArmLimitViolation(int(i), "acceleration",
+    sudden = ~(change <= acceleration * period * (1.0 + ROUNDING))
+    if sudden.any():
+        i = int(np.flatnonzero(sudden)[0])
+        return ArmLimitViolation(i, "acceleration",
                                  float(change[i] / period),
                                  float(acceleration[i]))
     return None

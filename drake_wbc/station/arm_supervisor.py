@@ -20,10 +20,12 @@ station's `set_initial_state`) clears the fault, as the robot's reset.
 """
 
 import logging
+import math
 from typing import NamedTuple
 
 import numpy as np
-from pydrake.systems.framework import LeafSystem
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem, ValueProducer
 
 from drake_wbc.math.arm_control import start_within_limits
 from drake_wbc.math.arm_servo import (
@@ -131,9 +133,19 @@ class ArmCommandSupervisor(LeafSystem):
             "initial_positions", initial_positions))
         self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0,
                                                 self._update)
+        # What is taken at a sample, once for the output and the update;
+        # not on time, since the command taken changes only with the
+        # command received and the state (the station's plant steps
+        # several times a command period).
+        self._taken_entry = self.DeclareCacheEntry(
+            "the command taken", ValueProducer(
+                allocate=lambda: AbstractValue.Make(np.zeros(0)),
+                calc=lambda c, value: value.set_value(self._taken(c))),
+            {self._in.ticket(), self.xd_ticket()})
         self.DeclareVectorOutputPort(
             "position_command", n, lambda c, o: o.SetFromVector(
-                self._taken(c)[:n]))
+                self._taken_entry.Eval(c)[:n]),
+            prerequisites_of_calc={self._taken_entry.ticket()})
         self.DeclareVectorOutputPort(
             "fault", 1, lambda c, o: o.SetAtIndex(
                 0, self._state(c)[2 * n]),
@@ -171,7 +183,8 @@ class ArmCommandSupervisor(LeafSystem):
         context.SetDiscreteState(self._holding("positions", positions))
 
     def _taken(self, context):
-        """The state after the sample at the context's time."""
+        """The state after a sample at the context's input and state (a
+        new fault's time NaN: `_update` writes the sample's)."""
         state = self._state(context)
         n, limits = len(self.joint_names), self.limits
         last, velocity = state[:n], state[n:2 * n]
@@ -184,7 +197,8 @@ class ArmCommandSupervisor(LeafSystem):
             if violation is None:
                 q = np.array(received, dtype=float)
                 return np.concatenate([q, (q - last) / self.period, fault])
-            fault = [1.0, context.get_time(), violation.joint,
+            # The time is the update's (`_update`).
+            fault = [1.0, math.nan, violation.joint,
                      LIMIT_KINDS.index(violation.kind), violation.value,
                      violation.limit]
         command, velocity = brake_arm(
@@ -194,7 +208,9 @@ class ArmCommandSupervisor(LeafSystem):
 
     def _update(self, context, discrete_state):
         n = len(self.joint_names)
-        taken = self._taken(context)
+        taken = self._taken_entry.Eval(context)
         if taken[2 * n] and not self._state(context)[2 * n]:
+            taken = taken.copy()
+            taken[2 * n + 1] = context.get_time()
             LOG.warning(self._fault_in(taken).message())
         discrete_state.set_value(taken)
