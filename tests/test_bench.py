@@ -511,7 +511,13 @@ def test_a_scenario_that_does_not_fit_the_robot_is_skipped(tmp_path):
 @pytest.mark.parametrize("argv, message", [
     (["--seed", "-1"], "--seed = -1 is not allowed: must be 0 or greater"),
     (["--repeats", "0"], "--repeats = 0 is not allowed: must be 1 or "
-     "greater")])
+     "greater"),
+    # These ran for days (a million repetitions of a bench whose 30 take
+    # half a minute).
+    (["--repeats", "1000000"], "--repeats = 1000000 is not allowed: must "
+     "be at most 1000 (some 20 minutes on a 2-core machine)"),
+    (["--scenario-repeats", "101"], "--scenario-repeats = 101 is not "
+     "allowed: must be at most 100 (some 40 minutes on a 2-core machine)")])
 def test_bad_options_are_named_before_the_bench_starts(argv, message,
                                                        tmp_path, capsys):
     """A negative --seed started the race and then failed with numpy's

@@ -61,11 +61,13 @@ def add_bench_arguments(parser):
     parser.add_argument("--output", type=Path, default=Path("out/bench"),
                         help="output folder (default: %(default)s)")
     parser.add_argument("--repeats", type=int, default=None,
-                        help="timed repetitions of each micro-benchmark "
-                             f"(default: {FULL['repeats']}, quick "
-                             f"{QUICK['repeats']})")
+                        help="timed repetitions of each micro-benchmark, "
+                             f"at most {MAX_REPEATS} (default: "
+                             f"{FULL['repeats']}, quick {QUICK['repeats']})")
     parser.add_argument("--scenario-repeats", type=int, default=1,
-                        help="runs of each scenario (default: %(default)s)")
+                        help="runs of each scenario, at most "
+                             f"{MAX_SCENARIO_REPEATS} (default: "
+                             "%(default)s)")
     parser.add_argument("--scenario-duration", type=float, default=None,
                         help="simulated seconds of each scenario (default: "
                              "the scenario's, 1 with --quick)")
@@ -82,16 +84,38 @@ def add_bench_arguments(parser):
              "and each scenario's own)")
 
 
+MAX_REPEATS = 1000
+"""The most timed repetitions `--repeats` asks for: the full bench's 30
+of the race and the ticks take about half a minute on a 2-core machine,
+so 1000 take some 20 minutes."""
+
+MAX_SCENARIO_REPEATS = 100
+"""The most runs of each scenario `--scenario-repeats` asks for: the
+full bench's one run of every scenario takes about half a minute on a
+2-core machine, so 100 take some 40 minutes."""
+
+
+def _at_most(name, value, most, why):
+    if value > most:
+        raise ValueError(f"{name} = {value} is not allowed: must be at most "
+                         f"{most} ({why})")
+    return value
+
+
 def settings_from(args):
     """The run's settings (a dict like FULL) from parsed arguments."""
     settings = dict(QUICK if args.quick else FULL)
     if args.repeats is not None:
-        settings["repeats"] = whole_number("--repeats", args.repeats, 1)
+        settings["repeats"] = _at_most(
+            "--repeats", whole_number("--repeats", args.repeats, 1),
+            MAX_REPEATS, "some 20 minutes on a 2-core machine")
     if args.scenario_duration is not None:
         settings["scenario_duration"] = positive_duration(
             "--scenario-duration", args.scenario_duration)
-    settings["scenario_repeats"] = whole_number(
-        "--scenario-repeats", args.scenario_repeats, 1)
+    settings["scenario_repeats"] = _at_most(
+        "--scenario-repeats",
+        whole_number("--scenario-repeats", args.scenario_repeats, 1),
+        MAX_SCENARIO_REPEATS, "some 40 minutes on a 2-core machine")
     settings["seed"] = whole_number("--seed", args.seed)
     settings["quick"] = bool(args.quick)
     robot = getattr(args, "robot", None)
