@@ -106,9 +106,10 @@ logged at the same tick, as the InputGuard compares them): the largest
 its speed limit of 1.57 rad/s: the servo's lag of some 15 ms), 0.0227 in
 fixed_point, at most 0.011 in the others (0.0081 on the seven-joint
 arm). No joint of the shipped arms moves faster, so a servo that
-follows stays near that; over LCM the measurement is up to two periods
-older (1.57 rad/s x 0.02 s = 0.031 rad more). 0.1 rad is 4.4 times the
-largest measured, twice that with the latency, and it is the arm's own
+follows stays near that; over LCM the measurement may be as old as the
+arm_status watchdog allows (30 ms: 1.57 rad/s x 0.03 s = 0.047 rad more,
+0.07 rad in all). 0.1 rad is 4.4 times the largest measured, 1.4 times
+that worst case over LCM, and it is the arm's own
 braking distance from full speed within its acceleration limit
 (1.57^2 / (2 x 12.56) = 0.098 rad, 5 cm at a tool 0.5 m out): a resume
 from a command within it (as from what was last sent, kept) asks the
@@ -196,7 +197,10 @@ class SafetyParameters:
             own protective stop, an e-stop, a servo off, or held by
             hand), and an arm that far from the last command when a
             stop clears restarts from where it is
-            (DEFAULT_ARM_FOLLOW_TOLERANCE).
+            (DEFAULT_ARM_FOLLOW_TOLERANCE); over LCM the hardware
+            interface's command guard restarts the arm's commands from
+            where it is by the same tolerance
+            (drake_wbc.hardware.safety.resync_arm).
 
     The arm's limits (joint positions, 1.57 rad/s, 12.56 rad/s^2) are those
     of ArmControllerParameters. Vectors are given as any sequence (a list
