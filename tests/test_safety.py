@@ -957,6 +957,38 @@ def test_after_a_stop_in_which_the_arm_moved_the_commands_start_where_it_is(
     assert np.all(status[k_resume + 1:, STATUS["stopped"]] == 0.0)
 
 
+def test_a_protective_stop_that_outlasts_the_safe_stop_holds_where_the_arm_is(
+        arm):
+    """A safe stop during which the arm is moved 0.3 rad, while a point
+    inside the footprint holds the robot in a protective stop too: when
+    the safe stop clears, the arm's command restarts where the arm is
+    and stays there, at rest, for as long as the protective stop lasts
+    (a command left at the old position would trip the safe stop again
+    at every tick it was checked)."""
+    rig = Rig(arm)
+    rig.set("reference_velocity", BRISK)
+    rig.advance(1.0)
+    bad = np.array(rig.valid["base.state_estimated"], dtype=float)
+    bad[0] = np.nan
+    rig.set("base.state_estimated", bad)
+    rig.set("lidar.obstacle_points", np.array([[0.35, 0.0], [2.0, 0.0]]))
+    rig.advance(0.3)
+    moved = command_now(rig) + np.array([0.0, 0.3, 0.0, 0.0, -0.3, 0.0])
+    rig.set("arm.position_measured", moved)
+    rig.set("base.state_estimated", rig.valid["base.state_estimated"])
+    while stopped_now(rig):
+        rig.advance(H)
+    rig.follow()
+    rig.advance(1.0)
+    _, q_cmd = rig.log("arm.position_command")
+    _, status = rig.log("safety_status")
+    _, protective = rig.log("base_protective_stop")
+    assert protective[-1, 0] == 1.0
+    np.testing.assert_array_equal(q_cmd[-100:], np.tile(moved, (100, 1)))
+    assert status[-1, STATUS["trips"]] == 1.0
+    assert status[-1, STATUS["stopped"]] == 0.0
+
+
 def test_an_arm_within_the_tolerance_resumes_from_the_last_command(arm):
     """Moved by less than the tolerance during a stop, the arm resumes
     from the command last sent, exactly as a controller that never

@@ -73,16 +73,17 @@ def ArmCartesianVelocityController_(T):
           joint positions, read only with `resume`.
         - resume (1): optional (never while unconnected); >= 0.5 at the
           update at which a safe stop clears (InputGuard's `resume`).
-          Then, without hold, a joint of q_meas farther than
+          Then a joint of q_meas farther than
           `resume_tolerance` from q_cmd
           (drake_wbc.math.safety.check_following) restarts the command
           from q_meas (within the joint limits), at rest, before the
           step: the arm was moved, or stopped on its own, during the
           stop, and its servo, holding it there, must not be asked to
           jump back to where the command was. The step from there is
-          the acceleration limit's from rest, as from any hold. Within
-          the tolerance nothing changes: the command resumes from where
-          it was.
+          the acceleration limit's from rest, as from any hold (with
+          hold, e.g. a protective stop that outlasts the safe stop, the
+          command stays there, at rest). Within the tolerance nothing
+          changes: the command resumes from where it was.
         - arm_position_command: q_cmd (n, rad), the joint positions for the
           arm's position servo. It is the state: no direct feedthrough.
         - arm_velocity_command: q_dot (n, rad/s) of the last update, the
@@ -259,8 +260,7 @@ def ArmCartesianVelocityController_(T):
             hold = optional_scalar(self._hold, context, 0.0) >= 0.5
             x = self._state(context)
             q, previous = x[self._q], x[self._q_dot]
-            if not hold and optional_scalar(
-                    self._resume, context, 0.0) >= 0.5 and (
+            if optional_scalar(self._resume, context, 0.0) >= 0.5 and (
                     self._measured.HasValue(context)):
                 q, previous = self._resumed(
                     q, previous, self._measured.Eval(context))
