@@ -189,7 +189,10 @@ class Controller:
         `base_velocity` (T_b), and the base command's limiter and the
         compensator's prediction of the base (if any) from it. The
         DMPs start at rest; the input guard takes `arm_position` as the
-        last valid arm measurement."""
+        last valid arm measurement, and from the second tick on expects
+        the measured arm within safety.arm_follow_tolerance of the
+        command that starts there (an arm elsewhere is a safe stop, after
+        which the command restarts from where the arm is)."""
         def context_of(name):
             return self.stages[name].GetMyMutableContextFromRoot(
                 root_context)
