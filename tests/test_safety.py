@@ -30,7 +30,12 @@ from drake_wbc.controller import (
     load_controller_parameters,
 )
 from drake_wbc.controller.diagram import HARDWARE_INPUTS, STATION_INPUTS
-from drake_wbc.experiments.runner import build_closed_loop, simulate
+from drake_wbc.experiments.runner import (
+    build_closed_loop,
+    fault_message,
+    simulate,
+    start_simulator,
+)
 from drake_wbc.experiments.scenario import find_scenario, load_scenario
 from drake_wbc.math import command_limits, safety
 from drake_wbc.math.motion_mode import MotionMode
@@ -910,6 +915,49 @@ def test_an_arm_held_still_trips_at_the_tick_it_falls_behind(arm):
     np.testing.assert_array_equal(rates[-5:], 0.0)
     assert rig.controller.safety_reason(rig.root_context).endswith(
         f"; resuming from where it is after {HOLD:g} s")
+
+
+def test_a_station_arm_that_stops_on_its_own_trips_and_is_resumed_where_it_is():
+    """The simulated station's arm faults on the first command (the
+    controller started 0.05 rad from it) and stays stopped, as a real
+    arm's protective stop does. The controller, whose task moves on,
+    trips once the arm is 0.1 rad behind (it integrated on for ever),
+    and at each resume its command starts where the arm stands, one
+    step of the acceleration limit from rest."""
+    scenario = load_scenario(find_scenario("trajectory_tracking"))
+    loop = build_closed_loop(scenario)
+    simulator = start_simulator(loop)
+    root = simulator.get_mutable_context()
+    away = np.array(scenario.station.initial_arm_positions)
+    away[0] += 0.05
+    loop.controller.initialize(root, arm_position=away)
+    simulator.AdvanceTo(3.0)
+    log = loop.logger.run_log(root)
+    assert fault_message(loop.station, root).startswith(
+        "arm fault at t = 0.000 s")
+    status = log["safety_status"]
+    command, measured = log["arm.position_command"], log[
+        "arm.position_measured"]
+    names = loop.controller.stages["guard"].input_names
+    trips = np.flatnonzero(np.diff(status[:, STATUS["trips"]]) > 0) + 1
+    assert len(trips) >= 2
+    for i in trips:
+        assert status[i, STATUS["reason"]] == int(Reason.NOT_FOLLOWING)
+        assert status[i, STATUS["input"]] == names.index(
+            "arm.position_measured")
+        assert abs(status[i, STATUS["value"]]) > FOLLOW_TOLERANCE
+    resumes = np.flatnonzero(np.diff(status[:, STATUS["stopped"]]) < 0) + 1
+    assert len(resumes) >= 1
+    for i in resumes:
+        # The tick before resumed, from the arm's position then.
+        start = measured[i - 1]
+        assert np.abs(command[i] - start).max() <= (
+            JOINT_ACCELERATION * H * H * (1 + 1e-6))
+        end = min(i + 20, len(command))
+        seen = np.vstack([start, start, command[i:end]])
+        rates = np.diff(seen, axis=0) / H
+        assert np.abs(np.diff(rates, axis=0)).max() / H <= (
+            JOINT_ACCELERATION * (1 + 1e-6))
 
 
 def test_after_a_stop_in_which_the_arm_moved_the_commands_start_where_it_is(
