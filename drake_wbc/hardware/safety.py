@@ -15,13 +15,15 @@ between the robot side's command receiver and its arm
 
 The promises (drake_wbc/hardware/README.md): every arm command sent is
 within the joint position limits and within the joint speed and
-acceleration limits of the one before, after a stop too; every base
+acceleration limits of the one before, after a stop too, but where the
+arm is not where the one before sent it: after a stop, and when the
+controller restarts its arm command from where the arm is, an arm found
+farther than the tolerance from the last command sent is commanded
+from where it is instead, at rest, and within the limits as it sees
+them (`resync_arm`); every base
 command is within the base's speed limits, and within its acceleration
 limits of the one before except a stop, which is zero at once (the
-base's own velocity loop brakes within its limits); after a stop, and
-when the controller restarts its arm command from where the arm is, an
-arm found farther than the tolerance from the last command sent is
-commanded from where it is instead (`resync_arm`); a stale stream stops
+base's own velocity loop brakes within its limits); a stale stream stops
 what depends on it within its watchdog limit and one watchdog period
 (the stop goes out at the next period, not the next control tick); a
 sender's clock that jumps, and a stall of the controller's own process
