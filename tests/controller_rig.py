@@ -1,10 +1,11 @@
-"""The controller Diagram advanced alone against fixed measurements, every
-vector output logged at each tick: the rig of the run-time safety tests."""
+"""The controller Diagram advanced alone against fixed measurements and
+an arm that follows its commands, every vector output logged at each
+tick: the rig of the run-time safety tests."""
 
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder, PortDataType
+from pydrake.systems.framework import DiagramBuilder, LeafSystem, PortDataType
 from pydrake.systems.primitives import VectorLogSink
 
 from drake_wbc.controller import build_controller
@@ -15,15 +16,39 @@ H = 0.01
 """The control period, s."""
 
 
+class FollowingArm(LeafSystem):
+    """An arm whose position servo follows the controller's command at
+    once (`measured` is `command`, no lag), or a reading given in its
+    place (`reading` while `follow` is 0)."""
+
+    def __init__(self, size):
+        super().__init__()
+        self.command = self.DeclareVectorInputPort("command", size)
+        self.reading = self.DeclareVectorInputPort("reading", size)
+        self.follow = self.DeclareVectorInputPort("follow", 1)
+        self.DeclareVectorOutputPort("measured", size, self._measured)
+
+    def _measured(self, context, output):
+        following = self.follow.Eval(context)[0] >= 0.5
+        output.SetFromVector((self.command if following
+                              else self.reading).Eval(context))
+
+
 class Rig:
     """The controller Diagram with every vector output logged at each
     tick, its inputs fixed on its context and changeable between
-    advances."""
+    advances; its arm.position_measured is a FollowingArm's, following
+    the arm.position_command until a reading is set."""
 
     def __init__(self, arm, params=None, q=HOME_ARM_POSITIONS):
         self.controller = build_controller(params, arm)
         builder = DiagramBuilder()
         diagram = self.diagram = builder.AddSystem(self.controller.diagram)
+        self.arm = builder.AddSystem(FollowingArm(arm.num_joints))
+        builder.Connect(diagram.GetOutputPort("arm.position_command"),
+                        self.arm.GetInputPort("command"))
+        builder.Connect(self.arm.GetOutputPort("measured"),
+                        diagram.GetInputPort("arm.position_measured"))
         self.logs = {}
         for i in range(diagram.num_output_ports()):
             port = diagram.get_output_port(i)
@@ -34,6 +59,8 @@ class Rig:
         self.root = builder.Build()
         self.root_context = self.root.CreateDefaultContext()
         self.context = diagram.GetMyMutableContextFromRoot(self.root_context)
+        self.arm_context = self.arm.GetMyMutableContextFromRoot(
+            self.root_context)
         self.q = np.asarray(q, dtype=float)
         self.valid = {
             "base.state_estimated": [0.0, 0.0, 0.3, 0.0, 0.0, 0.0],
@@ -48,17 +75,37 @@ class Rig:
         }
         for name, value in self.valid.items():
             self.set(name, value)
+        self.follow()
         self.controller.initialize(self.root_context, arm_position=self.q)
         self.simulator = Simulator(self.root, self.root_context)
         self.ticks = 0
 
     def set(self, name, value):
+        """Sets input `name` to `value`; the arm's measured position to a
+        reading in place of the following arm's."""
+        if name == "arm.position_measured":
+            self.arm.GetInputPort("reading").FixValue(
+                self.arm_context, np.asarray(value, dtype=float))
+            self.arm.GetInputPort("follow").FixValue(self.arm_context, [0.0])
+            return
         port = self.diagram.GetInputPort(name)
         if name == "lidar.obstacle_points":
             port.FixValue(self.context, AbstractValue.Make(
                 np.asarray(value, dtype=float)))
         else:
             port.FixValue(self.context, np.asarray(value, dtype=float))
+
+    def follow(self):
+        """The arm's measured position follows its command again."""
+        self.arm.GetInputPort("follow").FixValue(self.arm_context, [1.0])
+
+    def restore(self, name):
+        """Input `name` valid again: its valid value, or, for the arm's
+        measured position, the following arm's."""
+        if name == "arm.position_measured":
+            self.follow()
+        else:
+            self.set(name, self.valid[name])
 
     def advance(self, duration):
         """Advances by `duration` to a tick k h exactly (the tick's update

@@ -542,6 +542,68 @@ def test_controller_brakes_on_hold_and_on_a_twist_that_is_not_finite(arm):
     np.testing.assert_array_equal(state, np.r_[q0, np.zeros(6), 0.0])
 
 
+def resumed_update(system, context, q, previous, V, measured, resume,
+                   hold=0.0):
+    system.GetInputPort("arm_position").FixValue(context, measured)
+    system.GetInputPort("resume").FixValue(context, [resume])
+    return controller_update(system, context, q, previous, V, hold)
+
+
+def test_a_resume_restarts_from_where_the_arm_is(arm):
+    """At the update that ends a safe stop (`resume`), an arm measured
+    farther than the tolerance from q_cmd restarts the command from the
+    measurement, at rest: the update is the one from there with no
+    previous rate, its step within the acceleration limit. Within the
+    tolerance, or without resume, the measurement changes nothing, bit
+    for bit; with hold (a protective stop that outlasts the safe stop)
+    the command restarts there and stays; the AutoDiff system takes the
+    same branch."""
+    system = ArmCartesianVelocityController(None, arm)
+    assert system.resume_tolerance == 0.1
+    q = 0.5 * (arm.lower + arm.upper) + 0.1
+    previous = np.array([0.05, -0.04, 0.03, 0.0, 0.0, 0.0])
+    V = np.array([0.1, 0.0, 0.05, 0.0, 0.2, 0.0])
+    away = q + np.array([0.0, 0.15, 0.0, -0.3, 0.0, 0.0])
+
+    def update(*args, **kwargs):
+        return resumed_update(system, system.CreateDefaultContext(), *args,
+                              **kwargs)
+
+    plain = controller_update(system, system.CreateDefaultContext(), q,
+                              previous, V)
+    near = q + np.array([0.0, 0.0999, 0.0, -0.0999, 0.0, 0.0])
+    np.testing.assert_array_equal(update(q, previous, V, near, 1.0), plain)
+    np.testing.assert_array_equal(update(q, previous, V, away, 0.0), plain)
+    np.testing.assert_array_equal(update(q, previous, V, away, 1.0, 1.0),
+                                  np.r_[away, np.zeros(6), 0.0])
+    state = update(q, previous, V, away, 1.0)
+    from_there = controller_update(system, system.CreateDefaultContext(),
+                                   away, np.zeros(6), V)
+    np.testing.assert_array_equal(state, from_there)
+    assert np.abs(state[6:12]).max() > 0.0
+    assert np.abs(state[6:12]).max() <= ROBOT_ACCELERATION_LIMIT * H * (
+        1 + 1e-12)
+    # A measurement beyond a joint's limit restarts on the limit.
+    beyond = away.copy()
+    beyond[0] = arm.upper[0] + 0.05
+    state = update(q, previous, np.zeros(6), beyond, 1.0)
+    assert state[0] == arm.upper[0]
+    autodiff = system.ToAutoDiffXd()
+    context = autodiff.CreateDefaultContext()
+    context.SetDiscreteState(np.concatenate([q, previous, [0.0]]))
+    autodiff.GetInputPort("arm_velocity").FixValue(context, V)
+    autodiff.GetInputPort("arm_position").FixValue(
+        context, InitializeAutoDiff(away).ravel())
+    autodiff.GetInputPort("resume").FixValue(context, [1.0])
+    update_ad = autodiff.EvalUniquePeriodicDiscreteUpdate(
+        context).get_vector().CopyToVector()
+    np.testing.assert_allclose(ExtractValue(update_ad).ravel(), from_there,
+                               rtol=1e-12, atol=1e-15)
+    # d q_cmd / d q_meas: the identity plus h d q_dot / d q.
+    derivatives = np.array([u.derivatives() for u in update_ad[:6]])
+    assert np.abs(derivatives - np.eye(6)).max() < 0.1
+
+
 @pytest.mark.parametrize("V", [[1e308, 1e308, 0, 0, 0, 1e308],
                                [1.7e308, 0, 0, 0, 0, 0],
                                [1e308, -1e308, 1e308, -1e308, 1e308, 1e308]])
@@ -701,7 +763,7 @@ def test_ports_state_and_no_direct_feedthrough():
     system = ArmCartesianVelocityController()
     inputs = [system.get_input_port(i).get_name()
               for i in range(system.num_input_ports())]
-    assert inputs == ["arm_velocity", "hold"]
+    assert inputs == ["arm_velocity", "hold", "arm_position", "resume"]
     names = [system.get_output_port(i).get_name()
              for i in range(system.num_output_ports())]
     assert names == ["arm_position_command", "arm_velocity_command",
@@ -869,6 +931,10 @@ def test_bad_system_arguments_are_rejected():
     for time_step in (0.0, -0.01):
         with pytest.raises(ValueError, match=f"time_step = {time_step}"):
             ArmCartesianVelocityController(time_step=time_step)
+    for tolerance in (0.0, float("inf")):
+        with pytest.raises(ValueError, match=(
+                f"resume_tolerance = {tolerance} is not allowed")):
+            ArmCartesianVelocityController(resume_tolerance=tolerance)
     system = ArmCartesianVelocityController()
     with pytest.raises(ValueError, match="q"):
         system.set_arm_position(system.CreateDefaultContext(), np.zeros(5))

@@ -292,6 +292,108 @@ def test_commands_resume_within_the_acceleration_limits():
           f"{np.max(np.abs(np.diff(rate, axis=0)), axis=0) / H} rad/s^2")
 
 
+MOVED = HOME_ARM_POSITIONS + np.array([0.3, -0.3, 0.0, 0.3, 0.0, 0.0])
+"""Where the arm was moved during a stop (by hand, or by its own stop)."""
+
+
+def _assert_from_rest_at(arm, start, limits):
+    """Every arm command of `arm` (rows), as the arm standing at rest at
+    `start` sees them, within the joint speed and acceleration limits."""
+    seen = np.vstack([start, start, arm])
+    rate = np.diff(seen, axis=0) / H
+    assert np.all(np.abs(rate) <= limits.joint_speed * (1 + 1e-9))
+    assert np.all(np.abs(np.diff(rate, axis=0))
+                  <= limits.joint_acceleration * H * (1 + 1e-9))
+
+
+def test_after_a_stop_the_arm_is_commanded_from_where_it_is(caplog):
+    """A stale stream stops everything; meanwhile the arm is moved 0.3 rad
+    (on three joints) and reports it. When the stop clears, the guard
+    sends where the arm is, at rest, not what it sent last, and holds it
+    there while the controller's command (still the old one: the
+    controller is in its own safe stop) is farther than the tolerance
+    from it; once the controller resumes from there, it follows within
+    the limits. It resumed from what it sent last: a jump of 0.3 rad of
+    the servo's setpoint, and then drove the arm back to the old
+    command."""
+    bench = Bench()
+    limits = Limits.of_robot(bench.options)
+    bench.run(60)
+    bench.run(10, status=False)
+    assert bench.diagnostics()["watchdog_tripped"] == 1.0
+    stopped = bench.tick * H
+
+    def moved(bench):
+        bench.status(q=MOVED)
+
+    with caplog.at_level(logging.WARNING, logger="drake_wbc.hardware"):
+        bench.run(80, status=False, extra=moved)
+    assert bench.diagnostics()["watchdog_tripped"] == 0.0
+    assert len(_records(caplog, "arm elsewhere at t = ")) == 1
+    assert "joint 0 is 0.3 rad from the last command sent (tolerance " \
+        "0.1 rad)" in caplog.text
+    resumed = bench.tick * H
+    bench.set_command(bench.arm, MOVED)      # the controller resumes there
+    bench.run(10, status=False, extra=moved)
+    goal = MOVED + np.array([0.0, 0.0, 0.2, 0.0, -0.1, 0.0])
+    bench.set_command(bench.arm, goal)
+    bench.run(60, status=False, extra=moved)
+    times, arm = bench.commands("arm", stopped)
+    away = np.flatnonzero(np.abs(arm - HOME_ARM_POSITIONS).max(axis=1) > 0)
+    first = int(away[0])
+    np.testing.assert_array_equal(arm[first], MOVED)
+    assert times[first] < resumed          # held there before it resumed
+    _assert_from_rest_at(arm[first:], MOVED, limits)
+    np.testing.assert_allclose(arm[-1], goal)
+
+
+def test_a_controller_resuming_where_the_arm_is_is_followed_from_there():
+    """No stop of the guard's: the controller, in its own safe stop, held
+    its command while the arm was moved 0.3 rad, and then restarts from
+    where the arm is, a step of its command of 0.3 rad. The guard sends
+    from where the arm is, at rest, within the limits; it followed from
+    what it sent last, towards the arm, sending the old position
+    first."""
+    bench = Bench()
+    limits = Limits.of_robot(bench.options)
+    bench.run(60)
+
+    def moved(bench):
+        bench.status(q=MOVED)
+
+    bench.run(30, status=False, extra=moved)
+    times, arm = bench.commands("arm")
+    np.testing.assert_array_equal(arm[-1], HOME_ARM_POSITIONS)
+    resumed = bench.tick * H
+    goal = MOVED + np.array([0.0, 0.0, 0.2, 0.0, -0.1, 0.0])
+    bench.set_command(bench.arm, MOVED + 0.01 * (goal - MOVED))
+    bench.run(1, status=False, extra=moved)
+    bench.set_command(bench.arm, goal)
+    bench.run(60, status=False, extra=moved)
+    _, arm = bench.commands("arm", resumed)
+    _assert_from_rest_at(arm, MOVED, limits)
+    np.testing.assert_allclose(arm[-1], goal)
+    # An arm where the last command sent was: a step of the controller's
+    # command is followed from there, as ever (here to the arm's 0.3 rad
+    # away).
+    bench = Bench()
+    bench.run(60)
+    bench.set_command(bench.arm, MOVED)
+    bench.run(5)
+    _, arm = bench.commands("arm", 0.6 - 1e-9)
+    step = np.abs(arm[0] - HOME_ARM_POSITIONS).max()
+    assert 0.0 < step <= limits.joint_acceleration[0] * H * H * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("tolerance, message", [
+    (0.0, "must be greater than 0"), (float("inf"), "must be finite")])
+def test_the_guards_arm_tolerance_is_checked(tolerance, message):
+    with pytest.raises(ValueError, match=(
+            f"arm_follow_tolerance = {tolerance} is not allowed: {message}")):
+        HardwareInterface(HardwareOptions(lcm_url="memq://"),
+                          DrakeLcm("memq://"), arm_follow_tolerance=tolerance)
+
+
 def test_a_trip_clears_only_after_the_recovery_time():
     """A status that comes and goes (here one good message every 40 ms)
     stops the robot once, not at every gap, and the commands resume

@@ -23,7 +23,12 @@ from pydrake.systems.framework import (
 from pydrake.systems.primitives import Linearize
 
 from drake_wbc.math import safety
-from drake_wbc.math.safety import STATUS_FIELDS, Reason, SafetyParameters
+from drake_wbc.math.safety import (
+    STATUS_FIELDS,
+    Following,
+    Reason,
+    SafetyParameters,
+)
 from drake_wbc.stages.safety import GuardedInput, InputGuard
 
 H = 0.01
@@ -410,6 +415,86 @@ def test_guard_still_linearises():
     np.testing.assert_array_equal(linear.D(), np.eye(3))
     np.testing.assert_array_equal(linear.B()[:3], np.eye(3))
     np.testing.assert_array_equal(linear.A(), np.zeros((14, 14)))
+
+
+def following_guard():
+    return InputGuard([GuardedInput("q", 3, follows=Following(
+        "q_command", 0.1, "rad", "it does not follow")), GuardedInput(
+        "u", 1)], time_step=H, params=SafetyParameters(hold_time=HOLD))
+
+
+@pytest.mark.parametrize("autodiff", [False, True])
+def test_a_followed_input_trips_beyond_its_tolerance(autodiff):
+    """An input that follows a command: valid within the tolerance of it
+    (and passed on, a true measurement, also when not), a fault beyond
+    it from the second tick on (at the first no command was sent yet),
+    not checked during the stop, which clears after the hold time with
+    `resume` at that tick alone; in double and in AutoDiffXd."""
+    guard = following_guard()
+    if autodiff:
+        guard = guard.ToAutoDiffXd()
+    context = guard.CreateDefaultContext()
+    command = np.array([0.3, -0.2, 1.0])
+    guard.GetInputPort("u").FixValue(context, [0.0])
+
+    def tick(q, expected_stop, expected_resume=0.0):
+        guard.GetInputPort("q").FixValue(context, np.asarray(q))
+        guard.GetInputPort("q_command").FixValue(context, command)
+        outputs = [float(ExtractValue(np.asarray(
+            guard.GetOutputPort(name).Eval(context), dtype=object))[0, 0])
+            for name in ("stop", "resume")]
+        assert outputs == [expected_stop, expected_resume]
+        np.testing.assert_array_equal(ExtractValue(np.asarray(
+            guard.GetOutputPort("q").Eval(context), dtype=object)).ravel(),
+            q)
+        context.SetDiscreteState(guard.EvalUniquePeriodicDiscreteUpdate(
+            context).get_vector().CopyToVector())
+
+    far = command + [0.0, 0.1001, 0.0]
+    tick(far, 0.0)                          # the first tick: unchecked
+    tick(command + [0.09, -0.09, 0.05], 0.0)  # within it
+    tick(far, 1.0)
+    status = ExtractValue(np.asarray(guard.GetOutputPort(
+        "safety_status").Eval(context), dtype=object)).ravel()
+    assert status[F["reason"]] == int(Reason.NOT_FOLLOWING)
+    assert (status[F["input"]], status[F["entry"]]) == (0, 1)
+    assert status[F["value"]] == pytest.approx(0.1001)
+    assert guard.reason(context) == (
+        "q[1] is 0.1 rad from the last command (tolerance 0.1 rad): it "
+        "does not follow")
+    for _ in range(round(HOLD / H) - 1):
+        tick(far, 1.0)                      # held, but not kept stopped
+    tick(far, 0.0, 1.0)                     # clears: resume
+    tick(command, 0.0)
+    tick(far, 1.0)
+
+
+def test_a_guard_with_a_followed_input_still_linearises():
+    guard = following_guard()
+    context = guard.CreateDefaultContext()
+    guard.GetInputPort("q").FixValue(context, [0.1, 0.2, 0.3])
+    guard.GetInputPort("q_command").FixValue(context, [0.1, 0.2, 0.3])
+    guard.GetInputPort("u").FixValue(context, [0.0])
+    linear = Linearize(guard, context, input_port_index=InputPortIndex(0),
+                       output_port_index=OutputPortIndex(0),
+                       equilibrium_check_tolerance=math.inf)
+    np.testing.assert_array_equal(linear.D(), np.eye(3))
+
+
+def test_a_follow_tolerance_that_is_not_positive_is_refused():
+    with pytest.raises(ValueError, match=(
+            r"q follows.tolerance = 0.0 is not allowed: must be greater "
+            r"than 0")):
+        InputGuard([GuardedInput("q", 3, follows=Following("c", 0.0))])
+
+
+def test_check_following_in_closed_form():
+    assert safety.check_following([1.0, 2.0], [1.05, 1.91], 0.1).valid
+    assert safety.check_following([1.0, 2.0, 3.0], [1.0, 2.3, 2.5], 0.1) == (
+        Reason.NOT_FOLLOWING, 1, pytest.approx(-0.3))
+    assert safety.check_following(InitializeAutoDiff([0.0, 0.5]).ravel(),
+                                  np.zeros(2), 0.4) == (
+        Reason.NOT_FOLLOWING, 1, 0.5)
 
 
 @pytest.mark.parametrize("lower, upper, message", [

@@ -30,6 +30,13 @@ from drake_wbc.controller import (
     load_controller_parameters,
 )
 from drake_wbc.controller.diagram import HARDWARE_INPUTS, STATION_INPUTS
+from drake_wbc.experiments.runner import (
+    build_closed_loop,
+    fault_message,
+    simulate,
+    start_simulator,
+)
+from drake_wbc.experiments.scenario import find_scenario, load_scenario
 from drake_wbc.math import command_limits, safety
 from drake_wbc.math.motion_mode import MotionMode
 from drake_wbc.math.safety import STATUS_FIELDS, Reason, SafetyParameters
@@ -145,7 +152,7 @@ def injected(arm):
             rig.advance(FAULT / 2)
             reasons.append(rig.controller.safety_reason(rig.root_context))
             rig.advance(FAULT / 2)
-            rig.set(injection.port, valid)
+            rig.restore(injection.port)
             rig.advance(AFTER)
             messages.append([m for _, m in recorder.records[before:]])
     finally:
@@ -254,7 +261,7 @@ def tripped_run(arm, params=None, reference=(0.3, 0.2, 0.0, 0.0, 0.0, 0.3),
     rig.set(port, bad)
     for k in range(round(2.3 / H)):
         if k == round(0.3 / H):
-            rig.set(port, rig.valid[port])
+            rig.restore(port)
         rig.advance(H)
         if sample is not None:
             sample(rig)
@@ -586,7 +593,11 @@ def test_limits_agree_with_the_formulas_written_out():
 def test_saturated_base_command_is_parallel_and_flagged(arm):
     params = ControllerParameters()
     params.workspace.mode = MotionMode.LOCOMOTION  # sigma = 0: the base
+    # The arm's measurement held at its start, so that the capability
+    # and the distribution stay put; a tolerance that lets it.
+    params.safety.arm_follow_tolerance = 10.0
     rig = Rig(arm, params)
+    rig.set("arm.position_measured", rig.q)
     rig.set("reference_velocity", [2.4, -1.8, 0.0, 0.0, 0.0, 0.0])
     rig.set("lidar.obstacle_points", np.zeros((0, 2)))
     rig.advance(2.0)
@@ -839,3 +850,250 @@ def test_checks_in_closed_form():
         state = safety.next_stop_state(state, False, H, 0.05)
         assert state.stopped
     assert not safety.next_stop_state(state, False, H, 0.05).stopped
+
+
+# --- an arm that does not follow its commands ---------------------------
+
+FOLLOW_TOLERANCE = safety.DEFAULT_ARM_FOLLOW_TOLERANCE
+BRISK = [0.3, 0.2, 0.0, 0.0, 0.0, 0.3]
+
+
+def command_now(rig):
+    """The arm command the controller sends now (its last)."""
+    return np.array(rig.diagram.GetOutputPort("arm.position_command").Eval(
+        rig.context))
+
+
+def stopped_now(rig):
+    return rig.diagram.GetOutputPort("safety_status").Eval(rig.context)[
+        STATUS["stopped"]] == 1.0
+
+
+def test_an_arm_held_still_trips_at_the_tick_it_falls_behind(arm):
+    """The arm's measured position held still while the commands move
+    away (its own protective stop, a hand holding it): the safe stop
+    trips at the first tick at which a joint is farther than the
+    tolerance from the last command, not before, and says which joint,
+    how far and the tolerance. Nothing compared them before: the
+    controller integrated on, away from where the arm was."""
+    rig = Rig(arm)
+    rig.set("reference_velocity", BRISK)
+    rig.advance(1.0)
+    held = command_now(rig)
+    k_held = round(rig.time() / H)
+    rig.set("arm.position_measured", held)
+    while not stopped_now(rig):
+        assert rig.time() < 3.0, "never tripped"
+        rig.advance(H)
+    k_trip = round(rig.time() / H) - 1  # the tick that decided
+    times, q_cmd = rig.log("arm.position_command")
+    _, status = rig.log("safety_status")
+    assert times[k_trip] == pytest.approx(k_trip * H)
+    deviation = held - q_cmd
+    assert np.abs(deviation[k_held:k_trip]).max() <= FOLLOW_TOLERANCE
+    assert np.all(status[k_held:k_trip + 1, STATUS["stopped"]] == 0.0)
+    beyond = np.flatnonzero(np.abs(deviation[k_trip]) > FOLLOW_TOLERANCE)
+    j = int(beyond[0])
+    fault = status[k_trip + 1]
+    assert fault[STATUS["stopped"]] == 1.0
+    assert fault[STATUS["reason"]] == int(Reason.NOT_FOLLOWING)
+    names = rig.controller.stages["guard"].input_names
+    assert fault[STATUS["input"]] == names.index("arm.position_measured")
+    assert fault[STATUS["entry"]] == j
+    assert fault[STATUS["value"]] == deviation[k_trip, j]
+    assert rig.controller.safety_reason(rig.root_context) == (
+        f"arm.position_measured[{j}] is {abs(deviation[k_trip, j]):.3g} "
+        f"rad from the last command (tolerance {FOLLOW_TOLERANCE:g} rad): "
+        "the arm does not follow (its own stop, or held)")
+    # Then the command brakes within the acceleration limit, and the
+    # stop holds while the arm is still not following.
+    rig.advance(0.2)
+    _, q_cmd = rig.log("arm.position_command")
+    rates = np.diff(q_cmd[k_trip - 1:], axis=0) / H
+    assert np.abs(np.diff(rates, axis=0)).max() / H <= (
+        JOINT_ACCELERATION * (1 + 1e-6))
+    np.testing.assert_array_equal(rates[-5:], 0.0)
+    assert rig.controller.safety_reason(rig.root_context).endswith(
+        f"; resuming from where it is after {HOLD:g} s")
+
+
+def test_a_station_arm_that_stops_on_its_own_trips_and_is_resumed_where_it_is():
+    """The simulated station's arm faults on the first command (the
+    controller started 0.05 rad from it) and stays stopped, as a real
+    arm's protective stop does. The controller, whose task moves on,
+    trips once the arm is 0.1 rad behind (it integrated on for ever),
+    and at each resume its command starts where the arm stands, one
+    step of the acceleration limit from rest."""
+    scenario = load_scenario(find_scenario("trajectory_tracking"))
+    loop = build_closed_loop(scenario)
+    simulator = start_simulator(loop)
+    root = simulator.get_mutable_context()
+    away = np.array(scenario.station.initial_arm_positions)
+    away[0] += 0.05
+    loop.controller.initialize(root, arm_position=away)
+    simulator.AdvanceTo(3.0)
+    log = loop.logger.run_log(root)
+    assert fault_message(loop.station, root).startswith(
+        "arm fault at t = 0.000 s")
+    status = log["safety_status"]
+    command, measured = log["arm.position_command"], log[
+        "arm.position_measured"]
+    names = loop.controller.stages["guard"].input_names
+    trips = np.flatnonzero(np.diff(status[:, STATUS["trips"]]) > 0) + 1
+    assert len(trips) >= 2
+    for i in trips:
+        assert status[i, STATUS["reason"]] == int(Reason.NOT_FOLLOWING)
+        assert status[i, STATUS["input"]] == names.index(
+            "arm.position_measured")
+        assert abs(status[i, STATUS["value"]]) > FOLLOW_TOLERANCE
+    resumes = np.flatnonzero(np.diff(status[:, STATUS["stopped"]]) < 0) + 1
+    assert len(resumes) >= 1
+    for i in resumes:
+        # The tick before resumed, from the arm's position then.
+        start = measured[i - 1]
+        assert np.abs(command[i] - start).max() <= (
+            JOINT_ACCELERATION * H * H * (1 + 1e-6))
+        end = min(i + 20, len(command))
+        seen = np.vstack([start, start, command[i:end]])
+        rates = np.diff(seen, axis=0) / H
+        assert np.abs(np.diff(rates, axis=0)).max() / H <= (
+            JOINT_ACCELERATION * (1 + 1e-6))
+
+
+def test_after_a_stop_in_which_the_arm_moved_the_commands_start_where_it_is(
+        arm):
+    """A safe stop (a NaN on the odometry) during which the arm is moved
+    0.3 rad on three joints (by hand, or by its own stop): when the stop
+    clears, the commands start at the measured position, from rest, and
+    every step is within the joint speed and acceleration limits as the
+    arm, standing there, sees them. They resumed from the command last
+    sent, 0.3 rad away: a jump of the servo's setpoint."""
+    rig = Rig(arm)
+    rig.set("reference_velocity", BRISK)
+    rig.advance(1.0)
+    bad = np.array(rig.valid["base.state_estimated"], dtype=float)
+    bad[0] = np.nan
+    rig.set("base.state_estimated", bad)
+    rig.advance(0.2)                      # braked to rest and held
+    held = command_now(rig)
+    offset = np.array([0.3, -0.3, 0.0, 0.3, 0.0, 0.0])
+    for k in range(1, 21):                # moved within 0.2 s
+        rig.set("arm.position_measured", held + k / 20 * offset)
+        rig.advance(H)
+    moved = held + offset
+    rig.set("base.state_estimated", rig.valid["base.state_estimated"])
+    while stopped_now(rig):
+        assert rig.time() < 3.0, "never resumed"
+        rig.advance(H)
+    k_resume = round(rig.time() / H) - 1  # the tick that resumed
+    rig.follow()                          # the arm follows from there
+    rig.advance(1.0)
+    _, q_cmd = rig.log("arm.position_command")
+    _, status = rig.log("safety_status")
+    np.testing.assert_array_equal(q_cmd[k_resume], held)  # still held
+    first = q_cmd[k_resume + 1]
+    assert np.abs(first - moved).max() <= (
+        JOINT_ACCELERATION * H * H * (1 + 1e-6))
+    seen = np.vstack([moved, moved, q_cmd[k_resume + 1:]])
+    rates = np.diff(seen, axis=0) / H
+    assert np.abs(rates).max() <= JOINT_SPEED * (1 + 1e-9)
+    assert np.abs(np.diff(rates, axis=0)).max() / H <= (
+        JOINT_ACCELERATION * (1 + 1e-6))
+    assert np.abs(q_cmd[-1] - moved).max() > 1e-2      # moving again
+    # One stop, the odometry's: the arm follows from where it is.
+    assert status[-1, STATUS["trips"]] == 1.0
+    assert np.all(status[k_resume + 1:, STATUS["stopped"]] == 0.0)
+
+
+def test_a_protective_stop_that_outlasts_the_safe_stop_holds_where_the_arm_is(
+        arm):
+    """A safe stop during which the arm is moved 0.3 rad, while a point
+    inside the footprint holds the robot in a protective stop too: when
+    the safe stop clears, the arm's command restarts where the arm is
+    and stays there, at rest, for as long as the protective stop lasts
+    (a command left at the old position would trip the safe stop again
+    at every tick it was checked)."""
+    rig = Rig(arm)
+    rig.set("reference_velocity", BRISK)
+    rig.advance(1.0)
+    bad = np.array(rig.valid["base.state_estimated"], dtype=float)
+    bad[0] = np.nan
+    rig.set("base.state_estimated", bad)
+    rig.set("lidar.obstacle_points", np.array([[0.35, 0.0], [2.0, 0.0]]))
+    rig.advance(0.3)
+    moved = command_now(rig) + np.array([0.0, 0.3, 0.0, 0.0, -0.3, 0.0])
+    rig.set("arm.position_measured", moved)
+    rig.set("base.state_estimated", rig.valid["base.state_estimated"])
+    while stopped_now(rig):
+        rig.advance(H)
+    rig.follow()
+    rig.advance(1.0)
+    _, q_cmd = rig.log("arm.position_command")
+    _, status = rig.log("safety_status")
+    _, protective = rig.log("base_protective_stop")
+    assert protective[-1, 0] == 1.0
+    np.testing.assert_array_equal(q_cmd[-100:], np.tile(moved, (100, 1)))
+    assert status[-1, STATUS["trips"]] == 1.0
+    assert status[-1, STATUS["stopped"]] == 0.0
+
+
+def test_an_arm_within_the_tolerance_resumes_from_the_last_command(arm):
+    """Moved by less than the tolerance during a stop, the arm resumes
+    from the command last sent, exactly as a controller that never
+    compared them (the rule's other side: nothing changes within it)."""
+    runs = []
+    for tolerance in (FOLLOW_TOLERANCE, 10.0):
+        params = ControllerParameters()
+        params.safety.arm_follow_tolerance = tolerance
+        rig = Rig(arm, params)
+        rig.set("reference_velocity", BRISK)
+        rig.advance(1.0)
+        bad = np.array(rig.valid["base.state_estimated"], dtype=float)
+        bad[0] = np.nan
+        rig.set("base.state_estimated", bad)
+        rig.advance(0.3)
+        rig.set("arm.position_measured", command_now(rig) + 0.09)
+        rig.set("base.state_estimated", rig.valid["base.state_estimated"])
+        while stopped_now(rig):
+            rig.advance(H)
+        rig.follow()
+        rig.advance(0.5)
+        runs.append(rig.log("arm.position_command")[1])
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+@pytest.mark.parametrize("name, variant, duration", [
+    ("repeat_obstacle", "obstacle", 4.0),
+    ("trajectory_tracking_lbr", "filtered", 4.0)])
+def test_a_closed_loop_never_trips_on_the_arm_following(name, variant,
+                                                        duration):
+    """On the simulated station (a real MultibodyPlant and its servos),
+    through a replay whose joints reach their speed limit of 1.57 rad/s
+    and a line on the seven-joint arm: no safe stop, and the measured
+    position stays within a quarter of the tolerance of the last
+    command (0.023 rad at most, the servo's lag)."""
+    scenario = load_scenario(find_scenario(name))
+    chosen = next(v for v in scenario.variants if v.name == variant)
+    log = simulate(build_closed_loop(scenario, chosen), duration=duration)
+    assert np.all(log["safety_status"][:, STATUS["trips"]] == 0.0)
+    command, measured = log["arm.position_command"], log[
+        "arm.position_measured"]
+    rates = np.abs(np.diff(command, axis=0)).max() / H
+    deviation = np.abs(command - measured).max()
+    assert 0.001 < deviation <= 0.25 * FOLLOW_TOLERANCE
+    if name == "repeat_obstacle":
+        assert rates >= JOINT_SPEED * (1 - 1e-6)
+
+
+@pytest.mark.parametrize("value, message", [
+    (0.0, "must be greater than 0"), (-0.1, "must be greater than 0"),
+    (float("nan"), "must be finite"), (float("inf"), "must be finite"),
+    ("0.1", "must be a single number")])
+def test_the_follow_tolerance_is_checked_where_it_enters(value, message):
+    with pytest.raises(ValueError, match=(
+            rf"arm_follow_tolerance = .* is not allowed: {message}")):
+        SafetyParameters(arm_follow_tolerance=value)
+    with pytest.raises(ValueError, match=(
+            r"safety.arm_follow_tolerance = -1.0 is not allowed: must be "
+            r"greater than 0")):
+        load_controller_parameters(text="safety: {arm_follow_tolerance: -1}")

@@ -27,15 +27,17 @@ One control tick, as wired here (design notes, "data flow of one tick")::
                        ArmCdmp ◄─ F_ext, F_d, S_hri
                           ▼
              ArmCartesianVelocityController ◄─ stop or protective stop
-                                                (hold)
+                          │                     (hold), resume, measured
                           ▼
-                 arm.position_command
+                 arm.position_command (and, its state, to InputGuard)
 
 The station-facing ports carry the names of the simulated station and of
-the LCM hardware interface, so the same diagram drives either. The only
-feedback edge inside, delta_V_ee, enters WholeBodyCdmp's state alone, and
-the commands leave from state (filter, limiter's inputs, arm controller):
-no algebraic loop, and no direct feedthrough from any input to a command.
+the LCM hardware interface, so the same diagram drives either. The
+feedback edges inside, delta_V_ee, which enters WholeBodyCdmp's state
+alone, and the arm's position command, the arm controller's state, into
+the InputGuard, leave from state, and so do the commands (filter,
+limiter's inputs, arm controller): no algebraic loop, and no direct
+feedthrough from any input to a command.
 
 Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
 - Every input enters through the InputGuard: a NaN, an infinite value, a
@@ -46,9 +48,15 @@ Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
   wrist wrench beyond the sensor's range, tool.ft_sensor_range of the
   robot's description) or a pHRI switch other
   than 0 or 1 never reaches a stage (the guard passes the last valid
-  sample on) and triggers a safe stop. From that tick on the base command
-  is zero (at once: the base's own drive brakes it within its limits, the
-  shortest stop it can make) and the arm command brakes to rest within
+  sample on) and triggers a safe stop. So does an arm that does not
+  follow: a joint measured farther than safety.arm_follow_tolerance
+  from the arm controller's last position command (its state, the
+  guard's input `arm.position_command`; checked from the second tick on
+  and not during a stop), which says that the arm stopped on its own
+  (its protective stop, an e-stop, a servo off) or is held. From that
+  tick on the base command is zero (at once: the base's own drive brakes
+  it within its limits, the shortest stop it can make) and the arm
+  command brakes to rest within
   the joint acceleration limit (the arm controller's hold: a position
   command held at once would ask the servo for an unbounded
   deceleration). Nothing integrates meanwhile: the DMPs' couplings are
@@ -60,8 +68,11 @@ Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
   gated to zero) are stable and come to rest on them. The stop clears
   once every input has been valid for safety.hold_time; the base command
   then restarts from zero within the acceleration limits and the arm from
-  rest at its last command, so no command jumps and none makes up for
-  the stop. The `safety_status`
+  rest at its last command, or, when the arm is farther than
+  safety.arm_follow_tolerance from it (moved, or stopped on its own,
+  during the stop), from rest where the arm is (the guard's `resume` and
+  the measured position into the arm controller), so no command jumps
+  and none makes up for the stop. The `safety_status`
   output (drake_wbc.math.safety.STATUS_FIELDS) and `safety_reason` (a sentence;
   also Controller.safety_reason) say why; the stop is logged when it trips
   and when it clears. Obstacle points with a NaN or infinite coordinate
@@ -116,6 +127,7 @@ from drake_wbc.math.safety import (
     MAX_ODOMETRY,
     MEASURED_POSITION_MARGIN,
     MEASURED_TWIST_FACTOR,
+    Following,
 )
 from drake_wbc.math.task_inputs import TASK_INPUTS
 from drake_wbc.math.validation import checked_instance, validated_copy
@@ -177,7 +189,10 @@ class Controller:
         `base_velocity` (T_b), and the base command's limiter and the
         compensator's prediction of the base (if any) from it. The
         DMPs start at rest; the input guard takes `arm_position` as the
-        last valid arm measurement."""
+        last valid arm measurement, and from the second tick on expects
+        the measured arm within safety.arm_follow_tolerance of the
+        command that starts there (an arm elsewhere is a safe stop, after
+        which the command restarts from where the arm is)."""
         def context_of(name):
             return self.stages[name].GetMyMutableContextFromRoot(
                 root_context)
@@ -294,7 +309,8 @@ def build_controller(params=None, robot=None):
         arm_cdmp=add("arm_cdmp", ArmCdmp(
             params.arm_cdmp, time_step=h, phri_switch=switch)),
         arm_controller=add("arm_controller", ArmCartesianVelocityController(
-            params.arm_controller, arm, time_step=h)),
+            params.arm_controller, arm, time_step=h,
+            resume_tolerance=params.safety.arm_follow_tolerance)),
     )
     if params.whole_body_cdmp.hri_time_constant > 0.0:
         # The admittance's virtual mass on the whole body's F_ext (eq.
@@ -314,8 +330,12 @@ def build_controller(params=None, robot=None):
         builder.ExportInput(s["guard"].GetInputPort(name), name)
     # Station measurements.
     connect("guard", "base.state_estimated", "base_yaw", "u0")
-    for stage in ("capability", "wrench"):
+    for stage in ("capability", "wrench", "arm_controller"):
         connect("guard", "arm.position_measured", stage, "arm_position")
+    # The arm's last position command (the arm controller's state: no
+    # algebraic loop), which its measured position must follow.
+    connect("arm_controller", "arm_position_command", "guard",
+            "arm.position_command")
     connect("guard", "wrist.wrench_measured", "wrench", "wrist_wrench")
     connect("guard", "lidar.obstacle_points", "base_cdmp", "obstacle_points")
     # Task inputs.
@@ -335,6 +355,7 @@ def build_controller(params=None, robot=None):
     connect("guard", "stop", "any_stop", "u0")
     connect("base_limiter", "protective_stop", "any_stop", "u1")
     connect("any_stop", "sum", "arm_controller", "hold")
+    connect("guard", "resume", "arm_controller", "resume")
     for gate in ("base_cdmp_gate", "arm_cdmp_gate", "deviation_gate"):
         connect("any_stop", "sum", gate, "stop")
 
@@ -417,7 +438,10 @@ def _input_guard(params, arm):
     within +-MAX_ODOMETRY and its twist within MEASURED_TWIST_FACTOR
     times the robot's own velocity limits; the arm's
     measured positions each within its joint's limits, give or take
-    MEASURED_POSITION_MARGIN; the wrist's wrench each component within
+    MEASURED_POSITION_MARGIN, and within safety.arm_follow_tolerance of
+    the arm controller's last position command (its input
+    `arm.position_command`; drake_wbc.math.safety.check_following); the
+    wrist's wrench each component within
     the sensor's range (the robot's description's tool.ft_sensor_range:
     a reading beyond what the sensor can measure is a broken or forged
     message, not a force)."""
@@ -438,7 +462,11 @@ def _input_guard(params, arm):
                lower=tuple(-odometry), upper=tuple(odometry)),
         vector("arm.position_measured", arm.num_joints, initial=arm.home,
                lower=tuple(arm.lower - MEASURED_POSITION_MARGIN),
-               upper=tuple(arm.upper + MEASURED_POSITION_MARGIN)),
+               upper=tuple(arm.upper + MEASURED_POSITION_MARGIN),
+               follows=Following(
+                   "arm.position_command",
+                   params.safety.arm_follow_tolerance, "rad",
+                   "the arm does not follow (its own stop, or held)")),
         vector("wrist.wrench_measured", 6, lower=tuple(-sensor_range),
                upper=tuple(sensor_range)),
         task("reference_velocity", zero_when_stopped=True),

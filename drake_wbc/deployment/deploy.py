@@ -128,15 +128,17 @@ def add_controller_side(builder, scenario, variant=None, options=None,
             f"allowed with controller.time_step = {h!r} s: the commands go "
             "out once a control period, so they must be equal")
     arm = controller_arm(scenario)
+    params = controller_for(scenario, variant)
     # Until the robot's first status: the shipped robot's scenario start,
     # or another robot's home.
     hardware = HardwareInterface(
         options, lcm, None if scenario.robot
         else scenario.station.initial_arm_positions, robot=arm,
-        wall_clock=wall_clock)
+        wall_clock=wall_clock,
+        arm_follow_tolerance=params.safety.arm_follow_tolerance)
     builder.AddNamedSystem("hardware", hardware.diagram)
     controller, sources = add_controller(
-        builder, controller_for(scenario, variant), scenario.task,
+        builder, params, scenario.task,
         hardware.diagram, arm=hardware.arm)
     # The watchdog's stop stops the controller too (HARDWARE_INPUTS).
     for name in HARDWARE_INPUTS:

@@ -20,11 +20,13 @@ Diagram built for a simulation drives the robot unchanged. Inside, a
 MessageDecoder (drake_wbc.hardware.codecs) subscribes to each status
 channel and keeps its last good message, judging time stamps by the
 protocol's rules; the controller's commands go through the CommandGuard
-(drake_wbc.hardware.safety: the watchdog of every stream, and the
-limits) to MessageEncoders, which stamp them with the interface's sender
-identity, and LcmPublisherSystems; a FlaggedPublisher sends the base's
-stop at once when the guard finds a stale stream between two ticks; an
-LcmInterfaceSystem pumps the messages in.
+(drake_wbc.hardware.safety: the watchdog of every stream, the limits,
+and, with the arm's measured positions, the arm's restart from where it
+is after a stop) to MessageEncoders, which stamp them with the
+interface's sender identity, and LcmPublisherSystems; a
+FlaggedPublisher sends the base's stop at once when the guard finds a
+stale stream between two ticks; an LcmInterfaceSystem pumps the
+messages in.
 
 `hardware.diagnostics` holds DIAGNOSTICS: the guard's status, the age of
 each status channel's last good message and its count of rejected
@@ -59,6 +61,7 @@ from drake_wbc.hardware.codecs import (
 from drake_wbc.hardware.messages import RawBytesSerializer
 from drake_wbc.hardware.options import STATUS_CHANNELS, HardwareOptions
 from drake_wbc.hardware.safety import GUARD_STATUS, CommandGuard, Limits
+from drake_wbc.math.safety import DEFAULT_ARM_FOLLOW_TOLERANCE
 from drake_wbc.math.validation import checked_instance
 from drake_wbc.robot.model import arm_kinematics
 
@@ -116,10 +119,15 @@ class HardwareInterface:
         wall_clock: the WallClock (drake_wbc.hardware.safety) of a run in
             real time, which the guard reads at every check; None on
             simulated time.
+        arm_follow_tolerance: rad, the controller's
+            SafetyParameters.arm_follow_tolerance, for the guard's
+            restart of the arm's commands from where it is after a stop
+            (CommandGuard); its default if None.
     """
 
     def __init__(self, options=None, lcm=None, initial_arm_positions=None,
-                 sender=None, robot=None, wall_clock=None):
+                 sender=None, robot=None, wall_clock=None,
+                 arm_follow_tolerance=None):
         self.options = options = checked_instance(
             "options", options, HardwareOptions, HardwareOptions)
         if lcm is None:
@@ -147,7 +155,13 @@ class HardwareInterface:
                     num_joints=n, max_points=options.max_obstacle_points))
         s["guard"] = guard = builder.AddNamedSystem("guard", CommandGuard(
             options, initial_arm_positions, Limits.of_robot(options, arm),
-            wall_clock=wall_clock))
+            wall_clock=wall_clock, arm_tolerance=(
+                DEFAULT_ARM_FOLLOW_TOLERANCE if arm_follow_tolerance is None
+                else arm_follow_tolerance)))
+        # Where the arm is, so that the commands never send it back to
+        # an old command at once after a stop.
+        builder.Connect(s["decoder.arm_status"].GetOutputPort("positions"),
+                        guard.GetInputPort("arm_position_measured"))
         for port, name in (("age", "status_ages"),
                            ("clock_jumps", "clock_jumps")):
             mux = builder.AddNamedSystem(

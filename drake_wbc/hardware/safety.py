@@ -15,7 +15,12 @@ between the robot side's command receiver and its arm
 
 The promises (drake_wbc/hardware/README.md): every arm command sent is
 within the joint position limits and within the joint speed and
-acceleration limits of the one before, after a stop too; every base
+acceleration limits of the one before, after a stop too, but where the
+arm is not where the one before sent it: after a stop, and when the
+controller restarts its arm command from where the arm is, an arm found
+farther than the tolerance from the last command sent is commanded
+from where it is instead, at rest, and within the limits as it sees
+them (`resync_arm`); every base
 command is within the base's speed limits, and within its acceleration
 limits of the one before except a stop, which is zero at once (the
 base's own velocity loop brakes within its limits); a stale stream stops
@@ -44,6 +49,11 @@ from drake_wbc.hardware.options import (
 from drake_wbc.math.arm_control import start_within_limits
 from drake_wbc.math.arm_servo import brake_arm
 from drake_wbc.math.command_limits import ROUNDING, limit_base_velocity
+from drake_wbc.math.safety import (
+    DEFAULT_ARM_FOLLOW_TOLERANCE,
+    VALID,
+    check_following,
+)
 from drake_wbc.math.validation import (
     as_vector,
     checked_instance,
@@ -350,6 +360,10 @@ class GuardState(NamedTuple):
             checks, in controller seconds (0 on simulated time).
         command_wall_time: the wall clock at the last command time, in
             controller seconds (nan: none, on simulated time).
+        arm_resync: the arm was found away from `arm` (`resync_arm`):
+            the arm command restarted from its measured position, at
+            rest, and holds there until the controller's command is
+            within the tolerance of it.
     """
 
     base: np.ndarray
@@ -371,6 +385,7 @@ class GuardState(NamedTuple):
     wall_time: float = math.nan
     check_interval: float = 0.0
     command_wall_time: float = math.nan
+    arm_resync: bool = False
 
     def __deepcopy__(self, memo):
         # Never changed in place (only replaced), so the copies that Drake
@@ -393,20 +408,31 @@ class GuardConfig(NamedTuple):
         recovery_time: s.
         period: the command period, s.
         limits: Limits.
+        arm_tolerance: rad, how far the measured arm may be from the last
+            command sent before it counts as elsewhere (`resync_arm`).
     """
 
     watchdog_limits: tuple
     recovery_time: float
     period: float
     limits: Limits
+    arm_tolerance: float = DEFAULT_ARM_FOLLOW_TOLERANCE
 
     @classmethod
-    def of(cls, options, limits=None):
+    def of(cls, options, limits=None,
+           arm_tolerance=DEFAULT_ARM_FOLLOW_TOLERANCE):
         """The settings of a HardwareOptions (Limits.of_robot(options) if
-        `limits` is None)."""
+        `limits` is None) and the controller's arm tolerance (its
+        SafetyParameters.arm_follow_tolerance).
+
+        Raises:
+            ValueError: naming arm_follow_tolerance when it is not finite
+                and > 0.
+        """
         return cls(options.watchdog_limits.as_tuple(),
                    options.watchdog_recovery_time, options.publish_period,
-                   limits or Limits.of_robot(options))
+                   limits or Limits.of_robot(options),
+                   positive("arm_follow_tolerance", arm_tolerance))
 
 
 def stall_limit(config):
@@ -418,8 +444,38 @@ def stall_limit(config):
     return config.limits.command_timeout - config.period
 
 
+def resync_arm(state, measured, config):
+    """The GuardState `state` with its arm command restarted from where
+    the arm is, when it is elsewhere.
+
+    The guard sends what it limited from what it sent last
+    (`follow_arm_command`). An arm that is farther than
+    `config.arm_tolerance` from that (`check_following`: moved by hand,
+    or stopped on its own, during a stop) would be asked to jump back
+    to it. So its command restarts from its measured position (within
+    the joint limits), at rest, and holds there (`arm_resync`) until the
+    controller's command is within the tolerance of it (the controller
+    resumes from where the arm is too, drake_wbc.controller.diagram).
+    An arm where the last command was, or no measurement (None), leaves
+    `state` as it is.
+
+    Returns:
+        (GuardState, the deviation's InputCheck, VALID when unchanged).
+    """
+    if measured is None:
+        return state, VALID
+    check = check_following(measured, state.arm, config.arm_tolerance)
+    if check.valid:
+        return state, check
+    limits = config.limits
+    start = np.clip(np.asarray(measured, dtype=float), limits.lower,
+                    limits.upper)
+    return state._replace(arm=start, arm_velocity=np.zeros_like(start),
+                          arm_resync=True), check
+
+
 def guard_step(state, now, ages, base, arm, command_time, config,
-               clock_jumps=None, wall_time=None):
+               clock_jumps=None, wall_time=None, arm_measured=None):
     """One check of the command guard.
 
     Each stream is fresh while its age is within its watchdog limit; it
@@ -446,7 +502,12 @@ def guard_step(state, now, ages, base, arm, command_time, config,
     the arm stopping (`stop_arm`); otherwise the arm following the
     controller's (`follow_arm_command`) and the base zero in a base stop,
     else the controller's within the limits (`limit_base_command`), from
-    what was sent last, so nothing jumps when the commands resume.
+    what was sent last, so nothing jumps when the commands resume. The
+    arm's from where it is (`resync_arm`) when it is elsewhere at the
+    check at which a full stop ends (the commands start, or resume), or
+    at a command time at which the controller's command moved farther
+    than the tolerance since the last one (no joint moves that fast:
+    the controller restarted from where the arm is).
 
     Args:
         state: GuardState.
@@ -460,10 +521,13 @@ def guard_step(state, now, ages, base, arm, command_time, config,
             has jumped (the decoders' Reception.clock_jumps); None: none.
         wall_time: the wall clock now, in controller seconds
             (WallClock.now); None on simulated time.
+        arm_measured: (n,) the arm's measured positions (the arm_status
+            stream's), rad; None: not known (no `resync_arm`).
 
     Returns:
         (GuardState, list of (event, detail) for the log: "tripped",
-        "cleared", "base stopped", "base cleared", "started").
+        "cleared", "base stopped", "base cleared", "started", "arm
+        elsewhere").
     """
     jumps = state.clock_jumps if clock_jumps is None else tuple(
         int(count) for count in clock_jumps)
@@ -533,6 +597,8 @@ def guard_step(state, now, ages, base, arm, command_time, config,
         command_wall_time=(
             (math.nan if wall_time is None else float(wall_time))
             if command_time else state.command_wall_time))
+    if state.full_stop and not full:
+        new = _resync(new, arm_measured, config, events)
     if not command_time:
         if (tripped or base_stopped) and np.any(state.base != 0.0):
             new = new._replace(base=np.zeros(3), urgent=True)
@@ -540,16 +606,28 @@ def guard_step(state, now, ages, base, arm, command_time, config,
     h, limits = config.period, config.limits
     invalid = not (np.all(np.isfinite(base)) and np.all(np.isfinite(arm)))
     if full or invalid:
-        q, v = stop_arm(state.arm, state.arm_velocity, h, limits)
+        q, v = stop_arm(new.arm, new.arm_velocity, h, limits)
         return new._replace(
             base=np.zeros(3), arm=q, arm_velocity=v,
             target=state.target if invalid else np.array(arm, dtype=float),
             base_saturated=False, arm_saturated=False,
-            invalid=state.invalid + invalid), events
+            invalid=state.invalid + invalid,
+            arm_resync=new.arm_resync and not full), events
     arm = np.array(arm, dtype=float)
-    q, v, arm_saturated = follow_arm_command(
-        arm, target_rate(arm, state.target, h), state.arm,
-        state.arm_velocity, h, limits)
+    if not check_following(arm, state.target, config.arm_tolerance).valid:
+        new = _resync(new, arm_measured, config, events)
+    if new.arm_resync and not check_following(
+            arm, new.arm, config.arm_tolerance).valid:
+        # Held where the arm is until the controller's command is near.
+        q, v, arm_saturated = new.arm, np.zeros_like(new.arm), True
+    else:
+        # After a restart the target moves from where the arm is (the
+        # controller resumed there, at rest), not from its old command.
+        q, v, arm_saturated = follow_arm_command(
+            arm, target_rate(arm, new.arm if new.arm_resync
+                             else state.target, h), new.arm,
+            new.arm_velocity, h, limits)
+        new = new._replace(arm_resync=False)
     if base_stop:
         sent, base_saturated = np.zeros(3), False
     else:
@@ -558,6 +636,17 @@ def guard_step(state, now, ages, base, arm, command_time, config,
     return new._replace(base=sent, arm=q, arm_velocity=v, target=arm,
                         base_saturated=base_saturated,
                         arm_saturated=arm_saturated), events
+
+
+def _resync(state, measured, config, events):
+    """`resync_arm` of `state`, its event added to `events` when the
+    arm was elsewhere."""
+    state, check = resync_arm(state, measured, config)
+    if not check.valid:
+        events.append(("arm elsewhere", (
+            f"joint {check.entry} is {abs(check.value):.3g} rad from the "
+            f"last command sent (tolerance {config.arm_tolerance:g} rad)")))
+    return state
 
 
 class WallClock:
@@ -611,6 +700,12 @@ class CommandGuard(LeafSystem):
     - clock_jumps: optional (none when unconnected), (4) per stream, how
       many times its sender's clock has jumped (the decoders'
       `clock_jumps`): a jump is a stale stream at that check.
+    - arm_position_measured: optional (never used when unconnected), (n)
+      the arm's measured positions (the arm_status decoder's): after a
+      full stop, or when the controller restarts from where the arm is,
+      an arm farther than `arm_tolerance` from the last command sent is
+      commanded from where it is, at rest (`resync_arm`), never back to
+      that command at once.
     - base_velocity_command, arm_position_command (outputs): what is
       sent, from state (`guard_step`).
     - status: (8) GUARD_STATUS.
@@ -641,16 +736,20 @@ class CommandGuard(LeafSystem):
         wall_clock: the WallClock of a controller running in real time
             (drake_wbc.deployment.deploy), which every check reads; None
             on simulated time.
+        arm_tolerance: rad > 0, the controller's
+            SafetyParameters.arm_follow_tolerance (its default if not
+            given).
     """
 
     def __init__(self, options=None, initial_arm_positions=None,
-                 limits=None, wall_clock=None):
+                 limits=None, wall_clock=None,
+                 arm_tolerance=DEFAULT_ARM_FOLLOW_TOLERANCE):
         super().__init__()
         self.wall_clock = checked_instance("wall_clock", wall_clock,
                                            WallClock, lambda: None)
         self.options = options = checked_instance(
             "options", options, HardwareOptions, HardwareOptions)
-        self.config = GuardConfig.of(options, limits)
+        self.config = GuardConfig.of(options, limits, arm_tolerance)
         self.limits = self.config.limits
         self.num_joints = n = self.limits.lower.size
         if initial_arm_positions is None and limits is not None:
@@ -672,6 +771,8 @@ class CommandGuard(LeafSystem):
                                                  len(STATUS_CHANNELS))
         self._jumps = self.DeclareVectorInputPort("clock_jumps",
                                                   len(STATUS_CHANNELS))
+        self._measured = self.DeclareVectorInputPort(
+            "arm_position_measured", n)
         self._state = self.DeclareAbstractState(AbstractValue.Make(
             GuardState.holding(initial)))
         self.DeclarePeriodicUnrestrictedUpdateEvent(
@@ -742,12 +843,14 @@ class CommandGuard(LeafSystem):
         ages = self._ages.Eval(context)
         jumps = (self._jumps.Eval(context) if self._jumps.HasValue(context)
                  else None)
+        measured = (self._measured.Eval(context)
+                    if self._measured.HasValue(context) else None)
         wall_time = (None if self.wall_clock is None
                      else self.wall_clock.now())
         result, events = guard_step(
             self.stored(context), now, ages, self._base_in.Eval(context),
             self._arm_in.Eval(context), command_time, self.config,
-            clock_jumps=jumps, wall_time=wall_time)
+            clock_jumps=jumps, wall_time=wall_time, arm_measured=measured)
         for event, detail in events:
             _say(event, detail, now, self.options)
         if command_time and result.invalid > self.stored(context).invalid:
@@ -774,6 +877,9 @@ def _say(event, detail, now, options):
         LOG.warning("base cleared at t = %.3f s: obstacle points fresh for "
                     "%.3g s; the base resumes within its limits", now,
                     recovery)
+    elif event == "arm elsewhere":
+        LOG.warning("arm elsewhere at t = %.3f s: %s; its commands restart "
+                    "from where it is, at rest", now, detail)
     else:
         LOG.info("every stream fresh at t = %.3f s: the commands start", now)
 

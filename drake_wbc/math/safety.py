@@ -6,11 +6,16 @@ stand behind. Three mechanisms serve that, and this module holds their math
 (numpy only; the Drake systems in drake_wbc.stages.safety are thin over
 it):
 
-1. Input validity (`check_vector`, `check_inputs`, `check_points`): every
+1. Input validity (`check_vector`, `check_inputs`, `check_points`,
+   `check_following`): every
    value that enters the controller is checked once a tick. A NaN, an
    infinite value, a value outside the range a stage accepts (k_n < 0
    in eq. (wbccm), s_c outside [0, 1] in eq. (compensation)) or a switch
-   other than 0 or 1 (S_hri) is a fault of that input. Obstacle points
+   other than 0 or 1 (S_hri) is a fault of that input, and so is a
+   measurement that does not follow the command it measures (the arm's
+   measured position farther than `arm_follow_tolerance` from the arm
+   controller's last position command: the arm stopped on its own, or
+   is held). Obstacle points
    are the exception: a row with a NaN or infinite coordinate is dropped
    and counted, not a fault (see `check_points`). `check_inputs` and
    `check_points` have each a float kernel for the control tick
@@ -20,8 +25,9 @@ it):
 2. The safe stop (`next_stop_state`): on a fault the controller stops (zero
    base velocity, the arm braked to rest within its acceleration limit,
    the DMPs' couplings held; drake_wbc.controller.diagram) and it resumes,
-   from what it last sent, only after every input has been valid again
-   for `hold_time`.
+   from what it last sent (or, for the arm, from where it is when that
+   is farther than `arm_follow_tolerance` from it), only after every
+   input has been valid again for `hold_time`.
 3. Command limits that keep the direction, in drake_wbc.math.command_limits:
    the base command is scaled as a whole to the robot's velocity limits
    (SafetyParameters, below), and its change from one tick to the next as
@@ -88,6 +94,29 @@ slipping wheel reads beyond its command limit, no omnidirectional base
 reads ten times it (a forged 50 m/s)."""
 
 
+DEFAULT_ARM_FOLLOW_TOLERANCE = 0.1
+"""rad: how far a joint's measured position may be from the arm
+controller's last position command before the controller takes it that
+the arm does not follow (SafetyParameters.arm_follow_tolerance).
+
+Measured over every shipped scenario's full run (`drake-wbc run NAME`,
+every variant, both shipped robots; the measurement and the command
+logged at the same tick, as the InputGuard compares them): the largest
+|q_cmd - q_meas| of any joint is 0.0229 rad (repeat_obstacle, a joint at
+its speed limit of 1.57 rad/s: the servo's lag of some 15 ms), 0.0227 in
+fixed_point, at most 0.011 in the others (0.0081 on the seven-joint
+arm). No joint of the shipped arms moves faster, so a servo that
+follows stays near that; over LCM the measurement may be as old as the
+arm_status watchdog allows (30 ms: 1.57 rad/s x 0.03 s = 0.047 rad more,
+0.07 rad in all). 0.1 rad is 4.4 times the largest measured, 1.4 times
+that worst case over LCM, and it is the arm's own
+braking distance from full speed within its acceleration limit
+(1.57^2 / (2 x 12.56) = 0.098 rad, 5 cm at a tool 0.5 m out): a resume
+from a command within it (as from what was last sent, kept) asks the
+servo for no more than a step of that size. An arm that stops on its
+own while its command runs at full speed trips within 64 ms."""
+
+
 class Reason(IntEnum):
     """Why an input is not valid (the reason code of the safety status)."""
 
@@ -97,6 +126,7 @@ class Reason(IntEnum):
     OUT_OF_RANGE = 3
     MALFORMED = 4
     NOT_A_SWITCH = 5
+    NOT_FOLLOWING = 6
 
 
 class InputCheck(NamedTuple):
@@ -106,7 +136,9 @@ class InputCheck(NamedTuple):
         reason: a Reason; VALID when the input is usable.
         entry: the index of the first bad entry (-1 when valid or when the
             whole value is malformed).
-        value: the bad entry's value (NaN when valid or malformed).
+        value: the bad entry's value (NaN when valid or malformed); for
+            NOT_FOLLOWING its deviation from the command it follows
+            (input - command).
     """
 
     reason: Reason
@@ -159,6 +191,16 @@ class SafetyParameters:
             protective separation distance
             (drake_wbc.math.separation.PeopleSeparationParameters; its
             human speeds at least ISO 13855's).
+        arm_follow_tolerance: rad > 0, finite: a joint's measured
+            position farther than this from the arm controller's last
+            position command is a fault (the arm does not follow: its
+            own protective stop, an e-stop, a servo off, or held by
+            hand), and an arm that far from the last command when a
+            stop clears restarts from where it is
+            (DEFAULT_ARM_FOLLOW_TOLERANCE); over LCM the hardware
+            interface's command guard restarts the arm's commands from
+            where it is by the same tolerance
+            (drake_wbc.hardware.safety.resync_arm).
 
     The arm's limits (joint positions, 1.57 rad/s, 12.56 rad/s^2) are those
     of ArmControllerParameters. Vectors are given as any sequence (a list
@@ -173,9 +215,11 @@ class SafetyParameters:
     base_lag: float | None = None
     people: PeopleSeparationParameters = field(
         default_factory=PeopleSeparationParameters)
+    arm_follow_tolerance: float = DEFAULT_ARM_FOLLOW_TOLERANCE
 
     def __post_init__(self):
         positive("hold_time", self.hold_time)
+        positive("arm_follow_tolerance", self.arm_follow_tolerance)
         non_negative("stop_distance", self.stop_distance)
         positive("stop_time", self.stop_time)
         if self.base_lag is not None:
@@ -357,6 +401,55 @@ def check_inputs_float(values, ranges):
     return check_inputs(values, ranges)
 
 
+class Following(NamedTuple):
+    """That an input measures what a command drives, and must follow it.
+
+    Attributes:
+        command: the name of the command it follows (the InputGuard's
+            input port of that name: the controller's last command,
+            from its state).
+        tolerance: the largest |input - command| of an entry that is not
+            a fault, > 0 (in `unit`).
+        unit: of the input and the tolerance, for the reason.
+        meaning: what a larger deviation says, for the reason.
+    """
+
+    command: str
+    tolerance: float
+    unit: str = ""
+    meaning: str = ""
+
+
+def check_following(value, command, tolerance):
+    """Checks that a measurement follows its command: every entry of
+    `value` within `tolerance` of the same entry of `command`.
+
+    The arm's measured joint positions against the arm controller's last
+    position command: a position servo that follows lags behind a moving
+    command by a small fraction of the tolerance
+    (DEFAULT_ARM_FOLLOW_TOLERANCE); an arm that does not (its own
+    protective stop, an e-stop, a servo off, a hand holding it) falls
+    behind without bound while the controller integrates on.
+
+    Args:
+        value: the measurement (a vector of floats or AutoDiffXd; its
+            values are checked).
+        command: the command, of the same size.
+        tolerance: the largest deviation allowed, > 0.
+
+    Returns:
+        InputCheck: VALID, or NOT_FOLLOWING with the index of the first
+        entry farther than `tolerance` and its deviation value - command.
+    """
+    deviation = (np.asarray(value_of(value), dtype=float).ravel()
+                 - np.asarray(value_of(command), dtype=float).ravel())
+    beyond = np.flatnonzero(~(np.abs(deviation) <= tolerance))
+    if beyond.size == 0:
+        return VALID
+    i = int(beyond[0])
+    return InputCheck(Reason.NOT_FOLLOWING, i, float(deviation[i]))
+
+
 def check_points(points):
     """Checks obstacle points and keeps the usable ones.
 
@@ -444,13 +537,15 @@ def _non_finite_rows(points):
     return count
 
 
-def describe(name, check, size=None):
+def describe(name, check, size=None, following=None):
     """A sentence that says what is wrong with the input `name`.
 
     Args:
         name: the input port's name.
         check: its InputCheck.
         size: the port's size, for a malformed value.
+        following: the input's Following, for a deviation from its
+            command (NOT_FOLLOWING).
     """
     where = f"{name}[{check.entry}]"
     if check.reason is Reason.VALID:
@@ -463,6 +558,11 @@ def describe(name, check, size=None):
         return f"{where} = {check.value!r} is out of the range allowed"
     if check.reason is Reason.NOT_A_SWITCH:
         return f"{where} = {check.value!r} is not a switch: must be 0 or 1"
+    if check.reason is Reason.NOT_FOLLOWING:
+        unit = f" {following.unit}" if following.unit else ""
+        text = (f"{where} is {abs(check.value):.3g}{unit} from the last "
+                f"command (tolerance {following.tolerance:g}{unit})")
+        return f"{text}: {following.meaning}" if following.meaning else text
     shape = "(M, 2)" if size is None else f"({size},)"
     return f"{name} is malformed: it must be an array of shape {shape}"
 
@@ -518,7 +618,8 @@ STATUS_FIELDS = ("stopped", "invalid", "reason", "input", "entry", "value",
   input_names), -1 when not stopped.
 - entry: the index of its first bad entry, -1 when none.
 - value: that entry's value (0.0 for NaN, so that the status stays finite;
-  +-1e308 for an infinity).
+  +-1e308 for an infinity); for NOT_FOLLOWING its deviation from the
+  command, input - command.
 - valid_time: s for which every input has been valid.
 - trips: how many safe stops have started since the beginning.
 - dropped_points: obstacle points dropped at the last tick (a row with a
@@ -584,7 +685,7 @@ def next_status(status, fault, after, dropped=0):
     return new
 
 
-def status_reason(status, input_names, sizes, hold_time):
+def status_reason(status, input_names, sizes, hold_time, followings=None):
     """What a status vector says, as a sentence ("" when not stopped).
 
     Args:
@@ -592,6 +693,8 @@ def status_reason(status, input_names, sizes, hold_time):
         input_names: the inputs' names, in the order of its `input`.
         sizes: their sizes (None for the obstacle points).
         hold_time: s, for the message while the stop holds.
+        followings: the inputs' Following (None for one that follows no
+            command), in the same order; None for none.
     """
     if status[_STOPPED] < 0.5:
         return ""
@@ -602,8 +705,10 @@ def status_reason(status, input_names, sizes, hold_time):
         value = math.copysign(math.inf, value)
     text = describe(input_names[i],
                     InputCheck(reason, int(status[_ENTRY]), value),
-                    sizes[i])
+                    sizes[i], followings[i] if followings else None)
     if status[_INVALID] < 0.5:
-        text += (f"; the inputs are valid again, resuming after "
+        text += (f"; resuming from where it is after {hold_time:g} s"
+                 if reason is Reason.NOT_FOLLOWING else
+                 f"; the inputs are valid again, resuming after "
                  f"{hold_time:g} s of valid inputs")
     return text

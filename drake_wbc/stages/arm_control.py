@@ -13,6 +13,10 @@ from drake_wbc.math.arm_control import (
     twist_limits,
 )
 from drake_wbc.math.kernels import body_for
+from drake_wbc.math.safety import (
+    DEFAULT_ARM_FOLLOW_TOLERANCE,
+    check_following,
+)
 from drake_wbc.math.scalar_support import all_finite, through_float_function
 from drake_wbc.math.validation import checked_instance, positive
 from drake_wbc.robot.model import ArmKinematics
@@ -42,7 +46,8 @@ def ArmCartesianVelocityController_(T):
                            ┌──────────────────────┐
             arm_velocity ─►│ ArmCartesianVelocity ├─► arm_position_command
             hold ─────────►│ Controller           ├─► arm_velocity_command
-                           │                      ├─► limited
+            arm_position ─►│                      ├─► limited
+            resume ───────►│                      │
                            └──────────────────────┘
 
         - arm_velocity: V_a (6), the arm's Cartesian twist command
@@ -59,10 +64,26 @@ def ArmCartesianVelocityController_(T):
           deceleration; braking never asks for more than the arm can do.
           When the hold ends the arm restarts from the command it was
           last sent, from rest, within the acceleration limit: no jump
-          either way. Without an acceleration limit
+          either way (or from where it is, see arm_position). Without an
+          acceleration limit
           (`use_acceleration_limit` false) the command stops at once. A
           twist that is not finite is treated the same way (with
           `limited` 1.0), never integrated.
+        - arm_position: optional, q_meas (n, rad), the arm's measured
+          joint positions, read only with `resume`.
+        - resume (1): optional (never while unconnected); >= 0.5 at the
+          update at which a safe stop clears (InputGuard's `resume`).
+          Then a joint of q_meas farther than
+          `resume_tolerance` from q_cmd
+          (drake_wbc.math.safety.check_following) restarts the command
+          from q_meas (within the joint limits), at rest, before the
+          step: the arm was moved, or stopped on its own, during the
+          stop, and its servo, holding it there, must not be asked to
+          jump back to where the command was. The step from there is
+          the acceleration limit's from rest, as from any hold (with
+          hold, e.g. a protective stop that outlasts the safe stop, the
+          command stays there, at rest). Within the tolerance nothing
+          changes: the command resumes from where it was.
         - arm_position_command: q_cmd (n, rad), the joint positions for the
           arm's position servo. It is the state: no direct feedthrough.
         - arm_velocity_command: q_dot (n, rad/s) of the last update, the
@@ -122,9 +143,15 @@ def ArmCartesianVelocityController_(T):
                 run their updates concurrently from several threads).
             time_step: the control period h > 0 in s, default 0.01 (the
                 paper's 100 Hz).
+            resume_tolerance: rad > 0, how far the measured position
+                (arm_position) may be from q_cmd before the command
+                restarts from it (the controller's
+                SafetyParameters.arm_follow_tolerance); the default
+                DEFAULT_ARM_FOLLOW_TOLERANCE.
         """
 
         def _construct(self, params=None, kinematics=None, time_step=0.01,
+                       resume_tolerance=DEFAULT_ARM_FOLLOW_TOLERANCE,
                        converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.params = params = checked_instance(
@@ -144,6 +171,8 @@ def ArmCartesianVelocityController_(T):
             self._q, self._q_dot = slice(0, n), slice(n, 2 * n)
             self._limited_entry, self._state_size = 2 * n, 2 * n + 1
             self._time_step = positive("time_step", time_step)
+            self.resume_tolerance = positive("resume_tolerance",
+                                             resume_tolerance)
             self._lower, self._upper = self.lower.tolist(), self.upper.tolist()
             self._limits = twist_limits(
                 self.lower, self.upper, self.velocity_limits,
@@ -166,6 +195,8 @@ def ArmCartesianVelocityController_(T):
             self._input = self.DeclareVectorInputPort("arm_velocity",
                                                       TWIST_SIZE)
             self._hold = self.DeclareVectorInputPort("hold", 1)
+            self._measured = self.DeclareVectorInputPort("arm_position", n)
+            self._resume = self.DeclareVectorInputPort("resume", 1)
             initial = np.zeros(self._state_size)
             initial[self._q] = kinematics.home
             state = self.DeclareDiscreteState(BasicVector_[T](initial))
@@ -186,7 +217,8 @@ def ArmCartesianVelocityController_(T):
             # The original's parameters and kinematics, not its arguments:
             # a default (None) would build a second plant.
             Impl._construct(self, other.params, other.kinematics,
-                            other._time_step, converter=converter)
+                            other._time_step, other.resume_tolerance,
+                            converter=converter)
 
         @staticmethod
         def _state(context):
@@ -227,9 +259,25 @@ def ArmCartesianVelocityController_(T):
         def _update(self, context, discrete_state):
             hold = optional_scalar(self._hold, context, 0.0) >= 0.5
             x = self._state(context)
+            q, previous = x[self._q], x[self._q_dot]
+            if optional_scalar(self._resume, context, 0.0) >= 0.5 and (
+                    self._measured.HasValue(context)):
+                q, previous = self._resumed(
+                    q, previous, self._measured.Eval(context))
             discrete_state.set_value(self._next_state(
-                x[self._q], x[self._q_dot], self._input.Eval(context),
-                hold))
+                q, previous, self._input.Eval(context), hold))
+
+        def _resumed(self, q, previous, measured):
+            """(q_cmd, previous q_dot) to step from: the state's, or
+            `measured` (within the joint limits) at rest when a joint is
+            farther than resume_tolerance from q_cmd (a measurement
+            that is not finite is none)."""
+            if not all_finite(measured) or check_following(
+                    measured, q, self.resume_tolerance).valid:
+                return q, previous
+            start = [min(max(m, lower), upper) for m, lower, upper in zip(
+                measured.tolist(), self._lower, self._upper, strict=True)]
+            return np.array(start), previous * 0.0
 
         def _position(self, context, output):
             output.SetFromVector(self._state(context)[self._q])

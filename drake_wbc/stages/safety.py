@@ -17,8 +17,10 @@ from drake_wbc.math.kernels import body_for
 from drake_wbc.math.safety import (
     STATUS_FIELDS,
     VALID,
+    Following,
     InputCheck,
     SafetyParameters,
+    check_following,
     check_inputs,
     check_points,
     initial_status,
@@ -68,6 +70,11 @@ class GuardedInput(NamedTuple):
             (zeros if None).
         switch: every entry must be exactly 0 or 1 (a switch; anything
             else is a fault, drake_wbc.math.safety.check_vector).
+        follows: a drake_wbc.math.safety.Following: the input measures
+            what a command of the controller drives, and an entry
+            farther than its tolerance from the command is a fault
+            (check_following); the guard has an input port of the
+            command's name and size. None: no such check.
     """
 
     name: str
@@ -78,6 +85,7 @@ class GuardedInput(NamedTuple):
     zero_when_stopped: bool = False
     initial: tuple | None = None
     switch: bool = False
+    follows: Following | None = None
 
 
 def _range_of(spec):
@@ -120,7 +128,9 @@ class _Assessment(NamedTuple):
     points: np.ndarray  # the usable obstacle points
     dropped: int
     points_check: InputCheck
+    following: object   # (input index, InputCheck) of a deviation, or None
     after: object       # the StopState after this tick: the decision
+    resumes: bool       # stopped before this tick, not after it
 
 
 @define_stage("InputGuard_")
@@ -134,7 +144,8 @@ def InputGuard_(T):
                                ┌────────────┐
             <each input> ─────►│            ├──► <its guarded outputs>
             obstacle_points ──►│ InputGuard ├──► obstacle_points (abstract)
-                               │            ├──► stop, stopped
+            <each command> ───►│            ├──► stop, stopped
+                               │            ├──► resume
                                │            ├──► safety_status
                                └────────────┘──► safety_reason (abstract)
 
@@ -150,6 +161,20 @@ def InputGuard_(T):
           or infinite coordinate, which are dropped and counted
           (drake_wbc.math.safety.check_points); a malformed array is a fault,
           and no points are passed on while it lasts.
+        - <each command> (input): for a GuardedInput that `follows` one,
+          the command it follows, under the Following's `command` name
+          (the arm controller's `arm_position_command`: its state, the
+          command of the last tick, so no algebraic loop). At a tick
+          that follows one not stopped, an entry of the input farther
+          than the tolerance from it is a fault (check_following; the
+          input itself is valid and passed on, it is a true
+          measurement). During a stop it is not checked: an arm that
+          stopped on its own stays where it is, the stop clears after
+          hold_time all the same, and the arm controller resumes from
+          where the arm is (`resume`). Nor at the very first tick: no
+          command has been sent yet (the arm controller's initial state,
+          which Controller.initialize sets to the measured position;
+          over LCM the measurement may not have arrived yet).
         - stop (1): 1.0 when the controller stops at this tick: the
           decision, from this tick's inputs, that the next update will
           store. For stages that act in their update (the arm
@@ -157,6 +182,9 @@ def InputGuard_(T):
         - stopped (1): 1.0 when the last tick decided to stop (state: no
           direct feedthrough), for the command outputs; it equals `stop`
           as it was at that tick.
+        - resume (1): 1.0 when a stop clears at this tick (the last tick
+          stopped, this one not): for the arm controller's restart from
+          where the arm is.
         - safety_status: see STATUS_FIELDS (state).
         - safety_reason: the reason as a sentence, "" when not stopped
           (state); also `reason(context)`.
@@ -209,6 +237,17 @@ def InputGuard_(T):
                 (port, any(entry[1] is not None for entry in spec.outputs))
                 for port, spec in zip(self._ports, self.inputs, strict=True))
             self._ranges = tuple(_range_of(spec) for spec in self.inputs)
+            # Each input's Following (None for the points), as input_names.
+            self.followings = tuple(spec.follows for spec in self.inputs) + (
+                (None,) if points_name else ())
+            self._commands = []
+            for i, spec in enumerate(self.inputs):
+                if spec.follows is not None:
+                    positive(f"{spec.name} follows.tolerance",
+                             spec.follows.tolerance)
+                    self._commands.append((i, spec.follows, (
+                        self.DeclareVectorInputPort(spec.follows.command,
+                                                    spec.size))))
             self._check_inputs = body_for(check_inputs, T)
             self._check_points = body_for(check_points, T)
             self._points = None
@@ -252,6 +291,7 @@ def InputGuard_(T):
                     self._points_output)
             self._stop_values = (np.zeros(1), np.ones(1))
             self.DeclareVectorOutputPort("stop", 1, self._stop_output)
+            self.DeclareVectorOutputPort("resume", 1, self._resume_output)
             self.DeclareVectorOutputPort(
                 "stopped", 1, self._stopped_output,
                 prerequisites_of_calc=from_state)
@@ -288,12 +328,26 @@ def InputGuard_(T):
                     self._points.Eval(context))
             else:
                 points, dropped, points_check = np.zeros((0, 2)), 0, VALID
-            invalid = not (points_check.valid and all_valid)
-            after = next_stop_state(stop_state_of(self._status(context)),
-                                    invalid, self.time_step,
+            before = stop_state_of(self._status(context))
+            following = None
+            # Checked at a tick that follows one not stopped, but for the
+            # first (valid for 0 s and not stopped: no tick yet).
+            if not before.stopped and before.valid_time > 0.0:
+                for i, follows, port in self._commands:
+                    if values[i] is None or not checks[i].valid:
+                        continue
+                    check = check_following(values[i], port.Eval(context),
+                                            follows.tolerance)
+                    if not check.valid:
+                        following = i, check
+                        break
+            invalid = not (points_check.valid and all_valid) or (
+                following is not None)
+            after = next_stop_state(before, invalid, self.time_step,
                                     self.params.hold_time)
             return _Assessment(values, checks, all_valid, points, dropped,
-                               points_check, after)
+                               points_check, following, after,
+                               before.stopped and not after.stopped)
 
         def _first_fault(self, assessment):
             """(input index, InputCheck) of the first invalid input, or
@@ -304,7 +358,7 @@ def InputGuard_(T):
                         return i, check
             if not assessment.points_check.valid:
                 return len(self.inputs), assessment.points_check
-            return None
+            return assessment.following
 
         # --- outputs ------------------------------------------------------
 
@@ -335,6 +389,10 @@ def InputGuard_(T):
         def _points_output(self, context, output):
             output.set_value(self._assessment.Eval(context).points)
 
+        def _resume_output(self, context, output):
+            resumes = self._assessment.Eval(context).resumes
+            output.SetFromVector(self._stop_values[resumes])
+
         def _stop_output(self, context, output):
             stop = self._assessment.Eval(context).after.stopped
             output.SetFromVector(self._stop_values[stop])
@@ -355,7 +413,7 @@ def InputGuard_(T):
 
         def _reason_of(self, status):
             return status_reason(status, self.input_names, self._sizes,
-                                 self.params.hold_time)
+                                 self.params.hold_time, self.followings)
 
         # --- update -------------------------------------------------------
 
