@@ -3,7 +3,8 @@
 A small forward kinematics of serial chains given as URDF-style joint
 origins (xyz, rpy relative to the previous link frame, revolute about the
 local z axis, then a fixed flange offset), the Elfin5 chain as tabulated in
-the robot facts, and random rotations. The tests compare the library and
+the robot facts, the UR5e's maker's Denavit-Hartenberg table, and random
+rotations. The tests compare the library and
 the model files with these; the joint-limit penalty of the paper is
 written out term by term here too.
 """
@@ -24,6 +25,27 @@ ELFIN5 = (
 )
 ELFIN5_UPPER = np.array([3.14, 2.35, 2.61, 3.14, 2.56, 3.14])
 ELFIN5_LOWER = -ELFIN5_UPPER
+
+# The UR5e's published Denavit-Hartenberg parameters (d, a, alpha), theta =
+# q, and its dynamic parameters: link masses (kg) and centres of mass in
+# the DH link frames (m).
+UR5E_DH = (
+    (0.1625, 0.0, np.pi / 2),
+    (0.0, -0.425, 0.0),
+    (0.0, -0.3922, 0.0),
+    (0.1333, 0.0, np.pi / 2),
+    (0.0997, 0.0, -np.pi / 2),
+    (0.0996, 0.0, 0.0),
+)
+UR5E_MASSES = (3.761, 8.058, 2.846, 1.37, 1.3, 0.365)
+UR5E_CENTRES_OF_MASS = (
+    (0.0, -0.02561, 0.00193),
+    (0.2125, 0.0, 0.11336),
+    (0.15, 0.0, 0.0265),
+    (0.0, -0.0018, 0.01634),
+    (0.0, 0.0018, 0.01634),
+    (0.0, 0.0, -0.001159),
+)
 
 
 def random_rotation(rng):
@@ -63,6 +85,22 @@ def forward_kinematics(chain, q):
     p = p + R @ np.asarray(flange_xyz)
     R = R @ rpy_matrix(*flange_rpy)
     return p, R, np.array(axes), np.array(origins)
+
+
+def dh_frames(table, q):
+    """The (4, 4) poses of the DH link frames 1 to n in frame 0, by the
+    classic convention: T_i = T_(i-1) Rz(theta_i) Tz(d_i) Tx(a_i)
+    Rx(alpha_i), theta_i = q_i."""
+    T, frames = np.eye(4), []
+    for (d, a, alpha), theta in zip(table, q, strict=True):
+        ct, st = np.cos(theta), np.sin(theta)
+        ca, sa = np.cos(alpha), np.sin(alpha)
+        T = T @ np.array([[ct, -st * ca, st * sa, a * ct],
+                          [st, ct * ca, -ct * sa, a * st],
+                          [0.0, sa, ca, d],
+                          [0.0, 0.0, 0.0, 1.0]])
+        frames.append(T)
+    return frames
 
 
 def jacobian(chain, q):

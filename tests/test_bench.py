@@ -20,6 +20,8 @@ from drake_wbc.robot.model import ArmKinematics, make_robot_plant
 
 LBR_FILE = models_dir() / "lbr_omni.robot.yaml"
 """The second shipped robot's description: a 7-joint arm."""
+UR_FILE = models_dir() / "ur_omni.robot.yaml"
+"""The third shipped robot's description: a UR5e-class arm."""
 
 
 @pytest.fixture(scope="module")
@@ -32,9 +34,15 @@ def lbr():
     return ArmKinematics(*make_robot_plant(load_robot_description(LBR_FILE)))
 
 
-@pytest.fixture(params=["arm", "lbr"])
+@pytest.fixture(scope="module")
+def ur():
+    return ArmKinematics(*make_robot_plant(load_robot_description(UR_FILE)))
+
+
+@pytest.fixture(params=["arm", "lbr", "ur"])
 def either(request):
-    """The shipped robot's arm, then the 7-joint one."""
+    """The shipped robot's arm, then the 7-joint one, then the UR-class
+    one."""
     return request.getfixturevalue(request.param)
 
 
@@ -447,31 +455,35 @@ def test_a_short_tick_on_the_7_joint_robot(lbr):
 
 
 @pytest.mark.filterwarnings("ignore:The default value of raise_error")
-def test_quick_bench_on_the_7_joint_robot(tmp_path):
-    """`drake-wbc bench --quick --robot models/lbr_omni.robot.yaml`, at
-    the smallest counts its options allow: every part on that robot (the
-    race fair, the joint-space peer answering its own problem, the tick,
-    the scenario run on it)."""
+@pytest.mark.parametrize("path, name, joints", [(LBR_FILE, "lbr_omni", 7),
+                                                (UR_FILE, "ur_omni", 6)],
+                         ids=["lbr_omni", "ur_omni"])
+def test_quick_bench_on_the_other_shipped_robots(tmp_path, path, name,
+                                                 joints):
+    """`drake-wbc bench --quick --robot models/lbr_omni.robot.yaml` (and
+    ur_omni), at the smallest counts its options allow: every part on
+    that robot (the race fair, the joint-space peer answering its own
+    problem, the tick, the scenario run on it)."""
     parser = argparse.ArgumentParser()
     add_bench_arguments(parser)
     args = parser.parse_args(["--quick", "--output", str(tmp_path),
                               "--repeats", "1", "--scenario-duration",
-                              "0.1", "--robot", str(LBR_FILE)])
+                              "0.1", "--robot", str(path)])
     assert run_bench(args, echo=lambda line: None) == 0
     results = json.loads((tmp_path / "bench.json").read_text())
-    assert results["robot"] == {"name": "lbr_omni", "arm_joints": 7}
-    assert results["settings"]["robot"] == str(LBR_FILE.resolve())
+    assert results["robot"] == {"name": name, "arm_joints": joints}
+    assert results["settings"]["robot"] == str(path.resolve())
     race_results = results["distribution"]
     assert race_results["fair"]
-    for name, entry in race_results["solve"].items():
-        assert entry["max_abs_difference"] <= FAIRNESS_TOLERANCE, name
+    for solver, entry in race_results["solve"].items():
+        assert entry["max_abs_difference"] <= FAIRNESS_TOLERANCE, solver
     plant = race_results["with_kinematics"]["drake_diffik_plant"]
     assert plant["max_abs_difference"] < 1e-9  # no mount: no bounds
     assert results["control_tick"]["tick"]["time_us"]["median"] > 0
     run = results["scenarios"]["trajectory_tracking"]
-    assert run["runs"][0]["robot"] == "lbr_omni"
+    assert run["runs"][0]["robot"] == name
     assert run["runs"][0]["simulated_s"] == pytest.approx(0.1)
-    assert "Robot: lbr_omni (7 arm joints)." in (
+    assert f"Robot: {name} ({joints} arm joints)." in (
         tmp_path / "bench.md").read_text()
 
 

@@ -232,6 +232,24 @@ def test_demo_reports_the_capability_with_the_controllers_k_j(tmp_path,
         assert f"with k_j = {k_j} and the band" in out
 
 
+def test_demo_lists_the_arms_own_limits(tmp_path, capsys):
+    """The joint table shows the limits the arm's controller and the LCM
+    guard hold it to: the description's where it tightens the model's
+    (the UR-class arm's elbow, +-pi of the model's +-2 pi), which the
+    table showed as the model's."""
+    robot = (Path(__file__).resolve().parents[1] / "models"
+             / "ur_omni.robot.yaml")
+    assert main(["demo", "--robot", str(robot), "--output",
+                 str(tmp_path)]) == 0
+    rows = {line.split()[1]: line for line in
+            capsys.readouterr().out.splitlines() if line.startswith("  arm ")}
+    assert "[-3.14, +3.14] rad" in rows["elbow"]
+    for name in ("shoulder_pan", "shoulder_lift", "wrist_1", "wrist_2",
+                 "wrist_3"):
+        assert "[-6.28, +6.28] rad" in rows[name]
+    assert all("3.14 rad/s" in row for row in rows.values())
+
+
 def test_the_summary_heads_a_single_run_without_its_name():
     """One run's metrics read "Run metrics:" (not "Run run:", the default
     run's name); several runs are each headed by their name."""

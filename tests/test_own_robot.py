@@ -457,17 +457,23 @@ def test_a_suspension_under_a_urdf_base_is_refused_naming_its_file(
         SimulatedStation(options, robot=description)
 
 
-def test_the_second_shipped_robot_tracks_the_papers_step():
-    """The second shipped robot (models/lbr_omni.robot.yaml: a 7-joint
-    LBR-class arm on a larger omni base, its own sensor and probe) in its
-    trajectory-tracking scenario, 2.2 s of it: the tool takes up the
-    0.1 m/s step (in the ground truth, once settled) with every command
-    within that robot's limits, and the tuning its demo proposes (in its
-    description, which the scenario leaves to it)."""
-    scenario = load_scenario(find_scenario("trajectory_tracking_lbr"))
+@pytest.mark.parametrize("name, robot_name, joints", [
+    ("trajectory_tracking_lbr", "lbr_omni", 7),
+    ("trajectory_tracking_ur", "ur_omni", 6)])
+def test_the_other_shipped_robots_track_the_papers_step(name, robot_name,
+                                                         joints):
+    """The second and third shipped robots (models/lbr_omni.robot.yaml: a
+    7-joint LBR-class arm; models/ur_omni.robot.yaml: a UR5e-class arm
+    with shoulder and wrist offsets and its built-in wrist sensor; both on
+    the larger omni base) in their trajectory-tracking scenarios, 2.2 s
+    of each: the tool takes up the 0.1 m/s step (in the ground truth,
+    once settled) with every command within that robot's limits, and the
+    tuning its demo proposes (in its description, which the scenario
+    leaves to it)."""
+    scenario = load_scenario(find_scenario(name))
     scenario.duration = 2.2
     robot = scenario_robot(scenario)
-    assert robot.name == "lbr_omni" and len(robot.arm.joints) == 7
+    assert robot.name == robot_name and len(robot.arm.joints) == joints
     arm = controller_arm(scenario)
     assert scenario.controller.capability_band is None
     params = controller_for(scenario)
@@ -481,7 +487,7 @@ def test_the_second_shipped_robot_tracks_the_papers_step():
     assert np.mean(v[settled, 0]) == pytest.approx(0.1, abs=0.01)
     assert np.max(np.abs(v[settled, 1])) < 0.01
     q = log["arm.position_command"]
-    assert q.shape[1] == 7
+    assert q.shape[1] == joints
     assert np.all(q >= arm.lower) and np.all(q <= arm.upper)
     speed = np.linalg.norm(log["base.velocity_command"][:, :2], axis=1)
     assert np.max(speed) <= 0.8 + 1e-9

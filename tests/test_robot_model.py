@@ -13,11 +13,19 @@ from reference_kinematics import (
     ELFIN5,
     ELFIN5_LOWER,
     ELFIN5_UPPER,
+    UR5E_CENTRES_OF_MASS,
+    UR5E_DH,
+    UR5E_MASSES,
+    dh_frames,
     forward_kinematics,
 )
 from shipped_names import ARM_JOINTS, BASE_JOINTS, MOUNT_JOINTS
 
-from drake_wbc.robot.description import shipped_robot
+from drake_wbc.robot.description import (
+    load_robot_description,
+    models_dir,
+    shipped_robot,
+)
 from drake_wbc.robot.model import (
     HOME_ARM_POSITIONS,
     ArmKinematics,
@@ -342,6 +350,76 @@ def test_sensing_weld_reads_the_tool_weight():
 
 
 @pytest.fixture(scope="module")
+def ur():
+    """The third shipped robot's plant: the UR5e-class arm."""
+    return make_robot_plant(load_robot_description(
+        models_dir() / "ur_omni.robot.yaml"))
+
+
+# The maker's base frame (DH frame 0) in the UR arm's T_a: turned by pi
+# about z (ur5e.sdf).
+X_A0 = np.diag([-1.0, -1.0, 1.0, 1.0])
+
+
+def test_the_ur_arm_is_its_makers_dh_table(ur):
+    """The UR5e-class arm's model (frames placed by hand in ur5e.sdf) is
+    the maker's published DH table: the flange is DH frame 6 at random
+    configurations over the joints' +-2 pi, and each link's mass and
+    centre of mass are the published ones in its DH frame (link 6 with
+    the flange's plate beyond the wrist's sensor)."""
+    plant, model = ur
+    arm = model.arm_joints
+    bodies = [[j.child_body()] for j in arm]
+    bodies[-1].append(model.ft_sensor_joint.child_body())
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        q = rng.uniform(-2.0 * np.pi, 2.0 * np.pi, 6)
+        context = _arm_context(plant, model, q)
+        X_A6 = model.flange_frame.CalcPose(context, model.arm_base_frame)
+        frames = [X_A0 @ T for T in dh_frames(UR5E_DH, q)]
+        np.testing.assert_allclose(X_A6.GetAsMatrix4(), frames[-1],
+                                   atol=1e-12)
+        X_AW = model.arm_base_frame.CalcPoseInWorld(context).inverse()
+        for link, mass, centre, T in zip(bodies, UR5E_MASSES,
+                                         UR5E_CENTRES_OF_MASS, frames,
+                                         strict=True):
+            masses = [b.get_mass(context) for b in link]
+            weighted = sum(m * (X_AW @ b.EvalPoseInWorld(context)).multiply(
+                b.CalcCenterOfMassInBodyFrame(context))
+                for m, b in zip(masses, link, strict=True))
+            assert sum(masses) == pytest.approx(mass, abs=1e-12)
+            np.testing.assert_allclose(weighted / sum(masses),
+                                       T[:3, :3] @ centre + T[:3, 3],
+                                       atol=1e-6)
+
+
+def test_the_ur_arm_has_its_makers_limits(ur):
+    """+-2 pi (the model's, as published; the description holds the
+    elbow to +-pi, where the upper arm stops it) and 180 degrees/s on
+    every joint, the maker's maximum joint torques (150 N m on the three
+    large joints, 28 N m on the wrist's) and the 10 rad/s^2 estimate;
+    the arm weighs the published 20.6 kg."""
+    plant, model = ur
+    arm = ArmKinematics(plant, model)
+    for joint in model.arm_joints:
+        assert joint.position_upper_limits()[0] == 2.0 * np.pi
+        assert joint.position_lower_limits()[0] == -2.0 * np.pi
+    np.testing.assert_array_equal(
+        arm.upper, [2.0 * np.pi, 2.0 * np.pi, np.pi] + [2.0 * np.pi] * 3)
+    np.testing.assert_array_equal(arm.lower, -arm.upper)
+    np.testing.assert_array_equal(arm.velocity_limits, np.full(6, np.pi))
+    np.testing.assert_array_equal(arm.acceleration_limits, np.full(6, 10.0))
+    efforts = [plant.get_joint_actuator(i).effort_limit()
+               for i in plant.GetJointActuatorIndices()
+               if plant.get_joint_actuator(i).joint() in model.arm_joints]
+    assert efforts == [150.0, 150.0, 150.0, 28.0, 28.0, 28.0]
+    context = plant.CreateDefaultContext()
+    instance = model.arm_joints[0].model_instance()
+    assert sum(plant.get_body(i).get_mass(context)
+               for i in plant.GetBodyIndices(instance)) == pytest.approx(20.6)
+
+
+@pytest.fixture(scope="module")
 def shipped_arm():
     return ArmKinematics()
 
@@ -502,15 +580,15 @@ def _omni_arm_plant(folder, n):
 
 
 def _chain_robots(folder):
-    """(name, plant, model) of both shipped robots and the 6- and 7-joint
-    omni arm of tests/omni_arm.py."""
+    """(name, plant, model) of the three shipped robots and the 6- and
+    7-joint omni arm of tests/omni_arm.py."""
     from drake_wbc.robot.description import (
         load_robot_description,
         models_dir,
     )
     robots = [(name, *make_robot_plant(load_robot_description(
         models_dir() / f"{name}.robot.yaml")))
-        for name in ("mcr", "lbr_omni")]
+        for name in ("mcr", "lbr_omni", "ur_omni")]
     for n in (6, 7):
         (folder / str(n)).mkdir()
         robots.append((f"omni_arm_{n}", *_omni_arm_plant(folder / str(n),

@@ -14,7 +14,7 @@ from drake_wbc.controller.parameters import for_robot
 from drake_wbc.math import capability
 from drake_wbc.math.capability import CapabilityBand
 from drake_wbc.math.workspace import LocalWorkspace, deflection, extent
-from drake_wbc.robot.description import load_robot_description
+from drake_wbc.robot.description import load_robot_description, models_dir
 from drake_wbc.robot.model import ArmKinematics, make_robot_plant
 from drake_wbc.robot.tuning import (
     RobotTuningWarning,
@@ -173,6 +173,34 @@ def test_the_local_workspace_is_proposed_and_checked_at_the_arms_home(
     params.workspace.mode = "intuitive-phri"
     with pytest.warns(RobotTuningWarning, match="extent_lower"):
         build_controller(params, robot=seven)
+
+
+@pytest.mark.parametrize("name", ["lbr_omni", "ur_omni"])
+def test_the_shipped_robots_carry_the_tuning_their_demo_proposes(name):
+    """The second and third shipped robots' descriptions hold what
+    `drake-wbc demo --robot` proposes for their arms, to the three
+    decimals written: k_j for their number of joints, the band at 0.54
+    and 0.62 of C_m at home and, where the tool at home reaches beyond
+    the paper's d^l (the UR-class arm's, 0.752 m), the local workspace
+    at that reach; check_tuning finds nothing to change."""
+    robot = load_robot_description(models_dir() / f"{name}.robot.yaml")
+    arm = ArmKinematics(*make_robot_plant(robot))
+    tuning = robot.tuning
+    assert tuning.joint_limit_gain == pytest.approx(
+        proposed_joint_limit_gain(arm.num_joints), rel=1e-9)
+    band = survey_capability(arm, count=1).proposed_band()
+    assert (tuning.capability_band.lower, tuning.capability_band.upper) == (
+        pytest.approx((band.lower, band.upper), abs=5e-4))
+    workspace = tuning.local_workspace
+    if home_extent(arm) > LocalWorkspace().extent_lower:
+        proposal = proposed_local_workspace(arm)
+        assert (workspace.extent_lower, workspace.extent_upper) == (
+            pytest.approx((proposal.extent_lower, proposal.extent_upper),
+                          abs=5e-4))
+    else:
+        assert workspace == LocalWorkspace()
+    assert check_tuning(arm, tuning.capability_band,
+                        tuning.joint_limit_gain, workspace) == []
 
 
 def test_an_arm_base_frame_facing_away_from_the_tool_is_warned_of(tmp_path):

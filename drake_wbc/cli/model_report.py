@@ -41,7 +41,9 @@ def describe_robot(q_a=None, k_j=None, description=None):
     """Returns a text report of the robot model at arm configuration `q_a`
     (its home if None).
 
-    Lists every moving joint with its limits and whether it is actuated,
+    Lists every moving joint with its limits (the arm's own, ArmLimits:
+    the description's where it tightens the model's) and whether it is
+    actuated,
     the masses, the mount's rocking modes (with a two-joint mount), the
     base's described limits, footprint, timeout and lag (what the
     controller's safety takes), and the capability of movement (m,
@@ -73,12 +75,20 @@ def describe_robot(q_a=None, k_j=None, description=None):
     # e.g. `shoulder_lift_joint`, are longer than the shipped robot's).
     width = max([12] + [len(j.name()) for _, joints in groups
                         for j in joints])
+    # The arm's limits are its own: what its controller and the LCM
+    # guard hold it to.
+    own = {joint.index(): i for i, joint in enumerate(model.arm_joints)}
     for group, joints in groups:
         for joint in joints:
             name = joint.name()
             unit = "m" if joint.type_name() == "prismatic" else "rad"
             low = joint.position_lower_limits()[0]
             high = joint.position_upper_limits()[0]
+            speed = joint.velocity_upper_limits()[0]
+            if joint.index() in own:
+                i = own[joint.index()]
+                low, high = model.limits.lower[i], model.limits.upper[i]
+                speed = model.limits.velocity[i]
             limits = (
                 "unlimited"
                 if np.isinf(low) and np.isinf(high)
@@ -90,10 +100,9 @@ def describe_robot(q_a=None, k_j=None, description=None):
                 if joint.index() in actuated
                 else "unactuated (spring-damper)"
             )
-            speed = f"{joint.velocity_upper_limits()[0]:5.2f} {unit}/s"
             lines.append(
                 f"  {group:5s} {name:{width}s} {joint.type_name():9s} "
-                f"{limits:24s} {speed:11s}  {effort}"
+                f"{limits:24s} {f'{speed:5.2f} {unit}/s':11s}  {effort}"
             )
 
     def mass(instance):
