@@ -340,6 +340,21 @@ def test_the_measurements_are_new_every_tick():
                                    atol=1e-12)
 
 
+def test_the_ticks_time_a_running_controller(either):
+    """The ticker's arm measurements do not follow its commands (no
+    plant): with the guard's arm-follow check at its default, the
+    controller stopped some 1.5 s into every batch of ticks, so the bench
+    timed a stopped controller for a quarter of them. The check runs,
+    at a tolerance wider than any arm's travel."""
+    from drake_wbc.bench.control_tick import ControllerTicker
+
+    ticker = ControllerTicker(either, num_points=20)
+    ticker.restart()
+    for _ in range(300):
+        ticker.advance()
+        assert ticker.controller.safety_reason(ticker.context) == ""
+
+
 def test_a_tick_pulls_the_station_s_commands():
     """After a tick, the exported commands are computed already: the
     ports' cache entries are up to date (pulling them again computes
