@@ -53,6 +53,7 @@ from drake_wbc.math.safety import (
     DEFAULT_ARM_FOLLOW_TOLERANCE,
     VALID,
     check_following,
+    restart_position,
 )
 from drake_wbc.math.validation import (
     as_vector,
@@ -450,10 +451,11 @@ def resync_arm(state, measured, config):
 
     The guard sends what it limited from what it sent last
     (`follow_arm_command`). An arm that is farther than
-    `config.arm_tolerance` from that (`check_following`: moved by hand,
-    or stopped on its own, during a stop) would be asked to jump back
-    to it. So its command restarts from its measured position (within
-    the joint limits), at rest, and holds there (`arm_resync`) until the
+    `config.arm_tolerance` from that (moved by hand, or stopped on its
+    own, during a stop) would be asked to jump back to it. So its
+    command restarts from its measured position (within the joint
+    limits: drake_wbc.math.safety.restart_position, the controller's
+    rule), at rest, and holds there (`arm_resync`) until the
     controller's command is within the tolerance of it (the controller
     resumes from where the arm is too, drake_wbc.controller.diagram).
     An arm where the last command was, or no measurement (None), leaves
@@ -464,12 +466,11 @@ def resync_arm(state, measured, config):
     """
     if measured is None:
         return state, VALID
-    check = check_following(measured, state.arm, config.arm_tolerance)
-    if check.valid:
+    check, start = restart_position(
+        np.asarray(measured, dtype=float), state.arm, config.arm_tolerance,
+        config.limits.lower, config.limits.upper)
+    if start is None:
         return state, check
-    limits = config.limits
-    start = np.clip(np.asarray(measured, dtype=float), limits.lower,
-                    limits.upper)
     return state._replace(arm=start, arm_velocity=np.zeros_like(start),
                           arm_resync=True), check
 

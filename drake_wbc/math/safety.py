@@ -26,8 +26,8 @@ it):
    base velocity, the arm braked to rest within its acceleration limit,
    the DMPs' couplings held; drake_wbc.controller.diagram) and it resumes,
    from what it last sent (or, for the arm, from where it is when that
-   is farther than `arm_follow_tolerance` from it), only after every
-   input has been valid again for `hold_time`.
+   is farther than `arm_follow_tolerance` from it, `restart_position`),
+   only after every input has been valid again for `hold_time`.
 3. Command limits that keep the direction, in drake_wbc.math.command_limits:
    the base command is scaled as a whole to the robot's velocity limits
    (SafetyParameters, below), and its change from one tick to the next as
@@ -49,7 +49,7 @@ import numpy as np
 
 from drake_wbc.math import kernels
 from drake_wbc.math.compiled import compiled
-from drake_wbc.math.scalar_support import value_of
+from drake_wbc.math.scalar_support import all_finite, value_of
 from drake_wbc.math.separation import PeopleSeparationParameters
 from drake_wbc.math.validation import non_negative, positive, positive_vector
 
@@ -448,6 +448,43 @@ def check_following(value, command, tolerance):
         return VALID
     i = int(beyond[0])
     return InputCheck(Reason.NOT_FOLLOWING, i, float(deviation[i]))
+
+
+def restart_position(measured, command, tolerance, lower, upper):
+    """Where an arm's position command restarts after a stop.
+
+    An arm farther than `tolerance` from its last command
+    (`check_following`: moved by hand, or stopped on its own, during the
+    stop) is held there by its servo, and a command resumed from the old
+    one would ask it to jump back: the command restarts from the
+    measured position, held within the joint limits (and at rest, which
+    is the caller's). Within the tolerance it resumes from where it was.
+    The controller's arm stage (drake_wbc.stages.arm_control) and the
+    hardware interface's command guard (drake_wbc.hardware.safety) both
+    restart by this rule.
+
+    Args:
+        measured: (n,) the arm's measured positions, rad (floats or
+            AutoDiffXd; the result is of the same type). One that is
+            not finite is no measurement.
+        command: (n,) the last position command, rad.
+        tolerance: rad > 0.
+        lower, upper: (n,) the joint position limits, rad.
+
+    Returns:
+        (the InputCheck of `measured` against `command`, VALID for a
+        measurement that is not finite; the (n,) positions to restart
+        from, or None when the command resumes from where it was).
+    """
+    if not all_finite(measured):
+        return VALID, None
+    check = check_following(measured, command, tolerance)
+    if check.valid:
+        return check, None
+    return check, np.array([
+        min(max(m, low), high) for m, low, high in zip(
+            np.asarray(measured).tolist(), np.asarray(lower).tolist(),
+            np.asarray(upper).tolist(), strict=True)])
 
 
 def check_points(points):

@@ -15,7 +15,7 @@ from drake_wbc.math.arm_control import (
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.safety import (
     DEFAULT_ARM_FOLLOW_TOLERANCE,
-    check_following,
+    restart_position,
 )
 from drake_wbc.math.scalar_support import all_finite, through_float_function
 from drake_wbc.math.validation import checked_instance, positive
@@ -73,15 +73,14 @@ def ArmCartesianVelocityController_(T):
           joint positions, read only with `resume`.
         - resume (1): optional (never while unconnected); >= 0.5 at the
           update at which a safe stop clears (InputGuard's `resume`).
-          Then a joint of q_meas farther than
-          `resume_tolerance` from q_cmd
-          (drake_wbc.math.safety.check_following) restarts the command
-          from q_meas (within the joint limits), at rest, before the
-          step: the arm was moved, or stopped on its own, during the
-          stop, and its servo, holding it there, must not be asked to
-          jump back to where the command was. The step from there is
-          the acceleration limit's from rest, as from any hold (with
-          hold, e.g. a protective stop that outlasts the safe stop, the
+          Then a joint of q_meas farther than `resume_tolerance` from
+          q_cmd restarts the command from q_meas (within the joint
+          limits; drake_wbc.math.safety.restart_position), at rest,
+          before the step: the arm was moved, or stopped on its own,
+          during the stop, and its servo, holding it there, must not be
+          asked to jump back to where the command was. The step from
+          there is the acceleration limit's from rest, as from any hold
+          (with hold, e.g. a protective stop that outlasts the safe stop, the
           command stays there, at rest). Within the tolerance nothing
           changes: the command resumes from where it was.
         - arm_position_command: q_cmd (n, rad), the joint positions for the
@@ -272,12 +271,11 @@ def ArmCartesianVelocityController_(T):
             `measured` (within the joint limits) at rest when a joint is
             farther than resume_tolerance from q_cmd (a measurement
             that is not finite is none)."""
-            if not all_finite(measured) or check_following(
-                    measured, q, self.resume_tolerance).valid:
+            start = restart_position(measured, q, self.resume_tolerance,
+                                     self._lower, self._upper)[1]
+            if start is None:
                 return q, previous
-            start = [min(max(m, lower), upper) for m, lower, upper in zip(
-                measured.tolist(), self._lower, self._upper, strict=True)]
-            return np.array(start), previous * 0.0
+            return start, previous * 0.0
 
         def _position(self, context, output):
             output.SetFromVector(self._state(context)[self._q])
