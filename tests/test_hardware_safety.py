@@ -24,6 +24,7 @@ from drake_wbc.hardware.interface import DIAGNOSTICS, HardwareInterface
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.hardware.safety import (
     ArmCommandLimiter,
+    CommandGuard,
     Limits,
     WallClock,
     brake_speed,
@@ -877,6 +878,20 @@ def test_an_arm_found_beyond_its_limits_is_refused_not_jumped_back():
     with pytest.raises(ValueError, match=re.escape(
             "initial_positions[0] = 3.3 is not allowed")):
         ArmCommandLimiter(H, 0.007, q0, limits)
+
+
+def test_the_guards_arm_follow_tolerance_goes_by_the_name_its_error_gives():
+    """The command guard's tolerance was `arm_tolerance` while its error
+    named `arm_follow_tolerance`: CommandGuard(arm_follow_tolerance=...),
+    as the error and the HardwareInterface call it, was refused as an
+    unknown argument. It now has the one name throughout."""
+    options = HardwareOptions()
+    guard = CommandGuard(options, HOME_ARM_POSITIONS,
+                         arm_follow_tolerance=0.15)
+    assert guard.config.arm_follow_tolerance == 0.15
+    with pytest.raises(ValueError, match=re.escape(
+            "arm_follow_tolerance = 0.0 is not allowed")):
+        CommandGuard(options, HOME_ARM_POSITIONS, arm_follow_tolerance=0.0)
 
 
 def test_an_arm_resting_at_a_limit_with_an_encoders_noise_starts_there():

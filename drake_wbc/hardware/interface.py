@@ -122,12 +122,12 @@ class HardwareInterface:
         arm_follow_tolerance: rad, the controller's
             SafetyParameters.arm_follow_tolerance, for the guard's
             restart of the arm's commands from where it is after a stop
-            (CommandGuard); its default if None.
+            (CommandGuard); its default if not given.
     """
 
     def __init__(self, options=None, lcm=None, initial_arm_positions=None,
                  sender=None, robot=None, wall_clock=None,
-                 arm_follow_tolerance=None):
+                 arm_follow_tolerance=DEFAULT_ARM_FOLLOW_TOLERANCE):
         self.options = options = checked_instance(
             "options", options, HardwareOptions, HardwareOptions)
         if lcm is None:
@@ -155,9 +155,8 @@ class HardwareInterface:
                     num_joints=n, max_points=options.max_obstacle_points))
         s["guard"] = guard = builder.AddNamedSystem("guard", CommandGuard(
             options, initial_arm_positions, Limits.of_robot(options, arm),
-            wall_clock=wall_clock, arm_tolerance=(
-                DEFAULT_ARM_FOLLOW_TOLERANCE if arm_follow_tolerance is None
-                else arm_follow_tolerance)))
+            wall_clock=wall_clock,
+            arm_follow_tolerance=arm_follow_tolerance))
         # Where the arm is, so that the commands never send it back to
         # an old command at once after a stop.
         builder.Connect(s["decoder.arm_status"].GetOutputPort("positions"),

@@ -409,19 +409,20 @@ class GuardConfig(NamedTuple):
         recovery_time: s.
         period: the command period, s.
         limits: Limits.
-        arm_tolerance: rad, how far the measured arm may be from the last
-            command sent before it counts as elsewhere (`resync_arm`).
+        arm_follow_tolerance: rad, how far the measured arm may be from
+            the last command sent before it counts as elsewhere
+            (`resync_arm`).
     """
 
     watchdog_limits: tuple
     recovery_time: float
     period: float
     limits: Limits
-    arm_tolerance: float = DEFAULT_ARM_FOLLOW_TOLERANCE
+    arm_follow_tolerance: float = DEFAULT_ARM_FOLLOW_TOLERANCE
 
     @classmethod
     def of(cls, options, limits=None,
-           arm_tolerance=DEFAULT_ARM_FOLLOW_TOLERANCE):
+           arm_follow_tolerance=DEFAULT_ARM_FOLLOW_TOLERANCE):
         """The settings of a HardwareOptions (Limits.of_robot(options) if
         `limits` is None) and the controller's arm tolerance (its
         SafetyParameters.arm_follow_tolerance).
@@ -433,7 +434,7 @@ class GuardConfig(NamedTuple):
         return cls(options.watchdog_limits.as_tuple(),
                    options.watchdog_recovery_time, options.publish_period,
                    limits or Limits.of_robot(options),
-                   positive("arm_follow_tolerance", arm_tolerance))
+                   positive("arm_follow_tolerance", arm_follow_tolerance))
 
 
 def stall_limit(config):
@@ -451,8 +452,8 @@ def resync_arm(state, measured, config):
 
     The guard sends what it limited from what it sent last
     (`follow_arm_command`). An arm that is farther than
-    `config.arm_tolerance` from that (moved by hand, or stopped on its
-    own, during a stop) would be asked to jump back to it. So its
+    `config.arm_follow_tolerance` from that (moved by hand, or stopped
+    on its own, during a stop) would be asked to jump back to it. So its
     command restarts from its measured position (within the joint
     limits: drake_wbc.math.safety.restart_position, the controller's
     rule), at rest, and holds there (`arm_resync`) until the
@@ -467,8 +468,9 @@ def resync_arm(state, measured, config):
     if measured is None:
         return state, VALID
     check, start = restart_position(
-        np.asarray(measured, dtype=float), state.arm, config.arm_tolerance,
-        config.limits.lower, config.limits.upper)
+        np.asarray(measured, dtype=float), state.arm,
+        config.arm_follow_tolerance, config.limits.lower,
+        config.limits.upper)
     if start is None:
         return state, check
     return state._replace(arm=start, arm_velocity=np.zeros_like(start),
@@ -615,10 +617,11 @@ def guard_step(state, now, ages, base, arm, command_time, config,
             invalid=state.invalid + invalid,
             arm_resync=new.arm_resync and not full), events
     arm = np.array(arm, dtype=float)
-    if not check_following(arm, state.target, config.arm_tolerance).valid:
+    tolerance = config.arm_follow_tolerance
+    if not check_following(arm, state.target, tolerance).valid:
         new = _resync(new, arm_measured, config, events)
     if new.arm_resync and not check_following(
-            arm, new.arm, config.arm_tolerance).valid:
+            arm, new.arm, tolerance).valid:
         # Held where the arm is until the controller's command is near.
         q, v, arm_saturated = new.arm, np.zeros_like(new.arm), True
     else:
@@ -646,7 +649,8 @@ def _resync(state, measured, config, events):
     if not check.valid:
         events.append(("arm elsewhere", (
             f"joint {check.entry} is {abs(check.value):.3g} rad from the "
-            f"last command sent (tolerance {config.arm_tolerance:g} rad)")))
+            f"last command sent (tolerance "
+            f"{config.arm_follow_tolerance:g} rad)")))
     return state
 
 
@@ -704,8 +708,8 @@ class CommandGuard(LeafSystem):
     - arm_position_measured: optional (never used when unconnected), (n)
       the arm's measured positions (the arm_status decoder's): after a
       full stop, or when the controller restarts from where the arm is,
-      an arm farther than `arm_tolerance` from the last command sent is
-      commanded from where it is, at rest (`resync_arm`), never back to
+      an arm farther than `arm_follow_tolerance` from the last command
+      sent is commanded from where it is, at rest (`resync_arm`), never back to
       that command at once.
     - base_velocity_command, arm_position_command (outputs): what is
       sent, from state (`guard_step`).
@@ -737,20 +741,20 @@ class CommandGuard(LeafSystem):
         wall_clock: the WallClock of a controller running in real time
             (drake_wbc.deployment.deploy), which every check reads; None
             on simulated time.
-        arm_tolerance: rad > 0, the controller's
+        arm_follow_tolerance: rad > 0, the controller's
             SafetyParameters.arm_follow_tolerance (its default if not
             given).
     """
 
     def __init__(self, options=None, initial_arm_positions=None,
                  limits=None, wall_clock=None,
-                 arm_tolerance=DEFAULT_ARM_FOLLOW_TOLERANCE):
+                 arm_follow_tolerance=DEFAULT_ARM_FOLLOW_TOLERANCE):
         super().__init__()
         self.wall_clock = checked_instance("wall_clock", wall_clock,
                                            WallClock, lambda: None)
         self.options = options = checked_instance(
             "options", options, HardwareOptions, HardwareOptions)
-        self.config = GuardConfig.of(options, limits, arm_tolerance)
+        self.config = GuardConfig.of(options, limits, arm_follow_tolerance)
         self.limits = self.config.limits
         self.num_joints = n = self.limits.lower.size
         if initial_arm_positions is None and limits is not None:
