@@ -61,6 +61,17 @@ def test_whole_number_shows_a_whole_value_as_an_integer(value, message):
     assert whole_number("count", 811.0, 1) == 811
 
 
+def test_whole_number_has_an_upper_bound_of_its_own():
+    """The bench's largest repetitions were checked by a copy of the
+    bound (bench.commands): whole_number takes it, as positive_duration
+    takes its longest, and names the value as a whole number."""
+    assert whole_number("count", 1000.0, 1, 1000) == 1000
+    with pytest.raises(ValueError) as error:
+        whole_number("count", 1001.0, 1, 1000, " (some 20 minutes)")
+    assert str(error.value) == ("count = 1001 is not allowed: must be at "
+                                "most 1000 (some 20 minutes)")
+
+
 @pytest.mark.parametrize("bad", ["15000", b"15000", np.str_("1.5"), True,
                                  np.True_, np.array("2.0"), np.array(True)])
 def test_a_string_or_boolean_is_not_a_number(bad):

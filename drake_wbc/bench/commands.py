@@ -95,27 +95,19 @@ full bench's one run of every scenario takes about half a minute on a
 2-core machine, so 100 take some 40 minutes."""
 
 
-def _at_most(name, value, most, why):
-    if value > most:
-        raise ValueError(f"{name} = {value} is not allowed: must be at most "
-                         f"{most} ({why})")
-    return value
-
-
 def settings_from(args):
     """The run's settings (a dict like FULL) from parsed arguments."""
     settings = dict(QUICK if args.quick else FULL)
     if args.repeats is not None:
-        settings["repeats"] = _at_most(
-            "--repeats", whole_number("--repeats", args.repeats, 1),
-            MAX_REPEATS, "some 20 minutes on a 2-core machine")
+        settings["repeats"] = whole_number(
+            "--repeats", args.repeats, 1, MAX_REPEATS,
+            " (some 20 minutes on a 2-core machine)")
     if args.scenario_duration is not None:
         settings["scenario_duration"] = positive_duration(
             "--scenario-duration", args.scenario_duration)
-    settings["scenario_repeats"] = _at_most(
-        "--scenario-repeats",
-        whole_number("--scenario-repeats", args.scenario_repeats, 1),
-        MAX_SCENARIO_REPEATS, "some 40 minutes on a 2-core machine")
+    settings["scenario_repeats"] = whole_number(
+        "--scenario-repeats", args.scenario_repeats, 1, MAX_SCENARIO_REPEATS,
+        " (some 40 minutes on a 2-core machine)")
     settings["seed"] = whole_number("--seed", args.seed)
     settings["quick"] = bool(args.quick)
     robot = getattr(args, "robot", None)

@@ -204,8 +204,10 @@ def unit_interval(name, value):
     return value
 
 
-def whole_number(name, value, minimum=0):
-    """`value` as an int >= `minimum` (811.0 is accepted; a bool is not).
+def whole_number(name, value, minimum=0, maximum=None, hint=""):
+    """`value` as an int >= `minimum` and, unless `maximum` is None, <=
+    `maximum` (811.0 is accepted; a bool is not); `hint` ends the
+    message of one too large.
 
     Raises:
         ValueError: naming `name`, its value (a whole one as an integer)
@@ -221,6 +223,9 @@ def whole_number(name, value, minimum=0):
     if number < minimum:
         raise ValueError(f"{name} = {int(number)} is not allowed: must be "
                          f"{minimum} or greater")
+    if maximum is not None and number > maximum:
+        raise ValueError(f"{name} = {int(number)} is not allowed: must be "
+                         f"at most {maximum}{hint}")
     return int(number)
 
 
