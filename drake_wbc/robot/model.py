@@ -930,13 +930,11 @@ class ArmKinematics:
         if self.chain is not None:
             self._chain_arrays = tuple(self.chain)
 
-    def _set_arm_positions(self, q_a, key=None):
+    def _set_arm_positions(self, q_a):
         """Puts q_a (n,) into the private context; a no-op when it is
-        already there, which keeps the plant's kinematics cache valid.
-        `key`: q_a.tobytes() of a checked q_a, if known."""
-        if key is None:
-            q_a = as_float_array("q_a", q_a, (self.num_joints,))
-            key = q_a.tobytes()
+        already there, which keeps the plant's kinematics cache valid."""
+        q_a = as_float_array("q_a", q_a, (self.num_joints,))
+        key = q_a.tobytes()
         if key != self._q_a_key:
             self._q[self._q_indices] = q_a
             self._plant.SetPositions(self._context, self._q)
@@ -972,10 +970,9 @@ class ArmKinematics:
         ask at different configurations (the capability at the measured
         one, the arm's controller at its command), each once a tick, and
         a memo's key and copies cost more than they saved."""
-        q_a = as_float_array("q_a", q_a, (self.num_joints,))
         if self.chain is None:
-            self._set_arm_positions(q_a)
-            return self._evaluate_here()
+            return self.plant_values(q_a)
+        q_a = as_float_array("q_a", q_a, (self.num_joints,))
         J_a, X_AE = self._chain_kinematics(*self._chain_arrays, q_a)
         return ArmKinematicsValues(J_a, origin_in(self._R_BA, self._p_BA,
                                                   X_AE), X_AE)
