@@ -1097,3 +1097,31 @@ def test_the_follow_tolerance_is_checked_where_it_enters(value, message):
             r"safety.arm_follow_tolerance = -1.0 is not allowed: must be "
             r"greater than 0")):
         load_controller_parameters(text="safety: {arm_follow_tolerance: -1}")
+
+
+@pytest.mark.parametrize("robot, tolerance", [
+    (None, 0.1), ("lbr_omni.robot.yaml", 0.063 * 3.1416),
+    ("ur_omni.robot.yaml", 0.063 * np.pi)])
+def test_each_arm_is_held_to_its_own_follow_tolerance(robot, tolerance):
+    """The arm-follow tolerance was 0.1 rad on every arm, the Elfin5's:
+    a UR-class or seven-joint arm's joint at its full 3.14 rad/s lags its
+    command by up to 0.14 rad over LCM (the servo's lag and a status at
+    its watchdog's age), which stopped the robot though the arm followed.
+    Now a robot that gives none has its arm's own (what its fastest
+    joint travels in 63 ms, at least 0.1 rad), the same on the
+    controller's guard and on the hardware interface's."""
+    from pydrake.lcm import DrakeLcm
+
+    from drake_wbc.hardware.interface import HardwareInterface
+    from drake_wbc.robot.description import models_dir
+
+    arm = arm_kinematics(None if robot is None else load_robot_description(
+        models_dir() / robot))
+    controller = build_controller(ControllerParameters(), arm)
+    assert controller.params.safety.arm_follow_tolerance == pytest.approx(
+        tolerance, rel=1e-12)
+    assert controller.stages["arm_controller"].resume_tolerance == (
+        controller.params.safety.arm_follow_tolerance)
+    hardware = HardwareInterface(lcm=DrakeLcm("memq://"), robot=arm)
+    assert hardware.systems["guard"].config.arm_follow_tolerance == (
+        controller.params.safety.arm_follow_tolerance)

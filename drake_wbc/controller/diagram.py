@@ -110,6 +110,7 @@ Run-time safety (drake_wbc.math.safety, drake_wbc.stages.safety):
   limits.
 """
 
+import dataclasses
 import warnings
 
 import numpy as np
@@ -128,6 +129,7 @@ from drake_wbc.math.safety import (
     MEASURED_POSITION_MARGIN,
     MEASURED_TWIST_FACTOR,
     Following,
+    arm_follow_tolerance_of,
 )
 from drake_wbc.math.task_inputs import TASK_INPUTS
 from drake_wbc.math.validation import checked_instance, validated_copy
@@ -268,6 +270,11 @@ def build_controller(params=None, robot=None):
         "params", params, ControllerParameters, ControllerParameters))
     arm = arm_kinematics(robot)
     params = for_robot(params, arm.model.description)
+    if params.safety.arm_follow_tolerance is None:
+        # The arm's own: its fastest joint's lag at full speed.
+        params = dataclasses.replace(params, safety=dataclasses.replace(
+            params.safety, arm_follow_tolerance=arm_follow_tolerance_of(
+                arm.velocity_limits)))
     h, band, switch = (params.time_step, params.capability_band,
                        params.phri_switch)
     check_arm_limits(params.arm_controller, arm)

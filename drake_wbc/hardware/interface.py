@@ -61,7 +61,7 @@ from drake_wbc.hardware.codecs import (
 from drake_wbc.hardware.messages import RawBytesSerializer
 from drake_wbc.hardware.options import STATUS_CHANNELS, HardwareOptions
 from drake_wbc.hardware.safety import GUARD_STATUS, CommandGuard, Limits
-from drake_wbc.math.safety import DEFAULT_ARM_FOLLOW_TOLERANCE
+from drake_wbc.math.safety import arm_follow_tolerance_of
 from drake_wbc.math.validation import checked_instance
 from drake_wbc.robot.model import arm_kinematics
 
@@ -122,12 +122,14 @@ class HardwareInterface:
         arm_follow_tolerance: rad, the controller's
             SafetyParameters.arm_follow_tolerance, for the guard's
             restart of the arm's commands from where it is after a stop
-            (CommandGuard); its default if not given.
+            (CommandGuard); None: the robot's arm's own, as the
+            controller's (drake_wbc.math.safety.arm_follow_tolerance_of
+            its joint speed limits).
     """
 
     def __init__(self, options=None, lcm=None, initial_arm_positions=None,
                  sender=None, robot=None, wall_clock=None,
-                 arm_follow_tolerance=DEFAULT_ARM_FOLLOW_TOLERANCE):
+                 arm_follow_tolerance=None):
         self.options = options = checked_instance(
             "options", options, HardwareOptions, HardwareOptions)
         if lcm is None:
@@ -137,6 +139,9 @@ class HardwareInterface:
         self.sender = new_sender() if sender is None else int(sender)
         self.arm = arm = arm_kinematics(robot)
         n = arm.num_joints
+        if arm_follow_tolerance is None:
+            arm_follow_tolerance = arm_follow_tolerance_of(
+                arm.velocity_limits)
         if initial_arm_positions is None:
             initial_arm_positions = arm.home
         channels = options.channels

@@ -116,14 +116,30 @@ within it (as from what was last sent, kept) asks the servo for no
 more than a step of that size. An Elfin5 that stops on its own while
 its command runs at full speed trips within 64 ms.
 
-It is sized for the Elfin5's joints. The other shipped arms' faster
-joints (the seven-joint arm's last four at 2.27 to 3.14 rad/s, every
-UR-class joint at 3.14 rad/s) lag by more at their full speed: 0.047
-rad through the servo at 3.14 rad/s, 0.14 rad over LCM with a status at
-the watchdog's age, beyond 0.1 rad. Their scenarios stay far below
-(the largest deviations above), but a controller that drives such a
-joint near its full speed over LCM sets a larger
-SafetyParameters.arm_follow_tolerance (0.15 rad covers 3.14 rad/s)."""
+It is sized for the Elfin5's joints, and the floor of every arm's
+(`arm_follow_tolerance_of`): the other shipped arms' faster joints (the
+seven-joint arm's last four at 2.27 to 3.14 rad/s, every UR-class joint
+at 3.14 rad/s) lag by more at their full speed, 0.047 rad through the
+servo at 3.14 rad/s and 0.14 rad over LCM with a status at the
+watchdog's age."""
+
+FOLLOW_TIME = 0.063
+"""s: how long behind its command a following arm's measured joint may
+be, with margin: the servo's lag (some 15 ms in the shipped scenarios)
+and a status as old as the arm_status watchdog allows over LCM (30 ms),
+times 1.4. A joint at its full speed is that far behind
+(`arm_follow_tolerance_of`)."""
+
+
+def arm_follow_tolerance_of(joint_speeds):
+    """The arm-follow tolerance of an arm whose joints move at most at
+    `joint_speeds` (rad/s, its own speed limits), rad: what its fastest
+    joint travels in FOLLOW_TIME, at least DEFAULT_ARM_FOLLOW_TOLERANCE
+    (0.1 rad for the Elfin5's 1.57 rad/s, 0.198 for the UR-class and
+    seven-joint arms' 3.14 rad/s). What SafetyParameters'
+    arm_follow_tolerance is on a robot where it gives none."""
+    fastest = float(np.max(np.asarray(joint_speeds, dtype=float)))
+    return max(DEFAULT_ARM_FOLLOW_TOLERANCE, FOLLOW_TIME * fastest)
 
 
 class Reason(IntEnum):
@@ -205,11 +221,12 @@ class SafetyParameters:
             position command is a fault (the arm does not follow: its
             own protective stop, an e-stop, a servo off, or held by
             hand), and an arm that far from the last command when a
-            stop clears restarts from where it is
-            (DEFAULT_ARM_FOLLOW_TOLERANCE); over LCM the hardware
-            interface's command guard restarts the arm's commands from
-            where it is by the same tolerance
-            (drake_wbc.hardware.safety.resync_arm).
+            stop clears restarts from where it is; over LCM the
+            hardware interface's command guard restarts the arm's
+            commands from where it is by the same tolerance
+            (drake_wbc.hardware.safety.resync_arm). None: the arm's
+            own, `arm_follow_tolerance_of` its joint speed limits
+            (build_controller and the hardware interface fill it in).
 
     The arm's limits (joint positions, 1.57 rad/s, 12.56 rad/s^2) are those
     of ArmControllerParameters. Vectors are given as any sequence (a list
@@ -224,11 +241,12 @@ class SafetyParameters:
     base_lag: float | None = None
     people: PeopleSeparationParameters = field(
         default_factory=PeopleSeparationParameters)
-    arm_follow_tolerance: float = DEFAULT_ARM_FOLLOW_TOLERANCE
+    arm_follow_tolerance: float | None = None
 
     def __post_init__(self):
         positive("hold_time", self.hold_time)
-        positive("arm_follow_tolerance", self.arm_follow_tolerance)
+        if self.arm_follow_tolerance is not None:
+            positive("arm_follow_tolerance", self.arm_follow_tolerance)
         non_negative("stop_distance", self.stop_distance)
         positive("stop_time", self.stop_time)
         if self.base_lag is not None:
