@@ -102,21 +102,21 @@ the arm does not follow (SafetyParameters.arm_follow_tolerance).
 Measured over every shipped scenario's full run (`drake-wbc run NAME`,
 every variant; the measurement and the command logged at the same tick,
 as the InputGuard compares them): the largest |q_cmd - q_meas| of any
-joint is 0.0229 rad (repeat_obstacle, an Elfin5 joint at its speed
-limit of 1.57 rad/s: the servo's lag of some 15 ms), 0.0227 in
+joint is 0.0229 rad (repeat_obstacle, a joint of the paper's arm at its
+speed limit of 1.57 rad/s: the servo's lag of some 15 ms), 0.0227 in
 fixed_point, at most 0.011 in the others (0.0081 on the seven-joint
 arm, 0.0066 on the UR-class arm, whose joints move at no more than 0.1
 rad/s there). Over LCM the measurement may be as old as the arm_status
 watchdog allows (30 ms: 1.57 rad/s x 0.03 s = 0.047 rad more, 0.07 rad
-in all). For the Elfin5, 0.1 rad is 4.4 times the largest measured, 1.4
+in all). For that arm, 0.1 rad is 4.4 times the largest measured, 1.4
 times that worst case over LCM, and it is the arm's own braking
 distance from full speed within its acceleration limit (1.57^2 / (2 x
 12.56) = 0.098 rad, 5 cm at a tool 0.5 m out): a resume from a command
 within it (as from what was last sent, kept) asks the servo for no
-more than a step of that size. An Elfin5 that stops on its own while
+more than a step of that size. Such an arm that stops on its own while
 its command runs at full speed trips within 64 ms.
 
-It is sized for the Elfin5's joints, and the floor of every arm's
+It is sized for that arm's joints, and the floor of every arm's
 (`arm_follow_tolerance_of`): the other shipped arms' faster joints (the
 seven-joint arm's last four at 2.27 to 3.14 rad/s, every UR-class joint
 at 3.14 rad/s) lag by more at their full speed, 0.047 rad through the
@@ -135,7 +135,7 @@ def arm_follow_tolerance_of(joint_speeds):
     """The arm-follow tolerance of an arm whose joints move at most at
     `joint_speeds` (rad/s, its own speed limits), rad: what its fastest
     joint travels in FOLLOW_TIME, at least DEFAULT_ARM_FOLLOW_TOLERANCE
-    (0.1 rad for the Elfin5's 1.57 rad/s, 0.198 for the UR-class and
+    (0.1 rad for the paper's arm's 1.57 rad/s, 0.198 for the UR-class and
     seven-joint arms' 3.14 rad/s). What SafetyParameters'
     arm_follow_tolerance is on a robot where it gives none."""
     fastest = float(np.max(np.asarray(joint_speeds, dtype=float)))
