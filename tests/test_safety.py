@@ -864,6 +864,17 @@ def command_now(rig):
         rig.context))
 
 
+def moving_then_blind(rig):
+    """`rig` after a second of the brisk reference, its odometry then a
+    NaN (a safe stop from the next tick on, the arm moving)."""
+    rig.set("reference_velocity", BRISK)
+    rig.advance(1.0)
+    bad = np.array(rig.valid["base.state_estimated"], dtype=float)
+    bad[0] = np.nan
+    rig.set("base.state_estimated", bad)
+    return rig
+
+
 def stopped_now(rig):
     return rig.diagram.GetOutputPort("safety_status").Eval(rig.context)[
         STATUS["stopped"]] == 1.0
@@ -968,12 +979,7 @@ def test_after_a_stop_in_which_the_arm_moved_the_commands_start_where_it_is(
     every step is within the joint speed and acceleration limits as the
     arm, standing there, sees them. They resumed from the command last
     sent, 0.3 rad away: a jump of the servo's setpoint."""
-    rig = Rig(arm)
-    rig.set("reference_velocity", BRISK)
-    rig.advance(1.0)
-    bad = np.array(rig.valid["base.state_estimated"], dtype=float)
-    bad[0] = np.nan
-    rig.set("base.state_estimated", bad)
+    rig = moving_then_blind(Rig(arm))
     rig.advance(0.2)                      # braked to rest and held
     held = command_now(rig)
     offset = np.array([0.3, -0.3, 0.0, 0.3, 0.0, 0.0])
@@ -1013,12 +1019,7 @@ def test_a_protective_stop_that_outlasts_the_safe_stop_holds_where_the_arm_is(
     and stays there, at rest, for as long as the protective stop lasts
     (a command left at the old position would trip the safe stop again
     at every tick it was checked)."""
-    rig = Rig(arm)
-    rig.set("reference_velocity", BRISK)
-    rig.advance(1.0)
-    bad = np.array(rig.valid["base.state_estimated"], dtype=float)
-    bad[0] = np.nan
-    rig.set("base.state_estimated", bad)
+    rig = moving_then_blind(Rig(arm))
     rig.set("lidar.obstacle_points", np.array([[0.35, 0.0], [2.0, 0.0]]))
     rig.advance(0.3)
     moved = command_now(rig) + np.array([0.0, 0.3, 0.0, 0.0, -0.3, 0.0])
@@ -1045,12 +1046,7 @@ def test_an_arm_within_the_tolerance_resumes_from_the_last_command(arm):
     for tolerance in (FOLLOW_TOLERANCE, 10.0):
         params = ControllerParameters()
         params.safety.arm_follow_tolerance = tolerance
-        rig = Rig(arm, params)
-        rig.set("reference_velocity", BRISK)
-        rig.advance(1.0)
-        bad = np.array(rig.valid["base.state_estimated"], dtype=float)
-        bad[0] = np.nan
-        rig.set("base.state_estimated", bad)
+        rig = moving_then_blind(Rig(arm, params))
         rig.advance(0.3)
         rig.set("arm.position_measured", command_now(rig) + 0.09)
         rig.set("base.state_estimated", rig.valid["base.state_estimated"])
