@@ -225,15 +225,24 @@ def wait_for_status(lcm, options, num_joints, timeout=None, stop=None):
 
 def wait_for_next(lcm, channel, timeout):
     """Blocks until the next message on `channel` (or `timeout` s of
-    wall clock); returns True if one came."""
-    arrived = []
-    lcm.Subscribe(channel, lambda data: arrived.append(len(data)))
+    wall clock); returns True if one came.
+
+    Its handler stays subscribed to `lcm` (pydrake's Subscribe offers no
+    unsubscribe), which a deployment then pumps for as long as it runs:
+    it sets a flag, and keeps nothing of the messages.
+    """
+    arrived = [False]
+
+    def handle(data):
+        arrived[0] = True
+
+    lcm.Subscribe(channel, handle)
     lcm.HandleSubscriptions(0)
-    arrived.clear()
+    arrived[0] = False
     deadline = time.monotonic() + timeout
-    while not arrived and time.monotonic() < deadline:
+    while not arrived[0] and time.monotonic() < deadline:
         lcm.HandleSubscriptions(5)
-    return bool(arrived)
+    return arrived[0]
 
 
 def send_stop(lcm, options, arm_positions, sender, utime,
