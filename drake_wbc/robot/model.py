@@ -692,11 +692,11 @@ def _arm_limits(arm, joints):
         if math.isinf(lo) != math.isinf(hi):
             raise ValueError(
                 f"arm.position_lower[{i}] = {lo!r} and arm.position_upper"
-                f"[{i}] = {hi!r} (the model's {shown['position_lower'][i]!r}"
-                f" and {shown['position_upper'][i]!r}, tightened by the "
-                f"description's) are not allowed for {arm.joints[i]!r}: a "
-                "joint is limited on both sides, or on neither (a "
-                "continuous joint, -inf and inf)")
+                f"[{i}] = {hi!r} (the model gives "
+                f"{shown['position_lower'][i]!r} and "
+                f"{shown['position_upper'][i]!r}) are not allowed for "
+                f"{arm.joints[i]!r}: a joint is limited on both sides, or "
+                "on neither (a continuous joint, -inf and inf)")
     for i, (q, lo, hi) in enumerate(zip(
             arm.home, limits["position_lower"].tolist(),
             limits["position_upper"].tolist(), strict=True)):
