@@ -8,7 +8,9 @@ limits (URDF has none), and its description
 import textwrap
 
 
-def urdf_text(n):
+def urdf_text(n, continuous=()):
+    """The URDF of an n-joint omni arm, the arm's joints of the indices
+    `continuous` (0 the first) continuous (no position limits)."""
     axes = ["0 0 1", "0 1 0", "0 1 0", "0 0 1", "0 1 0", "0 0 1", "0 1 0"]
     links = ["<link name='world_x'/>", "<link name='world_y'/>",
              _link("chassis", 50.0)]
@@ -21,7 +23,8 @@ def urdf_text(n):
     for i in range(n):
         link = f"link{i + 1}"
         links.append(_link(link, 2.0))
-        joints.append(_joint(f"j{i + 1}", "revolute", parent, link,
+        kind = "continuous" if i in continuous else "revolute"
+        joints.append(_joint(f"j{i + 1}", kind, parent, link,
                              axis=axes[i % len(axes)],
                              xyz="0 0 0.3" if i else "0.2 0 0.4"))
         parent = link
@@ -55,7 +58,9 @@ def _joint(name, kind, parent, child, axis=None, xyz="0 0 0", limits=True):
             f"<child link='{child}'/><origin xyz='{xyz}'/>")
     if axis:
         text += f"<axis xyz='{axis}'/>"
-    if kind != "fixed" and limits:
+    if kind == "continuous":
+        text += "<limit effort='100' velocity='2.0'/>"
+    elif kind != "fixed" and limits:
         text += ("<limit lower='-2.5' upper='2.5' effort='100' "
                  "velocity='2.0'/>")
     return text + "</joint>"
@@ -97,16 +102,17 @@ def description_text(n, extra=""):
         """).replace("EXTRA\n", extra + "\n" if extra else "")
 
 
-def write_omni_arm(folder, n, accelerations=True, extra=""):
+def write_omni_arm(folder, n, accelerations=True, extra="", continuous=()):
     """Writes the URDF and the description of an n-joint omni arm into
     `folder`; returns the description's path. With `accelerations` the
     description gives the arm's acceleration limits (9 rad/s^2, which the
-    URDF cannot); `extra` adds lines under `arm:`."""
+    URDF cannot); `extra` adds lines under `arm:`; the arm's joints of
+    the indices `continuous` are continuous."""
     lines = [f"  acceleration_limits: [{', '.join(['9.0'] * n)}]"] \
         if accelerations else []
     if extra:
         lines.append(extra)
-    (folder / "omni_arm.urdf").write_text(urdf_text(n))
+    (folder / "omni_arm.urdf").write_text(urdf_text(n, continuous))
     path = folder / "omni_arm.yaml"
     path.write_text(description_text(n, extra="\n".join(lines)))
     return path

@@ -216,15 +216,19 @@ def test_a_guard_of_that_robots_limits_asks_for_its_arms_start(tmp_path, n):
         CommandGuard(HardwareOptions(), None, limits)
 
 
-def test_the_same_controller_deploys_over_lcm_to_that_robot(tmp_path):
+@pytest.mark.parametrize("continuous", [(), (0, 2, 4, 6)])
+def test_the_same_controller_deploys_over_lcm_to_that_robot(tmp_path,
+                                                            continuous):
     """The controller side of `drake-wbc deploy` for a scenario that names
     the 7-joint robot (`robot:`), over real LCM messages (memq://), with
     the test in the robot's place: it sends 7-joint statuses (the arm
     where it was last commanded, the base at its command) and the
     controller answers with 7-joint commands, within that arm's own
-    limits, that move the tool along the task's world twist."""
+    limits, that move the tool along the task's world twist; also with
+    the arm's joints 1, 3, 5 and 7 continuous (no position limits, only
+    their speed and acceleration limits)."""
     n = 7
-    robot = write_omni_arm(tmp_path, n)
+    robot = write_omni_arm(tmp_path, n, continuous=continuous)
     scenario_file = write_scenario(tmp_path, robot, 2.0,
                                    extra="hardware:\n  lcm_url: memq://\n")
     scenario = load_scenario(scenario_file)

@@ -85,6 +85,7 @@ from pydrake.multibody.inverse_kinematics import (
 )
 
 from drake_wbc.math import distribution, kernels, kinematics
+from drake_wbc.math.joint_range import configuration_range
 from drake_wbc.math.validation import (
     in_closed_range,
     non_negative,
@@ -156,14 +157,17 @@ def joint_null_velocity(J_a, capability_gradient, null_space_gain):
 def make_problems(count, seed, arm):
     """`count` problems drawn with numpy's generator seeded by `seed`:
     q_a uniform in 80 % of the joint ranges of `arm` (ArmKinematics, its
-    n joints), V_ee normal with 0.1 m/s, rad/s per component, sigma
-    uniform in (0.05, 0.95), grad_x C_m normal with 0.3 (6,), k_n uniform
-    in [0, 0.2]; the joint-space null velocity from J_a at q_a (no
+    n joints; a continuous joint's range one turn,
+    drake_wbc.math.joint_range.configuration_range), V_ee normal with
+    0.1 m/s, rad/s per component, sigma uniform in (0.05, 0.95),
+    grad_x C_m normal with 0.3 (6,), k_n uniform in [0, 0.2]; the
+    joint-space null velocity from J_a at q_a (no
     draw: the same seed gives the same problems as without it)."""
     count = whole_number("count", count, minimum=1)
     rng = np.random.default_rng(seed)
-    middle = 0.5 * (arm.lower + arm.upper)
-    half = 0.4 * (arm.upper - arm.lower)
+    lower, upper = configuration_range(arm.lower, arm.upper)
+    middle = 0.5 * (lower + upper)
+    half = 0.4 * (upper - lower)
     problems = []
     for _ in range(count):
         q_a = rng.uniform(middle - half, middle + half)

@@ -225,12 +225,15 @@ def brake_speed(distance, acceleration, period):
     so m = floor((sqrt(1 + 8 d / (a h^2)) - 1) / 2) and f follows. From v
     the next period's brake_speed is at least v - a h, so a joint that
     keeps to it never has to brake harder than it may, and never passes
-    the point."""
+    the point. An infinite distance (towards the limit of a continuous
+    joint, which has none) allows any speed: inf."""
     step = acceleration * period
-    m = np.floor(0.5 * (np.sqrt(1.0 + 8.0 * distance / (step * period))
-                        - 1.0))
-    f = (distance / period - 0.5 * step * m * (m + 1.0)) / (m + 1.0)
-    return m * step + np.clip(f, 0.0, step)
+    with np.errstate(invalid="ignore"):  # inf - inf where distance = inf
+        m = np.floor(0.5 * (np.sqrt(1.0 + 8.0 * distance / (step * period))
+                            - 1.0))
+        f = (distance / period - 0.5 * step * m * (m + 1.0)) / (m + 1.0)
+    return np.where(np.isinf(distance), math.inf,
+                    m * step + np.clip(f, 0.0, step))
 
 
 TARGET_RATE_BOUND = 1e150

@@ -40,6 +40,8 @@ Names say which is which, in every module:
 - movement, demonstration: a whole-body movement learned from
   demonstrations as a DMP (teach and repeat).
 - arm_control: the arm's Cartesian velocity controller (Sec. III-A).
+- joint_range: joint position ranges where a continuous joint has none
+  (limits -inf and inf), and the range to draw its angles from.
 - arm_servo: what a cobot's position servo refuses (a command beyond a
   joint's position, speed or acceleration limit) and its stop.
 - base_state: the layout of the base's state (base.state_estimated),

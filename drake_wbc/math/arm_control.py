@@ -19,7 +19,9 @@ the first arrow is `joint_velocity_for_twist`, in four stages:
    [lower + margin, upper - margin] within the next step (q + q_dot h stays
    inside), and with an acceleration limit a joint approaching the band's
    edge is slowed early enough to stop at it without exceeding that limit
-   (see `joint_position_velocity_bounds`).
+   (see `joint_position_velocity_bounds`). A continuous joint (limits
+   -inf and inf) has no edge: only its speed and acceleration limits
+   hold it, and a redundant arm's self-motion does not centre it.
 3. Velocity limits by uniform scaling of the whole q_dot, so that the
    end effector keeps its direction of motion and only slows down.
 4. Optionally an acceleration limit: the change from the previous q_dot is
@@ -134,7 +136,8 @@ class ArmControllerParameters:
             for the arm's own (ArmKinematics.acceleration_limits, joint
             by joint).
         lower, upper: (n,) joint limits in rad, or None for the arm's own
-            (ArmKinematics.lower / .upper).
+            (ArmKinematics.lower / .upper); -inf and inf for a continuous
+            joint, which has none (the arm's own must be unlimited too).
         velocity_limits: (n,) rad/s > 0, or None for the arm's own.
         self_motion_gain: k_c >= 0, 1/s, of the joint centring in the
             self-motion of an arm of more than six joints (see
@@ -180,7 +183,7 @@ class ArmControllerParameters:
             )
         if self.lower is not None:
             lower, upper = ordered_limits("lower", self.lower, "upper",
-                                          self.upper)
+                                          self.upper, unlimited=True)
             check_margin(self.margin, lower, upper)
             self.lower = tuple(lower.tolist())
             self.upper = tuple(upper.tolist())
@@ -261,7 +264,8 @@ class TwistLimits:
     `twist_limits` (a controller builds them when it is built).
 
     Attributes:
-        lower, upper: (n,) joint limits, rad.
+        lower, upper: (n,) joint limits, rad (-inf and inf: a continuous
+            joint, without position limits).
         velocity: (n,) joint velocity limits, rad/s > 0.
         time_step: the control period h > 0, s.
         damping: lambda_max >= 0.
@@ -301,7 +305,8 @@ def twist_limits(lower, upper, velocity_limit, time_step,
     Raises:
         ValueError: naming the argument, its value and what is allowed.
     """
-    lower, upper = ordered_limits("lower", lower, "upper", upper)
+    lower, upper = ordered_limits("lower", lower, "upper", upper,
+                                  unlimited=True)
     n = lower.size
     if acceleration_limit is not None:
         acceleration_limit = _positive_vector("acceleration_limit",
@@ -452,7 +457,8 @@ def joint_position_bounds(q, lower, upper, time_step, margin,
 
     Args:
         q: (n,) joint angles, rad.
-        lower, upper: (n,) joint limits, rad.
+        lower, upper: (n,) joint limits, rad (-inf and inf: a continuous
+            joint, without position limits).
         time_step: h > 0, s.
         margin: >= 0, rad.
         acceleration: None, or (n,) rad/s^2 > 0.
@@ -464,9 +470,12 @@ def joint_position_bounds(q, lower, upper, time_step, margin,
             high.append(q[i] * math.nan)
             continue
         step = None if acceleration is None else acceleration[i] * time_step
-        for distance, bounds, sign in (
-                ((upper[i] - margin) - q[i], high, 1.0),
-                (q[i] - lower[i] - margin, low, -1.0)):
+        for edge, distance, bounds, sign in (
+                (upper[i], (upper[i] - margin) - q[i], high, 1.0),
+                (lower[i], q[i] - lower[i] - margin, low, -1.0)):
+            if math.isinf(edge):  # a continuous joint: no edge to stop at
+                bounds.append(sign * math.inf)
+                continue
             distance = max(distance, 0.0)
             rate = distance / time_step
             if step is not None:
@@ -498,8 +507,10 @@ def centring_velocity(q, lower, upper, gain):
     """The joint centring of a redundant arm's self-motion, any scalar
     type: z_i = -k_c (q_i - m_i) / r_i, m_i the middle of joint i's range
     and r_i its half-width, so that a joint at its limit is driven towards
-    the middle at k_c rad/s."""
-    return np.array([-gain * (q_i - 0.5 * (lo + hi)) / (0.5 * (hi - lo))
+    the middle at k_c rad/s; z_i = 0 for a continuous joint (no limits:
+    the limit of z_i as its range grows about q_i)."""
+    return np.array([q_i * 0.0 if math.isinf(lo)
+                     else -gain * (q_i - 0.5 * (lo + hi)) / (0.5 * (hi - lo))
                      for q_i, lo, hi in zip(q, lower.tolist(),
                                             upper.tolist(), strict=True)])
 
@@ -637,7 +648,8 @@ def joint_position_velocity_bounds(q, lower, upper, time_step,
 
     Args:
         q: (n,) joint angles, rad.
-        lower, upper: (n,) joint limits, rad.
+        lower, upper: (n,) joint limits, rad (-inf and inf: a continuous
+            joint, without position limits).
         time_step: h > 0, s.
         margin: >= 0, rad, below half of every range.
         acceleration_limit: None, or rad/s^2 > 0 (a number or (n,)).
@@ -646,7 +658,8 @@ def joint_position_velocity_bounds(q, lower, upper, time_step,
         (low, high), two (n,) arrays in rad/s.
     """
     q = as_vector("q", q)
-    lower, upper = ordered_limits("lower", lower, "upper", upper, q.size)
+    lower, upper = ordered_limits("lower", lower, "upper", upper, q.size,
+                                  unlimited=True)
     h = positive("time_step", time_step)
     margin = check_margin(margin, lower, upper)
     if acceleration_limit is not None:
@@ -686,7 +699,8 @@ def joint_velocity_for_twist(J_a, V_a, q, lower, upper, velocity_limit,
             q.
         V_a: (6,) commanded twist [v_a; w_a] in T_a, m/s and rad/s.
         q: (n,) joint angles, rad.
-        lower, upper: (n,) joint limits, rad.
+        lower, upper: (n,) joint limits, rad (-inf and inf: a continuous
+            joint, without position limits).
         velocity_limit: rad/s > 0, a number or (n,).
         time_step: control period h > 0, s.
         damping: lambda_max >= 0. Default `DEFAULT_DAMPING`.
@@ -704,7 +718,6 @@ def joint_velocity_for_twist(J_a, V_a, q, lower, upper, velocity_limit,
     n = J.shape[1]
     V = as_vector("V_a", V_a, 6)
     q = as_vector("q", q, n)
-    ordered_limits("lower", lower, "upper", upper, n)
     limits = twist_limits(lower, upper, velocity_limit, time_step, damping,
                           damping_threshold, margin, acceleration_limit)
     previous = None
@@ -757,6 +770,9 @@ class _FloatLimits(NamedTuple):
                                / (2.0 * a))
         lower = np.array(limits.lower, dtype=float)
         upper = np.array(limits.upper, dtype=float)
+        # A continuous joint's centring is 0: (q - 0) / inf.
+        with np.errstate(invalid="ignore"):  # -inf + inf
+            middle = np.where(np.isinf(lower), 0.0, 0.5 * (lower + upper))
         return cls(
             lower=lower,
             # The band's upper edges, formed as upper - margin - q is.
@@ -768,14 +784,17 @@ class _FloatLimits(NamedTuple):
             step=np.ascontiguousarray(step),
             step_h=np.ascontiguousarray(step_h),
             clear=clear * (1.0 + 1e-9) + 1e-300,
-            middle=0.5 * (lower + upper), half=0.5 * (upper - lower),
+            middle=middle, half=0.5 * (upper - lower),
             gain=float(limits.self_motion_gain))
 
 
 @compiled
 def _rate(i, distance, h, accelerating, step, step_h):
     """The bound on |q_dot_i| towards an edge `distance` away:
-    min(d / h, braking_rate(d)), d >= 0."""
+    min(d / h, braking_rate(d)), d >= 0; inf where there is no edge (a
+    continuous joint's)."""
+    if distance == math.inf:
+        return math.inf
     distance = max(distance, 0.0)
     rate = distance / h
     if accelerating:
@@ -963,7 +982,8 @@ def _twist_samples(rng):
     """Random arguments of joint_velocity_command: Jacobians of 5 to 7
     columns with singular values from regular to exactly zero (damped and
     undamped solves), joints inside, on and beyond the edges of their
-    bands (and one case in ten with a joint angle NaN or infinite, one
+    bands (one case in five with continuous joints, limits -inf and inf,
+    at any angle; one in ten with a joint angle NaN or infinite, one
     in twenty each with an entry of J_a or V_a NaN or infinite), slow
     and fast twists, previous rates from rest to beyond the
     limits, with and without an acceleration limit; and one case in five
@@ -991,6 +1011,10 @@ def _twist_samples(rng):
         edge = (lower[i] + margin if rng.uniform() < 0.5
                 else upper[i] - margin)
         q[i] = edge + rng.choice([-1.0, 0.0, 1.0]) * rng.uniform(0.0, 0.05)
+    if rng.uniform() < 0.2:  # continuous joints, without position limits
+        free = rng.choice(n, size=rng.integers(1, n + 1), replace=False)
+        lower[free], upper[free] = -np.inf, np.inf
+        q[free] = rng.uniform(-10.0, 10.0, free.size)
     if rng.uniform() < 0.1:
         q[rng.integers(n)] = rng.choice([np.nan, np.inf, -np.inf])
     if rng.uniform() < 0.05:

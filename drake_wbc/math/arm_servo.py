@@ -56,7 +56,8 @@ def arm_command_violation(command, last, velocity, period, lower, upper,
     [lower, upper]; its rate (command - last) / period within +-speed;
     the change of that rate from `velocity` within +-acceleration period.
     A command that is not a number (NaN) is beyond its position limits;
-    an infinite one too.
+    an infinite one too, also on a continuous joint (limits -inf and
+    inf, which bound nothing else).
 
     Args:
         command: (n,) the command received, rad.
@@ -64,7 +65,8 @@ def arm_command_violation(command, last, velocity, period, lower, upper,
             arm holds), rad.
         velocity: (n,) the rate of `last` (at the start: 0), rad/s.
         period: h, the command period, s.
-        lower, upper: (n,) the joint position limits, rad.
+        lower, upper: (n,) the joint position limits, rad (-inf and inf:
+            a continuous joint).
         speed: (n,) the joint speed limits, rad/s.
         acceleration: (n,) the joint acceleration limits, rad/s^2.
 
@@ -74,11 +76,14 @@ def arm_command_violation(command, last, velocity, period, lower, upper,
     command = np.asarray(command, dtype=float)
     lower = np.asarray(lower, dtype=float)
     upper = np.asarray(upper, dtype=float)
-    within = ((command >= lower - ROUNDING * np.abs(lower))
+    # Infinite, beyond the position limits even of a continuous joint
+    # (-inf and inf), which it would pass as a speed.
+    within = (np.isfinite(command)
+              & (command >= lower - ROUNDING * np.abs(lower))
               & (command <= upper + ROUNDING * np.abs(upper)))
     if not within.all():
         i = int(np.flatnonzero(~within)[0])
-        side = lower[i] if command[i] < lower[i] else upper[i]
+        side = lower[i] if command[i] <= lower[i] else upper[i]
         return ArmLimitViolation(i, "position", float(command[i]),
                                  float(side))
     # Within the position limits, so finite: no rate below overflows.

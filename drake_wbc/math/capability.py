@@ -256,11 +256,22 @@ def _finite_jacobian(J):
 
 def _limit_factors(q, lower, upper):
     """The factors f_i = (q_i - l_i)(u_i - q_i) / (u_i - l_i)^2 of P_jnt and
-    their slopes df_i/dq_i, with each joint clamped to its limits."""
+    their slopes df_i/dq_i, with each joint clamped to its limits; a
+    continuous joint's (l_i = -inf, u_i = inf) are their limits as the
+    range grows about q_i, f_i = 1/4 and 0: it is never nearer a limit
+    than at mid-range."""
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
     q = np.clip(np.asarray(q), lower, upper)
     span2 = (upper - lower) ** 2
-    return (q - lower) * (upper - q) / span2, (upper + lower - 2.0 * q) / span2
+    limited = np.isfinite(span2)
+    if limited.all():
+        return ((q - lower) * (upper - q) / span2,
+                (upper + lower - 2.0 * q) / span2)
+    zero = q * 0.0
+    finite = np.where(limited, span2, 1.0)
+    low, high = np.where(limited, lower, -1.0), np.where(limited, upper, 1.0)
+    return (np.where(limited, (q - low) * (high - q) / finite, zero + 0.25),
+            np.where(limited, (high + low - 2.0 * q) / finite, zero))
 
 
 def _joint_limit_penalty(q, lower, upper, k_j):
@@ -418,7 +429,8 @@ def _as_jacobian(J_a, rows=None, wide=True):
 def _as_limits(q, lower, upper, size=None):
     """Returns q, lower, upper, checked float vectors of one size."""
     q = as_vector("q", q, size)
-    lower, upper = ordered_limits("lower", lower, "upper", upper, q.size)
+    lower, upper = ordered_limits("lower", lower, "upper", upper, q.size,
+                                  unlimited=True)
     return q, lower, upper
 
 
@@ -449,11 +461,15 @@ def joint_limit_penalty(q, lower, upper, k_j=DEFAULT_JOINT_LIMIT_GAIN):
     when every joint is mid-range (see `DEFAULT_JOINT_LIMIT_GAIN`). A joint
     beyond a limit (a simulated joint can overshoot by a hair) is clamped to
     that limit, so that P_jnt = 0 there rather than a meaningless value.
+    A continuous joint (q^l = -inf, q^u = inf) is never near a limit: its
+    factor is 1/4 at every angle, the limit of the factor as its range
+    grows, and it does not turn P_jnt.
 
     Args:
         q: (n,) joint angles q_a, rad.
-        lower: (n,) lower joint limits q^l, rad.
-        upper: (n,) upper joint limits q^u, rad, each > its lower limit.
+        lower: (n,) lower joint limits q^l, rad (-inf: a continuous joint).
+        upper: (n,) upper joint limits q^u, rad, each > its lower limit
+            (inf where the lower is -inf, and only there).
         k_j: scaling factor k_j > 0, dimensionless.
 
     Returns:
@@ -726,8 +742,11 @@ def _penalty_and_gradient(q, lower, upper, k_j):
         elif q_i > u_i:
             q_i = u_i
         span2 = (u_i - l_i) * (u_i - l_i)
-        factors[i] = (q_i - l_i) * (u_i - q_i) / span2
-        slopes[i] = (u_i + l_i - 2.0 * q_i) / span2
+        if math.isinf(span2):  # a continuous joint: as at mid-range
+            factors[i], slopes[i] = 0.25, 0.0
+        else:
+            factors[i] = (q_i - l_i) * (u_i - q_i) / span2
+            slopes[i] = (u_i + l_i - 2.0 * q_i) / span2
         product *= factors[i]
     penalty = -math.expm1(-k_j * product)
     scale = k_j * math.exp(-k_j * product)
@@ -834,7 +853,9 @@ def _capability_terms_sample(rng):
     singular values (well conditioned, near-singular and singular, the
     damping on and off), n = 6 or 7, joints inside their range, at a
     limit, beyond one, two at limits; in one case in twenty an entry of
-    J_a NaN or infinite; float64 arrays, as the stage passes them."""
+    J_a NaN or infinite, in one in five some joints continuous (limits
+    -inf and inf, at any angle); float64 arrays, as the stage passes
+    them."""
     n = 6 if rng.uniform() < 0.75 else 7
     U, _ = np.linalg.qr(rng.normal(size=(6, 6)))
     V, _ = np.linalg.qr(rng.normal(size=(n, n)))
@@ -863,6 +884,10 @@ def _capability_terms_sample(rng):
     if rng.uniform() < 0.05:
         J[rng.integers(6), rng.integers(n)] = rng.choice(
             [np.nan, np.inf, -np.inf])
+    if rng.uniform() < 0.2:  # continuous joints, without position limits
+        free = rng.choice(n, size=rng.integers(1, n + 1), replace=False)
+        lower[free], upper[free] = -np.inf, np.inf
+        q[free] = rng.uniform(-10.0, 10.0, free.size)
     return J, q, lower, upper, k_j, damping, eps
 
 

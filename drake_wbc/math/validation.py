@@ -116,7 +116,9 @@ def _holds_non_number(value):
     return False
 
 
-def _as_array(name, value, shape, kind):
+def _as_array(name, value, shape, kind, finite=True):
+    """`value` as a float array of `shape` (a string or boolean refused),
+    every entry finite where `finite` (else unchecked: the caller's)."""
     # Arrays of numbers, the usual case, hold no string or boolean.
     if not (type(value) is np.ndarray and value.dtype.kind in "fiu") and (
             _holds_non_number(value)):
@@ -140,7 +142,7 @@ def _as_array(name, value, shape, kind):
             f"{name} has shape {array.shape}, which is not allowed: "
             f"must have shape ({wanted})"
         )
-    if not np.all(np.isfinite(array)):
+    if finite and not np.all(np.isfinite(array)):
         raise ValueError(
             f"{name} = {_shown(array)} is not allowed: "
             "every entry must be finite (no NaN or infinity)"
@@ -371,18 +373,62 @@ def _above(name, value, strict):
     return number
 
 
-def ordered_limits(lower_name, lower, upper_name, upper, size=None):
+def limit_vector(name, value, size=None, infinity=math.inf):
+    """`value` as a float vector of `size` entries (any if None), each
+    finite or equal to `infinity` (-inf for lower limits, inf for upper
+    ones): a limit that bounds nothing on that side.
+
+    Raises:
+        ValueError: naming `name` and the first entry that is NaN or the
+            other infinity, or when the shape is wrong.
+    """
+    array = _as_array(name, value, (size,), "vector", finite=False)
+    bad = np.flatnonzero(~np.isfinite(array) & (array != infinity))
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"{name}[{i}] = {float(array[i])!r} is not allowed: must be "
+            f"finite, or {infinity!r} (no limit on that side)")
+    return array
+
+
+def ordered_limits(lower_name, lower, upper_name, upper, size=None,
+                   unlimited=False):
     """Returns (lower, upper) as vectors after checking lower < upper.
 
     Works for scalars too (pass size=None and numbers): the result is then
     a pair of 1-element vectors.
 
+    Args:
+        lower_name, upper_name: the limits' names, for the error.
+        lower, upper: the limits.
+        size: the number of entries, any if None.
+        unlimited: whether an entry may be unlimited: -inf below and +inf
+            above together (a continuous joint, which has no position
+            limits). A limit infinite on one side only is refused either
+            way; every other entry is finite.
+
     Raises:
         ValueError: naming both arguments and the first index where the
-            lower limit is not below the upper one.
+            lower limit is not below the upper one, or (with `unlimited`)
+            where one of them is infinite and the other not its opposite.
     """
-    lower = as_vector(lower_name, np.atleast_1d(lower), size)
-    upper = as_vector(upper_name, np.atleast_1d(upper), lower.shape[0])
+    if not unlimited:
+        lower = as_vector(lower_name, np.atleast_1d(lower), size)
+        upper = as_vector(upper_name, np.atleast_1d(upper), lower.shape[0])
+    else:
+        lower = limit_vector(lower_name, np.atleast_1d(lower), size,
+                             -math.inf)
+        upper = limit_vector(upper_name, np.atleast_1d(upper),
+                             lower.shape[0], math.inf)
+        one_sided = np.isinf(lower) != np.isinf(upper)
+        if one_sided.any():
+            i = int(np.flatnonzero(one_sided)[0])
+            raise ValueError(
+                f"{lower_name}[{i}] = {float(lower[i])!r} and "
+                f"{upper_name}[{i}] = {float(upper[i])!r} are not allowed: "
+                "each pair must be finite, or -inf and inf together (a "
+                "continuous joint, without position limits)")
     bad = np.flatnonzero(lower >= upper)
     if bad.size:
         i = int(bad[0])

@@ -36,7 +36,13 @@ from pathlib import Path
 
 from drake_wbc.math.capability import DEFAULT_JOINT_LIMIT_GAIN, CapabilityBand
 from drake_wbc.math.loading import load_typed
-from drake_wbc.math.validation import as_vector, non_negative, positive, text
+from drake_wbc.math.validation import (
+    as_vector,
+    limit_vector,
+    non_negative,
+    positive,
+    text,
+)
 from drake_wbc.math.workspace import LocalWorkspace
 
 MIN_ARM_JOINTS = 6
@@ -121,15 +127,14 @@ def _names(name, values, count=None, minimum=0):
     return names
 
 
-def _limits(name, values, size, signed=False, optional=False):
-    """`values` as (size,) finite numbers, each > 0 unless `signed` (joint
-    positions); None stays None where `optional`."""
+def _limits(name, values, size, optional=False):
+    """`values` as (size,) finite numbers, each > 0; None stays None where
+    `optional`."""
     if values is None and optional:
         return None
     vector = as_vector(name, values, size)
-    if not signed:
-        for i, v in enumerate(vector):
-            positive(f"{name}[{i}]", v)
+    for i, v in enumerate(vector):
+        positive(f"{name}[{i}]", v)
     return tuple(float(v) for v in vector)
 
 
@@ -252,7 +257,9 @@ class ArmDescription:
         home: the home configuration, one angle per joint, rad: where the
             arm starts and what the capability band is tuned at.
         position_lower, position_upper: optional tighter joint position
-            limits, rad (the model's by default).
+            limits, rad (the model's by default). A continuous joint (no
+            position limits in its model: URDF's type="continuous") keeps
+            none with -.inf and .inf, or gets these if finite.
         velocity_limits: optional tighter joint speed limits, rad/s.
         acceleration_limits: optional tighter joint acceleration limits,
             rad/s^2 (the model must have them, or they are given here).
@@ -276,9 +283,11 @@ class ArmDescription:
         self.base_frame = _names("base_frame", [self.base_frame])[0]
         self.flange_frame = _names("flange_frame", [self.flange_frame])[0]
         self.home = tuple(float(v) for v in as_vector("home", self.home, n))
-        for name in ("position_lower", "position_upper"):
-            setattr(self, name, _limits(
-                name, getattr(self, name), n, signed=True, optional=True))
+        for name, infinity in (("position_lower", -math.inf),
+                               ("position_upper", math.inf)):
+            if getattr(self, name) is not None:
+                setattr(self, name, tuple(float(v) for v in limit_vector(
+                    name, getattr(self, name), n, infinity)))
         if self.position_lower is not None and self.position_upper is not None:
             for i, (lo, hi) in enumerate(zip(self.position_lower,
                                              self.position_upper,

@@ -129,7 +129,8 @@ class ArmLimits(NamedTuple):
     where tighter.
 
     Attributes:
-        lower, upper: joint position limits, rad.
+        lower, upper: joint position limits, rad; -inf and inf for a
+            continuous joint, which has none.
         velocity: joint speed limits, rad/s.
         acceleration: joint acceleration limits, rad/s^2.
     """
@@ -236,7 +237,8 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
             joint between T_a and the TCP is not one of arm.joints or one
             outboard of the sensor's weld not a weld, a LIDAR's frame is
             not on the base, the arm's limits are missing or wider than
-            the model's, a model file (model.file, model.directives, a
+            the model's, a joint of the arm limited on one side only,
+            a model file (model.file, model.directives, a
             file the directives add) is not there, or a suspension is
             asked of a base whose model is not SDFormat.
     """
@@ -631,9 +633,11 @@ def _robot_model(plant, description):
 def _arm_limits(arm, joints):
     """The arm's own ArmLimits: the model's, tightened where the
     description gives tighter ones; a ValueError naming the field for a
-    limit that is missing or wider than the model's, or a home outside.
-    A joint whose model gives no position range (lower = upper = 0) gets
-    the description's in the plant."""
+    limit that is missing or wider than the model's, a joint limited on
+    one side only, or a home outside. A joint whose model gives no
+    position range (lower = upper = 0) gets the description's in the
+    plant. A continuous joint (the model's limits -inf and inf) has no
+    position limits, unless the description gives finite ones."""
     n = len(joints)
     model = dict(
         position_lower=[float(j.position_lower_limits()[0]) for j in joints],
@@ -650,9 +654,9 @@ def _arm_limits(arm, joints):
     # So is a position range of lower = upper = 0 (a URDF's lower='0'
     # upper='0', likewise); the description's then go into the plant,
     # whose joint would otherwise be held at 0.
-    unlimited = [i for i in range(n) if model["position_lower"][i]
-                 == model["position_upper"][i] == 0.0]
-    for i in unlimited:
+    unset = [i for i in range(n) if model["position_lower"][i]
+             == model["position_upper"][i] == 0.0]
+    for i in unset:
         model["position_lower"][i] = -math.inf
         model["position_upper"][i] = math.inf
     limits = {}
@@ -668,7 +672,13 @@ def _arm_limits(arm, joints):
                     f"arm.{name}[{i}] = {value!r} is not allowed: must be "
                     f"within the model's own {own[i]!r} for "
                     f"{arm.joints[i]!r} (a limit may only tighten)")
-            if not np.isfinite(value):
+            # An infinite position limit is none, a continuous joint's
+            # (the model's, or the description's -.inf and .inf); one
+            # the model left unset must be given.
+            missing = not np.isfinite(value) and (
+                not name.startswith("position")
+                or (given is None and i in unset))
+            if missing:
                 raise ValueError(
                     f"arm.{name}[{i}] is missing, which is not allowed: the "
                     f"model gives {arm.joints[i]!r} none "
@@ -676,6 +686,17 @@ def _arm_limits(arm, joints):
                     "description")
             values.append(float(value))
         limits[name] = np.array(values)
+    for i, (lo, hi) in enumerate(zip(limits["position_lower"].tolist(),
+                                     limits["position_upper"].tolist(),
+                                     strict=True)):
+        if math.isinf(lo) != math.isinf(hi):
+            raise ValueError(
+                f"arm.position_lower[{i}] = {lo!r} and arm.position_upper"
+                f"[{i}] = {hi!r} (the model gives "
+                f"{shown['position_lower'][i]!r} and "
+                f"{shown['position_upper'][i]!r}) are not allowed for "
+                f"{arm.joints[i]!r}: a joint is limited on both sides, or "
+                "on neither (a continuous joint, -inf and inf)")
     for i, (q, lo, hi) in enumerate(zip(
             arm.home, limits["position_lower"].tolist(),
             limits["position_upper"].tolist(), strict=True)):
@@ -683,7 +704,7 @@ def _arm_limits(arm, joints):
             raise ValueError(
                 f"arm.home[{i}] = {q!r} is not allowed: must be inside "
                 f"{arm.joints[i]!r}'s limits ({lo!r}, {hi!r})")
-    for i in unlimited:
+    for i in unset:
         joints[i].set_position_limits(limits["position_lower"][i:i + 1],
                                       limits["position_upper"][i:i + 1])
     return ArmLimits(limits["position_lower"], limits["position_upper"],

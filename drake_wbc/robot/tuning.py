@@ -40,6 +40,7 @@ import numpy as np
 from drake_wbc.math import capability
 from drake_wbc.math.arm_control import DEFAULT_DAMPING_THRESHOLD
 from drake_wbc.math.capability import CapabilityBand
+from drake_wbc.math.joint_range import configuration_range
 from drake_wbc.math.validation import positive, whole_number
 from drake_wbc.math.workspace import LocalWorkspace, deflection, extent
 
@@ -112,13 +113,15 @@ def capability_at(arm, q, k_j):
 
 def survey_capability(arm, k_j=None, count=2000, seed=0):
     """C_m of `arm` (an ArmKinematics) at home and at `count` random
-    configurations within its limits (numpy Generator `seed`), with gain
-    `k_j` (the proposed one for the arm if None)."""
+    configurations within its limits (numpy Generator `seed`; a
+    continuous joint's within one turn,
+    drake_wbc.math.joint_range.configuration_range), with gain `k_j` (the
+    proposed one for the arm if None)."""
     k_j = (proposed_joint_limit_gain(arm.num_joints) if k_j is None
            else positive("k_j", k_j))
     rng = np.random.default_rng(seed)
-    samples = np.sort([capability_at(arm, rng.uniform(arm.lower, arm.upper),
-                                     k_j)
+    lower, upper = configuration_range(arm.lower, arm.upper)
+    samples = np.sort([capability_at(arm, rng.uniform(lower, upper), k_j)
                        for _ in range(whole_number("count", count, 1))])
     return CapabilitySurvey(k_j, capability_at(arm, arm.home, k_j), samples)
 
