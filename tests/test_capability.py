@@ -27,6 +27,7 @@ from reference_kinematics import (
     penalty_by_loop,
     random_nonsingular_q,
 )
+from singular_sides import is_one_of, one_sided_gradients
 
 from drake_wbc.math import capability as cap
 
@@ -281,6 +282,32 @@ def test_manipulability_gradient_at_and_near_singularities():
         g_near = cap.manipulability_joint_gradient(jacobian(ELFIN5, near))
         assert min(np.linalg.norm(g_near - g),
                    np.linalg.norm(g_near + g)) < 1e-6 * np.linalg.norm(g)
+
+
+@pytest.mark.parametrize("body", [cap.capability_terms,
+                                  cap.capability_terms_float])
+def test_an_exact_singularity_gives_one_of_the_two_sides(body):
+    """With one zero singular value the gradient has no side: each body
+    returns the limit of the gradients on one side or the other (J_a +-
+    delta u v^T), whichever its SVD's signs give (numpy 2.4's LAPACK and
+    the compiled kernel's agreed on the random samples of
+    tests/test_kernels.py, numpy 2.5's did not). C_m itself is 0 to
+    rounding."""
+    rng = np.random.default_rng(31)
+    lower, upper = np.full(6, -3.0), np.full(6, 3.0)
+    for _ in range(20):
+        U, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+        V, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+        s = np.concatenate([np.sort(rng.uniform(0.1, 1.5, 5))[::-1], [0.0]])
+        J = (U * s) @ V.T
+        q = rng.uniform(-2.5, 2.5, 6)
+        damping, eps = 0.02, 0.1
+        C_m, g = body(J, q, lower, upper, K_J, damping, eps)
+        assert abs(C_m) < 1e-12
+        sides = one_sided_gradients(J, q, lower, upper, K_J, damping, eps)
+        assert np.linalg.norm(sides[0] - sides[1]) > 0.1 * np.linalg.norm(
+            sides[0])
+        assert is_one_of(g, sides)
 
 
 def test_penalty_gradient_matches_finite_differences_inside():

@@ -236,3 +236,33 @@ def test_a_forged_wrench_beyond_the_sensors_range_stops_the_robot(caplog):
     assert np.all(steps <= limits.base_acceleration * (1.0 + 1e-9))
     acceleration = np.abs(np.diff(arm, 2, axis=0)) / h ** 2
     assert np.all(acceleration <= limits.joint_acceleration * (1.0 + 1e-9))
+
+
+ON_THE_DEBUG_ALLOCATOR = """
+from drake_wbc.deployment.loopback import build_loopback, simulate_loopback
+from drake_wbc.experiments.scenario import find_scenario, load_scenario
+
+loop = build_loopback(load_scenario(find_scenario("hardware")))
+print(simulate_loopback(loop, 0.1).time[-1])
+"""
+"""A short loopback run: every message on memq:// reaches a receiver's
+Python handler, while the Simulator advances."""
+
+
+def test_no_message_is_handled_without_the_gil():
+    """pydrake's LcmInterfaceSystem calls the Python handlers subscribed
+    on a DrakeLcm from Simulator.AdvanceTo, which has released the GIL,
+    and its binding makes each message's bytes object before taking the
+    GIL back: Python 3.12 and later crashed there (a segmentation fault
+    at the first message), 3.11 allocated without the GIL. Python's
+    debug allocator aborts the process on such an allocation; the
+    receivers are pumped from Python (LcmPump)."""
+    import os
+    import subprocess
+    import sys
+
+    done = subprocess.run(
+        [sys.executable, "-c", ON_THE_DEBUG_ALLOCATOR], capture_output=True,
+        text=True, timeout=300, env={**os.environ, "PYTHONMALLOC": "debug"})
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert float(done.stdout.strip().splitlines()[-1]) == pytest.approx(0.1)

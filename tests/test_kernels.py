@@ -229,6 +229,27 @@ def _forcing_edges():
     return cases
 
 
+def _one_exact_singularity(J_a, *_):
+    """Whether J_a (finite) has exactly one singular value that is zero
+    to rounding: there grad_x C_m has no side, and which one a body
+    gives depends on its SVD's LAPACK (numpy's and the compiled kernel's
+    agree with numpy 2.4, not with 2.5); tests/test_capability.py checks
+    that each gives one, and only C_m is compared here."""
+    if not np.isfinite(J_a).all():
+        return False
+    s = np.linalg.svd(J_a, compute_uv=False)
+    return np.sum(s <= max(J_a.shape) * np.finfo(float).eps * s[0]) == 1
+
+
+AMBIGUOUS = {
+    "drake_wbc.math.capability.capability_terms": (_one_exact_singularity,
+                                                   slice(0, 1)),
+}
+"""Inputs where a reference's result is not unique, by the reference's
+name: (whether the arguments are such, the part of the flat result that
+is unique there)."""
+
+
 EDGES = {
     "drake_wbc.math.capability.transition_of": _transition_edges,
     "drake_wbc.math.capability.transition_derivative_of": _transition_edges,
@@ -254,10 +275,13 @@ name: each a function that returns a list of argument tuples."""
 def test_the_kernel_gives_its_references_result(kernel):
     rng = np.random.default_rng(20261201)
     edges = EDGES.get(_name(kernel), lambda: [])()
+    ambiguous, unique = AMBIGUOUS.get(_name(kernel), (None, slice(None)))
     for args in [kernel.sample(rng) for _ in range(SAMPLES)] + edges:
         expected = _flat(kernel.reference(*args))
         actual = _flat(kernel.fast(*args))
         assert actual.shape == expected.shape, args
+        if ambiguous is not None and ambiguous(*args):
+            expected, actual = expected[unique], actual[unique]
         scale = max(1.0, float(np.max(np.abs(expected), initial=0.0,
                                       where=np.isfinite(expected))))
         np.testing.assert_allclose(actual, expected, rtol=0.0,

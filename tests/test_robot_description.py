@@ -13,6 +13,8 @@ from pydrake.multibody.plant import MultibodyPlant
 
 from drake_wbc.robot.description import (
     MIN_ARM_JOINTS,
+    BaseDescription,
+    RobotDescription,
     ToolDescription,
     load_robot_description,
     models_dir,
@@ -579,3 +581,15 @@ def test_a_model_drake_cannot_parse_names_the_field(tmp_path):
     with pytest.raises(ValueError, match=r"^model\.directives = "
                        "'arm.dmd.yaml' is not allowed: .*unknown package"):
         add_robot(MultibodyPlant(0.001), load_robot_description(path))
+
+
+def test_a_blank_description_with_nan_parts_is_blank():
+    """The loader starts from a blank RobotDescription; a blank part holds
+    NaN defaults, which are equal only when they are the same object: on
+    Python 3.13, whose dataclasses compare field by field, never, and
+    every description file was refused ("model is missing"). A blank
+    part whose NaN is another object is still blank."""
+    blank_base = BaseDescription(height=float("nan"))
+    assert RobotDescription(base=blank_base).base is blank_base
+    with pytest.raises(ValueError, match="model is missing"):
+        RobotDescription(name="r", base=blank_base)

@@ -354,7 +354,11 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
                                wall_clock)
     diagram = builder.Build()
     diagram.set_name("deployment")
-    status = wait_for_status(lcm, options, side.hardware.arm.num_joints,
+    # The waits listen where the receivers do, on the bus that the
+    # diagram's LcmPump polls from Python: a handler left on `lcm` itself
+    # would be called by the Simulator without the GIL (see LcmPump).
+    bus = side.hardware.receiving
+    status = wait_for_status(bus, options, side.hardware.arm.num_joints,
                              stop=stop)
     if status is None:
         return None
@@ -371,7 +375,7 @@ def deploy(scenario, variant=None, options=None, duration=None, lcm=None,
     # follows the robot's status by a fraction of a period and the
     # commands reach the robot well before it samples them.
     limit = options.watchdog_limits.base_state
-    if not wait_for_next(lcm, options.channels.base_state, limit):
+    if not wait_for_next(bus, options.channels.base_state, limit):
         # Started anyway, the controller took the last state heard for a
         # fresh one and sent commands until the watchdog tripped.
         raise TimeoutError(

@@ -88,7 +88,7 @@ def build_loopback(scenario, variant=None, options=None, lcm=None):
     lcm = lcm or DrakeLcm("memq://")
     builder = DiagramBuilder()
     side = add_controller_side(builder, scenario, variant, options, lcm)
-    robot = RobotSide(scenario, options, lcm, add_lcm_interface=False)
+    robot = RobotSide(scenario, options, lcm, add_pump=False)
     builder.AddNamedSystem("robot", robot.diagram)
     hardware, controller = side.hardware.diagram, side.controller.diagram
     ports = {}

@@ -40,7 +40,6 @@ and the arm holds the scenario's initial positions.
 from dataclasses import replace
 
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.lcm import LcmInterfaceSystem
 
 from drake_wbc.experiments.scenario import Scenario, scenario_station
 from drake_wbc.hardware.codecs import (
@@ -85,12 +84,13 @@ class RobotSide:
             None).
         lcm: the DrakeLcmInterface to talk over; it must outlive the
             diagram.
-        add_lcm_interface: add an LcmInterfaceSystem to pump messages in
-            (False when another one in the same Diagram pumps `lcm`).
+        add_pump: pump `lcm` with an LcmPump of its own (False when
+            another one in the same Diagram pumps `lcm`; a UDP
+            connection's queue of its own is always pumped here).
     """
 
     def __init__(self, scenario, options=None, lcm=None,
-                 add_lcm_interface=True):
+                 add_pump=True):
         self.scenario = checked_instance("scenario", scenario, Scenario,
                                          Scenario)
         options = options or scenario.hardware
@@ -102,15 +102,12 @@ class RobotSide:
         channels = options.channels
         builder = DiagramBuilder()
         s = self.systems = {}
-        if add_lcm_interface:
-            s["lcm"] = builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
         self.station = scenario_station(scenario)
         station = builder.AddNamedSystem("station", self.station.diagram)
 
         bus = receiving_bus(lcm)
-        if bus is not lcm:
-            s["pump"] = builder.AddNamedSystem("pump", LcmPump(
-                bus, options.watchdog_period))
+        if add_pump or bus is not lcm:
+            s["pump"] = builder.AddNamedSystem("pump", LcmPump(bus))
         s["commands"] = receiver = builder.AddNamedSystem(
             "commands", CommandReceiver(
                 bus, (channels.base_command, channels.arm_command),

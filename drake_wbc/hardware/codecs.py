@@ -391,18 +391,30 @@ def receiving_bus(lcm):
 
 
 class LcmPump(LeafSystem):
-    """Polls a QueuedLcm every `period` s (a publish event), so that its
-    messages reach the receivers' mailboxes; the receivers take them in at
-    the next simulator step, at the same time."""
+    """Delivers the messages received on `bus` to the receivers' Python
+    handlers (their mailboxes) at the start of every simulator step,
+    before the receivers take them in: a per-step unrestricted update
+    that changes no state, so it must come before the receivers in the
+    Diagram (the Diagram updates its systems in the order they were
+    added; HardwareInterface and RobotSide add it before their
+    receivers).
 
-    def __init__(self, bus, period):
+    `bus` is what `receiving_bus` gives: a QueuedLcm over UDP, the
+    DrakeLcm itself over memq://. Drake's LcmInterfaceSystem is not used
+    to pump: it calls the handlers from Simulator.AdvanceTo, which has
+    released the GIL, and pydrake's Subscribe makes each message's bytes
+    object before it takes the GIL back (Python 3.12 and later crash
+    there; tests/test_hardware_loop.py checks on Python's debug
+    allocator). Here the handlers run on the Python thread that holds
+    the GIL, over UDP and over memq:// alike, so the in-process runs
+    deliver as the deployment does."""
+
+    def __init__(self, bus):
         super().__init__()
         self._bus = bus
-        self.DeclarePeriodicPublishEvent(positive("period", period), 0.0,
-                                         self._poll)
-        self.DeclareInitializationPublishEvent(self._poll)
+        self.DeclarePerStepUnrestrictedUpdateEvent(self._poll)
 
-    def _poll(self, context):
+    def _poll(self, context, state):
         self._bus.HandleSubscriptions(0)
 
 
@@ -451,9 +463,9 @@ class MessageDecoder(LeafSystem):
       have jumped (Reception.clock_jumps).
 
     It subscribes to `channel` itself and takes in every message
-    delivered, in order, at the simulator step after the delivery (an
-    LcmInterfaceSystem in the same Diagram pumps LCM and wakes the
-    simulator at once): not only the last one of a step, so that a flood
+    delivered, in order, at the start of each simulator step (an
+    LcmPump before it in the Diagram delivers them): not only the last
+    one of a step, so that a flood
     of garbage on the channel cannot hide the genuine messages. The
     outputs are of the state alone. Rejections are logged on the
     `drake_wbc.hardware` logger, at most once a LOG_INTERVAL.

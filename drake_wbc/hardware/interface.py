@@ -25,8 +25,8 @@ and, with the arm's measured positions, the arm's restart from where it
 is after a stop) to MessageEncoders, which stamp them with the
 interface's sender identity, and LcmPublisherSystems; a
 FlaggedPublisher sends the base's stop at once when the guard finds a
-stale stream between two ticks; an LcmInterfaceSystem pumps the
-messages in.
+stale stream between two ticks; an LcmPump delivers the messages to
+the decoders at the start of every simulator step.
 
 `hardware.diagnostics` holds DIAGNOSTICS: the guard's status, the age of
 each status channel's last good message and its count of rejected
@@ -47,7 +47,7 @@ there, and a base stop found between two ticks goes out one check later.
 import secrets
 
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem
+from pydrake.systems.lcm import LcmPublisherSystem
 from pydrake.systems.primitives import Multiplexer
 
 from drake_wbc.hardware.codecs import (
@@ -148,11 +148,8 @@ class HardwareInterface:
         rules = ClockRules.of(options)
         builder = DiagramBuilder()
         s = self.systems = {}
-        s["lcm"] = builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
         self.receiving = bus = receiving_bus(lcm)
-        if bus is not lcm:
-            s["pump"] = builder.AddNamedSystem("pump", LcmPump(
-                bus, options.watchdog_period))
+        s["pump"] = builder.AddNamedSystem("pump", LcmPump(bus))
         for name in STATUS_CHANNELS:
             s[f"decoder.{name}"] = builder.AddNamedSystem(
                 f"decoder.{name}", MessageDecoder(

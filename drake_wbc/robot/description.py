@@ -81,6 +81,12 @@ def _blank(part):
         if isinstance(default, float) and math.isnan(default):
             if not (isinstance(value, float) and math.isnan(value)):
                 return False
+        elif dataclasses.is_dataclass(default):
+            # Field by field: a part with a NaN default is never == a
+            # blank one from Python 3.13 on (dataclasses compare field by
+            # field there, not as tuples, which took NaN is NaN as equal).
+            if type(value) is not type(default) or not _blank(value):
+                return False
         elif value != default:
             return False
     return True
