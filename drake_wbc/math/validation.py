@@ -256,6 +256,13 @@ def text(name, value):
     return value
 
 
+def _first(bad):
+    """The index of the first True entry of the bool array `bad` (the
+    entry a check's error names), or None."""
+    found = np.flatnonzero(bad)
+    return int(found[0]) if found.size else None
+
+
 def selection(name, value, size):
     """Returns `value` as a vector of `size` entries, each exactly 0 or 1
     (the diagonal of a selection matrix such as S_m, or a switch such as
@@ -265,9 +272,8 @@ def selection(name, value, size):
         ValueError: naming `name`, its value and the first bad entry.
     """
     vector = as_vector(name, np.atleast_1d(value), size)
-    bad = np.flatnonzero((vector != 0.0) & (vector != 1.0))
-    if bad.size:
-        i = int(bad[0])
+    i = _first((vector != 0.0) & (vector != 1.0))
+    if i is not None:
         raise ValueError(
             f"{name} = {_shown(vector)} is not allowed: every entry must "
             f"be 0 or 1 (here {name}[{i}] = {float(vector[i])!r})")
@@ -383,9 +389,8 @@ def limit_vector(name, value, size=None, infinity=math.inf):
             other infinity, or when the shape is wrong.
     """
     array = _as_array(name, value, (size,), "vector", finite=False)
-    bad = np.flatnonzero(~np.isfinite(array) & (array != infinity))
-    if bad.size:
-        i = int(bad[0])
+    i = _first(~np.isfinite(array) & (array != infinity))
+    if i is not None:
         raise ValueError(
             f"{name}[{i}] = {float(array[i])!r} is not allowed: must be "
             f"finite, or {infinity!r} (no limit on that side)")
@@ -421,17 +426,15 @@ def ordered_limits(lower_name, lower, upper_name, upper, size=None,
                              -math.inf)
         upper = limit_vector(upper_name, np.atleast_1d(upper),
                              lower.shape[0], math.inf)
-        one_sided = np.isinf(lower) != np.isinf(upper)
-        if one_sided.any():
-            i = int(np.flatnonzero(one_sided)[0])
+        i = _first(np.isinf(lower) != np.isinf(upper))
+        if i is not None:
             raise ValueError(
                 f"{lower_name}[{i}] = {float(lower[i])!r} and "
                 f"{upper_name}[{i}] = {float(upper[i])!r} are not allowed: "
                 "each pair must be finite, or -inf and inf together (a "
                 "continuous joint, without position limits)")
-    bad = np.flatnonzero(lower >= upper)
-    if bad.size:
-        i = int(bad[0])
+    i = _first(lower >= upper)
+    if i is not None:
         raise ValueError(
             f"{lower_name}[{i}] = {float(lower[i])!r} and {upper_name}[{i}] "
             f"= {float(upper[i])!r} are not allowed: each lower limit must be "
@@ -550,9 +553,8 @@ def positive_vector(name, value, size):
         ValueError: naming `name`, the first bad entry and what is allowed.
     """
     vector = as_vector(name, value, size)
-    bad = np.flatnonzero(vector <= 0.0)
-    if bad.size:
-        i = int(bad[0])
+    i = _first(vector <= 0.0)
+    if i is not None:
         raise ValueError(
             f"{name}[{i}] = {float(vector[i])!r} is not allowed: every entry "
             "must be greater than 0")
