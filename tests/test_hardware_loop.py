@@ -266,3 +266,37 @@ def test_no_message_is_handled_without_the_gil():
         text=True, timeout=300, env={**os.environ, "PYTHONMALLOC": "debug"})
     assert done.returncode == 0, done.stderr[-2000:]
     assert float(done.stdout.strip().splitlines()[-1]) == pytest.approx(0.1)
+
+
+def _flat_names(diagram):
+    """The names of a Diagram's leaf systems, in the order the Diagram
+    updates them (the order they were added, sub-diagrams in place)."""
+    names = []
+    for system in diagram.GetSystems():
+        inner = getattr(system, "GetSystems", None)
+        names += ([f"{system.get_name()}/{name}"
+                   for name in _flat_names(system)] if inner
+                  else [system.get_name()])
+    return names
+
+
+def test_the_pump_delivers_before_any_receiver_takes_in():
+    """LcmPump delivers at the start of a step, as a per-step update in
+    the Diagram's order: a receiver updated before it would take every
+    message a step late. In the loopback, the controller side's pump
+    serves both sides; a robot side alone has its own."""
+    from pydrake.lcm import DrakeLcm
+
+    from drake_wbc.deployment.robot_side import RobotSide
+
+    scenario = load_scenario(find_scenario("hardware"))
+    receivers = ("decoder.", "commands")
+    for diagram in (build_loopback(scenario).diagram,
+                    RobotSide(scenario, lcm=DrakeLcm("memq://")).diagram):
+        names = _flat_names(diagram)
+        pumps = [i for i, name in enumerate(names)
+                 if name.rsplit("/", 1)[-1] == "pump"]
+        taking = [i for i, name in enumerate(names)
+                  if name.rsplit("/", 1)[-1].startswith(receivers)]
+        assert len(pumps) == 1 and taking, names
+        assert pumps[0] < min(taking), names
