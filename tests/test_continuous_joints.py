@@ -167,6 +167,24 @@ def test_the_closed_loop_of_a_continuous_joint_arm_tracks(tmp_path):
     assert np.max(np.abs(path - limited)) < 5e-4
 
 
+def test_a_stress_case_of_an_arm_without_position_limits_holds(tmp_path):
+    """`drake-wbc stress --robot` on an arm of continuous joints alone: a
+    case's joint limit margins are None (no limit to measure to), as a
+    distance is without obstacles, not inf, which failed every case as
+    a number that is not finite; the case breaks no invariant."""
+    from drake_wbc.stress.cases import run_case, violations
+    from drake_wbc.stress.run import summary_table
+
+    robot = write_omni_arm(tmp_path, 7, continuous=range(7))
+    record = run_case(0, 0, 0.3, str(robot))
+    assert record["error"] == ""
+    assert record["min_joint_limit_margin_rad"] is None
+    assert record["min_command_joint_limit_margin_rad"] is None
+    assert record["all_finite"] and record["arm_fault"] == "none"
+    assert violations(record) == []
+    assert summary_table([record]).splitlines()[-1].endswith("  ok")
+
+
 # --- each function that meets an infinite range ---------------------------
 
 

@@ -216,8 +216,10 @@ def random_scenario(seed, index, duration=4.0, robot=""):
 
 
 def _none_if_inf(x):
-    """`x` as a float, None for an infinity (nothing to measure to)."""
-    return None if np.isinf(x) else float(x)
+    """`x` as a float, None for +inf: nothing to measure to (no
+    obstacle; no joint with a position limit, an arm of continuous
+    joints alone)."""
+    return None if x == math.inf else float(x)
 
 
 def _limits(scenario):
@@ -234,8 +236,9 @@ def case_record(seed, index, scenario, log):
         log: its drake_wbc.controller.run_log.RunLog.
 
     Returns:
-        dict of plain numbers and strings (JSON-ready; distances are None
-        when there is nothing to measure them to).
+        dict of plain numbers and strings (JSON-ready; distances and
+        joint limit margins are None when there is nothing to measure
+        them to).
     """
     lower, upper, joint_speed_limits = _limits(scenario)
     metrics = run_metrics(scenario, log)
@@ -268,8 +271,9 @@ def case_record(seed, index, scenario, log):
         "min_static_obstacle_distance_m": _none_if_inf(np.min(distance)),
         "min_obstacle_distance_m": _none_if_inf(
             metrics["min_obstacle_distance_m"]),
-        "min_joint_limit_margin_rad": metrics["min_joint_limit_margin_rad"],
-        "min_command_joint_limit_margin_rad": float(command_margin),
+        "min_joint_limit_margin_rad": _none_if_inf(
+            metrics["min_joint_limit_margin_rad"]),
+        "min_command_joint_limit_margin_rad": _none_if_inf(command_margin),
         "max_base_speed_command_m_s":
             metrics["max_base_speed_command_m_s"],
         "max_base_command_ratio": float(np.max(base / base_limits)),

@@ -33,7 +33,9 @@ The invariants checked on every case (drake_wbc.stress.cases.violations):
 
 Recorded but not an invariant: the least C_m, the least margin of the
 measured joint positions to their limits, the closest approach of a
-person (people walk where they like).
+person (people walk where they like). A margin or distance with nothing
+to measure to (an arm of continuous joints alone, no obstacle) is
+recorded as None, "-" in the table.
 
 `run_stress(args)` checks its arguments before it touches anything,
 prints a progress line (cases done / total, failures so far; a failing
