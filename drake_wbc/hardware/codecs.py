@@ -620,9 +620,9 @@ class CommandReceiver(LeafSystem):
     Both channels obey one sender (`admit`): the first one heard, until
     it has been quiet on both for `release_time`; its time stamps are judged
     by `rules` (a new sender starts a new sequence). It subscribes to
-    both channels itself and takes in every message, in order of
-    arrival, at the simulator step after delivery, as MessageDecoder
-    does.
+    both channels itself and takes in every message delivered, in order
+    of arrival, at the start of each simulator step, as MessageDecoder
+    does (an LcmPump before it in the Diagram delivers them).
 
     Args:
         lcm: the DrakeLcmInterface to subscribe on.
