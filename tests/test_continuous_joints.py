@@ -223,6 +223,31 @@ def test_the_joint_limit_penalty_of_a_continuous_joint_is_mid_ranges(arm):
         np.testing.assert_allclose(g, reference[1], rtol=0, atol=1e-12)
 
 
+def test_a_joint_of_finite_limits_is_limited_however_wide(arm):
+    """A joint limited to (-1e200, 1) at 0.5, beside a continuous one, is
+    a limited joint 0.5 rad from its upper limit: its factor (0.5 +
+    1e200) 0.5 / (1 + 1e200)^2, some 5e-201, makes P_jnt, C_m and their
+    gradients 0 to double precision, in both bodies, as before
+    continuous joints. Its range's square overflows to inf, which took
+    it for a continuous joint: P_jnt 0.45 here."""
+    k_j = 1e4
+    q = np.array(HOMES[7])
+    q[1] = 0.5
+    lower, upper = arm.lower.copy(), arm.upper.copy()
+    lower[1], upper[1] = -1e200, 1.0
+    assert math.isinf(lower[0])  # and joint 0 continuous
+    with np.errstate(over="ignore"):
+        assert capability.joint_limit_penalty(q, lower, upper, k_j) == 0.0
+        np.testing.assert_array_equal(
+            capability.joint_limit_penalty_gradient(q, lower, upper, k_j),
+            0.0)
+        J = arm.evaluate(q).J_a
+        C_m, g = capability.capability_terms_float(J, q, lower, upper, k_j,
+                                                   0.02, 0.02)
+    assert C_m == 0.0
+    np.testing.assert_array_equal(g, 0.0)
+
+
 def test_the_capability_of_a_continuous_joint_arm_in_autodiff(arm):
     """C_m's reference body in AutoDiffXd: its value the float one's and
     its derivatives dC_m/dq (P_jnt dm/dq + m dP_jnt/dq), finite."""

@@ -42,6 +42,7 @@ import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 
 from drake_wbc.math.compiled import compiled
+from drake_wbc.math.joint_range import unlimited
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.scalar_support import (
     constant_like,
@@ -269,11 +270,12 @@ def _limit_factors(q, lower, upper):
     their slopes df_i/dq_i, with each joint clamped to its limits; a
     continuous joint's (l_i = -inf, u_i = inf) are their limits as the
     range grows about q_i, f_i = 1/4 and 0: it is never nearer a limit
-    than at mid-range."""
+    than at mid-range. A joint with finite limits is limited however
+    wide its range (one whose square overflows has f_i = 0, as before)."""
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
     q = np.clip(np.asarray(q), lower, upper)
     span2 = (upper - lower) ** 2
-    limited = np.isfinite(span2)
+    limited = ~unlimited(lower, upper)
     if limited.all():
         return ((q - lower) * (upper - q) / span2,
                 (upper + lower - 2.0 * q) / span2)
@@ -757,7 +759,7 @@ def _penalty_and_gradient(q, lower, upper, k_j):
         elif q_i > u_i:
             q_i = u_i
         span2 = (u_i - l_i) * (u_i - l_i)
-        if math.isinf(span2):  # a continuous joint: as at mid-range
+        if math.isinf(l_i):  # a continuous joint (-inf, inf): mid-range
             factors[i], slopes[i] = 0.25, 0.0
         else:
             factors[i] = (q_i - l_i) * (u_i - q_i) / span2
