@@ -14,10 +14,10 @@ The types are in lcmtypes/*.lcm (package drake_wbc_lcm, Python generated
 by lcm-gen beside them); the wrist's wrench is Drake's lcmt_force_torque.
 Time stamps are microseconds (`utime`; lcmt_force_torque's `timestamp`).
 
-`RawBytesSerializer` lets Drake's LcmSubscriberSystem and
-LcmPublisherSystem carry the bytes themselves, so that a malformed message
-reaches the decoder, which rejects it, instead of raising inside the
-subscriber.
+`RawBytesSerializer` lets Drake's LcmPublisherSystem send the bytes that
+the encoders made (the receivers take the bytes from their own
+subscriptions, so that a malformed message reaches the decoder, which
+rejects it: drake_wbc.hardware.codecs).
 """
 
 import struct
@@ -59,9 +59,9 @@ class Decoded(NamedTuple):
 
 
 class RawBytesSerializer(SerializerInterface):
-    """A Drake LCM serializer whose value is the message's bytes: the
-    subscriber stores what arrived, the publisher sends bytes as they are
-    (encoding and decoding happen in drake_wbc.hardware.codecs)."""
+    """A Drake LCM serializer whose value is the message's bytes: a
+    publisher sends them as they are (encoding and decoding happen in
+    drake_wbc.hardware.codecs)."""
 
     def __init__(self):
         SerializerInterface.__init__(self)
