@@ -167,6 +167,10 @@ def test_the_closed_loop_of_a_continuous_joint_arm_tracks(tmp_path):
     assert np.max(np.abs(path - limited)) < 5e-4
 
 
+# The test arm is not tuned (drake-wbc demo would propose k_j and the
+# workspace): the stress case's invariants are the point here.
+@pytest.mark.filterwarnings(
+    "ignore::drake_wbc.robot.tuning.RobotTuningWarning")
 def test_a_stress_case_of_an_arm_without_position_limits_holds(tmp_path):
     """`drake-wbc stress --robot` on an arm of continuous joints alone: a
     case's joint limit margins are None (no limit to measure to), as a
