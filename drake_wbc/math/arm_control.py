@@ -32,9 +32,9 @@ the first arrow is `joint_velocity_for_twist`, in four stages:
 Units: J_a is the (6, n) geometric Jacobian [v; w] of the end effector in
 T_a (m/rad and rad/rad per column), V_a is in m/s and rad/s, joint angles
 in rad, rates in rad/s, accelerations in rad/s^2, time_step in s. The
-singular values of J_a mix both units; for the Elfin5 with its tool they lie
-between about 0.15 and 2 at the home pose and fall to 0 only at a
-singularity (see `DEFAULT_DAMPING_THRESHOLD`).
+singular values of J_a mix both units; for the shipped arm with its tool
+they lie between about 0.15 and 2 at the home pose and fall to 0 only at
+a singularity (see `DEFAULT_DAMPING_THRESHOLD`).
 
 Here: the parameters and their checks; the limits of one controller,
 checked once (`TwistLimits`); the reference body of the controller,
@@ -71,7 +71,7 @@ DEFAULT_DAMPING_THRESHOLD = 0.05
 """Default threshold eps on the smallest singular value s_min of J_a below
 which `joint_velocity_for_twist` damps its solve.
 
-Why 0.05 on the Elfin5 with the wiping tool: at the home pose
+Why 0.05 on the shipped arm with its tool: at the home pose
 s_min = 0.147 and the median over the whole joint space is 0.089, so most
 working poses are solved exactly (no damping, no tracking error). s_min
 falls as about 0.31 d within d rad of the wrist singularity (q5 = 0) and
@@ -80,7 +80,7 @@ as about 0.16 d near the stretched elbow (q3 = 0): damping acts in the last
 before the stretched elbow. With the default damping (lambda_max = eps) the
 largest joint-rate gain of any direction is 1.07 / eps = 21 rad/s per unit
 of twist, so a twist of up to 0.07 m/s (or rad/s) towards a singularity
-still stays below the Elfin5's 1.57 rad/s, and larger ones are slowed
+still stays below the shipped arm's 1.57 rad/s, and larger ones are slowed
 uniformly by the velocity limit rather than blowing up. A smaller
 threshold (0.02) would let the gain reach 53 and the joint rates saturate
 on every pass near a singularity; a larger one (0.1) would damp half of the
@@ -98,15 +98,15 @@ lambda^2 reaches 0 with zero slope."""
 DEFAULT_JOINT_LIMIT_MARGIN = 0.05
 """Default margin (rad) kept between the command and each joint limit.
 
-The position command never leaves [lower + margin, upper - margin]. 0.05 rad
-(2.9 degrees) is 0.8 to 1.1% of each Elfin5 range (4.7 to 6.28 rad), so it
-costs practically no workspace, yet it is larger than what a stiff,
-well-damped position servo overshoots a command that brakes to rest (a few
-percent of the following error, which is itself at most 1.57 rad/s times
-the arm's 0.02 to 0.05 s lag, 0.03 to 0.08 rad at full speed and far less
-once braked), and it covers the tolerance of the arm's own limit switches
-and of the published limits. The capability of movement (and the
-compensation that gives way by it) keeps the arm much further away in
+The position command never leaves [lower + margin, upper - margin]. 0.05
+rad (2.9 degrees) is 0.8 to 1.1% of each of the shipped arm's ranges (4.7
+to 6.28 rad), so it costs practically no workspace, yet it is larger than
+what a stiff, well-damped position servo overshoots a command that brakes
+to rest (a few percent of the following error, which is itself at most 1.57
+rad/s times the arm's 0.02 to 0.05 s lag, 0.03 to 0.08 rad at full speed
+and far less once braked), and it covers the tolerance of the arm's own
+limit switches and of the published limits. The capability of movement (and
+the compensation that gives way by it) keeps the arm much further away in
 normal use, from 8 to 12% of a range; this margin is the last line."""
 
 DEFAULT_SELF_MOTION_GAIN = 0.5

@@ -12,7 +12,7 @@ not worsen, a projection faded in by the transition alpha of eq.
 J_a is the 6 x n geometric Jacobian of the tool point in the arm's base
 frame T_a, rows [v; w] (linear velocity of the tool point in m/s, angular
 velocity in rad/s per joint rate in rad/s), columns the joint rates of an
-all-revolute serial chain (n = 6 for the Elfin5). The gradients are
+all-revolute serial chain (n = 6 for the shipped arm). The gradients are
 analytic, from J_a and q alone: dJ_a/dq from J_a itself, no finite
 differences of the kinematics.
 
@@ -74,8 +74,8 @@ to approach 1 at mid-range. For n = 6 and this default:
                                   = 1 - exp(-0.696) = 0.501.
 
 Why 1.5e4 on our arm: it makes the paper's limitation band
-0.035 < C_m < 0.04 mean "close to a constraint" on the Elfin5 with the
-wiping tool. At the home pose (drake_wbc.robot.model.HOME_ARM_POSITIONS)
+0.035 < C_m < 0.04 mean "close to a constraint" on the shipped arm with its
+tool. At the home pose (drake_wbc.robot.model.HOME_ARM_POSITIONS)
 m = 0.071 and P_jnt = 0.91, so C_m = 0.065, well above the band. Moving
 one joint from home, C_m enters the band either when that joint comes
 within about 8 to 12% of its range from a limit (P_jnt falls to 0.5-0.6
@@ -88,7 +88,7 @@ within about 4% of a limit before the band is reached.
 
 DEFAULT_DAMPING_THRESHOLD = 0.02
 """Default threshold eps on the smallest singular value s_min of J_a, below
-which `capability_gradient` damps its solve. For the Elfin5 with its tool,
+which `capability_gradient` damps its solve. For the shipped arm with its tool,
 s_min is about 0.31 d within d rad of the wrist singularity (q_5 = 0) and
 about 0.16 d near the stretched elbow (q_3 = 0) (as for
 drake_wbc.math.arm_control's threshold): 0.02 damps roughly the last

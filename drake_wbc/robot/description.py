@@ -20,11 +20,12 @@ the TCP is outboard of the arm, the sensor between flange and TCP, the
 limits within the model's) is checked by `add_robot`.
 
 Names of joints and frames are scoped by their model instance, as Drake
-prints them: `elfin5::joint1`, `mcr_base::base_link`. Relative paths are
-relative to the description file's folder.
+prints them: `<model instance>::<name>`, e.g. `mcr_base::base_link`.
+Relative paths are relative to the description file's folder.
 
-The shipped robot, an Elfin5 on an omnidirectional base with an FT-300
-and a wiping tool, is `models/mcr.robot.yaml` (`shipped_robot()`).
+The shipped robot, the paper's 6-joint cobot on an omnidirectional base
+with a wrist force/torque sensor and a tool, is `models/mcr.robot.yaml`
+(`shipped_robot()`).
 """
 
 import copy

@@ -1,9 +1,9 @@
 """The robot's model in Drake, from its description.
 
 Loads a robot described by a `RobotDescription` (drake_wbc.robot.description;
-the shipped one by default: models/mcr.robot.yaml, an Elfin5 on an
-omnidirectional base) into a `MultibodyPlant`, finds its parts, checks
-the description against the model, and computes the two kinematic
+the shipped one by default: models/mcr.robot.yaml, the paper's 6-joint
+cobot on an omnidirectional base) into a `MultibodyPlant`, finds its
+parts, checks the description against the model, and computes the two kinematic
 quantities that the controller needs from the arm's configuration: the
 arm Jacobian J_a and the end-effector position in the base frame (paper,
 Sec. III-A)::

@@ -2,7 +2,7 @@
 the capability band C_m^l < C_m < C_m^u of eq. (transition) and the local
 workspace of the intuitive pHRI mode.
 
-Both were tuned for the shipped Elfin5 (drake_wbc.math.capability,
+Both were tuned for the shipped arm (drake_wbc.math.capability,
 DEFAULT_JOINT_LIMIT_GAIN): C_m = m P_jnt has the units of the arm's
 manipulability (m^3 for a 6 x n Jacobian) and P_jnt = 1 - exp(-k_j
 prod_i f_i) scales with 4^-n, so neither carries over to another arm.
