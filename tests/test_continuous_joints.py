@@ -230,26 +230,66 @@ def test_the_joint_limit_penalty_of_a_continuous_joint_is_mid_ranges(arm):
 def test_a_joint_of_finite_limits_is_limited_however_wide(arm):
     """A joint limited to (-1e200, 1) at 0.5, beside a continuous one, is
     a limited joint 0.5 rad from its upper limit: its factor (0.5 +
-    1e200) 0.5 / (1 + 1e200)^2, some 5e-201, makes P_jnt, C_m and their
-    gradients 0 to double precision, in both bodies, as before
-    continuous joints. Its range's square overflows to inf, which took
-    it for a continuous joint: P_jnt 0.45 here."""
+    1e200) 0.5 / (1 + 1e200)^2, some 5e-201, makes P_jnt about k_j
+    prod_i f_i, some 1e-200, and C_m and their gradients as small, in
+    both bodies. Its range's square overflows to inf, which took it for a
+    continuous joint before (P_jnt 0.45 here)."""
     k_j = 1e4
     q = np.array(HOMES[7])
     q[1] = 0.5
     lower, upper = arm.lower.copy(), arm.upper.copy()
     lower[1], upper[1] = -1e200, 1.0
     assert math.isinf(lower[0])  # and joint 0 continuous
-    with np.errstate(over="ignore"):
-        assert capability.joint_limit_penalty(q, lower, upper, k_j) == 0.0
-        np.testing.assert_array_equal(
-            capability.joint_limit_penalty_gradient(q, lower, upper, k_j),
-            0.0)
-        J = arm.evaluate(q).J_a
-        C_m, g = capability.capability_terms_float(J, q, lower, upper, k_j,
-                                                   0.02, 0.02)
-    assert C_m == 0.0
-    np.testing.assert_array_equal(g, 0.0)
+    factors = [0.25 if math.isinf(low) else
+               ((q_i - low) / (high - low)) * ((high - q_i) / (high - low))
+               for q_i, low, high in zip(q, lower, upper, strict=True)]
+    expected = k_j * math.prod(factors)  # 1 - exp(-x) = x to rounding here
+    assert 1e-201 < expected < 1e-199
+    penalty = capability.joint_limit_penalty(q, lower, upper, k_j)
+    assert penalty == pytest.approx(expected, rel=1e-12)
+    assert np.all(np.abs(capability.joint_limit_penalty_gradient(
+        q, lower, upper, k_j)) < 1e-190)
+    J = arm.evaluate(q).J_a
+    C_m, g = capability.capability_terms_float(J, q, lower, upper, k_j,
+                                               0.02, 0.02)
+    assert C_m == pytest.approx(capability.manipulability(J) * penalty,
+                                rel=1e-12)
+    assert np.all(np.abs(g) < 1e-190)
+
+
+def test_a_range_whose_square_overflows_is_mid_range_at_its_middle(arm):
+    """A joint limited to (-1e200, 1e200) at 0 is at mid-range: its factor
+    (q - l)(u - q) / (u - l)^2 is 1/4, so P_jnt, C_m and their gradients
+    are those of the same arm with that joint continuous, in both bodies,
+    with no overflow on the way (the product of the two distances is
+    1e400: inf / inf was NaN)."""
+    k_j = 1e4
+    q = np.array(HOMES[7])
+    q[1] = 0.0
+    lower, upper = arm.lower.copy(), arm.upper.copy()
+    lower[1], upper[1] = -1e200, 1e200
+    continuous_lower, continuous_upper = lower.copy(), upper.copy()
+    continuous_lower[1], continuous_upper[1] = -np.inf, np.inf
+    J = arm.evaluate(q).J_a
+    with np.errstate(all="raise"):
+        penalty = capability.joint_limit_penalty(q, lower, upper, k_j)
+        gradient = capability.joint_limit_penalty_gradient(q, lower, upper,
+                                                           k_j)
+        fast = capability.capability_terms_float(J, q, lower, upper, k_j,
+                                                 0.02, 0.02)
+        reference = capability.capability_terms(J, q, lower, upper, k_j,
+                                                0.02, 0.02)
+    assert penalty == pytest.approx(capability.joint_limit_penalty(
+        q, continuous_lower, continuous_upper, k_j), rel=1e-14)
+    np.testing.assert_allclose(
+        gradient, capability.joint_limit_penalty_gradient(
+            q, continuous_lower, continuous_upper, k_j),
+        rtol=1e-12, atol=1e-300)
+    expected = capability.capability_terms_float(
+        J, q, continuous_lower, continuous_upper, k_j, 0.02, 0.02)
+    for C_m, g in (fast, reference):
+        assert C_m == pytest.approx(expected[0], rel=1e-14)
+        np.testing.assert_allclose(g, expected[1], rtol=1e-12, atol=1e-15)
 
 
 def test_the_capability_of_a_continuous_joint_arm_in_autodiff(arm):

@@ -271,19 +271,23 @@ def _limit_factors(q, lower, upper):
     continuous joint's (l_i = -inf, u_i = inf) are their limits as the
     range grows about q_i, f_i = 1/4 and 0: it is never nearer a limit
     than at mid-range. A joint with finite limits is limited however
-    wide its range (one whose square overflows has f_i = 0, as before)."""
+    wide its range: each distance is divided by the span before the two
+    are multiplied, so that a range whose square overflows (-1e200,
+    1e200) still gives its f_i, 1/4 at mid-range."""
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)
     q = np.clip(np.asarray(q), lower, upper)
-    span2 = (upper - lower) ** 2
+    span = upper - lower
     limited = ~unlimited(lower, upper)
     if limited.all():
-        return ((q - lower) * (upper - q) / span2,
-                (upper + lower - 2.0 * q) / span2)
+        return (((q - lower) / span) * ((upper - q) / span),
+                ((upper + lower - 2.0 * q) / span) / span)
     zero = q * 0.0
-    finite = np.where(limited, span2, 1.0)
+    finite = np.where(limited, span, 1.0)
     low, high = np.where(limited, lower, -1.0), np.where(limited, upper, 1.0)
-    return (np.where(limited, (q - low) * (high - q) / finite, zero + 0.25),
-            np.where(limited, (high + low - 2.0 * q) / finite, zero))
+    return (np.where(limited, ((q - low) / finite) * ((high - q) / finite),
+                     zero + 0.25),
+            np.where(limited, ((high + low - 2.0 * q) / finite) / finite,
+                     zero))
 
 
 def _joint_limit_penalty(q, lower, upper, k_j):
@@ -758,12 +762,12 @@ def _penalty_and_gradient(q, lower, upper, k_j):
             q_i = l_i
         elif q_i > u_i:
             q_i = u_i
-        span2 = (u_i - l_i) * (u_i - l_i)
+        span = u_i - l_i
         if math.isinf(l_i):  # a continuous joint (-inf, inf): mid-range
             factors[i], slopes[i] = 0.25, 0.0
-        else:
-            factors[i] = (q_i - l_i) * (u_i - q_i) / span2
-            slopes[i] = (u_i + l_i - 2.0 * q_i) / span2
+        else:  # as _limit_factors: no product of two distances
+            factors[i] = ((q_i - l_i) / span) * ((u_i - q_i) / span)
+            slopes[i] = ((u_i + l_i - 2.0 * q_i) / span) / span
         product *= factors[i]
     penalty = -math.expm1(-k_j * product)
     scale = k_j * math.exp(-k_j * product)
