@@ -383,12 +383,21 @@ def test_a_long_run_shows_its_progress_and_time_left_at_once(tmp_path):
     """The longest run allowed (an hour simulated) says how far it is and
     how long it has left within its first simulated second: the
     Simulator advances at most MAX_CHUNK (1 s) at a time (it was a
-    two-hundredth of the run, 18 s here and 5e297 s for 1e300)."""
+    two-hundredth of the run, 18 s here and 5e297 s for 1e300).
+
+    The command runs with Python's own Ctrl-C handler whatever the suite
+    was started from: a suite started as a background job of a shell
+    inherits SIGINT ignored, and so would the command (it finished its
+    hour instead of stopping)."""
     import signal
 
     process = subprocess.Popen(
-        [sys.executable, "-m", "drake_wbc.cli", "run", "--duration",
-         "3600", "--no-replay", "--output", str(tmp_path)],
+        [sys.executable, "-c",
+         "import signal, sys; "
+         "signal.signal(signal.SIGINT, signal.default_int_handler); "
+         "from drake_wbc.cli.main import main; sys.exit(main())",
+         "run", "--duration", "3600", "--no-replay", "--output",
+         str(tmp_path)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = process.stderr.readline()
