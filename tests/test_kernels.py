@@ -60,8 +60,9 @@ def _transition_edges():
 def _capability_edges():
     """C_m and grad_x C_m with s_min on the damping threshold and a float
     either side (where the damping sets in), at an exact singularity with
-    and without damping, J_a zero, and joints at both limits (P_jnt = 0)
-    or beyond them, for six and seven joints."""
+    and without damping, J_a zero, joints at both limits (P_jnt = 0) or
+    beyond them, a damping of 1e200 and a continuous joint at a NaN or
+    infinite angle, for six and seven joints."""
     rng = np.random.default_rng(3)
     cases = []
     for n in (6, 7):
@@ -81,6 +82,16 @@ def _capability_edges():
                               for q in configurations]
         cases.append((np.zeros((6, n)), np.zeros(n), lower, upper, 1.5e4,
                       0.02, 0.02))
+        # A damping whose square overflows (the reference's power of a
+        # float raised OverflowError), and a continuous joint at an angle
+        # NaN or infinite (the kernel gave a finite C_m).
+        cases.append((J, np.zeros(n), lower, upper, 1.5e4, 1e200, 1.0))
+        free_lower, free_upper = lower.copy(), upper.copy()
+        free_lower[0], free_upper[0] = -np.inf, np.inf
+        for angle in (np.nan, np.inf, -np.inf):
+            q = np.zeros(n)
+            q[0] = angle
+            cases.append((J, q, free_lower, free_upper, 1.5e4, 0.02, 0.02))
     return cases
 
 
@@ -158,12 +169,15 @@ def _footprint_edges():
 def _repulsion_edges():
     """The force at the points of `_repulsion_points`, and one point's
     force at the bound max_force exactly and a float either side (where
-    the force is scaled down)."""
+    the force is scaled down), and under a bound whose square overflows
+    (1e200: no bound; the reference's power of a float raised
+    OverflowError)."""
     from drake_wbc.math.repulsion import repulsive_force
     point = np.array([[0.45, 0.0]])
     push = float(np.hypot(*repulsive_force(point, _field(max_force=1e9))))
     return [(points, _field()) for points in _repulsion_points()] + [
-        (point, _field(max_force=bound)) for bound in _either_side(push)]
+        (point, _field(max_force=bound)) for bound in _either_side(push)] + [
+        (point, _field(max_force=1e200))]
 
 
 def _limit_edges():

@@ -350,7 +350,9 @@ def _capability_gradient(J, q, lower, upper, k_j, damping,
     if not _finite_jacobian(J):
         return np.full(J.shape[0], math.nan)
     U, s, Vt = np.linalg.svd(J, full_matrices=False)
-    lambda2 = (damping**2 * (1.0 - (s[-1] / damping_threshold) ** 2)
+    # damping * damping, not damping**2: a Python float's power raises
+    # OverflowError where the product is inf (the kernel's, and gains 0).
+    lambda2 = (damping * damping * (1.0 - (s[-1] / damping_threshold) ** 2)
                if s[-1] < damping_threshold else 0.0)
     gains = np.divide(s, s * s + lambda2, out=np.zeros_like(s),
                       where=s > _zero_singular_value(J.shape, s[0]))
@@ -764,7 +766,8 @@ def _penalty_and_gradient(q, lower, upper, k_j):
             q_i = u_i
         span = u_i - l_i
         if math.isinf(l_i):  # a continuous joint (-inf, inf): mid-range
-            factors[i], slopes[i] = 0.25, 0.0
+            # (0 q_i: a NaN or infinite angle gives NaN, as the reference)
+            factors[i], slopes[i] = 0.25 + 0.0 * q_i, 0.0 * q_i
         else:  # as _limit_factors: no product of two distances
             factors[i] = ((q_i - l_i) / span) * ((u_i - q_i) / span)
             slopes[i] = ((u_i + l_i - 2.0 * q_i) / span) / span

@@ -269,9 +269,10 @@ def repulsive_force(obstacle_points, params):
 
 
 def _bounded(force, params):
-    """`force` (2,) scaled down to params.max_force if longer."""
+    """`force` (2,) scaled down to params.max_force if longer (a bound so
+    large that its square overflows to inf bounds nothing)."""
     squared = force[0] * force[0] + force[1] * force[1]
-    if squared > params.max_force**2:
+    if squared > params.max_force * params.max_force:
         force = force * (params.max_force / np.sqrt(squared))
     return force
 
