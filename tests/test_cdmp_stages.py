@@ -13,6 +13,7 @@ from shipped_names import FOOTPRINT
 
 from drake_wbc.analysis.frequency import linear_system_response
 from drake_wbc.math import cdmp, repulsion
+from drake_wbc.math.dmp import DmpParameters
 from drake_wbc.stages.cdmp_base import AffineDynamics
 from drake_wbc.stages.cdmp_stages import ArmCdmp, BaseCdmp
 from drake_wbc.stages.whole_body_cdmp import WholeBodyCdmp
@@ -322,6 +323,40 @@ def test_arm_cdmp_is_its_reference_body(s_hri, autodiff):
 def test_bad_time_step_is_rejected():
     with pytest.raises(ValueError, match="time_step"):
         ArmCdmp(time_step=-0.01)
+
+
+@pytest.mark.parametrize("stage, params", [
+    (BaseCdmp, partial(cdmp.BaseCdmpParameters, repulsion=BASE.repulsion)),
+    (WholeBodyCdmp, cdmp.WholeBodyCdmpParameters),
+    (ArmCdmp, cdmp.ArmCdmpParameters)])
+def test_a_stage_built_by_hand_refuses_a_dmp_its_period_cannot_sample(
+        stage, params):
+    """Each stage checks its DMP against its control period where the two
+    meet, as the controller's parameters do: tau = 0.03 puts the fastest
+    pole, sqrt(alpha_z beta_z) / tau = 12.5 / 0.03 = 416.7 rad/s, above
+    pi / 0.01 = 314.2 rad/s (the stage took it); tau = 0.04 (312.5) is
+    below, and continuous time samples every DMP."""
+    too_fast = params(dmp=DmpParameters(tau=0.03))
+    with pytest.raises(ValueError, match=(
+            r"params\.dmp\.alpha_z = 25\.0, beta_z = 6\.25 and tau = 0\.03 s "
+            r"are not allowed with time_step = 0\.01 s: .*fastest pole "
+            r"\(416\.667 rad/s\) must lie below the Nyquist rate")):
+        stage(too_fast, time_step=0.01)
+    stage(params(dmp=DmpParameters(tau=0.04)), time_step=0.01)
+    stage(too_fast, time_step=0.0)
+
+
+def test_a_movement_played_faster_than_its_period_samples_is_refused():
+    """A learned movement played at tau = 0.03 runs its DMP's fastest pole
+    at 416.7 rad/s, above the control period's Nyquist rate: refused,
+    naming the movement's DMP and what to change (the stage played it)."""
+    fast = cdmp.WholeBodyCdmpParameters(movement=cdmp.MovementReplay(
+        file="movements/teach.yaml", tau=0.03))
+    with pytest.raises(ValueError, match=(
+            r"movement\.dmp\.alpha_z = .* tau = 0\.03 s are not allowed "
+            r"with time_step = 0\.01 s: .*Nyquist.*; play the movement "
+            r"slower \(a larger movement\.tau\)")):
+        WholeBodyCdmp(fast, time_step=0.01)
 
 
 @pytest.mark.parametrize("stage", [WholeBodyCdmp, ArmCdmp])

@@ -36,6 +36,7 @@ from drake_wbc.math.capability import (
 )
 from drake_wbc.math.compensation import RobustCompensatorParameters
 from drake_wbc.math.distribution import MotionDistributorParameters
+from drake_wbc.math.dmp import check_sampled
 from drake_wbc.math.filtering import (
     BaseFilterParameters,
     check_filter_period,
@@ -145,31 +146,7 @@ class ControllerParameters:
                 "allowed: must be a CapabilityBand, or None (the robot's)")
         check_filter_period(self.base_filter, h, prefix="base_filter.")
         for name in ("base_cdmp", "whole_body_cdmp", "arm_cdmp"):
-            dmp = getattr(self, name).dmp
-            rate = _fastest_pole(dmp)
-            if not rate < np.pi / h:
-                raise ValueError(
-                    f"{name}.dmp.alpha_z = {dmp.alpha_z!r}, beta_z = "
-                    f"{dmp.resolved_beta_z!r} and tau = {dmp.tau!r} s are not "
-                    f"allowed with time_step = {h!r} s: the transformation "
-                    f"system's fastest pole ({rate:.6g} rad/s) must lie below "
-                    f"the Nyquist rate pi / time_step = {np.pi / h:.6g} "
-                    "rad/s, as the filter's cut-off (a DMP faster than the "
-                    "control period cannot be sampled by it, and its "
-                    "discretisation overflows long before 1e300)")
-
-
-def _fastest_pole(dmp):
-    """The largest |lambda| of the transformation system of eq. (6),
-    tau^2 lambda^2 + alpha_z tau lambda + alpha_z beta_z = 0, rad/s: the
-    DMP's fastest rate (sqrt(alpha_z beta_z) / tau when critically damped
-    or under-damped)."""
-    alpha, beta, tau = dmp.alpha_z, dmp.resolved_beta_z, dmp.tau
-    with np.errstate(over="ignore", invalid="ignore"):
-        discriminant = alpha * alpha - 4.0 * alpha * beta
-        if discriminant > 0.0:
-            return float((alpha + np.sqrt(discriminant)) / (2.0 * tau))
-        return float(np.sqrt(alpha * beta) / tau)
+            check_sampled(getattr(self, name).dmp, h, f"{name}.dmp")
 
 
 def check_arm_limits(params, arm):

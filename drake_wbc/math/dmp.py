@@ -205,16 +205,68 @@ def canonical_phase_float(t, params):
 
 
 def fastest_rate(params):
-    """The largest rate, 1/s, of the linear dynamics of eqs. (6) and (7)
-    at DmpParameters `params`: the largest modulus of the roots of
-    tau^2 s^2 + tau alpha_z s + alpha_z beta_z (at most alpha_z / tau
-    while they are real, sqrt(alpha_z beta_z) / tau when complex) and of
-    the canonical system's -alpha_s / tau. A fixed-step integration of
-    the DMP resolves it with steps well below its inverse."""
+    """A bound, 1/s, on the rates of the linear dynamics of eqs. (6) and
+    (7) at DmpParameters `params`: max(alpha_z, sqrt(alpha_z beta_z),
+    alpha_s) / tau, at least the largest modulus of the roots of
+    tau^2 s^2 + tau alpha_z s + alpha_z beta_z (alpha_z / tau bounds
+    them while they are real, sqrt(alpha_z beta_z) / tau is their modulus
+    when complex; twice `fastest_pole` at the critically damped default)
+    and of the canonical system's -alpha_s / tau. A fixed-step
+    integration of the DMP resolves it with steps well below its
+    inverse."""
     params = _checked_parameters(params)
     return max(params.alpha_z,
                math.sqrt(params.alpha_z * params.resolved_beta_z),
                params.resolved_alpha_s) / params.tau
+
+
+def fastest_pole(params):
+    """The largest modulus, rad/s, of the poles of eq. (6)'s
+    transformation system at DmpParameters `params`, the roots of
+    tau^2 lambda^2 + alpha_z tau lambda + alpha_z beta_z = 0:
+    (alpha_z + sqrt(alpha_z^2 - 4 alpha_z beta_z)) / (2 tau) while they
+    are real, sqrt(alpha_z beta_z) / tau when critically damped or
+    under-damped (12.5 rad/s at the defaults); inf where it overflows."""
+    alpha, beta, tau = params.alpha_z, params.resolved_beta_z, params.tau
+    with np.errstate(over="ignore", invalid="ignore"):
+        discriminant = alpha * alpha - 4.0 * alpha * beta
+        if discriminant > 0.0:
+            return float((alpha + np.sqrt(discriminant)) / (2.0 * tau))
+        return float(np.sqrt(alpha * beta) / tau)
+
+
+def check_sampled(params, time_step, name="dmp", hint=""):
+    """Checks that a control period samples the DMP `params`.
+
+    The transformation system's fastest pole (`fastest_pole`) must lie
+    below the Nyquist rate pi / time_step, as the base filter's cut-off
+    does (a DMP faster than the control period cannot be sampled by it,
+    and its discretisation overflows long before 1e300). time_step 0
+    (continuous) samples every DMP.
+
+    Args:
+        params: DmpParameters.
+        time_step: the control period h, s (>= 0, checked by the caller).
+        name: what the caller calls `params`, for the message.
+        hint: what to change, appended to the message.
+
+    Raises:
+        ValueError: naming alpha_z, beta_z, tau, time_step and both
+            rates.
+    """
+    if time_step == 0.0:
+        return
+    rate, nyquist = fastest_pole(params), math.pi / time_step
+    if not rate < nyquist:
+        raise ValueError(
+            f"{name}.alpha_z = {params.alpha_z!r}, beta_z = "
+            f"{params.resolved_beta_z!r} and tau = {params.tau!r} s are not "
+            f"allowed with time_step = {time_step!r} s: the transformation "
+            f"system's fastest pole ({rate:.6g} rad/s) must lie below "
+            f"the Nyquist rate pi / time_step = {nyquist:.6g} "
+            "rad/s, as the filter's cut-off (a DMP faster than the "
+            "control period cannot be sampled by it, and its "
+            f"discretisation overflows long before 1e300){hint}")
 
 
 def canonical_derivative(s, params):

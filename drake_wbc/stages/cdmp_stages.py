@@ -11,9 +11,14 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem_, ValueProducer
 
 from drake_wbc.math import cdmp, repulsion
+from drake_wbc.math.dmp import check_sampled
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.task_inputs import TASK_INPUTS
-from drake_wbc.math.validation import checked_instance, robots_own
+from drake_wbc.math.validation import (
+    checked_instance,
+    non_negative,
+    robots_own,
+)
 from drake_wbc.stages.cdmp_base import ONE, AffineDynamics, CdmpStage
 from drake_wbc.stages.support import define_stage, optional_input
 
@@ -60,6 +65,8 @@ def BaseCdmp_(T):
                 cdmp.BaseCdmpParameters)
             robots_own("params.repulsion.half_sizes",
                        params.repulsion.half_sizes)
+            check_sampled(params.dmp, non_negative("time_step", time_step),
+                          "params.dmp")
             self._dimension = 3
             no_points = np.zeros((0, 2))
 
@@ -166,6 +173,8 @@ def ArmCdmp_(T):
             self.params = params = checked_instance(
                 "params", params, cdmp.ArmCdmpParameters,
                 cdmp.ArmCdmpParameters)
+            check_sampled(params.dmp, non_negative("time_step", time_step),
+                          "params.dmp")
             self._dimension = 6
             self._default_switch = TASK_INPUTS["phri_switch"].check_number(
                 "phri_switch", phri_switch)

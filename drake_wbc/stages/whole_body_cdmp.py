@@ -34,6 +34,7 @@ from pydrake.systems.framework import LeafSystem_
 from drake_wbc.math import cdmp
 from drake_wbc.math.base_state import BASE_POSE, BASE_STATE_SIZE
 from drake_wbc.math.demonstration import TcpPose, tcp_pose_in_world
+from drake_wbc.math.dmp import check_sampled
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.kinematics import twist_in_base, twist_in_world
 from drake_wbc.math.movement import (
@@ -43,7 +44,7 @@ from drake_wbc.math.movement import (
 )
 from drake_wbc.math.scalar_support import through_float_function
 from drake_wbc.math.task_inputs import TASK_INPUTS
-from drake_wbc.math.validation import checked_instance
+from drake_wbc.math.validation import checked_instance, non_negative
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.cdmp_base import ONE, AffineDynamics, CdmpStage
 from drake_wbc.stages.support import (
@@ -134,10 +135,17 @@ def WholeBodyCdmp_(T):
             self.params = params = checked_instance(
                 "params", params, cdmp.WholeBodyCdmpParameters,
                 cdmp.WholeBodyCdmpParameters)
+            check_sampled(params.dmp, non_negative("time_step", time_step),
+                          "params.dmp")
             self._dimension = 6
             self._default_switch = TASK_INPUTS["phri_switch"].check_number(
                 "phri_switch", phri_switch)
             self.player = player or movement_player(params)
+            if self.player is not None:  # the DMP it plays, at its tau
+                check_sampled(
+                    self.player.transformation_parameters(params.dmp),
+                    time_step, "movement.dmp",
+                    "; play the movement slower (a larger movement.tau)")
             num_inputs = (_DEVIATION.stop if self.player is None
                           else _FORCING.stop)
             self._in_world = body_for(twist_in_world, T)
