@@ -16,15 +16,14 @@ from drake_wbc.stages import StopGate, StopSwitch
 def _evaluate(system, context, value, stop):
     system.GetInputPort("value").FixValue(context, value)
     system.GetInputPort("stop").FixValue(context, [stop])
-    return (np.asarray(system.GetOutputPort(name).Eval(context))
-            for name in ("gated", "scale"))
+    return np.asarray(system.GetOutputPort("gated").Eval(context))
 
 
 @pytest.mark.parametrize("size", [3, 6])
 def test_the_switch_is_stop_switched_and_the_gate_without_limits(size):
     """On random values and stops (either side of 0.5, and on it), in
     double and AutoDiffXd: gated equals math.gating.stop_switched and
-    the StopGate's output exactly, the scale is 1."""
+    the StopGate's output exactly."""
     switch, gate = StopSwitch(size), StopGate(size)
     pairs = [(switch, gate, 0.5),
              (switch.ToAutoDiffXd(), gate.ToAutoDiffXd(), 0.51)]
@@ -34,15 +33,13 @@ def test_the_switch_is_stop_switched_and_the_gate_without_limits(size):
         for _ in range(40):
             value = rng.normal(size=size)
             stop = rng.choice([0.0, 1.0, on_threshold, 0.49, rng.random()])
-            (gated, scale), (expected, one) = (
+            gated, expected = (
                 _evaluate(s, c, value, stop)
                 for s, c in zip((ours, theirs), contexts, strict=True))
             np.testing.assert_array_equal(
                 ExtractValue(gated).ravel(), stop_switched(value, stop))
             np.testing.assert_array_equal(ExtractValue(gated),
                                           ExtractValue(expected))
-            assert ExtractValue(scale).ravel().tolist() == [1.0]
-            assert ExtractValue(one).ravel().tolist() == [1.0]
 
 
 def test_autodiff_derivatives_pass_through_or_stop():

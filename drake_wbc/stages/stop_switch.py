@@ -2,15 +2,10 @@
 systems (its math: drake_wbc.math.gating). The gate that also keeps a
 signal within an envelope is StopGate (drake_wbc.stages.safety)."""
 
-import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.symbolic import MakeVectorVariable
 from pydrake.systems.framework import Diagram_
-from pydrake.systems.primitives import (
-    ConstantVectorSource_,
-    Multiplexer_,
-    SymbolicVectorSystem_,
-)
+from pydrake.systems.primitives import Multiplexer_, SymbolicVectorSystem_
 
 from drake_wbc.math.gating import stop_switched
 from drake_wbc.math.validation import whole_number
@@ -35,16 +30,15 @@ def StopSwitch_(T):
         ::
 
                      ┌────────────┐
-            value ──►│            ├──► gated
-            stop ───►│ StopSwitch ├──► scale
+            value ──►│            │
+            stop ───►│ StopSwitch ├──► gated
                      └────────────┘
 
         - value: (size) the signal.
         - stop (1): >= 0.5 during a stop (InputGuard's `stop`).
         - gated: (size) zeros while stop, otherwise the very values;
-          direct feedthrough of both inputs.
-        - scale (1): always 1 (the ports of a StopGate without limits,
-          whose scale this is).
+          direct feedthrough of both inputs (the `gated` of a StopGate
+          without limits).
 
         It holds an integrating stage while stopped: the controller
         zeroes the inputs of the DMPs' couplings with it
@@ -58,8 +52,8 @@ def StopSwitch_(T):
         Built of Drake's C++ systems, so that no Python runs in its tick:
         a Multiplexer of [value; stop] into a SymbolicVectorSystem
         (named MODEL_NAME) of drake_wbc.math.gating.stop_switched
-        evaluated on symbolic variables (stop_switch_expressions), and a
-        constant source of the scale. tests/test_stop_switch.py holds it
+        evaluated on symbolic variables (stop_switch_expressions).
+        tests/test_stop_switch.py holds it
         to stop_switched on random inputs, in double and AutoDiffXd, and
         to the StopGate without limits. Its scalar-converted copies are
         Drake's (stages.support.define_composite_stage).
@@ -79,14 +73,11 @@ def StopSwitch_(T):
                 switch = builder.AddNamedSystem(
                     MODEL_NAME, SymbolicVectorSystem_[T](
                         input=inputs, output=outputs))
-                one = builder.AddNamedSystem(
-                    "scale", ConstantVectorSource_[T](np.ones(1)))
                 builder.Connect(join.get_output_port(),
                                 switch.get_input_port())
                 builder.ExportInput(join.get_input_port(0), "value")
                 builder.ExportInput(join.get_input_port(1), "stop")
                 builder.ExportOutput(switch.get_output_port(), "gated")
-                builder.ExportOutput(one.get_output_port(), "scale")
 
             build_composite(self, T, build)
 
