@@ -19,3 +19,7 @@ BASE_YAW = 2
 
 BASE_TWIST = slice(3, 6)
 """The twist [vx, vy, wz] in T_b."""
+
+BASE_AXES = 3
+"""The base's velocity components [vx, vy, wz] (T_b): the size of its
+twist, of its velocity command and of its limits."""

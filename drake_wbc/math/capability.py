@@ -46,8 +46,10 @@ from drake_wbc.math.joint_range import unlimited
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.scalar_support import (
     constant_like,
+    cross,
     is_autodiff,
     through_float_function,
+    zero_like,
 )
 from drake_wbc.math.validation import (
     as_matrix,
@@ -172,12 +174,6 @@ class ArmCapabilityParameters:
 # Scalar-generic helpers of the reference bodies
 # ----------------------------------------------------------------------------
 
-def _zero_like(value):
-    """0 of the scalar type of `value` (a float, or AutoDiffXd 0 with zero
-    derivatives)."""
-    return value * 0.0
-
-
 def _expm1(x):
     """e^x - 1, accurate for small |x|, for a float or AutoDiffXd x."""
     if isinstance(x, AutoDiffXd):
@@ -223,14 +219,6 @@ def _others_as_written(values):
     values = np.asarray(values)
     return np.array([np.prod(np.delete(values, k))
                      for k in range(values.size)])
-
-
-def _cross(a, b):
-    """a x b along the first axis of (3, ...) arrays, for any scalar type
-    (np.cross is also slow for small arrays)."""
-    return np.array([a[1] * b[2] - a[2] * b[1],
-                     a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])
 
 
 # ----------------------------------------------------------------------------
@@ -314,8 +302,8 @@ def _jacobian_derivative(J):
     """(n, 6, n) D with D[i] = dJ_a/dq_i (see `jacobian_derivative`)."""
     Jv, Jw = J[:3].T, J[3:].T  # (n, 3): row j is column j of J_a
     # [:, i, j] = Jw_i x Jv_j and Jw_i x Jw_j (vector first).
-    w_x_v = _cross(Jw.T[:, :, None], Jv.T[:, None, :])
-    w_x_w = _cross(Jw.T[:, :, None], Jw.T[:, None, :])
+    w_x_v = cross(Jw.T[:, :, None], Jv.T[:, None, :])
+    w_x_w = cross(Jw.T[:, :, None], Jw.T[:, None, :])
     upper = np.triu(np.ones((J.shape[1],) * 2, dtype=bool))
     dJv = np.where(upper, w_x_v, np.swapaxes(w_x_v, 1, 2))
     dJw = np.where(upper, w_x_w, 0.0)
@@ -410,7 +398,7 @@ def _constant(value, constant):
     value * 0 + constant (the zero's sign kept) for a finite value, and
     for an infinite one, where value * 0 is NaN, the exact constant
     (scalar_support.constant_like)."""
-    zero = _zero_like(value)
+    zero = zero_like(value)
     if zero != zero:
         return constant_like(value, constant)
     return zero + constant if constant else zero

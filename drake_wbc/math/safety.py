@@ -48,13 +48,11 @@ from typing import NamedTuple
 import numpy as np
 
 from drake_wbc.math import kernels
+from drake_wbc.math.base_state import BASE_AXES
 from drake_wbc.math.compiled import compiled
 from drake_wbc.math.scalar_support import all_finite, value_of
 from drake_wbc.math.separation import PeopleSeparationParameters
 from drake_wbc.math.validation import non_negative, positive, positive_vector
-
-BASE_AXES = 3
-"""The base's velocity components [vx, vy, wz] (T_b)."""
 
 DEFAULT_HOLD_TIME = 0.5
 """Seconds for which every input must be valid again before the controller

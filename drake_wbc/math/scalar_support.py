@@ -39,6 +39,20 @@ def is_autodiff(array):
         isinstance(v, AutoDiffXd) for v in array.flat)
 
 
+def zero_like(value):
+    """0 of the scalar type of `value` (a float, or AutoDiffXd 0 with zero
+    derivatives; NaN for an infinite or NaN `value`, as `value * 0.0`)."""
+    return value * 0.0
+
+
+def cross(a, b):
+    """a x b along the first axis of (3, ...) arrays, for any scalar type
+    (np.cross is slow for small arrays and takes no AutoDiffXd)."""
+    return np.array([a[1] * b[2] - a[2] * b[1],
+                     a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
+
+
 def constant_like(like, constant):
     """`constant` as a scalar of the type of the scalar `like`: a float,
     or an AutoDiffXd with as many derivatives as `like`'s, all zero; for

@@ -131,7 +131,11 @@ from drake_wbc.math.capability import (
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.kinematics import random_rotation
 from drake_wbc.math.motion_mode import MotionMode, fixed_weighting_factors
-from drake_wbc.math.scalar_support import constant_like, value_of
+from drake_wbc.math.scalar_support import (
+    constant_like,
+    value_of,
+    zero_like,
+)
 from drake_wbc.math.validation import (
     as_scalar,
     as_vector,
@@ -322,12 +326,6 @@ class AdaptiveWorkspace(NamedTuple):
 # Reference bodies: scalar-generic, arguments not checked
 # ----------------------------------------------------------------------------
 
-def _zero_like(value):
-    """0 of the scalar type of `value` (a float, or AutoDiffXd 0 with zero
-    derivatives)."""
-    return value * 0.0
-
-
 def _horizontal(p):
     x, y = p[0], p[1]
     return x, y, x * x + y * y
@@ -347,14 +345,14 @@ def _extent(p):
 def _deflection(p):
     x, y, d_squared = _horizontal(p)
     if _on_axis(d_squared):
-        return _zero_like(x)
+        return zero_like(x)
     azimuth = np.arctan2(y, x)
     return -azimuth if azimuth < 0.0 else azimuth
 
 
 def _extent_gradient(p):
     x, y, d_squared = _horizontal(p)
-    zero = _zero_like(x)
+    zero = zero_like(x)
     if _on_axis(d_squared):
         return np.array([zero] * 6)
     d = np.sqrt(d_squared)
@@ -363,7 +361,7 @@ def _extent_gradient(p):
 
 def _deflection_gradient(p):
     x, y, d_squared = _horizontal(p)
-    zero = _zero_like(x)
+    zero = zero_like(x)
     if _on_axis(d_squared) or y == 0.0:
         return np.array([zero] * 6)
     sign = 1.0 if y > 0.0 else -1.0
@@ -448,7 +446,7 @@ def _limited(previous, target, max_step):
 def _deactivated(factor, gradient, V_a, direction):
     """The deactivation strategy (see `deactivated`)."""
     if _side(0.0, gradient, V_a, direction, 0.0) == 1.0:
-        return _zero_like(factor) + 1.0
+        return zero_like(factor) + 1.0
     return factor
 
 
@@ -501,8 +499,8 @@ def _state(previous, p_ee_in_base, V_ee, C_m, grad_C_m, constants):
     side_xy = _side(previous[2], penalized.gradient_d, V_a, grad_d, speed)
     side_phi = _side(previous[3], penalized.gradient_phi, V_a, grad_phi,
                      speed)
-    target_xy = _zero_like(f_xy) + 1.0 if side_xy == 1.0 else f_xy
-    target_phi = _zero_like(f_phi) + 1.0 if side_phi == 1.0 else f_phi
+    target_xy = zero_like(f_xy) + 1.0 if side_xy == 1.0 else f_xy
+    target_phi = zero_like(f_phi) + 1.0 if side_phi == 1.0 else f_phi
     return LocalWorkspaceState(
         d=_extent(p),
         phi=_deflection(p),
@@ -549,7 +547,7 @@ def adaptive_weighting_factors(previous, p_ee_in_base, V_ee, C_m, grad_C_m,
     if not np.isfinite(np.concatenate([
             np.ravel(value_of(part))
             for part in (p_ee_in_base, V_ee, C_m, grad_C_m)])).all():
-        nowhere = _zero_like(C_m) + math.nan
+        nowhere = zero_like(C_m) + math.nan
         return nowhere, nowhere, nowhere, nowhere
     state = _state(previous, p_ee_in_base, V_ee, C_m, grad_C_m, constants)
     return (state.sigma_xy, state.sigma_phi, state.deactivated_xy,

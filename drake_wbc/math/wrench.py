@@ -51,19 +51,11 @@ import numpy as np
 
 from drake_wbc.math.compiled import compiled
 from drake_wbc.math.kernels import fast_kernel
-from drake_wbc.math.scalar_support import value_of
+from drake_wbc.math.scalar_support import cross, value_of
 from drake_wbc.math.validation import boolean, whole_number
 
 STANDARD_GRAVITY = 9.81
 """m/s^2, along -z of T_b when the base stands level."""
-
-
-def _cross(a, b):
-    """a x b of 3-vectors of any scalar type (np.cross is slow for one
-    pair)."""
-    return np.array([a[1] * b[2] - a[2] * b[1],
-                     a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])
 
 
 def _skew(p):
@@ -144,8 +136,8 @@ def external_wrench(reading, R_LM, payload, motion=None):
             [0.0, 0.0, -STANDARD_GRAVITY]) - motion[:3]))
         spin = R_LM.T @ motion[3:]
     f_M = reading[:3] - weight
-    tau_M = reading[3:] - _cross(payload.com_in_sensor, weight) + spin
-    lever = _cross(payload.sensor_from_tcp, f_M)
+    tau_M = reading[3:] - cross(payload.com_in_sensor, weight) + spin
+    lever = cross(payload.sensor_from_tcp, f_M)
     F_ext = np.concatenate([R_LM @ f_M, R_LM @ (tau_M + lever)])
     return F_ext if finite else F_ext * math.nan
 
@@ -179,7 +171,7 @@ def tool_motion(rotations, positions, payload, h):
     w_before = _vee_of_rotation(R1 @ R0.T) / h
     w, w_dot = 0.5 * (w_after + w_before), (w_after - w_before) / h
     inertia = R1 @ payload.inertia @ R1.T
-    return np.concatenate([a, inertia @ w_dot + _cross(w, inertia @ w)])
+    return np.concatenate([a, inertia @ w_dot + cross(w, inertia @ w)])
 
 
 def _wrench_inputs(rng):

@@ -14,8 +14,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem_, ValueProducer
 
-from drake_wbc.math import safety
-from drake_wbc.math.base_state import BASE_STATE_SIZE
+from drake_wbc.math.base_state import BASE_AXES, BASE_STATE_SIZE
 from drake_wbc.math.command_limits import (
     limit_base_velocity,
     uniform_scale,
@@ -48,7 +47,7 @@ from drake_wbc.math.validation import (
 )
 from drake_wbc.stages.support import define_stage
 
-_ALLOWED = safety.BASE_AXES + 3 * NEAREST_POINTS
+_ALLOWED = BASE_AXES + 3 * NEAREST_POINTS
 """Where the allowed speeds start in BaseCommandLimiter's state."""
 
 _PEOPLE = _ALLOWED + NEAREST_POINTS
@@ -101,7 +100,7 @@ class LimiterState(NamedTuple):
 def limiter_state(state):
     """The LimiterState of a BaseCommandLimiter's state vector (_SIZE,)."""
     return LimiterState(
-        state[:safety.BASE_AXES], state[safety.BASE_AXES:_PEOPLE],
+        state[:BASE_AXES], state[BASE_AXES:_PEOPLE],
         state[_PEOPLE:_PEOPLE_ALLOWED].reshape(-1, 3),
         state[_PEOPLE_ALLOWED:_PROTECTIVE], state[_PROTECTIVE:_SCAN],
         state[_SCAN:_TRACKER], state[_TRACKER:])
@@ -272,7 +271,7 @@ def BaseCommandLimiter_(T):
             self._scale = body_for(scale_for_rows, T)
             self._people_scan = body_for(people_scan, T)
             self._velocity = self.DeclareVectorInputPort(
-                "velocity", safety.BASE_AXES)
+                "velocity", BASE_AXES)
             self._stopped = self.DeclareVectorInputPort("stopped", 1)
             self._envelope = self.DeclareVectorInputPort("envelope_scale", 1)
             self._points = self.DeclareAbstractInputPort(
@@ -295,7 +294,7 @@ def BaseCommandLimiter_(T):
                  self._velocity.ticket(), self._stopped.ticket()})
             depends = {self._result.ticket()}
             self.DeclareVectorOutputPort(
-                "velocity_command", safety.BASE_AXES, self._command_output,
+                "velocity_command", BASE_AXES, self._command_output,
                 prerequisites_of_calc=depends)
             self.DeclareVectorOutputPort(
                 "saturation", 3, self._saturation_output,
@@ -309,7 +308,7 @@ def BaseCommandLimiter_(T):
             people = np.concatenate([np.zeros(3 * MAX_TRACKS),
                                      np.full(MAX_TRACKS, FAR)])
             return np.concatenate([
-                np.zeros(safety.BASE_AXES),
+                np.zeros(BASE_AXES),
                 self._separation(np.zeros((0, 2))), people,
                 [0.0, NEVER, 0.0], np.zeros(_SIGNATURE_SIZE),
                 initial_tracker()])
@@ -480,7 +479,7 @@ def BaseCommandLimiter_(T):
             than the limits when the controller takes over would
             otherwise be sent commands beyond them until they had
             ramped down."""
-            velocity = as_vector("velocity", velocity, safety.BASE_AXES)
+            velocity = as_vector("velocity", velocity, BASE_AXES)
             scale = uniform_scale(velocity, self._velocity_limits)
             if scale < 1.0:
                 velocity = scale * velocity

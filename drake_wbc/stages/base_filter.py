@@ -7,12 +7,10 @@ from pydrake.symbolic import Expression
 from pydrake.systems.framework import Diagram_
 from pydrake.systems.primitives import LinearSystem_
 
+from drake_wbc.math.base_state import BASE_AXES
 from drake_wbc.math.filtering import BaseFilterParameters, base_filter_model
 from drake_wbc.math.validation import checked_instance
 from drake_wbc.stages.support import build_composite, define_composite_stage
-
-BASE_AXES = 3
-"""The base's velocity components [vx, vy, wz] (T_b)."""
 
 MODEL_NAME = "eq_filtering"
 """The name of the stage's LinearSystem inside it."""
