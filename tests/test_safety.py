@@ -855,6 +855,9 @@ def test_checks_in_closed_form():
 # --- an arm that does not follow its commands ---------------------------
 
 FOLLOW_TOLERANCE = safety.DEFAULT_ARM_FOLLOW_TOLERANCE
+CAUGHT_UP = 0.01
+"""rad: how near the arm a held command that caught up with it ends (a
+tenth of the follow tolerance; mrad in the runs here)."""
 BRISK = [0.3, 0.2, 0.0, 0.0, 0.0, 0.3]
 
 
@@ -916,14 +919,15 @@ def test_an_arm_held_still_trips_at_the_tick_it_falls_behind(arm):
         f"arm.position_measured[{j}] is {abs(deviation[k_trip, j]):.3g} "
         f"rad from the last command (tolerance {FOLLOW_TOLERANCE:g} rad): "
         "the arm does not follow (its own stop, or held)")
-    # Then the command brakes within the acceleration limit, and the
-    # stop holds while the arm is still not following.
-    rig.advance(0.2)
+    # Then the command goes back to where the arm is, within the
+    # acceleration limit, and rests there while the stop holds.
+    rig.advance(0.4)
     _, q_cmd = rig.log("arm.position_command")
     rates = np.diff(q_cmd[k_trip - 1:], axis=0) / H
     assert np.abs(np.diff(rates, axis=0)).max() / H <= (
         JOINT_ACCELERATION * (1 + 1e-6))
     np.testing.assert_array_equal(rates[-5:], 0.0)
+    assert np.abs(q_cmd[-1] - held).max() <= CAUGHT_UP
     assert rig.controller.safety_reason(rig.root_context).endswith(
         f"; resuming from where it is after {HOLD:g} s")
 
@@ -933,8 +937,10 @@ def test_a_station_arm_that_stops_on_its_own_trips_and_is_resumed_where_it_is():
     controller started 0.05 rad from it) and stays stopped, as a real
     arm's protective stop does. The controller, whose task moves on,
     trips once the arm is 0.1 rad behind (it integrated on for ever),
-    and at each resume its command starts where the arm stands, one
-    step of the acceleration limit from rest."""
+    its held command goes back to where the arm stands within the joint
+    limits, and at each resume starts there: every step within the
+    acceleration limit (a jump there in one tick faulted a servo that
+    had not stopped)."""
     scenario = load_scenario(find_scenario("trajectory_tracking"))
     loop = build_closed_loop(scenario)
     simulator = start_simulator(loop)
@@ -960,28 +966,29 @@ def test_a_station_arm_that_stops_on_its_own_trips_and_is_resumed_where_it_is():
     resumes = np.flatnonzero(np.diff(status[:, STATUS["stopped"]]) < 0) + 1
     assert len(resumes) >= 1
     for i in resumes:
-        # The tick before resumed, from the arm's position then.
-        start = measured[i - 1]
-        assert np.abs(command[i] - start).max() <= (
-            JOINT_ACCELERATION * H * H * (1 + 1e-6))
-        end = min(i + 20, len(command))
-        seen = np.vstack([start, start, command[i:end]])
-        rates = np.diff(seen, axis=0) / H
-        assert np.abs(np.diff(rates, axis=0)).max() / H <= (
-            JOINT_ACCELERATION * (1 + 1e-6))
+        # The tick before resumed, near the arm's position then.
+        assert np.abs(command[i - 1] - measured[i - 1]).max() <= CAUGHT_UP
+    rates = np.diff(command[1:], axis=0) / H  # from its first command
+    assert np.abs(rates).max() <= JOINT_SPEED * (1 + 1e-9)
+    assert np.abs(np.diff(rates, axis=0)).max() / H <= (
+        JOINT_ACCELERATION * (1 + 1e-6))
 
 
 def test_after_a_stop_in_which_the_arm_moved_the_commands_start_where_it_is(
         arm):
     """A safe stop (a NaN on the odometry) during which the arm is moved
-    0.3 rad on three joints (by hand, or by its own stop): when the stop
-    clears, the commands start at the measured position, from rest, and
-    every step is within the joint speed and acceleration limits as the
-    arm, standing there, sees them. They resumed from the command last
-    sent, 0.3 rad away: a jump of the servo's setpoint."""
+    0.3 rad on three joints (by hand, or against something): the held
+    command goes there within the joint speed and acceleration limits
+    while the stop lasts, and the commands resume from where the arm
+    stands, every step from the hold to the resume and on within the
+    limits. They resumed from the command last sent, 0.3 rad away (a
+    jump of the servo's setpoint), and later from the measured position
+    in one tick (a step the servo of an arm pushed off its command
+    refuses, 10 rad/s and more)."""
     rig = moving_then_blind(Rig(arm))
     rig.advance(0.2)                      # braked to rest and held
     held = command_now(rig)
+    k_held = round(rig.time() / H)
     offset = np.array([0.3, -0.3, 0.0, 0.3, 0.0, 0.0])
     for k in range(1, 21):                # moved within 0.2 s
         rig.set("arm.position_measured", held + k / 20 * offset)
@@ -996,12 +1003,10 @@ def test_after_a_stop_in_which_the_arm_moved_the_commands_start_where_it_is(
     rig.advance(1.0)
     _, q_cmd = rig.log("arm.position_command")
     _, status = rig.log("safety_status")
-    np.testing.assert_array_equal(q_cmd[k_resume], held)  # still held
-    first = q_cmd[k_resume + 1]
-    assert np.abs(first - moved).max() <= (
-        JOINT_ACCELERATION * H * H * (1 + 1e-6))
-    seen = np.vstack([moved, moved, q_cmd[k_resume + 1:]])
-    rates = np.diff(seen, axis=0) / H
+    # Within a few mrad of the arm (the catch-up brakes once within the
+    # tolerance, on the profile that stops on it).
+    assert np.abs(q_cmd[k_resume] - moved).max() <= CAUGHT_UP
+    rates = np.diff(q_cmd[k_held - 1:], axis=0) / H
     assert np.abs(rates).max() <= JOINT_SPEED * (1 + 1e-9)
     assert np.abs(np.diff(rates, axis=0)).max() / H <= (
         JOINT_ACCELERATION * (1 + 1e-6))
@@ -1014,11 +1019,11 @@ def test_after_a_stop_in_which_the_arm_moved_the_commands_start_where_it_is(
 def test_a_protective_stop_that_outlasts_the_safe_stop_holds_where_the_arm_is(
         arm):
     """A safe stop during which the arm is moved 0.3 rad, while a point
-    inside the footprint holds the robot in a protective stop too: when
-    the safe stop clears, the arm's command restarts where the arm is
-    and stays there, at rest, for as long as the protective stop lasts
-    (a command left at the old position would trip the safe stop again
-    at every tick it was checked)."""
+    inside the footprint holds the robot in a protective stop too: the
+    arm's command goes where the arm is and stays there, at rest, for as
+    long as the protective stop lasts (a command left at the old
+    position would trip the safe stop again at every tick it was
+    checked)."""
     rig = moving_then_blind(Rig(arm))
     rig.set("lidar.obstacle_points", np.array([[0.35, 0.0], [2.0, 0.0]]))
     rig.advance(0.3)
@@ -1033,7 +1038,8 @@ def test_a_protective_stop_that_outlasts_the_safe_stop_holds_where_the_arm_is(
     _, status = rig.log("safety_status")
     _, protective = rig.log("base_protective_stop")
     assert protective[-1, 0] == 1.0
-    np.testing.assert_array_equal(q_cmd[-100:], np.tile(moved, (100, 1)))
+    np.testing.assert_array_equal(q_cmd[-100:], np.tile(q_cmd[-1], (100, 1)))
+    assert np.abs(q_cmd[-1] - moved).max() <= CAUGHT_UP
     assert status[-1, STATUS["trips"]] == 1.0
     assert status[-1, STATUS["stopped"]] == 0.0
 

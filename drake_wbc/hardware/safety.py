@@ -47,7 +47,7 @@ from drake_wbc.hardware.options import (
     command_timeout_of,
 )
 from drake_wbc.math.arm_control import start_within_limits
-from drake_wbc.math.arm_servo import brake_arm
+from drake_wbc.math.arm_servo import brake_arm, brake_speed
 from drake_wbc.math.command_limits import ROUNDING, limit_base_velocity
 from drake_wbc.math.safety import (
     DEFAULT_ARM_FOLLOW_TOLERANCE,
@@ -211,29 +211,6 @@ def limit_base_command(command, last, period, limits):
         limits.base_acceleration * (1.0 + ROUNDING), period)
     return np.asarray(limited.command, dtype=float), (
         changed or limited.acceleration_scale < 1.0)
-
-
-def brake_speed(distance, acceleration, period):
-    """The largest speed v at which a joint may move this period and still
-    come to rest within `distance`, slowing by at most `acceleration` *
-    `period` each period of `period` s (elementwise, all >= 0). Braking
-    hardest from v = m a h + f (m whole, 0 <= f < a h), it moves v, v - a h,
-    ..., f for one period each:
-
-        h ((m + 1) f + a h m (m + 1) / 2) = distance,
-
-    so m = floor((sqrt(1 + 8 d / (a h^2)) - 1) / 2) and f follows. From v
-    the next period's brake_speed is at least v - a h, so a joint that
-    keeps to it never has to brake harder than it may, and never passes
-    the point. An infinite distance (towards the limit of a continuous
-    joint, which has none) allows any speed: inf."""
-    step = acceleration * period
-    with np.errstate(invalid="ignore"):  # inf - inf where distance = inf
-        m = np.floor(0.5 * (np.sqrt(1.0 + 8.0 * distance / (step * period))
-                            - 1.0))
-        f = (distance / period - 0.5 * step * m * (m + 1.0)) / (m + 1.0)
-    return np.where(np.isinf(distance), math.inf,
-                    m * step + np.clip(f, 0.0, step))
 
 
 TARGET_RATE_BOUND = 1e150

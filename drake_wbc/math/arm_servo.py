@@ -16,6 +16,7 @@ Plain float functions (a fault is an event, not a signal to
 differentiate).
 """
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -126,3 +127,76 @@ def brake_arm(last, velocity, period, acceleration, lower, upper):
         np.abs(velocity) - acceleration * period, 0.0)
     command = np.clip(last + slower * period, lower, upper)
     return command, (command - last) / period
+
+
+def brake_speed(distance, acceleration, period):
+    """The largest speed v at which a joint may move this period and still
+    come to rest within `distance`, slowing by at most `acceleration` *
+    `period` each period of `period` s (elementwise, all >= 0). Braking
+    hardest from v = m a h + f (m whole, 0 <= f < a h), it moves v, v - a h,
+    ..., f for one period each:
+
+        h ((m + 1) f + a h m (m + 1) / 2) = distance,
+
+    so m = floor((sqrt(1 + 8 d / (a h^2)) - 1) / 2) and f follows. From v
+    the next period's brake_speed is at least v - a h, so a joint that
+    keeps to it never has to brake harder than it may, and never passes
+    the point. An infinite distance (towards the limit of a continuous
+    joint, which has none) allows any speed: inf."""
+    step = acceleration * period
+    with np.errstate(invalid="ignore"):  # inf - inf where distance = inf
+        m = np.floor(0.5 * (np.sqrt(1.0 + 8.0 * distance / (step * period))
+                            - 1.0))
+        f = (distance / period - 0.5 * step * m * (m + 1.0)) / (m + 1.0)
+    return np.where(np.isinf(distance), math.inf,
+                    m * step + np.clip(f, 0.0, step))
+
+
+def catch_up_arm(last, velocity, target, period, speed, acceleration):
+    """The next position command of an arm whose command goes to `target`
+    (where the arm is) and comes to rest on it: each joint moves towards
+    it at most at its speed limit and at the `brake_speed` of the
+    distance left (so that it can still stop on it), its rate changing
+    by at most its acceleration limit a period: no step the servo would
+    refuse, from wherever the command was going (one coming faster than
+    it can stop on the target passes it, braking, and comes back).
+
+    Args:
+        last: (n,) the last command, rad.
+        velocity: (n,) its rate, rad/s.
+        target: (n,) where the command goes, rad (within the position
+            limits: the caller's).
+        period: h, s between commands.
+        speed, acceleration: (n,) the joint speed (rad/s) and
+            acceleration (rad/s^2) limits.
+
+    Returns:
+        (command (n,), its rate (n,)).
+    """
+    ahead = target - last
+    closing = np.sign(ahead) * brake_speed(np.abs(ahead), acceleration,
+                                           period)
+    change = acceleration * period
+    wanted = np.clip(np.clip(closing, velocity - change, velocity + change),
+                     -speed, speed)
+    command = last + wanted * period
+    return command, wanted
+
+
+def catching_up(last, velocity, target, within):
+    """Which joints of a command that goes to `target` are on their way
+    there: moving towards it, and farther than `within` from it (a
+    command braking away from it, or at rest, is not).
+
+    Args:
+        last: (n,) the last command, rad.
+        velocity: (n,) its rate, rad/s.
+        target: (n,) where it goes, rad.
+        within: rad >= 0.
+
+    Returns:
+        (n,) bool.
+    """
+    ahead = target - last
+    return ((velocity != 0.0) & (np.sign(velocity) == np.sign(ahead))
+            & (np.abs(ahead) > within))

@@ -12,15 +12,26 @@ from drake_wbc.math.arm_control import (
     start_within_limits,
     twist_limits,
 )
+from drake_wbc.math.arm_servo import catch_up_arm, catching_up
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.safety import (
     DEFAULT_ARM_FOLLOW_TOLERANCE,
     restart_position,
 )
-from drake_wbc.math.scalar_support import all_finite, through_float_function
+from drake_wbc.math.scalar_support import (
+    all_finite,
+    through_float_function,
+    value_of,
+    zero_like,
+)
 from drake_wbc.math.validation import checked_instance, positive
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.support import define_stage, optional_scalar
+
+CAUGHT_UP = 1e-4
+"""rad: a held joint that goes to where the arm is
+(`ArmCartesianVelocityController`'s catch-up) has caught up with it
+within this."""
 
 TWIST_SIZE = 6
 """V_a = [v_a; w_a] in T_a."""
@@ -259,12 +270,52 @@ def ArmCartesianVelocityController_(T):
             hold = optional_scalar(self._hold, context, 0.0) >= 0.5
             x = self._state(context)
             q, previous = x[self._q], x[self._q_dot]
-            if optional_scalar(self._resume, context, 0.0) >= 0.5 and (
-                    self._measured.HasValue(context)):
-                q, previous = self._resumed(
-                    q, previous, self._measured.Eval(context))
-            discrete_state.set_value(self._next_state(
-                q, previous, self._input.Eval(context), hold))
+            measured = (self._measured.Eval(context)
+                        if self._measured.HasValue(context) else None)
+            if measured is not None and optional_scalar(
+                    self._resume, context, 0.0) >= 0.5:
+                q, previous = self._resumed(q, previous, measured)
+            state = self._next_state(q, previous, self._input.Eval(context),
+                                     hold)
+            if hold and measured is not None:
+                self._catch_up(state, q, previous, measured)
+            discrete_state.set_value(state)
+
+        def _catch_up(self, state, q, previous, measured):
+            """Makes the held command in `state` go to where the arm is
+            (within the joint limits) instead of braking on the spot:
+            every joint once a joint is farther than resume_tolerance
+            from the command (the arm stopped against something, or was
+            moved, during the stop), and a joint already on its way
+            there until it is within CAUGHT_UP (catching_up); within the
+            joint speed and acceleration limits (catch_up_arm). So the
+            command is where the arm is when the stop clears, and resumes
+            from there without a jump: in one tick, the step from the
+            command to the arm is one the servo of an arm pushed off its
+            command refuses. In floats: during a stop the command is
+            bookkeeping, not a signal to differentiate. A measurement
+            that is not finite is none."""
+            if not all_finite(measured):
+                return
+            far = restart_position(measured, q, self.resume_tolerance,
+                                   self._lower, self._upper)[1]
+            last = np.array(value_of(q), dtype=float)
+            velocity = np.array(value_of(previous), dtype=float)
+            arm = np.clip(np.array(value_of(measured), dtype=float),
+                          self.lower, self.upper)
+            catching = catching_up(last, velocity, arm, CAUGHT_UP) | (
+                far is not None)
+            if not catching.any():
+                return
+            command, _ = catch_up_arm(last, velocity, arm, self._time_step,
+                                      self.velocity_limits,
+                                      self._start_acceleration)
+            command = np.clip(command, self.lower, self.upper)
+            rate = (command - last) / self._time_step
+            n = self.num_joints
+            for j in np.flatnonzero(catching):
+                state[j] = zero_like(state[j]) + command[j]
+                state[n + j] = zero_like(state[n + j]) + rate[j]
 
         def _resumed(self, q, previous, measured):
             """(q_cmd, previous q_dot) to step from: the state's, or
