@@ -974,6 +974,32 @@ def test_a_station_arm_that_stops_on_its_own_trips_and_is_resumed_where_it_is():
         JOINT_ACCELERATION * (1 + 1e-6))
 
 
+def test_an_arm_pushed_off_its_command_against_a_wall_resumes_without_a_fault():
+    """Trajectory tracking with a wall 3 cm past the tool: the arm, pushed
+    0.1 rad off its command against it, trips the follow check; the held
+    command goes to where the arm is within the joint limits, and the
+    commands resume from there. The station's servo, which had not
+    stopped, faulted on the resume (a 0.11 rad step in one tick: 11.5
+    rad/s on joint 5) when the command was moved there at once."""
+    path = find_scenario("trajectory_tracking")
+    scenario = load_scenario(text=path.read_text() + (
+        "\nscene: {boxes: [{name: wall, center: [1.016, 0.0, 1.0], "
+        "size: [0.1, 4.0, 2.0]}]}\n"))
+    loop = build_closed_loop(scenario)
+    simulator = start_simulator(loop)
+    root = simulator.get_mutable_context()
+    simulator.AdvanceTo(3.0)
+    log = loop.logger.run_log(root)
+    assert fault_message(loop.station, root) == "none"
+    status = log["safety_status"]
+    assert status[-1, STATUS["trips"]] >= 1.0
+    assert status[-1, STATUS["stopped"]] == 0.0   # resumed
+    rates = np.diff(log["arm.position_command"], axis=0) / H
+    assert np.abs(rates).max() <= JOINT_SPEED * (1 + 1e-9)
+    assert np.abs(np.diff(rates, axis=0)).max() / H <= (
+        JOINT_ACCELERATION * (1 + 1e-6))
+
+
 def test_after_a_stop_in_which_the_arm_moved_the_commands_start_where_it_is(
         arm):
     """A safe stop (a NaN on the odometry) during which the arm is moved

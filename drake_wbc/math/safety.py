@@ -25,9 +25,11 @@ it):
 2. The safe stop (`next_stop_state`): on a fault the controller stops (zero
    base velocity, the arm braked to rest within its acceleration limit,
    the DMPs' couplings held; drake_wbc.controller.diagram) and it resumes,
-   from what it last sent (or, for the arm, from where it is when that
-   is farther than `arm_follow_tolerance` from it, `restart_position`),
-   only after every input has been valid again for `hold_time`.
+   from what it last sent, only after every input has been valid again
+   for `hold_time`; an arm farther than `arm_follow_tolerance` from its
+   held command has the command go to where it is during the stop
+   (drake_wbc.stages.arm_control), or restart there when the stop
+   clears first (`restart_position`).
 3. Command limits that keep the direction, in drake_wbc.math.command_limits:
    the base command is scaled as a whole to the robot's velocity limits
    (SafetyParameters, below), and its change from one tick to the next as
@@ -218,8 +220,9 @@ class SafetyParameters:
             position farther than this from the arm controller's last
             position command is a fault (the arm does not follow: its
             own protective stop, an e-stop, a servo off, or held by
-            hand), and an arm that far from the last command when a
-            stop clears restarts from where it is; over LCM the
+            hand), and an arm that far from the held command during a
+            stop has the command go to where it is (or restart there
+            when the stop clears first); over LCM the
             hardware interface's command guard restarts the arm's
             commands from where it is by the same tolerance
             (drake_wbc.hardware.safety.resync_arm). None: the arm's

@@ -75,25 +75,33 @@ def ArmCartesianVelocityController_(T):
           deceleration; braking never asks for more than the arm can do.
           When the hold ends the arm restarts from the command it was
           last sent, from rest, within the acceleration limit: no jump
-          either way (or from where it is, see arm_position). Without an
-          acceleration limit
-          (`use_acceleration_limit` false) the command stops at once. A
-          twist that is not finite is treated the same way (with
-          `limited` 1.0), never integrated.
+          either way. Held, the command goes to where the arm is when
+          the arm is elsewhere (see arm_position). Without an
+          acceleration limit (`use_acceleration_limit` false) the
+          command stops at once. A twist that is not finite is treated
+          the same way (with `limited` 1.0), never integrated.
         - arm_position: optional, q_meas (n, rad), the arm's measured
-          joint positions, read only with `resume`.
+          joint positions, read with `hold` and with `resume`. Held,
+          once a joint of q_meas is farther than `resume_tolerance` from
+          q_cmd (the arm was moved, pushed off its command against
+          something, or stopped on its own, during the stop), the
+          command goes to q_meas (within the joint limits) at the joint
+          speed and acceleration limits instead of braking on the spot
+          (drake_wbc.math.arm_servo.catch_up_arm; every joint while one
+          is beyond the tolerance, then each joint on its way there
+          until within CAUGHT_UP), so that it resumes from where the
+          arm is: its servo, holding the arm there, must not be asked
+          to jump back to where the command was, and the servo of an
+          arm pushed off its command refuses a command moved there in
+          one tick.
         - resume (1): optional (never while unconnected); >= 0.5 at the
           update at which a safe stop clears (InputGuard's `resume`).
-          Then a joint of q_meas farther than `resume_tolerance` from
-          q_cmd restarts the command from q_meas (within the joint
-          limits; drake_wbc.math.safety.restart_position), at rest,
-          before the step: the arm was moved, or stopped on its own,
-          during the stop, and its servo, holding it there, must not be
-          asked to jump back to where the command was. The step from
-          there is the acceleration limit's from rest, as from any hold
-          (with hold, e.g. a protective stop that outlasts the safe stop, the
-          command stays there, at rest). Within the tolerance nothing
-          changes: the command resumes from where it was.
+          Should a joint of q_meas still be farther than
+          `resume_tolerance` from q_cmd (a stop too short to catch up),
+          the command restarts from q_meas (within the joint limits;
+          drake_wbc.math.safety.restart_position), at rest, before the
+          step. Within the tolerance nothing changes: the command
+          resumes from where it was.
         - arm_position_command: q_cmd (n, rad), the joint positions for the
           arm's position servo. It is the state: no direct feedthrough.
         - arm_velocity_command: q_dot (n, rad/s) of the last update, the
