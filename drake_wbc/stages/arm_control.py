@@ -278,10 +278,12 @@ def ArmCartesianVelocityController_(T):
             hold = optional_scalar(self._hold, context, 0.0) >= 0.5
             x = self._state(context)
             q, previous = x[self._q], x[self._q_dot]
+            resume = optional_scalar(self._resume, context, 0.0) >= 0.5
+            # The measurement matters only at a hold and at a resume.
             measured = (self._measured.Eval(context)
-                        if self._measured.HasValue(context) else None)
-            if measured is not None and optional_scalar(
-                    self._resume, context, 0.0) >= 0.5:
+                        if (hold or resume) and self._measured.HasValue(
+                            context) else None)
+            if measured is not None and resume:
                 q, previous = self._resumed(q, previous, measured)
             state = self._next_state(q, previous, self._input.Eval(context),
                                      hold)
