@@ -141,3 +141,30 @@ def write_scenario(folder, robot, duration, extra=""):
             values: [[0.05, 0.0, 0.02, 0.0, 0.0, 0.0]]
         """) + extra)
     return path
+
+
+def add_collision_spheres(folder, radii):
+    """Gives the omni arm's links in `folder` collision spheres at their
+    frames' origins: `radii` maps a link's name (e.g. link3) to its
+    sphere's radius (m)."""
+    urdf = folder / "omni_arm.urdf"
+    text = urdf.read_text()
+    for link, radius in radii.items():
+        head = f"<link name='{link}'>"
+        assert head in text, link
+        text = text.replace(head, head + (
+            f"<collision><geometry><sphere radius='{radius}'/></geometry>"
+            "</collision>"))
+    urdf.write_text(text)
+
+
+def use_directives(folder, path, extra=""):
+    """Makes the omni arm's description `path` (in `folder`) load its URDF
+    through model directives, robot.dmd.yaml, to which `extra` adds
+    directives."""
+    (folder / "robot.dmd.yaml").write_text(
+        "directives:\n- add_model: {name: omni_arm, file: "
+        "package://mine/omni_arm.urdf}\n" + extra)
+    path.write_text(path.read_text().replace(
+        "file: omni_arm.urdf",
+        "directives: robot.dmd.yaml\n  packages: {mine: .}"))

@@ -10,7 +10,13 @@ import warnings
 
 import numpy as np
 import pytest
-from omni_arm import write_omni_arm, write_scenario
+from omni_arm import (
+    HOMES,
+    add_collision_spheres,
+    use_directives,
+    write_omni_arm,
+    write_scenario,
+)
 from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
@@ -48,7 +54,7 @@ from drake_wbc.robot.tuning import (
     survey_capability,
 )
 from drake_wbc.stages.wrench import tool_weight_reading
-from drake_wbc.station.scene import CylinderObstacle, Scene
+from drake_wbc.station.scene import BoxObstacle, CylinderObstacle, Scene
 from drake_wbc.station.simulation import SimulatedStation, StationOptions
 
 H = 0.01
@@ -444,12 +450,7 @@ def test_a_suspension_under_a_urdf_base_is_refused_naming_its_file(
     internal argument yaw_joint and "the base's SDFormat", which it was
     not."""
     path = write_omni_arm(tmp_path, 7)
-    (tmp_path / "robot.dmd.yaml").write_text(
-        "directives:\n- add_model: {name: omni_arm, file: "
-        "package://mine/omni_arm.urdf}\n")
-    path.write_text(path.read_text().replace(
-        "file: omni_arm.urdf",
-        "directives: robot.dmd.yaml\n  packages: {mine: .}"))
+    use_directives(tmp_path, path)
     description = load_robot_description(path)
     options = StationOptions(
         initial_arm_positions=list(description.arm.home),
@@ -459,6 +460,85 @@ def test_a_suspension_under_a_urdf_base_is_refused_naming_its_file(
             r"base.joints\[2\] = 'omni_arm::base_yaw' is "
             r"'package://mine/omni_arm.urdf', not an SDFormat file")):
         SimulatedStation(options, robot=description)
+
+
+
+def _link_origins(description, q_arm):
+    """Where the omni arm's link1 and link3 are in the world with the
+    arm at q_arm and the base at the origin, from a plant of the robot
+    alone."""
+    plant, model = make_robot_plant(description)
+    context = plant.CreateDefaultContext()
+    q = plant.GetPositions(context)
+    q[[j.position_start() for j in model.arm_joints]] = q_arm
+    plant.SetPositions(context, q)
+    return [plant.GetBodyByName(link).EvalPoseInWorld(context).translation()
+            for link in ("link1", "link3")]
+
+
+def _sphere_overlap(description, radius, q_arm):
+    """How deep the omni arm's spheres of `radius` on link1 and link3
+    overlap with the arm at q_arm (m; negative: apart)."""
+    p1, p3 = _link_origins(description, q_arm)
+    return 2.0 * radius - np.linalg.norm(p3 - p1)
+
+
+SELF_FILTER = """\
+- add_collision_filter_group:
+    name: robot
+    members: [omni_arm::link1, omni_arm::link3]
+    ignored_collision_filter_groups: [robot]
+"""
+"""The README's directive that filters the omni arm's link1 and link3."""
+
+
+def test_links_that_overlap_at_home_are_refused_unless_filtered(tmp_path):
+    """Drake filters a body's contacts with its parent only: link1 and
+    link3 (two joints apart), their spheres overlapping at home, pushed
+    each other from the first step, and nothing said so. The station
+    refuses them naming the pair and the depth (the spheres' closed
+    form); with the collision filter group the README gives, it is
+    built."""
+    path = write_omni_arm(tmp_path, 7)
+    add_collision_spheres(tmp_path, {"link1": 0.32, "link3": 0.32})
+    use_directives(tmp_path, path)
+    description = load_robot_description(path)
+    depth = _sphere_overlap(description, 0.32, HOMES[7])
+    assert 0.05 < depth < 0.07
+    with pytest.raises(ValueError, match=(
+            r"(?s)^arm\.home = \[0\.0, 0\.5, .*\] is not allowed: there the "
+            r"robot's own bodies overlap \('omni_arm::link1' and "
+            rf"'omni_arm::link3' by {1e3 * depth:.1f} mm\).*"
+            r"add_collision_filter_group:\n    name: robot\n    members: "
+            r"\[omni_arm::link1, omni_arm::link3\]\n")):
+        SimulatedStation(robot=description)
+    use_directives(tmp_path, path, SELF_FILTER)
+    station = SimulatedStation(robot=load_robot_description(path))
+    assert station.model.num_arm_joints == 7
+
+
+def test_links_that_overlap_at_the_start_are_refused(tmp_path):
+    """Apart at home, link1's and link3's spheres overlap where a
+    scenario starts the arm (joint 2 bent to 1.2 rad): refused naming
+    the start; contact with the scene (a box around the arm) is not the
+    robot's own."""
+    path = write_omni_arm(tmp_path, 7)
+    add_collision_spheres(tmp_path, {"link1": 0.27, "link3": 0.27})
+    description = load_robot_description(path)
+    assert _sphere_overlap(description, 0.27, HOMES[7]) < -0.03
+    start = [0.0, 1.2, 0.3, -0.2, 1.3, 0.2, 0.0]
+    depth = _sphere_overlap(description, 0.27, start)
+    assert depth > 0.04
+    with pytest.raises(ValueError, match=(
+            r"^station\.initial_arm_positions = \[0\.0, 1\.2, .*\] is not "
+            r"allowed: .*\('omni_arm::link1' and 'omni_arm::link3' by "
+            rf"{1e3 * depth:.1f} mm\)")):
+        SimulatedStation(StationOptions(initial_arm_positions=start),
+                         robot=description)
+    # A crate the sphere on link3 reaches into at home.
+    crate = BoxObstacle("crate", _link_origins(description, HOMES[7])[1],
+                        [0.2, 0.2, 0.2])
+    SimulatedStation(scene=Scene(boxes=[crate]), robot=description)
 
 
 @pytest.mark.parametrize("name, robot_name, joints", [

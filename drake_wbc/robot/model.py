@@ -726,6 +726,80 @@ def make_robot_plant(description=None, time_step=0.0, suspension=None,
     return plant, model
 
 
+def self_contacts(plant, context, instances):
+    """The robot's own bodies that overlap at the pose of `context`.
+
+    MultibodyPlant filters the contacts of a body with its parent (and
+    within bodies welded together) only: two links of an arm whose
+    collision shapes overlap elsewhere (a wrist's cylinders at its
+    joints) press on each other from the first step of a simulation,
+    unless the model filters them (a collision filter group). Contacts
+    with what is not the robot's (the world, the scene) are left out.
+    One query of SceneGraph (QueryObject.ComputePointPairPenetration).
+
+    Args:
+        plant: a finalized plant registered with a SceneGraph, in a
+            Diagram.
+        context: the plant's context, in its Diagram's.
+        instances: the robot's model instances.
+
+    Returns:
+        list of (body_a, body_b, depth): the bodies' scoped names (in
+        the order of their indices) and how deep their shapes overlap
+        (m), the deepest of each pair of bodies, deepest first.
+    """
+    query = plant.get_geometry_query_input_port().Eval(context)
+    inspector = query.inspector()
+    robot = set(instances)
+    deepest = {}
+    for pair in query.ComputePointPairPenetration():
+        a, b = (plant.GetBodyFromFrameId(inspector.GetFrameId(i))
+                for i in (pair.id_A, pair.id_B))
+        if (a is None or b is None or a.index() == b.index()
+                or a.model_instance() not in robot
+                or b.model_instance() not in robot):
+            continue
+        if b.index() < a.index():
+            a, b = b, a
+        key = (a.scoped_name().get_full(), b.scoped_name().get_full())
+        deepest[key] = max(deepest.get(key, 0.0), pair.depth)
+    return sorted(((a, b, depth) for (a, b), depth in deepest.items()),
+                  key=lambda contact: -contact[2])
+
+
+def check_self_contacts(plant, context, instances, path, positions):
+    """Refuses a robot whose own bodies overlap at the arm's
+    configuration `positions`, set in `context` (`self_contacts`).
+
+    Args:
+        plant, context, instances: as self_contacts takes them.
+        path: the name of the configuration's field (e.g. arm.home).
+        positions: its value, rad.
+
+    Raises:
+        ValueError: naming `path` and its value, each pair of bodies
+            that overlap (scoped names) and the depth in mm, and the
+            model directive that filters their contacts.
+    """
+    contacts = self_contacts(plant, context, instances)
+    if not contacts:
+        return
+    pairs = ", ".join(f"{a!r} and {b!r} by {1e3 * depth:.1f} mm"
+                      for a, b, depth in contacts)
+    members = ", ".join(dict.fromkeys(
+        name for a, b, _ in contacts for name in (a, b)))
+    raise ValueError(
+        f"{path} = {[float(q) for q in positions]} is not allowed: there "
+        f"the robot's own bodies overlap ({pairs}), and would push each "
+        "other from the first step (Drake filters the contacts of a body "
+        "with its parent only); shapes that overlap in the model, not on "
+        "the robot, are filtered in its model directives (model.directives;"
+        " in a model of one file, its drake:collision_filter_group):\n"
+        "- add_collision_filter_group:\n    name: robot\n    members: "
+        f"[{members}]\n    ignored_collision_filter_groups: [robot]\n"
+        f"and a pair that collides on the robot too needs another {path}")
+
+
 PLANAR_TEST_POSE = (0.3, -0.2, 0.5)
 """(x, y, yaw), m, m, rad: where check_planar_base puts the base."""
 

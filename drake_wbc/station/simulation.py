@@ -50,7 +50,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
-from pydrake.multibody.tree import MultibodyForces
+from pydrake.multibody.tree import ModelInstanceIndex, MultibodyForces
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import (
     ConstantValueSource,
@@ -71,6 +71,7 @@ from drake_wbc.robot.description import RobotDescription, shipped_robot
 from drake_wbc.robot.model import (
     ArmMount,
     add_robot,
+    check_self_contacts,
     joint_position_indices,
     joint_velocity_indices,
     scoped_joint_name,
@@ -407,6 +408,14 @@ class SimulatedStation:
         mount: the robot's ArmMount (drake_wbc.robot.model), the arm's
             rotation on the base: the shipped robot's (none) if None. The
             controller's ArmKinematics must be made with the same one.
+        robot: the RobotDescription (the shipped robot's if None).
+
+    Raises:
+        ValueError: naming the field, where the options do not fit the
+            robot or its description its model (add_robot), or where the
+            robot's own bodies overlap at its arm.home or at
+            initial_arm_positions (check_self_contacts: the simulation
+            is the one place where they would touch).
     """
 
     def __init__(self, options=None, scene=None, mount=None, robot=None):
@@ -426,8 +435,12 @@ class SimulatedStation:
             use_sampled_output_ports=False), builder)
         # The start first: the gains below are sized at it. A start left
         # out is this robot's home (a configuration belongs to one arm).
+        starts = [("arm.home", robot.arm.home)]
         if options.initial_arm_positions is None:
             options.initial_arm_positions = list(robot.arm.home)
+        elif list(options.initial_arm_positions) != list(robot.arm.home):
+            starts.append(("station.initial_arm_positions",
+                           options.initial_arm_positions))
         # The base's velocity loop: the robot's own where the options
         # give none.
         if options.base is None:
@@ -458,7 +471,10 @@ class SimulatedStation:
                 np.linalg.norm(plant.gravity_field().gravity_vector())))
         self._drive_inertias = drive_inertias(
             options.initial_arm_positions, options.arm, robot, mount=mount)
+        first = plant.num_model_instances()
         model = self.add_robot_to(plant)
+        self._instances = tuple(ModelInstanceIndex(i) for i in range(
+            first, plant.num_model_instances()))
         add_static_obstacles(plant, scene)
         self.hand_body = None if scene.hand.impedance is None else (
             add_hand_body(plant, model, scene.hand.impedance))
@@ -578,6 +594,14 @@ class SimulatedStation:
             export_out(port, name)
         self.diagram = builder.Build()
         self.diagram.set_name("simulated_station")
+        # Where the simulation starts, and the home (every station's
+        # robot goes there), the robot's own bodies must not overlap.
+        context = self.diagram.CreateDefaultContext()
+        plant_context = plant.GetMyMutableContextFromRoot(context)
+        for path, positions in starts:
+            self._set_start_positions(plant_context, positions)
+            check_self_contacts(plant, plant_context, self._instances, path,
+                                positions)
 
     def _add_lidars(self, builder, scene):
         """The robot's scanners (its description's lidar_frames), each
@@ -660,17 +684,8 @@ class SimulatedStation:
             return self.diagram.GetMutableSubsystemContext(system, own)
 
         plant_context = of(plant)
-        q = plant.GetPositions(plant_context)
-        q[joint_position_indices(model.base_joints)] = (
-            options.initial_base_pose)
         q_cmd = np.asarray(options.initial_arm_positions, dtype=float)
-        q[joint_position_indices(model.arm_joints)] = q_cmd
-        q[joint_position_indices(self._compliant_joints())] = 0.0
-        for joint in model.locked_joints:
-            start = joint.position_start()
-            q[start:start + joint.num_positions()] = (
-                joint.default_positions())
-        plant.SetPositions(plant_context, q)
+        self._set_start_positions(plant_context, q_cmd)
         plant.SetVelocities(plant_context, np.zeros(plant.num_velocities()))
         self._settle_under_gravity(plant_context, q_cmd)
         # What the wrist sensor carries is rigid: its joints (a gripper's)
@@ -721,6 +736,22 @@ class SimulatedStation:
         model = self.model
         return (model.passive_joints + model.suspension_joints
                 + model.horizontal_joints)
+
+    def _set_start_positions(self, plant_context, arm_positions):
+        """Puts the robot in `plant_context` at the options' base pose
+        with the arm at `arm_positions`, the base's spring-damper joints
+        at rest and what the wrist sensor carries as its model has it."""
+        options, plant, model = self.options, self.plant, self.model
+        q = plant.GetPositions(plant_context)
+        q[joint_position_indices(model.base_joints)] = (
+            options.initial_base_pose)
+        q[joint_position_indices(model.arm_joints)] = arm_positions
+        q[joint_position_indices(self._compliant_joints())] = 0.0
+        for joint in model.locked_joints:
+            start = joint.position_start()
+            q[start:start + joint.num_positions()] = (
+                joint.default_positions())
+        plant.SetPositions(plant_context, q)
 
     def _settle_under_gravity(self, context, q_cmd, iterations=30):
         """Moves the mount's (and the suspension's) and the arm's joints to
