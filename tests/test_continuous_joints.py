@@ -17,10 +17,10 @@ from drake_wbc.bench.distribution_race import make_problems
 from drake_wbc.experiments.runner import build_closed_loop, start_simulator
 from drake_wbc.experiments.scenario import load_scenario
 from drake_wbc.hardware.options import HardwareOptions
-from drake_wbc.hardware.safety import Limits, brake_speed, follow_arm_command
+from drake_wbc.hardware.safety import Limits, follow_arm_command
 from drake_wbc.math import arm_control, capability
 from drake_wbc.math.arm_control import ArmControllerParameters
-from drake_wbc.math.arm_servo import arm_command_violation
+from drake_wbc.math.arm_servo import arm_command_violation, brake_speed
 from drake_wbc.math.joint_range import ONE_TURN, configuration_range
 from drake_wbc.math.validation import ordered_limits
 from drake_wbc.robot.description import load_robot_description

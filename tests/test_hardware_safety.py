@@ -27,12 +27,12 @@ from drake_wbc.hardware.safety import (
     CommandGuard,
     Limits,
     WallClock,
-    brake_speed,
     follow_arm_command,
     saturate_base_velocity,
     stop_arm,
     target_rate,
 )
+from drake_wbc.math.arm_servo import brake_speed
 from drake_wbc.robot.model import HOME_ARM_POSITIONS
 
 H = 0.01

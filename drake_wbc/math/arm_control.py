@@ -40,7 +40,8 @@ Here: the parameters and their checks; the limits of one controller,
 checked once (`TwistLimits`); the reference body of the controller,
 `joint_velocity_command`, for any scalar type (float, and AutoDiffXd for
 the stage's linearisation), with its parts (`damping_rule`,
-`damped_solve`, `braking_rate`, `joint_position_bounds`); the checked
+`damped_solve`, `joint_position_bounds`, with the braking rate of
+drake_wbc.math.arm_servo.braking_rate); the checked
 functions a user calls (`joint_velocity_for_twist` and its parts); and the
 float kernel of the control tick, `joint_velocity_command_float`
 (drake_wbc.math.kernels), which the Drake system
@@ -55,6 +56,7 @@ from typing import NamedTuple
 import numpy as np
 
 from drake_wbc.math import kernels
+from drake_wbc.math.arm_servo import braking_rate
 from drake_wbc.math.command_limits import uniform_scale
 from drake_wbc.math.compiled import compiled
 from drake_wbc.math.scalar_support import solve, value_of
@@ -424,27 +426,6 @@ def start_within_limits(name, positions, lower, upper, acceleration,
             f"{float(upper[i])!r}] rad (the first command, held within "
             f"them, would jump there); {remedy}")
     return np.clip(q, lower, upper)
-
-
-def braking_rate(distance, step, step_h):
-    """The largest rate towards an edge `distance` away (>= 0) from which
-    a joint can still stop at the edge, its rate changing by at most
-    step = a h a period (step_h = step h); any scalar type.
-
-    Braking from rate v = (m + f) a h (m an integer, 0 < f <= 1) at the
-    full deceleration runs through v, v - a h, ..., f a h, then 0, and
-    covers S(v) = a h^2 (m + 1)(f + m / 2). This inverts S: with
-    D = distance / (a h^2), m(m + 1)/2 < D <= (m + 1)(m + 2)/2 and
-    f = D / (m + 1) - m / 2. Since S(v - a h) = S(v) - v h, the bound one
-    period later is exactly a h lower: braking along it never needs more
-    than the acceleration limit, and S(v) >= v h keeps q + v h inside.
-    (m, a whole number, has no derivative.)
-    """
-    D = distance / step_h
-    r = 0.5 * (math.sqrt(1.0 + 8.0 * float(value_of(D))) - 1.0)
-    m = max(float(math.ceil(r)) - 1.0, 0.0)
-    f = min(max(D / (m + 1.0) - 0.5 * m, 0.0), 1.0)
-    return (m + f) * step
 
 
 def joint_position_bounds(q, lower, upper, time_step, margin,

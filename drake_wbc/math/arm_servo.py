@@ -13,7 +13,9 @@ to rest within its acceleration limits and stays stopped
 brakes with the same step (drake_wbc.hardware.safety.stop_arm).
 
 Plain float functions (a fault is an event, not a signal to
-differentiate).
+differentiate), but `braking_rate`, the braking bound of the arm
+controller's reference body too (drake_wbc.math.arm_control), of any
+scalar type.
 """
 
 import math
@@ -22,6 +24,7 @@ from typing import NamedTuple
 import numpy as np
 
 from drake_wbc.math.command_limits import ROUNDING
+from drake_wbc.math.scalar_support import value_of
 
 LIMIT_KINDS = ("position", "speed", "acceleration")
 """The limits a position command is checked against, in the order they
@@ -129,27 +132,55 @@ def brake_arm(last, velocity, period, acceleration, lower, upper):
     return command, (command - last) / period
 
 
+def braking_rate(distance, step, step_h):
+    """The largest rate towards an edge `distance` away (>= 0) from which
+    a joint can still stop at the edge, its rate changing by at most
+    step = a h a period (step_h = step h); any scalar type.
+
+    Braking from rate v = (m + f) a h (m an integer, 0 < f <= 1) at the
+    full deceleration runs through v, v - a h, ..., f a h, then 0, and
+    covers S(v) = a h^2 (m + 1)(f + m / 2). This inverts S: with
+    D = distance / (a h^2), m(m + 1)/2 < D <= (m + 1)(m + 2)/2 and
+    f = D / (m + 1) - m / 2. Since S(v - a h) = S(v) - v h, the bound one
+    period later is exactly a h lower: braking along it never needs more
+    than the acceleration limit, and S(v) >= v h keeps q + v h inside.
+    (m, a whole number, has no derivative.)
+    """
+    D = distance / step_h
+    r = 0.5 * (math.sqrt(1.0 + 8.0 * float(value_of(D))) - 1.0)
+    m = max(float(math.ceil(r)) - 1.0, 0.0)
+    f = min(max(D / (m + 1.0) - 0.5 * m, 0.0), 1.0)
+    return (m + f) * step
+
+
+
 def brake_speed(distance, acceleration, period):
-    """The largest speed v at which a joint may move this period and still
-    come to rest within `distance`, slowing by at most `acceleration` *
-    `period` each period of `period` s (elementwise, all >= 0). Braking
-    hardest from v = m a h + f (m whole, 0 <= f < a h), it moves v, v - a h,
-    ..., f for one period each:
+    """`braking_rate` elementwise in floats: the largest speed at which
+    each joint may move this period and still come to rest within
+    `distance` (>= 0), slowing by at most `acceleration` * `period` each
+    period of `period` s. From it the next period's brake_speed is at
+    least v - a h, so a joint that keeps to it never has to brake harder
+    than it may, and never passes the point. An infinite distance
+    (towards the limit of a continuous joint, which has none) allows any
+    speed: inf; a NaN distance gives NaN.
 
-        h ((m + 1) f + a h m (m + 1) / 2) = distance,
+    Args:
+        distance: (n,) rad (or m).
+        acceleration: (n,) or a scalar, > 0, per s^2.
+        period: h, s.
 
-    so m = floor((sqrt(1 + 8 d / (a h^2)) - 1) / 2) and f follows. From v
-    the next period's brake_speed is at least v - a h, so a joint that
-    keeps to it never has to brake harder than it may, and never passes
-    the point. An infinite distance (towards the limit of a continuous
-    joint, which has none) allows any speed: inf."""
-    step = acceleration * period
-    with np.errstate(invalid="ignore"):  # inf - inf where distance = inf
-        m = np.floor(0.5 * (np.sqrt(1.0 + 8.0 * distance / (step * period))
-                            - 1.0))
-        f = (distance / period - 0.5 * step * m * (m + 1.0)) / (m + 1.0)
-    return np.where(np.isinf(distance), math.inf,
-                    m * step + np.clip(f, 0.0, step))
+    Returns:
+        (n,) float array.
+    """
+    distance, acceleration = np.broadcast_arrays(
+        np.asarray(distance, dtype=float),
+        np.asarray(acceleration, dtype=float))
+    return np.array([
+        d if math.isnan(d) else math.inf if math.isinf(d)
+        else braking_rate(d, a * period, a * period * period)
+        for d, a in zip(distance.ravel().tolist(),
+                        acceleration.ravel().tolist(), strict=True)],
+        dtype=float).reshape(distance.shape)
 
 
 def catch_up_arm(last, velocity, target, period, speed, acceleration):
