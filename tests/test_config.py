@@ -17,6 +17,7 @@ from drake_wbc.controller import (
     load_controller_parameters,
 )
 from drake_wbc.math.capability import CapabilityBand
+from drake_wbc.math.cdmp import AdmittanceCouplingParameters, ArmCdmpParameters
 from drake_wbc.math.dmp import DmpParameters
 from drake_wbc.math.filtering import BaseFilterParameters
 from drake_wbc.math.motion_mode import MotionMode
@@ -60,8 +61,32 @@ def test_the_file_holds_the_defaults_in_full():
     assert_every_field_written(yaml_load_file(CONTROLLER_FILE), defaults)
     loaded = load_controller_parameters(path=CONTROLLER_FILE)
     assert_same(loaded, defaults)
+    assert loaded == defaults
     assert loaded.workspace.mode is MotionMode.LOCO_MANIPULATION
     assert not loaded.arm_cdmp.S_m.flags.writeable  # normalised again
+
+
+def test_parameters_compare_by_value_their_arrays_too():
+    """ControllerParameters() == ControllerParameters(): the two parameter
+    classes with array fields (ArmCdmpParameters' S_m and F_d,
+    AdmittanceCouplingParameters' D_a and F_d) compare them by value,
+    shape included; like the other parameters (mutable), they are not
+    hashable."""
+    assert ControllerParameters() == ControllerParameters()
+    other = ControllerParameters()
+    other.arm_cdmp = ArmCdmpParameters(F_d=[-5.0, 0, 0, 0, 0, 0])
+    assert other != ControllerParameters()
+    assert AdmittanceCouplingParameters() == AdmittanceCouplingParameters()
+    assert AdmittanceCouplingParameters(F_d=[0.0, 1.0]) \
+        != AdmittanceCouplingParameters(F_d=[0.0, 0.0])
+    # 0.01 as a number and as a matrix are not the same parameters.
+    assert AdmittanceCouplingParameters() \
+        != AdmittanceCouplingParameters(D_a=[[0.01]])
+    assert ArmCdmpParameters() != "ArmCdmpParameters()"
+    for params in (ControllerParameters(), ArmCdmpParameters(),
+                   AdmittanceCouplingParameters()):
+        with pytest.raises(TypeError, match="unhashable"):
+            hash(params)
 
 
 def test_the_file_loads_from_a_string_too():
