@@ -94,6 +94,39 @@ def test_demo_aligns_the_columns_of_long_joint_names(tmp_path, capsys):
     assert len(rows) == 9 and len(starts) == 1
 
 
+def test_demo_says_an_arm_joint_without_an_actuator_has_none(tmp_path,
+                                                             capsys):
+    """An arm joint whose URDF gives it no transmission (no actuator) is
+    listed as having none, which the simulated station refuses (it said
+    "unactuated (spring-damper)", though the joint has no spring); the
+    shipped robot's mount joints, springs, are spring-dampers."""
+    from drake_wbc.robot.description import load_robot_description
+    from drake_wbc.station.simulation import SimulatedStation
+
+    path = write_omni_arm(tmp_path, 6)
+    urdf = tmp_path / "omni_arm.urdf"
+    text = urdf.read_text()
+    start = text.index("<transmission name='j3_drive'>")
+    end = text.index("</transmission>", start) + len("</transmission>")
+    urdf.write_text(text[:start] + text[end:])
+    assert main(["demo", "--robot", str(path), "--output",
+                 str(tmp_path)]) == 0
+    rows = {line.split()[1]: line for line in
+            capsys.readouterr().out.splitlines()
+            if re.match(r"^  (base|mount|arm) ", line)}
+    assert rows["j3"].endswith("no actuator (the simulated station "
+                               "refuses it)")
+    assert rows["j2"].endswith("100 N m")
+    assert "spring" not in "".join(rows.values())
+    with pytest.raises(ValueError, match="the model gives it no actuator"):
+        SimulatedStation(robot=load_robot_description(path))
+    assert main(["demo", "--output", str(tmp_path)]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines()
+            if re.match(r"^  mount ", line)]
+    assert len(rows) == 2
+    assert all(row.endswith("unactuated (spring-damper)") for row in rows)
+
+
 def test_demo_rejects_a_bad_configuration(tmp_path, capsys):
     code = main(["demo", "--output", str(tmp_path), "--q-arm",
                  "0", "0", "nan", "0", "0", "0"])

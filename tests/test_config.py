@@ -17,6 +17,7 @@ from drake_wbc.controller import (
     load_controller_parameters,
 )
 from drake_wbc.math.capability import CapabilityBand
+from drake_wbc.math.cdmp import AdmittanceCouplingParameters, ArmCdmpParameters
 from drake_wbc.math.dmp import DmpParameters
 from drake_wbc.math.filtering import BaseFilterParameters
 from drake_wbc.math.motion_mode import MotionMode
@@ -60,8 +61,32 @@ def test_the_file_holds_the_defaults_in_full():
     assert_every_field_written(yaml_load_file(CONTROLLER_FILE), defaults)
     loaded = load_controller_parameters(path=CONTROLLER_FILE)
     assert_same(loaded, defaults)
+    assert loaded == defaults
     assert loaded.workspace.mode is MotionMode.LOCO_MANIPULATION
     assert not loaded.arm_cdmp.S_m.flags.writeable  # normalised again
+
+
+def test_parameters_compare_by_value_their_arrays_too():
+    """ControllerParameters() == ControllerParameters(): the two parameter
+    classes with array fields (ArmCdmpParameters' S_m and F_d,
+    AdmittanceCouplingParameters' D_a and F_d) compare them by value,
+    shape included; like the other parameters (mutable), they are not
+    hashable."""
+    assert ControllerParameters() == ControllerParameters()
+    other = ControllerParameters()
+    other.arm_cdmp = ArmCdmpParameters(F_d=[-5.0, 0, 0, 0, 0, 0])
+    assert other != ControllerParameters()
+    assert AdmittanceCouplingParameters() == AdmittanceCouplingParameters()
+    assert AdmittanceCouplingParameters(F_d=[0.0, 1.0]) \
+        != AdmittanceCouplingParameters(F_d=[0.0, 0.0])
+    # 0.01 as a number and as a matrix are not the same parameters.
+    assert AdmittanceCouplingParameters() \
+        != AdmittanceCouplingParameters(D_a=[[0.01]])
+    assert ArmCdmpParameters() != "ArmCdmpParameters()"
+    for params in (ControllerParameters(), ArmCdmpParameters(),
+                   AdmittanceCouplingParameters()):
+        with pytest.raises(TypeError, match="unhashable"):
+            hash(params)
 
 
 def test_the_file_loads_from_a_string_too():
@@ -139,7 +164,7 @@ BAD_VALUES = [
      "greater than 0"),
     ("arm_cdmp: {S_m: [0.5, 1, 1, 1, 1, 1]}", "arm_cdmp.S_m = ",
      "must be 0 or 1"),
-    ("arm_cdmp: {S_m: [1, 1]}", "arm_cdmp.S_m has shape (2,)",
+    ("arm_cdmp: {S_m: [1, 1]}", "arm_cdmp.S_m = [1. 1.] has shape (2,)",
      "shape (6,)"),
     ("workspace: {mode: flying}", "workspace.mode = 'flying'",
      "'intuitive-phri'"),
@@ -153,9 +178,10 @@ BAD_VALUES = [
     ("arm_controller: {lower: [0, 0, 0, 0, 0, 0]}",
      "arm_controller.lower = ", "both limits or neither"),
     ("time_step: 0.6", "time_step = 0.6", "Nyquist"),
-    ("base_filter: {zeta: fast}", "base_filter.zeta = 'fast'", "float"),
+    ("base_filter: {zeta: fast}", "base_filter.zeta = 'fast'",
+     "must be a number"),
     ("workspace: {sigma_xy: [0.5]}", "workspace.sigma_xy = [0.5]",
-     "float"),
+     "must be a number"),
     ("capability_band: 0.04", "capability_band = 0.04",
      "mapping of the fields of CapabilityBand"),
     ("arm_cdmp: {S_x: 1}", "unknown key 'arm_cdmp.S_x'", "k_p, k_d"),

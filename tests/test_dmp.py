@@ -340,11 +340,11 @@ def test_bad_learning_input():
     params = DmpParameters()
     with pytest.raises(ValueError, match="t = "):
         learn_forcing_term([0.0, 0.5, 0.4], [0.0, 1.0, 2.0])
-    with pytest.raises(ValueError, match="y has shape"):
+    with pytest.raises(ValueError, match="y = .* has shape"):
         learn_forcing_term([0.0, 0.5, 1.0], np.zeros((4, 2)))
     with pytest.raises(ValueError, match="regularisation"):
         fit_weights(np.ones((3, 2)), np.ones(3), 0.0)
-    with pytest.raises(ValueError, match="weights has shape"):
+    with pytest.raises(ValueError, match="weights = .* has shape"):
         rollout(params, [0.0], [1.0], 1.0, DT, np.zeros((3, 1)))
     with pytest.raises(ValueError, match="params"):
         rollout("params", [0.0], [1.0], 1.0, DT)

@@ -6,6 +6,8 @@ first approach (from the left, 1.5 to 9 s) and the second up to the
 switch of k_n (C_m in the band from about 19.5 s, s_c = 1 throughout).
 """
 
+import math
+
 import numpy as np
 import pytest
 
@@ -128,7 +130,8 @@ def test_robust_compensation_holds_capability_at_the_band(metrics):
     # ... and the robust compensation stops it at the lower limit.
     assert metrics["min_capability_compensation_on"] >= \
         lower - CAPABILITY_TOLERANCE
-    assert metrics["min_capability_compensation_off"] is None
+    # s_c is 1 all through: no C_m with it off (NaN, as documented).
+    assert math.isnan(metrics["min_capability_compensation_off"])
     assert metrics["min_person_distance_m"] > MIN_PERSON_DISTANCE
 
 
@@ -139,7 +142,7 @@ def test_metrics_have_the_documented_keys(metrics):
         for key in APPROACH_KEYS:
             assert f"approach_{k}_{key}" in metrics
     # The person is still close when the shortened run ends.
-    assert metrics["approach_2_max_ee_deviation_after_m"] is None
+    assert math.isnan(metrics["approach_2_max_ee_deviation_after_m"])
 
 
 def test_metrics_of_several_runs_are_prefixed(scenario, log):
@@ -151,3 +154,30 @@ def test_figure_is_written(scenario, log, tmp_path):
     paths = fixed_point.draw_figures(scenario, {"run": log}, tmp_path)
     assert [p.name for p in paths] == ["wbc_avoid_run.png"]
     assert paths[0].read_bytes().startswith(b"\x89PNG")
+
+
+def test_a_stretch_without_samples_is_nan_in_the_summary(tmp_path, capsys):
+    """`drake-wbc run fixed_point --robot <a 7-joint arm> --duration 3`:
+    the person is still close when the run ends, and s_c is never 0, so
+    two metrics measure an empty stretch. summary.json wrote them as
+    null; like every metric that is not a number they are "nan" (README),
+    read back as NaN."""
+    from omni_arm import write_omni_arm
+
+    from drake_wbc.cli.main import main
+    from drake_wbc.experiments.reports import from_json_text
+
+    robot = write_omni_arm(tmp_path, 7)
+    output = tmp_path / "out"
+    assert main(["run", "fixed_point", "--robot", str(robot), "--duration",
+                 "3", "--output", str(output)]) == 0
+    text = (output / "summary.json").read_text()
+    assert "null" not in text
+    metrics = from_json_text(text)["metrics"]
+    assert metrics["approaches"] == 1
+    assert metrics["approach_1_end_s"] == 3.0
+    for key in ("approach_1_max_ee_deviation_after_m",
+                "min_capability_compensation_off"):
+        assert math.isnan(metrics[key])
+    assert metrics["min_capability_compensation_on"] == \
+        metrics["approach_1_min_capability"]

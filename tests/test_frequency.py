@@ -867,15 +867,15 @@ def driver_period_map(period):
     # response of the wrong size).
     (lambda: frequency_response(np.eye(2), np.ones((3, 1)), np.ones((1, 2)),
                                 np.zeros((1, 1)), OMEGA),
-     r"B has shape \(3, 1\), which is not allowed: must have shape "
+     r"B = .* has shape \(3, 1\), which is not allowed: must have shape "
      r"\(2, any\)"),
     (lambda: frequency_response(np.eye(2), np.ones((2, 1)), np.ones((1, 3)),
                                 np.zeros((1, 1)), OMEGA),
-     r"C has shape \(1, 3\), which is not allowed: must have shape "
+     r"C = .* has shape \(1, 3\), which is not allowed: must have shape "
      r"\(any, 2\)"),
     (lambda: frequency_response(np.eye(2), np.ones((2, 1)), np.ones((1, 2)),
                                 np.zeros((2, 2)), OMEGA),
-     r"D has shape \(2, 2\), which is not allowed: must have shape "
+     r"D = .* has shape \(2, 2\), which is not allowed: must have shape "
      r"\(1, 1\)"),
     (lambda: frequency_response(np.ones((1, 2)), np.ones((1, 1)),
                                 np.ones((1, 2)), np.zeros((1, 1)), OMEGA),
@@ -904,7 +904,7 @@ def driver_period_map(period):
     (lambda: closed_forms.second_order_zoh_response(
         "1", 1.0, 1.0, 1.0, 1.0, H, OMEGA), r"b1 = '1' is not allowed"),
     (lambda: zero_order_hold(np.eye(1), np.ones((2, 1)), H),
-     r"B has shape \(2, 1\), which is not allowed: must have shape "
+     r"B = .* has shape \(2, 1\), which is not allowed: must have shape "
      r"\(1, any\)"),
     # An operating point beyond the arm's limits (the input guard passed
     # the home's C_m on under q_a = 3.3 rad).

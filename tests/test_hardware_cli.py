@@ -2,11 +2,16 @@
 touch LCM: a real-time rate must be a positive finite number (with 0 the
 Simulator ran unpaced, and the joints moved at 2 rad/s of wall time)."""
 
+import warnings
+
 import pytest
+from omni_arm import write_omni_arm
 
 from drake_wbc.cli.main import main
 from drake_wbc.deployment.deploy import deploy
 from drake_wbc.experiments.scenario import find_scenario, load_scenario
+from drake_wbc.robot.description import load_robot_description
+from drake_wbc.robot.tuning import RobotTuningWarning
 
 
 @pytest.mark.parametrize("program", ["robot-sim", "deploy"])
@@ -54,6 +59,32 @@ def test_a_deployment_may_last_a_working_day(tmp_path, capsys):
     with pytest.raises(ValueError, match=r"duration = 1e\+300 is not "
                                          r"allowed: must be at most 86400"):
         deploy(load_scenario(find_scenario("hardware")), duration=1e300)
+
+
+def test_only_the_simulated_robot_starts_at_the_other_robots_home(
+        tmp_path, capsys):
+    """With --robot another robot's description, robot-sim (the simulated
+    robot) starts the arm at that robot's home and says so; deploy starts
+    the controller from the measured arm, and said the same, untrue
+    there. Here deploy waits for a robot that does not answer (memq://),
+    and robot-sim runs 0.05 s on it."""
+    robot = write_omni_arm(tmp_path, 7)
+    home = list(load_robot_description(robot).arm.home)
+    path = tmp_path / "scenario.yaml"
+    text = find_scenario("hardware").read_text()
+    path.write_text(text.replace("  startup_timeout: 10.0 ",
+                                 "  startup_timeout: 0.2 "))
+    said = f"the arm starts at omni_arm's home {home}"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RobotTuningWarning)
+        assert main(["deploy", str(path), "--robot", str(robot),
+                     "--lcm-url", "memq://"]) == 1
+        out, err = capsys.readouterr()
+        assert "no status" in err
+        assert "starts at" not in out and "waiting for" in out
+        assert main(["robot-sim", str(path), "--robot", str(robot),
+                     "--duration", "0.05", "--lcm-url", "memq://"]) == 0
+    assert said in capsys.readouterr().out
 
 
 def test_robot_sim_shows_a_progress_line(capsys):

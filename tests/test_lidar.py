@@ -314,7 +314,7 @@ def test_merger_concatenates_in_input_order():
     np.testing.assert_array_equal(merged, np.vstack(arrays))
     merger.GetInputPort("points_1").FixValue(
         context, AbstractValue.Make(np.zeros((2, 3))))
-    with pytest.raises(ValueError, match="points_1 has shape"):
+    with pytest.raises(ValueError, match="points_1 = .* has shape"):
         merger.GetOutputPort("points").Eval(context)
 
 
@@ -374,7 +374,7 @@ def test_bad_arguments_are_named():
         cast_rays(ORIGIN, [0.0], [[1, 1, 0.2], [2, 2, -0.2]], None, FAR)
     with pytest.raises(ValueError, match=r"boxes\[0, 3\]"):
         cast_rays(ORIGIN, [0.0], None, [[1, 1, 0.2, 0.0, 0.0]], FAR)
-    with pytest.raises(ValueError, match="boxes has shape"):
+    with pytest.raises(ValueError, match="boxes = .* has shape"):
         cast_rays(ORIGIN, [0.0], None, [[1, 1, 0.2, 0.3]], FAR)
     with pytest.raises(ValueError, match="tick"):
         scan([0, 0, 0], [0, 0, 0], None, None, None, -1)

@@ -6,6 +6,8 @@ must carry the TCP along the commanded world twist."""
 
 import copy
 import re
+import threading
+import time
 import warnings
 
 import numpy as np
@@ -26,7 +28,7 @@ from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 from drake_wbc.analysis.plant_chain import linearize_base_plant
 from drake_wbc.controller import ControllerParameters, build_controller
 from drake_wbc.controller.parameters import for_robot
-from drake_wbc.deployment.deploy import add_controller_side
+from drake_wbc.deployment.deploy import add_controller_side, wait_for_status
 from drake_wbc.experiments.runner import (
     build_closed_loop,
     simulate,
@@ -297,6 +299,56 @@ def test_the_same_controller_deploys_over_lcm_to_that_robot(tmp_path,
     assert moved[0] > 0.02 and moved[2] > 0.008
     assert abs(moved[1]) < 0.3 * moved[0]
 
+
+
+def test_the_wait_for_the_robot_says_why_its_status_is_refused(tmp_path):
+    """`drake-wbc deploy` for the 7-joint robot, the arm answering with
+    6-joint statuses at 100 Hz (real LCM messages, memq://): the wait for
+    the robot's status ends with what was refused and why (the messages'
+    count and the last refusal), not with "is the robot running"."""
+    n = 7
+    robot = write_omni_arm(tmp_path, n)
+    num_joints = len(load_robot_description(robot).arm.joints)
+    assert num_joints == n
+    options = HardwareOptions(lcm_url="memq://")
+    channels = options.channels
+    lcm = DrakeLcm("memq://")
+    waiting, sent = threading.Event(), [0]
+
+    def robot_side():
+        utime = 0
+        while not waiting.is_set():
+            utime += 10_000
+            sent[0] += 1
+            for channel, data in (
+                    (channels.base_state,
+                     messages.encode_base_state(utime, np.zeros(6))),
+                    (channels.arm_status, messages.encode_arm_status(
+                        utime, np.zeros(n - 1), np.zeros(n - 1))),
+                    (channels.wrist_wrench,
+                     messages.encode_wrench(utime, np.zeros(6))),
+                    (channels.obstacle_points,
+                     messages.encode_obstacle_points(utime,
+                                                     np.zeros((0, 2))))):
+                lcm.Publish(channel, data)
+            time.sleep(0.01)
+
+    sender = threading.Thread(target=robot_side)
+    sender.start()
+    try:
+        with pytest.raises(TimeoutError) as raised:
+            wait_for_status(lcm, options, num_joints, timeout=0.5)
+    finally:
+        waiting.set()
+        sender.join()
+    text = str(raised.value)
+    print(text)
+    match = re.search(rf"{channels.arm_status}: (\d+) messages rejected: "
+                      rf"position has {n - 1} entries, which is not "
+                      rf"allowed: must have {n}$", text)
+    assert match and 1 <= int(match.group(1)) <= sent[0]
+    assert f"no status on {channels.arm_status} within" in text
+    assert "is the robot" not in text
 
 
 def test_the_simulated_station_runs_that_robot(tmp_path):

@@ -145,6 +145,73 @@ def test_a_description_that_does_not_fit_its_model_names_the_field(
         _add(_shipped_text(**changes))
 
 
+SEVEN_HOME = "home: [0.0, 0.5, 0.3, -0.2, 1.3, 0.2, 0.0]"
+SEVEN_ACCELERATIONS = "acceleration_limits: [9.0, 9.0, 9.0, 9.0, 9.0, 9.0, 9.0]"
+
+
+@pytest.mark.parametrize("old, new, message", [
+    (SEVEN_ACCELERATIONS, "acceleration_limits: [9.0, 9.0, 9.0]",
+     "arm.acceleration_limits = [9. 9. 9.] has shape (3,), which is not "
+     "allowed: must have shape (7,)"),
+    (SEVEN_HOME, "home: [0.0, 0.5]",
+     "arm.home = [0.  0.5] has shape (2,), which is not allowed: must have "
+     "shape (7,)"),
+    ("height: 0.35", "height: abc",
+     "base.height = 'abc' is not allowed: must be a number"),
+    ("footprint_half_sizes: [0.45, 0.35]", "footprint_half_sizes: [a, b]",
+     "base.footprint_half_sizes = ['a', 'b'] is not allowed: must be a list "
+     "of numbers"),
+])
+def test_a_description_files_bad_value_is_shown_with_what_is_allowed(
+        tmp_path, old, new, message):
+    """The loader's errors name the file and the field; a value of the
+    wrong shape is shown (it was not), and a field that must be a number
+    says so (it said "could not convert string to float: 'abc'")."""
+    path = write_omni_arm(tmp_path, 7)
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new))
+    with pytest.raises(ValueError) as raised:
+        load_robot_description(path)
+    assert str(raised.value) == f"{path}: {message}"
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("omni_arm::j7]", "omni_arm::j8]",
+     "arm.joints[6] = 'omni_arm::j8' is not allowed: the model has no "
+     "joint 'j8' in 'omni_arm'"),
+    ("flange_frame: omni_arm::flange", "flange_frame: omni_arm::flangex",
+     "arm.flange_frame = 'omni_arm::flangex' is not allowed: the model has "
+     "no frame 'flangex' in 'omni_arm'"),
+    (SEVEN_HOME, SEVEN_HOME.replace("0.0]", "9.0]"),
+     "arm.home[6] = 9.0 is not allowed: must be inside 'omni_arm::j7''s "
+     "limits (-2.5, 2.5)"),
+    (SEVEN_ACCELERATIONS, SEVEN_ACCELERATIONS + "\n  velocity_limits: "
+     "[9.0, 9.0, 9.0, 9.0, 9.0, 9.0, 9.0]",
+     "arm.velocity_limits[0] = 9.0 is not allowed: must be within the "
+     "model's own 2.0 for 'omni_arm::j1' (a limit may only tighten)"),
+])
+def test_a_description_that_does_not_fit_its_model_names_its_file(
+        tmp_path, old, new, message):
+    """The errors of checking a description against its model (joints,
+    frames, home, limits: add_robot) start with the description's file,
+    as the loader's do (they named the field alone); a description from
+    text has no file to name."""
+    path = write_omni_arm(tmp_path, 7)
+    text = path.read_text()
+    assert old in text
+    text = text.replace(old, new)
+    path.write_text(text)
+    description = load_robot_description(path)
+    with pytest.raises(ValueError) as raised:
+        make_robot_plant(description)
+    assert str(raised.value) == f"{path}: {message}"
+    assert description.source_file == str(path)
+    with pytest.raises(ValueError) as raised:
+        make_robot_plant(load_robot_description(text=text, root=tmp_path))
+    assert str(raised.value) == message
+
+
 @pytest.mark.parametrize("given, message", [
     ("file: omni_armX.urdf",
      r"model.file = 'omni_armX.urdf' is not allowed: no such file "
@@ -181,7 +248,8 @@ def test_a_model_file_changed_after_loading_is_checked_when_added(
     description = load_robot_description(write_omni_arm(tmp_path, 6))
     description.model.file = "gone.urdf"
     with pytest.raises(ValueError, match=(
-            r"^model.file = 'gone.urdf' is not allowed: no such file "
+            rf"^{re.escape(str(tmp_path))}/omni_arm.yaml: "
+            r"model.file = 'gone.urdf' is not allowed: no such file "
             r"'.*gone.urdf' \(a relative path is relative to the "
             r"description's folder")):
         make_robot_plant(description)
@@ -569,8 +637,9 @@ def test_a_model_drake_cannot_parse_names_the_field(tmp_path):
     (it was a RuntimeError from deep in pydrake)."""
     path = write_omni_arm(tmp_path, 6)
     (tmp_path / "omni_arm.urdf").write_text("<robot name='x'><link>")
-    with pytest.raises(ValueError, match=r"^model\.file = 'omni_arm\.urdf' "
-                       "is not allowed: .*Failed to parse XML"):
+    with pytest.raises(ValueError, match=rf"^{re.escape(str(path))}: "
+                       r"model\.file = 'omni_arm\.urdf' is not allowed: "
+                       ".*Failed to parse XML"):
         add_robot(MultibodyPlant(0.001), load_robot_description(path))
     (tmp_path / "arm.dmd.yaml").write_text(
         "directives:\n- add_model: {name: a, file: package://nosuch/a.urdf}\n")
@@ -578,8 +647,9 @@ def test_a_model_drake_cannot_parse_names_the_field(tmp_path):
                                     "directives: arm.dmd.yaml")
     assert "directives: arm.dmd.yaml" in text
     path.write_text(text)
-    with pytest.raises(ValueError, match=r"^model\.directives = "
-                       "'arm.dmd.yaml' is not allowed: .*unknown package"):
+    with pytest.raises(ValueError, match=rf"^{re.escape(str(path))}: "
+                       r"model\.directives = 'arm.dmd.yaml' is not allowed: "
+                       ".*unknown package"):
         add_robot(MultibodyPlant(0.001), load_robot_description(path))
 
 

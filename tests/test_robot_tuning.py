@@ -3,6 +3,7 @@ capability band and the local workspace, checked and proposed for the
 shipped arm and for a 7-joint arm the project did not model."""
 
 import math
+import re
 import warnings
 
 import numpy as np
@@ -119,6 +120,46 @@ def test_a_singular_home_is_named_and_no_band_is_proposed_there(
         s_min = np.linalg.svd(arm.evaluate(q).J_a, compute_uv=False)[-1]
         assert smallest_singular_value(arm, q) == s_min
         assert singular(arm, q) == (s_min < DEFAULT_DAMPING_THRESHOLD)
+
+
+@pytest.mark.parametrize("j7", [2.4, 2.45])
+def test_the_band_to_give_is_the_one_at_the_proposed_k_j(tmp_path, capsys,
+                                                         j7):
+    """`drake-wbc demo` on a 7-joint arm with no tuning, its home with
+    the last joint near its limit (C_m at home 0.0175 with the six-joint
+    k_j = 1.5e4, 0.065 with the proposed 6e4; with j7 = 2.45, 0.009 and
+    0.035): it proposes k_j and a band at that k_j, and its "to change"
+    sentence about the band is at that k_j too. It suggested a second
+    band at the old k_j ((0.00946, 0.0108) beside the proposed (0.0352,
+    0.0402)); now the band (0.035, 0.04), not active at home with the
+    proposed k_j, is not to change, and where it still is (j7 = 2.45)
+    the band to give is the proposed one, said to be at that k_j."""
+    from drake_wbc.cli.main import main
+
+    path = write_omni_arm(tmp_path, 7)
+    text = path.read_text()
+    home = text[text.index("home: ["):].split("\n", 1)[0]
+    path.write_text(text.replace(
+        home, f"home: [0.0, 0.5, 0.3, -0.2, 1.3, 0.2, {j7}]"))
+    arm = ArmKinematics(*make_robot_plant(load_robot_description(path)))
+    k_j = proposed_joint_limit_gain(7)
+    at_proposed = capability_at(arm, arm.home, k_j)
+    assert capability_at(arm, arm.home, 1.5e4) < 0.035
+    assert main(["demo", "--robot", str(path), "--output",
+                 str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    proposed = re.search(r"proposed capability_band: \(([^,]+), ([^)]+)\)",
+                         out)
+    lower, upper = 0.035 / 0.0649 * at_proposed, 0.04 / 0.0649 * at_proposed
+    assert proposed.groups() == (f"{lower:.4g}", f"{upper:.4g}")
+    to_give = re.findall(r"give a band below it, e\.g\. \(([^,]+), "
+                         r"([^)]+)\)", out)
+    if at_proposed > 0.04:
+        assert to_give == []
+    else:
+        assert to_give == [(f"{lower:.3g}", f"{upper:.3g}")]
+        assert (f"where C_m = {at_proposed:.4g} with the proposed k_j = "
+                "6e+04") in out
 
 
 def test_a_seven_joint_arm_with_the_six_joint_tuning_is_warned_of(seven):

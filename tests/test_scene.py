@@ -136,8 +136,8 @@ def test_a_full_scene_loads_and_round_trips_through_yaml():
      "increasing"),
     ("people: [{name: a, times: [0, 1], waypoints: [[0, 0], [1, 0], "
      "[2, 0]]}]",
-     "people[0].waypoints has shape (3, 2), which is not allowed: must have "
-     "shape (2, 2)"),
+     "people[0].waypoints = [[0. 0.] [1. 0.] [2. 0.]] has shape (3, 2), "
+     "which is not allowed: must have shape (2, 2)"),
     ("people: [{name: a, radius: -0.1}]",
      "people[0].radius = -0.1 is not allowed: must be greater than 0"),
     ("people: [{name: a, times: [0, 2], waypoints: [[0, 0], [1, 0]], "
@@ -151,8 +151,8 @@ def test_a_full_scene_loads_and_round_trips_through_yaml():
      "hand.times = [0.0, 2.0, 1.0] is not allowed: must be strictly "
      "increasing"),
     ("hand: {times: [0, 1], forces: [[0, 0, 0]]}",
-     "hand.forces has shape (1, 3), which is not allowed: must have shape "
-     "(2, 3)"),
+     "hand.forces = [[0. 0. 0.]] has shape (1, 3), which is not allowed: "
+     "must have shape (2, 3)"),
     ("cylinders: [{name: a}]\nboxes: [{name: a}]",
      "boxes[0].name = 'a' is not allowed: cylinders[0].name has that name "
      "already"),

@@ -69,14 +69,17 @@ def _log_to_stderr():
         logger.setLevel(logging.INFO)
 
 
-def _scenario_and_options(args):
+def _scenario_and_options(args, echo=print):
+    """The scenario's path, the scenario on --robot and its hardware
+    options with --lcm-url; `echo` says where the arm starts on another
+    robot (None: the command starts from no arm of its own)."""
     from drake_wbc.experiments.scenario import find_scenario, load_scenario
     from drake_wbc.hardware.options import HardwareOptions
     from drake_wbc.math.validation import validate
 
     path = find_scenario(args.scenario)
     scenario = load_scenario(path)
-    scenario = on_robot(scenario, args)
+    scenario = on_robot(scenario, args, echo)
     options = scenario.hardware or HardwareOptions()
     if args.lcm_url is not None:
         try:
@@ -206,7 +209,8 @@ def run_deploy(args):
     _log_to_stderr()
     duration = _duration(args.duration, longest=LONGEST_DEPLOYMENT)
     rate = _realtime_rate(args.realtime_rate)
-    path, scenario, options = _scenario_and_options(args)
+    # The controller starts from the measured arm, not from a home.
+    path, scenario, options = _scenario_and_options(args, echo=None)
     variant = _variant(scenario, args.variant)
     channels = options.channels
     print(f"drake-wbc deploy {path.stem} ({variant.name}) on "
@@ -300,7 +304,7 @@ def run_plot(args):
         scenario = on_robot(
             Scenario(description=f"LCM log {args.logfile.stem}")
             if scenario is None else load_scenario(find_scenario(scenario)),
-            args)
+            args, echo=None)  # a log's arm started where it was
     try:
         summary = plot_lcm_log(args.logfile, output, scenario=scenario,
                                variant=args.variant,

@@ -42,11 +42,12 @@ def describe_robot(q_a=None, k_j=None, description=None):
     (its home if None).
 
     Lists every moving joint with its limits (the arm's own, ArmLimits:
-    the description's where it tightens the model's) and whether it is
-    actuated,
-    the masses, the mount's rocking modes (with a two-joint mount), the
-    base's described limits, footprint, timeout and lag (what the
-    controller's safety takes), and the capability of movement (m,
+    the description's where it tightens the model's) and its actuator's
+    effort limit (a mount's joints are spring-dampers; a base or arm
+    joint without an actuator is said to have none, which the simulated
+    station refuses), the masses, the mount's rocking modes (with a
+    two-joint mount), the base's described limits, footprint, timeout and
+    lag (what the controller's safety takes), and the capability of movement (m,
     P_jnt, C_m and grad_x C_m) at `q_a`.
 
     Args:
@@ -94,12 +95,14 @@ def describe_robot(q_a=None, k_j=None, description=None):
                 if np.isinf(low) and np.isinf(high)
                 else f"[{low:+.2f}, {high:+.2f}] {unit}"
             )
-            effort = (
-                f"{actuated[joint.index()]:6.0f} "
-                f"{'N' if unit == 'm' else 'N m'}"
-                if joint.index() in actuated
-                else "unactuated (spring-damper)"
-            )
+            if joint.index() in actuated:
+                effort = (f"{actuated[joint.index()]:6.0f} "
+                          f"{'N' if unit == 'm' else 'N m'}")
+            elif group == "mount":
+                # A passive joint has a spring (add_robot checks it).
+                effort = "unactuated (spring-damper)"
+            else:
+                effort = "no actuator (the simulated station refuses it)"
             lines.append(
                 f"  {group:5s} {name:{width}s} {joint.type_name():9s} "
                 f"{limits:24s} {f'{speed:5.2f} {unit}/s':11s}  {effort}"

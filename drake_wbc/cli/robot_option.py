@@ -1,7 +1,7 @@
 """The `--robot FILE` option of the commands that run a scenario: the
 scenario on the robot of a description YAML
-(drake_wbc.experiments.scenario.with_robot), its arm starting at that
-robot's home unless it is the scenario's own robot."""
+(drake_wbc.experiments.scenario.with_robot), its simulated arm starting
+at that robot's home unless it is the scenario's own robot."""
 
 from pathlib import Path
 
@@ -17,7 +17,9 @@ def add_robot_argument(parser, what="run the scenario", why=""):
 
 def on_robot(scenario, args, echo=print):
     """`scenario` (a Scenario) on the robot of `args.robot`, or itself
-    where the command line gives none."""
+    where the command line gives none; `echo` says that the arm starts
+    at that robot's home (None for a command whose arm does not start
+    there: deploy starts from the measured arm)."""
     robot = getattr(args, "robot", None)
     if robot is None:
         return scenario

@@ -186,7 +186,9 @@ def wait_for_status(lcm, options, num_joints, timeout=None, stop=None):
         (6,), points (M, 2)), or None if stopped.
 
     Raises:
-        TimeoutError: naming the channels still silent and the URL.
+        TimeoutError: naming the channels still without a good message,
+            the URL, and for each channel whose messages were refused
+            how many and why (the last refusal's MessageError).
     """
     timeout = options.startup_timeout if timeout is None else positive(
         "timeout", timeout)
@@ -194,6 +196,7 @@ def wait_for_status(lcm, options, num_joints, timeout=None, stop=None):
     decoders = {getattr(options.channels, name): formats[name].decode
                 for name in STATUS_CHANNELS}
     received, waiting = {}, [True]
+    rejected = {}  # channel -> (count, the last MessageError)
 
     def handler_for(channel):
         def handle(data):
@@ -201,8 +204,9 @@ def wait_for_status(lcm, options, num_joints, timeout=None, stop=None):
                 return
             try:
                 received[channel] = decoders[channel](data).values[0]
-            except messages.MessageError:
-                pass
+            except messages.MessageError as error:
+                count = rejected.get(channel, (0, None))[0]
+                rejected[channel] = (count + 1, error)
         return handle
 
     # (pydrake's Subscribe offers no unsubscribe: the handlers stay, idle.)
@@ -214,10 +218,16 @@ def wait_for_status(lcm, options, num_joints, timeout=None, stop=None):
             return None
         if time.monotonic() > deadline:
             silent = sorted(set(decoders) - set(received))
+            url = getattr(lcm, 'get_lcm_url', lambda: '?')()
+            reasons = [f"{channel}: {rejected[channel][0]} messages "
+                       f"rejected: {rejected[channel][1]}"
+                       for channel in silent if channel in rejected]
+            if set(silent) - set(rejected):
+                reasons.append("is the robot (or `drake-wbc robot-sim`) "
+                               "running on this LCM URL?")
             raise TimeoutError(
-                f"no status on {', '.join(silent)} within {timeout:g} s on "
-                f"{getattr(lcm, 'get_lcm_url', lambda: '?')()}: is the robot "
-                "(or `drake-wbc robot-sim`) running on this LCM URL?")
+                f"no status on {', '.join(silent)} within "
+                f"{timeout:g} s on {url}: {'; '.join(reasons)}")
         lcm.HandleSubscriptions(50)
     waiting[0] = False
     return tuple(received[channel] for channel in decoders)

@@ -11,8 +11,8 @@ x_dist, y_dist = int delta_V_ee dt of eq. (deviation), which is the
 controller's own estimate (the paper's Fig. "wbc_avoid" plots it).
 
 Metrics of `compute_metrics` (a run's keys are prefixed with
-"<run>." when the scenario has several runs; None where a stretch of time
-has no samples):
+"<run>." when the scenario has several runs; NaN where a stretch of time
+has no samples, "nan" in summary.json):
 
 - approaches: how many approaches there were.
 - approach_<k>_start_s, approach_<k>_end_s: when approach k began and
@@ -37,6 +37,7 @@ has no samples):
 - max_integrated_deviation_m: the largest norm of (x_dist, y_dist).
 """
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -94,11 +95,11 @@ def null_space_gain(scenario, log):
 
 
 def _max(values):
-    return float(np.max(values)) if len(values) else None
+    return float(np.max(values)) if len(values) else math.nan
 
 
 def _min(values):
-    return float(np.min(values)) if len(values) else None
+    return float(np.min(values)) if len(values) else math.nan
 
 
 def run_metrics(scenario, log):

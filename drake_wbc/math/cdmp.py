@@ -42,7 +42,7 @@ about the vertical by the base's yaw (eq. (3): drake_wbc.math.kinematics
 """
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -72,6 +72,24 @@ def _set(obj, name, value):
         value = np.array(value, dtype=float)
         value.flags.writeable = False
     setattr(obj, name, value)
+
+
+def _fields_equal(a, b):
+    """The == of a parameters dataclass with array fields: the same class
+    and every field equal, arrays by np.array_equal (shape and values).
+    The classes using it define __eq__, so that, like the other
+    parameters dataclasses (mutable, compared by value), they are
+    unhashable."""
+    if a.__class__ is not b.__class__:
+        return NotImplemented
+    for f in fields(a):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+            if not np.array_equal(x, y):
+                return False
+        elif x != y:
+            return False
+    return True
 
 
 @dataclass
@@ -124,6 +142,9 @@ class AdmittanceCouplingParameters:
                 D_a) else None)
         _set(self, "F_d", np.asarray(F_d))
         _dmp(self.dmp)
+
+    def __eq__(self, other):
+        return _fields_equal(self, other)
 
 
 @dataclass
@@ -273,6 +294,9 @@ class ArmCdmpParameters:
         _set(self, "S_m", selection("S_m", self.S_m, 6))
         _set(self, "F_d", as_vector("F_d", self.F_d, 6))
         _dmp(self.dmp)
+
+    def __eq__(self, other):
+        return _fields_equal(self, other)
 
 
 def shifted_velocity(z, C, k_d, tau):

@@ -29,6 +29,7 @@ a ValueError naming the file (if any), the field's dotted path (e.g.
 """
 
 import dataclasses
+import types
 import typing
 from pathlib import Path
 
@@ -385,6 +386,8 @@ def _failing_key(document, schema, prefix):
         if item_schema is not None and not isinstance(value, list):
             message = (f"must be a list of {item_schema.__name__} (each a "
                        f"mapping of {_field_names(item_schema)})")
+        elif _allowed(hints[key]) is not None:
+            message = _allowed(hints[key])
         elif typing.get_origin(hints[key]) is list and not isinstance(
                 value, list):
             message = "must be a list"
@@ -393,6 +396,36 @@ def _failing_key(document, schema, prefix):
                        f"{nested.__name__} ({_field_names(nested)})")
         return f"{name} = {short_value(value)} is not allowed: {message}"
     return None
+
+
+_KINDS = {float: "a number", int: "a whole number", bool: "true or false",
+          str: "a string"}
+"""What a field of each plain type holds, said in an error."""
+
+_KINDS_OF_ITEMS = {float: "numbers", int: "whole numbers",
+                   bool: "booleans (true or false)", str: "strings"}
+
+
+def _allowed(hint):
+    """What a field of type `hint` allows, as `must be ...`, for the plain
+    types and lists of them (also `X | None`: or null); None for others,
+    whose loader's message stands (yaml_load_typed says, e.g., "could not
+    convert string to float" of a number field)."""
+    kinds = typing.get_args(hint) if isinstance(
+        hint, types.UnionType) else (hint,)
+    optional = type(None) in kinds
+    kinds = [kind for kind in kinds if kind is not type(None)]
+    if len(kinds) != 1:
+        return None
+    kind, = kinds
+    if kind in _KINDS:
+        wanted = _KINDS[kind]
+    elif (typing.get_origin(kind) is list
+          and typing.get_args(kind)[0] in _KINDS_OF_ITEMS):
+        wanted = f"a list of {_KINDS_OF_ITEMS[typing.get_args(kind)[0]]}"
+    else:
+        return None
+    return f"must be {wanted}" + (" or null" if optional else "")
 
 
 def _load_error(schema, document):

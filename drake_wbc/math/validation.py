@@ -28,8 +28,10 @@ from drake_wbc.math.scalar_support import value_of
 
 
 def _shown(value):
-    """A short, readable rendering of a value for an error message."""
-    text = np.array2string(np.asarray(value), precision=6, threshold=20)
+    """A short, readable rendering of a value for an error message, on
+    one line (a matrix's rows side by side)."""
+    text = np.array2string(np.asarray(value), precision=6, threshold=20,
+                           max_line_width=math.inf).replace("\n", "")
     return text if len(text) <= 200 else text[:197] + "..."
 
 
@@ -139,8 +141,8 @@ def _as_array(name, value, shape, kind, finite=True):
         wanted = ", ".join("any" if n is None else str(n) for n in shape)
         wanted += "," if len(shape) == 1 else ""
         raise ValueError(
-            f"{name} has shape {array.shape}, which is not allowed: "
-            f"must have shape ({wanted})"
+            f"{name} = {_shown(array)} has shape {array.shape}, which is "
+            f"not allowed: must have shape ({wanted})"
         )
     if finite and not np.all(np.isfinite(array)):
         raise ValueError(

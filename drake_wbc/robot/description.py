@@ -34,6 +34,7 @@ import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 from drake_wbc.math.capability import DEFAULT_JOINT_LIMIT_GAIN, CapabilityBand
 from drake_wbc.math.loading import load_typed
@@ -409,8 +410,14 @@ class RobotDescription:
             in their x-y plane), on the base.
         root: the folder that relative paths are relative to; the
             description file's folder when loaded from a file.
+        source_file: the description file, as load_robot_description
+            was given it ("" for a description from text or code; not a
+            field of the file): the errors of checking the description
+            against its model (drake_wbc.robot.model.add_robot) start
+            with it, as the loader's do.
     """
 
+    source_file: ClassVar[str] = ""
     name: str = ""
     model: ModelSource = field(default_factory=ModelSource)
     base: BaseDescription = field(default_factory=BaseDescription)
@@ -472,8 +479,16 @@ def load_robot_description(path=None, text=None, root=None):
     elif path is not None:
         description.root = str((Path(path).resolve().parent
                                 / description.root).resolve())
-    check_model_files(description, "" if path is None else f"{path}: ")
+    if path is not None:
+        description.source_file = str(path)
+    check_model_files(description, file_prefix(description))
     return description
+
+
+def file_prefix(description):
+    """`<the description's file>: `, the start of an error found in
+    `description` (RobotDescription), or "" where it came from no file."""
+    return f"{description.source_file}: " if description.source_file else ""
 
 
 def check_model_files(description, source=""):

@@ -62,6 +62,7 @@ from drake_wbc.math.validation import (
 from drake_wbc.robot.description import (
     RobotDescription,
     check_model_files,
+    file_prefix,
     models_dir,
     shipped_robot,
 )
@@ -249,7 +250,9 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
         )
     description = checked_instance("description", description,
                                    RobotDescription, shipped_robot)
-    check_model_files(description)
+    # What is wrong with the description is said of its file.
+    where = file_prefix(description)
+    check_model_files(description, where)
     parser = parser or Parser(plant)
     package_map = parser.package_map()
     # The library's models (bases, tools) as package://drake_wbc/..., so a
@@ -276,16 +279,17 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
         try:
             directives = LoadModelDirectives(path)
         except RuntimeError as error:  # Drake's loader: one line of why
-            raise ValueError(f"model.directives = {source.directives!r} is "
-                             f"not allowed: {error}") from None
+            raise ValueError(f"{where}model.directives = "
+                             f"{source.directives!r} is not allowed: "
+                             f"{error}") from None
         for add in (d.add_model for d in directives.directives
                     if d.add_model is not None):
             try:
                 package_map.ResolveUrl(add.file)
             except RuntimeError as error:
                 raise ValueError(
-                    f"model.directives = {source.directives!r} is not "
-                    f"allowed: its add_model {add.name!r} gives file = "
+                    f"{where}model.directives = {source.directives!r} is "
+                    f"not allowed: its add_model {add.name!r} gives file = "
                     f"{add.file!r}, which does not resolve "
                     f"({str(error).removeprefix('error: ')}); directives "
                     "name files by package:// URLs (of model.packages, or "
@@ -303,8 +307,8 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
                 ProcessModelDirectives(directives, plant, parser)
             except RuntimeError as error:  # e.g. a model file not there
                 raise ValueError(
-                    f"model.directives = {source.directives!r} is not "
-                    f"allowed: {error}") from None
+                    f"{where}model.directives = {source.directives!r} is "
+                    f"not allowed: {error}") from None
         else:
             # The base's file with the suspension's joints added, parsed
             # in its place (the other directives weld to it).
@@ -353,9 +357,12 @@ def add_robot(plant: MultibodyPlant, description=None, parser: Parser = None,
             else:
                 parser.AddModels(url)
         except RuntimeError as error:  # Drake's parser: one line of why
-            raise ValueError(f"model.file = {source.file!r} is not "
+            raise ValueError(f"{where}model.file = {source.file!r} is not "
                              f"allowed: {error}") from None
-    model = replace(_robot_model(plant, description), mount=mount)
+    try:
+        model = replace(_robot_model(plant, description), mount=mount)
+    except ValueError as error:  # joints, frames, limits, home
+        raise ValueError(f"{where}{error}") from None
     if suspension is None:
         return model
     model = replace(model, suspension_joints=tuple(

@@ -169,7 +169,9 @@ def check_tuning(arm, band, k_j, local_workspace=None, start=None,
     (one evaluation at home): it checks that P_jnt can come near 1, that
     the arm's home is not at or near a singularity (`singular`), that
     the band is not active there (alpha > 0) and that the tool there is
-    inside d^l and phi^l (else the base moves from the start).
+    inside d^l and phi^l (else the base moves from the start). Where it
+    proposes another k_j, it checks the band, and proposes one, at that
+    k_j (the band `drake-wbc demo` proposes beside it), and says so.
 
     Args:
         arm, band, k_j, local_workspace: as above.
@@ -184,6 +186,7 @@ def check_tuning(arm, band, k_j, local_workspace=None, start=None,
     problems = []
     n = arm.num_joints
     best = mid_range_penalty(k_j, n)
+    at_k_j = ""
     if best < 0.9 and start is None:
         problems.append(
             f"capability.joint_limit_gain = {k_j!r} caps P_jnt at "
@@ -191,6 +194,9 @@ def check_tuning(arm, band, k_j, local_workspace=None, start=None,
             f"mid-range): give about {proposed_joint_limit_gain(n):.3g} "
             "(in the controller's parameters, or for every controller of "
             "this robot in its description's tuning)")
+        # The band means something at the k_j the arm is to have.
+        k_j = proposed_joint_limit_gain(n)
+        at_k_j = f" with the proposed k_j = {k_j:.3g}"
     at_home = start is None
     q = np.asarray(arm.home if at_home else start, dtype=float)
     if at_home:
@@ -211,15 +217,16 @@ def check_tuning(arm, band, k_j, local_workspace=None, start=None,
             f"smallest singular value of J_a is {s_min:.3g}, below the "
             f"arm controller's damping threshold {damping_threshold:g}, "
             f"where its damped least squares gives way; C_m = "
-            f"{value:.3g}): the tool cannot follow every direction there"
+            f"{value:.3g}{at_k_j}): the tool cannot follow every direction "
+            "there"
             + (", and no capability band can be proposed at fractions of "
                "the home's C_m" if at_home else "") + f"; {bend}")
     elif value <= band.upper:
         problems.append(
             f"capability_band = ({band.lower!r}, {band.upper!r}) is active "
-            f"at {place}, where C_m = {value:.4g}: the compensation would "
-            "give way and k_n switch off from the start; "
-            + change.format(what="a band", side="below")
+            f"at {place}, where C_m = {value:.4g}{at_k_j}: the "
+            "compensation would give way and k_n switch off from the "
+            "start; " + change.format(what="a band", side="below")
             + f"({BAND_OVER_HOME[0] * value:.3g}, "
             f"{BAND_OVER_HOME[1] * value:.3g}) in the controller's "
             "parameters or the robot description's tuning (drake-wbc "
