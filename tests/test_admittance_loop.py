@@ -205,3 +205,50 @@ def test_a_case_checks_the_settings_it_is_given():
         al.AdmittanceCase(shipped, time_constant=11.0)
     with pytest.raises(ValueError, match="hri_time_constant = -0.1"):
         al.AdmittanceCase(shipped, time_constant=-0.1)
+
+
+def test_an_open_loop_unstable_case_has_no_margins(setting):
+    """At the paper's T_hri = 0 with the inertia compensation the loop
+    broken at the wrist's reading already has a pole outside the unit
+    circle (the loop through the arm's measured positions stays closed):
+    its gain and phase margins mean nothing, yet the table printed
+    GM -45.41 dB, PM -85.0 (on y) and ranked the row by them. They are
+    n/a there, with the pole; a stable open loop keeps its margins."""
+    from drake_wbc.analysis.bode import format_table
+    from drake_wbc.analysis.frequency import frequency_grid
+    from drake_wbc.analysis.report import admittance_summary
+
+    scenario, station = setting
+    hertz, omega = frequency_grid(0.01, 0.5 / PERIOD, 60)
+    case = al.AdmittanceCase(scenario, inertia_compensation=True,
+                             time_constant=0.0, station=station)
+    # The largest stable k_hri as `drake-wbc bode phri` finds it (the
+    # search is not what is checked here).
+    result = case.result("paper, inertia", omega, limit=0.02813)
+    eig = np.linalg.eigvals(result.loop.A())
+    pole = eig[np.argmax(np.abs(eig))]
+    hertz_pole = abs(np.angle(pole)) / (2 * np.pi * PERIOD)
+    assert abs(pole) > 1.05 and 30.0 < hertz_pole < 45.0
+    assert result.margins == {}
+    reason = (f"open loop unstable: |z| = {abs(pole):.3f} at "
+              f"{hertz_pole:.3g} Hz")
+    assert result.margins_unavailable == reason
+    _, row, note = admittance_summary("case", result, hertz)
+    assert np.isnan(row.gain_margin_db) and np.isnan(row.phase_margin_deg)
+    assert row.margins_unavailable == reason and reason in note
+    assert format_table([row]).splitlines()[-1].split()[-3:] == [
+        "n/a", "n/a", "0.02813"]
+
+    stable = al.AdmittanceCase(scenario, station=station,
+                               plant=(case.plant, case.rest_reading))
+    result = stable.result("phri", omega, limit=0.07774)
+    eig = np.linalg.eigvals(result.loop.A())
+    drifts = np.abs(eig - 1.0) < al.DRIFT_TOLERANCE
+    assert np.abs(eig[~drifts]).max() < 1.0
+    assert result.margins_unavailable == ""
+    _, row, note = admittance_summary("case", result, hertz)
+    worst = min(al.AXES, key=lambda a: result.margins[a].gain_margin)
+    assert row.name == f"phri ({worst})"
+    assert row.gain_margin_db == result.margins[worst].gain_margin_db > 0.0
+    assert row.phase_margin_deg == result.margins[worst].phase_margin > 0.0
+    assert "n/a" not in format_table([row]) and "n/a" not in note

@@ -757,7 +757,7 @@ def test_a_discrete_loops_margins_are_read_below_its_nyquist_frequency():
         time_constant=0.0, k_hri=0.05, loop=LinearSystem(
             np.eye(6), np.eye(6), -g * np.eye(6), np.zeros((6, 6)), H),
         rotation=np.eye(6), spectral_radius=1.0, limit=np.nan,
-        limit_frequency=np.nan, margins={})
+        limit_frequency=np.nan, open_loop_pole=0j, margins={})
     for axis in admittance_loop.AXES:
         assert result.axis_margins(axis, omega) == margins
 

@@ -53,7 +53,17 @@ combines them at the control period h:
   T_b for the per-axis responses), the closed loop's eigenvalues, the
   largest stable k_hri (bisection on k_hri, the controller relinearised;
   stable while the closed loop's spectral radius is below 1) and the
-  gain and phase margins per translational axis at the scenario's k_hri.
+  gain and phase margins per translational axis at the scenario's k_hri,
+  where the open loop is stable. An open loop with a pole outside the
+  unit circle has no margins (the Nyquist criterion would need its
+  unstable poles counted), only its largest stable k_hri: at the
+  paper's T = 0 with the inertia compensation (|z| = 1.102 at 38.6 Hz,
+  1.093 at 38.8 Hz with the stiff hand) the loop that stays closed, the
+  estimator's removal of the tool's inertial reaction from the arm's
+  measured positions through the admittance to the arm's command, is
+  unstable by itself at k_hri = 0.05 (controller and plant apart are
+  stable, and so is that loop at k_hri = 0.005 or without the
+  compensation).
 
 Checked against the simulated station (tests/test_admittance_loop.py):
 the `phri` scenario's stage A oscillates at 1.3 times the largest stable
@@ -438,8 +448,11 @@ class LoopResult:
             loop is unstable at its lowest, its highest if stable there).
         limit_frequency: Hz, of the closed loop's least stable
             eigenvalue just above the limit (nan where there is none).
+        open_loop_pole: the least stable pole of `loop` (drifts aside,
+            `least_stable`; 0 if it has none).
         margins: per axis of T_b (AXES), StabilityMargins of
-            L_i = -(R P C R^T)_ii at k_hri.
+            L_i = -(R P C R^T)_ii at k_hri; empty where the open loop is
+            unstable (`margins_unavailable`).
     """
 
     label: str
@@ -452,7 +465,19 @@ class LoopResult:
     spectral_radius: float
     limit: float
     limit_frequency: float
+    open_loop_pole: complex
     margins: dict
+
+    @property
+    def margins_unavailable(self):
+        """Why the loop has no gain and phase margins: "open loop
+        unstable: |z| = ... at ... Hz" if `open_loop_pole` lies on or
+        outside the unit circle, else "" (it has them)."""
+        pole = self.open_loop_pole
+        if abs(pole) < 1.0:
+            return ""
+        hertz = abs(np.angle(pole)) / (2 * np.pi * self.loop.time_period())
+        return f"open loop unstable: |z| = {abs(pole):.3f} at {hertz:.3g} Hz"
 
     def axis_loop(self, axis):
         """omega (rad/s, a float or an array) -> L_axis (complex, one per
@@ -512,10 +537,11 @@ def spectral_radius(A, drift_tolerance=DRIFT_TOLERANCE):
 
 
 def least_stable(A, drift_tolerance=DRIFT_TOLERANCE):
-    """The eigenvalue of A (not a drift) of the largest modulus."""
+    """The eigenvalue of A (not a drift) of the largest modulus; 0 if
+    there is none."""
     eig = np.linalg.eigvals(A)
     eig = eig[np.abs(eig - 1.0) >= drift_tolerance]
-    return eig[np.argmax(np.abs(eig))]
+    return complex(eig[np.argmax(np.abs(eig))]) if len(eig) else 0j
 
 
 SETTLED_SPEED = 1e-8
@@ -678,14 +704,16 @@ class AdmittanceCase:
                 high = middle
         return float(low)
 
-    def result(self, label, omega, k_hri=None):
+    def result(self, label, omega, k_hri=None, limit=None):
         """The LoopResult at `k_hri` (the scenario's if None), margins on
-        the grid `omega` (rad/s)."""
+        the grid `omega` (rad/s) if the open loop is stable; `limit` the
+        largest stable k_hri if it is known (`limit()` searches it if
+        None)."""
         k = self.params.whole_body_cdmp.k_hri if k_hri is None else k_hri
         loop = self.loop(k)
         wrench = reading_loop(loop)
         radius = spectral_radius(closed_loop_matrix(loop))
-        limit = self.limit()
+        limit = self.limit() if limit is None else float(limit)
         frequency = float("nan")
         if np.isfinite(limit) and limit < K_HRI_SEARCH[1]:
             worst = least_stable(closed_loop_matrix(self.loop(limit * 1.01)))
@@ -697,8 +725,10 @@ class AdmittanceCase:
             time_constant=self.params.whole_body_cdmp.hri_time_constant,
             k_hri=k, loop=wrench, rotation=self._rotation,
             spectral_radius=radius, limit=limit,
-            limit_frequency=frequency, margins={})
-        for axis in AXES:
-            result.margins[axis] = result.axis_margins(axis, omega)
+            limit_frequency=frequency,
+            open_loop_pole=least_stable(wrench.A()), margins={})
+        if not result.margins_unavailable:
+            for axis in AXES:
+                result.margins[axis] = result.axis_margins(axis, omega)
         return result
 

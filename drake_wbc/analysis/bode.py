@@ -180,11 +180,16 @@ class ResponseSummary:
             lowest frequency and is largest there (its peak lies below
             the band).
         gain_margin_db, phase_margin_deg: of a loop (nan where no loop
-            closes; inf where |L| or the phase never crosses).
+            closes or it has no margins; inf where |L| or the phase
+            never crosses).
         stable_gain: the largest stable value of a loop's gain (the
             admittance loop's k_hri), nan where none is computed; the
             table and summary.csv have this column only if some row has
             one.
+        margins_unavailable: why a loop has no margins (e.g. "open loop
+            unstable: |z| = 1.102 at 38.6 Hz"), "" where it has them or
+            is no loop; the table shows its margins as n/a, and
+            summary.csv has this column only if some row has one.
     """
 
     name: str
@@ -195,11 +200,18 @@ class ResponseSummary:
     gain_margin_db: float = float("nan")
     phase_margin_deg: float = float("nan")
     stable_gain: float = float("nan")
+    margins_unavailable: str = ""
 
 
-def summarize(name, hertz, response, margins=None, stable_gain=None):
+def summarize(name, hertz, response, margins=None, stable_gain=None,
+              margins_unavailable=""):
     """The ResponseSummary of `response` on the grid `hertz` (Hz), with
-    the StabilityMargins `margins` of its loop if any."""
+    the StabilityMargins `margins` of its loop if any, or the reason
+    `margins_unavailable` why its loop has none."""
+    if margins is not None and margins_unavailable:
+        raise ValueError(
+            f"margins_unavailable = {margins_unavailable!r} is not allowed "
+            "with margins: must be '' where the loop has them")
     omega = TWO_PI * as_vector("hertz", hertz)
     response = np.asarray(response)
     peak, at = peak_gain(omega, response)
@@ -220,7 +232,8 @@ def summarize(name, hertz, response, margins=None, stable_gain=None):
         phase_margin_deg=(margins.phase_margin if margins is not None
                           else float("nan")),
         stable_gain=(float("nan") if stable_gain is None
-                     else float(stable_gain)))
+                     else float(stable_gain)),
+        margins_unavailable=str(margins_unavailable))
 
 
 TABLE_COLUMNS = (
@@ -234,12 +247,30 @@ TABLE_COLUMNS = (
     ("largest stable gain", "stable_gain", "{:.4g}"),
 )
 
+MARGINS = ("gain_margin_db", "phase_margin_deg")
+"""The columns that a loop without margins shows as n/a."""
+
 
 def _columns(rows):
     """TABLE_COLUMNS, without stable_gain unless a row has one."""
     if any(not np.isnan(row.stable_gain) for row in rows):
         return TABLE_COLUMNS
     return tuple(c for c in TABLE_COLUMNS if c[1] != "stable_gain")
+
+
+def _csv_keys(rows):
+    """summary.csv's columns: the table's, and margins_unavailable if a
+    row has a reason."""
+    keys = [key for _, key, _ in _columns(rows)]
+    if any(row.margins_unavailable for row in rows):
+        keys.append("margins_unavailable")
+    return keys
+
+
+def _row_cell(row, key, fmt):
+    if key in MARGINS and row.margins_unavailable:
+        return "n/a"
+    return _cell(fmt, getattr(row, key))
 
 
 def _cell(fmt, value):
@@ -254,7 +285,7 @@ def format_table(rows):
     """The summaries as a text table, one row each, columns aligned."""
     columns = _columns(rows)
     cells = [[title for title, _, _ in columns]]
-    cells += [[_cell(fmt, getattr(row, key)) for _, key, fmt in columns]
+    cells += [[_row_cell(row, key, fmt) for _, key, fmt in columns]
               for row in rows]
     widths = [max(len(r[i]) for r in cells) for i in range(len(cells[0]))]
     lines = ["  ".join(c.ljust(w) if i == 0 else c.rjust(w)
@@ -269,7 +300,7 @@ def write_summary_csv(rows, path):
     path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    keys = [key for _, key, _ in _columns(rows)]
+    keys = _csv_keys(rows)
     with path.open("w", newline="") as stream:
         writer = csv.writer(stream)
         writer.writerow(keys)

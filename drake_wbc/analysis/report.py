@@ -30,7 +30,8 @@ and CSV per figure, summary.csv, and the table it returns):
   the scenario's hri_time_constant and at the paper's 0 if that is not
   it): L per translational axis of T_b, and a row per case with the gain
   and phase margins of its least stable axis and the largest stable
-  k_hri of the whole loop.
+  k_hri of the whole loop; a case whose open loop is unstable has no
+  margins (n/a, with its unstable pole in the notes).
 """
 
 from dataclasses import dataclass, field, replace
@@ -309,7 +310,7 @@ def admittance_cases(scenario):
     return cases
 
 
-def _admittance_plots(report, scenario, hertz, omega, h, say):
+def _admittance_plots(report, scenario, hertz, omega, say):
     """admittance_loop_*: the admittance loop of each case at the
     scenario's k_hri, L per axis of T_b, and its row; linearised where a
     redundant arm's self-motion comes to rest. `say` is told of each
@@ -333,23 +334,42 @@ def _admittance_plots(report, scenario, hertz, omega, h, say):
             time_constant=T, station=station, plant=plants.get(id(hand)))
         plants[id(hand)] = (case.plant, case.rest_reading)
         result = case.result(label, omega)
-        limit = admittance_loop.limit_sentence(result, frequency=False)
-        plot = BodePlot(name, f"{label}: L at k_hri = {result.k_hri:g} "
-                        f"({limit})", hertz,
-                        nyquist_hz=0.5 / h)
-        for axis in admittance_loop.AXES:
-            plot.add(f"L, {axis} of T_b", result.axis_loop(axis)(omega))
+        plot, row, note = admittance_summary(name, result, hertz)
         report.plots[name] = plot
-        worst = min(admittance_loop.AXES,
-                    key=lambda a: result.margins[a].gain_margin)
-        report.rows.append(summarize(
-            f"{label} ({worst})", hertz,
-            plot.curves[admittance_loop.AXES.index(worst)].response,
-            result.margins[worst], stable_gain=result.limit))
-        report.notes.append(
-            f"{label}: closed-loop spectral radius {result.spectral_radius:.4f}"
-            f" at k_hri = {result.k_hri:g}; "
-            f"{admittance_loop.limit_sentence(result)}")
+        report.rows.append(row)
+        report.notes.append(note)
+
+
+def admittance_summary(name, result, hertz):
+    """(BodePlot `name`, its table row, its note) of the admittance
+    loop's LoopResult `result` on the grid `hertz` (Hz): L per axis of
+    T_b; the row of the axis of the least gain margin, or, where the
+    open loop is unstable and the loop has no margins, of the axis of
+    the largest gain on the band, its margins n/a and the reason in the
+    note."""
+    omega = 2.0 * np.pi * np.asarray(hertz)
+    axes = admittance_loop.AXES
+    limit = admittance_loop.limit_sentence(result, frequency=False)
+    plot = BodePlot(name, f"{result.label}: L at k_hri = {result.k_hri:g} "
+                    f"({limit})", hertz,
+                    nyquist_hz=0.5 / result.loop.time_period())
+    for axis in axes:
+        plot.add(f"L, {axis} of T_b", result.axis_loop(axis)(omega))
+    unavailable = result.margins_unavailable
+    if unavailable:
+        worst = max(axes, key=lambda a: np.abs(
+            plot.curves[axes.index(a)].response).max())
+    else:
+        worst = min(axes, key=lambda a: result.margins[a].gain_margin)
+    row = summarize(f"{result.label} ({worst})", hertz,
+                    plot.curves[axes.index(worst)].response,
+                    result.margins.get(worst), stable_gain=result.limit,
+                    margins_unavailable=unavailable)
+    margins = f"; margins n/a, {unavailable}" if unavailable else ""
+    note = (f"{result.label}: closed-loop spectral radius "
+            f"{result.spectral_radius:.4f} at k_hri = {result.k_hri:g}; "
+            f"{admittance_loop.limit_sentence(result)}{margins}")
+    return plot, row, note
 
 
 def compute_bode_report(scenario, points_per_decade=60,
@@ -401,7 +421,7 @@ def compute_bode_report(scenario, points_per_decade=60,
     say("the sweeps over omega_f and zeta")
     _sweep_plots(report, params, point, driver, hertz, omega, h)
     if has_admittance_loop(scenario):
-        _admittance_plots(report, scenario, hertz, omega, h, say)
+        _admittance_plots(report, scenario, hertz, omega, say)
     report.table = format_table(report.rows)
     report.notes.insert(0, (
         f"operating point: q_a = {np.round(point.arm_positions, 3).tolist()}"
