@@ -32,7 +32,12 @@ TABLE_ROWS = (
     "base velocity, driver and plant", "end effector, driver and plant",
     "arm CDMP, stiffness axis",
     "arm CDMP, force axis", "whole-body CDMP, S_hri = 1",
-    "contact loop, admittance axis", "contact loop, stiffness axis")
+    "contact loop, admittance axis, DMP alone, no delay",
+    "contact loop, admittance axis, 2 periods to motion",
+    "contact loop, admittance axis, 3 periods to motion",
+    "contact loop, stiffness axis, DMP alone, no delay",
+    "contact loop, stiffness axis, 2 periods to motion",
+    "contact loop, stiffness axis, 3 periods to motion")
 
 
 def _parse(add_arguments, argv):
@@ -124,8 +129,8 @@ def test_bode_shows_the_plant(bode):
 
 def test_bode_table_reports_the_contact_loop_margins(bode):
     _, text, _, _ = bode
-    line = next(x for x in text.splitlines()
-                if x.startswith("contact loop, admittance axis"))
+    line = next(x for x in text.splitlines() if x.startswith(
+        "contact loop, admittance axis, DMP alone, no delay"))
     # The discrete integrator K k_f h / (z - 1) with K k_f h = 0.3: gain
     # margin 2 / 0.3 at the Nyquist frequency; |L| = 1 where
     # 2 sin(w h / 2) = 0.3, with the phase margin 90 - w h / 2 degrees.
@@ -140,13 +145,50 @@ def test_bode_table_reports_the_contact_loop_margins(bode):
             "-0.00", f"{np.sqrt(10**0.15 - 1):.3f}"]
 
 
+def critical_gain(delay):
+    """The largest g for which g z^-delay / (z - 1) is stable in a
+    negative feedback loop: bisection on the roots of its characteristic
+    polynomial z^(delay + 1) - z^delay + g."""
+    low, high = 0.0, 3.0
+    while high - low > 1e-12:
+        g = 0.5 * (low + high)
+        polynomial = np.zeros(delay + 2)
+        polynomial[:2] = 1.0, -1.0
+        polynomial[-1] += g
+        if np.abs(np.roots(polynomial)).max() < 1.0:
+            low = g
+        else:
+            high = g
+    return low
+
+
+def test_bode_table_puts_the_delay_to_the_arms_motion_in_the_contact_loop(
+        bode):
+    """The contact loop's margin of the DMP alone, K k_f h / (z - 1), is
+    2 / 0.3 (16.48 dB); with the two to three control periods from a
+    reading to the arm's motion, K k_f h z^-d / (z - 1), it is the
+    critical gain of that loop over 0.3: 6.28 dB (d = 2) and 3.43 dB
+    (d = 3). The table printed the first alone, as the contact loop's."""
+    _, text, _, _ = bode
+    lines = text.splitlines()
+    for delay, label in ((0, "DMP alone, no delay"),
+                         (2, "2 periods to motion"),
+                         (3, "3 periods to motion")):
+        row = f"contact loop, admittance axis, {label}"
+        line = next(x for x in lines if x.startswith(row))
+        expected = 20 * np.log10(critical_gain(delay) / 0.3)
+        assert line[len(row):].split()[4] == f"{expected:.2f}"
+    assert critical_gain(3) == pytest.approx(0.445, abs=5e-4)
+
+
 def test_bode_table_gives_an_integrator_no_dc_gain(bode):
     """The force axis of the arm's CDMP and the whole body's admittance
     are eq. (tf-admit), D_a / s: an infinite DC gain and no bandwidth
     (not the gain at the grid's 0.01 Hz and 1.41 times that)."""
     _, text, _, _ = bode
     for row in ("arm CDMP, force axis", "whole-body CDMP, S_hri = 1",
-                "contact loop, admittance axis"):
+                "contact loop, admittance axis, DMP alone, no delay",
+                "contact loop, admittance axis, 3 periods to motion"):
         line = next(x for x in text.splitlines() if x.startswith(row))
         dc, bandwidth, peak, at = line[len(row):].split()[:4]
         assert (dc, bandwidth, peak, at) == ("inf", "-", "inf", "0.000")

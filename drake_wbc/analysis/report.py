@@ -21,7 +21,9 @@ and CSV per figure, summary.csv, and the table it returns):
   the control period, over the exact zero-order-hold equivalents of
   eqs. (lp-admit) and (tf-admit);
 - contact_loops: the arm's CDMP against a contact spring K (the wiping
-  pad's), with the loops' gain and phase margins;
+  pad's), with the loops' gain and phase margins: the DMP alone, and
+  with the READING_TO_MOTION_PERIODS from a reading to the arm's motion
+  (the real loop's margins lie between these two);
 - filter_sweep, split_sweep: families of curves over omega_f and zeta;
 - admittance_loop_*: in a scenario with intuitive pHRI (S_hri = 1 in its
   parameters or its task) or a hand on the tool, the admittance loop of
@@ -71,6 +73,18 @@ CONTACT_STIFFNESS = 3.0e3
 """K of the contact loops, N/m: a soft sponge pressed against a wall
 (about 3e3 N/m, as the shipped wiping pad's; `compute_bode_report`
 takes another)."""
+
+READING_TO_MOTION_PERIODS = (2, 3)
+"""d, control periods from a wrist reading to the arm's motion beyond
+the coupled DMP's own, that the contact loops' delayed rows add as
+z^-d (the row without them is the DMP alone): the wrist sensor's sample
+and the arm driver's ramp over one command period make two, the arm's
+servo up to one more. The station's plant part
+(drake_wbc.analysis.admittance_loop.linearize_plant_part) shows it: the
+arm at 46 % of a command one period after it and at 101 % after two,
+the wrist's reading one period behind the arm. The force loop K k_f h
+z^-d / (z - 1) is stable below K k_f h = 0.618 (d = 2) and 0.445
+(d = 3), against 2 for the DMP alone (models/ft300_wiping_tool.sdf)."""
 
 REPRODUCTION_TOLERANCE = 0.1
 """|V_ee,actual / V_ee - 1| above which the end effector's command counts
@@ -241,18 +255,25 @@ def _dmp_plots(report, params, hertz, omega, h, stiffness):
     report.plots[plot.name] = plot
 
     plot = BodePlot("contact_loops", f"arm CDMP against a contact of "
-                    f"{stiffness:g} N/m: loop K H(z)", hertz,
+                    f"{stiffness:g} N/m: loop K H(z) z^-d", hertz,
                     nyquist_hz=0.5 / h)
     for kind in ("admittance", "stiffness"):
         linear = linearize_dmp_force(kind, params)
+        for delay in (0, *READING_TO_MOTION_PERIODS):
 
-        def loop(w, linear=linear):
-            return stiffness * linear.response(np.atleast_1d(w))[0]
+            def loop(w, linear=linear, delay=delay):
+                w = np.atleast_1d(w)
+                return (stiffness * linear.response(w)
+                        * np.exp(-1j * delay * w * h))[0]
 
-        margins = stability_margins(loop, omega, h)
-        plot.add(f"{kind} axis", stiffness * responses[kind])
-        report.rows.append(summarize(f"contact loop, {kind} axis", hertz,
-                                     stiffness * responses[kind], margins))
+            response = stiffness * responses[kind] * np.exp(
+                -1j * delay * omega * h)
+            label = (f"{kind} axis, DMP alone, no delay" if delay == 0
+                     else f"{kind} axis, {delay} periods to motion")
+            plot.add(label, response)
+            report.rows.append(summarize(
+                f"contact loop, {label}", hertz, response,
+                stability_margins(loop, omega, h)))
     report.plots[plot.name] = plot
 
 
