@@ -21,12 +21,14 @@ from pydrake.systems.primitives import (
 
 from drake_wbc.analysis import (
     admittance_loop,
+    bode,
     chains,
     closed_forms,
     plant_chain,
 )
 from drake_wbc.analysis.dmp_force_response import linearize_dmp_force
 from drake_wbc.analysis.frequency import (
+    StabilityMargins,
     bandwidth,
     coupled_states,
     frequency_grid,
@@ -861,6 +863,13 @@ def driver_period_map(period):
      r"points_per_decade = 0.3 is not allowed: must be at least 1"),
     (lambda: linearize_dmp_force("spring"), "kind = 'spring'"),
     (lambda: stability_margins(3.0, OMEGA), "loop"),
+    # A loop's margins and a reason why it has none.
+    (lambda: bode.summarize(
+        "loop", OMEGA / (2 * np.pi), 1.0 / (1j * OMEGA),
+        StabilityMargins(2.0, 1.0, 60.0, 0.5),
+        margins_unavailable="open loop unstable"),
+     r"margins_unavailable = 'open loop unstable' is not allowed with "
+     r"margins: must be '' where the loop has them"),
     (lambda: linearize_dmp_force("stiffness", axis=7), "axis = 7"),
     (lambda: plant_chain.linearize_base_plant(None), "station = None"),
     # A, B, C, D of inconsistent shapes (an IndexError, or with D a
@@ -924,7 +933,8 @@ def driver_period_map(period):
      r"period = 0.0005 s is not allowed with the update period of "
      r"'driver' = 0.001 s: must be a whole multiple \(1, 2, ...\) of it"),
     (lambda: driver_period_map(0.0015), r"period = 0.0015 s"),
-], ids=["grid-order", "grid-density", "dmp-kind", "loop", "dmp-axis",
+], ids=["grid-order", "grid-density", "dmp-kind", "loop",
+        "margins-and-reason", "dmp-axis",
         "station", "B", "C", "D", "A", "bandwidth-response",
         "peak-response", "unsorted-grid", "negative-grid", "empty-grid",
         "zoh-coefficient", "zoh-coefficient-type", "hold-shapes",
