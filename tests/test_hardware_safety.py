@@ -348,6 +348,52 @@ def test_after_a_stop_the_arm_is_commanded_from_where_it_is(caplog):
     np.testing.assert_allclose(arm[-1], goal)
 
 
+@pytest.mark.parametrize("beyond", [0.03, 0.2])
+def test_an_arm_read_beyond_its_limits_after_a_stop_is_no_restart(
+        caplog, beyond):
+    """After a stop the arm reads 0.03 rad (or 0.2) beyond joint 0's
+    upper limit (3.14): the guard restarted from there held within the
+    limits, 3.14 sent after 0.0 (314 rad/s), a jump of the setpoint away
+    from the arm too. At the start the same reading is refused
+    (start_within_limits); at a restart the guard now keeps its own last
+    command and its limits, so nothing jumps, and says so once, naming
+    the joint, its reading and its limits. A reading within one period's
+    step at the acceleration limit from rest (an encoder at its limit)
+    restarts on the limit, as before."""
+    caplog.set_level(logging.WARNING, logger="drake_wbc.hardware")
+    bench = Bench()
+    limits = Limits.of_robot(bench.options)
+    bench.run(60)
+    bench.run(10, status=False)
+    assert bench.diagnostics()["watchdog_tripped"] == 1.0
+    before = bench.sent["arm"][-1][1]
+    stopped = bench.tick * H
+    q = HOME_ARM_POSITIONS.copy()
+    q[0] = limits.upper[0] + beyond
+    bench.run(80, status=False, extra=lambda bench: bench.status(q=q))
+    assert bench.diagnostics()["watchdog_tripped"] == 0.0
+    _, arm = bench.commands("arm", stopped)
+    rate = np.diff(np.vstack([before, before, arm]), axis=0) / H
+    assert np.all(np.abs(rate) <= limits.joint_speed * (1 + 1e-9))
+    assert np.all(np.abs(np.diff(rate, axis=0))
+                  <= limits.joint_acceleration * H * (1 + 1e-9))
+    np.testing.assert_array_equal(arm[-1], HOME_ARM_POSITIONS)
+    assert not _records(caplog, "arm elsewhere")
+    records = _records(caplog, "arm beyond its limits at t = ")
+    assert len(records) == 1
+    assert (f"joint 0 reads {q[0]:.6g} rad, beyond its limits "
+            "[-3.14, 3.14] rad by more than 0.00126 rad"
+            in records[0].getMessage())
+    # An encoder's noise at the limit: the restart is on the limit.
+    caplog.clear()
+    bench.run(10, status=False)
+    q[0] = limits.upper[0] + 0.5 * limits.joint_acceleration[0] * H * H
+    bench.run(80, status=False, extra=lambda bench: bench.status(q=q))
+    assert len(_records(caplog, "arm elsewhere at t = ")) == 1
+    assert not _records(caplog, "arm beyond its limits")
+    assert bench.sent["arm"][-1][1][0] == limits.upper[0]
+
+
 def test_a_controller_resuming_where_the_arm_is_is_followed_from_there():
     """No stop of the guard's: the controller, in its own safe stop, held
     its command while the arm was moved 0.3 rad, and then restarts from

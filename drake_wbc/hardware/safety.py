@@ -20,7 +20,8 @@ arm is not where the one before sent it: after a stop, and when the
 controller restarts its arm command from where the arm is, an arm found
 farther than the tolerance from the last command sent is commanded
 from where it is instead, at rest, and within the limits as it sees
-them (`resync_arm`); every base
+them (`resync_arm`; not from a measurement beyond the limits, from
+which the command, held within them, would jump); every base
 command is within the base's speed limits, and within its acceleration
 limits of the one before except a stop, which is zero at once (the
 base's own velocity loop brakes within its limits); a stale stream stops
@@ -52,7 +53,9 @@ from drake_wbc.math.command_limits import ROUNDING, limit_base_velocity
 from drake_wbc.math.safety import (
     DEFAULT_ARM_FOLLOW_TOLERANCE,
     VALID,
+    Restart,
     check_following,
+    limit_slack,
     restart_position,
 )
 from drake_wbc.math.validation import (
@@ -440,21 +443,29 @@ def resync_arm(state, measured, config):
     controller's command is within the tolerance of it (the controller
     resumes from where the arm is too, drake_wbc.controller.diagram).
     An arm where the last command was, or no measurement (None), leaves
-    `state` as it is.
+    `state` as it is; so does an arm measured farther beyond a joint's
+    limits than one period's step at its acceleration limit from rest
+    (`Restart.beyond`: no position to start from either,
+    `start_within_limits`): the command, held within the limits, would
+    jump away from it. The command goes on from the last one sent,
+    within the limits.
 
     Returns:
-        (GuardState, the deviation's InputCheck, VALID when unchanged).
+        (GuardState, the Restart of restart_position; its check VALID
+        with no measurement).
     """
     if measured is None:
-        return state, VALID
-    check, start = restart_position(
+        return state, Restart(VALID, None)
+    restart = restart_position(
         np.asarray(measured, dtype=float), state.arm,
         config.arm_follow_tolerance, config.limits.lower,
-        config.limits.upper)
-    if start is None:
-        return state, check
+        config.limits.upper, config.limits.joint_acceleration,
+        config.period)
+    if restart.start is None:
+        return state, restart
+    start = restart.start
     return state._replace(arm=start, arm_velocity=np.zeros_like(start),
-                          arm_resync=True), check
+                          arm_resync=True), restart
 
 
 def guard_step(state, now, ages, base, arm, command_time, config,
@@ -510,7 +521,7 @@ def guard_step(state, now, ages, base, arm, command_time, config,
     Returns:
         (GuardState, list of (event, detail) for the log: "tripped",
         "cleared", "base stopped", "base cleared", "started", "arm
-        elsewhere").
+        elsewhere", "arm beyond its limits").
     """
     jumps = state.clock_jumps if clock_jumps is None else tuple(
         int(count) for count in clock_jumps)
@@ -624,9 +635,19 @@ def guard_step(state, now, ages, base, arm, command_time, config,
 
 def _resync(state, measured, config, events):
     """`resync_arm` of `state`, its event added to `events` when the
-    arm was elsewhere."""
-    state, check = resync_arm(state, measured, config)
-    if not check.valid:
+    arm was elsewhere, or beyond its limits."""
+    state, restart = resync_arm(state, measured, config)
+    check, j = restart.check, restart.beyond
+    if j >= 0:
+        limits = config.limits
+        slack = limit_slack(limits.joint_acceleration[j], config.period)
+        events.append(("arm beyond its limits", (
+            f"joint {j} reads {measured[j]:.6g} rad, beyond its limits "
+            f"[{limits.lower[j]:.6g}, {limits.upper[j]:.6g}] rad by more "
+            f"than {slack:.3g} rad, and is {abs(check.value):.3g} "
+            f"rad from the last command sent (tolerance "
+            f"{config.arm_follow_tolerance:g} rad)")))
+    elif not check.valid:
         events.append(("arm elsewhere", (
             f"joint {check.entry} is {abs(check.value):.3g} rad from the "
             f"last command sent (tolerance "
@@ -865,6 +886,11 @@ def _say(event, detail, now, options):
     elif event == "arm elsewhere":
         LOG.warning("arm elsewhere at t = %.3f s: %s; its commands restart "
                     "from where it is, at rest", now, detail)
+    elif event == "arm beyond its limits":
+        LOG.warning("arm beyond its limits at t = %.3f s: %s; its commands "
+                    "do not restart from there (held within the limits, "
+                    "they would jump away from it): they go on from the "
+                    "last command sent, within the limits", now, detail)
     else:
         LOG.info("every stream fresh at t = %.3f s: the commands start", now)
 
