@@ -691,7 +691,66 @@ def test_a_controller_too_slow_for_the_robots_timeout_stops(caplog):
     times, base = bench.commands("base", slow)
     assert times[0] < slow + H  # the last command before is 0.24 s old
     np.testing.assert_array_equal(base[1:], 0.0)
-    assert len(_records(caplog, "since the last command (limit 0.240 s)")) \
+    assert len(_records(caplog, "since the last command time, the next "
+                                "0.001 s away at the least (limit 0.250 s "
+                                "together)")) == 1
+
+
+class PacedClock:
+    """A wall clock for a test: a controller whose own clock runs `pace`
+    times as fast as the wall clock (1: it keeps pace), from the time
+    of `bench`'s simulator."""
+
+    def __init__(self):
+        self.bench, self.pace, self.start, self.wall = None, 1.0, 0.0, 100.0
+
+    def set_pace(self, pace):
+        self.wall, self.start = self(), self.bench.root.get_time()
+        self.pace = pace
+
+    def __call__(self):
+        time = 0.0 if self.bench is None else self.bench.root.get_time()
+        return self.wall + (time - self.start) / self.pace
+
+
+def test_a_controller_at_pace_runs_at_the_shortest_command_timeout(caplog):
+    """A robot command timeout of 0.015 s (accepted: longer than the
+    command period) stopped a controller keeping perfect pace at once
+    and for good: the guard compared the wall clock since the last
+    command time with the timeout less a period (5 ms), which a period
+    between two commands exceeds. It now compares what the robot waits at
+    the least: that time and the controller's to the next command time,
+    against the timeout itself. At the shortest timeout allowed, a
+    period and a watchdog period (0.011 s; shorter ones are refused
+    naming it), a controller at pace runs without a trip; one at 0.9 of
+    real time, its commands 11.1 ms apart, stops (its checks 1.1 ms
+    apart, the stall limit's 1 ms), and at 0.6 of real time with a
+    timeout of 0.015 s, saying why."""
+    caplog.set_level(logging.WARNING, logger="drake_wbc.hardware")
+    with pytest.raises(ValueError, match=re.escape(
+            "robot_command_timeout = 0.0105 s is not allowed with "
+            "publish_period = 0.01 s and watchdog_period = 0.001 s: must be "
+            "at least their sum, 0.011 s")):
+        Bench(robot_command_timeout=0.0105)
+    for timeout, pace in ((0.011, 0.9), (0.015, 0.6)):
+        caplog.clear()
+        clock = PacedClock()
+        bench = Bench(wall_clock=WallClock(clock=clock),
+                      robot_command_timeout=timeout)
+        clock.bench = bench
+        bench.run(200)
+        assert bench.diagnostics()["watchdog_trips"] == 0.0
+        _rows_equal(bench.commands("base", 1.0)[1], BASE_COMMAND)
+        assert not _records(caplog, "watchdog tripped")
+        clock.set_pace(pace)
+        bench.run(20)
+        assert bench.diagnostics()["watchdog_tripped"] == 1.0
+    # At 0.6 of real time the checks are 1.7 ms apart, within the stall
+    # limit (5 ms), and the commands 16.7 ms: the stop comes 2 ms of the
+    # controller's time before the next command time.
+    assert len(_records(caplog, "0.013 s of wall clock passed since the "
+                                "last command time, the next 0.002 s away "
+                                "at the least (limit 0.015 s together)")) \
         == 1
 
 

@@ -469,7 +469,8 @@ def resync_arm(state, measured, config):
 
 
 def guard_step(state, now, ages, base, arm, command_time, config,
-               clock_jumps=None, wall_time=None, arm_measured=None):
+               clock_jumps=None, wall_time=None, arm_measured=None,
+               until_command=0.0):
     """One check of the command guard.
 
     Each stream is fresh while its age is within its watchdog limit; it
@@ -485,9 +486,12 @@ def guard_step(state, now, ages, base, arm, command_time, config,
     check, so that the commands resume from rest after the recovery time
     (a shorter stall is as a late message: the robot still runs the last
     command, and the commands go on from it). So, too, when the wall
-    clock ran longer than that since the last command time, however
-    short each check: a controller so slow that its commands come further
-    apart than the robot waits for one. A stream of
+    clock since the last command time and the controller's time to the
+    next one (`until_command`) are longer than the robot's command
+    timeout together, however short each check: a controller so slow
+    that its commands come further apart than the robot waits for one
+    (each goes out at the same offset after its command time, so the
+    robot waits at least that long for the next). A stream of
     FULL_STOP_STREAMS that does not count stops everything;
     obstacle_points stop the base. A stop that begins
     between command times zeroes the base at once (`urgent`). At a
@@ -517,6 +521,8 @@ def guard_step(state, now, ages, base, arm, command_time, config,
             (WallClock.now); None on simulated time.
         arm_measured: (n,) the arm's measured positions (the arm_status
             stream's), rad; None: not known (no `resync_arm`).
+        until_command: the controller's time from this check to the next
+            command time, s (0 at one).
 
     Returns:
         (GuardState, list of (event, detail) for the log: "tripped",
@@ -531,7 +537,10 @@ def guard_step(state, now, ages, base, arm, command_time, config,
         0.0 if wall_time is None or math.isnan(state.command_wall_time)
         else wall_time - state.command_wall_time)
     stalled = interval > stall_limit(config) + AGE_TOLERANCE
-    lagging = stalled or since_command > stall_limit(config) + AGE_TOLERANCE
+    waits = since_command + (0.0 if command_time else until_command)
+    lagging = stalled or (
+        wall_time is not None
+        and waits > config.limits.command_timeout + AGE_TOLERANCE)
     fresh_since, recovering, counts, why = [], [], [], []
     for i, age in enumerate(ages):
         since, again = state.fresh_since[i], state.recovering[i]
@@ -561,10 +570,10 @@ def guard_step(state, now, ages, base, arm, command_time, config,
         "process missed the processor for longer than the robot waits for "
         "a command") if stalled else (
         f"every stream: {since_command:.3f} s of wall clock passed since "
-        f"the last command (limit {stall_limit(config):.3f} s): the "
-        "controller runs too slowly for the robot, which stops its base "
-        "when no command comes for "
-        f"{config.limits.command_timeout:.3f} s")
+        f"the last command time, the next {waits - since_command:.3f} s "
+        f"away at the least (limit {config.limits.command_timeout:.3f} s "
+        "together): the controller runs too slowly for the robot, which "
+        "stops its base when no command comes for that long")
     events = []
     tripped = full and not state.full_stop and state.started
     if tripped:
@@ -856,7 +865,9 @@ class CommandGuard(LeafSystem):
         result, events = guard_step(
             self.stored(context), now, ages, self._base_in.Eval(context),
             self._arm_in.Eval(context), command_time, self.config,
-            clock_jumps=jumps, wall_time=wall_time, arm_measured=measured)
+            clock_jumps=jumps, wall_time=wall_time, arm_measured=measured,
+            until_command=(-check % self._checks_per_command)
+            * self.options.watchdog_period)
         for event, detail in events:
             _say(event, detail, now, self.options)
         if command_time and result.invalid > self.stored(context).invalid:
