@@ -519,6 +519,39 @@ def test_bad_messages_never_reach_the_controller():
     np.testing.assert_array_equal(bench.sent["base"][-1][1], 0.0)
 
 
+def test_a_command_not_finite_is_said_once_and_so_is_its_end(caplog):
+    """The controller's base command NaN for 1 s: the guard warned at
+    every command time (100 times), without saying which entry. It now
+    says once when the command becomes not finite, naming the port and
+    the entry, and once when it is finite again; the count of commands
+    not sent goes on. The arm's likewise."""
+    caplog.set_level(logging.WARNING, logger="drake_wbc.hardware")
+    bench = Bench()
+    bench.run(60)
+    bench.set_command(bench.base, [0.3, np.nan, 0.2])
+    bench.run(100)
+    bench.set_command(bench.base, BASE_COMMAND)
+    bench.run(20)
+    assert bench.diagnostics()["invalid_commands"] == 100.0
+    bad = _records(caplog, "is not finite")
+    assert len(bad) == 1
+    assert "(base_velocity_command[1] = nan); not sent" in \
+        bad[0].getMessage()
+    assert len(_records(caplog, " s is finite again")) == 1
+    caplog.clear()
+    arm = HOME_ARM_POSITIONS.copy()
+    arm[4] = -np.inf
+    bench.set_command(bench.arm, arm)
+    bench.run(10)
+    bench.set_command(bench.arm, HOME_ARM_POSITIONS)
+    bench.run(10)
+    assert bench.diagnostics()["invalid_commands"] == 110.0
+    assert [r.getMessage().split(" s ")[1] for r in caplog.records] == [
+        "is not finite (arm_position_command[4] = -inf); not sent (the "
+        "base stops, the arm slows down and holds) until it is finite "
+        "again", "is finite again; sent within the limits"]
+
+
 def test_one_future_stamped_message_locks_nothing_out():
     """A message stamped a minute ahead (forged, or a sender's clock
     gone wrong) is rejected; the genuine messages after it are taken and

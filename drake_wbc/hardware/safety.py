@@ -55,6 +55,7 @@ from drake_wbc.math.safety import (
     VALID,
     Restart,
     check_following,
+    check_vector,
     limit_slack,
     restart_position,
 )
@@ -329,6 +330,8 @@ class GuardState(NamedTuple):
         base_saturated, arm_saturated: a limit changed the command of the
             last command time.
         invalid: how many controller commands were not finite.
+        not_finite: the controller's command at the last command time was
+            not finite.
         fresh_since: (4,) per stream of STATUS_CHANNELS, since when it has been
             fresh (nan: stale now).
         recovering: (4,) per stream, it went stale after being fresh, so
@@ -362,6 +365,7 @@ class GuardState(NamedTuple):
     base_saturated: bool = False
     arm_saturated: bool = False
     invalid: int = 0
+    not_finite: bool = False
     fresh_since: tuple = (math.nan,) * len(STATUS_CHANNELS)
     recovering: tuple = (False,) * len(STATUS_CHANNELS)
     urgent: bool = False
@@ -527,7 +531,9 @@ def guard_step(state, now, ages, base, arm, command_time, config,
     Returns:
         (GuardState, list of (event, detail) for the log: "tripped",
         "cleared", "base stopped", "base cleared", "started", "arm
-        elsewhere", "arm beyond its limits").
+        elsewhere", "arm beyond its limits", and "not finite" and
+        "finite" when the controller's command becomes not finite, and
+        finite again, at a command time).
     """
     jumps = state.clock_jumps if clock_jumps is None else tuple(
         int(count) for count in clock_jumps)
@@ -607,7 +613,13 @@ def guard_step(state, now, ages, base, arm, command_time, config,
             new = new._replace(base=np.zeros(3), urgent=True)
         return new, events
     h, limits = config.period, config.limits
-    invalid = not (np.all(np.isfinite(base)) and np.all(np.isfinite(arm)))
+    bad = _not_finite(base, arm)
+    invalid = bad is not None
+    if invalid and not state.not_finite:
+        events.append(("not finite", bad))
+    elif state.not_finite and not invalid:
+        events.append(("finite", ""))
+    new = new._replace(not_finite=invalid)
     if full or invalid:
         q, v = stop_arm(new.arm, new.arm_velocity, h, limits)
         return new._replace(
@@ -640,6 +652,18 @@ def guard_step(state, now, ages, base, arm, command_time, config,
     return new._replace(base=sent, arm=q, arm_velocity=v, target=arm,
                         base_saturated=base_saturated,
                         arm_saturated=arm_saturated), events
+
+
+def _not_finite(base, arm):
+    """The first entry of the controller's commands that is not finite,
+    as "port[i] = value" (the base's velocity command first, then the
+    arm's position command: CommandGuard's input ports), or None."""
+    for port, values in (("base_velocity_command", base),
+                         ("arm_position_command", arm)):
+        check = check_vector(values)
+        if not check.valid:
+            return f"{port}[{check.entry}] = {check.value!r}"
+    return None
 
 
 def _resync(state, measured, config, events):
@@ -735,9 +759,10 @@ class CommandGuard(LeafSystem):
     `options.guard_offset` checks the ages; the one at `guard_offset`
     after each control tick also takes the controller's commands of that
     tick and computes what is sent; the LCM publishers send it at
-    `options.publish_offset`. Each stop and each recovery is said once on
-    the `drake_wbc.hardware` logger. A plain double LeafSystem (it
-    branches on ages and limits and is never linearised).
+    `options.publish_offset`. Each stop and each recovery, and the
+    controller's command becoming not finite and finite again, is said
+    once on the `drake_wbc.hardware` logger. A plain double LeafSystem
+    (it branches on ages and limits and is never linearised).
 
     Args:
         options: HardwareOptions (periods, watchdog, limits).
@@ -870,9 +895,6 @@ class CommandGuard(LeafSystem):
             * self.options.watchdog_period)
         for event, detail in events:
             _say(event, detail, now, self.options)
-        if command_time and result.invalid > self.stored(context).invalid:
-            LOG.warning("the controller's command at t = %.3f s is not "
-                        "finite; not sent", now)
         state.get_mutable_abstract_state(self._state).set_value(result)
 
 
@@ -894,6 +916,13 @@ def _say(event, detail, now, options):
         LOG.warning("base cleared at t = %.3f s: obstacle points fresh for "
                     "%.3g s; the base resumes within its limits", now,
                     recovery)
+    elif event == "not finite":
+        LOG.warning("the controller's command at t = %.3f s is not finite "
+                    "(%s); not sent (the base stops, the arm slows down and "
+                    "holds) until it is finite again", now, detail)
+    elif event == "finite":
+        LOG.warning("the controller's command at t = %.3f s is finite "
+                    "again; sent within the limits", now)
     elif event == "arm elsewhere":
         LOG.warning("arm elsewhere at t = %.3f s: %s; its commands restart "
                     "from where it is, at rest", now, detail)
