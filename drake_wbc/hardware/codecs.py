@@ -19,7 +19,7 @@ what the controller linearises.
 import functools
 import logging
 import math
-from collections import deque
+from collections import Counter, deque
 from typing import NamedTuple
 
 import lcm as lcm_module
@@ -296,29 +296,43 @@ def _points_value(points=None):
 class _Mailbox:
     """The messages an LCM subscription delivered and a receiver has not
     taken in yet, oldest first, at most QUEUE_LIMIT of them (the oldest
-    are dropped, and counted, beyond that)."""
+    are dropped, and counted, beyond that).
 
-    def __init__(self):
+    Args:
+        kind: of a message, the key under which its drop is counted (its
+            channel's, for a receiver of several); one for all if None.
+    """
+
+    def __init__(self, kind=None):
         self.items = deque()
-        self.dropped = 0
+        self.dropped = Counter()
+        self._kind = kind or (lambda item: None)
 
     def put(self, item):
         if len(self.items) >= QUEUE_LIMIT:
-            self.items.popleft()
-            self.dropped += 1
+            self.dropped[self._kind(self.items.popleft())] += 1
         self.items.append(item)
 
     def take(self):
+        """(the messages, oldest first; a Counter of the drops by kind)."""
         items, dropped = list(self.items), self.dropped
         self.items.clear()
-        self.dropped = 0
+        self.dropped = Counter()
         return items, dropped
 
     def keep_newest(self):
         """Drops all but the newest message (and forgets the drops)."""
         while len(self.items) > 1:
             self.items.popleft()
-        self.dropped = 0
+        self.dropped = Counter()
+
+
+def _dropped(reception, count):
+    """`reception` with `count` messages dropped from a full mailbox."""
+    return reception._replace(
+        rejected=reception.rejected + count,
+        reason=f"{count} dropped: more than {QUEUE_LIMIT} messages in one "
+               "step")
 
 
 QUEUE_LIMIT = 1000
@@ -560,10 +574,7 @@ class MessageDecoder(LeafSystem):
         now = context.get_time()
         before = reception = self.reception(context)
         if dropped:
-            reception = reception._replace(
-                rejected=reception.rejected + dropped,
-                reason=f"{dropped} dropped: more than {QUEUE_LIMIT} "
-                       "messages in one step")
+            reception = _dropped(reception, dropped.total())
         for data in items:
             reception = receive(reception, data, now, self.format.decode,
                                 self.rules)
@@ -645,8 +656,12 @@ class CommandReceiver(LeafSystem):
         n = self.initial.size
         formats = message_formats(n)
         self._formats = (formats["base_command"], formats["arm_command"])
-        self._mailbox = _Mailbox()
+        self._mailbox = _Mailbox(kind=lambda item: item[0])
         self._warnings = _Warnings(f"commands on {', '.join(channels)}")
+        self._rejections = tuple(
+            _Warnings(f"{message_format.name} on {channel}")
+            for message_format, channel in zip(self._formats, channels,
+                                               strict=True))
         for kind, channel in enumerate(channels):
             lcm.Subscribe(channel, lambda data, kind=kind: self._mailbox.put(
                 (kind, data)))
@@ -702,13 +717,15 @@ class CommandReceiver(LeafSystem):
                             f" (sender {before[0].sender} fell quiet)")
             receptions[kind] = take(receptions[kind], decoded, now,
                                     self.rules)
-        if dropped:
-            receptions[1] = receptions[1]._replace(
-                rejected=receptions[1].rejected + dropped)
-        rejected = sum(r.rejected for r in receptions) - sum(
-            r.rejected for r in before[1:])
-        self._warnings.say(now, "rejected", rejected, "; ".join(
-            r.reason for r in receptions if r.reason))
+        for kind, count in dropped.items():
+            receptions[kind] = _dropped(receptions[kind], count)
+        # Each channel's rejections with its own reason: that of its last
+        # message rejected (since its last warning), not another channel's
+        # of long ago.
+        for kind, reception in enumerate(receptions):
+            self._rejections[kind].say(
+                now, "rejected", reception.rejected - before[1 + kind].rejected,
+                reception.reason)
         self._warnings.say(now, "refused", lock.refused - before[0].refused,
                            f"another sender than {lock.sender}, which has "
                            "the command channels")
