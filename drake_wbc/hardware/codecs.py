@@ -468,7 +468,7 @@ class MessageDecoder(LeafSystem):
 
     - value ports: as the format names them (e.g. `positions`,
       `velocities` of an arm status), the last good message's values;
-      the defaults until one arrives.
+      zeros (no points) until one arrives.
     - age: (1) s since the last good message was taken in (inf before
       the first, and while the receiver's clock is set back before it:
       `Reception.age`), on the receiver's clock (the context's time).
@@ -490,52 +490,35 @@ class MessageDecoder(LeafSystem):
         lcm: the DrakeLcmInterface to subscribe on (it must outlive the
             system).
         channel: the channel's name.
-        defaults: the values before the first message (zeros, no points
-            if None), one per value port.
-        timeout: if given, s: once the last good message is older than
-            this, the value ports give `defaults` again (the robot's own
-            command timeout); None keeps the last values forever.
         rules: the ClockRules of the sender's time stamps.
         num_joints: the arm's joint count, for the arm's kinds by name.
         max_points: the most points an obstacle points message may hold,
             for that kind by name (None: any number).
     """
 
-    def __init__(self, message_format, lcm, channel, defaults=None,
-                 timeout=None, rules=DEFAULT_RULES, num_joints=None,
-                 max_points=None):
+    def __init__(self, message_format, lcm, channel, rules=DEFAULT_RULES,
+                 num_joints=None, max_points=None):
         super().__init__()
         self.format = message_format = _format(message_format, num_joints,
                                                max_points)
         ports = message_format.ports
-        if defaults is None:
-            defaults = [np.zeros((0, 2)) if size is None else np.zeros(size)
-                        for _, size in ports]
-        if len(defaults) != len(ports):
-            raise ValueError(f"defaults has {len(defaults)} entries, which "
-                             f"is not allowed: must have {len(ports)}")
-        self.defaults = tuple(
-            np.asarray(value, dtype=float) if size is None
-            else as_vector(f"defaults[{i}]", value, size)
-            for i, ((_, size), value) in enumerate(
-                zip(ports, defaults, strict=True)))
-        self.timeout = None if timeout is None else non_negative(
-            "timeout", timeout)
         self.rules = rules
         self._mailbox = _Mailbox()
         self._warnings = _Warnings(f"{message_format.name} on {channel}")
         lcm.Subscribe(channel, self._mailbox.put)
         self._state = self.DeclareAbstractState(AbstractValue.Make(
-            Reception(None, self.defaults, -np.inf)))
+            Reception(None, tuple(
+                np.zeros((0, 2)) if size is None else np.zeros(size)
+                for _, size in ports), -np.inf)))
         for i, (name, size) in enumerate(ports):
             if size is None:
                 self.DeclareAbstractOutputPort(
                     name, _points_value, lambda c, o, i=i: o.set_value(
-                        self._values(c)[i]))
+                        self.reception(c).values[i]))
             else:
                 self.DeclareVectorOutputPort(
                     name, size, lambda c, o, i=i: o.SetFromVector(
-                        self._values(c)[i]))
+                        self.reception(c).values[i]))
         self.DeclareVectorOutputPort("age", 1, self._age)
         self.DeclareVectorOutputPort("rejected", 1, self._rejected)
         self.DeclareVectorOutputPort(
@@ -553,13 +536,6 @@ class MessageDecoder(LeafSystem):
         waited for the robot), which the receiver's clock did not see
         arrive."""
         self._mailbox.keep_newest()
-
-    def _values(self, context):
-        reception = self.reception(context)
-        if (self.timeout is not None
-                and reception.age(context.get_time()) > self.timeout):
-            return self.defaults
-        return reception.values
 
     def _age(self, context, output):
         output.SetAtIndex(0, self.reception(context).age(context.get_time()))
