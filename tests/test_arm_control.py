@@ -554,7 +554,8 @@ def test_a_resume_restarts_from_where_the_arm_is(arm):
     farther than the tolerance from q_cmd restarts the command from the
     measurement, at rest: the update is the one from there with no
     previous rate, its step within the acceleration limit. Within the
-    tolerance, or without resume, the measurement changes nothing, bit
+    tolerance, or without resume, or beyond a joint's limits (by more than
+    an encoder at the limit reads), the measurement changes nothing, bit
     for bit; with hold (a protective stop that outlasts the safe stop)
     the command restarts there and stays; the AutoDiff system takes the
     same branch."""
@@ -583,11 +584,22 @@ def test_a_resume_restarts_from_where_the_arm_is(arm):
     assert np.abs(state[6:12]).max() > 0.0
     assert np.abs(state[6:12]).max() <= ROBOT_ACCELERATION_LIMIT * H * (
         1 + 1e-12)
-    # A measurement beyond a joint's limit restarts on the limit.
+    # A measurement beyond a joint's limit by at most one period's step at
+    # the acceleration limit from rest (an encoder at its limit) restarts
+    # on the limit; one farther beyond (within the input guard's
+    # MEASURED_POSITION_MARGIN, so no fault) is no position to restart
+    # from, as none to start from: held on the limit, the command jumped
+    # 0.05 rad away from the arm. It resumes from where it was.
+    slack = arm.acceleration_limits[0] * H * H
     beyond = away.copy()
-    beyond[0] = arm.upper[0] + 0.05
+    beyond[0] = arm.upper[0] + 0.9 * slack
     state = update(q, previous, np.zeros(6), beyond, 1.0)
     assert state[0] == arm.upper[0]
+    beyond[0] = arm.upper[0] + 0.05
+    np.testing.assert_array_equal(
+        update(q, previous, np.zeros(6), beyond, 1.0),
+        controller_update(system, system.CreateDefaultContext(), q,
+                          previous, np.zeros(6)))
     autodiff = system.ToAutoDiffXd()
     context = autodiff.CreateDefaultContext()
     context.SetDiscreteState(np.concatenate([q, previous, [0.0]]))

@@ -297,11 +297,14 @@ def test_the_command_timeout_may_only_tighten_the_robots_own():
 def test_the_command_timeout_outlasts_a_command_period():
     """A robot command timeout no longer than the command period stops
     the base between every two commands (and left the command guard's
-    stall limit, the timeout less a period, below zero): refused, the
+    stall limit, the timeout less a period, below zero), and one shorter
+    than a period and a watchdog period the guard at every check (its
+    stall limit below the time between two checks): refused, the
     robot's own too."""
     with pytest.raises(ValueError, match=re.escape(
             "robot_command_timeout = 0.03 s is not allowed with "
-            "publish_period = 0.05 s: must be longer than it")):
+            "publish_period = 0.05 s and watchdog_period = 0.001 s: must "
+            "be at least their sum, 0.051 s")):
         Limits.of_robot(HardwareOptions(publish_period=0.05,
                                         robot_command_timeout=0.03))
     base = copy.deepcopy(shipped_robot().base)

@@ -5,6 +5,8 @@ itself, so that a forged packet neither jerks the arm nor locks the real
 controller out. The simulated robot (RobotSide) over memq://, with the
 test as the controller and as a second sender."""
 
+import logging
+
 import numpy as np
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
@@ -13,7 +15,7 @@ from pydrake.systems.framework import DiagramBuilder
 from drake_wbc.deployment.robot_side import RobotSide
 from drake_wbc.experiments.scenario import find_scenario, load_scenario
 from drake_wbc.hardware import messages
-from drake_wbc.hardware.codecs import COMMAND_STATUS
+from drake_wbc.hardware.codecs import COMMAND_STATUS, QUEUE_LIMIT
 from drake_wbc.hardware.options import HardwareOptions
 
 H = 0.01
@@ -200,3 +202,46 @@ def test_the_robots_command_timeout_holds_when_its_clock_is_set_back():
     simulator.Initialize()
     simulator.AdvanceTo(0.6)
     np.testing.assert_array_equal(velocity.Eval(context), 0.0)
+
+
+def test_each_command_channel_says_its_own_rejections(caplog):
+    """One arm command of 7 joints, and 1.5 s later one base command with
+    a NaN: the warning of the second joined the reasons of both channels'
+    last rejections, the arm's 1.5 s old. Each channel now says its own,
+    of its messages rejected since its last warning. A flood of base
+    commands beyond the mailbox (QUEUE_LIMIT in one step) drops the
+    oldest: counted on the base's channel, where they were, not always
+    on the arm's."""
+    caplog.set_level(logging.WARNING, logger="drake_wbc.hardware")
+    r = Robot()
+    channels = r.options.channels
+    r.run(5, positions=r.home)
+    r.lcm.Publish(channels.arm_command, messages.encode_arm_command(
+        r.tick * 10_000, np.zeros(7), CONTROLLER))
+    r.run(150, positions=r.home)
+    r.lcm.Publish(channels.base_command, messages.encode_base_command(
+        r.tick * 10_000, [np.nan, 0.0, 0.0], CONTROLLER))
+    r.run(2, positions=r.home)
+    rejected = [record.getMessage() for record in caplog.records
+                if "rejected" in record.getMessage()]
+    assert rejected == [
+        f"arm_command on {channels.arm_command}: 1 message(s) rejected: "
+        "position has 7 entries, which is not allowed: must have 6",
+        f"base_command on {channels.base_command}: 1 message(s) rejected: "
+        "velocity = [nan  0.  0.] is not allowed: every entry must be "
+        "finite (no NaN or infinity)"]
+    assert (r.status()["base_command_rejected"],
+            r.status()["arm_command_rejected"]) == (1.0, 1.0)
+    caplog.clear()
+    r.run(100, positions=r.home)
+    command = messages.encode_base_command(r.tick * 10_000, np.zeros(3),
+                                           CONTROLLER)
+    for _ in range(QUEUE_LIMIT + 5):  # repeats of one stamp: no rejection
+        r.lcm.Publish(channels.base_command, command)
+    r.run(1, positions=r.home)
+    assert (r.status()["base_command_rejected"],
+            r.status()["arm_command_rejected"]) == (6.0, 1.0)
+    assert [record.getMessage() for record in caplog.records] == [
+        f"base_command on {channels.base_command}: 5 message(s) rejected "
+        f"in the last 1.02 s: 5 dropped: more than {QUEUE_LIMIT} messages "
+        "in one step"]

@@ -348,6 +348,52 @@ def test_after_a_stop_the_arm_is_commanded_from_where_it_is(caplog):
     np.testing.assert_allclose(arm[-1], goal)
 
 
+@pytest.mark.parametrize("beyond", [0.03, 0.2])
+def test_an_arm_read_beyond_its_limits_after_a_stop_is_no_restart(
+        caplog, beyond):
+    """After a stop the arm reads 0.03 rad (or 0.2) beyond joint 0's
+    upper limit (3.14): the guard restarted from there held within the
+    limits, 3.14 sent after 0.0 (314 rad/s), a jump of the setpoint away
+    from the arm too. At the start the same reading is refused
+    (start_within_limits); at a restart the guard now keeps its own last
+    command and its limits, so nothing jumps, and says so once, naming
+    the joint, its reading and its limits. A reading within one period's
+    step at the acceleration limit from rest (an encoder at its limit)
+    restarts on the limit, as before."""
+    caplog.set_level(logging.WARNING, logger="drake_wbc.hardware")
+    bench = Bench()
+    limits = Limits.of_robot(bench.options)
+    bench.run(60)
+    bench.run(10, status=False)
+    assert bench.diagnostics()["watchdog_tripped"] == 1.0
+    before = bench.sent["arm"][-1][1]
+    stopped = bench.tick * H
+    q = HOME_ARM_POSITIONS.copy()
+    q[0] = limits.upper[0] + beyond
+    bench.run(80, status=False, extra=lambda bench: bench.status(q=q))
+    assert bench.diagnostics()["watchdog_tripped"] == 0.0
+    _, arm = bench.commands("arm", stopped)
+    rate = np.diff(np.vstack([before, before, arm]), axis=0) / H
+    assert np.all(np.abs(rate) <= limits.joint_speed * (1 + 1e-9))
+    assert np.all(np.abs(np.diff(rate, axis=0))
+                  <= limits.joint_acceleration * H * (1 + 1e-9))
+    np.testing.assert_array_equal(arm[-1], HOME_ARM_POSITIONS)
+    assert not _records(caplog, "arm elsewhere")
+    records = _records(caplog, "arm beyond its limits at t = ")
+    assert len(records) == 1
+    assert (f"joint 0 reads {q[0]:.6g} rad, beyond its limits "
+            "[-3.14, 3.14] rad by more than 0.00126 rad"
+            in records[0].getMessage())
+    # An encoder's noise at the limit: the restart is on the limit.
+    caplog.clear()
+    bench.run(10, status=False)
+    q[0] = limits.upper[0] + 0.5 * limits.joint_acceleration[0] * H * H
+    bench.run(80, status=False, extra=lambda bench: bench.status(q=q))
+    assert len(_records(caplog, "arm elsewhere at t = ")) == 1
+    assert not _records(caplog, "arm beyond its limits")
+    assert bench.sent["arm"][-1][1][0] == limits.upper[0]
+
+
 def test_a_controller_resuming_where_the_arm_is_is_followed_from_there():
     """No stop of the guard's: the controller, in its own safe stop, held
     its command while the arm was moved 0.3 rad, and then restarts from
@@ -471,6 +517,39 @@ def test_bad_messages_never_reach_the_controller():
     for _, command in bench.sent["base"] + bench.sent["arm"]:
         assert np.all(np.isfinite(command))
     np.testing.assert_array_equal(bench.sent["base"][-1][1], 0.0)
+
+
+def test_a_command_not_finite_is_said_once_and_so_is_its_end(caplog):
+    """The controller's base command NaN for 1 s: the guard warned at
+    every command time (100 times), without saying which entry. It now
+    says once when the command becomes not finite, naming the port and
+    the entry, and once when it is finite again; the count of commands
+    not sent goes on. The arm's likewise."""
+    caplog.set_level(logging.WARNING, logger="drake_wbc.hardware")
+    bench = Bench()
+    bench.run(60)
+    bench.set_command(bench.base, [0.3, np.nan, 0.2])
+    bench.run(100)
+    bench.set_command(bench.base, BASE_COMMAND)
+    bench.run(20)
+    assert bench.diagnostics()["invalid_commands"] == 100.0
+    bad = _records(caplog, "is not finite")
+    assert len(bad) == 1
+    assert "(base_velocity_command[1] = nan); not sent" in \
+        bad[0].getMessage()
+    assert len(_records(caplog, " s is finite again")) == 1
+    caplog.clear()
+    arm = HOME_ARM_POSITIONS.copy()
+    arm[4] = -np.inf
+    bench.set_command(bench.arm, arm)
+    bench.run(10)
+    bench.set_command(bench.arm, HOME_ARM_POSITIONS)
+    bench.run(10)
+    assert bench.diagnostics()["invalid_commands"] == 110.0
+    assert [r.getMessage().split(" s ")[1] for r in caplog.records] == [
+        "is not finite (arm_position_command[4] = -inf); not sent (the "
+        "base stops, the arm slows down and holds) until it is finite "
+        "again", "is finite again; sent within the limits"]
 
 
 def test_one_future_stamped_message_locks_nothing_out():
@@ -645,7 +724,66 @@ def test_a_controller_too_slow_for_the_robots_timeout_stops(caplog):
     times, base = bench.commands("base", slow)
     assert times[0] < slow + H  # the last command before is 0.24 s old
     np.testing.assert_array_equal(base[1:], 0.0)
-    assert len(_records(caplog, "since the last command (limit 0.240 s)")) \
+    assert len(_records(caplog, "since the last command time, the next "
+                                "0.001 s away at the least (limit 0.250 s "
+                                "together)")) == 1
+
+
+class PacedClock:
+    """A wall clock for a test: a controller whose own clock runs `pace`
+    times as fast as the wall clock (1: it keeps pace), from the time
+    of `bench`'s simulator."""
+
+    def __init__(self):
+        self.bench, self.pace, self.start, self.wall = None, 1.0, 0.0, 100.0
+
+    def set_pace(self, pace):
+        self.wall, self.start = self(), self.bench.root.get_time()
+        self.pace = pace
+
+    def __call__(self):
+        time = 0.0 if self.bench is None else self.bench.root.get_time()
+        return self.wall + (time - self.start) / self.pace
+
+
+def test_a_controller_at_pace_runs_at_the_shortest_command_timeout(caplog):
+    """A robot command timeout of 0.015 s (accepted: longer than the
+    command period) stopped a controller keeping perfect pace at once
+    and for good: the guard compared the wall clock since the last
+    command time with the timeout less a period (5 ms), which a period
+    between two commands exceeds. It now compares what the robot waits at
+    the least: that time and the controller's to the next command time,
+    against the timeout itself. At the shortest timeout allowed, a
+    period and a watchdog period (0.011 s; shorter ones are refused
+    naming it), a controller at pace runs without a trip; one at 0.9 of
+    real time, its commands 11.1 ms apart, stops (its checks 1.1 ms
+    apart, the stall limit's 1 ms), and at 0.6 of real time with a
+    timeout of 0.015 s, saying why."""
+    caplog.set_level(logging.WARNING, logger="drake_wbc.hardware")
+    with pytest.raises(ValueError, match=re.escape(
+            "robot_command_timeout = 0.0105 s is not allowed with "
+            "publish_period = 0.01 s and watchdog_period = 0.001 s: must be "
+            "at least their sum, 0.011 s")):
+        Bench(robot_command_timeout=0.0105)
+    for timeout, pace in ((0.011, 0.9), (0.015, 0.6)):
+        caplog.clear()
+        clock = PacedClock()
+        bench = Bench(wall_clock=WallClock(clock=clock),
+                      robot_command_timeout=timeout)
+        clock.bench = bench
+        bench.run(200)
+        assert bench.diagnostics()["watchdog_trips"] == 0.0
+        _rows_equal(bench.commands("base", 1.0)[1], BASE_COMMAND)
+        assert not _records(caplog, "watchdog tripped")
+        clock.set_pace(pace)
+        bench.run(20)
+        assert bench.diagnostics()["watchdog_tripped"] == 1.0
+    # At 0.6 of real time the checks are 1.7 ms apart, within the stall
+    # limit (5 ms), and the commands 16.7 ms: the stop comes 2 ms of the
+    # controller's time before the next command time.
+    assert len(_records(caplog, "0.013 s of wall clock passed since the "
+                                "last command time, the next 0.002 s away "
+                                "at the least (limit 0.015 s together)")) \
         == 1
 
 

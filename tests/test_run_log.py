@@ -146,6 +146,84 @@ def test_an_lcm_logs_joint_columns_are_one_a_joint(tmp_path):
         f"v{i}" for i in range(1, n + 1))
 
 
+def test_an_lcm_log_skips_an_arm_message_of_another_joint_count(tmp_path):
+    """One stray seven-joint arm status among a six-joint robot's: reading
+    the log failed on it (numpy's "inhomogeneous shape"), where its
+    docstring says bad messages are skipped. Decoded with the robot's
+    joint count (that of most of its arm status messages), the stray one
+    is skipped, as the robot and the controller refuse it; so is an arm
+    command of another count."""
+    import lcm
+
+    from drake_wbc.deployment.lcm_logs import read_lcm_log
+    from drake_wbc.hardware import messages
+    from drake_wbc.hardware.options import HardwareOptions
+
+    channels = HardwareOptions().channels
+    path = tmp_path / "run.lcmlog"
+    log = lcm.EventLog(str(path), "w", overwrite=True)
+    for k in range(20):
+        t = 1_000_000 + k * 10_000
+        log.write_event(t, channels.arm_status, messages.encode_arm_status(
+            t, np.full(6, 0.01 * k), np.zeros(6)))
+        log.write_event(t, channels.arm_command, messages.encode_arm_command(
+            t, np.full(6, 0.01 * k)))
+        if k == 10:
+            log.write_event(t + 1, channels.arm_status,
+                            messages.encode_arm_status(t, np.ones(7),
+                                                       np.ones(7)))
+            log.write_event(t + 1, channels.arm_command,
+                            messages.encode_arm_command(t, np.ones(7)))
+    log.close()
+    run = read_lcm_log(path)
+    expected = np.repeat(0.01 * np.arange(20)[:, None], 6, axis=1)
+    np.testing.assert_allclose(run["arm.position_measured"], expected)
+    np.testing.assert_allclose(run["arm.position_command"], expected)
+
+
+def test_an_lcm_log_keeps_the_commands_of_the_sender_obeyed(tmp_path):
+    """A second sender's arm command in the middle of a controller's: the
+    robot refused it (one sender at a time), the log read it as sent. Now
+    only the commands of the sender the robot obeyed are: the first
+    heard, until it has been quiet for sender_release_time, when the
+    next one takes the channels."""
+    import lcm
+
+    from drake_wbc.deployment.lcm_logs import read_lcm_log
+    from drake_wbc.hardware import messages
+    from drake_wbc.hardware.options import HardwareOptions
+
+    options = HardwareOptions()
+    channels = options.channels
+    path = tmp_path / "run.lcmlog"
+    log = lcm.EventLog(str(path), "w", overwrite=True)
+    for k in range(20):
+        t = 1_000_000 + k * 10_000
+        log.write_event(t, channels.arm_command, messages.encode_arm_command(
+            t, np.zeros(6), sender=111))
+        log.write_event(t, channels.base_command,
+                        messages.encode_base_command(t, np.zeros(3),
+                                                     sender=111))
+        if k == 10:
+            for channel, data in (
+                    (channels.arm_command, messages.encode_arm_command(
+                        t, np.ones(6), sender=222)),
+                    (channels.base_command, messages.encode_base_command(
+                        t, np.ones(3), sender=222))):
+                log.write_event(t + 50, channel, data)
+    # The first sender quiet for longer than the release time: the second
+    # takes the channels.
+    later = 1_190_000 + int(1e6 * options.sender_release_time) + 10_000
+    log.write_event(later, channels.arm_command, messages.encode_arm_command(
+        later, np.ones(6), sender=222))
+    log.close()
+    run = read_lcm_log(path)
+    command = run["arm.position_command"]
+    np.testing.assert_array_equal(command[:-1], 0.0)
+    np.testing.assert_array_equal(command[-1], 1.0)
+    np.testing.assert_array_equal(run["base.velocity_command"], 0.0)
+
+
 def test_the_real_time_factor_reads_back(tmp_path):
     """save then load gives the run's real-time factor, and NaN back for
     a run that does not know it."""

@@ -476,7 +476,16 @@ def test_an_arm_position_beyond_its_own_joints_limit_is_a_fault(arm):
     """The arm's measured positions had one range for every joint, the
     widest joint's (+-3.14 rad, give or take the margin): a status of
     3.0 rad on the fifth joint, limited to +-2.56 rad, was taken as a
-    real position. Each joint has its own range now."""
+    real position. Each joint has its own range now.
+
+    Within the margin beyond its limit (0.05 rad, no fault) the arm is
+    still no position to restart from when the stop clears: the command
+    restarted there, held on the limit, jumped 0.72 rad in one tick (72
+    rad/s), and still 0.05 rad away from the arm. It resumes from where it
+    was (restart_position, the rule of the hardware's guard); the arm
+    not following it, the controller stops again and its held command
+    goes to the limit within the joint speed limit, from where it
+    resumes."""
     rig = Rig(arm)
     rig.advance(0.1)
     q = np.array(rig.q)
@@ -489,7 +498,14 @@ def test_an_arm_position_beyond_its_own_joints_limit_is_a_fault(arm):
     q[4] = arm.upper[4] + 0.5 * safety.MEASURED_POSITION_MARGIN
     rig.set("arm.position_measured", q)
     rig.advance(HOLD + 0.05)
+    assert rig.controller.safety_reason(rig.root_context).startswith(
+        "arm.position_measured[4] is 0.753 rad from the last command")
+    rig.advance(HOLD)
     assert rig.controller.safety_reason(rig.root_context) == ""
+    _, command = rig.log("arm.position_command")
+    assert arm.upper[4] - 0.01 < command[-1][4] <= arm.upper[4]
+    assert np.abs(np.diff(command, axis=0)).max() <= JOINT_SPEED * H * (
+        1 + 1e-9)
 
 
 def test_a_protective_stop_stops_the_arm_too(arm):

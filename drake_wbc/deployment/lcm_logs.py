@@ -13,7 +13,10 @@ one:
 - arm.position_measured, arm.velocity_estimated: WBC_ARM_STATUS;
 - wrist.wrench_measured: WBC_WRIST_WRENCH;
 - base.velocity_command, arm.position_command: WBC_BASE_COMMAND,
-  WBC_ARM_COMMAND (the commands as sent);
+  WBC_ARM_COMMAND (the commands as sent, of the sender the robot obeyed:
+  the first heard, until it was quiet for sender_release_time, as the
+  robot's rule, drake_wbc.hardware.codecs.admit; another sender's,
+  which the robot refused, are skipped);
 - truth.*: WBC_TRUTH (from a simulated robot only);
 - capability, alpha, ..., reference_velocity, hardware.diagnostics:
   WBC_CONTROLLER.
@@ -27,16 +30,19 @@ WBC_CONTROLLER, time is the robot's (WBC_TRUTH's), or reception time
 from the first message. Each signal is sampled by holding its latest
 message (the first one before it starts) on the grid of the clock's
 messages. A log of several runs (each restart of the controller) gives
-one run at a time.
+one run at a time. A message that does not decode, and an arm message of
+another joint count than the robot's (`arm_joint_count`), is skipped.
 """
 
-from collections import defaultdict
+import functools
+from collections import Counter, defaultdict
 
 import lcm
 import numpy as np
 
 from drake_wbc.controller.run_log import RunLog, column_names
 from drake_wbc.hardware import messages
+from drake_wbc.hardware.codecs import SenderLock, admit
 from drake_wbc.hardware.interface import DIAGNOSTICS
 from drake_wbc.hardware.options import HardwareOptions
 from drake_wbc.math.validation import checked_instance
@@ -55,6 +61,12 @@ CHANNEL_SIGNALS = (
     ("arm_command", messages.decode_arm_command, ("arm.position_command",)),
 )
 """(channel field, decoder, signal names of its values)."""
+
+ARM_CHANNELS = ("arm_status", "arm_command")
+"""The channels whose decoders take the arm's joint count."""
+
+COMMAND_CHANNELS = ("base_command", "arm_command")
+"""The channels of one sender at a time (`obeyed`)."""
 
 EXTRA_COLUMNS = {
     "arm.velocity_estimated": "v",  # v1, ..., vn: one a joint
@@ -78,18 +90,48 @@ def read_events(path):
     return events
 
 
-def _samples(events, decode):
-    """(times (n,), values per output: list of arrays) of a channel's good
-    messages, by reception time; bad ones are skipped."""
-    times, values = [], []
+def _decoded(events, decode):
+    """[(reception time, Decoded)] of a channel's good messages, in the
+    log's order; bad ones are skipped."""
+    good = []
     for stamp, data in events:
         try:
-            decoded = decode(data)
+            good.append((stamp, decode(data)))
         except messages.MessageError:
             continue
-        times.append(stamp)
-        values.append(decoded.values)
-    return np.asarray(times), values
+    return good
+
+
+def arm_joint_count(events, channels):
+    """The robot's arm joint count in a log (`events` of `read_events`):
+    that of most of its arm status messages (of its arm commands, without
+    any), so that a stray message of another count is skipped, not
+    taken for the robot's; None without either."""
+    decoders = {name: decode for name, decode, _ in CHANNEL_SIGNALS}
+    for name in ARM_CHANNELS:
+        counts = Counter(
+            decoded.values[0].size for _, decoded in _decoded(
+                events.get(getattr(channels, name), []), decoders[name]))
+        if counts:
+            return counts.most_common(1)[0][0]
+    return None
+
+
+def obeyed(commands, release_time):
+    """The commands the robot obeyed of `commands` (a dict channel field
+    -> [(reception time, Decoded)] of COMMAND_CHANNELS): on both
+    channels, in order of reception, those of one sender at a time, the
+    robot's rule (drake_wbc.hardware.codecs.admit, with its
+    `release_time`). The same dict with the others left out."""
+    merged = sorted((stamp, order, name, decoded)
+                    for name, good in commands.items()
+                    for order, (stamp, decoded) in enumerate(good))
+    lock, kept = SenderLock(), {name: [] for name in commands}
+    for stamp, _, name, decoded in merged:
+        lock, taken, _ = admit(lock, decoded.sender, stamp, release_time)
+        if taken:
+            kept[name].append((stamp, decoded))
+    return kept
 
 
 def _bundles(events):
@@ -203,14 +245,22 @@ def read_lcm_log(path, options=None, deployment=0):
 
         def to_clock(stamps):
             return np.asarray(stamps) - start
+    joints = arm_joint_count(events, channels)
+    good = {name: _decoded(
+        events.get(getattr(channels, name), []),
+        functools.partial(decode, num_joints=joints)
+        if name in ARM_CHANNELS else decode)
+        for name, decode, _ in CHANNEL_SIGNALS}
+    good.update(obeyed({name: good[name] for name in COMMAND_CHANNELS},
+                       options.sender_release_time))
     signals = {}
-    for name, decode, names in CHANNEL_SIGNALS:
-        times, values = _samples(events.get(getattr(channels, name), []),
-                                 decode)
-        if len(times):
+    for name, _, names in CHANNEL_SIGNALS:
+        if good[name]:
+            times = np.array([stamp for stamp, _ in good[name]])
             for i, signal in enumerate(names):
-                signals[signal] = hold(to_clock(times),
-                                       [v[i] for v in values], grid)
+                signals[signal] = hold(
+                    to_clock(times),
+                    [decoded.values[i] for _, decoded in good[name]], grid)
     for name, (bundle_stamps, bundle_times, bundle) in bundles.items():
         times = bundle_times if name == clock else to_clock(bundle_stamps)
         for signal, values in bundle.items():

@@ -19,7 +19,7 @@ what the controller linearises.
 import functools
 import logging
 import math
-from collections import deque
+from collections import Counter, deque
 from typing import NamedTuple
 
 import lcm as lcm_module
@@ -296,29 +296,43 @@ def _points_value(points=None):
 class _Mailbox:
     """The messages an LCM subscription delivered and a receiver has not
     taken in yet, oldest first, at most QUEUE_LIMIT of them (the oldest
-    are dropped, and counted, beyond that)."""
+    are dropped, and counted, beyond that).
 
-    def __init__(self):
+    Args:
+        kind: of a message, the key under which its drop is counted (its
+            channel's, for a receiver of several); one for all if None.
+    """
+
+    def __init__(self, kind=None):
         self.items = deque()
-        self.dropped = 0
+        self.dropped = Counter()
+        self._kind = kind or (lambda item: None)
 
     def put(self, item):
         if len(self.items) >= QUEUE_LIMIT:
-            self.items.popleft()
-            self.dropped += 1
+            self.dropped[self._kind(self.items.popleft())] += 1
         self.items.append(item)
 
     def take(self):
+        """(the messages, oldest first; a Counter of the drops by kind)."""
         items, dropped = list(self.items), self.dropped
         self.items.clear()
-        self.dropped = 0
+        self.dropped = Counter()
         return items, dropped
 
     def keep_newest(self):
         """Drops all but the newest message (and forgets the drops)."""
         while len(self.items) > 1:
             self.items.popleft()
-        self.dropped = 0
+        self.dropped = Counter()
+
+
+def _dropped(reception, count):
+    """`reception` with `count` messages dropped from a full mailbox."""
+    return reception._replace(
+        rejected=reception.rejected + count,
+        reason=f"{count} dropped: more than {QUEUE_LIMIT} messages in one "
+               "step")
 
 
 QUEUE_LIMIT = 1000
@@ -454,7 +468,7 @@ class MessageDecoder(LeafSystem):
 
     - value ports: as the format names them (e.g. `positions`,
       `velocities` of an arm status), the last good message's values;
-      the defaults until one arrives.
+      zeros (no points) until one arrives.
     - age: (1) s since the last good message was taken in (inf before
       the first, and while the receiver's clock is set back before it:
       `Reception.age`), on the receiver's clock (the context's time).
@@ -476,52 +490,35 @@ class MessageDecoder(LeafSystem):
         lcm: the DrakeLcmInterface to subscribe on (it must outlive the
             system).
         channel: the channel's name.
-        defaults: the values before the first message (zeros, no points
-            if None), one per value port.
-        timeout: if given, s: once the last good message is older than
-            this, the value ports give `defaults` again (the robot's own
-            command timeout); None keeps the last values forever.
         rules: the ClockRules of the sender's time stamps.
         num_joints: the arm's joint count, for the arm's kinds by name.
         max_points: the most points an obstacle points message may hold,
             for that kind by name (None: any number).
     """
 
-    def __init__(self, message_format, lcm, channel, defaults=None,
-                 timeout=None, rules=DEFAULT_RULES, num_joints=None,
-                 max_points=None):
+    def __init__(self, message_format, lcm, channel, rules=DEFAULT_RULES,
+                 num_joints=None, max_points=None):
         super().__init__()
         self.format = message_format = _format(message_format, num_joints,
                                                max_points)
         ports = message_format.ports
-        if defaults is None:
-            defaults = [np.zeros((0, 2)) if size is None else np.zeros(size)
-                        for _, size in ports]
-        if len(defaults) != len(ports):
-            raise ValueError(f"defaults has {len(defaults)} entries, which "
-                             f"is not allowed: must have {len(ports)}")
-        self.defaults = tuple(
-            np.asarray(value, dtype=float) if size is None
-            else as_vector(f"defaults[{i}]", value, size)
-            for i, ((_, size), value) in enumerate(
-                zip(ports, defaults, strict=True)))
-        self.timeout = None if timeout is None else non_negative(
-            "timeout", timeout)
         self.rules = rules
         self._mailbox = _Mailbox()
         self._warnings = _Warnings(f"{message_format.name} on {channel}")
         lcm.Subscribe(channel, self._mailbox.put)
         self._state = self.DeclareAbstractState(AbstractValue.Make(
-            Reception(None, self.defaults, -np.inf)))
+            Reception(None, tuple(
+                np.zeros((0, 2)) if size is None else np.zeros(size)
+                for _, size in ports), -np.inf)))
         for i, (name, size) in enumerate(ports):
             if size is None:
                 self.DeclareAbstractOutputPort(
                     name, _points_value, lambda c, o, i=i: o.set_value(
-                        self._values(c)[i]))
+                        self.reception(c).values[i]))
             else:
                 self.DeclareVectorOutputPort(
                     name, size, lambda c, o, i=i: o.SetFromVector(
-                        self._values(c)[i]))
+                        self.reception(c).values[i]))
         self.DeclareVectorOutputPort("age", 1, self._age)
         self.DeclareVectorOutputPort("rejected", 1, self._rejected)
         self.DeclareVectorOutputPort(
@@ -540,13 +537,6 @@ class MessageDecoder(LeafSystem):
         arrive."""
         self._mailbox.keep_newest()
 
-    def _values(self, context):
-        reception = self.reception(context)
-        if (self.timeout is not None
-                and reception.age(context.get_time()) > self.timeout):
-            return self.defaults
-        return reception.values
-
     def _age(self, context, output):
         output.SetAtIndex(0, self.reception(context).age(context.get_time()))
 
@@ -560,10 +550,7 @@ class MessageDecoder(LeafSystem):
         now = context.get_time()
         before = reception = self.reception(context)
         if dropped:
-            reception = reception._replace(
-                rejected=reception.rejected + dropped,
-                reason=f"{dropped} dropped: more than {QUEUE_LIMIT} "
-                       "messages in one step")
+            reception = _dropped(reception, dropped.total())
         for data in items:
             reception = receive(reception, data, now, self.format.decode,
                                 self.rules)
@@ -645,8 +632,12 @@ class CommandReceiver(LeafSystem):
         n = self.initial.size
         formats = message_formats(n)
         self._formats = (formats["base_command"], formats["arm_command"])
-        self._mailbox = _Mailbox()
+        self._mailbox = _Mailbox(kind=lambda item: item[0])
         self._warnings = _Warnings(f"commands on {', '.join(channels)}")
+        self._rejections = tuple(
+            _Warnings(f"{message_format.name} on {channel}")
+            for message_format, channel in zip(self._formats, channels,
+                                               strict=True))
         for kind, channel in enumerate(channels):
             lcm.Subscribe(channel, lambda data, kind=kind: self._mailbox.put(
                 (kind, data)))
@@ -702,13 +693,15 @@ class CommandReceiver(LeafSystem):
                             f" (sender {before[0].sender} fell quiet)")
             receptions[kind] = take(receptions[kind], decoded, now,
                                     self.rules)
-        if dropped:
-            receptions[1] = receptions[1]._replace(
-                rejected=receptions[1].rejected + dropped)
-        rejected = sum(r.rejected for r in receptions) - sum(
-            r.rejected for r in before[1:])
-        self._warnings.say(now, "rejected", rejected, "; ".join(
-            r.reason for r in receptions if r.reason))
+        for kind, count in dropped.items():
+            receptions[kind] = _dropped(receptions[kind], count)
+        # Each channel's rejections with its own reason: that of its last
+        # message rejected (since its last warning), not another channel's
+        # of long ago.
+        for kind, reception in enumerate(receptions):
+            self._rejections[kind].say(
+                now, "rejected", reception.rejected - before[1 + kind].rejected,
+                reception.reason)
         self._warnings.say(now, "refused", lock.refused - before[0].refused,
                            f"another sender than {lock.sender}, which has "
                            "the command channels")

@@ -211,7 +211,8 @@ class HardwareOptions:
         robot_command_timeout: the robot side stops the base when no base
             command came for this long, s; None (the default): the
             robot's own (its description's base.command_timeout, 0.25 s
-            for the shipped base), which a given one may only shorten.
+            for the shipped base), which a given one may only shorten;
+            at least publish_period + watchdog_period (`command_timeout_of`).
         sender_release_time: the robot side hands its command channels
             to another sender only after the one it obeys has been quiet
             for this long, s (1.0 s): a controller that misses the
@@ -308,8 +309,12 @@ def command_timeout_of(options, base):
     command timeout (a watchdog slower than the robot's would let the
     robot stop first, and uninformed), and options.sender_release_time
     at least the timeout (the base has stopped before another sender may
-    drive it), and the timeout longer than options.publish_period (or the
-    base stops between two commands).
+    drive it), and the timeout at least options.publish_period plus
+    options.watchdog_period: no longer than a period, the base stops
+    between two commands, and shorter than that sum, the command guard,
+    which takes a gap between two of its checks longer than the timeout
+    less a period for a stall of the controller
+    (drake_wbc.hardware.safety.stall_limit), stops at every check.
 
     Args:
         options: HardwareOptions.
@@ -330,14 +335,18 @@ def command_timeout_of(options, base):
     if timeout is None:
         timeout = own
     at_most("robot_command_timeout", timeout, own, "s")
-    if timeout <= options.publish_period:
+    least = options.publish_period + options.watchdog_period
+    if timeout < least * (1.0 - 1e-12):
         whose = (" (the robot's own)" if options.robot_command_timeout is None
                  else "")
         raise ValueError(
             f"robot_command_timeout = {timeout!r} s{whose} is not allowed "
-            f"with publish_period = {options.publish_period!r} s: must be "
-            "longer than it, or the robot stops its base between two "
-            "commands")
+            f"with publish_period = {options.publish_period!r} s and "
+            f"watchdog_period = {options.watchdog_period!r} s: must be at "
+            f"least their sum, {least:.6g} s: the robot stops its base "
+            "when no command came for that long, and the command guard "
+            "when more than the timeout less a period passed between two "
+            "of its checks")
     if options.sender_release_time < timeout:
         raise ValueError(
             f"sender_release_time = {options.sender_release_time!r} s is "

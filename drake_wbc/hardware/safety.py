@@ -20,7 +20,8 @@ arm is not where the one before sent it: after a stop, and when the
 controller restarts its arm command from where the arm is, an arm found
 farther than the tolerance from the last command sent is commanded
 from where it is instead, at rest, and within the limits as it sees
-them (`resync_arm`); every base
+them (`resync_arm`; not from a measurement beyond the limits, from
+which the command, held within them, would jump); every base
 command is within the base's speed limits, and within its acceleration
 limits of the one before except a stop, which is zero at once (the
 base's own velocity loop brakes within its limits); a stale stream stops
@@ -52,7 +53,10 @@ from drake_wbc.math.command_limits import ROUNDING, limit_base_velocity
 from drake_wbc.math.safety import (
     DEFAULT_ARM_FOLLOW_TOLERANCE,
     VALID,
+    Restart,
     check_following,
+    check_vector,
+    limit_slack,
     restart_position,
 )
 from drake_wbc.math.validation import (
@@ -326,6 +330,8 @@ class GuardState(NamedTuple):
         base_saturated, arm_saturated: a limit changed the command of the
             last command time.
         invalid: how many controller commands were not finite.
+        not_finite: the controller's command at the last command time was
+            not finite.
         fresh_since: (4,) per stream of STATUS_CHANNELS, since when it has been
             fresh (nan: stale now).
         recovering: (4,) per stream, it went stale after being fresh, so
@@ -359,6 +365,7 @@ class GuardState(NamedTuple):
     base_saturated: bool = False
     arm_saturated: bool = False
     invalid: int = 0
+    not_finite: bool = False
     fresh_since: tuple = (math.nan,) * len(STATUS_CHANNELS)
     recovering: tuple = (False,) * len(STATUS_CHANNELS)
     urgent: bool = False
@@ -440,25 +447,34 @@ def resync_arm(state, measured, config):
     controller's command is within the tolerance of it (the controller
     resumes from where the arm is too, drake_wbc.controller.diagram).
     An arm where the last command was, or no measurement (None), leaves
-    `state` as it is.
+    `state` as it is; so does an arm measured farther beyond a joint's
+    limits than one period's step at its acceleration limit from rest
+    (`Restart.beyond`: no position to start from either,
+    `start_within_limits`): the command, held within the limits, would
+    jump away from it. The command goes on from the last one sent,
+    within the limits.
 
     Returns:
-        (GuardState, the deviation's InputCheck, VALID when unchanged).
+        (GuardState, the Restart of restart_position; its check VALID
+        with no measurement).
     """
     if measured is None:
-        return state, VALID
-    check, start = restart_position(
+        return state, Restart(VALID, None)
+    restart = restart_position(
         np.asarray(measured, dtype=float), state.arm,
         config.arm_follow_tolerance, config.limits.lower,
-        config.limits.upper)
-    if start is None:
-        return state, check
+        config.limits.upper, config.limits.joint_acceleration,
+        config.period)
+    if restart.start is None:
+        return state, restart
+    start = restart.start
     return state._replace(arm=start, arm_velocity=np.zeros_like(start),
-                          arm_resync=True), check
+                          arm_resync=True), restart
 
 
 def guard_step(state, now, ages, base, arm, command_time, config,
-               clock_jumps=None, wall_time=None, arm_measured=None):
+               clock_jumps=None, wall_time=None, arm_measured=None,
+               until_command=0.0):
     """One check of the command guard.
 
     Each stream is fresh while its age is within its watchdog limit; it
@@ -474,9 +490,12 @@ def guard_step(state, now, ages, base, arm, command_time, config,
     check, so that the commands resume from rest after the recovery time
     (a shorter stall is as a late message: the robot still runs the last
     command, and the commands go on from it). So, too, when the wall
-    clock ran longer than that since the last command time, however
-    short each check: a controller so slow that its commands come further
-    apart than the robot waits for one. A stream of
+    clock since the last command time and the controller's time to the
+    next one (`until_command`) are longer than the robot's command
+    timeout together, however short each check: a controller so slow
+    that its commands come further apart than the robot waits for one
+    (each goes out at the same offset after its command time, so the
+    robot waits at least that long for the next). A stream of
     FULL_STOP_STREAMS that does not count stops everything;
     obstacle_points stop the base. A stop that begins
     between command times zeroes the base at once (`urgent`). At a
@@ -506,11 +525,15 @@ def guard_step(state, now, ages, base, arm, command_time, config,
             (WallClock.now); None on simulated time.
         arm_measured: (n,) the arm's measured positions (the arm_status
             stream's), rad; None: not known (no `resync_arm`).
+        until_command: the controller's time from this check to the next
+            command time, s (0 at one).
 
     Returns:
         (GuardState, list of (event, detail) for the log: "tripped",
         "cleared", "base stopped", "base cleared", "started", "arm
-        elsewhere").
+        elsewhere", "arm beyond its limits", and "not finite" and
+        "finite" when the controller's command becomes not finite, and
+        finite again, at a command time).
     """
     jumps = state.clock_jumps if clock_jumps is None else tuple(
         int(count) for count in clock_jumps)
@@ -520,7 +543,10 @@ def guard_step(state, now, ages, base, arm, command_time, config,
         0.0 if wall_time is None or math.isnan(state.command_wall_time)
         else wall_time - state.command_wall_time)
     stalled = interval > stall_limit(config) + AGE_TOLERANCE
-    lagging = stalled or since_command > stall_limit(config) + AGE_TOLERANCE
+    waits = since_command + (0.0 if command_time else until_command)
+    lagging = stalled or (
+        wall_time is not None
+        and waits > config.limits.command_timeout + AGE_TOLERANCE)
     fresh_since, recovering, counts, why = [], [], [], []
     for i, age in enumerate(ages):
         since, again = state.fresh_since[i], state.recovering[i]
@@ -550,10 +576,10 @@ def guard_step(state, now, ages, base, arm, command_time, config,
         "process missed the processor for longer than the robot waits for "
         "a command") if stalled else (
         f"every stream: {since_command:.3f} s of wall clock passed since "
-        f"the last command (limit {stall_limit(config):.3f} s): the "
-        "controller runs too slowly for the robot, which stops its base "
-        "when no command comes for "
-        f"{config.limits.command_timeout:.3f} s")
+        f"the last command time, the next {waits - since_command:.3f} s "
+        f"away at the least (limit {config.limits.command_timeout:.3f} s "
+        "together): the controller runs too slowly for the robot, which "
+        "stops its base when no command comes for that long")
     events = []
     tripped = full and not state.full_stop and state.started
     if tripped:
@@ -587,7 +613,13 @@ def guard_step(state, now, ages, base, arm, command_time, config,
             new = new._replace(base=np.zeros(3), urgent=True)
         return new, events
     h, limits = config.period, config.limits
-    invalid = not (np.all(np.isfinite(base)) and np.all(np.isfinite(arm)))
+    bad = _not_finite(base, arm)
+    invalid = bad is not None
+    if invalid and not state.not_finite:
+        events.append(("not finite", bad))
+    elif state.not_finite and not invalid:
+        events.append(("finite", ""))
+    new = new._replace(not_finite=invalid)
     if full or invalid:
         q, v = stop_arm(new.arm, new.arm_velocity, h, limits)
         return new._replace(
@@ -622,11 +654,33 @@ def guard_step(state, now, ages, base, arm, command_time, config,
                         arm_saturated=arm_saturated), events
 
 
+def _not_finite(base, arm):
+    """The first entry of the controller's commands that is not finite,
+    as "port[i] = value" (the base's velocity command first, then the
+    arm's position command: CommandGuard's input ports), or None."""
+    for port, values in (("base_velocity_command", base),
+                         ("arm_position_command", arm)):
+        check = check_vector(values)
+        if not check.valid:
+            return f"{port}[{check.entry}] = {check.value!r}"
+    return None
+
+
 def _resync(state, measured, config, events):
     """`resync_arm` of `state`, its event added to `events` when the
-    arm was elsewhere."""
-    state, check = resync_arm(state, measured, config)
-    if not check.valid:
+    arm was elsewhere, or beyond its limits."""
+    state, restart = resync_arm(state, measured, config)
+    check, j = restart.check, restart.beyond
+    if j >= 0:
+        limits = config.limits
+        slack = limit_slack(limits.joint_acceleration[j], config.period)
+        events.append(("arm beyond its limits", (
+            f"joint {j} reads {measured[j]:.6g} rad, beyond its limits "
+            f"[{limits.lower[j]:.6g}, {limits.upper[j]:.6g}] rad by more "
+            f"than {slack:.3g} rad, and is {abs(check.value):.3g} "
+            f"rad from the last command sent (tolerance "
+            f"{config.arm_follow_tolerance:g} rad)")))
+    elif not check.valid:
         events.append(("arm elsewhere", (
             f"joint {check.entry} is {abs(check.value):.3g} rad from the "
             f"last command sent (tolerance "
@@ -705,9 +759,10 @@ class CommandGuard(LeafSystem):
     `options.guard_offset` checks the ages; the one at `guard_offset`
     after each control tick also takes the controller's commands of that
     tick and computes what is sent; the LCM publishers send it at
-    `options.publish_offset`. Each stop and each recovery is said once on
-    the `drake_wbc.hardware` logger. A plain double LeafSystem (it
-    branches on ages and limits and is never linearised).
+    `options.publish_offset`. Each stop and each recovery, and the
+    controller's command becoming not finite and finite again, is said
+    once on the `drake_wbc.hardware` logger. A plain double LeafSystem
+    (it branches on ages and limits and is never linearised).
 
     Args:
         options: HardwareOptions (periods, watchdog, limits).
@@ -835,12 +890,11 @@ class CommandGuard(LeafSystem):
         result, events = guard_step(
             self.stored(context), now, ages, self._base_in.Eval(context),
             self._arm_in.Eval(context), command_time, self.config,
-            clock_jumps=jumps, wall_time=wall_time, arm_measured=measured)
+            clock_jumps=jumps, wall_time=wall_time, arm_measured=measured,
+            until_command=(-check % self._checks_per_command)
+            * self.options.watchdog_period)
         for event, detail in events:
             _say(event, detail, now, self.options)
-        if command_time and result.invalid > self.stored(context).invalid:
-            LOG.warning("the controller's command at t = %.3f s is not "
-                        "finite; not sent", now)
         state.get_mutable_abstract_state(self._state).set_value(result)
 
 
@@ -862,9 +916,21 @@ def _say(event, detail, now, options):
         LOG.warning("base cleared at t = %.3f s: obstacle points fresh for "
                     "%.3g s; the base resumes within its limits", now,
                     recovery)
+    elif event == "not finite":
+        LOG.warning("the controller's command at t = %.3f s is not finite "
+                    "(%s); not sent (the base stops, the arm slows down and "
+                    "holds) until it is finite again", now, detail)
+    elif event == "finite":
+        LOG.warning("the controller's command at t = %.3f s is finite "
+                    "again; sent within the limits", now)
     elif event == "arm elsewhere":
         LOG.warning("arm elsewhere at t = %.3f s: %s; its commands restart "
                     "from where it is, at rest", now, detail)
+    elif event == "arm beyond its limits":
+        LOG.warning("arm beyond its limits at t = %.3f s: %s; its commands "
+                    "do not restart from there (held within the limits, "
+                    "they would jump away from it): they go on from the "
+                    "last command sent, within the limits", now, detail)
     else:
         LOG.info("every stream fresh at t = %.3f s: the commands start", now)
 

@@ -59,6 +59,7 @@ from drake_wbc.math import kernels
 from drake_wbc.math.arm_servo import braking_rate
 from drake_wbc.math.command_limits import uniform_scale
 from drake_wbc.math.compiled import compiled
+from drake_wbc.math.safety import beyond_limits
 from drake_wbc.math.scalar_support import solve, value_of
 from drake_wbc.math.validation import (
     as_matrix,
@@ -397,10 +398,12 @@ def start_within_limits(name, positions, lower, upper, acceleration,
     """`positions` (n,) as a float vector within [lower, upper]: the arm
     positions a command starts from (the robot's measured ones). A
     position beyond a limit by no more than the step its acceleration
-    limit allows from rest in one `period` (acceleration period^2: an arm
-    resting on its limit, read with an encoder's noise) is taken as on
-    the limit; from one further beyond, the first command, held within
-    the limits, would be a jump (a step beyond the acceleration limit).
+    limit allows from rest in one `period` (drake_wbc.math.safety.
+    limit_slack: an arm resting on its limit, read with an encoder's
+    noise) is taken as on the limit; from one further beyond, the first
+    command, held within the limits, would be a jump (a step beyond the
+    acceleration limit). A restart after a stop goes by the same rule
+    (drake_wbc.math.safety.restart_position).
 
     Args:
         name: the positions' name in the error.
@@ -418,8 +421,7 @@ def start_within_limits(name, positions, lower, upper, acceleration,
     lower = np.asarray(lower, dtype=float)
     upper = np.asarray(upper, dtype=float)
     q = as_vector(name, positions, lower.size)
-    slack = np.asarray(acceleration, dtype=float) * period * period
-    for i in np.flatnonzero((q < lower - slack) | (q > upper + slack)):
+    for i in beyond_limits(q, lower, upper, acceleration, period):
         raise ValueError(
             f"{name}[{i}] = {float(q[i])!r} is not allowed: must be within "
             f"the joint's limits [{float(lower[i])!r}, "

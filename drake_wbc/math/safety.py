@@ -478,7 +478,58 @@ def check_following(value, command, tolerance):
     return InputCheck(Reason.NOT_FOLLOWING, i, float(deviation[i]))
 
 
-def restart_position(measured, command, tolerance, lower, upper):
+def limit_slack(acceleration, period):
+    """rad: how far beyond a joint's position limit its measured position
+    may read and still be taken as on the limit: the step its acceleration
+    limit allows from rest in one command period (acceleration period^2;
+    an arm resting on its limit, read with an encoder's noise). A command
+    held within the limits from a position farther beyond is a jump of
+    the arm's setpoint: no position to start, or restart, a command from
+    (drake_wbc.math.arm_control.start_within_limits, `restart_position`).
+
+    Args:
+        acceleration: (n,) or scalar, the joint acceleration limits,
+            rad/s^2.
+        period: the command period h, s.
+
+    Returns:
+        (n,) or scalar, rad.
+    """
+    return np.asarray(acceleration, dtype=float) * period * period
+
+
+def beyond_limits(positions, lower, upper, acceleration, period):
+    """The indices (ascending) of the joints of `positions` (n,) farther
+    beyond their limits [lower, upper] than `limit_slack` of
+    `acceleration` and `period`."""
+    q = np.asarray(value_of(positions), dtype=float).ravel()
+    slack = limit_slack(acceleration, period)
+    return np.flatnonzero((q < np.asarray(lower, dtype=float) - slack)
+                          | (q > np.asarray(upper, dtype=float) + slack))
+
+
+class Restart(NamedTuple):
+    """Where an arm's position command restarts (`restart_position`).
+
+    Attributes:
+        check: the InputCheck of the measurement against the last
+            command: VALID when the command resumes from where it was
+            (or for a measurement that is not finite, which is none).
+        start: (n,) the positions to restart from, at rest, or None: the
+            command resumes from where it was, or the measurement is no
+            position to restart from (`beyond`).
+        beyond: the first joint measured farther beyond its limits than
+            `limit_slack` (-1: none), when the arm is elsewhere: the
+            command does not restart from there.
+    """
+
+    check: InputCheck
+    start: np.ndarray | None
+    beyond: int = -1
+
+
+def restart_position(measured, command, tolerance, lower, upper,
+                     acceleration, period):
     """Where an arm's position command restarts after a stop.
 
     An arm farther than `tolerance` from its last command
@@ -487,9 +538,14 @@ def restart_position(measured, command, tolerance, lower, upper):
     one would ask it to jump back: the command restarts from the
     measured position, held within the joint limits (and at rest, which
     is the caller's). Within the tolerance it resumes from where it was.
-    The controller's arm stage (drake_wbc.stages.arm_control) and the
-    hardware interface's command guard (drake_wbc.hardware.safety) both
-    restart by this rule.
+    A measurement farther beyond a joint's limits than `limit_slack` is
+    no position to restart from, as it is none to start from
+    (drake_wbc.math.arm_control.start_within_limits): the command, held
+    within the limits, would jump away from the arm. The command then
+    does not restart (`Restart.beyond`): it goes on from where it was,
+    within its limits. The controller's arm stage
+    (drake_wbc.stages.arm_control) and the hardware interface's command
+    guard (drake_wbc.hardware.safety) both restart by this rule.
 
     Args:
         measured: (n,) the arm's measured positions, rad (floats or
@@ -498,21 +554,24 @@ def restart_position(measured, command, tolerance, lower, upper):
         command: (n,) the last position command, rad.
         tolerance: rad > 0.
         lower, upper: (n,) the joint position limits, rad.
+        acceleration: (n,) or scalar, the joint acceleration limits,
+            rad/s^2, and period: the command period, s (`limit_slack`).
 
     Returns:
-        (the InputCheck of `measured` against `command`, VALID for a
-        measurement that is not finite; the (n,) positions to restart
-        from, or None when the command resumes from where it was).
+        Restart.
     """
     if not all_finite(measured):
-        return VALID, None
+        return Restart(VALID, None)
     check = check_following(measured, command, tolerance)
     if check.valid:
-        return check, None
-    return check, np.array([
+        return Restart(check, None)
+    beyond = beyond_limits(measured, lower, upper, acceleration, period)
+    if beyond.size:
+        return Restart(check, None, int(beyond[0]))
+    return Restart(check, np.array([
         min(max(m, low), high) for m, low, high in zip(
             np.asarray(measured).tolist(), np.asarray(lower).tolist(),
-            np.asarray(upper).tolist(), strict=True)])
+            np.asarray(upper).tolist(), strict=True)]))
 
 
 def check_points(points):

@@ -16,6 +16,7 @@ from drake_wbc.math.arm_servo import catch_up_arm, catching_up
 from drake_wbc.math.kernels import body_for
 from drake_wbc.math.safety import (
     DEFAULT_ARM_FOLLOW_TOLERANCE,
+    check_following,
     restart_position,
 )
 from drake_wbc.math.scalar_support import (
@@ -100,7 +101,11 @@ def ArmCartesianVelocityController_(T):
           `resume_tolerance` from q_cmd (a stop too short to catch up),
           the command restarts from q_meas (within the joint limits;
           drake_wbc.math.safety.restart_position), at rest, before the
-          step. Within the tolerance nothing changes: the command
+          step; not from a q_meas farther beyond a joint's limits than
+          one period's step at the acceleration limit from rest (no
+          position to start from either, `set_arm_position`): the
+          command, held within the limits, would jump away from the arm.
+          Then, as within the tolerance, nothing changes: the command
           resumes from where it was.
         - arm_position_command: q_cmd (n, rad), the joint positions for the
           arm's position servo. It is the state: no direct feedthrough.
@@ -307,14 +312,13 @@ def ArmCartesianVelocityController_(T):
             that is not finite is none."""
             if not all_finite(measured):
                 return
-            far = restart_position(measured, q, self.resume_tolerance,
-                                   self._lower, self._upper)[1]
+            far = not check_following(measured, q,
+                                      self.resume_tolerance).valid
             last = np.array(value_of(q), dtype=float)
             velocity = np.array(value_of(previous), dtype=float)
             arm = np.clip(np.array(value_of(measured), dtype=float),
                           self.lower, self.upper)
-            catching = catching_up(last, velocity, arm, CAUGHT_UP) | (
-                far is not None)
+            catching = catching_up(last, velocity, arm, CAUGHT_UP) | far
             if not catching.any():
                 return
             command, _ = catch_up_arm(last, velocity, arm, self._time_step,
@@ -331,9 +335,12 @@ def ArmCartesianVelocityController_(T):
             """(q_cmd, previous q_dot) to step from: the state's, or
             `measured` (within the joint limits) at rest when a joint is
             farther than resume_tolerance from q_cmd (a measurement
-            that is not finite is none)."""
-            start = restart_position(measured, q, self.resume_tolerance,
-                                     self._lower, self._upper)[1]
+            that is not finite is none, and one farther beyond a joint's
+            limits than limit_slack no position to restart from:
+            drake_wbc.math.safety.restart_position)."""
+            start = restart_position(
+                measured, q, self.resume_tolerance, self._lower,
+                self._upper, self._start_acceleration, self._time_step).start
             if start is None:
                 return q, previous
             return start, previous * 0.0
