@@ -257,11 +257,15 @@ def replay_scenario(args):
 
 def run_replay(args, echo=print):
     """Runs `drake-wbc replay` (see the module's docstring); returns 0."""
-    from drake_wbc.experiments.reports import run_scenario
+    from drake_wbc.experiments.reports import run_scenario, short_run_note
 
     scenario = replay_scenario(args)
     output = args.output or Path("out") / "replay"
     if echo is not None:
+        note = short_run_note(scenario)
+        if note is not None:
+            print(f"drake-wbc replay {args.movement}: note: {note}",
+                  file=sys.stderr, flush=True)
         echo(f"drake-wbc replay {args.movement}: writing to {output}/")
     run_scenario(scenario, output, name="replay", replay=args.replay,
                  progress=echo is not None, echo=echo)
