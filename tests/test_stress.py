@@ -324,3 +324,59 @@ def test_the_base_command_is_checked_against_that_robots_own_limits():
                                                 log.columns))
     assert record["max_base_command_ratio"] == pytest.approx(0.9 / own[0])
     assert any("base velocity command" in v for v in violations(record))
+
+
+def _raising(error):
+    def metric(*args, **kwargs):
+        raise error
+    return metric
+
+
+def test_any_exception_of_a_case_is_recorded_and_the_run_goes_on(
+        tmp_path, capsys, monkeypatch):
+    """An IndexError in measuring a case (injected into its obstacle
+    distance) ended `drake-wbc stress` with a traceback, the case
+    unrecorded: it is the case's error, a broken invariant, and the run
+    writes its results and exits 1."""
+    from drake_wbc.stress import cases
+
+    monkeypatch.setattr(cases, "obstacle_distances", _raising(
+        IndexError("index 3 is out of bounds for axis 0 with size 3")))
+    code = stress.run_stress(_stress_arguments(tmp_path, "--cases", "1"))
+    assert code == 1
+    (record,) = json.loads((tmp_path / "stress.json").read_text())["cases"]
+    assert record["error"] == ("IndexError: index 3 is out of bounds for "
+                               "axis 0 with size 3")
+    assert "the simulation failed: IndexError" in capsys.readouterr().out
+
+
+def test_a_case_that_cannot_be_drawn_is_recorded():
+    """The case's scenario is drawn within the case: an error there is
+    the case's record, not an error of the run (it reached the command
+    as a usage error, exit 2)."""
+    from drake_wbc.stress.cases import run_case
+
+    record = run_case(SEED, 0, 0.3, robot="/nonexistent/arm.robot.yaml")
+    assert record["error"].startswith("FileNotFoundError: ")
+    assert violations(record) == [
+        f"the simulation failed: {record['error']}"]
+
+
+@pytest.mark.parametrize("cause", [False, True])
+def test_a_stop_within_a_case_is_not_recorded_but_stops_the_run(
+        monkeypatch, cause):
+    """A signal's Stopped passes a case, and so does an exception it
+    caused (compiled code turns it into a SystemError)."""
+    import signal
+
+    from drake_wbc.stress import cases
+
+    stop = stress.Stopped(signal.SIGINT)
+    if cause:
+        error = SystemError("error return without exception set")
+        error.__cause__ = stop
+    else:
+        error = stop
+    monkeypatch.setattr(cases, "obstacle_distances", _raising(error))
+    with pytest.raises(type(error)):
+        cases.run_case(SEED, 0, 0.3)

@@ -49,6 +49,7 @@ from drake_wbc.station.scene import (
     HandForce,
     WalkingPerson,
 )
+from drake_wbc.stress.stopping import stop_within
 
 MODES = ("loco-manipulation", "intuitive-phri")
 """The controller's modes a case is drawn from (Table T:motion-mode)."""
@@ -301,17 +302,22 @@ def run_case(seed, index, duration=4.0, robot=""):
     description file `robot`, "" for the shipped one); returns its
     record.
 
-    An exception in the simulation (e.g. a non-finite state) does not
-    propagate: the record then holds it in "error", a broken invariant.
+    An exception in drawing, building, simulating or measuring the case
+    (e.g. a non-finite state, a stage's IndexError) does not propagate:
+    the record then holds it in "error" as "Type: message", a broken
+    invariant. A stop of the run (drake_wbc.stress.stopping.Stopped, a
+    BaseException, also as the cause of another exception) propagates.
     """
     from drake_wbc.experiments.runner import build_closed_loop, simulate
 
     started = time.perf_counter()
-    scenario = random_scenario(seed, index, duration, robot)
     try:
+        scenario = random_scenario(seed, index, duration, robot)
         log = simulate(build_closed_loop(scenario))
         record = case_record(seed, index, scenario, log)
-    except (RuntimeError, ValueError, SystemExit) as error:
+    except (Exception, SystemExit) as error:
+        if stop_within(error) is not None:
+            raise
         record = failed_record(seed, index, error)
     record["wall_time_s"] = time.perf_counter() - started
     return record

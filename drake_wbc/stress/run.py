@@ -73,6 +73,7 @@ from drake_wbc.experiments.scenario import robot_option_file
 from drake_wbc.math.validation import positive_duration, whole_number
 from drake_wbc.robot.description import load_robot_description
 from drake_wbc.stress.cases import TIMING_KEYS, run_case, violations
+from drake_wbc.stress.stopping import Stopped, stop_within
 
 DEFAULT_DURATION = 4.0
 """Simulated time of each case, s."""
@@ -327,30 +328,6 @@ def _watch_parent(parent, period=0.5):
     while os.getppid() == parent:
         time.sleep(period)
     os._exit(1)
-
-
-class Stopped(BaseException):
-    """A stress run stopped by a signal (SIGINT or SIGTERM); `code` is the
-    exit code, 128 + the signal's number. A BaseException, as
-    KeyboardInterrupt, so that no `except Exception` swallows it."""
-
-    def __init__(self, signum):
-        super().__init__(signal.Signals(signum).name)
-        self.signum, self.code = signum, 128 + signum
-
-
-def stop_within(error):
-    """The Stopped that `error` is or was raised from, or None. A signal's
-    Stopped raised while Python code runs on behalf of compiled code (a
-    compiled kernel's call back into the interpreter) comes out of it as
-    a SystemError caused by the Stopped."""
-    seen = set()
-    while error is not None and id(error) not in seen:
-        if isinstance(error, Stopped):
-            return error
-        seen.add(id(error))
-        error = error.__cause__ or error.__context__
-    return None
 
 
 _SIGNALS = {"held": 0, "pending": None, "received": []}
