@@ -380,3 +380,50 @@ def test_a_stop_within_a_case_is_not_recorded_but_stops_the_run(
     monkeypatch.setattr(cases, "obstacle_distances", _raising(error))
     with pytest.raises(type(error)):
         cases.run_case(SEED, 0, 0.3)
+
+
+def test_case_runs_one_case_alone_as_the_whole_run_does(serial, tmp_path,
+                                                        capsys):
+    """`--case K` runs case K of the seed alone, into <output>/case_K/,
+    its record that of the same case in a run of them all."""
+    code = stress.run_stress(_stress_arguments(
+        tmp_path, "--case", "1", "--duration", str(DURATION)))
+    document = json.loads((tmp_path / "case_1" / "stress.json").read_text())
+    (record,) = document["cases"]
+    assert stress.comparable(record) == stress.comparable(
+        dict(serial[1], violations=violations(serial[1])))
+    assert code == (1 if violations(serial[1]) else 0)
+    assert not (tmp_path / "stress.json").exists()
+    assert "case 1 of 1.0 s, seed 11" in capsys.readouterr().out
+    with pytest.raises(ValueError, match=r"^--case = -1 is not allowed"):
+        stress.run_stress(_stress_arguments(tmp_path, "--case", "-1"))
+
+
+def test_a_failing_case_says_how_to_run_it_again(tmp_path, capsys,
+                                                 monkeypatch):
+    """A failing case's line gives the command that runs it alone, and
+    its scenario is written beside stress.json: the command fails the
+    same way, and `drake-wbc run` reads the scenario back as the case's
+    (a failure said what broke, not how to run it again)."""
+    import shlex
+
+    from drake_wbc.cli.main import main
+    from drake_wbc.experiments.scenario import load_scenario, scenario_text
+    from drake_wbc.stress import cases
+
+    monkeypatch.setattr(cases, "obstacle_distances", _raising(
+        IndexError("injected")))
+    assert stress.run_stress(_stress_arguments(tmp_path, "--cases",
+                                               "2")) == 1
+    out = capsys.readouterr().out
+    scenario = tmp_path / "case_1.yaml"
+    command = (f"drake-wbc stress --seed {SEED} --case 1 --duration 0.3 "
+               f"--output {tmp_path}")
+    assert (f"case 1: run it alone with {command}; its scenario, for "
+            f"drake-wbc run: {scenario}") in out
+    assert scenario_text(load_scenario(scenario)) == scenario_text(
+        random_scenario(SEED, 1, 0.3))
+    assert main(shlex.split(command)[1:]) == 1
+    (record,) = json.loads(
+        (tmp_path / "case_1" / "stress.json").read_text())["cases"]
+    assert (record["case"], record["error"]) == (1, "IndexError: injected")
