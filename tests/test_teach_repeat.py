@@ -8,6 +8,7 @@ import warnings
 
 import numpy as np
 import pytest
+import yaml
 
 from drake_wbc.cli import teach as teach_commands
 from drake_wbc.controller.run_log import RunLog
@@ -421,3 +422,35 @@ def test_a_repeat_run_ended_before_the_movement_starts_has_no_metrics(
         for name in ("path_rms_m", "path_yaw_rms_rad", "goal_error_m",
                      "goal_yaw_error_rad", "velocity_correlation"):
             assert metrics[f"{run}.{name}"] == "nan"
+
+
+@pytest.mark.parametrize("field", ["goal", "start"])
+def test_a_goal_or_start_outside_the_site_is_refused_where_it_enters(
+        tmp_path, capsys, field):
+    """`replay --goal 1e300 ...` was refused, but the same goal from a
+    scenario's movement, or a movement file's goal or start, ran into
+    NaN references and a safety stop (exit 0): each is refused where it
+    enters, naming its field."""
+    from drake_wbc.cli.main import main
+
+    movement = find_scenario("repeat").parent / "movements" / "teach.yaml"
+    document = yaml.safe_load(movement.read_text())
+    document[field] = [1e300, 0.0, 0.6, -3.0]
+    far = tmp_path / "far.yaml"
+    far.write_text(yaml.safe_dump(document))
+    site = (r"is not allowed: every coordinate and size of a scene must "
+            r"lie within \+-1000 m")
+    with pytest.raises(ValueError, match=rf"far\.yaml: not a learned "
+                       rf"movement: {field} = .* {site}"):
+        mv.LearnedMovement.load(far)
+    assert main(["replay", str(far), "--duration", "1.0", "--output",
+                 str(tmp_path / "out")]) == 2
+    assert f"{field} = " in capsys.readouterr().err
+    text = movement.parent.parent.joinpath("repeat.yaml").read_text()
+    scenario = text.replace(
+        "start_time: 0.5, tau: 1.5}",
+        f"start_time: 0.5, tau: 1.5, {field}: [1.0e+300, 0, 0.6, -3]}}")
+    assert scenario != text
+    with pytest.raises(ValueError, match=rf"^variants\[2\]\.movement\."
+                       rf"{field} = \(1e\+300, 0\.0, 0\.6, -3\.0\) {site}"):
+        load_scenario(text=scenario)

@@ -184,8 +184,9 @@ def replay_scenario(args):
         non_negative,
         positive_duration,
         validate,
+        within_site,
     )
-    from drake_wbc.station.scene import CylinderObstacle, within_site
+    from drake_wbc.station.scene import CylinderObstacle
 
     if args.duration is not None:
         positive_duration("--duration", args.duration)
