@@ -340,7 +340,7 @@ def test_any_exception_of_a_case_is_recorded_and_the_run_goes_on(
     writes its results and exits 1."""
     from drake_wbc.stress import cases
 
-    monkeypatch.setattr(cases, "obstacle_distances", _raising(
+    monkeypatch.setattr(cases, "static_distances", _raising(
         IndexError("index 3 is out of bounds for axis 0 with size 3")))
     code = stress.run_stress(_stress_arguments(tmp_path, "--cases", "1"))
     assert code == 1
@@ -377,7 +377,7 @@ def test_a_stop_within_a_case_is_not_recorded_but_stops_the_run(
         error.__cause__ = stop
     else:
         error = stop
-    monkeypatch.setattr(cases, "obstacle_distances", _raising(error))
+    monkeypatch.setattr(cases, "static_distances", _raising(error))
     with pytest.raises(type(error)):
         cases.run_case(SEED, 0, 0.3)
 
@@ -411,7 +411,7 @@ def test_a_failing_case_says_how_to_run_it_again(tmp_path, capsys,
     from drake_wbc.experiments.scenario import load_scenario, scenario_text
     from drake_wbc.stress import cases
 
-    monkeypatch.setattr(cases, "obstacle_distances", _raising(
+    monkeypatch.setattr(cases, "static_distances", _raising(
         IndexError("injected")))
     assert stress.run_stress(_stress_arguments(tmp_path, "--cases",
                                                "2")) == 1

@@ -24,7 +24,6 @@ the same for the same arguments wherever it runs (its `wall_time_s` and
 record breaks (see drake_wbc.stress.run).
 """
 
-import copy
 import math
 import time
 from pathlib import Path
@@ -32,13 +31,12 @@ from pathlib import Path
 import numpy as np
 
 from drake_wbc.controller.task import Schedule
-from drake_wbc.experiments.common import obstacle_distances, run_metrics
+from drake_wbc.experiments.common import run_metrics, static_distances
 from drake_wbc.experiments.scenario import (
     Scenario,
     check_on_robot,
     controller_arm,
     controller_for,
-    footprint_of,
     scenario_robot,
 )
 from drake_wbc.math.validation import validate
@@ -243,10 +241,7 @@ def case_record(seed, index, scenario, log):
     """
     lower, upper, joint_speed_limits = _limits(scenario)
     metrics = run_metrics(scenario, log)
-    static = copy.deepcopy(scenario.scene)
-    static.people = []
-    distance = obstacle_distances(static, log["truth.base_pose"],
-                                  footprint_of(scenario))
+    distance = static_distances(scenario, log)
     command = log["arm.position_command"]
     dt = np.diff(log.time)[:, None]
     joint_speed = np.abs(np.diff(command, axis=0)) / dt
