@@ -27,6 +27,8 @@ from drake_wbc.cli.robot_option import add_robot_argument, on_robot
 
 def add_teach_arguments(parser):
     """The arguments of `drake-wbc teach`."""
+    from drake_wbc.math.movement import DEFAULT_NUM_BASIS
+
     parser.add_argument(
         "scenario", help="the teaching scenario's name or YAML file (e.g. "
         "teach); with --log, the scenario the robot ran (its markers and "
@@ -42,7 +44,7 @@ def add_teach_arguments(parser):
                              "S_hri turns 0 again)")
     parser.add_argument("--num-basis", type=int, default=None,
                         help="basis functions of the forcing term "
-                             "(default: 40)")
+                             f"(default: {DEFAULT_NUM_BASIS})")
     parser.add_argument("--output", type=Path, default=None,
                         help="output folder (default: out/teach_<scenario>)")
     parser.add_argument("--movement", type=Path, default=None,
