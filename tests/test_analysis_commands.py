@@ -319,3 +319,30 @@ def test_the_dmp_figures_closed_forms_check_its_responses():
     for response, closed in pairs:
         np.testing.assert_allclose(curves[response].response,
                                    curves[closed].response, rtol=1e-6)
+
+
+def test_diagram_says_in_one_line_when_dot_fails(tmp_path, monkeypatch,
+                                                 capsys):
+    """A `dot` that fails (here a script that says two lines and exits 1)
+    ended `drake-wbc diagram` in a traceback: it says so in one line,
+    keeps both .dot files and exits 1."""
+    from drake_wbc.cli.main import main
+
+    programs = tmp_path / "bin"
+    programs.mkdir()
+    dot = programs / "dot"
+    dot.write_text("#!/bin/sh\necho 'Error: syntax error in line 3' >&2\n"
+                   "echo 'near: ->' >&2\nexit 1\n")
+    dot.chmod(0o755)
+    monkeypatch.setenv("PATH", str(programs))
+    folder = tmp_path / "diagram"
+    assert main(["diagram", "trajectory_tracking", "--output",
+                 str(folder)]) == 1
+    err = capsys.readouterr().err
+    assert err == (
+        f"drake-wbc diagram trajectory_tracking: dot failed on "
+        f"{folder / 'controller.dot'} (exit 1): Error: syntax error in "
+        f"line 3; near: ->; the .dot files are kept in {folder}/\n")
+    for stem in ("controller", "station"):
+        assert (folder / f"{stem}.dot").read_text().lstrip().startswith(
+            "digraph")

@@ -174,6 +174,36 @@ def test_run_lists_every_scenario(capsys):
         DEFAULT_SCENARIO in names)
 
 
+def test_run_list_refuses_a_scenario_it_would_ignore(capsys):
+    """`run --list extra` listed every scenario and exited 0, the name
+    ignored."""
+    assert main(["run", "--list", "extra"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err == (
+        "drake-wbc run: scenario = 'extra' is not allowed with --list, "
+        "which lists every scenario: give one or the other\n")
+
+
+def test_the_teach_help_gives_the_default_number_of_basis_functions(
+        monkeypatch):
+    """--num-basis's help said "(default: 40)", written out, not the
+    default that learn_movement takes (the movement module's
+    DEFAULT_NUM_BASIS): it follows the constant."""
+    import argparse
+
+    from drake_wbc.cli import teach as teach_commands
+    from drake_wbc.math import movement as mv
+
+    for number in (mv.DEFAULT_NUM_BASIS, mv.DEFAULT_NUM_BASIS + 1):
+        monkeypatch.setattr(mv, "DEFAULT_NUM_BASIS", number)
+        parser = argparse.ArgumentParser()
+        teach_commands.add_teach_arguments(parser)
+        (help_text,) = [action.help for action in parser._actions
+                        if action.dest == "num_basis"]
+        assert help_text.endswith(f"(default: {number})")
+
+
 def test_a_closed_pipe_ends_the_command_quietly():
     """`drake-wbc run --list | head -1`: when the reader has gone, the
     command ends with 141 (as a shell's SIGPIPE) and no traceback."""

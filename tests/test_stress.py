@@ -324,3 +324,106 @@ def test_the_base_command_is_checked_against_that_robots_own_limits():
                                                 log.columns))
     assert record["max_base_command_ratio"] == pytest.approx(0.9 / own[0])
     assert any("base velocity command" in v for v in violations(record))
+
+
+def _raising(error):
+    def metric(*args, **kwargs):
+        raise error
+    return metric
+
+
+def test_any_exception_of_a_case_is_recorded_and_the_run_goes_on(
+        tmp_path, capsys, monkeypatch):
+    """An IndexError in measuring a case (injected into its obstacle
+    distance) ended `drake-wbc stress` with a traceback, the case
+    unrecorded: it is the case's error, a broken invariant, and the run
+    writes its results and exits 1."""
+    from drake_wbc.stress import cases
+
+    monkeypatch.setattr(cases, "static_distances", _raising(
+        IndexError("index 3 is out of bounds for axis 0 with size 3")))
+    code = stress.run_stress(_stress_arguments(tmp_path, "--cases", "1"))
+    assert code == 1
+    (record,) = json.loads((tmp_path / "stress.json").read_text())["cases"]
+    assert record["error"] == ("IndexError: index 3 is out of bounds for "
+                               "axis 0 with size 3")
+    assert "the simulation failed: IndexError" in capsys.readouterr().out
+
+
+def test_a_case_that_cannot_be_drawn_is_recorded():
+    """The case's scenario is drawn within the case: an error there is
+    the case's record, not an error of the run (it reached the command
+    as a usage error, exit 2)."""
+    from drake_wbc.stress.cases import run_case
+
+    record = run_case(SEED, 0, 0.3, robot="/nonexistent/arm.robot.yaml")
+    assert record["error"].startswith("FileNotFoundError: ")
+    assert violations(record) == [
+        f"the simulation failed: {record['error']}"]
+
+
+@pytest.mark.parametrize("cause", [False, True])
+def test_a_stop_within_a_case_is_not_recorded_but_stops_the_run(
+        monkeypatch, cause):
+    """A signal's Stopped passes a case, and so does an exception it
+    caused (compiled code turns it into a SystemError)."""
+    import signal
+
+    from drake_wbc.stress import cases
+
+    stop = stress.Stopped(signal.SIGINT)
+    if cause:
+        error = SystemError("error return without exception set")
+        error.__cause__ = stop
+    else:
+        error = stop
+    monkeypatch.setattr(cases, "static_distances", _raising(error))
+    with pytest.raises(type(error)):
+        cases.run_case(SEED, 0, 0.3)
+
+
+def test_case_runs_one_case_alone_as_the_whole_run_does(serial, tmp_path,
+                                                        capsys):
+    """`--case K` runs case K of the seed alone, into <output>/case_K/,
+    its record that of the same case in a run of them all."""
+    code = stress.run_stress(_stress_arguments(
+        tmp_path, "--case", "1", "--duration", str(DURATION)))
+    document = json.loads((tmp_path / "case_1" / "stress.json").read_text())
+    (record,) = document["cases"]
+    assert stress.comparable(record) == stress.comparable(
+        dict(serial[1], violations=violations(serial[1])))
+    assert code == (1 if violations(serial[1]) else 0)
+    assert not (tmp_path / "stress.json").exists()
+    assert "case 1 of 1.0 s, seed 11" in capsys.readouterr().out
+    with pytest.raises(ValueError, match=r"^--case = -1 is not allowed"):
+        stress.run_stress(_stress_arguments(tmp_path, "--case", "-1"))
+
+
+def test_a_failing_case_says_how_to_run_it_again(tmp_path, capsys,
+                                                 monkeypatch):
+    """A failing case's line gives the command that runs it alone, and
+    its scenario is written beside stress.json: the command fails the
+    same way, and `drake-wbc run` reads the scenario back as the case's
+    (a failure said what broke, not how to run it again)."""
+    import shlex
+
+    from drake_wbc.cli.main import main
+    from drake_wbc.experiments.scenario import load_scenario, scenario_text
+    from drake_wbc.stress import cases
+
+    monkeypatch.setattr(cases, "static_distances", _raising(
+        IndexError("injected")))
+    assert stress.run_stress(_stress_arguments(tmp_path, "--cases",
+                                               "2")) == 1
+    out = capsys.readouterr().out
+    scenario = tmp_path / "case_1.yaml"
+    command = (f"drake-wbc stress --seed {SEED} --case 1 --duration 0.3 "
+               f"--output {tmp_path}")
+    assert (f"case 1: run it alone with {command}; its scenario, for "
+            f"drake-wbc run: {scenario}") in out
+    assert scenario_text(load_scenario(scenario)) == scenario_text(
+        random_scenario(SEED, 1, 0.3))
+    assert main(shlex.split(command)[1:]) == 1
+    (record,) = json.loads(
+        (tmp_path / "case_1" / "stress.json").read_text())["cases"]
+    assert (record["case"], record["error"]) == (1, "IndexError: injected")

@@ -8,6 +8,7 @@ import warnings
 
 import numpy as np
 import pytest
+import yaml
 
 from drake_wbc.cli import teach as teach_commands
 from drake_wbc.controller.run_log import RunLog
@@ -20,7 +21,7 @@ from drake_wbc.experiments.scenario import (
     with_robot,
 )
 from drake_wbc.math import movement as mv
-from drake_wbc.math.demonstration import demonstration_from_log
+from drake_wbc.math.demonstration import demonstration_from_log, tcp_poses
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.robot.tuning import RobotTuningWarning
 
@@ -362,3 +363,94 @@ def test_a_teaching_run_cut_before_the_demonstration_writes_its_files(
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["metrics"] == {"start_s": 0.5}
     assert sorted(summary["files"]) == ["log_teach.csv", "log_teach.npz"]
+
+
+def test_a_replay_cut_short_is_compared_over_what_it_played(tmp_path,
+                                                           capsys):
+    """A 3.5 s run of the 6 s movement started at 0.5 s covers half of the
+    demonstration's samples: its metrics are over those (the path RMS
+    was 0.206 m, velocity_correlation 0.64, against the run's last pose
+    held to the end), the goal errors nan, and the command says so
+    before it runs. The run's samples fall on the demonstration's times
+    (20 Hz against the log's 100 Hz), so the RMS is taken here from them
+    directly, without interpolation."""
+    from drake_wbc.cli.main import main
+
+    movement = find_scenario("repeat").parent / "movements" / "teach.yaml"
+    assert main(["replay", str(movement), "--duration", "3.5", "--output",
+                 str(tmp_path)]) == 0
+    err = capsys.readouterr().err
+    assert ("note: the run ends at 3.5 s, before its movement does: "
+            "path_rms_m, path_yaw_rms_rad and velocity_correlation are "
+            "over the 3 s played, goal_error_m and goal_yaw_error_rad "
+            "will be nan (give a --duration of at least 6.5 s)") in err
+    metrics = json.loads((tmp_path / "summary.json").read_text())["metrics"]
+    assert metrics["goal_error_m"] == "nan"
+    assert metrics["goal_yaw_error_rad"] == "nan"
+    assert metrics["velocity_correlation"] > 0.9
+    log = RunLog.load(tmp_path / "log_replay.npz")
+    scenario = load_scenario(find_scenario("repeat"))
+    demo = mv.LearnedMovement.load(movement).demonstrations[0]
+    t = 0.5 + (demo.time - demo.time[0])
+    played = t <= 3.5 + 1e-9
+    assert played.sum() == 61  # of 121
+    rows = np.rint(t[played] / 0.01).astype(int)
+    np.testing.assert_allclose(log.time[rows], t[played], atol=1e-9)
+    tcp = tcp_poses(log["base.state_estimated"][:, :3],
+                    log["arm.position_measured"], controller_arm(scenario))
+    error = tcp[rows, :3] - demo.tcp[played, :3]
+    assert metrics["path_rms_m"] == pytest.approx(
+        np.sqrt(np.mean(np.sum(error**2, axis=1))), rel=1e-9)
+    assert metrics["path_rms_m"] < 0.01
+
+
+def test_a_repeat_run_ended_before_the_movement_starts_has_no_metrics(
+        tmp_path, capsys):
+    """`drake-wbc run repeat --duration 0.3` ends before the movements
+    start at 0.5 s: the note says so and their metrics are nan (they
+    were the start pose held against the whole demonstration)."""
+    from drake_wbc.cli.main import main
+
+    assert main(["run", "repeat", "--duration", "0.3", "--no-replay",
+                 "--output", str(tmp_path)]) == 0
+    assert ("drake-wbc run repeat: note: the run 'slower' ends at 0.3 s, "
+            "before its movement starts at 0.5 s: the movement's metrics "
+            "will be nan (give a --duration of at least 9.5 s)"
+            ) in capsys.readouterr().err
+    metrics = json.loads((tmp_path / "summary.json").read_text())["metrics"]
+    for run in ("demonstrated", "moved_goal", "slower"):
+        for name in ("path_rms_m", "path_yaw_rms_rad", "goal_error_m",
+                     "goal_yaw_error_rad", "velocity_correlation"):
+            assert metrics[f"{run}.{name}"] == "nan"
+
+
+@pytest.mark.parametrize("field", ["goal", "start"])
+def test_a_goal_or_start_outside_the_site_is_refused_where_it_enters(
+        tmp_path, capsys, field):
+    """`replay --goal 1e300 ...` was refused, but the same goal from a
+    scenario's movement, or a movement file's goal or start, ran into
+    NaN references and a safety stop (exit 0): each is refused where it
+    enters, naming its field."""
+    from drake_wbc.cli.main import main
+
+    movement = find_scenario("repeat").parent / "movements" / "teach.yaml"
+    document = yaml.safe_load(movement.read_text())
+    document[field] = [1e300, 0.0, 0.6, -3.0]
+    far = tmp_path / "far.yaml"
+    far.write_text(yaml.safe_dump(document))
+    site = (r"is not allowed: every coordinate and size of a scene must "
+            r"lie within \+-1000 m")
+    with pytest.raises(ValueError, match=rf"far\.yaml: not a learned "
+                       rf"movement: {field} = .* {site}"):
+        mv.LearnedMovement.load(far)
+    assert main(["replay", str(far), "--duration", "1.0", "--output",
+                 str(tmp_path / "out")]) == 2
+    assert f"{field} = " in capsys.readouterr().err
+    text = movement.parent.parent.joinpath("repeat.yaml").read_text()
+    scenario = text.replace(
+        "start_time: 0.5, tau: 1.5}",
+        f"start_time: 0.5, tau: 1.5, {field}: [1.0e+300, 0, 0.6, -3]}}")
+    assert scenario != text
+    with pytest.raises(ValueError, match=rf"^variants\[2\]\.movement\."
+                       rf"{field} = \(1e\+300, 0\.0, 0\.6, -3\.0\) {site}"):
+        load_scenario(text=scenario)

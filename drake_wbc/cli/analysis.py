@@ -82,7 +82,8 @@ def render_svg(dot_path):
     on PATH. Returns the SVG's path, or None where dot is not installed.
 
     Raises:
-        RuntimeError: if dot is there but fails, with its message.
+        RuntimeError: if dot is there but fails, with its message on one
+            line.
     """
     program = shutil.which(DOT_PROGRAM)
     if program is None:
@@ -91,15 +92,19 @@ def render_svg(dot_path):
     result = subprocess.run([program, "-Tsvg", str(dot_path), "-o", str(svg)],
                             capture_output=True, text=True, check=False)
     if result.returncode != 0:
-        raise RuntimeError(f"{DOT_PROGRAM} failed on {dot_path}: "
-                           f"{result.stderr.strip()}")
+        said = "; ".join(line.strip() for line in result.stderr.splitlines()
+                         if line.strip())
+        raise RuntimeError(f"{DOT_PROGRAM} failed on {dot_path} (exit "
+                           f"{result.returncode})" + (f": {said}" if said
+                                                      else ""))
     return svg
 
 
 def run_diagram(args):
     """Runs `drake-wbc diagram`: writes controller.dot and station.dot
     (Drake's GetGraphvizString) and their SVGs where Graphviz is
-    installed. Returns 0."""
+    installed. Returns 0, or 1 where dot fails (said in one line; the
+    .dot files are kept)."""
     from drake_wbc.controller import build_controller
     from drake_wbc.experiments.scenario import (
         controller_arm,
@@ -114,12 +119,20 @@ def run_diagram(args):
             scenario.controller, controller_arm(scenario)).diagram),
         ("station", scenario_station(scenario).diagram),
     )
-    missing = False
+    dots = []
     for stem, diagram in diagrams:
-        dot = output / f"{stem}.dot"
-        dot.write_text(diagram.GetGraphvizString())
-        print(f"  {dot}")
-        svg = render_svg(dot)
+        dots.append(output / f"{stem}.dot")
+        dots[-1].write_text(diagram.GetGraphvizString())
+        print(f"  {dots[-1]}")
+    missing = False
+    for dot in dots:
+        try:
+            svg = render_svg(dot)
+        except RuntimeError as error:
+            sys.stdout.flush()
+            print(f"drake-wbc diagram {name}: {error}; the .dot files are "
+                  f"kept in {output}/", file=sys.stderr)
+            return 1
         if svg is None:
             missing = True
         else:

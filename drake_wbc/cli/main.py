@@ -160,6 +160,10 @@ def _run_run(args):
     )
 
     if args.list:
+        if args.scenario is not None:
+            raise ValueError(
+                f"scenario = {args.scenario!r} is not allowed with --list, "
+                "which lists every scenario: give one or the other")
         paths = scenario_files()
         width = max(len(path.stem) for path in paths)
         for path in paths:

@@ -27,6 +27,8 @@ from drake_wbc.cli.robot_option import add_robot_argument, on_robot
 
 def add_teach_arguments(parser):
     """The arguments of `drake-wbc teach`."""
+    from drake_wbc.math.movement import DEFAULT_NUM_BASIS
+
     parser.add_argument(
         "scenario", help="the teaching scenario's name or YAML file (e.g. "
         "teach); with --log, the scenario the robot ran (its markers and "
@@ -42,7 +44,7 @@ def add_teach_arguments(parser):
                              "S_hri turns 0 again)")
     parser.add_argument("--num-basis", type=int, default=None,
                         help="basis functions of the forcing term "
-                             "(default: 40)")
+                             f"(default: {DEFAULT_NUM_BASIS})")
     parser.add_argument("--output", type=Path, default=None,
                         help="output folder (default: out/teach_<scenario>)")
     parser.add_argument("--movement", type=Path, default=None,
@@ -184,8 +186,9 @@ def replay_scenario(args):
         non_negative,
         positive_duration,
         validate,
+        within_site,
     )
-    from drake_wbc.station.scene import CylinderObstacle, within_site
+    from drake_wbc.station.scene import CylinderObstacle
 
     if args.duration is not None:
         positive_duration("--duration", args.duration)
@@ -257,11 +260,15 @@ def replay_scenario(args):
 
 def run_replay(args, echo=print):
     """Runs `drake-wbc replay` (see the module's docstring); returns 0."""
-    from drake_wbc.experiments.reports import run_scenario
+    from drake_wbc.experiments.reports import run_scenario, short_run_note
 
     scenario = replay_scenario(args)
     output = args.output or Path("out") / "replay"
     if echo is not None:
+        note = short_run_note(scenario)
+        if note is not None:
+            print(f"drake-wbc replay {args.movement}: note: {note}",
+                  file=sys.stderr, flush=True)
         echo(f"drake-wbc replay {args.movement}: writing to {output}/")
     run_scenario(scenario, output, name="replay", replay=args.replay,
                  progress=echo is not None, echo=echo)

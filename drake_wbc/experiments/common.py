@@ -8,6 +8,7 @@ knows it (`arm_fault`: the station's sentence, or "none"); and one
 overview figure.
 """
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -145,6 +146,31 @@ def obstacle_distances(scene, base_pose, footprint, people_positions=None,
         if candidates:
             result[i] = max(min(candidates), 0.0)
     return result
+
+
+def static_distances(scenario, log):
+    """(N,) the distance from the base's footprint to the nearest static
+    obstacle (cylinder or box) at each sample of `log` (a RunLog of
+    `scenario`), from ground truth; inf without any (obstacle_distances
+    of the scene without its people)."""
+    return obstacle_distances(replace(scenario.scene, people=[]),
+                              log["truth.base_pose"], footprint_of(scenario))
+
+
+def person_distances(scenario, log):
+    """(N,) the distance from the base's footprint to the nearest person
+    at each sample of `log` (a RunLog of `scenario`), from ground truth;
+    inf without people (obstacle_distances of the scene's people
+    alone)."""
+    return obstacle_distances(replace(scenario.scene, cylinders=[], boxes=[]),
+                              log["truth.base_pose"], footprint_of(scenario),
+                              log.signals.get("truth.people_positions"))
+
+
+def path_length(points):
+    """The length of the path through `points` (N, k), point after point:
+    the sum of the distances between consecutive ones (0 for one)."""
+    return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
 
 
 def run_metrics(scenario, log):

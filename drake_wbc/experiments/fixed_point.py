@@ -38,7 +38,6 @@ has no samples, "nan" in summary.json):
 """
 
 import math
-from dataclasses import replace
 
 import numpy as np
 
@@ -46,11 +45,11 @@ from drake_wbc.experiments.common import (
     integrated_deviation,
     metrics_of_each_run,
     new_figure,
-    obstacle_distances,
+    person_distances,
     save_figure,
     schedule_values,
 )
-from drake_wbc.experiments.scenario import controller_for, footprint_of
+from drake_wbc.experiments.scenario import controller_for
 
 APPROACH_GAP = 0.5
 """Approaches less than this many seconds apart are merged (s)."""
@@ -69,15 +68,6 @@ def approach_intervals(time, distance, threshold, gap=APPROACH_GAP):
         else:
             intervals.append((start, end))
     return intervals
-
-
-def person_distances(scenario, log):
-    """The distance (N,) from the footprint to the nearest person (inf
-    without people), from ground truth."""
-    people_only = replace(scenario.scene, cylinders=[], boxes=[])
-    return obstacle_distances(people_only, log["truth.base_pose"],
-                              footprint_of(scenario),
-                              log.signals.get("truth.people_positions"))
 
 
 def compensation_switch(scenario, log):

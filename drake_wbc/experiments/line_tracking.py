@@ -34,7 +34,9 @@ import numpy as np
 from drake_wbc.experiments.common import (
     metrics_of_each_run,
     obstacle_distances,
+    person_distances,
     save_figure,
+    static_distances,
 )
 from drake_wbc.experiments.scenario import footprint_of
 
@@ -85,12 +87,17 @@ def _scene_objects(scene):
     return objects
 
 
-def _closest(scene, log, is_person, footprint):
-    people = log.signals.get("truth.people_positions") if is_person else None
-    distance = obstacle_distances(scene, log["truth.base_pose"], footprint,
-                                  people)
+def _least(distance):
+    """The least of `distance` (N,), None where it is inf (nothing to
+    measure to)."""
     value = float(np.min(distance))
     return value if np.isfinite(value) else None
+
+
+def _closest(scene, log, is_person, footprint):
+    people = log.signals.get("truth.people_positions") if is_person else None
+    return _least(obstacle_distances(scene, log["truth.base_pose"],
+                                     footprint, people))
 
 
 def run_metrics(scenario, log):
@@ -114,10 +121,9 @@ def run_metrics(scenario, log):
             height - height[0]))),
         "ee_travel_m": float(ee_along[-1]),
         "base_travel_m": float(base_along[-1]),
-        "min_static_obstacle_distance_m": _closest(
-            replace(scene, people=[]), log, False, footprint),
-        "min_person_distance_m": _closest(
-            replace(scene, cylinders=[], boxes=[]), log, True, footprint),
+        "min_static_obstacle_distance_m": _least(static_distances(
+            scenario, log)),
+        "min_person_distance_m": _least(person_distances(scenario, log)),
     }
     for name, alone, is_person in _scene_objects(scene):
         metrics[f"closest_approach_{name}_m"] = _closest(

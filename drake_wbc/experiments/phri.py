@@ -42,9 +42,10 @@ import numpy as np
 
 from drake_wbc.experiments.common import (
     new_figure,
-    obstacle_distances,
+    path_length,
     sample_period,
     save_figure,
+    static_distances,
 )
 from drake_wbc.experiments.scenario import (
     controller_arm,
@@ -53,7 +54,6 @@ from drake_wbc.experiments.scenario import (
 )
 from drake_wbc.math import workspace
 from drake_wbc.robot.model import ArmKinematics
-from drake_wbc.station.scene import Scene
 
 STAGE_GAP = 1.2
 """s: pushes of the hand at least this far apart start a new stage."""
@@ -138,10 +138,6 @@ def _rotate(yaw, points):
                             s * points[:, 0] + c * points[:, 1]])
 
 
-def _path(points):
-    return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
-
-
 def stage_metrics(scenario, log, start, end, tcp_b, d, phi, distance):
     """STAGE_METRICS of the samples start <= t <= end."""
     mask = (log.time >= start) & (log.time <= end)
@@ -174,7 +170,7 @@ def stage_metrics(scenario, log, start, end, tcp_b, d, phi, distance):
         "base_dx_m": float(xy[-1, 0] - xy[0, 0]),
         "base_dy_m": float(xy[-1, 1] - xy[0, 1]),
         "base_rotation_rad": float(yaw[-1] - yaw[0]),
-        "base_path_m": _path(xy),
+        "base_path_m": path_length(xy),
         "base_max_displacement_m": float(np.max(np.linalg.norm(
             xy - xy[0], axis=1))),
         "base_max_rotation_rad": float(np.max(np.abs(yaw - yaw[0]))),
@@ -195,14 +191,6 @@ def stage_metrics(scenario, log, start, end, tcp_b, d, phi, distance):
     }
 
 
-def static_distance(scenario, log):
-    """(N,) distance from the footprint to the nearest static obstacle."""
-    static = Scene(cylinders=list(scenario.scene.cylinders),
-                   boxes=list(scenario.scene.boxes))
-    return obstacle_distances(static, log["truth.base_pose"],
-                              footprint_of(scenario))
-
-
 def compute_metrics(scenario, logs):
     """STAGE_METRICS of each stage of each run, and the stages' letters."""
     metrics = {}
@@ -211,7 +199,7 @@ def compute_metrics(scenario, logs):
     for name, log in logs.items():
         _, tcp_b = tcp_in_arm_base(log, arm)
         d, phi = extent_and_deflection(log, arm)
-        distance = static_distance(scenario, log)
+        distance = static_distances(scenario, log)
         metrics[f"{name}.stages"] = "".join(s for s, _, _ in windows)
         for stage, start, end in windows:
             values = stage_metrics(scenario, log, start, end, tcp_b, d, phi,

@@ -22,6 +22,12 @@ there are several runs:
   to any obstacle (inf without one); d_th_m the repulsion's threshold.
 - tau, duration_s: the replay's temporal scaling and length.
 
+A run cut short (`--duration`) is compared over the demonstration's
+samples it covers, those up to its end: the path's RMS and the velocity
+correlation over them (NaN without any, the correlation NaN with fewer
+than MIN_CORRELATED_SAMPLES), the goal errors NaN when the run ends
+before the movement does (`short_run_note`).
+
 Figures (`repeat_<run>.png`): the TCP's and the base's paths in the
 plane (demonstration, replay, goals, obstacles) and x, y, z and yaw
 against normalised time.
@@ -42,6 +48,11 @@ SPEED_FILTER_HZ = 2.0
 """Hz: the speed profiles are low-passed (zero phase) at this before
 they are correlated, so that sensor noise does not count as shape."""
 
+MIN_CORRELATED_SAMPLES = 10
+"""The fewest of the demonstration's samples a run must cover for its
+velocity_correlation (fewer: NaN): the zero-phase filter (second order)
+pads 9 samples at each end of a profile."""
+
 
 def replay_of(scenario, variant_name):
     """The cdmp.MovementReplay that the run `variant_name` plays."""
@@ -56,10 +67,46 @@ def replay_of(scenario, variant_name):
     return replay
 
 
+def movement_end(scenario, variant_name):
+    """s: when the movement of the run `variant_name` ends (its start
+    time and its duration at its tau)."""
+    replay = replay_of(scenario, variant_name)
+    movement = mv.LearnedMovement.load(mv.resolve_movement_file(replay.file))
+    tau = movement.params.tau if replay.tau is None else replay.tau
+    return replay.start_time + movement.params.with_tau(tau).duration
+
+
+def short_run_note(scenario):
+    """Why some of the metrics of `scenario` (its duration perhaps cut by
+    `drake-wbc run --duration` or `drake-wbc replay --duration`) cover
+    part of the movement or will be NaN, in a sentence; None where every
+    run lasts past its movement's end."""
+    ends = {variant.name: movement_end(scenario, variant.name)
+            for variant in scenario.variants}
+    name = max(ends, key=ends.get)
+    end, duration = ends[name], scenario.duration
+    if duration >= end:
+        return None
+    start = replay_of(scenario, name).start_time
+    runs = "the run" if len(ends) == 1 else f"the run {name!r}"
+    if duration <= start:
+        covered = (f"before its movement starts at {start:g} s: the "
+                   "movement's metrics will be nan")
+    else:
+        covered = ("before its movement does: path_rms_m, "
+                   "path_yaw_rms_rad and velocity_correlation are over "
+                   f"the {duration - start:.3g} s played, goal_error_m "
+                   "and goal_yaw_error_rad will be nan")
+    return (f"{runs} ends at {duration:g} s, {covered} (give a --duration "
+            f"of at least {end:g} s)")
+
+
 def replay_comparison(scenario, name, log):
-    """(movement, player, u, demo, replayed, target): the demonstration
-    and the replay (the run's TCP poses, sampled at the demonstration's
-    normalised times u) and the run's absolute goal target (4,)."""
+    """(movement, player, u, demo, replayed, target, tcp): the
+    demonstration and the replay (the run's TCP poses, sampled at the
+    demonstration's normalised times u; NaN at those after the log's
+    end, which the run did not reach), the run's absolute goal target
+    (4,) and the run's TCP poses (N, 4) at the log's times."""
     replay = replay_of(scenario, name)
     movement = mv.LearnedMovement.load(mv.resolve_movement_file(replay.file))
     player = mv.MovementPlayer(movement, replay)
@@ -72,7 +119,8 @@ def replay_comparison(scenario, name, log):
     tcp[:, 3] += 2 * np.pi * np.round((demo.tcp[0, 3] - tcp[0, 3])
                                       / (2 * np.pi))
     t = player.start_time + u * player.params.duration
-    replayed = np.column_stack([np.interp(t, log.time, tcp[:, i])
+    replayed = np.column_stack([np.interp(t, log.time, tcp[:, i],
+                                          left=np.nan, right=np.nan)
                                 for i in range(4)])
     start = movement.start if replay.start is None else np.asarray(
         replay.start)
@@ -107,22 +155,32 @@ def velocity_correlation(u, demonstrated, replayed, demonstration_duration,
 
 
 def run_metrics(scenario, name, log):
-    """The metrics of the module's docstring for one run."""
+    """The metrics of the module's docstring for one run: over the
+    demonstration's samples that the run covers, the goal errors NaN
+    when it ends before the movement does."""
     movement, player, u, demo, replayed, target, tcp = replay_comparison(
         scenario, name, log)
-    error = replayed - demo.tcp
+    covered = ~np.isnan(replayed[:, 0])
+    error = (replayed - demo.tcp)[covered]
+    ended = covered[-1]
+    nan = float("nan")
     people = log.signals.get("truth.people_positions")
     distance = obstacle_distances(scenario.scene, log["truth.base_pose"],
                                   footprint_of(scenario), people)
     return {
         "path_rms_m": float(np.sqrt(np.mean(np.sum(error[:, :3]**2,
-                                                   axis=1)))),
-        "path_yaw_rms_rad": float(np.sqrt(np.mean(error[:, 3]**2))),
-        "goal_error_m": float(np.linalg.norm(tcp[-1, :3] - target[:3])),
-        "goal_yaw_error_rad": float(abs(tcp[-1, 3] - target[3])),
+                                                   axis=1))))
+        if len(error) else nan,
+        "path_yaw_rms_rad": float(np.sqrt(np.mean(error[:, 3]**2)))
+        if len(error) else nan,
+        "goal_error_m": float(np.linalg.norm(tcp[-1, :3] - target[:3]))
+        if ended else nan,
+        "goal_yaw_error_rad": float(abs(tcp[-1, 3] - target[3]))
+        if ended else nan,
         "velocity_correlation": velocity_correlation(
-            u, demo.tcp[:, :3], replayed[:, :3], demo.duration,
-            player.params.duration),
+            u[covered], demo.tcp[covered, :3], replayed[covered, :3],
+            demo.duration, player.params.duration)
+        if covered.sum() >= MIN_CORRELATED_SAMPLES else nan,
         "min_obstacle_distance_m": float(np.min(distance)),
         "d_th_m": float(scenario.controller.base_cdmp.repulsion.d_th),
         "tau": float(player.params.tau),

@@ -539,3 +539,12 @@ def load_scenario(path=None, text=None):
             raise ValueError(f"{path or 'text'}: {error}") from None
     warn_of_the_tuning_at_the_start(scenario)
     return scenario
+
+
+def scenario_text(scenario):
+    """The YAML text of `scenario`, every field written out: load_scenario
+    reads it back as the same scenario (a random stress case's, written
+    to be run again with `drake-wbc run`)."""
+    from pydrake.common.yaml import yaml_dump_typed
+
+    return yaml_dump_typed(scenario)

@@ -21,7 +21,11 @@ learned rollout.
 
 import numpy as np
 
-from drake_wbc.experiments.common import new_figure, save_figure
+from drake_wbc.experiments.common import (
+    new_figure,
+    path_length,
+    save_figure,
+)
 from drake_wbc.experiments.scenario import controller_arm
 from drake_wbc.math import movement as mv
 from drake_wbc.math.demonstration import (
@@ -110,16 +114,12 @@ def movement_metrics(movement, start, stop):
         "start_s": start, "stop_s": stop, "duration_s": demo.duration,
         "tcp_dx_m": float(delta[0]), "tcp_dy_m": float(delta[1]),
         "tcp_dz_m": float(delta[2]), "tcp_dyaw_rad": float(delta[3]),
-        "tcp_path_m": _path(demo.tcp[:, :3]),
-        "base_path_m": (_path(demo.base[:, :2]) if demo.base is not None
+        "tcp_path_m": path_length(demo.tcp[:, :3]),
+        "base_path_m": (path_length(demo.base[:, :2]) if demo.base is not None
                         else float("nan")),
     }
     metrics.update(fit_metrics(movement))
     return metrics
-
-
-def _path(points):
-    return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
 
 
 def recorded(scenario, log):

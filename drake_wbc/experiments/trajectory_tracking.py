@@ -35,7 +35,9 @@ from drake_wbc.experiments.common import (
 from drake_wbc.experiments.scenario import controller_for
 
 BASE_BAND = (0.6, 3.0)
-"""Hz: above the filter's 1 Hz cut-off and below the mount's mode."""
+"""Hz: the base's response, from 0.6 Hz, below the base filter's 1 Hz
+cut-off (the band holds it), to 3 Hz, below the mount's 5 Hz mode, where
+MOUNT_BAND starts."""
 
 MOUNT_BAND = (3.0, 8.0)
 """Hz: around the mount's 5 Hz rocking mode."""

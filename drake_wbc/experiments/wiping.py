@@ -50,14 +50,14 @@ from drake_wbc.experiments.common import (
     held_integral,
     integrated_deviation,
     new_figure,
-    obstacle_distances,
+    person_distances,
     sample_period,
     save_figure,
     schedule_values,
+    static_distances,
 )
-from drake_wbc.experiments.scenario import controller_arm, footprint_of
+from drake_wbc.experiments.scenario import controller_arm
 from drake_wbc.stages.wrench import ExternalWrenchEstimator
-from drake_wbc.station.scene import Scene
 
 CONTACT_FORCE = 1.0
 """N: |F_ext,x| above this counts as contact (ten times the FT-300's
@@ -149,23 +149,6 @@ def path_deviation(log):
     return pose[:, :3] - commanded, angle, commanded
 
 
-def person_distance(scenario, log):
-    """(N,) distance from the footprint to the nearest person (inf
-    without people)."""
-    people = Scene(people=list(scenario.scene.people))
-    return obstacle_distances(people, log["truth.base_pose"],
-                              footprint_of(scenario),
-                              log.signals.get("truth.people_positions"))
-
-
-def static_distance(scenario, log):
-    """(N,) distance from the footprint to the nearest static obstacle."""
-    static = Scene(cylinders=list(scenario.scene.cylinders),
-                   boxes=list(scenario.scene.boxes))
-    return obstacle_distances(static, log["truth.base_pose"],
-                              footprint_of(scenario))
-
-
 def _rms(values):
     return float(np.sqrt(np.mean(values**2))) if len(values) else np.nan
 
@@ -188,7 +171,7 @@ def run_metrics(scenario, log):
     pose = log["truth.end_effector_pose"]
     dist = integrated_deviation(log)[:, :2]
     d_th = scenario.controller.base_cdmp.repulsion.d_th
-    person = person_distance(scenario, log)
+    person = person_distances(scenario, log)
     close = after & (person <= d_th)
     start = t[close][0] if np.any(close) else np.nan
     before = after & (t < start) if np.isfinite(start) else after
@@ -218,7 +201,7 @@ def run_metrics(scenario, log):
         "force_error_rms_person_close_N": _rms(error[close]),
         "force_error_peak_person_close_N": _peak(error[close]),
         "base_shift_person_close_m": float(shift),
-        "wall_min_distance_m": float(np.min(static_distance(scenario,
+        "wall_min_distance_m": float(np.min(static_distances(scenario,
                                                             log))),
     }
 
@@ -264,7 +247,7 @@ def draw_figures(scenario, logs, folder):
         for i, label in enumerate(("$v_x$", "$v_y$", r"$\omega_z$")):
             axes[3].plot(t, log["base.velocity_command"][:, i], label=label)
         axes[3].set_ylabel("$V_b^{ref}$ (m/s, rad/s)")
-        person = person_distance(scenario, log)
+        person = person_distances(scenario, log)
         axes[4].plot(t, np.where(np.isfinite(person), person, np.nan),
                      label="person")
         axes[4].axhline(d_th, color="r", ls=":", lw=1.0, label="$d_{th}$")

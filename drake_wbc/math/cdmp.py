@@ -56,6 +56,7 @@ from drake_wbc.math.validation import (
     non_negative,
     positive,
     selection,
+    within_site,
 )
 
 
@@ -156,16 +157,17 @@ class MovementReplay:
         file: the learned movement (a YAML file written by
             `drake-wbc teach`); a relative path is looked up in the
             working folder, then in the repository's diagrams/.
-        goal: the TCP's goal [x, y, z, yaw] in the world (m, rad), or
-            None for the demonstrated goal.
+        goal: the TCP's goal [x, y, z, yaw] in the world (m, rad; x, y
+            and z within the scene's site, +-SITE_EXTENT of
+            drake_wbc.math.validation), or None for the demonstrated goal.
         tau: the temporal scaling tau > 0 (the movement runs tau / tau_0
             times slower, tau_0 the learned one), or None for the learned
             one.
         start_time: when the movement starts, s >= 0 of the controller's
             clock; before it the DMP runs with g = 0 and f = 0.
         start: the TCP's pose [x, y, z, yaw] in the world where the
-            controller starts (its DMP's origin), or None for the
-            demonstration's start.
+            controller starts (its DMP's origin; within the site as the
+            goal), or None for the demonstration's start.
         tracking_gain: K >= 0, 1/s: from start_time, the task adds
             V_ee^ref = K (p*(t) - p(t)) on x, y, z and yaw, p* the pose
             the DMP plays (its own rollout) and p the TCP's pose from the
@@ -193,8 +195,11 @@ class MovementReplay:
                              "be the path of the learned movement's file")
         for name in ("goal", "start"):
             if getattr(self, name) is not None:
-                _set(self, name, tuple(float(v) for v in as_vector(
-                    name, getattr(self, name), 4)))
+                pose = tuple(float(v) for v in as_vector(
+                    name, getattr(self, name), 4))
+                # A point of the scene (goal: [1e300, ...] ran into NaN
+                # references and a safety stop).
+                _set(self, name, within_site(name, pose, lengths=pose[:3]))
         if self.tau is not None:
             positive("tau", self.tau)
         non_negative("start_time", self.start_time)

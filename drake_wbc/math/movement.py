@@ -33,7 +33,12 @@ from drake_wbc.math import dmp
 from drake_wbc.math.demonstration import DIMENSIONS, Demonstration
 from drake_wbc.math.kernels import fast_kernel
 from drake_wbc.math.loading import screened_data, short_value, shortened
-from drake_wbc.math.validation import as_matrix, as_vector, positive
+from drake_wbc.math.validation import (
+    as_matrix,
+    as_vector,
+    positive,
+    within_site,
+)
 
 LEARNED_TWIST_INDICES = (0, 1, 2, 5)
 """The entries of the whole-body DMP's [v; w] state that are learned:
@@ -77,7 +82,8 @@ class LearnedMovement:
         weights: (num_basis, 4) forcing weights (x, y, z, yaw), in
             absolute units.
         start, goal: (4,) the TCP's mean start and goal [x, y, z, yaw] in
-            the world.
+            the world (x, y and z within the scene's site, +-SITE_EXTENT
+            of drake_wbc.math.validation).
         demonstrations: the demonstrations (possibly resampled), for plots.
         source: how it was made (e.g. the command), for the file's header.
     """
@@ -96,8 +102,10 @@ class LearnedMovement:
         object.__setattr__(self, "weights", as_matrix(
             "weights", self.weights, (self.params.num_basis, 4)))
         for name in ("start", "goal"):
-            object.__setattr__(self, name, as_vector(
-                name, getattr(self, name), 4))
+            pose = as_vector(name, getattr(self, name), 4)
+            # Points of the scene, as a replay's goal and start.
+            object.__setattr__(self, name, within_site(
+                name, pose, lengths=pose[:3]))
         object.__setattr__(self, "demonstrations",
                            tuple(self.demonstrations))
 

@@ -322,6 +322,31 @@ def positive(name, value):
     return _above(name, value, strict=True)
 
 
+SITE_EXTENT = 1000.0
+"""The largest coordinate or size of anything in a scene, m (an obstacle,
+a person's path, the robot's start, a movement's start and goal): a
+scene is the robot's surroundings, which its LIDARs see to 25 m; Drake's
+geometry squares sizes and distances, and aborts on a cylinder 1e300 m
+high."""
+
+
+def within_site(name, value, lengths=None):
+    """`value` (m; a number or a vector) after checking that every entry
+    (or every entry of `lengths`, its parts in m) lies within
+    +-SITE_EXTENT.
+
+    Raises:
+        ValueError: naming `name`, its value and what is allowed.
+    """
+    array = np.asarray(value if lengths is None else lengths, dtype=float)
+    if np.any(np.abs(array) > SITE_EXTENT):
+        raise ValueError(
+            f"{name} = {value!r} is not allowed: every coordinate and size "
+            f"of a scene must lie within +-{SITE_EXTENT:g} m (the site "
+            "around the robot)")
+    return value
+
+
 LONGEST_RUN = 3600.0
 """s: the longest simulated run a command accepts (an hour).
 A run keeps its logs in memory, about 80 kB a simulated second (100

@@ -41,6 +41,7 @@ from drake_wbc.math.validation import (
     checked_instance,
     non_negative,
     positive,
+    within_site,
 )
 
 OBSTACLE_FRICTION = CoulombFriction(0.6, 0.5)  # static, dynamic
@@ -50,29 +51,6 @@ OBSTACLE_RESOLUTION_HINT = 0.05  # m, a rigid cylinder's largest mesh edge
 CYLINDER_COLOR = [0.55, 0.57, 0.62, 1.0]  # RGBA, grey
 BOX_COLOR = [0.78, 0.74, 0.66, 1.0]  # beige
 PERSON_COLOR = [0.25, 0.38, 0.62, 1.0]  # blue clothes
-
-SITE_EXTENT = 1000.0
-"""The largest coordinate or size of anything in a scene, m: a scene is
-the robot's surroundings, which its LIDARs see to 25 m; Drake's geometry
-squares sizes and distances, and aborts on a cylinder 1e300 m high."""
-
-
-def within_site(name, value, lengths=None):
-    """`value` (m; a number or a vector) after checking that every entry
-    (or every entry of `lengths`, its parts in m) lies within
-    +-SITE_EXTENT.
-
-    Raises:
-        ValueError: naming `name`, its value and what is allowed.
-    """
-    array = np.asarray(value if lengths is None else lengths, dtype=float)
-    if np.any(np.abs(array) > SITE_EXTENT):
-        raise ValueError(
-            f"{name} = {value!r} is not allowed: every coordinate and size "
-            f"of a scene must lie within +-{SITE_EXTENT:g} m (the site "
-            "around the robot)")
-    return value
-
 
 def _empty(value):
     return isinstance(value, (list, tuple)) and not value

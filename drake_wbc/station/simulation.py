@@ -66,6 +66,7 @@ from drake_wbc.math.validation import (
     positive,
     validated_copy,
     whole_multiple,
+    within_site,
 )
 from drake_wbc.robot.description import RobotDescription, shipped_robot
 from drake_wbc.robot.model import (
@@ -108,7 +109,6 @@ from drake_wbc.station.scene import (
     add_static_obstacles,
     people_at_height,
     planar_shapes,
-    within_site,
 )
 from drake_wbc.station.scene_sources import add_hand, add_people
 from drake_wbc.station.servo_gains import (
@@ -230,7 +230,8 @@ class StationOptions:
     time_step, arm.command_period a whole multiple of it and
     arm.servo_frequency below 1 / (2 time_step); the sensors sample at
     most once a step (wrist.rate and lidar.rate at most 1 / time_step),
-    and the base starts within the scene's site (scene.SITE_EXTENT).
+    and the base starts within the scene's site
+    (drake_wbc.math.validation.SITE_EXTENT).
     """
 
     time_step: float = 0.001

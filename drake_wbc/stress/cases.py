@@ -24,7 +24,6 @@ the same for the same arguments wherever it runs (its `wall_time_s` and
 record breaks (see drake_wbc.stress.run).
 """
 
-import copy
 import math
 import time
 from pathlib import Path
@@ -32,13 +31,12 @@ from pathlib import Path
 import numpy as np
 
 from drake_wbc.controller.task import Schedule
-from drake_wbc.experiments.common import obstacle_distances, run_metrics
+from drake_wbc.experiments.common import run_metrics, static_distances
 from drake_wbc.experiments.scenario import (
     Scenario,
     check_on_robot,
     controller_arm,
     controller_for,
-    footprint_of,
     scenario_robot,
 )
 from drake_wbc.math.validation import validate
@@ -49,6 +47,7 @@ from drake_wbc.station.scene import (
     HandForce,
     WalkingPerson,
 )
+from drake_wbc.stress.stopping import stop_within
 
 MODES = ("loco-manipulation", "intuitive-phri")
 """The controller's modes a case is drawn from (Table T:motion-mode)."""
@@ -242,10 +241,7 @@ def case_record(seed, index, scenario, log):
     """
     lower, upper, joint_speed_limits = _limits(scenario)
     metrics = run_metrics(scenario, log)
-    static = copy.deepcopy(scenario.scene)
-    static.people = []
-    distance = obstacle_distances(static, log["truth.base_pose"],
-                                  footprint_of(scenario))
+    distance = static_distances(scenario, log)
     command = log["arm.position_command"]
     dt = np.diff(log.time)[:, None]
     joint_speed = np.abs(np.diff(command, axis=0)) / dt
@@ -301,17 +297,22 @@ def run_case(seed, index, duration=4.0, robot=""):
     description file `robot`, "" for the shipped one); returns its
     record.
 
-    An exception in the simulation (e.g. a non-finite state) does not
-    propagate: the record then holds it in "error", a broken invariant.
+    An exception in drawing, building, simulating or measuring the case
+    (e.g. a non-finite state, a stage's IndexError) does not propagate:
+    the record then holds it in "error" as "Type: message", a broken
+    invariant. A stop of the run (drake_wbc.stress.stopping.Stopped, a
+    BaseException, also as the cause of another exception) propagates.
     """
     from drake_wbc.experiments.runner import build_closed_loop, simulate
 
     started = time.perf_counter()
-    scenario = random_scenario(seed, index, duration, robot)
     try:
+        scenario = random_scenario(seed, index, duration, robot)
         log = simulate(build_closed_loop(scenario))
         record = case_record(seed, index, scenario, log)
-    except (RuntimeError, ValueError, SystemExit) as error:
+    except (Exception, SystemExit) as error:
+        if stop_within(error) is not None:
+            raise
         record = failed_record(seed, index, error)
     record["wall_time_s"] = time.perf_counter() - started
     return record

@@ -44,7 +44,12 @@ in the output folder as it completes (so a long run that is stopped
 keeps what it did, and `--resume` runs only the cases missing from it),
 then prints a summary (every case for a short run; for a long one the
 spread of each column and the failing cases), writes `stress.json` and
-`stress.csv` and returns 0 when every invariant held, 1 otherwise.
+`stress.csv` and returns 0 when every invariant held, 1 otherwise. Each
+failing case's scenario is written beside them, `case_<K>.yaml` (`drake-wbc
+run` runs it, with its logs and figures), and the summary gives the
+command that runs that case alone: `drake-wbc stress --seed S --case K`
+(with the run's duration, robot and output), which writes into
+`<output>/case_<K>/`.
 
 Stopping a run: the first Ctrl-C (SIGINT) or SIGTERM cancels the cases
 under way (their worker processes are ended; the workers themselves
@@ -60,6 +65,7 @@ import csv
 import json
 import multiprocessing
 import os
+import shlex
 import signal
 import sys
 import threading
@@ -69,10 +75,16 @@ from pathlib import Path
 
 from drake_wbc.experiments.reports import from_json_text, json_text
 from drake_wbc.experiments.runner import wall_time_text
-from drake_wbc.experiments.scenario import robot_option_file
+from drake_wbc.experiments.scenario import robot_option_file, scenario_text
 from drake_wbc.math.validation import positive_duration, whole_number
 from drake_wbc.robot.description import load_robot_description
-from drake_wbc.stress.cases import TIMING_KEYS, run_case, violations
+from drake_wbc.stress.cases import (
+    TIMING_KEYS,
+    random_scenario,
+    run_case,
+    violations,
+)
+from drake_wbc.stress.stopping import Stopped, stop_within
 
 DEFAULT_DURATION = 4.0
 """Simulated time of each case, s."""
@@ -106,6 +118,11 @@ def add_stress_arguments(parser):
                         help="how many cases (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=0,
                         help="the run's seed (default: %(default)s)")
+    parser.add_argument(
+        "--case", type=int, default=None, metavar="K",
+        help="run case K of the seed alone (--cases is then ignored), "
+             "writing into <output>/case_K/; a failing case's line of the "
+             "summary gives this command")
     parser.add_argument(
         "--workers", type=int, default=None,
         help="worker processes (default: one per core); 1 runs the cases "
@@ -167,13 +184,13 @@ class ProgressLine:
 
 
 def run_cases(seed, cases, duration=DEFAULT_DURATION, workers=1,
-              scheduler=None, on_done=None, done=(), robot=""):
-    """Runs cases 0 .. cases - 1 of `seed`; returns their records, in case
-    order.
+              scheduler=None, on_done=None, done=(), robot="", first=0):
+    """Runs cases first .. cases - 1 of `seed`; returns their records, in
+    case order.
 
     Args:
         seed: a whole number >= 0.
-        cases: how many cases, >= 1.
+        cases: how many cases, >= 1 (the cases before `first` not run).
         duration: simulated time of each case, s.
         workers: worker processes (spawned); 1 runs the cases here, None
             one per core. Ignored with `scheduler`.
@@ -183,16 +200,18 @@ def run_cases(seed, cases, duration=DEFAULT_DURATION, workers=1,
         done: records of cases already run (e.g. `Journal.records`): they
             are returned as they are, and only the other cases run.
         robot: the robot's description file ("" for the shipped robot).
+        first: the first case to run, a whole number < cases.
 
     Raises:
         ValueError: naming a bad argument.
     """
     seed, cases, duration, workers = check_arguments(seed, cases, duration,
                                                      workers)
+    first = whole_number("first", first, 0, cases - 1)
     on_done = on_done or (lambda record: None)
     kept = {record["case"]: record for record in done
-            if record["case"] < cases}
-    pending = [index for index in range(cases) if index not in kept]
+            if first <= record["case"] < cases}
+    pending = [index for index in range(first, cases) if index not in kept]
     if not pending:
         records = []
     elif scheduler is not None:
@@ -327,30 +346,6 @@ def _watch_parent(parent, period=0.5):
     while os.getppid() == parent:
         time.sleep(period)
     os._exit(1)
-
-
-class Stopped(BaseException):
-    """A stress run stopped by a signal (SIGINT or SIGTERM); `code` is the
-    exit code, 128 + the signal's number. A BaseException, as
-    KeyboardInterrupt, so that no `except Exception` swallows it."""
-
-    def __init__(self, signum):
-        super().__init__(signal.Signals(signum).name)
-        self.signum, self.code = signum, 128 + signum
-
-
-def stop_within(error):
-    """The Stopped that `error` is or was raised from, or None. A signal's
-    Stopped raised while Python code runs on behalf of compiled code (a
-    compiled kernel's call back into the interpreter) comes out of it as
-    a SystemError caused by the Stopped."""
-    seen = set()
-    while error is not None and id(error) not in seen:
-        if isinstance(error, Stopped):
-            return error
-        seen.add(id(error))
-        error = error.__cause__ or error.__context__
-    return None
 
 
 _SIGNALS = {"held": 0, "pending": None, "received": []}
@@ -610,6 +605,43 @@ def write_results(folder, settings, records):
     return json_path, csv_path
 
 
+def rerun_command(settings, case, output):
+    """The command line that runs case `case` of the run of `settings`
+    alone, writing into `output`/case_<case>/."""
+    words = ["drake-wbc", "stress", "--seed", str(settings["seed"]),
+             "--case", str(case), "--duration", str(settings["duration_s"])]
+    if settings["robot"]:
+        words += ["--robot", settings["robot"]]
+    return shlex.join(words + ["--output", str(output)])
+
+
+def rerun_lines(folder, output, settings, records):
+    """For each failing case of `records`: writes its scenario into
+    `folder` (beside stress.json), `case_<K>.yaml`, where it can be drawn
+    (scenario_text), and returns a line saying how to run it again
+    (`rerun_command`, `output` the run's --output) and where its
+    scenario is."""
+    lines = []
+    for record in records:
+        if not violations(record):
+            continue
+        case = record["case"]
+        line = (f"case {case}: run it alone with "
+                f"{rerun_command(settings, case, output)}")
+        try:
+            scenario = random_scenario(settings["seed"], case,
+                                       settings["duration_s"],
+                                       settings["robot"])
+        except Exception as error:  # the case's own error, recorded
+            lines.append(f"{line} (its scenario cannot be drawn: "
+                         f"{type(error).__name__}: {error})")
+            continue
+        path = Path(folder) / f"case_{case}.yaml"
+        path.write_text(scenario_text(scenario), encoding="utf-8")
+        lines.append(f"{line}; its scenario, for drake-wbc run: {path}")
+    return lines
+
+
 def run_stress(args):
     """Runs `drake-wbc stress` with the parsed `args`; returns the exit
     code (0: every invariant held; 1: one broke; 130 or 143: stopped by
@@ -618,8 +650,12 @@ def run_stress(args):
     Raises:
         ValueError: naming a bad argument, before anything is written.
     """
+    first, cases, output = 0, args.cases, args.output
+    if args.case is not None:
+        first = whole_number("--case", args.case, 0, MAX_CASES - 1)
+        cases, output = first + 1, args.output / f"case_{first}"
     seed, cases, duration, workers = check_arguments(
-        args.seed, args.cases, args.duration, args.workers, prefix="--")
+        args.seed, cases, args.duration, args.workers, prefix="--")
     checked_scheduler(args.scheduler)
     where = (f"on the Dask cluster at {args.scheduler}" if args.scheduler
              else "in this process" if workers == 1
@@ -634,14 +670,16 @@ def run_stress(args):
     journal = None
     with stopped_by_signals():
         try:
-            journal = Journal(args.output, settings, resume=args.resume)
-            print(f"drake-wbc stress: {cases} cases of {duration} s, seed "
-                  f"{seed}, {where}; writing to {args.output}/")
-            kept = [r for r in journal.records if r["case"] < cases]
+            journal = Journal(output, settings, resume=args.resume)
+            what = (f"{cases} cases" if args.case is None
+                    else f"case {first}")
+            print(f"drake-wbc stress: {what} of {duration} s, seed "
+                  f"{seed}, {where}; writing to {output}/")
+            kept = [r for r in journal.records if first <= r["case"] < cases]
             if kept:
                 print(f"resuming: {len(kept)} case(s) kept from "
                       f"{journal.path}")
-            progress = ProgressLine(cases - len(kept))
+            progress = ProgressLine(cases - first - len(kept))
 
             def on_done(record):
                 journal.append(record)
@@ -649,10 +687,11 @@ def run_stress(args):
 
             records = run_cases(seed, cases, duration, workers,
                                 args.scheduler, on_done=on_done, done=kept,
-                                robot=robot)
+                                robot=robot, first=first)
             print(summary_table(records))
-            json_path, csv_path = write_results(args.output, settings,
-                                                records)
+            json_path, csv_path = write_results(output, settings, records)
+            for line in rerun_lines(output, args.output, settings, records):
+                print(line)
         except BaseException as error:
             stop = stop_within(error)
             if stop is None:
