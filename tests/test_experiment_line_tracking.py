@@ -115,3 +115,33 @@ def test_figure_is_written(scenario, log, tmp_path):
     paths = line_tracking.draw_figures(scenario, {"run": log}, tmp_path)
     assert [p.name for p in paths] == ["obst_avoid_run.png"]
     assert paths[0].read_bytes().startswith(b"\x89PNG")
+
+
+def test_each_persons_closest_approach_is_that_persons():
+    """With a second person standing 3 m to the right, each person's
+    closest approach is measured to that person alone: the footprint's
+    distance to its centre less its radius, from its own columns of the
+    people's positions (it took every person's centre with one person's
+    radius, so both gave the nearer one's)."""
+    path = find_scenario("line_tracking")
+    scenario = load_scenario(text=path.read_text().replace(
+        "  people:\n", "  people:\n  - name: far\n    times: [0.0, 20.0]\n"
+        "    waypoints: [[0.0, -3.0], [0.0, -3.0]]\n", 1))
+    log = simulate(build_closed_loop(scenario), duration=2.0)
+    metrics = line_tracking.run_metrics(scenario, log)
+    positions = log["truth.people_positions"]
+    pose = log["truth.base_pose"]
+    a, b = line_tracking.footprint_of(scenario)
+    for k, person in enumerate(scenario.scene.people):
+        offset = positions[:, 2 * k:2 * k + 2] - pose[:, :2]
+        c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        x = c * offset[:, 0] + s * offset[:, 1]   # in T_b
+        y = -s * offset[:, 0] + c * offset[:, 1]
+        gap = np.hypot(np.maximum(np.abs(x) - a, 0.0),
+                       np.maximum(np.abs(y) - b, 0.0)) - person.radius
+        assert metrics[f"closest_approach_{person.name}_m"] == (
+            pytest.approx(max(float(np.min(gap)), 0.0), abs=1e-9))
+    # In these 2 s the walker is still 3 m up the path, farther than the
+    # one standing: the two differ (each was the nearer one's, 2.45 m).
+    assert (metrics["closest_approach_walker_m"]
+            > metrics["closest_approach_far_m"] + 0.5)

@@ -76,14 +76,15 @@ def _ratio(numerator, denominator):
 
 
 def _scene_objects(scene):
-    """(name, scene holding that object alone, is_person) per object."""
+    """(name, scene holding that object alone, the person's index in the
+    scene's people or None) per object."""
     empty = replace(scene, cylinders=[], boxes=[], people=[])
-    objects = [(c.name, replace(empty, cylinders=[c]), False)
+    objects = [(c.name, replace(empty, cylinders=[c]), None)
                for c in scene.cylinders]
-    objects += [(b.name, replace(empty, boxes=[b]), False)
+    objects += [(b.name, replace(empty, boxes=[b]), None)
                 for b in scene.boxes]
-    objects += [(p.name, replace(empty, people=[p]), True)
-                for p in scene.people]
+    objects += [(p.name, replace(empty, people=[p]), k)
+                for k, p in enumerate(scene.people)]
     return objects
 
 
@@ -94,8 +95,13 @@ def _least(distance):
     return value if np.isfinite(value) else None
 
 
-def _closest(scene, log, is_person, footprint):
-    people = log.signals.get("truth.people_positions") if is_person else None
+def _closest(scene, log, person, footprint):
+    """The closest approach of the footprint to the one object of
+    `scene`; for the scene's person of index `person`, from its own
+    columns of truth.people_positions (all of them measured every
+    person's centre with this one's radius)."""
+    people = None if person is None else log[
+        "truth.people_positions"][:, 2 * person:2 * person + 2]
     return _least(obstacle_distances(scene, log["truth.base_pose"],
                                      footprint, people))
 
@@ -125,9 +131,9 @@ def run_metrics(scenario, log):
             scenario, log)),
         "min_person_distance_m": _least(person_distances(scenario, log)),
     }
-    for name, alone, is_person in _scene_objects(scene):
+    for name, alone, person in _scene_objects(scene):
         metrics[f"closest_approach_{name}_m"] = _closest(
-            alone, log, is_person, footprint)
+            alone, log, person, footprint)
     return metrics
 
 
