@@ -156,6 +156,9 @@ def test_figure_is_written(scenario, log, tmp_path):
     assert paths[0].read_bytes().startswith(b"\x89PNG")
 
 
+# The test arm is untuned (k_j caps its P_jnt): said, and not the point.
+@pytest.mark.filterwarnings(
+    "ignore::drake_wbc.robot.tuning.RobotTuningWarning")
 def test_a_stretch_without_samples_is_nan_in_the_summary(tmp_path, capsys):
     """`drake-wbc run fixed_point --robot <a 7-joint arm> --duration 3`:
     the person is still close when the run ends, and s_c is never 0, so
