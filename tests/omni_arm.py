@@ -158,6 +158,15 @@ def add_collision_spheres(folder, radii):
     urdf.write_text(text)
 
 
+SELF_FILTER = """\
+- add_collision_filter_group:
+    name: robot
+    members: [omni_arm::link1, omni_arm::link3]
+    ignored_collision_filter_groups: [robot]
+"""
+"""The README's directive that filters the omni arm's link1 and link3."""
+
+
 def use_directives(folder, path, extra=""):
     """Makes the omni arm's description `path` (in `folder`) load its URDF
     through model directives, robot.dmd.yaml, to which `extra` adds

@@ -127,6 +127,36 @@ def test_demo_says_an_arm_joint_without_an_actuator_has_none(tmp_path,
     assert all(row.endswith("unactuated (spring-damper)") for row in rows)
 
 
+def test_demo_says_where_the_robots_own_bodies_overlap(tmp_path, capsys):
+    """Two links of the arm whose collision spheres overlap at home (link1
+    and link3, two joints apart), which the simulated station refuses:
+    demo says so, naming the pair, the depth the station's error gives
+    and what to do; with the README's collision filter group it says
+    nothing of it (it said nothing either way)."""
+    from omni_arm import SELF_FILTER, add_collision_spheres, use_directives
+
+    from drake_wbc.robot.description import load_robot_description
+    from drake_wbc.station.simulation import SimulatedStation
+
+    path = write_omni_arm(tmp_path, 7)
+    add_collision_spheres(tmp_path, {"link1": 0.32, "link3": 0.32})
+    use_directives(tmp_path, path)
+    with pytest.raises(ValueError) as refused:
+        SimulatedStation(robot=load_robot_description(path))
+    depth = re.search(r"'omni_arm::link3' by ([0-9.]+) mm",
+                      str(refused.value)).group(1)
+    assert main(["demo", "--robot", str(path), "--output",
+                 str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert (f"The robot's own bodies overlap at this configuration: "
+            f"omni_arm::link1 and omni_arm::link3 by {depth} mm.") in out
+    assert "filter their contacts in the model directives" in out
+    use_directives(tmp_path, path, SELF_FILTER)
+    assert main(["demo", "--robot", str(path), "--output",
+                 str(tmp_path)]) == 0
+    assert "overlap" not in capsys.readouterr().out
+
+
 def test_demo_rejects_a_bad_configuration(tmp_path, capsys):
     code = main(["demo", "--output", str(tmp_path), "--q-arm",
                  "0", "0", "nan", "0", "0", "0"])

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from omni_arm import (
     HOMES,
+    SELF_FILTER,
     add_collision_spheres,
     use_directives,
     write_omni_arm,
@@ -533,15 +534,6 @@ def _sphere_overlap(description, radius, q_arm):
     overlap with the arm at q_arm (m; negative: apart)."""
     p1, p3 = _link_origins(description, q_arm)
     return 2.0 * radius - np.linalg.norm(p3 - p1)
-
-
-SELF_FILTER = """\
-- add_collision_filter_group:
-    name: robot
-    members: [omni_arm::link1, omni_arm::link3]
-    ignored_collision_filter_groups: [robot]
-"""
-"""The README's directive that filters the omni arm's link1 and link3."""
 
 
 def test_links_that_overlap_at_home_are_refused_unless_filtered(tmp_path):

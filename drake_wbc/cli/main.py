@@ -79,6 +79,7 @@ def file_stem(name, fallback="robot"):
 def _run_demo(args):
     from drake_wbc.cli.model_report import (
         describe_robot,
+        describe_self_contacts,
         describe_tuning,
         write_model_page,
     )
@@ -118,9 +119,11 @@ def _run_demo(args):
     print(describe_tuning(arm, params.capability_band,
                           params.capability.joint_limit_gain,
                           params.workspace.workspace))
-    page = write_model_page(
+    page, contacts = write_model_page(
         args.output / f"{file_stem(description.name)}_model.html", q_arm,
         description=description)
+    if contacts:
+        print(f"\n{describe_self_contacts(contacts)}")
     print(f"\nMeshcat page of the model (open it in a browser): {page}")
     return 0
 

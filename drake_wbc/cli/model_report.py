@@ -9,6 +9,7 @@ import numpy as np
 from pydrake.geometry import MeshcatVisualizer, Rgba
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.multibody.tree import ModelInstanceIndex
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.visualization import AddFrameTriadIllustration
 
@@ -21,6 +22,7 @@ from drake_wbc.robot.model import (
     joint_position_indices,
     make_robot_plant,
     mount_rocking_modes,
+    self_contacts,
 )
 from drake_wbc.robot.tuning import (
     BAND_OVER_HOME,
@@ -241,11 +243,16 @@ def write_model_page(path, q_a=None, lidar_range=1.0, description=None):
         description: the RobotDescription (the shipped robot if None).
 
     Returns:
-        pathlib.Path: the written file.
+        (pathlib.Path, list): the written file, and the robot's own
+        bodies that overlap at `q_a` (drake_wbc.robot.model.self_contacts:
+        the simulated station refuses them).
     """
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
+    first = plant.num_model_instances()
     model = add_robot(plant, description)
+    instances = [ModelInstanceIndex(i)
+                 for i in range(first, plant.num_model_instances())]
     q_a = as_vector("q_a", model.home if q_a is None else q_a,
                     model.num_arm_joints)
     plant.Finalize()
@@ -281,4 +288,19 @@ def write_model_page(path, q_a=None, lidar_range=1.0, description=None):
         meshcat.SetTransform(name, frame.CalcPoseInWorld(plant_context))
     meshcat.SetTransform("/lidar_fields", RigidTransform())
     diagram.ForcedPublish(context)
-    return write_static_html(meshcat, path)
+    return (write_static_html(meshcat, path),
+            self_contacts(plant, plant_context, instances))
+
+
+def describe_self_contacts(contacts):
+    """What `demo` says of the robot's own bodies that overlap
+    (`write_model_page`'s list), or "" where none do."""
+    if not contacts:
+        return ""
+    pairs = "; ".join(f"{a} and {b} by {1e3 * depth:.1f} mm"
+                      for a, b, depth in contacts)
+    return (f"The robot's own bodies overlap at this configuration: {pairs}."
+            " The simulated station refuses a robot whose bodies overlap "
+            "at its home or start: filter their contacts in the model "
+            "directives (README, \"Use your own robot\"), or give "
+            "another configuration.")
