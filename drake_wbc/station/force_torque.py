@@ -6,13 +6,15 @@ and `WeldWrench` turns that weld's reaction into the wrench [f; tau] the
 tool exerts on the sensor. `measure` models what the sensor makes of it
 (noise, saturation, quantisation), and `WristForceTorqueSensor` samples it
 at the sensor's rate, like the real one. Sampling at t = 0 follows the
-same rules as the LIDAR's (see drake_wbc.station.lidar), with one more
-(checked on drake 1.51.1): a discrete plant's reaction forces are sampled
-outputs (the default `use_sampled_output_ports`), zero until its first
-step. The reading stored at `Simulator.Initialize()` is then zero; the
-plant steps in an unrestricted update, which Drake runs before the
-discrete updates due at the same time, so the reading taken at t = 0
-already holds the forces of the initial state.
+same rules as the LIDAR's (see drake_wbc.station.lidar). The station's
+plant has unsampled output ports (`use_sampled_output_ports` False), so
+its reaction forces are those of the context's state from the start: the
+reading stored at `Simulator.Initialize()` already holds the initial
+state's forces (the tool's weight at rest). On a plant with sampled
+outputs (Drake's default; checked on drake 1.51.1) they are zero until
+its first step, which Drake runs in an unrestricted update before the
+discrete updates due at the same time: there the reading taken at
+Initialize is zero, and the one taken at t = 0 holds the initial forces.
 """
 
 from dataclasses import dataclass

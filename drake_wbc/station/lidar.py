@@ -38,7 +38,10 @@ MAX_BEAMS = 10_000
 
 @dataclass
 class LidarParameters:
-    """Parameters of one 2-D LIDAR; the defaults are the SICK TiM571's.
+    """Parameters of one 2-D LIDAR; the defaults are the SICK TiM571's
+    field, beams, ranges and rate, without range noise (the TiM571's
+    statistical error, about 20 mm, is not in the robot's facts: give
+    range_noise_std to simulate it).
 
     Attributes:
         field_of_view: rad, from the first beam to the last, in (0, 2 pi];
