@@ -59,9 +59,10 @@ def test_the_lag_steps_along_its_closed_form(lag):
 
 
 def held_response(driver_params, commands, period):
-    """The station's BaseVelocityDriver (its own step) under `commands`,
-    each held `period` s: its velocity at the start of each period."""
-    driver = BaseVelocityDriver(driver_params)
+    """The station's BaseVelocityDriver (at the station's default step,
+    1 ms) under `commands`, each held `period` s: its velocity at the
+    start of each period."""
+    driver = BaseVelocityDriver(driver_params, 0.001)
     simulator = Simulator(driver)
     context = simulator.get_mutable_context()
     driver.GetInputPort("base_pose").FixValue(context, np.zeros(3))
@@ -307,8 +308,7 @@ def test_the_deviation_loop_closes_through_the_base_only_with_its_motion():
     line_tracking); alpha = 0 opens the loop."""
     scenario = load_scenario(find_scenario("fixed_point"))
     hertz, omega = frequency_grid(0.01, 49.9, 100)
-    driver = replace(station_base(scenario),
-                     time_step=scenario.station.time_step)
+    driver, step = station_base(scenario), scenario.station.time_step
 
     def params_of(source):
         return replace(scenario.controller, compensator=replace(
@@ -322,7 +322,7 @@ def test_the_deviation_loop_closes_through_the_base_only_with_its_motion():
         assert ideal["measured"](w) == pytest.approx(ideal["command"](w),
                                                      rel=1e-9, abs=1e-15)
     margins = {source: stability_margins(chains.deviation_loop(
-        params_of(source), point, driver)[0], omega)
+        params_of(source), point, driver, base_step=step)[0], omega)
         for source in BASE_SOURCES}
     command = margins["command"].gain_margin_db
     assert command == pytest.approx(
@@ -330,5 +330,5 @@ def test_the_deviation_loop_closes_through_the_base_only_with_its_motion():
     for source in ("measured", "predicted"):
         assert 20.0 < margins[source].gain_margin_db < command - 2.0
     opened, _ = chains.deviation_loop(params_of("measured"), point, driver,
-                                      alpha=0.0)
+                                      alpha=0.0, base_step=step)
     assert max(abs(opened(w)) for w in omega[::10]) < 1e-12

@@ -31,14 +31,18 @@ from drake_wbc.station.symbolic_drivers import (
     joint_rates_system,
 )
 
+H = 0.001
+"""A plant step, s (the station's default)."""
 
-def run_loop(params, command, steps, x0=None):
-    """The loop's state after 0, 1, ..., steps periods, (steps + 1, n)."""
+
+def run_loop(params, h, command, steps, x0=None):
+    """The loop's state after 0, 1, ..., steps periods of h s,
+    (steps + 1, n)."""
     size = 3 if params.damping_ratio is None else 6
     x = np.zeros(size) if x0 is None else np.asarray(x0, dtype=float)
     states = [x]
     for _ in range(steps):
-        x = base_loop_step(x, command, params)
+        x = base_loop_step(x, command, params, h)
         states.append(x)
     return np.array(states)
 
@@ -63,14 +67,14 @@ def rotation_z(yaw):
     (0.1, 0.002, [0.05, 0.02, -0.08]),
 ])
 def test_first_order_loop_from_rest_is_the_sampled_exponential(lag, h, u):
-    params = BaseDriverParameters(lag=lag, time_step=h)
+    params = BaseDriverParameters(lag=lag)
     u = np.array(u)
     gain = 1.0 - np.exp(-h / lag)
     # Below the limits: the first (largest) step stays under a_max h, so
     # the acceleration limit never acts.
     assert np.all(gain * np.abs(u) < np.array(params.acceleration_limits) * h)
     steps = 600
-    v = run_loop(params, u, steps)
+    v = run_loop(params, h, u, steps)
     n = np.arange(steps + 1)[:, None]
     expected = u * (1.0 - np.exp(-n * h / lag))
     np.testing.assert_allclose(v, expected, rtol=0.0, atol=1e-13)
@@ -81,10 +85,10 @@ def test_large_command_saturates_at_the_velocity_and_acceleration_limits():
     a_max = np.array([1.0, 2.0, 0.5])
     params = BaseDriverParameters(velocity_limits=list(limits),
                                   acceleration_limits=list(a_max))
-    h, lag = params.time_step, params.lag
+    h, lag = H, params.lag
     command = np.array([5.0, -3.0, 2.0])
     steps = 6000
-    v = run_loop(params, command, steps)
+    v = run_loop(params, h, command, steps)
     assert np.all(np.abs(v) <= limits + 1e-15)
     change = np.abs(np.diff(v, axis=0))
     assert np.all(change <= a_max * h * (1.0 + 1e-12))
@@ -115,9 +119,8 @@ def test_second_order_loop_approaches_the_continuous_step_response(zeta):
     w = 1.0 / lag
     errors = []
     for h in (0.001, 0.0005):
-        params = BaseDriverParameters(lag=lag, damping_ratio=zeta,
-                                      time_step=h)
-        x = run_loop(params, u, int(round(duration / h)))
+        params = BaseDriverParameters(lag=lag, damping_ratio=zeta)
+        x = run_loop(params, h, u, int(round(duration / h)))
         assert np.all(np.abs(x[:, 3:]) < params.acceleration_limits)
         t = np.arange(x.shape[0])[:, None] * h
         expected = second_order_step(u, w, zeta, t)
@@ -136,7 +139,7 @@ def test_second_order_loop_approaches_the_continuous_step_response(zeta):
 
 @pytest.mark.parametrize("h", [0.002, 0.001])
 def test_jerky_loop_is_the_short_lags_sampled_exponential(h):
-    params = BaseDriverParameters(loop="jerky", time_step=h)
+    params = BaseDriverParameters(loop="jerky")
     assert params.lag == 0.02 and params.damping_ratio is None
     np.testing.assert_array_equal(params.acceleration_limits, [5.0] * 3)
     u = np.array([0.05, -0.03, 0.04])
@@ -144,7 +147,7 @@ def test_jerky_loop_is_the_short_lags_sampled_exponential(h):
     # Its first (largest) step stays under a_max h: no acceleration limit.
     assert np.all(gain * np.abs(u) < np.array(params.acceleration_limits) * h)
     steps = int(round(0.2 / h))
-    v = run_loop(params, u, steps)
+    v = run_loop(params, h, u, steps)
     n = np.arange(steps + 1)[:, None]
     np.testing.assert_allclose(v, u * (1.0 - np.exp(-n * h / params.lag)),
                                rtol=0.0, atol=1e-13)
@@ -155,11 +158,11 @@ def test_jerky_loop_is_the_short_lags_sampled_exponential(h):
 
 def test_ringing_loop_is_the_underdamped_second_order_step():
     h = 0.0005
-    params = BaseDriverParameters(loop="ringing", time_step=h)
+    params = BaseDriverParameters(loop="ringing")
     w, zeta = 1.0 / params.lag, params.damping_ratio
     assert w / (2 * np.pi) == pytest.approx(3.0) and zeta == 0.15
     u, duration = np.array([0.05, -0.03, 0.04]), 2.0
-    x = run_loop(params, u, int(round(duration / h)))
+    x = run_loop(params, h, u, int(round(duration / h)))
     assert np.all(np.abs(x[:, 3:]) < params.acceleration_limits)
     t = np.arange(x.shape[0])[:, None] * h
     error = np.max(np.abs(x[:, :3] - second_order_step(u, w, zeta, t)),
@@ -190,8 +193,7 @@ def test_a_named_loop_sets_its_values_and_refuses_others():
         with pytest.raises(ValueError, match=f"^{name} = .*loop = 'ringing'"):
             BaseDriverParameters(loop="ringing", **fields)
     with pytest.raises(ValueError, match="^damping_ratio = 0.3 .*'jerky'"):
-        BaseDriverParameters(loop="jerky", damping_ratio=0.3,
-                             time_step=0.002)
+        BaseDriverParameters(loop="jerky", damping_ratio=0.3)
 
 
 def test_a_named_loop_loads_from_a_scenario_file():
@@ -225,15 +227,15 @@ def autodiff_context(system, state, command, pose):
 
 def test_first_order_update_in_autodiff_has_the_lags_derivatives():
     params = BaseDriverParameters()
-    system = BaseVelocityDriver(params).ToAutoDiffXd()
+    system = BaseVelocityDriver(params, H).ToAutoDiffXd()
     v, u, pose = [0.05, -0.02, 0.01], [0.1, 0.1, 0.0], [0.3, -1.0, 0.5]
     context = autodiff_context(system, v, u, pose)
     update = system.EvalUniquePeriodicDiscreteUpdate(context)
     result = update.get_vector().CopyToVector()
     np.testing.assert_allclose(ExtractValue(result).ravel(),
-                               base_loop_step(np.array(v), u, params),
+                               base_loop_step(np.array(v), u, params, H),
                                atol=1e-15)
-    g = 1.0 - np.exp(-params.time_step / params.lag)
+    g = 1.0 - np.exp(-H / params.lag)
     expected = np.hstack([(1.0 - g) * np.eye(3), g * np.eye(3),
                           np.zeros((3, 3))])
     np.testing.assert_allclose(ExtractGradient(result), expected,
@@ -253,8 +255,8 @@ def test_first_order_update_in_autodiff_has_the_lags_derivatives():
 
 def test_second_order_update_in_autodiff_has_the_euler_steps_derivatives():
     params = BaseDriverParameters(damping_ratio=0.4)
-    h, w, zeta = params.time_step, 1.0 / params.lag, 0.4
-    system = BaseVelocityDriver(params).ToAutoDiffXd()
+    h, w, zeta = H, 1.0 / params.lag, 0.4
+    system = BaseVelocityDriver(params, h).ToAutoDiffXd()
     x = [0.05, -0.02, 0.01, 0.1, 0.0, -0.2]
     context = autodiff_context(system, x, [0.3, 0.1, -0.2], [0.0, 0.0, 0.0])
     result = system.EvalUniquePeriodicDiscreteUpdate(context).get_vector(
@@ -270,12 +272,13 @@ def test_second_order_update_in_autodiff_has_the_euler_steps_derivatives():
                                atol=1e-15)
     np.testing.assert_allclose(
         ExtractValue(result).ravel(),
-        base_loop_step(np.array(x), [0.3, 0.1, -0.2], params), atol=1e-15)
+        base_loop_step(np.array(x), [0.3, 0.1, -0.2], params, h),
+        atol=1e-15)
 
 
 def base_driver_simulator(params, command, pose):
     builder = DiagramBuilder()
-    driver = builder.AddSystem(BaseVelocityDriver(params))
+    driver = builder.AddSystem(BaseVelocityDriver(params, H))
     for name, value in (("velocity_command", command), ("base_pose", pose)):
         source = builder.AddSystem(ConstantVectorSource(value))
         builder.Connect(source.get_output_port(), driver.GetInputPort(name))
@@ -288,7 +291,7 @@ def base_driver_simulator(params, command, pose):
 @pytest.mark.parametrize("yaw", [0.0, 0.5, -2.0])
 def test_base_driver_rotates_the_loops_velocity_into_joint_rates(yaw):
     params = BaseDriverParameters()
-    h, lag = params.time_step, params.lag
+    h, lag = H, params.lag
     u = np.array([0.12, -0.08, 0.15])
     driver, simulator, context = base_driver_simulator(
         params, u, [0.4, -1.0, yaw])
@@ -304,6 +307,23 @@ def test_base_driver_rotates_the_loops_velocity_into_joint_rates(yaw):
         np.testing.assert_array_equal(desired[:3], 0.0)
         np.testing.assert_allclose(desired[3:], rotation_z(yaw) @ velocity,
                                    atol=1e-15)
+
+
+def test_the_base_drivers_run_at_the_step_they_are_given():
+    """The loop's step is an argument of the drivers, not a field of its
+    parameters (whose default of 1 ms refused a 5 ms loop even at a
+    0.2 ms step); it is checked against the loop's lag."""
+    params = BaseDriverParameters(lag=0.005, servo_time_constant=0.001)
+    for make in (BaseVelocityDriver, base_loop_system):
+        assert make(params, 0.0002).GetUniquePeriodicDiscreteUpdateAttribute(
+            ).period_sec() == 0.0002
+        with pytest.raises(ValueError, match=r"^time_step = 0\.001 s is not "
+                           r"allowed with lag = 0\.005 s: must be at most "
+                           r"lag / 10"):
+            make(params, 0.001)
+        with pytest.raises(ValueError, match="^time_step = None is not "
+                           "allowed"):
+            make(params)
 
 
 def test_set_velocity_starts_the_loop_in_steady_motion():
@@ -490,7 +510,7 @@ def test_second_order_overshoot_stops_at_the_velocity_limit():
     x = np.zeros(6)
     peak = 0.0
     for _ in range(2000):
-        x = base_loop_step(x, np.array([0.99, 0.0, 0.0]), params)
+        x = base_loop_step(x, np.array([0.99, 0.0, 0.0]), params, H)
         peak = max(peak, x[0])
     assert peak <= params.velocity_limits[0]
     assert peak == pytest.approx(params.velocity_limits[0])
@@ -499,14 +519,14 @@ def test_second_order_overshoot_stops_at_the_velocity_limit():
 # The drivers as the station runs them: SymbolicVectorSystems built from
 # the same functions, checked against the reference LeafSystems above.
 
-@pytest.mark.parametrize("params", [
-    BaseDriverParameters(time_step=0.005),
-    BaseDriverParameters(damping_ratio=0.3, lag=0.1, time_step=0.002,
-                         acceleration_limits=[2.0, 0.5, 1.0])])
-def test_symbolic_base_loop_steps_like_base_loop_step(params):
-    system = base_loop_system(params)
+@pytest.mark.parametrize("params, h", [
+    (BaseDriverParameters(), 0.005),
+    (BaseDriverParameters(damping_ratio=0.3, lag=0.1,
+                          acceleration_limits=[2.0, 0.5, 1.0]), 0.002)])
+def test_symbolic_base_loop_steps_like_base_loop_step(params, h):
+    system = base_loop_system(params, h)
     assert system.GetUniquePeriodicDiscreteUpdateAttribute().period_sec() \
-        == params.time_step
+        == h
     context = system.CreateDefaultContext()
     rng = np.random.default_rng(7)
     for _ in range(200):  # within and beyond every limit
@@ -516,7 +536,7 @@ def test_symbolic_base_loop_steps_like_base_loop_step(params):
         system.get_input_port().FixValue(context, u)
         np.testing.assert_allclose(
             system.EvalUniquePeriodicDiscreteUpdate(context).get_vector()
-            .CopyToVector(), base_loop_step(x, u, params), atol=1e-15)
+            .CopyToVector(), base_loop_step(x, u, params, h), atol=1e-15)
         np.testing.assert_array_equal(
             system.get_output_port().Eval(context), x[:3])
     context.SetDiscreteState(base_loop_state(params, [0.2, 0.0, -0.1]))
@@ -526,7 +546,7 @@ def test_symbolic_base_loop_steps_like_base_loop_step(params):
 
 def test_symbolic_base_loop_in_autodiff_has_the_lags_derivatives():
     params = BaseDriverParameters()
-    system = base_loop_system(params).ToAutoDiffXd()
+    system = base_loop_system(params, H).ToAutoDiffXd()
     context = system.CreateDefaultContext()
     context.SetDiscreteState(InitializeAutoDiff(
         np.array([0.1, -0.05, 0.02]), 6, 0).ravel())
@@ -534,7 +554,7 @@ def test_symbolic_base_loop_in_autodiff_has_the_lags_derivatives():
         np.array([0.1005, -0.05, 0.021]), 6, 3).ravel())
     result = system.EvalUniquePeriodicDiscreteUpdate(context).get_vector(
     ).CopyToVector()
-    g = 1.0 - np.exp(-params.time_step / params.lag)
+    g = 1.0 - np.exp(-H / params.lag)
     np.testing.assert_allclose(ExtractGradient(result), np.hstack(
         [(1.0 - g) * np.eye(3), g * np.eye(3)]), atol=1e-15)
 
@@ -555,7 +575,7 @@ def test_symbolic_arm_interpolator_follows_the_arm_driver(n):
     """Both fed the same commands, changing between samples: the same
     desired state at every plant step and in between (a 6- and a 7-joint
     arm)."""
-    params = ArmDriverParameters(time_step=0.005)
+    params = ArmDriverParameters()
     q0 = np.resize(np.array(HOME_ARM_POSITIONS), n)
     reference, symbolic = ArmPositionDriver(params, q0), \
         arm_interpolator_system(params, q0)

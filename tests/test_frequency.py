@@ -95,8 +95,13 @@ def point(scenario):
 
 @pytest.fixture(scope="module")
 def driver(scenario):
-    return replace(station_base(scenario),
-                   time_step=scenario.station.time_step)
+    return station_base(scenario)
+
+
+@pytest.fixture(scope="module")
+def step(scenario):
+    """The base driver's step: the station's."""
+    return scenario.station.time_step
 
 
 # The base filter, eq. (filtering).
@@ -393,17 +398,18 @@ def test_period_map_equals_linearize_at_one_rate(scenario, point, system):
                            rtol=0.0, atol=1e-12)
 
 
-def test_base_loop_sum_departs_from_unity(scenario, point, driver):
+def test_base_loop_sum_departs_from_unity(scenario, point, driver, step):
     response = linear_system_response(chains.linearize_split(
-        scenario.controller, point, base_driver=driver), OMEGA)
+        scenario.controller, point, base_driver=driver, base_step=step),
+        OMEGA)
     total = response[:, 12, 0]
     assert abs(total[0] - 1.0) < 0.01  # DC: reproduced
     assert np.abs(total - 1.0).max() > 0.1  # the base's lag shows
     # The driver alone: the first-order lag, exactly discretised.
-    loop = linear_system_response(chains.linearize_base_driver(driver),
-                                  OMEGA)[:, 0, 0]
-    q = np.exp(-driver.time_step / driver.lag)
-    z = np.exp(1j * OMEGA * driver.time_step)
+    loop = linear_system_response(chains.linearize_base_driver(
+        driver, step), OMEGA)[:, 0, 0]
+    q = np.exp(-step / driver.lag)
+    z = np.exp(1j * OMEGA * step)
     assert relative_error(loop, (1.0 - q) / (z - q)) < 1e-6
 
 
@@ -461,18 +467,21 @@ def test_base_filter_linearisation_matches_simulation():
 
 
 def test_base_loop_chain_linearisation_matches_simulation(scenario, point,
-                                                          driver):
-    diagram = chains.build_split_diagram(scenario.controller, point, driver)
+                                                          driver, step):
+    diagram = chains.build_split_diagram(scenario.controller, point, driver,
+                                         base_step=step)
     measured, omegas = _measured_response(diagram, 6, "end_effector_velocity",
                                           0)
     predicted = linear_system_response(chains.linearize_split(
-        scenario.controller, point, driver), omegas)[:, 12, 0]
+        scenario.controller, point, driver, base_step=step), omegas)[:, 12, 0]
     _check(measured, predicted)
     base, _ = _measured_response(
-        chains.build_split_diagram(scenario.controller, point, driver), 6,
+        chains.build_split_diagram(scenario.controller, point, driver,
+                                   base_step=step), 6,
         "base_share", 0)
     _check(base, linear_system_response(chains.linearize_split(
-        scenario.controller, point, driver), omegas)[:, 0, 0])
+        scenario.controller, point, driver, base_step=step),
+        omegas)[:, 0, 0])
 
 
 # The base's loop through the station's plant.
@@ -489,10 +498,11 @@ def base_plant(station):
 
 
 def test_base_plant_agrees_with_the_driver_at_low_frequency(
-        station, base_plant, driver):
+        station, base_plant, driver, step):
     low = OMEGA[HERTZ <= 0.1]
     plant = linear_system_response(base_plant, low)
-    alone = linear_system_response(chains.linearize_base_driver(driver), low)
+    alone = linear_system_response(chains.linearize_base_driver(driver, step),
+                                   low)
     for axis in range(3):  # the base's actual velocity: the loop's
         assert relative_error(plant[:, axis, axis],
                               alone[:, axis, axis]) < 0.01
@@ -507,11 +517,12 @@ def test_base_plant_agrees_with_the_driver_at_low_frequency(
     assert peak > 2.0 and 4.0 < at / (2 * np.pi) < 6.0
 
 
-def test_split_through_the_plant(scenario, point, station, driver):
+def test_split_through_the_plant(scenario, point, station, driver, step):
     with_plant = linear_system_response(chains.linearize_split(
         scenario.controller, point, station=station), OMEGA)
     with_driver = linear_system_response(chains.linearize_split(
-        scenario.controller, point, base_driver=driver), OMEGA)
+        scenario.controller, point, base_driver=driver, base_step=step),
+        OMEGA)
     assert with_plant.shape[1] == 18 + 9
     # The shares are those of the driver's loop, exactly.
     assert np.abs(with_plant[:, :18] - with_driver).max() < 1e-9
@@ -524,7 +535,7 @@ def test_split_through_the_plant(scenario, point, station, driver):
     assert abs(with_plant[0, 21, 0] - 1.0) < 0.01
     with pytest.raises(ValueError, match="base_driver"):
         chains.build_split_diagram(scenario.controller, point, driver,
-                                   station=station)
+                                   station=station, base_step=step)
 
 
 def _station_response(station, axis, outputs):
@@ -847,7 +858,7 @@ def test_a_pole_near_the_grids_start_hides_the_dc_gain():
 def driver_period_map(period):
     """The period map of the station's base driver (its 1 ms step) at
     rest over `period`."""
-    driver = BaseVelocityDriver()
+    driver = BaseVelocityDriver(time_step=0.001)
     driver.set_name("driver")
     context = driver.CreateDefaultContext()
     driver.GetInputPort("base_pose").FixValue(context, np.zeros(3))

@@ -360,7 +360,7 @@ def test_the_base_loop_is_the_robots_own_where_the_options_give_none():
     given = BaseDriverParameters(loop="ringing")
     kept = SimulatedStation(StationOptions(time_step=0.001, base=given),
                             robot=lbr).options.base
-    assert kept == replace(given, time_step=kept.time_step)
+    assert kept == given
 
 
 def test_a_robot_with_a_fast_base_loop_is_simulated_at_its_own_lag():
@@ -676,6 +676,40 @@ def test_the_plant_step_and_the_scene_period_are_checked():
     with pytest.raises(ValueError, match=r"scene_period = 0\.012 s .* "
                        r"time_step = 0\.005 s: must be a whole multiple"):
         StationOptions(time_step=0.005, scene_period=0.012)
+
+
+def test_the_drivers_run_at_the_plant_step_alone():
+    """The drivers' one step is the plant's: a 5 ms base loop at a
+    0.2 ms step (a default 1 ms step of the loop's own refused it) runs
+    at 0.2 ms, its velocity the lag sampled at that step; a step coarser
+    than lag / 10 is refused naming time_step and base.lag."""
+    from drake_wbc.station.drivers import BaseDriverParameters
+
+    h, lag, u = 0.0002, 0.005, np.array([0.004, -0.003, 0.002])
+    station = SimulatedStation(StationOptions(
+        time_step=h, base=BaseDriverParameters(lag=lag,
+                                               servo_time_constant=0.001)))
+    assert station.plant.time_step() == h
+    driver = station.systems["base_driver"]
+    assert driver.GetUniquePeriodicDiscreteUpdateAttribute().period_sec() \
+        == h
+    context = station.diagram.CreateDefaultContext()
+    station.set_initial_state(context)
+    station.diagram.GetInputPort("arm.position_command").FixValue(
+        context, station.options.initial_arm_positions)
+    station.diagram.GetInputPort("base.velocity_command").FixValue(context,
+                                                                   u)
+    simulator = Simulator(station.diagram, context)
+    n = 25  # updates at 0, h, ..., n h have run by (n + 1/2) h
+    simulator.AdvanceTo((n + 0.5) * h)
+    np.testing.assert_allclose(
+        station.diagram.GetOutputPort("truth.base_loop_velocity").Eval(
+            context), u * (1.0 - np.exp(-(n + 1) * h / lag)), atol=1e-12)
+    with pytest.raises(ValueError, match=r"^time_step = 0\.001 s is not "
+                       r"allowed with base\.lag = 0\.005 s: must be at most "
+                       r"lag / 10"):
+        StationOptions(time_step=0.001, base=BaseDriverParameters(
+            lag=lag, servo_time_constant=0.001))
 
 
 def test_odometry_system_reports_what_base_odometry_does(station):

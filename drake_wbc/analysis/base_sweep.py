@@ -117,8 +117,7 @@ def point_scenario(scenario, sweep_map, x, y):
     station.base = BaseDriverParameters(
         lag=lag, damping_ratio=zeta, velocity_limits=base.velocity_limits,
         acceleration_limits=accel,
-        servo_time_constant=min(base.servo_time_constant, lag / 4),
-        time_step=step)
+        servo_time_constant=min(base.servo_time_constant, lag / 4))
     validate(scenario)
     return scenario
 

@@ -66,6 +66,7 @@ from drake_wbc.stages import (
 from drake_wbc.station.drivers import (
     BaseDriverParameters,
     BaseVelocityDriver,
+    check_base_time_step,
 )
 
 SPLIT_OUTPUTS = ("base_share", "arm_share", "end_effector_velocity")
@@ -165,13 +166,15 @@ def linearize_base_filter(params=None, time_step=0.01):
     return Linearize(system, context)
 
 
-def linearize_base_driver(params=None):
+def linearize_base_driver(params=None, time_step=None):
     """Drake's linearisation of the station's BaseVelocityDriver at rest
-    (the base's velocity loop, inside its saturations): a LinearSystem
-    from the velocity command (3) to the loop's velocity (3), discrete at
-    params.time_step (the plant's step)."""
+    (the base's velocity loop of BaseDriverParameters `params`, inside
+    its saturations): a LinearSystem from the velocity command (3) to the
+    loop's velocity (3), discrete at `time_step` (s, required: the
+    plant's step, StationOptions.time_step)."""
     system = BaseVelocityDriver(checked_instance(
-        "params", params, BaseDriverParameters, BaseDriverParameters))
+        "params", params, BaseDriverParameters, BaseDriverParameters),
+        time_step)
     context = system.CreateDefaultContext()
     system.GetInputPort("base_pose").FixValue(context, np.zeros(3))
     command = system.GetInputPort("velocity_command")
@@ -181,7 +184,7 @@ def linearize_base_driver(params=None):
 
 
 def build_split_diagram(params=None, point=None, base_driver=None,
-                        alpha=None, station=None):
+                        alpha=None, station=None, base_step=None):
     """The split of the end-effector command as a Diagram.
 
     ::
@@ -220,8 +223,12 @@ def build_split_diagram(params=None, point=None, base_driver=None,
             be None), its base driver drives a copy of its plant
             (`add_station_plant`), whose state [q; v] is exported as
             plant_state and after the shares on shares_and_plant_state.
+        base_step: the step of `base_driver`'s loop in s (the plant's,
+            StationOptions.time_step), required with it, at most its
+            lag / 10.
     """
-    return _build_split(params, point, base_driver, alpha, station)[0]
+    return _build_split(params, point, base_driver, alpha, station,
+                        base_step)[0]
 
 
 def _add_split_stages(add, params, point):
@@ -234,6 +241,15 @@ def _add_split_stages(add, params, point):
                 params.base_filter, time_step=params.time_step)),
             add("compensator", RobustCompensator(
                 params.compensator, point.arm, time_step=params.time_step)))
+
+
+def _base_driver(params, time_step):
+    """The BaseVelocityDriver of a chain's `base_driver` (`params`) at
+    its `base_step` (`time_step`)."""
+    params = checked_instance("base_driver", params, BaseDriverParameters,
+                              None)
+    return BaseVelocityDriver(params, check_base_time_step(
+        params, "base_step", time_step, prefix="base_driver."))
 
 
 def _connect_split(builder, distributor, base_filter, compensator):
@@ -251,7 +267,7 @@ def _connect_split(builder, distributor, base_filter, compensator):
     return filtered
 
 
-def _build_split(params, point, base_driver, alpha, station):
+def _build_split(params, point, base_driver, alpha, station, base_step):
     """build_split_diagram's diagram, and the RobotModel of its plant (or
     None)."""
     params = checked_instance("params", params, ControllerParameters,
@@ -298,8 +314,7 @@ def _build_split(params, point, base_driver, alpha, station):
         connect(filtered, driver.GetInputPort("velocity_command"))
         base_motion = driver.GetOutputPort("velocity")
     elif base_driver is not None:
-        driver = add("base_driver", BaseVelocityDriver(checked_instance(
-            "base_driver", base_driver, BaseDriverParameters, None)))
+        driver = add("base_driver", _base_driver(base_driver, base_step))
         connect(filtered, driver.GetInputPort("velocity_command"))
         constant("base_pose", np.zeros(3), driver, "base_pose")
         base_motion = driver.GetOutputPort("velocity")
@@ -348,7 +363,7 @@ def _build_split(params, point, base_driver, alpha, station):
 
 
 def linearize_split(params=None, point=None, base_driver=None, alpha=None,
-                    station=None):
+                    station=None, base_step=None):
     """The split's LinearSystem from V_ee (6) to the stacked shares (18,
     SPLIT_OUTPUTS), discrete at params.time_step: Drake's `Linearize`
     for ideal actuators, `linearize_period_map` with the base driver
@@ -363,7 +378,8 @@ def linearize_split(params=None, point=None, base_driver=None, alpha=None,
     """
     params = checked_instance("params", params, ControllerParameters,
                               ControllerParameters)
-    diagram, model = _build_split(params, point, base_driver, alpha, station)
+    diagram, model = _build_split(params, point, base_driver, alpha, station,
+                                  base_step)
     context = diagram.CreateDefaultContext()
     source = diagram.GetInputPort("end_effector_velocity")
     source.FixValue(context, np.zeros(6))
@@ -389,7 +405,7 @@ def linearize_split(params=None, point=None, base_driver=None, alpha=None,
 
 
 def build_deviation_loop(params=None, point=None, base_driver=None,
-                         alpha=1.0):
+                         alpha=1.0, base_step=None):
     """The loop of the tracking-error elimination, eq. (cdmp-wb-error),
     broken at WholeBodyCdmp's deviation input, as a Diagram.
 
@@ -417,6 +433,8 @@ def build_deviation_loop(params=None, point=None, base_driver=None,
         base_driver: BaseDriverParameters of the base's velocity loop, or
             None for an ideal base (its velocity the filter's output).
         alpha: alpha in [0, 1].
+        base_step: the step of `base_driver`'s loop in s (the plant's,
+            StationOptions.time_step), required with it.
     """
     params = checked_instance("params", params, ControllerParameters,
                               ControllerParameters)
@@ -456,8 +474,7 @@ def build_deviation_loop(params=None, point=None, base_driver=None,
     filtered = _connect_split(builder, distributor, base_filter, compensator)
     base_motion = filtered
     if base_driver is not None:
-        driver = add("base_driver", BaseVelocityDriver(checked_instance(
-            "base_driver", base_driver, BaseDriverParameters, None)))
+        driver = add("base_driver", _base_driver(base_driver, base_step))
         connect(filtered, driver.GetInputPort("velocity_command"))
         constant(np.zeros(3), driver.GetInputPort("base_pose"))
         base_motion = driver.GetOutputPort("velocity")
@@ -475,7 +492,8 @@ def build_deviation_loop(params=None, point=None, base_driver=None,
     return diagram
 
 
-def deviation_loop(params=None, point=None, base_driver=None, alpha=1.0):
+def deviation_loop(params=None, point=None, base_driver=None, alpha=1.0,
+                   base_step=None):
     """The loop transfer function L(omega) of `build_deviation_loop`
     (same arguments), for `frequency.stability_margins`: its deviation is
     always along d = R6_ba grad_x C_m / |.| (P_Cm has rank one), so the
@@ -483,7 +501,7 @@ def deviation_loop(params=None, point=None, base_driver=None, alpha=1.0):
     deviation_in to deviation_out (the loop closes as deviation_in =
     deviation_out; L's sign is that of a negative feedback). Linearised
     with `linearize_period_map` over one control period (the driver runs
-    at its own step).
+    at base_step).
 
     Returns:
         (L, linear): a callable omega (rad/s) -> complex, and the
@@ -492,7 +510,8 @@ def deviation_loop(params=None, point=None, base_driver=None, alpha=1.0):
     params = checked_instance("params", params, ControllerParameters,
                               ControllerParameters)
     point = point if point is not None else operating_point(params)
-    diagram = build_deviation_loop(params, point, base_driver, alpha)
+    diagram = build_deviation_loop(params, point, base_driver, alpha,
+                                   base_step)
     context = diagram.CreateDefaultContext()
     source = diagram.GetInputPort("deviation_in")
     source.FixValue(context, np.zeros(6))

@@ -5,7 +5,6 @@ equilibrium, and what the plant's state gives of the base's and the end
 effector's velocities. drake_wbc.analysis.chains puts it after the split
 of the end-effector command."""
 
-from dataclasses import replace
 
 import numpy as np
 from pydrake.multibody.plant import (
@@ -68,8 +67,7 @@ def add_station_plant(builder, station):
     h = options.time_step
     add = builder.AddNamedSystem
     plant.Finalize()
-    driver = add("base_driver", BaseVelocityDriver(
-        replace(options.base, time_step=h)))
+    driver = add("base_driver", BaseVelocityDriver(options.base, h))
     odometry = add("odometry", BaseOdometry(plant, model))
     hold = add("arm_hold", ConstantVectorSource(np.concatenate(
         [options.initial_arm_positions,

@@ -165,11 +165,10 @@ def _split_plots(report, params, point, station, hertz, omega, h):
              * lowpass_zoh_response(f.omega_f, f.zeta, h, omega), True)
     report.plots[plot.name] = plot
 
-    driver = replace(station.options.base,
-                     time_step=station.options.time_step)
-    real = linear_system_response(
-        chains.linearize_split(params, point, base_driver=driver), omega)
-    loop = chains.linearize_base_driver(driver)
+    driver, step = station.options.base, station.options.time_step
+    real = linear_system_response(chains.linearize_split(
+        params, point, base_driver=driver, base_step=step), omega)
+    loop = chains.linearize_base_driver(driver, step)
     plot = BodePlot("split_base_loop", "V_ee (x) split with the base's "
                     f"velocity loop (lag {driver.lag:g} s)", hertz,
                     nyquist_hz=0.5 / h)
@@ -277,7 +276,8 @@ def _dmp_plots(report, params, hertz, omega, h, stiffness):
     report.plots[plot.name] = plot
 
 
-def _sweep_plots(report, params, point, driver, hertz, omega, h):
+def _sweep_plots(report, params, point, station, hertz, omega, h):
+    driver, step = station.options.base, station.options.time_step
     filters = BodePlot("filter_sweep", "base filter, eq. (filtering), "
                        f"discrete at {h:g} s: omega_f and zeta", hertz,
                        nyquist_hz=0.5 / h)
@@ -295,8 +295,8 @@ def _sweep_plots(report, params, point, driver, hertz, omega, h):
                 family=family)
             swept = replace(params, base_filter=setting)
             split.add(label, linear_system_response(chains.linearize_split(
-                swept, point, base_driver=driver), omega)[:, 12 + AXIS,
-                                                          AXIS],
+                swept, point, base_driver=driver, base_step=step),
+                omega)[:, 12 + AXIS, AXIS],
                 family=family)
     report.plots[filters.name] = filters
     report.plots[split.name] = split
@@ -415,8 +415,6 @@ def compute_bode_report(scenario, points_per_decade=60,
                                    scenario.station.initial_arm_positions,
                                    controller_arm(scenario))
     station = scenario_station(scenario)
-    driver = replace(station.options.base,
-                     time_step=scenario.station.time_step)
     report = BodeReport()
     f = replace(params.base_filter, enabled=True)
     plot = BodePlot("base_filter", "base filter, eq. (filtering): "
@@ -440,7 +438,7 @@ def compute_bode_report(scenario, points_per_decade=60,
     say("the coupled DMPs' force responses")
     _dmp_plots(report, params, hertz, omega, h, contact_stiffness)
     say("the sweeps over omega_f and zeta")
-    _sweep_plots(report, params, point, driver, hertz, omega, h)
+    _sweep_plots(report, params, point, station, hertz, omega, h)
     if has_admittance_loop(scenario):
         _admittance_plots(report, scenario, hertz, omega, say)
     report.table = format_table(report.rows)

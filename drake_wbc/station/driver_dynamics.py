@@ -49,7 +49,7 @@ def interpolated_command(state, time, period):
     return q_from + fraction * (q_to - q_from), rate
 
 
-def base_loop_step(x, command, params):
+def base_loop_step(x, command, params, time_step):
     """One period of the base's velocity loop, per axis.
 
     First order (params.damping_ratio None): x = v, and
@@ -69,8 +69,11 @@ def base_loop_step(x, command, params):
             by its acceleration in the second-order loop.
         command: (3,) the commanded velocity, T_b.
         params: BaseDriverParameters.
+        time_step: the loop's step h in s (the plant's in the station,
+            StationOptions.time_step; checked by the caller,
+            drivers.check_base_time_step).
     """
-    h, zeta = params.time_step, params.damping_ratio
+    h, zeta = time_step, params.damping_ratio
     w = 1.0 / params.lag
     gain = 1.0 - np.exp(-h / params.lag)
     velocity, acceleration = [], []

@@ -100,8 +100,9 @@ class BaseDriverParameters:
         servo_time_constant: time constant of the wheel servo that tracks
             the loop's output, s; it sizes the plant's velocity gain and
             must be below lag / 2.
-        time_step: the driver's update period in s (the plant's step; the
-            station sets it), at most lag / 10.
+
+    The loop runs at a step given apart, the plant's in the station
+    (StationOptions.time_step), at most lag / 10 (`check_base_time_step`).
     """
 
     loop: str | None = None
@@ -112,7 +113,6 @@ class BaseDriverParameters:
     acceleration_limits: list[float] = field(
         default_factory=lambda: [1.0, 1.0, 1.0])
     servo_time_constant: float = 0.01
-    time_step: float = 0.001
 
     def __post_init__(self):
         self._fill_from_loop()
@@ -130,7 +130,6 @@ class BaseDriverParameters:
                 f"servo_time_constant = {servo!r} s is not allowed with "
                 f"lag = {self.lag!r} s: must be below lag / 2, or the "
                 "servo, not the loop, sets the base's bandwidth")
-        check_base_time_step(self, "time_step", self.time_step)
 
     def _fill_from_loop(self):
         """Sets the named loop's values (see `loop`)."""
@@ -250,16 +249,16 @@ class ArmDriverParameters:
             stiffness. The station puts it into its plant, as the
             joints' rotor inertia (servo_gains.drive_inertias), so that
             each servo really has servo_frequency.
-        time_step: the driver's update period in s (the plant's step);
-            command_period must be a whole multiple of it and
-            servo_frequency below its Nyquist frequency 1 / (2 time_step).
+
+    The plant's step (StationOptions.time_step), at which the servo's PD
+    loop runs, is given apart: command_period a whole multiple of it and
+    servo_frequency below its Nyquist frequency (`check_arm_time_step`).
     """
 
     command_period: float = 0.01
     servo_frequency: float = 25.0
     damping_ratio: float = 1.0
     min_inertia: float = 0.2
-    time_step: float = 0.001
 
     def __post_init__(self):
         positive("command_period", self.command_period)
@@ -272,7 +271,6 @@ class ArmDriverParameters:
                 "hold the arm against gravity and the plant fails)")
         positive("damping_ratio", self.damping_ratio)
         non_negative("min_inertia", self.min_inertia)
-        check_arm_time_step(self, "time_step", self.time_step)
 
 
 def check_base_time_step(params, name, time_step, prefix=""):
@@ -330,18 +328,23 @@ def BaseVelocityDriver_(T):
 
         Args:
             params: BaseDriverParameters (the defaults if None).
+            time_step: the loop's step h in s (required; the station's
+                plant's, StationOptions.time_step), at most params.lag / 10
+                (`check_base_time_step`).
         """
 
-        def _construct(self, params=None, converter=None):
+        def _construct(self, params=None, time_step=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.params = params = checked_instance(
                 "params", params, BaseDriverParameters, BaseDriverParameters)
+            self.time_step = check_base_time_step(params, "time_step",
+                                                  time_step)
             self._command = self.DeclareVectorInputPort(
                 "velocity_command", 3)
             self._pose = self.DeclareVectorInputPort("base_pose", 3)
             state = self.DeclareDiscreteState(base_loop_size(self.params))
             self.DeclarePeriodicDiscreteUpdateEvent(
-                self.params.time_step, 0.0, self._update)
+                self.time_step, 0.0, self._update)
             ticket = {self.discrete_state_ticket(state)}
             self.DeclareVectorOutputPort(
                 "desired_state", 6, self._desired_state,
@@ -351,12 +354,13 @@ def BaseVelocityDriver_(T):
                 "velocity", 3, self._velocity, prerequisites_of_calc=ticket)
 
         def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.params, converter=converter)
+            Impl._construct(self, other.params, other.time_step,
+                            converter=converter)
 
         def _update(self, context, discrete_state):
             v = context.get_discrete_state_vector().CopyToVector()
             discrete_state.set_value(base_loop_step(
-                v, self._command.Eval(context), self.params))
+                v, self._command.Eval(context), self.params, self.time_step))
 
         def _desired_state(self, context, output):
             v = context.get_discrete_state_vector().CopyToVector()[:3]

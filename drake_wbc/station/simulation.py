@@ -45,7 +45,7 @@ that is part of a closed loop can still be analysed alone
 (drake_wbc.analysis.plant_chain).
 """
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -265,8 +265,9 @@ class StationOptions:
             lambda: None)
         self.traction = checked_instance(
             "traction", self.traction, TractionParameters, lambda: None)
-        # The drivers run at the plant's step, whatever their own (the
-        # robot's own base loop is checked when the station builds it).
+        # The drivers run at the plant's step, which only this field
+        # gives (the robot's own base loop is checked when the station
+        # builds it).
         if self.base is not None:
             check_base_time_step(self.base, "time_step", h, prefix="base.")
         check_arm_time_step(self.arm, "time_step", h, prefix="arm.")
@@ -501,12 +502,11 @@ class SimulatedStation:
         # The drivers, in C++ (drake_wbc.station.symbolic_drivers): they
         # run at every plant step.
         s["base_driver"] = add("base_driver", base_loop_system(
-            replace(options.base, time_step=h)))
+            options.base, h))
         s["base_rates_input"] = add("base_rates_input", Multiplexer([3, 3]))
         s["base_rates"] = add("base_rates", joint_rates_system())
         s["arm_driver"] = add("arm_driver", arm_interpolator_system(
-            replace(options.arm, time_step=h),
-            options.initial_arm_positions))
+            options.arm, options.initial_arm_positions))
         # The arm's servo interface before it: a command beyond the
         # arm's own limits faults it (in Python, once a command period).
         s["arm_supervisor"] = add("arm_supervisor", ArmCommandSupervisor(

@@ -9,10 +9,10 @@ reference implementations, which tests compare against), and the
 SymbolicVectorSystem evaluates them without Python. Like any
 SymbolicVectorSystem they convert to AutoDiffXd.
 
-- `base_loop_system(params)`: the base's velocity loop (state: the loop's
-  velocity in T_b, and its acceleration in the second-order loop); input
-  the velocity command (3), output the loop's velocity (3), from the
-  state alone.
+- `base_loop_system(params, time_step)`: the base's velocity loop at
+  the plant's step (state: the loop's velocity in T_b, and its
+  acceleration in the second-order loop); input the velocity command
+  (3), output the loop's velocity (3), from the state alone.
 - `joint_rates_system()`: input [v (3); base pose [x, y, yaw] (3)],
   output the base's desired state [0 (3); R(yaw) v] (6), for the plant.
 - `arm_interpolator_system(params, initial_positions)`: state [q_from,
@@ -39,6 +39,7 @@ from drake_wbc.station.drivers import (
     ArmDriverParameters,
     BaseDriverParameters,
     arm_start,
+    check_base_time_step,
 )
 
 
@@ -49,22 +50,25 @@ def _symbolic_numpy():
     return np.errstate(all="ignore")
 
 
-def base_loop_system(params=None):
-    """The base's velocity loop (`base_loop_step` at params.time_step) as
-    a discrete SymbolicVectorSystem. Start it with `base_loop_state`."""
+def base_loop_system(params=None, time_step=None):
+    """The base's velocity loop (`base_loop_step` of BaseDriverParameters
+    `params`, the defaults if None, at the step `time_step` in s, required:
+    the station's plant's, at most params.lag / 10) as a discrete
+    SymbolicVectorSystem. Start it with `base_loop_state`."""
     params = checked_instance("params", params, BaseDriverParameters,
                               BaseDriverParameters)
+    h = check_base_time_step(params, "time_step", time_step)
     x = MakeVectorVariable(base_loop_size(params), "x")
     u = MakeVectorVariable(3, "u")
     with _symbolic_numpy():
-        dynamics = base_loop_step(x, u, params)
+        dynamics = base_loop_step(x, u, params, h)
     return SymbolicVectorSystem(state=x, input=u, dynamics=dynamics,
-                                output=x[:3], time_period=params.time_step)
+                                output=x[:3], time_period=h)
 
 
 def base_loop_state(params, velocity):
-    """The state of `base_loop_system(params)` at rest at `velocity` (3,)
-    in T_b (zero acceleration)."""
+    """The state of `base_loop_system(params, time_step)` at rest at
+    `velocity` (3,) in T_b (zero acceleration)."""
     state = np.zeros(base_loop_size(params))
     state[:3] = velocity
     return state
