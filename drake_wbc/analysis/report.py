@@ -84,7 +84,8 @@ servo up to one more. The station's plant part
 arm at 46 % of a command one period after it and at 101 % after two,
 the wrist's reading one period behind the arm. The force loop K k_f h
 z^-d / (z - 1) is stable below K k_f h = 0.618 (d = 2) and 0.445
-(d = 3), against 2 for the DMP alone (models/ft300_wiping_tool.sdf)."""
+(d = 3), against 2 for the DMP alone (as the shipped tool's model says
+of its pad)."""
 
 REPRODUCTION_TOLERANCE = 0.1
 """|V_ee,actual / V_ee - 1| above which the end effector's command counts
