@@ -1019,3 +1019,83 @@ def test_a_redundant_arm_centres_its_joints_in_its_self_motion(seed):
     centred = joint_velocity_command(J6, V, q6, None, twist_limits(
         lower[:6], upper[:6], 10.0, H, self_motion_gain=0.5))
     np.testing.assert_array_equal(plain.q_dot, centred.q_dot)
+
+
+def _held_stage(arm, start, measured):
+    """The arm stage held (a safe stop) at `start`, its arm measured at
+    `measured`: (stage, context, simulator, the measured arm's port)."""
+    system = ArmCartesianVelocityController(None, arm)
+    context = system.CreateDefaultContext()
+    system.set_arm_position(context, start)
+    system.GetInputPort("arm_velocity").FixValue(context, np.zeros(6))
+    system.GetInputPort("hold").FixValue(context, [1.0])
+    system.GetInputPort("resume").FixValue(context, [0.0])
+    port = system.GetInputPort("arm_position")
+    port.FixValue(context, measured)
+    return system, context, Simulator(system, context), port
+
+
+def _command(context, n):
+    return context.get_discrete_state_vector().CopyToVector()[:n].copy()
+
+
+@pytest.mark.parametrize("clear_after", [20, 25, 30, 40])
+def test_a_held_command_catching_up_near_a_limit_resumes_within_limits(
+        arm, clear_after):
+    """The arm moved to 5 mrad from a joint's upper limit during a stop,
+    the command 0.3 rad away: the held command goes to the edge of the
+    band the running command keeps to (the margin inside the limit), so
+    that when the stop clears on the way there (once within the
+    tolerance) the running command goes on within the acceleration
+    limit. It went to the limit itself, outside the band, where the
+    running command allows no outward rate: it stopped dead in one
+    tick, 79 rad/s^2."""
+    n = arm.num_joints
+    start = np.array(arm.home, dtype=float)
+    start[0] = arm.upper[0] - 0.3
+    measured = start.copy()
+    measured[0] = arm.upper[0] - 0.005
+    system, context, simulator, _ = _held_stage(arm, start, measured)
+    commands = [start]
+    for i in range(60):
+        simulator.AdvanceTo((i + 1) * H)
+        commands.append(_command(context, n))
+        if i == clear_after:
+            system.GetInputPort("hold").FixValue(context, [0.0])
+            system.GetInputPort("resume").FixValue(context, [1.0])
+        elif i == clear_after + 1:
+            system.GetInputPort("resume").FixValue(context, [0.0])
+    rates = np.diff(np.array(commands), axis=0) / H
+    assert np.abs(rates).max() <= arm.velocity_limits.max() * (1 + 1e-9)
+    assert np.abs(np.diff(rates, axis=0)).max() / H <= (
+        ROBOT_ACCELERATION_LIMIT * (1 + 1e-6))
+    assert commands[-1][0] <= arm.upper[0] - DEFAULT_JOINT_LIMIT_MARGIN + (
+        1e-12)
+
+
+@pytest.mark.parametrize("sag", [0.002, 0.005, 0.02])
+def test_a_held_command_does_not_chase_an_arm_that_sags_below_it(arm, sag):
+    """A joint pushed 0.15 rad off its held command and let go, its servo
+    (lagging, about 25 Hz) settling `sag` below the command, as a
+    position servo under gravity does: the command goes to the arm and
+    stays, a minute later where it came to rest. It went on following
+    the arm that the servo carried along below it, down to the joint
+    limit (2 mrad of sag, in 30 s)."""
+    n = arm.num_joints
+    home = np.array(arm.home, dtype=float)
+    offset = np.zeros(n)
+    offset[1] = -sag
+    measured = home + offset
+    measured[1] -= 0.15
+    _, context, simulator, port = _held_stage(arm, home, measured)
+    rested = None
+    for i in range(6000):
+        simulator.AdvanceTo((i + 1) * H)
+        q = _command(context, n)
+        if i >= 10:  # let go: the servo follows the command, `sag` below
+            measured = measured + 0.55 * (q + offset - measured)
+            port.FixValue(context, measured)
+        if i == 200:
+            rested = q
+    np.testing.assert_allclose(q, rested, atol=1e-9)
+    assert abs(q[1] - home[1]) < 0.16

@@ -29,10 +29,15 @@ from drake_wbc.math.validation import checked_instance, positive
 from drake_wbc.robot.model import ArmKinematics
 from drake_wbc.stages.support import define_stage, optional_scalar
 
-CAUGHT_UP = 1e-4
-"""rad: a held joint that goes to where the arm is
+CAUGHT_UP = 0.25
+"""A held joint that goes to where the arm is
 (`ArmCartesianVelocityController`'s catch-up) has caught up with it
-within this."""
+within this fraction of the resume tolerance (0.025 rad for 0.1): far
+above any position servo's steady error (a fraction of a mrad on the
+shipped arm), which a command that went on following the arm would
+chase for ever (an arm sagging 2 mrad below its command took it to the
+joint limit), and near enough that the braking from there ends within a
+few mrad of the arm."""
 
 TWIST_SIZE = 6
 """V_a = [v_a; w_a] in T_a."""
@@ -86,11 +91,14 @@ def ArmCartesianVelocityController_(T):
           once a joint of q_meas is farther than `resume_tolerance` from
           q_cmd (the arm was moved, pushed off its command against
           something, or stopped on its own, during the stop), the
-          command goes to q_meas (within the joint limits) at the joint
-          speed and acceleration limits instead of braking on the spot
+          command goes to q_meas (within the band [lower + margin,
+          upper - margin] it keeps to when running) at the joint speed
+          and acceleration limits instead of braking on the spot
           (drake_wbc.math.arm_servo.catch_up_arm; every joint while one
           is beyond the tolerance, then each joint on its way there
-          until within CAUGHT_UP), so that it resumes from where the
+          until within CAUGHT_UP of the tolerance, whence it brakes on
+          the profile that stops on the arm), so that it resumes from
+          where the
           arm is: its servo, holding the arm there, must not be asked
           to jump back to where the command was, and the servo of an
           arm pushed off its command refuses a command moved there in
@@ -213,6 +221,10 @@ def ArmCartesianVelocityController_(T):
             # A hold brakes to rest and stays: without the self-motion of
             # an arm of more than six joints, which would go on moving it.
             self._hold_limits = replace(self._limits, self_motion_gain=0.0)
+            # Where a held command may go to catch up with the arm: the
+            # band the running command keeps to, so that it resumes inside.
+            self._band = (self.lower + params.margin,
+                          self.upper - params.margin)
             self._command = body_for(joint_velocity_command, T)
             self._no_twist = np.zeros(TWIST_SIZE)
             self._input = self.DeclareVectorInputPort("arm_velocity",
@@ -298,11 +310,12 @@ def ArmCartesianVelocityController_(T):
 
         def _catch_up(self, state, q, previous, measured):
             """Makes the held command in `state` go to where the arm is
-            (within the joint limits) instead of braking on the spot:
-            every joint once a joint is farther than resume_tolerance
-            from the command (the arm stopped against something, or was
-            moved, during the stop), and a joint already on its way
-            there until it is within CAUGHT_UP (catching_up); within the
+            (within the band the running command keeps to) instead of
+            braking on the spot: every joint once a joint is farther than
+            resume_tolerance from the command (the arm stopped against
+            something, or was moved, during the stop), and a joint
+            already on its way there until it is within CAUGHT_UP of the
+            tolerance (catching_up); within the
             joint speed and acceleration limits (catch_up_arm). So the
             command is where the arm is when the stop clears, and resumes
             from there without a jump: in one tick, the step from the
@@ -317,8 +330,9 @@ def ArmCartesianVelocityController_(T):
             last = np.array(value_of(q), dtype=float)
             velocity = np.array(value_of(previous), dtype=float)
             arm = np.clip(np.array(value_of(measured), dtype=float),
-                          self.lower, self.upper)
-            catching = catching_up(last, velocity, arm, CAUGHT_UP) | far
+                          *self._band)
+            catching = catching_up(last, velocity, arm,
+                                   CAUGHT_UP * self.resume_tolerance) | far
             if not catching.any():
                 return
             command, _ = catch_up_arm(last, velocity, arm, self._time_step,
