@@ -48,7 +48,7 @@ from drake_wbc.hardware.options import (
     command_timeout_of,
 )
 from drake_wbc.math.arm_control import start_within_limits
-from drake_wbc.math.arm_servo import brake_arm, brake_speed
+from drake_wbc.math.arm_servo import brake_arm, brake_speed, catch_up_arm
 from drake_wbc.math.command_limits import ROUNDING, limit_base_velocity
 from drake_wbc.math.safety import (
     DEFAULT_ARM_FOLLOW_TOLERANCE,
@@ -277,15 +277,9 @@ def follow_arm_command(target, target_velocity, last, velocity, period,
     # the joint follows it at its limits all the same.
     moving = np.clip(np.where(held == target, target_velocity, 0.0),
                      -TARGET_RATE_BOUND, TARGET_RATE_BOUND)
-    # How far the target was ahead before it moved this period, and the
-    # speed relative to it that stops on it.
-    ahead = held - last - moving * period
-    distance = np.abs(ahead)
-    closing = np.sign(ahead) * brake_speed(distance, accel, period)
-    wanted = np.clip(moving + closing, velocity - accel * period,
-                     velocity + accel * period)
-    wanted = np.clip(np.clip(wanted, -speed, speed), -down, up)
-    command = np.clip(last + wanted * period, limits.lower, limits.upper)
+    command, _ = catch_up_arm(last, velocity, held, period, speed, accel,
+                              target_velocity=moving, bounds=(down, up))
+    command = np.clip(command, limits.lower, limits.upper)
     return command, (command - last) / period, True
 
 

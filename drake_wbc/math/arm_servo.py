@@ -183,14 +183,18 @@ def brake_speed(distance, acceleration, period):
         dtype=float).reshape(distance.shape)
 
 
-def catch_up_arm(last, velocity, target, period, speed, acceleration):
+def catch_up_arm(last, velocity, target, period, speed, acceleration,
+                 target_velocity=0.0, bounds=None):
     """The next position command of an arm whose command goes to `target`
-    (where the arm is) and comes to rest on it: each joint moves towards
-    it at most at its speed limit and at the `brake_speed` of the
-    distance left (so that it can still stop on it), its rate changing
-    by at most its acceleration limit a period: no step the servo would
-    refuse, from wherever the command was going (one coming faster than
-    it can stop on the target passes it, braking, and comes back).
+    (where the arm is, or a target moving at `target_velocity`) and
+    comes to rest on it: each joint moves towards it, relative to it, at
+    the `brake_speed` of the distance left (so that it can still stop on
+    it), at most at its speed limit (and within `bounds`), its rate
+    changing by at most its acceleration limit a period: no step the
+    servo would refuse, from wherever the command was going (one coming
+    faster than it can stop on the target passes it, braking, and comes
+    back). The robot side's limiter follows a moving target by it too
+    (drake_wbc.hardware.safety.follow_arm_command).
 
     Args:
         last: (n,) the last command, rad.
@@ -200,18 +204,25 @@ def catch_up_arm(last, velocity, target, period, speed, acceleration):
         period: h, s between commands.
         speed, acceleration: (n,) the joint speed (rad/s) and
             acceleration (rad/s^2) limits.
+        target_velocity: (n,) or 0, the rate at which the target moves
+            this period, rad/s.
+        bounds: None, or (down, up): (n,) the largest rates towards the
+            lower and the upper position limits, rad/s.
 
     Returns:
         (command (n,), its rate (n,)).
     """
-    ahead = target - last
+    # How far the target was ahead before it moved this period, and the
+    # speed relative to it that stops on it.
+    ahead = target - last - target_velocity * period
     closing = np.sign(ahead) * brake_speed(np.abs(ahead), acceleration,
                                            period)
     change = acceleration * period
-    wanted = np.clip(np.clip(closing, velocity - change, velocity + change),
-                     -speed, speed)
-    command = last + wanted * period
-    return command, wanted
+    wanted = np.clip(np.clip(target_velocity + closing, velocity - change,
+                             velocity + change), -speed, speed)
+    if bounds is not None:
+        wanted = np.clip(wanted, -bounds[0], bounds[1])
+    return last + wanted * period, wanted
 
 
 def catching_up(last, velocity, target, within):
